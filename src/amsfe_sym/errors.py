@@ -1,0 +1,67 @@
+"""One exception hierarchy for the whole toolkit.
+
+Every error derives from :class:`AmsfeError` and also from the builtin it refines, so a
+caller can catch either (``except ValueError`` keeps working). Messages say what was
+expected, what was found, and how to fix it; :func:`describe` builds them uniformly.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "AmsfeError",
+    "CodegenError",
+    "ConfigError",
+    "EstimatorError",
+    "MeasurementError",
+    "ModelError",
+    "ShapeError",
+    "SpecError",
+    "UnsupportedJointError",
+    "UrdfError",
+    "describe",
+]
+
+
+def describe(what: str, expected: str, found: str, fix: str) -> str:
+    """Format a message as ``what: expected ..., found ...; fix: ...``."""
+    return f"{what}: expected {expected}, found {found}. Fix: {fix}"
+
+
+class AmsfeError(Exception):
+    """Base of every error raised by amsfe_sym."""
+
+
+class UrdfError(AmsfeError, ValueError):
+    """A URDF file is malformed or physically invalid (bad inertia, negative mass, ...)."""
+
+
+class UnsupportedJointError(UrdfError):
+    """A joint type the toolkit does not model (floating, planar, spherical, mimic)."""
+
+
+class ModelError(AmsfeError, ValueError):
+    """The robot model as a whole cannot be used (singular mass matrix, empty chain)."""
+
+
+class SpecError(AmsfeError, ValueError):
+    """A robot spec or scenario file is invalid (unknown joint or frame, bad value)."""
+
+
+class ConfigError(SpecError):
+    """A run configuration (scenario) is invalid: covariances, delays, estimator names."""
+
+
+class ShapeError(AmsfeError, ValueError):
+    """An array has the wrong shape at an API boundary."""
+
+
+class CodegenError(AmsfeError, RuntimeError):
+    """Generating, compiling or loading the C library failed."""
+
+
+class EstimatorError(AmsfeError, RuntimeError):
+    """The estimator cannot proceed (buffer too short, covariance lost definiteness)."""
+
+
+class MeasurementError(AmsfeError, ValueError):
+    """A measurement is unusable (NaN or inf, outside the image, wrong size)."""
