@@ -1,0 +1,355 @@
+"""Code generation: symbolic functions -> C source + header + shared library + manifest.
+
+One shared library per robot in ``generated/<name>/``.  Generation is cached by content:
+the hash covers the URDF and spec bytes, the locked joints, the source of the modules that
+build the symbols (so a change in how we generate invalidates old output), the CasADi and
+Pinocchio versions, and the compiler with its flags.  An unchanged robot is neither
+regenerated nor recompiled; the cache check reads only files, never Pinocchio.
+
+Output is written to a temporary folder and moved into place only when the library has
+compiled and loaded, so bad input or a failed build leaves ``generated/`` as it was.
+
+Compiler flags: ``-O1`` by default (see docs/codegen.md for the measurements behind it);
+override with ``$AMSFE_CFLAGS`` or ``--cflags``.  ``-march=native`` ties the library to
+the CPU; it is allowed, and since the flags are hashed, a changed flag rebuilds.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import json
+import os
+import platform
+import shlex
+import shutil
+import subprocess
+import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+
+from amsfe_sym import __version__
+from amsfe_sym.errors import CodegenError, describe
+from amsfe_sym.spec import RobotSpec, load_spec
+
+__all__ = ["DEFAULT_CFLAGS", "GenerateResult", "content_hash", "default_out_dir", "generate"]
+
+DEFAULT_CFLAGS: tuple[str, ...] = ("-O1", "-fPIC", "-shared")
+MANIFEST = "manifest.json"
+#: Modules whose source decides what is generated (hashed into the cache key).
+_GENERATOR_MODULES = (
+    "spec.py",
+    "load.py",
+    "codegen.py",
+    "symbolic/spatial.py",
+    "symbolic/linalg.py",
+    "symbolic/dynamics.py",
+    "symbolic/camera.py",
+    "symbolic/transition.py",
+    "symbolic/model.py",
+)
+
+
+@dataclass(frozen=True)
+class GenerateResult:
+    """What :func:`generate` did.
+
+    Attributes:
+        out_dir: ``generated/<name>/``.
+        manifest_path: Its ``manifest.json``.
+        library_path: The shared library.
+        reused: True when the cache matched and nothing was rebuilt.
+        seconds: Wall time of the call [s].
+        timings: Per-stage wall times [s] (load, symbolic, codegen, compile) when built.
+    """
+
+    out_dir: Path
+    manifest_path: Path
+    library_path: Path
+    reused: bool
+    seconds: float
+    timings: dict[str, float]
+
+
+def default_out_dir() -> Path:
+    """``$AMSFE_GENERATED_DIR``, else the repository's ``generated/``, else ``./generated``."""
+    env = os.environ.get("AMSFE_GENERATED_DIR")
+    if env:
+        return Path(env)
+    repo = Path(__file__).resolve().parent.parent.parent
+    if (repo / "pyproject.toml").is_file() and (repo / "generated").is_dir():
+        return repo / "generated"
+    return Path.cwd() / "generated"
+
+
+def compiler() -> str:
+    """The C compiler: ``$CC`` or ``cc``."""
+    return os.environ.get("CC", "cc")
+
+
+def cflags(extra: Sequence[str] | None = None) -> list[str]:
+    """Compiler flags: ``$AMSFE_CFLAGS`` (shell-split) or the defaults, plus ``extra``."""
+    env = os.environ.get("AMSFE_CFLAGS")
+    flags = shlex.split(env) if env else list(DEFAULT_CFLAGS)
+    for required in ("-fPIC", "-shared"):
+        if required not in flags:
+            flags.append(required)
+    return flags + list(extra or ())
+
+
+def _compiler_version(cc: str) -> str:
+    try:
+        out = subprocess.run([cc, "--version"], capture_output=True, text=True, check=True)
+    except (OSError, subprocess.CalledProcessError) as exc:
+        raise CodegenError(
+            describe("C compiler", f"a working {cc!r}", f"error {exc}", "install gcc or set $CC")
+        ) from exc
+    return out.stdout.splitlines()[0] if out.stdout else cc
+
+
+def content_hash(spec: RobotSpec, flags: Sequence[str]) -> tuple[str, dict[str, Any]]:
+    """The cache key of ``spec`` built with ``flags``, and what went into it."""
+    src = Path(__file__).resolve().parent
+    gen = hashlib.sha256()
+    for rel in _GENERATOR_MODULES:
+        gen.update((src / rel).read_bytes())
+    cc = compiler()
+    inputs: dict[str, Any] = {
+        "robot": spec.fingerprint(),
+        "generator_source": gen.hexdigest(),
+        "amsfe_sym": __version__,
+        "casadi": ca.__version__,
+        "pinocchio": metadata.version("pin") if _has_dist("pin") else "unknown",
+        "compiler": _compiler_version(cc),
+        "cflags": list(flags),
+        "machine": platform.machine(),
+    }
+    key = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()
+    return key, inputs
+
+
+def _has_dist(name: str) -> bool:
+    try:
+        metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return False
+    return True
+
+
+def _cached(out_dir: Path, key: str) -> Path | None:
+    """The library path if ``out_dir`` holds a complete build with hash ``key``."""
+    mpath = out_dir / MANIFEST
+    try:
+        manifest = json.loads(mpath.read_text())
+    except (OSError, ValueError):
+        return None
+    if manifest.get("content_hash") != key:
+        return None
+    lib = out_dir / str(manifest.get("library", ""))
+    if not lib.is_file():
+        return None
+    return lib
+
+
+def generate(
+    robot: str | os.PathLike[str] | RobotSpec = "paper_2link",
+    out: str | os.PathLike[str] | None = None,
+    lock: dict[str, float] | None = None,
+    extra_cflags: Sequence[str] | None = None,
+    force: bool = False,
+    progress: bool = False,
+) -> GenerateResult:
+    """Generate (or reuse) the compiled model library of a robot.
+
+    Args:
+        robot: Robot name, folder, ``robot.toml``, URDF path, or a spec.
+        out: Parent folder; output goes to ``<out>/<name>/`` (default :func:`default_out_dir`).
+        lock: Extra joints to lock, name -> value [rad or m].
+        extra_cflags: Extra compiler flags (hashed into the cache key).
+        force: Rebuild even if the cache matches.
+        progress: Print stage timings to stderr.
+
+    Returns:
+        A :class:`GenerateResult`.
+
+    Raises:
+        UrdfError, SpecError, ModelError: bad input (nothing is written).
+        CodegenError: the compiler failed (nothing is replaced).
+    """
+    t_start = time.perf_counter()
+    spec = robot if isinstance(robot, RobotSpec) else load_spec(robot)
+    if lock:
+        spec = spec.with_locked(lock)
+    flags = cflags(extra_cflags)
+    key, hash_inputs = content_hash(spec, flags)
+    parent = Path(out) if out is not None else default_out_dir()
+    out_dir = parent / spec.name
+    if not force:
+        lib = _cached(out_dir, key)
+        if lib is not None:
+            return GenerateResult(
+                out_dir, out_dir / MANIFEST, lib, True, time.perf_counter() - t_start, {}
+            )
+
+    # heavy imports only when building
+    from amsfe_sym.load import load_robot
+    from amsfe_sym.symbolic.model import build_functions
+
+    timings: dict[str, float] = {}
+    t = time.perf_counter()
+    robot_obj = load_robot(spec)
+    timings["load"] = time.perf_counter() - t
+    t = time.perf_counter()
+    model = build_functions(robot_obj)
+    timings["symbolic"] = time.perf_counter() - t
+    _say(progress, f"[amsfe] {spec.name}: symbolic model built in {timings['symbolic']:.2f} s")
+
+    parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{spec.name}-", dir=parent))
+    tmp.chmod(0o755)
+    try:
+        t = time.perf_counter()
+        cname = f"{spec.name}.c"
+        gen = ca.CodeGenerator(cname, {"with_header": True, "with_mem": False})
+        for f in model.functions.values():
+            gen.add(f)
+        cwd = os.getcwd()
+        try:
+            os.chdir(tmp)
+            gen.generate()
+        finally:
+            os.chdir(cwd)
+        timings["codegen"] = time.perf_counter() - t
+        t = time.perf_counter()
+        libname = f"lib{spec.name}.so"
+        cmd = [compiler(), *flags, "-o", libname, cname, "-lm"]
+        _say(progress, f"[amsfe] {spec.name}: compiling ({' '.join(cmd)})")
+        proc = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise CodegenError(
+                describe(
+                    f"compiling {cname}",
+                    "a successful build",
+                    f"exit code {proc.returncode}: {proc.stderr[-2000:]}",
+                    "check the compiler and $AMSFE_CFLAGS",
+                )
+            )
+        timings["compile"] = time.perf_counter() - t
+        try:
+            ctypes.CDLL(str(tmp / libname))
+        except OSError as exc:
+            raise CodegenError(
+                describe(f"loading {libname}", "a loadable library", str(exc), "rebuild")
+            ) from exc
+        manifest = _manifest(model, key, hash_inputs, libname, cname, timings)
+        (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
+        _replace_dir(tmp, out_dir)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    _say(progress, f"[amsfe] {spec.name}: compiled in {timings['compile']:.2f} s -> {out_dir}")
+    return GenerateResult(
+        out_dir,
+        out_dir / MANIFEST,
+        out_dir / f"lib{spec.name}.so",
+        False,
+        time.perf_counter() - t_start,
+        timings,
+    )
+
+
+def _replace_dir(new: Path, target: Path) -> None:
+    """Move ``new`` to ``target`` replacing any old content, as atomically as rename allows."""
+    old = None
+    if target.exists():
+        old = target.with_name(f".{target.name}.old-{os.getpid()}-{time.time_ns()}")
+        target.rename(old)
+    new.rename(target)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def _say(on: bool, msg: str) -> None:
+    if on:
+        import sys
+
+        print(msg, file=sys.stderr, flush=True)
+
+
+def _manifest(
+    model: Any,
+    key: str,
+    hash_inputs: dict[str, Any],
+    libname: str,
+    cname: str,
+    timings: dict[str, float],
+) -> dict[str, Any]:
+    robot = model.robot
+    cam = robot.camera
+    fns = {}
+    for name, f in model.functions.items():
+        fns[name] = {
+            "inputs": [
+                {"name": f.name_in(i), "shape": list(f.size_in(i))} for i in range(f.n_in())
+            ],
+            "outputs": [
+                {"name": f.name_out(i), "shape": list(f.size_out(i))} for i in range(f.n_out())
+            ],
+        }
+    n, p = robot.n, robot.p
+    return {
+        "name": robot.name,
+        "library": libname,
+        "source": cname,
+        "header": cname[:-2] + ".h",
+        "urdf": str(robot.spec.urdf),
+        "spec": None if robot.spec.spec_path is None else str(robot.spec.spec_path),
+        "joints": [j.name for j in robot.joints],
+        "joint_kinds": [j.kind for j in robot.joints],
+        "locked": dict(robot.spec.model.locked),
+        "n": n,
+        "p": p,
+        "N": 4 * n + p,
+        "theta": [
+            {
+                "name": b.spec.name,
+                "kind": b.spec.kind,
+                "target": b.spec.target,
+                "offset": list(b.spec.offset),
+                "true": b.spec.true,
+                "initial": b.spec.initial,
+                "unit": "N m/rad" if b.spec.kind == "joint_stiffness" else "kg",
+            }
+            for b in robot.theta
+        ],
+        "tracked_frame": robot.tracked_frame,
+        "tracked_offset": robot.tracked_offset.tolist(),
+        "T": robot.spec.model.T,
+        "integrator": robot.spec.model.integrator,
+        "inverse_iterations": robot.spec.model.inverse_iterations,
+        "plant_substeps": robot.spec.model.plant_substeps,
+        "gravity": robot.gravity.tolist(),
+        "state_layout": model.layout.as_dict(),
+        "noise_layout": {"w_l": [0, n], "w_m": [n, 2 * n], "w_theta": [2 * n, 2 * n + p]},
+        "actuators": {"Ks": robot.Ks.tolist(), "Mm": robot.Mm.tolist(), "Fm": robot.Fm.tolist()},
+        "camera": {
+            "K": cam.K.tolist(),
+            "R_cw": cam.R_cw.tolist(),
+            "position": cam.position.tolist(),
+            "width": cam.width,
+            "height": cam.height,
+            "period": cam.period,
+            "delay": cam.delay,
+        },
+        "camera_depends_on_theta": model.camera_depends_on_theta,
+        "functions": fns,
+        "content_hash": key,
+        "hash_inputs": hash_inputs,
+        "timings_s": {k: round(v, 4) for k, v in timings.items()},
+    }

@@ -1,0 +1,612 @@
+"""Simulated sensors: motor encoders every step, a slow and late camera, torque noise.
+
+These produce the measurements of the paper's eqs. (5)-(11) from the TRUE plant state:
+
+* :class:`Encoders` -- the fast motor-side measurement ``z_m = [qm, qmd] + v_m``
+  (eqs. 5-6), delivered at every step ``k`` (sampling interval ``T`` [s]).
+* :class:`Camera` -- the slow link-side measurement ``z_c = h_c(q) + v_c`` [px]
+  (eqs. 7-10): one exposure every ``l`` steps (eq. 11, ``s_m = l s_c``), delivered ``d``
+  steps after the exposure.  ``d`` and ``l`` are independent here (the paper's study has
+  ``d = l = 125``); ``d > l`` means several frames are in flight at once.
+* :class:`Disturbance` -- process noise: torques [N m] on link and motor for the plant.
+
+All randomness comes from ONE :class:`numpy.random.Generator` given to each sensor (the
+caller may give every sensor its own generator, e.g. spawned from one seed with
+``numpy.random.default_rng(seed).spawn(3)``).  Every sensor draws the same amount of
+random numbers per event whatever its configuration (noise, drop and jitter are always
+drawn), so changing, say, ``drop_probability`` keeps the pixel-noise realisations of the
+frames that survive: runs differ only in what was changed (common random numbers).
+
+Errors follow :mod:`amsfe_sym.errors`: a bad configuration raises
+:class:`~amsfe_sym.errors.ConfigError`, a wrongly shaped array
+:class:`~amsfe_sym.errors.ShapeError`, a NaN or inf true state
+:class:`~amsfe_sym.errors.MeasurementError`.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+import numbers
+import operator
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, TypeGuard
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from amsfe_sym.errors import ConfigError, MeasurementError, ShapeError, describe
+
+if TYPE_CHECKING:
+    from amsfe_sym.spec import CameraSpec
+
+__all__ = [
+    "Camera",
+    "CameraConfig",
+    "CameraFrame",
+    "CameraStats",
+    "Disturbance",
+    "EncoderConfig",
+    "Encoders",
+    "TorqueNoise",
+]
+
+FloatArray = NDArray[np.float64]
+StdLike = float | Sequence[float]
+
+
+# --------------------------------------------------------------------------------------
+# helpers
+
+
+def _is_int(value: object) -> TypeGuard[numbers.Integral]:
+    """True for Python and numpy integers, False for bool."""
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def _check_std(value: object, what: str) -> StdLike:
+    """Validate a scalar or per-joint standard deviation; return a float or a tuple."""
+    if isinstance(value, numbers.Real) and not isinstance(value, bool):
+        v = float(value)
+        if not math.isfinite(v) or v < 0.0:
+            raise ConfigError(
+                describe(what, "a finite standard deviation >= 0", repr(value), "use e.g. 1e-4")
+            )
+        return v
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(
+            describe(what, "a number or a sequence of numbers", repr(value), "use e.g. 1e-4")
+        ) from exc
+    if arr.ndim != 1 or arr.size == 0:
+        raise ConfigError(
+            describe(
+                what,
+                "a scalar or a non-empty 1-D sequence (one value per joint)",
+                f"shape {arr.shape}",
+                "give one number or a list with one number per joint",
+            )
+        )
+    if not np.all(np.isfinite(arr)) or np.any(arr < 0.0):
+        raise ConfigError(
+            describe(what, "finite standard deviations >= 0", repr(value), "fix the entries")
+        )
+    return tuple(float(x) for x in arr)
+
+
+def _per_joint(value: StdLike, n: int, what: str) -> FloatArray:
+    """Broadcast a validated scalar or per-joint value to an array of shape (n,)."""
+    if isinstance(value, float):
+        return np.full(n, value)
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != (n,):
+        raise ShapeError(
+            describe(
+                what,
+                f"a scalar or {n} values (one per joint)",
+                f"{arr.size} values",
+                f"give one number or a list of length {n}",
+            )
+        )
+    return arr
+
+
+def _vector(value: ArrayLike, n: int, what: str) -> FloatArray:
+    """Return ``value`` as a finite float vector of shape (n,), or raise."""
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != (n,):
+        raise ShapeError(
+            describe(what, f"shape ({n},)", f"shape {arr.shape}", f"pass a 1-D array of {n}")
+        )
+    if not np.all(np.isfinite(arr)):
+        raise MeasurementError(
+            describe(
+                what,
+                "finite values",
+                np.array2string(arr, precision=4),
+                "the true state diverged or was not initialised; check the plant",
+            )
+        )
+    return arr
+
+
+def _positive_int(value: object, what: str, minimum: int) -> int:
+    """Return ``value`` as an ``int`` if it is an integer (not a bool) >= ``minimum``."""
+    if not _is_int(value) or operator.index(value) < minimum:
+        raise ConfigError(describe(what, f"an integer >= {minimum}", repr(value), "fix the value"))
+    return operator.index(value)
+
+
+# --------------------------------------------------------------------------------------
+# encoders, eqs. (5)-(6)
+
+
+@dataclass(frozen=True)
+class EncoderConfig:
+    """Motor encoder noise and resolution.
+
+    Attributes:
+        q_std: Standard deviation of the motor-angle noise [rad]: a scalar or one value
+            per joint.
+        qd_std: Standard deviation of the motor-rate noise [rad/s]: scalar or per joint.
+        counts_per_rev: Encoder counts per revolution.  When set, the measured motor angle
+            is rounded to the nearest multiple of ``2 pi / counts_per_rev`` [rad] (after
+            the noise is added, so the output always lies on the count grid).  The rate is
+            not quantized (it stands for a filtered or tachometer rate).  ``None``: no
+            quantization.
+
+    Raises:
+        ConfigError: a negative or non-finite standard deviation, or ``counts_per_rev`` not
+            a positive integer.
+    """
+
+    q_std: StdLike = 0.0
+    qd_std: StdLike = 0.0
+    counts_per_rev: int | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "q_std", _check_std(self.q_std, "EncoderConfig.q_std"))
+        object.__setattr__(self, "qd_std", _check_std(self.qd_std, "EncoderConfig.qd_std"))
+        if self.counts_per_rev is not None:
+            object.__setattr__(
+                self,
+                "counts_per_rev",
+                _positive_int(self.counts_per_rev, "EncoderConfig.counts_per_rev", 1),
+            )
+
+    @property
+    def resolution(self) -> float | None:
+        """Angle of one encoder count, ``2 pi / counts_per_rev`` [rad], or ``None``."""
+        if self.counts_per_rev is None:
+            return None
+        return 2.0 * math.pi / self.counts_per_rev
+
+
+class Encoders:
+    """Motor-side encoders of ``n`` joints: ``z_m(k) = [qm(k), qmd(k)] + v_m(k)``, eqs. (5)-(6).
+
+    A measurement is available at every step.  The noise is zero-mean Gaussian and white;
+    with ``counts_per_rev`` set the angle is also quantized (uniform error of variance
+    ``res^2 / 12``, which :attr:`variance` includes so an estimator can use it as ``R_m``).
+
+    Args:
+        n: Number of joints.
+        config: Noise and resolution.
+        rng: The only source of randomness.
+
+    Raises:
+        ConfigError: ``n`` is not a positive integer.
+        ShapeError: a per-joint standard deviation does not have ``n`` entries.
+    """
+
+    def __init__(self, n: int, config: EncoderConfig, rng: np.random.Generator) -> None:
+        self.n = _positive_int(n, "Encoders n (number of joints)", 1)
+        self.config = config
+        self._rng = rng
+        self._q_std = _per_joint(config.q_std, self.n, "EncoderConfig.q_std")
+        self._qd_std = _per_joint(config.qd_std, self.n, "EncoderConfig.qd_std")
+
+    @property
+    def variance(self) -> FloatArray:
+        """Effective measurement variance, shape (2n,): ``[q_std^2 + res^2/12, qd_std^2]``.
+
+        Units [rad^2] then [rad^2/s^2]; the diagonal of ``R_m`` for the estimator (eq. 6).
+        """
+        res = self.config.resolution
+        quant = 0.0 if res is None else res * res / 12.0
+        return np.concatenate([self._q_std**2 + quant, self._qd_std**2])
+
+    def measure(self, qm: ArrayLike, qmd: ArrayLike) -> FloatArray:
+        """Measure the true motor angle and rate at the current step.
+
+        Args:
+            qm: True motor angles [rad], shape (n,).
+            qmd: True motor rates [rad/s], shape (n,).
+
+        Returns:
+            ``z_m = [qm + v_q, qmd + v_qd]``, shape (2n,) [rad, rad/s]; the angle part is
+            quantized to the count grid when ``counts_per_rev`` is set.
+
+        Raises:
+            ShapeError: ``qm`` or ``qmd`` is not of shape (n,).
+            MeasurementError: ``qm`` or ``qmd`` holds NaN or inf.
+        """
+        qm_a = _vector(qm, self.n, "Encoders.measure qm [rad]")
+        qmd_a = _vector(qmd, self.n, "Encoders.measure qmd [rad/s]")
+        noise = self._rng.standard_normal(2 * self.n)
+        z_q = qm_a + self._q_std * noise[: self.n]
+        z_qd = qmd_a + self._qd_std * noise[self.n :]
+        res = self.config.resolution
+        if res is not None:
+            z_q = np.round(z_q / res) * res
+        return np.concatenate([z_q, z_qd])
+
+
+# --------------------------------------------------------------------------------------
+# camera, eqs. (7)-(11)
+
+
+@dataclass(frozen=True, eq=False)
+class CameraFrame:
+    """One delivered camera image: where the tracked point was seen, and when.
+
+    Attributes:
+        exposure_step: Step ``kappa`` at which the image was taken (the state the pixel
+            describes is ``x(kappa)``).
+        z: Measured pixel ``[u, v]`` [px], shape (2,), read-only.
+        delivery_step: Step at which the frame reached the estimator
+            (``kappa + d`` plus jitter); ``-1`` when unknown.
+
+    ``eq=False``: frames compare by identity (an array field has no scalar equality).
+    """
+
+    exposure_step: int
+    z: FloatArray
+    delivery_step: int = -1
+
+    @property
+    def delay(self) -> int:
+        """Steps from exposure to delivery, or -1 when the delivery step is unknown."""
+        return -1 if self.delivery_step < 0 else self.delivery_step - self.exposure_step
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    """Camera timing, noise and image size.
+
+    Attributes:
+        period: ``l``, steps between two exposures (eq. 11), >= 1.
+        delay: ``d``, steps from an exposure to its delivery, >= 0 (independent of ``l``).
+        pixel_std: Standard deviation of the pixel noise [px] on each axis, >= 0.
+        width: Image width [px]; a frame is inside when ``0 <= u < width``.
+        height: Image height [px]; a frame is inside when ``0 <= v < height``.
+        phase: Exposures happen at steps ``k`` with ``k % period == phase``,
+            ``0 <= phase < period``.
+        round_to_pixel: Round the noisy pixel to the nearest integer (adds a uniform error
+            of variance 1/12 px^2 per axis, included in :attr:`variance`).
+        drop_probability: Probability that an exposed frame is lost, in [0, 1).
+        jitter_steps: Extra delivery delay drawn uniformly from the integers
+            ``0 .. jitter_steps``, so a frame arrives ``d .. d + jitter_steps`` steps after
+            its exposure.  With ``jitter_steps >= period`` a later frame can arrive before an
+            earlier one: frames are then delivered OUT OF ORDER across steps (within one step
+            they are sorted by exposure step) and the estimator must cope.
+
+    Raises:
+        ConfigError: any value outside the ranges above.
+    """
+
+    period: int
+    delay: int
+    pixel_std: float
+    width: int = 640
+    height: int = 512
+    phase: int = 0
+    round_to_pixel: bool = True
+    drop_probability: float = 0.0
+    jitter_steps: int = 0
+
+    def __post_init__(self) -> None:
+        _positive_int(self.period, "CameraConfig.period (l, steps between exposures)", 1)
+        _positive_int(self.delay, "CameraConfig.delay (d, steps exposure -> delivery)", 0)
+        _positive_int(self.width, "CameraConfig.width [px]", 1)
+        _positive_int(self.height, "CameraConfig.height [px]", 1)
+        _positive_int(self.jitter_steps, "CameraConfig.jitter_steps", 0)
+        if not _is_int(self.phase) or not 0 <= int(self.phase) < int(self.period):
+            raise ConfigError(
+                describe(
+                    "CameraConfig.phase",
+                    f"an integer in [0, period) = [0, {self.period})",
+                    repr(self.phase),
+                    "use phase = k0 % period for a first exposure at step k0",
+                )
+            )
+        std = self.pixel_std
+        if (
+            not isinstance(std, numbers.Real)
+            or isinstance(std, bool)
+            or not (math.isfinite(float(std)) and float(std) >= 0.0)
+        ):
+            raise ConfigError(
+                describe(
+                    "CameraConfig.pixel_std [px]", "a finite number >= 0", repr(std), "e.g. 1.0"
+                )
+            )
+        p = self.drop_probability
+        if not isinstance(p, numbers.Real) or isinstance(p, bool) or not 0.0 <= float(p) < 1.0:
+            raise ConfigError(
+                describe(
+                    "CameraConfig.drop_probability",
+                    "a number in [0, 1)",
+                    repr(p),
+                    "use 0 for a camera that never loses a frame",
+                )
+            )
+        if not isinstance(self.round_to_pixel, bool):
+            raise ConfigError(
+                describe(
+                    "CameraConfig.round_to_pixel", "true or false", repr(self.round_to_pixel), ""
+                )
+            )
+        # store plain Python numbers (numpy scalars would leak into reprs and hashes)
+        for name in ("period", "delay", "width", "height", "phase", "jitter_steps"):
+            object.__setattr__(self, name, int(getattr(self, name)))
+        object.__setattr__(self, "pixel_std", float(std))
+        object.__setattr__(self, "drop_probability", float(p))
+
+    @property
+    def variance(self) -> float:
+        """Effective pixel variance per axis [px^2]: ``pixel_std^2`` (+ 1/12 if rounded).
+
+        The diagonal of ``R_c`` for the estimator (eq. 10).
+        """
+        return self.pixel_std**2 + (1.0 / 12.0 if self.round_to_pixel else 0.0)
+
+    @classmethod
+    def from_spec(cls, spec: CameraSpec, pixel_std: float, **overrides: Any) -> CameraConfig:
+        """Build from a robot spec's camera section (period, delay, width, height).
+
+        Args:
+            spec: The robot's :class:`amsfe_sym.spec.CameraSpec`.
+            pixel_std: Pixel noise standard deviation [px] (not part of the robot spec).
+            **overrides: Any other field of :class:`CameraConfig` (e.g. ``phase``).
+        """
+        values: dict[str, Any] = {
+            "period": spec.period,
+            "delay": spec.delay,
+            "width": spec.width,
+            "height": spec.height,
+            "pixel_std": pixel_std,
+        }
+        values.update(overrides)
+        return cls(**values)
+
+
+@dataclass
+class CameraStats:
+    """Counters of what happened to the exposed frames.
+
+    ``exposed == delivered + dropped + out_of_image + in_flight`` at all times (the last is
+    :attr:`Camera.in_flight`).
+
+    Attributes:
+        exposed: Exposures taken.
+        delivered: Frames returned by :meth:`Camera.tick`.
+        dropped: Frames lost at random (``drop_probability``).
+        out_of_image: Frames not delivered because the point was not seen: the true
+            projection is NaN/inf (e.g. behind the camera) or outside the image, or the
+            noisy (rounded) pixel fell outside the image.  Checked before the drop, so a
+            frame counts in one category only.
+        out_of_image_true: Of ``out_of_image``, those whose TRUE projection was NaN, inf or
+            outside the image.
+        out_of_order: Delivered frames exposed before a frame delivered at an earlier step
+            (possible only with ``jitter_steps > 0``).
+    """
+
+    exposed: int = 0
+    delivered: int = 0
+    dropped: int = 0
+    out_of_image: int = 0
+    out_of_image_true: int = 0
+    out_of_order: int = 0
+
+
+@dataclass(order=True)
+class _Pending:
+    delivery_step: int
+    exposure_step: int
+    z: FloatArray = field(compare=False)
+
+
+class Camera:
+    """A camera seeing the tracked point: slow (period ``l``) and late (delay ``d``).
+
+    Call :meth:`tick` once per step with the TRUE link angles.  At an exposure step
+    (``k % period == phase``) it projects them with ``project`` (the map ``h_c`` of eqs.
+    7-9), adds Gaussian pixel noise (eq. 10), rounds to whole pixels if asked, decides
+    whether the frame is lost, draws the delivery jitter, and queues the frame for step
+    ``k + delay + jitter``.  :meth:`tick` returns the frames due at this step.
+
+    Args:
+        config: Timing, noise, image size.
+        project: Map from the true link angles ``q`` [rad], shape (n,), to the pixel
+            ``[u, v]`` [px], shape (2,).  It may return NaN when the point cannot be seen
+            (e.g. behind the camera); such frames count as out of image.
+        rng: The only source of randomness.  Per exposure it draws, in this order, 2
+            standard normals (noise), 1 uniform (drop), 1 integer (jitter), whatever the
+            configuration and the frame's fate.
+    """
+
+    def __init__(
+        self,
+        config: CameraConfig,
+        project: Callable[[FloatArray], ArrayLike],
+        rng: np.random.Generator,
+    ) -> None:
+        self.config = config
+        self.project = project
+        self._rng = rng
+        self._queue: list[_Pending] = []
+        self._last_step: int | None = None
+        self._last_delivered_exposure: int | None = None
+        self.stats = CameraStats()
+
+    @property
+    def in_flight(self) -> int:
+        """Frames exposed and queued but not yet delivered."""
+        return len(self._queue)
+
+    def is_exposure_step(self, k: int) -> bool:
+        """True when an image is taken at step ``k``."""
+        return k % self.config.period == self.config.phase
+
+    def tick(self, k: int, q_true: ArrayLike) -> list[CameraFrame]:
+        """Advance the camera to step ``k``; return the frames delivered at ``k``.
+
+        Args:
+            k: The current step; must increase strictly from call to call (steps skipped
+                between calls take no exposure; frames due in them arrive at ``k``).
+            q_true: TRUE link angles at step ``k`` [rad], shape (n,).
+
+        Returns:
+            Frames whose delivery step is ``<= k``, sorted by exposure step.  A frame
+            exposed at ``k`` with ``delay = 0`` (and no jitter) is returned by this call.
+
+        Raises:
+            ConfigError: ``k`` is not an integer or not larger than the previous step.
+            ShapeError: ``project`` does not return 2 values.
+            MeasurementError: ``q_true`` holds NaN or inf.
+        """
+        if not _is_int(k):
+            raise ConfigError(describe("Camera.tick k", "an integer step", repr(k), "pass int(k)"))
+        k = int(k)
+        if self._last_step is not None and k <= self._last_step:
+            raise ConfigError(
+                describe(
+                    "Camera.tick k",
+                    f"a step > {self._last_step} (the previous call)",
+                    str(k),
+                    "call tick once per step with increasing k, or build a new Camera",
+                )
+            )
+        self._last_step = k
+        if self.is_exposure_step(k):
+            self._expose(k, q_true)
+        due: list[_Pending] = []
+        while self._queue and self._queue[0].delivery_step <= k:
+            due.append(heapq.heappop(self._queue))
+        due.sort(key=lambda p: p.exposure_step)
+        frames: list[CameraFrame] = []
+        for p in due:
+            last = self._last_delivered_exposure
+            if last is not None and p.exposure_step < last:
+                self.stats.out_of_order += 1
+            self._last_delivered_exposure = (
+                p.exposure_step if last is None else max(last, p.exposure_step)
+            )
+            frames.append(CameraFrame(p.exposure_step, p.z, delivery_step=k))
+        self.stats.delivered += len(frames)
+        return frames
+
+    def _expose(self, k: int, q_true: ArrayLike) -> None:
+        cfg = self.config
+        q = np.asarray(q_true, dtype=float)
+        if q.ndim != 1 or q.size == 0:
+            raise ShapeError(
+                describe("Camera.tick q_true [rad]", "shape (n,)", f"shape {q.shape}", "pass q")
+            )
+        if not np.all(np.isfinite(q)):
+            raise MeasurementError(
+                describe(
+                    "Camera.tick q_true [rad]",
+                    "finite values",
+                    np.array2string(q, precision=4),
+                    "the true state diverged or was not initialised; check the plant",
+                )
+            )
+        y = np.asarray(self.project(q), dtype=float)
+        if y.shape != (2,):
+            raise ShapeError(
+                describe(
+                    "Camera project(q) result [px]",
+                    "shape (2,): one pixel [u, v]",
+                    f"shape {y.shape}",
+                    "make the projection return the pixel of the tracked point",
+                )
+            )
+        # Draw everything first, always, so the stream does not depend on the frame's fate.
+        noise = self._rng.standard_normal(2)
+        u_drop = self._rng.random()
+        jitter = int(self._rng.integers(0, cfg.jitter_steps + 1))
+        self.stats.exposed += 1
+
+        if not self._inside(y):
+            self.stats.out_of_image += 1
+            self.stats.out_of_image_true += 1
+            return
+        z = y + cfg.pixel_std * noise
+        if cfg.round_to_pixel:
+            z = np.round(z)
+        if not self._inside(z):
+            self.stats.out_of_image += 1
+            return
+        if u_drop < cfg.drop_probability:
+            self.stats.dropped += 1
+            return
+        z.setflags(write=False)
+        heapq.heappush(self._queue, _Pending(k + cfg.delay + jitter, k, z))
+
+    def _inside(self, y: FloatArray) -> bool:
+        cfg = self.config
+        return bool(np.all(np.isfinite(y)) and 0.0 <= y[0] < cfg.width and 0.0 <= y[1] < cfg.height)
+
+
+# --------------------------------------------------------------------------------------
+# process disturbance
+
+
+@dataclass(frozen=True, eq=False)
+class TorqueNoise:
+    """One step's disturbance torques.
+
+    Attributes:
+        link: Torque on the link side [N m], shape (n,) (adds to ``Ks (qm - q)``, eq. 1b).
+        motor: Torque on the motor side [N m], shape (n,) (adds to ``u``, eq. 1d).
+    """
+
+    link: FloatArray
+    motor: FloatArray
+
+
+class Disturbance:
+    """White Gaussian torque noise for the plant, one sample per step.
+
+    Args:
+        n: Number of joints.
+        std_link: Standard deviation of the link torque [N m], scalar or per joint.
+        std_motor: Standard deviation of the motor torque [N m], scalar or per joint.
+        rng: The only source of randomness (draws 2n standard normals per sample, even when
+            a standard deviation is zero).
+
+    Raises:
+        ConfigError: ``n`` not a positive integer or a negative / non-finite std.
+        ShapeError: a per-joint std without ``n`` entries.
+    """
+
+    def __init__(
+        self, n: int, std_link: StdLike, std_motor: StdLike, rng: np.random.Generator
+    ) -> None:
+        self.n = _positive_int(n, "Disturbance n (number of joints)", 1)
+        self.std_link = _per_joint(
+            _check_std(std_link, "Disturbance std_link [N m]"), self.n, "Disturbance std_link"
+        )
+        self.std_motor = _per_joint(
+            _check_std(std_motor, "Disturbance std_motor [N m]"), self.n, "Disturbance std_motor"
+        )
+        self._rng = rng
+
+    def sample(self) -> TorqueNoise:
+        """Draw this step's link and motor torques [N m]."""
+        w = self._rng.standard_normal(2 * self.n)
+        return TorqueNoise(link=self.std_link * w[: self.n], motor=self.std_motor * w[self.n :])

@@ -1,0 +1,53 @@
+"""Small dense symbolic linear algebra that code-generates well.
+
+CasADi's SX ``solve`` builds a large, less accurate expression; for the symmetric positive
+definite mass matrix an unrolled LDL^T (no pivoting needed for SPD) is compact and exact.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+__all__ = ["ldl_solve"]
+
+
+def ldl_solve(A: ca.SX, b: ca.SX) -> ca.SX:
+    """Solve A x = b for symmetric positive definite A (n x n) by an unrolled LDL^T.
+
+    Args:
+        A: Symmetric positive definite matrix (only the lower triangle is read).
+        b: Right-hand side, n x k.
+
+    Returns:
+        x, n x k.
+    """
+    n = A.shape[0]
+    L = [[ca.SX(0) for _ in range(n)] for _ in range(n)]
+    D = [ca.SX(0) for _ in range(n)]
+    for j in range(n):
+        dj = A[j, j]
+        for k in range(j):
+            dj = dj - L[j][k] * L[j][k] * D[k]
+        D[j] = dj
+        for i in range(j + 1, n):
+            lij = A[i, j]
+            for k in range(j):
+                lij = lij - L[i][k] * L[j][k] * D[k]
+            L[i][j] = lij / dj
+    cols = []
+    for c in range(b.shape[1]):
+        y = [ca.SX(0) for _ in range(n)]
+        for i in range(n):
+            yi = b[i, c]
+            for k in range(i):
+                yi = yi - L[i][k] * y[k]
+            y[i] = yi
+        z = [y[i] / D[i] for i in range(n)]
+        x = [ca.SX(0) for _ in range(n)]
+        for i in reversed(range(n)):
+            xi = z[i]
+            for k in range(i + 1, n):
+                xi = xi - L[k][i] * x[k]
+            x[i] = xi
+        cols.append(ca.vertcat(*x))
+    return ca.horzcat(*cols)

@@ -1,0 +1,87 @@
+"""Assemble every symbolic function of one robot (the generated-function contract).
+
+:func:`build_functions` returns CasADi Functions named and shaped as docs/architecture.md's
+contract table says; :mod:`amsfe_sym.codegen` turns them into one C library.  All outputs
+are dense so the C buffers are plain column-major arrays.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+
+from amsfe_sym.load import Robot
+from amsfe_sym.symbolic.camera import depth, pinhole
+from amsfe_sym.symbolic.dynamics import RigidBodyTree
+from amsfe_sym.symbolic.transition import StateLayout, Transition
+
+__all__ = ["SymbolicModel", "build_functions"]
+
+
+@dataclass
+class SymbolicModel:
+    """The functions of one robot plus what the manifest needs to describe them."""
+
+    robot: Robot
+    layout: StateLayout
+    functions: dict[str, ca.Function] = field(default_factory=dict)
+    camera_depends_on_theta: bool = False
+
+
+def _fn(name: str, ins: list[tuple[str, ca.SX]], outs: list[tuple[str, ca.SX]]) -> ca.Function:
+    return ca.Function(
+        name,
+        [s for _, s in ins],
+        [ca.densify(e) for _, e in outs],
+        [n for n, _ in ins],
+        [n for n, _ in outs],
+    )
+
+
+def build_functions(robot: Robot) -> SymbolicModel:
+    """Build every model function of ``robot`` (eqs. 1-8, 22) as CasADi SX Functions."""
+    tree = RigidBodyTree(robot)
+    spec = robot.spec.model
+    tr = Transition(tree, spec.integrator, spec.inverse_iterations)
+    n, p = robot.n, robot.p
+    L = tr.layout
+    N = L.N
+    q, qd = ca.SX.sym("q", n), ca.SX.sym("qd", n)
+    th = ca.SX.sym("theta", p)
+    x, u = ca.SX.sym("x", N), ca.SX.sym("u", n)
+    xn = ca.SX.sym("x_next", N)
+    w = ca.SX.sym("w", 2 * n + p)
+
+    M = tree.mass_matrix(q, th)
+    r = tree.frame_point(q, robot.tracked_frame_id, robot.tracked_offset)
+    y = pinhole(robot.camera, r)
+    dy = ca.jacobian(y, q)
+    F = tr.forward(x, u)
+    Fw = tr.forward(x, u, w)
+    A = ca.jacobian(F, x)
+    G = ca.substitute(ca.jacobian(Fw, w), w, ca.SX.zeros(2 * n + p, 1))
+
+    fns = [
+        _fn("mass_matrix", [("q", q), ("theta", th)], [("M", M)]),
+        _fn("bias", [("q", q), ("qd", qd), ("theta", th)], [("b", tree.bias(q, qd, th))]),
+        _fn("gravity", [("q", q), ("theta", th)], [("g", tree.gravity_torque(q, th))]),
+        _fn("tracked_point", [("q", q), ("theta", th)], [("r", r)]),
+        _fn("camera", [("q", q), ("theta", th)], [("y", y)]),
+        _fn("camera_jacobian", [("q", q), ("theta", th)], [("dy_dq", dy)]),
+        _fn(
+            "camera_measure",
+            [("q", q), ("theta", th)],
+            [("y", y), ("dy_dq", dy), ("depth", depth(robot.camera, r))],
+        ),
+        _fn("transition", [("x", x), ("u", u)], [("x_next", F)]),
+        _fn("transition_jacobian", [("x", x), ("u", u)], [("A", A)]),
+        _fn("noise_gain", [("x", x), ("u", u)], [("Gamma", G)]),
+        _fn("transition_step", [("x", x), ("u", u)], [("x_next", F), ("A", A), ("Gamma", G)]),
+        _fn("transition_inverse", [("x_next", xn), ("u", u)], [("x", tr.inverse(xn, u))]),
+    ]
+    model = SymbolicModel(robot=robot, layout=L)
+    model.functions = {f.name(): f for f in fns}
+    model.functions["plant_step"] = tr.plant_step(spec.plant_substeps)
+    model.camera_depends_on_theta = bool(ca.depends_on(y, th)) if p else False
+    return model

@@ -1,0 +1,232 @@
+"""The discrete flexible-joint transition F(x, u) (eqs. 1a-1d, 3, 4), its inverse (eq. 22),
+and the continuous-time plant used as the simulated truth.
+
+State (eq. 2): ``x = [q, qd, qm, qmd, theta]``, ``N = 4n + p``.  Process noise enters as
+impulses ``w = [w_l (n) [N m s], w_m (n) [N m s], w_theta (p)]``, so that the noise gain
+``Gamma = dF/dw`` at ``w = 0`` matches eq. (4)'s Gamma for the paper's integrator.
+
+Two integrators (PAPER-NOTES section 1):
+
+``paper`` (eqs. 1a-1d read as Nicosia's momentum update, errata corrected)::
+
+    q+      = q + T qd
+    M(q+) qd+ = M(q) qd + T [Ks (qm - q) + f(q, qd)] + w_l,   f = d/dq(1/2 qd^T M qd) - g(q)
+    qm+     = qm + T qmd
+    Mm qmd+ = Mm qmd + T [u - Fm qmd - Ks (qm - q)] + w_m
+    theta+  = theta + T w_theta
+
+``semi_implicit`` (symplectic Euler; q advances with the new velocity, stable for stiff joints)::
+
+    M(q) (qd+ - qd) = T [Ks (qm - q) - b(q, qd)] + w_l,       q+  = q + T qd+
+    Mm (qmd+ - qmd) = T [u - Fm qmd - Ks (qm - q)] + w_m,    qm+ = qm + T qmd+
+    theta+ = theta + T w_theta
+
+The inverse solves the same equations for x given x+ exactly in the motor and q parts and
+by a fixed number of unrolled chord (simplified Newton) steps for qd, whose contraction
+factor is O(T); the round trip is checked in the tests and by ``amsfe check``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+
+from amsfe_sym.symbolic.dynamics import RigidBodyTree
+from amsfe_sym.symbolic.linalg import ldl_solve
+
+__all__ = ["StateLayout", "Transition"]
+
+
+@dataclass(frozen=True)
+class StateLayout:
+    """Slices of the state vector x = [q, qd, qm, qmd, theta] (eq. 2)."""
+
+    n: int
+    p: int
+
+    @property
+    def N(self) -> int:
+        return 4 * self.n + self.p
+
+    @property
+    def q(self) -> slice:
+        return slice(0, self.n)
+
+    @property
+    def qd(self) -> slice:
+        return slice(self.n, 2 * self.n)
+
+    @property
+    def qm(self) -> slice:
+        return slice(2 * self.n, 3 * self.n)
+
+    @property
+    def qmd(self) -> slice:
+        return slice(3 * self.n, 4 * self.n)
+
+    @property
+    def theta(self) -> slice:
+        return slice(4 * self.n, 4 * self.n + self.p)
+
+    def as_dict(self) -> dict[str, list[int]]:
+        """Start and stop index of each block, for the manifest."""
+        return {
+            k: [getattr(self, k).start, getattr(self, k).stop]
+            for k in ("q", "qd", "qm", "qmd", "theta")
+        }
+
+
+class Transition:
+    """Builds F, its jacobians, its inverse and the plant for one robot.
+
+    Args:
+        tree: The SX rigid-body tree.
+        integrator: ``"paper"`` or ``"semi_implicit"``.
+        inverse_iterations: Unrolled chord steps in the inverse.
+    """
+
+    def __init__(self, tree: RigidBodyTree, integrator: str, inverse_iterations: int) -> None:
+        self.tree = tree
+        self.robot = tree.robot
+        self.layout = StateLayout(tree.n, tree.p)
+        self.integrator = integrator
+        self.iterations = inverse_iterations
+        self.T = float(self.robot.spec.model.T)
+
+    # ------------------------------------------------------------------ pieces
+    def stiffness(self, theta: ca.SX) -> ca.SX:
+        """Ks as an n-vector, with joint-stiffness parameters bound to theta."""
+        ks = [ca.SX(float(v)) for v in self.robot.Ks]
+        for i, b in enumerate(self.robot.theta):
+            if b.kind == "joint_stiffness":
+                ks[b.q_index] = theta[i]
+        return ca.vertcat(*ks)
+
+    def f_link(self, q: ca.SX, qd: ca.SX, theta: ca.SX) -> ca.SX:
+        """f(q, qd) = d/dq (1/2 qd^T M(q) qd) - g(q): the non-inertial link forces of (1b)."""
+        qs = ca.SX.sym("q_f", self.tree.n)
+        M = self.tree.mass_matrix(qs, theta)
+        ke = 0.5 * ca.dot(qd, ca.mtimes(M, qd))
+        dke = ca.substitute(ca.gradient(ke, qs), qs, q)
+        return dke - self.tree.gravity_torque(q, theta)
+
+    def split(self, x: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+        L = self.layout
+        return x[L.q], x[L.qd], x[L.qm], x[L.qmd], x[L.theta]
+
+    # ------------------------------------------------------------------ forward
+    def forward(self, x: ca.SX, u: ca.SX, w: ca.SX | None = None) -> ca.SX:
+        """x+ = F(x, u) + noise (eq. 3); ``w`` = [w_l, w_m, w_theta] impulses, or None."""
+        n, p, T = self.tree.n, self.tree.p, self.T
+        q, qd, qm, qmd, th = self.split(x)
+        if w is None:
+            w = ca.SX.zeros(2 * n + p, 1)
+        wl, wm, wt = w[0:n], w[n : 2 * n], w[2 * n :]
+        Ks = self.stiffness(th)
+        Mm = ca.DM(self.robot.Mm)
+        Fm = ca.DM(self.robot.Fm)
+        delta = qm - q  # eq. (1d)
+        if self.integrator == "paper":
+            q_next = q + T * qd  # (1a)
+            mom = ca.mtimes(self.tree.mass_matrix(q, th), qd) + T * (
+                Ks * delta + self.f_link(q, qd, th)
+            ) + wl
+            qd_next = ldl_solve(self.tree.mass_matrix(q_next, th), mom)  # (1b)
+            qm_next = qm + T * qmd
+            qmd_next = qmd + (T * (u - Fm * qmd - Ks * delta) + wm) / Mm  # (1c)
+        else:
+            rhs = T * (Ks * delta - self.tree.bias(q, qd, th)) + wl
+            qd_next = qd + ldl_solve(self.tree.mass_matrix(q, th), rhs)
+            q_next = q + T * qd_next
+            qmd_next = qmd + (T * (u - Fm * qmd - Ks * delta) + wm) / Mm
+            qm_next = qm + T * qmd_next
+        th_next = th + T * wt
+        return ca.vertcat(q_next, qd_next, qm_next, qmd_next, th_next)
+
+    # ------------------------------------------------------------------ inverse
+    def inverse(self, xn: ca.SX, u: ca.SX) -> ca.SX:
+        """x = F^-1(x+, u): the backward transition F_{kappa,lk} of eq. (22)."""
+        T, K = self.T, self.iterations
+        qn, qdn, qmn, qmdn, th = self.split(xn)
+        Ks = self.stiffness(th)
+        Mm = ca.DM(self.robot.Mm)
+        Fm = ca.DM(self.robot.Fm)
+        if self.integrator == "paper":
+            Mn = self.tree.mass_matrix(qn, th)
+            target = ca.mtimes(Mn, qdn)  # M(q+) qd+
+
+            def motor(q: ca.SX) -> tuple[ca.SX, ca.SX]:
+                # (Mm - T Fm + T^2 Ks) qmd = Mm qmd+ - T u + T Ks (qm+ - q), qm = qm+ - T qmd
+                qmd = (Mm * qmdn - T * u + T * Ks * (qmn - q)) / (Mm - T * Fm + T * T * Ks)
+                return qmn - T * qmd, qmd
+
+            qd = qdn
+            for _ in range(K):
+                q = qn - T * qd
+                qm, _qmd = motor(q)
+                resid = (
+                    ca.mtimes(self.tree.mass_matrix(q, th), qd)
+                    + T * (Ks * (qm - q) + self.f_link(q, qd, th))
+                    - target
+                )
+                qd = qd - ldl_solve(Mn, resid)  # chord step with the fixed matrix M(q+)
+            q = qn - T * qd
+            qm, qmd = motor(q)
+        else:
+            q = qn - T * qdn
+            qm = qmn - T * qmdn
+            delta = qm - q
+            qmd = (Mm * qmdn - T * (u - Ks * delta)) / (Mm - T * Fm)
+            M = self.tree.mass_matrix(q, th)
+            qd = qdn
+            for _ in range(K):
+                qd = qdn - ldl_solve(M, T * (Ks * delta - self.tree.bias(q, qd, th)))
+        return ca.vertcat(q, qd, qm, qmd, th)
+
+    # ------------------------------------------------------------------ plant (truth)
+    def plant_rhs(self, xp: ca.SX, u: ca.SX, theta: ca.SX, tau_d: ca.SX) -> ca.SX:
+        """Continuous-time Spong model: d/dt [q, qd, qm, qmd].
+
+        ``M qdd + b = Ks (qm - q) + tau_l``, ``Mm qmdd + Fm qmd + Ks (qm - q) = u + tau_m``,
+        with disturbance torques ``tau_d = [tau_l, tau_m]`` [N m].
+        """
+        n = self.tree.n
+        q, qd, qm, qmd = xp[0:n], xp[n : 2 * n], xp[2 * n : 3 * n], xp[3 * n : 4 * n]
+        Ks = self.stiffness(theta)
+        delta = qm - q
+        qdd = ldl_solve(
+            self.tree.mass_matrix(q, theta),
+            Ks * delta - self.tree.bias(q, qd, theta) + tau_d[0:n],
+        )
+        qmdd = (u + tau_d[n:] - ca.DM(self.robot.Fm) * qmd - Ks * delta) / ca.DM(self.robot.Mm)
+        return ca.vertcat(qd, qdd, qmd, qmdd)
+
+    def plant_rhs_function(self) -> ca.Function:
+        """The plant's right-hand side as an SX Function (xp, u, theta, tau_d) -> d/dt xp."""
+        n, p = self.tree.n, self.tree.p
+        xp, u = ca.SX.sym("xp", 4 * n), ca.SX.sym("u", n)
+        th, td = ca.SX.sym("theta", p), ca.SX.sym("tau_d", 2 * n)
+        return ca.Function("plant_rhs", [xp, u, th, td], [self.plant_rhs(xp, u, th, td)])
+
+    def plant_step(self, substeps: int) -> ca.Function:
+        """One sampling interval T of the plant: ``substeps`` RK4 steps, u held (zero-order hold).
+
+        Built as an MX graph that calls the SX right-hand side 4 x ``substeps`` times, so the
+        generated C holds one copy of the dynamics and a short loop of calls.
+        """
+        n, p = self.tree.n, self.tree.p
+        rhs = self.plant_rhs_function()
+        xp, u = ca.MX.sym("xp", 4 * n), ca.MX.sym("u", n)
+        th, td = ca.MX.sym("theta", p), ca.MX.sym("tau_d", 2 * n)
+        h = self.T / substeps
+        x = xp
+        for _ in range(substeps):
+            k1 = rhs(x, u, th, td)
+            k2 = rhs(x + 0.5 * h * k1, u, th, td)
+            k3 = rhs(x + 0.5 * h * k2, u, th, td)
+            k4 = rhs(x + h * k3, u, th, td)
+            x = x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+        return ca.Function(
+            "plant_step", [xp, u, th, td], [x], ["xp", "u", "theta", "tau_d"], ["xp_next"]
+        )
