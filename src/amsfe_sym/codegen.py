@@ -124,7 +124,7 @@ def content_hash(spec: RobotSpec, flags: Sequence[str]) -> tuple[str, dict[str, 
         "robot": spec.fingerprint(),
         "generator_source": gen.hexdigest(),
         "amsfe_sym": __version__,
-        "casadi": ca.__version__,
+        "casadi": metadata.version("casadi"),
         "pinocchio": metadata.version("pin") if _has_dist("pin") else "unknown",
         "compiler": _compiler_version(cc),
         "cflags": list(flags),
@@ -282,6 +282,14 @@ def _say(on: bool, msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
 
 
+def _io(name: str, shape: tuple[int, int]) -> dict[str, Any]:
+    """Manifest entry of one input or output: name, shape, and whether it is a matrix
+    (a jacobian with one column is still a matrix) or a vector."""
+    from amsfe_sym.symbolic.model import MATRIX_OUTPUTS
+
+    return {"name": name, "shape": list(shape), "matrix": name in MATRIX_OUTPUTS or shape[1] > 1}
+
+
 def _manifest(
     model: Any,
     key: str,
@@ -295,12 +303,8 @@ def _manifest(
     fns = {}
     for name, f in model.functions.items():
         fns[name] = {
-            "inputs": [
-                {"name": f.name_in(i), "shape": list(f.size_in(i))} for i in range(f.n_in())
-            ],
-            "outputs": [
-                {"name": f.name_out(i), "shape": list(f.size_out(i))} for i in range(f.n_out())
-            ],
+            "inputs": [_io(f.name_in(i), f.size_in(i)) for i in range(f.n_in())],
+            "outputs": [_io(f.name_out(i), f.size_out(i)) for i in range(f.n_out())],
         }
     n, p = robot.n, robot.p
     return {

@@ -93,16 +93,17 @@ class ThetaBinding:
     """How one unknown parameter enters the model.
 
     For mass-like kinds, the body inertia of Pinocchio joint ``pin_joint`` becomes
-    ``base + theta * unit`` where ``unit`` is a 10-vector of dynamic parameters
-    (Pinocchio's ``toDynamicParameters`` order: m, m c, I at the joint origin) and ``base``
-    has already been corrected in the reduced model (for ``link_mass`` the link's nominal
-    inertia is removed from the model so theta carries all of it).
+    ``nominal + (theta - origin) * unit`` where ``unit`` is a 10-vector of dynamic
+    parameters (Pinocchio's ``toDynamicParameters`` order: m, m c, I at the joint origin),
+    ``nominal`` is the URDF's (kept in the Pinocchio model) and ``origin`` is the value
+    theta has in the URDF: 0 for a payload, the link's nominal mass for ``link_mass``.
     For ``joint_stiffness``, ``q_index`` is the joint whose Ks theta replaces.
     """
 
     spec: ThetaSpec
     pin_joint: int = 0
     unit: NDArray[np.float64] = field(default_factory=lambda: np.zeros(10))
+    origin: float = 0.0
     q_index: int = -1
 
     @property
@@ -114,8 +115,8 @@ class ThetaBinding:
 class Robot:
     """A validated robot: reduced Pinocchio model plus everything the spec resolves to.
 
-    The Pinocchio model's inertias are the *theta-free* part: for every mass-like theta the
-    full body inertia is ``model.inertias[j] + sum_i theta_i * unit_i`` (see
+    The Pinocchio model's inertias are the URDF's: for every mass-like theta the body
+    inertia is ``model.inertias[j] + sum_i (theta_i - origin_i) * unit_i`` (see
     :meth:`pin_model_at`).
     """
 
@@ -176,7 +177,9 @@ class Robot:
         model.gravity = pin.Motion(np.concatenate([self.gravity, np.zeros(3)]))
         for b, th in zip(self.theta, theta, strict=True):
             if b.kind in ("payload_mass", "link_mass"):
-                params = model.inertias[b.pin_joint].toDynamicParameters() + th * b.unit
+                params = (
+                    model.inertias[b.pin_joint].toDynamicParameters() + (th - b.origin) * b.unit
+                )
                 model.inertias[b.pin_joint] = pin.Inertia.FromDynamicParameters(params)
         return model
 
@@ -192,9 +195,7 @@ class Robot:
 # --------------------------------------------------------------------------------------
 
 
-def load_robot(
-    robot: str | Path | RobotSpec, lock: dict[str, float] | None = None
-) -> Robot:
+def load_robot(robot: str | Path | RobotSpec, lock: dict[str, float] | None = None) -> Robot:
     """Validate and load a robot.
 
     Args:
@@ -289,9 +290,7 @@ def load_robot(
     Fm = _per_joint(spec.actuators.Fm, DEFAULT_FM, n, "Fm", spec)
 
     # --- theta ---------------------------------------------------------------------------
-    bindings = tuple(
-        _bind_theta(t, model, joints, link_inertias, spec) for t in spec.theta
-    )
+    bindings = tuple(_bind_theta(t, model, joints, link_inertias, spec) for t in spec.theta)
     gravity = np.array(spec.model.gravity, dtype=float)
 
     robot_obj = Robot(
@@ -373,7 +372,7 @@ def _validate_urdf(path: Path) -> None:
                         f"{path}: joint {name!r} <axis>",
                         "a non-zero axis",
                         "xyz = 0 0 0",
-                        "give the joint axis, e.g. xyz=\"0 0 1\"",
+                        'give the joint axis, e.g. xyz="0 0 1"',
                     )
                 )
     for ln in root.findall("link"):
@@ -461,8 +460,11 @@ def _link_inertias(path: Path) -> dict[str, tuple[float, NDArray[np.float64], ND
         if ie is not None:
             v = {k: float(ie.get(k, "0")) for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
             inertia = np.array(
-                [[v["ixx"], v["ixy"], v["ixz"]], [v["ixy"], v["iyy"], v["iyz"]],
-                 [v["ixz"], v["iyz"], v["izz"]]]
+                [
+                    [v["ixx"], v["ixy"], v["ixz"]],
+                    [v["ixy"], v["iyy"], v["iyz"]],
+                    [v["ixz"], v["iyz"], v["izz"]],
+                ]
             )
         out[ln.get("name", "")] = (mass, xyz, R @ inertia @ R.T)
     return out
@@ -574,10 +576,7 @@ def _bind_theta(
     m0, com, inertia = link_inertias[t.target]
     nominal = frame.placement.act(pin.Inertia(m0, com, inertia))
     unit = np.asarray(nominal.toDynamicParameters(), dtype=float) / m0
-    # remove the nominal link from the model so theta carries it all
-    params = model.inertias[jid].toDynamicParameters() - m0 * unit
-    model.inertias[jid] = pin.Inertia.FromDynamicParameters(params)
-    return ThetaBinding(spec=t, pin_joint=jid, unit=unit)
+    return ThetaBinding(spec=t, pin_joint=jid, unit=unit, origin=m0)
 
 
 def _camera(spec: RobotSpec, model: pin.Model, frame_id: int) -> CameraModel:
@@ -600,7 +599,9 @@ def _camera(spec: RobotSpec, model: pin.Model, frame_id: int) -> CameraModel:
     fwd = look_at - position
     if np.linalg.norm(fwd) < 1e-9:
         raise SpecError(
-            describe(f"{spec.spec_path}: [camera]", "look_at != position", "equal points", "move one")
+            describe(
+                f"{spec.spec_path}: [camera]", "look_at != position", "equal points", "move one"
+            )
         )
     z = fwd / np.linalg.norm(fwd)
     x = np.cross(z, up)
@@ -625,8 +626,13 @@ def _camera(spec: RobotSpec, model: pin.Model, frame_id: int) -> CameraModel:
     cy = c.cy if c.cy is not None else c.height / 2.0
     K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
     return CameraModel(
-        K=K, R_cw=R_cw, position=position, width=c.width, height=c.height,
-        period=c.period, delay=c.delay,
+        K=K,
+        R_cw=R_cw,
+        position=position,
+        width=c.width,
+        height=c.height,
+        period=c.period,
+        delay=c.delay,
     )
 
 

@@ -52,7 +52,11 @@ class CompiledFunction:
             ) from exc
         self._f.restype = ctypes.c_int
         self._f.argtypes = [
-            ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int,
+            ctypes.c_void_p,
+            ctypes.c_void_p,
+            ctypes.c_void_p,
+            ctypes.c_void_p,
+            ctypes.c_int,
         ]
         sz = [ctypes.c_longlong(0) for _ in range(4)]
         work.restype = ctypes.c_int
@@ -62,8 +66,8 @@ class CompiledFunction:
         self.output_names = [o["name"] for o in signature["outputs"]]
         self.input_shapes = [tuple(i["shape"]) for i in signature["inputs"]]
         self.output_shapes = [tuple(o["shape"]) for o in signature["outputs"]]
-        self._in = [np.zeros(_np_shape(s), order="F") for s in self.input_shapes]
-        self._out = [np.zeros(_np_shape(s), order="F") for s in self.output_shapes]
+        self._in = [np.zeros(_np_shape(i), order="F") for i in signature["inputs"]]
+        self._out = [np.zeros(_np_shape(o), order="F") for o in signature["outputs"]]
         self._iw = np.zeros(max(sz_iw, 1), dtype=np.int64)
         self._w = np.zeros(max(sz_w, 1))
         self._arg = (ctypes.c_void_p * max(sz_arg, 1))()
@@ -85,8 +89,12 @@ class CompiledFunction:
         """Evaluate; return the internal output buffers (valid until the next call)."""
         if len(args) != self._n_in:
             raise ShapeError(
-                describe(f"{self.name}()", f"{self._n_in} inputs {self.input_names}",
-                         f"{len(args)}", "pass every input")
+                describe(
+                    f"{self.name}()",
+                    f"{self._n_in} inputs {self.input_names}",
+                    f"{len(args)}",
+                    "pass every input",
+                )
             )
         for buf, a in zip(self._in, args, strict=True):
             if buf.size:
@@ -94,8 +102,12 @@ class CompiledFunction:
                     buf[...] = a if buf.ndim == 1 else np.reshape(a, buf.shape)
                 except ValueError as exc:
                     raise ShapeError(
-                        describe(f"{self.name}() input", f"shape {buf.shape}",
-                                 f"shape {np.shape(a)}", "reshape the argument")
+                        describe(
+                            f"{self.name}() input",
+                            f"shape {buf.shape}",
+                            f"shape {np.shape(a)}",
+                            "reshape the argument",
+                        )
                     ) from exc
         if self._f(*self._call_args) != 0:
             raise CodegenError(f"{self.name}() returned an error code")
@@ -106,9 +118,10 @@ class CompiledFunction:
         return tuple(o.copy() for o in self.call_into(*args))
 
 
-def _np_shape(shape: tuple[int, ...]) -> tuple[int, ...]:
-    rows, cols = shape
-    return (rows,) if cols == 1 else (rows, cols)
+def _np_shape(io: dict[str, Any]) -> tuple[int, ...]:
+    """numpy shape of a manifest input/output: (rows,) for vectors, (rows, cols) for matrices."""
+    rows, cols = io["shape"]
+    return (rows, cols) if io.get("matrix", cols > 1) else (rows,)
 
 
 class ModelLibrary:
@@ -150,8 +163,12 @@ class ModelLibrary:
             sigs = self.manifest["functions"]
             if name not in sigs:
                 raise CodegenError(
-                    describe(f"function {name!r}", f"one of {sorted(sigs)}", "unknown name",
-                             "check the manifest")
+                    describe(
+                        f"function {name!r}",
+                        f"one of {sorted(sigs)}",
+                        "unknown name",
+                        "check the manifest",
+                    )
                 )
             self._fns[name] = CompiledFunction(self._lib, name, sigs[name])
         return self._fns[name]

@@ -38,7 +38,7 @@ class _Body:
     axis: NDArray[np.float64]
     placement: Placement  # joint frame in the parent joint frame at q = 0
     pi0: NDArray[np.float64]  # dynamic parameters of the theta-free inertia
-    units: tuple[tuple[int, NDArray[np.float64]], ...]  # (theta index, parameter direction)
+    units: tuple[tuple[int, float, NDArray[np.float64]], ...]  # (theta index, origin, direction)
 
 
 class RigidBodyTree:
@@ -60,7 +60,7 @@ class RigidBodyTree:
                 raise AssertionError("unexpected Pinocchio joint numbering")
             pl = model.jointPlacements[jid]
             units = tuple(
-                (i, b.unit)
+                (i, b.origin, b.unit)
                 for i, b in enumerate(robot.theta)
                 if b.kind in ("payload_mass", "link_mass") and b.pin_joint == jid
             )
@@ -114,8 +114,8 @@ class RigidBodyTree:
         out = []
         for b in self.bodies:
             pi = ca.SX(ca.DM(b.pi0))
-            for i, unit in b.units:
-                pi = pi + theta[i] * ca.SX(ca.DM(unit))
+            for i, origin, unit in b.units:
+                pi = pi + (theta[i] - origin) * ca.SX(ca.DM(unit))
             out.append(pi)
         return out
 

@@ -16,7 +16,10 @@ from amsfe_sym.symbolic.camera import depth, pinhole
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
 from amsfe_sym.symbolic.transition import StateLayout, Transition
 
-__all__ = ["SymbolicModel", "build_functions"]
+__all__ = ["MATRIX_OUTPUTS", "SymbolicModel", "build_functions"]
+
+#: Outputs that are matrices even when they have one column (e.g. dy/dq of a 1-joint arm).
+MATRIX_OUTPUTS = frozenset({"M", "dy_dq", "A", "Gamma"})
 
 
 @dataclass

@@ -18,11 +18,11 @@ from numpy.typing import NDArray
 __all__ = [
     "Placement",
     "cross",
+    "force_act",
+    "force_cross",
     "inertia_times",
     "motion_act_inv",
-    "force_act",
     "motion_cross",
-    "force_cross",
     "rodrigues",
 ]
 
@@ -89,7 +89,10 @@ def force_cross(v: SXLike, f: SXLike) -> SXLike:
 
 
 def inertia_times(pi: SXLike, m: SXLike) -> SXLike:
-    """Spatial inertia (dynamic parameters ``pi``) times motion ``m``: [m v - h x w; h x v + I w]."""
+    """Spatial inertia (dynamic parameters ``pi``) times motion ``m``.
+
+    Returns ``[m v - h x w; h x v + I w]`` for ``m = [v; w]``.
+    """
     mass, h = pi[0], pi[1:4]
     I_o = ca.vertcat(
         ca.horzcat(pi[4], pi[5], pi[7]),

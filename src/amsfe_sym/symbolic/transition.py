@@ -129,9 +129,11 @@ class Transition:
         delta = qm - q  # eq. (1d)
         if self.integrator == "paper":
             q_next = q + T * qd  # (1a)
-            mom = ca.mtimes(self.tree.mass_matrix(q, th), qd) + T * (
-                Ks * delta + self.f_link(q, qd, th)
-            ) + wl
+            mom = (
+                ca.mtimes(self.tree.mass_matrix(q, th), qd)
+                + T * (Ks * delta + self.f_link(q, qd, th))
+                + wl
+            )
             qd_next = ldl_solve(self.tree.mass_matrix(q_next, th), mom)  # (1b)
             qm_next = qm + T * qmd
             qmd_next = qmd + (T * (u - Fm * qmd - Ks * delta) + wm) / Mm  # (1c)

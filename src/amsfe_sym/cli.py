@@ -1,0 +1,146 @@
+"""The ``amsfe`` command line: generate, check, simulate, bench.
+
+Built as :func:`get_argument_parser` + :func:`main` (``main(argv)`` is what the tests call).
+Every command works with no arguments, on the paper's 2-link robot or its scenario.
+Errors of the toolkit print one ``error: ...`` line (expected, found, fix) and exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from amsfe_sym.errors import AmsfeError, SpecError, describe
+
+__all__ = ["get_argument_parser", "main"]
+
+
+def _lock_arg(text: str) -> tuple[str, float]:
+    name, _, value = text.partition("=")
+    try:
+        return name, float(value) if value else 0.0
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"--lock {text!r}: expected JOINT or JOINT=VALUE") from exc
+
+
+def get_argument_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``amsfe``."""
+    parser = argparse.ArgumentParser(
+        prog="amsfe",
+        description="Code-generated elastic-joint robot models, multirate sensor fusion, DTSMC.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    g = sub.add_parser("generate", help="URDF/robot -> generated/<name>/ (C, library, manifest)")
+    g.add_argument("robot", nargs="?", default="paper_2link", help="robot name, folder or URDF")
+    g.add_argument("--out", default=None, help="parent output folder (default: generated/)")
+    g.add_argument(
+        "--lock",
+        nargs="+",
+        type=_lock_arg,
+        default=[],
+        metavar="JOINT[=VALUE]",
+        help="hold joints fixed (value in rad or m, default 0)",
+    )
+    g.add_argument("--force", action="store_true", help="rebuild even if the cache matches")
+    g.add_argument("--cflags", default=None, help="extra compiler flags (quoted)")
+
+    c = sub.add_parser("check", help="every generated function vs Pinocchio / finite differences")
+    c.add_argument("robot", nargs="?", default="paper_2link")
+    c.add_argument("--out", default=None, help="parent folder of generated libraries")
+    c.add_argument("--lock", nargs="+", type=_lock_arg, default=[], metavar="JOINT[=VALUE]")
+    c.add_argument("--samples", type=int, default=50, help="random states (default 50)")
+    c.add_argument("--seed", type=int, default=0)
+
+    s = sub.add_parser("simulate", help="run a scenario: plant, sensors, estimator, controller")
+    s.add_argument("scenario", nargs="?", default="paper-sim", help="scenario name or .toml")
+    s.add_argument("--estimator", default=None, help="encoders | naive | oosm | replay | cloning")
+    s.add_argument("--controller", default=None, help="controller name")
+    s.add_argument("--seed", type=int, default=None)
+    s.add_argument("--duration", type=float, default=None, help="simulated time [s]")
+    s.add_argument("--out", default=None, help="run folder (default runs/<scenario>-<stamp>)")
+    s.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    s.add_argument("--no-plots", action="store_true", help="skip the figures")
+
+    b = sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
+    b.add_argument("robot", nargs="?", default="paper_2link")
+    b.add_argument("--out", default=None)
+    b.add_argument("--repeat", type=int, default=20000, help="calls per timing")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``amsfe`` with ``argv`` (default: ``sys.argv[1:]``); returns the exit code."""
+    args = get_argument_parser().parse_args(argv)
+    try:
+        if args.command == "generate":
+            return _generate(args)
+        if args.command == "check":
+            return _check(args)
+        if args.command == "simulate":
+            return _simulate(args)
+        if args.command == "bench":
+            return _bench(args)
+    except AmsfeError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    raise SpecError(describe("command", "generate|check|simulate|bench", args.command, "see -h"))
+
+
+def _generate(args: argparse.Namespace) -> int:
+    from amsfe_sym.codegen import generate
+
+    extra = args.cflags.split() if args.cflags else None
+    res = generate(
+        args.robot,
+        out=args.out,
+        lock=dict(args.lock),
+        extra_cflags=extra,
+        force=args.force,
+        progress=True,
+    )
+    state = "up to date (cached)" if res.reused else "generated"
+    print(f"{res.out_dir}: {state} in {res.seconds:.2f} s")
+    if res.timings:
+        print("  " + ", ".join(f"{k} {v:.2f} s" for k, v in res.timings.items()))
+    return 0
+
+
+def _check(args: argparse.Namespace) -> int:
+    from amsfe_sym.check import format_table, run_checks
+    from amsfe_sym.codegen import generate
+    from amsfe_sym.load import load_robot
+    from amsfe_sym.runtime.library import ModelLibrary
+
+    lock = dict(args.lock)
+    res = generate(args.robot, out=args.out, lock=lock, progress=True)
+    robot = load_robot(args.robot, lock=lock)
+    results = run_checks(robot, ModelLibrary(res.out_dir), samples=args.samples, seed=args.seed)
+    print(
+        f"{robot.name}: n = {robot.n}, p = {robot.p}, {args.samples} random states, "
+        f"seed {args.seed}, library {res.library_path}"
+    )
+    print(format_table(results))
+    failed = [r.function for r in results if not r.passed]
+    if failed:
+        print(f"FAILED: {', '.join(failed)}")
+        return 1
+    print(f"all {len(results)} functions pass")
+    return 0
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    from amsfe_sym.simulate import run_from_cli
+
+    return run_from_cli(args)
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from amsfe_sym.bench import run_bench
+
+    return run_bench(args)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

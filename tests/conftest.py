@@ -1,0 +1,53 @@
+"""Shared fixtures: every robot is generated (and compiled) at most once per session.
+
+Libraries go to the content-hash cache of :func:`amsfe_sym.codegen.default_out_dir`
+(``generated/`` in the repository, or ``$AMSFE_GENERATED_DIR``), so a second test run, and
+the README's main command, reuse them instead of compiling again.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from amsfe_sym.codegen import generate
+from amsfe_sym.load import Robot, load_robot
+from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.spec import robots_dir
+
+SHIPPED = sorted(d.name for d in robots_dir().iterdir() if (d / "robot.toml").is_file())
+DATA = Path(__file__).parent / "data"
+
+
+def erd_urdf(rel: str) -> Path:
+    """Path of a URDF shipped by the example-robot-data package (a real third-party file)."""
+    from importlib import metadata
+
+    try:
+        dist = metadata.distribution("example-robot-data")
+    except metadata.PackageNotFoundError:
+        pytest.skip("example-robot-data is not installed (pip install -e '.[test]')")
+    base = Path(str(dist.locate_file("cmeel.prefix/share/example-robot-data/robots")))
+    path = base / rel
+    if not path.is_file():
+        pytest.skip(f"{rel} not in this example-robot-data version")
+    return path
+
+
+class _Libraries:
+    def __init__(self) -> None:
+        self._cache: dict[str, tuple[Robot, ModelLibrary]] = {}
+
+    def get(self, robot: str | Path) -> tuple[Robot, ModelLibrary]:
+        key = str(robot)
+        if key not in self._cache:
+            res = generate(robot)
+            self._cache[key] = (load_robot(robot), ModelLibrary(res.out_dir))
+        return self._cache[key]
+
+
+@pytest.fixture(scope="session")
+def libraries() -> _Libraries:
+    """Session-wide access to generated libraries: ``libraries.get(name) -> (robot, lib)``."""
+    return _Libraries()

@@ -1,0 +1,35 @@
+"""The command line, called as ``main([...])``."""
+
+from __future__ import annotations
+
+import pytest
+
+from amsfe_sym.cli import main
+
+
+def test_generate_without_arguments_is_cached(capsys, libraries) -> None:
+    libraries.get("paper_2link")  # built once for the session
+    assert main(["generate"]) == 0
+    assert "up to date (cached)" in capsys.readouterr().out
+
+
+def test_check_prints_a_passing_table(capsys, libraries) -> None:
+    libraries.get("paper_2link")
+    assert main(["check", "--samples", "5"]) == 0
+    out = capsys.readouterr().out
+    for name in ("mass_matrix", "transition_jacobian", "transition_inverse", "camera_jacobian"):
+        assert name in out
+    assert "FAIL" not in out and "all 12 functions pass" in out
+
+
+def test_bad_robot_exits_2_with_one_clear_line(capsys, tmp_path) -> None:
+    assert main(["generate", str(tmp_path / "nope.urdf"), "--out", str(tmp_path / "gen")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "expected" in err and "Fix:" in err
+    assert not (tmp_path / "gen").exists()
+
+
+def test_lock_argument_parsing(tmp_path, capsys) -> None:
+    with pytest.raises(SystemExit):
+        main(["generate", "--lock", "j1=abc"])
+    assert "JOINT=VALUE" in capsys.readouterr().err

@@ -1,0 +1,192 @@
+"""The compiled libraries: contract, equality with the CasADi functions they came from,
+every function against its reference (finite differences, Pinocchio), and the cache."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from amsfe_sym.check import random_states, run_checks
+from amsfe_sym.codegen import generate
+from amsfe_sym.symbolic.model import build_functions
+
+from .conftest import SHIPPED, erd_urdf
+
+CONTRACT = {
+    "mass_matrix": (["q", "theta"], ["M"]),
+    "bias": (["q", "qd", "theta"], ["b"]),
+    "tracked_point": (["q", "theta"], ["r"]),
+    "camera": (["q", "theta"], ["y"]),
+    "camera_jacobian": (["q", "theta"], ["dy_dq"]),
+    "transition": (["x", "u"], ["x_next"]),
+    "transition_jacobian": (["x", "u"], ["A"]),
+    "transition_inverse": (["x_next", "u"], ["x"]),
+}
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_manifest_contract(name: str, libraries) -> None:
+    robot, lib = libraries.get(name)
+    m = lib.manifest
+    n, p = robot.n, robot.p
+    N = 4 * n + p
+    assert (m["n"], m["p"], m["N"]) == (n, p, N)
+    assert m["joints"] == [j.name for j in robot.joints]
+    assert m["tracked_frame"] == robot.tracked_frame
+    assert len(m["theta"]) == p and all("kind" in t and "target" in t for t in m["theta"])
+    assert m["T"] == robot.spec.model.T
+    assert m["state_layout"] == {
+        "q": [0, n],
+        "qd": [n, 2 * n],
+        "qm": [2 * n, 3 * n],
+        "qmd": [3 * n, 4 * n],
+        "theta": [4 * n, N],
+    }
+    assert len(m["content_hash"]) == 64
+    shapes = {
+        "q": [n, 1],
+        "qd": [n, 1],
+        "theta": [p, 1],
+        "x": [N, 1],
+        "u": [n, 1],
+        "x_next": [N, 1],
+        "M": [n, n],
+        "b": [n, 1],
+        "r": [3, 1],
+        "y": [2, 1],
+        "dy_dq": [2, n],
+        "A": [N, N],
+    }
+    for fname, (ins, outs) in CONTRACT.items():
+        sig = m["functions"][fname]
+        assert [i["name"] for i in sig["inputs"]] == ins
+        assert [o["name"] for o in sig["outputs"]] == outs
+        for io in sig["inputs"] + sig["outputs"]:
+            assert io["shape"] == shapes[io["name"]], (fname, io)
+    # anyone can load a function with plain CasADi and no other part of the toolkit
+    ext = ca.external("mass_matrix", str(lib.dir / m["library"]))
+    assert ext.size_out(0) == (n, n)
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_compiled_equals_casadi_function(name: str, libraries) -> None:
+    """Compiled C (through the ctypes binding) vs the CasADi VM: equal to rounding."""
+    robot, lib = libraries.get(name)
+    fns = build_functions(robot).functions
+    rng = np.random.default_rng(5)
+    for x in random_states(robot, 10, rng):
+        n = robot.n
+        u = rng.uniform(-3, 3, n)
+        q, qd, th = x[:n], x[n : 2 * n], x[4 * n :]
+        args = {
+            "mass_matrix": (q, th),
+            "bias": (q, qd, th),
+            "gravity": (q, th),
+            "tracked_point": (q, th),
+            "camera": (q, th),
+            "camera_jacobian": (q, th),
+            "camera_measure": (q, th),
+            "transition": (x, u),
+            "transition_jacobian": (x, u),
+            "noise_gain": (x, u),
+            "transition_step": (x, u),
+            "transition_inverse": (x, u),
+            "plant_step": (x[: 4 * n], u, th, rng.normal(size=2 * n)),
+        }
+        assert set(args) == set(lib.manifest["functions"])
+        for fname, a in args.items():
+            vm = fns[fname](*a)
+            vm = vm if isinstance(vm, tuple) else (vm,)
+            out = lib.function(fname)(*a)
+            for v, c in zip(vm, out, strict=True):
+                v = np.array(v).reshape(c.shape, order="F")
+                scale = max(1.0, float(np.max(np.abs(v), initial=0.0)))
+                assert np.max(np.abs(c - v), initial=0.0) <= 1e-13 * scale, fname
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_every_function_against_reference(name: str, libraries) -> None:
+    """Jacobians vs central finite differences (<= 1e-6), terms vs Pinocchio (<= 1e-10),
+    inverse round trip (<= 1e-9), plant vs numpy RK4 on pin.aba: ``amsfe check``'s table."""
+    robot, lib = libraries.get(name)
+    results = run_checks(robot, lib, samples=50, seed=1)
+    failed = [(r.function, r.max_error, r.tolerance) for r in results if not r.passed]
+    assert not failed
+    assert {r.function for r in results} >= {
+        "mass_matrix",
+        "bias",
+        "tracked_point",
+        "camera",
+        "camera_jacobian",
+        "transition",
+        "transition_jacobian",
+        "transition_inverse",
+    }
+
+
+@pytest.mark.parametrize(
+    "rel",
+    [
+        "ur_description/urdf/ur5_robot.urdf",
+        "double_pendulum_description/urdf/double_pendulum_continuous.urdf",
+    ],
+)
+def test_third_party_urdfs(rel: str, libraries) -> None:
+    """Real third-party URDFs, bare (default spec): generate and pass every check."""
+    robot, lib = libraries.get(erd_urdf(rel))
+    results = run_checks(robot, lib, samples=20, seed=2)
+    assert all(r.passed for r in results), [(r.function, r.max_error) for r in results]
+
+
+def test_paper_integrator_inverse_and_jacobian_inverse(libraries) -> None:
+    """The backward map's jacobian is the inverse of the forward one (PAPER-NOTES 1)."""
+    robot, lib = libraries.get("paper_2link")
+    assert lib.manifest["integrator"] == "paper"
+    rng = np.random.default_rng(9)
+    tr, jac, inv = (
+        lib.function(k) for k in ("transition", "transition_jacobian", "transition_inverse")
+    )
+    for x in random_states(robot, 10, rng):
+        u = rng.uniform(-3, 3, robot.n)
+        xn = tr(x, u)[0]
+        assert np.max(np.abs(inv(xn, u)[0] - x)) <= 1e-9
+        # jacobian of the inverse by finite differences == inverse of the forward jacobian
+        h = 1e-6
+        Jb = np.stack(
+            [(inv(xn + h * e, u)[0] - inv(xn - h * e, u)[0]) / (2 * h) for e in np.eye(xn.size)],
+            axis=1,
+        )
+        A = jac(x, u)[0]
+        assert np.max(np.abs(Jb @ A - np.eye(xn.size))) <= 1e-6
+
+
+def test_cache_reuse_and_invalidation(tmp_path) -> None:
+    """Unchanged input is reused without recompiling; a changed spec or flag rebuilds."""
+    src = tmp_path / "robot"
+    src.mkdir()
+    urdf = tmp_path / "dp.urdf"
+    shutil.copy(erd_urdf("double_pendulum_description/urdf/double_pendulum_simple.urdf"), urdf)
+    (src / "robot.toml").write_text(f'name = "dp"\nurdf = "{urdf}"\n[model]\nT = 0.002\n')
+    out = tmp_path / "gen"
+    first = generate(src, out=out)
+    assert not first.reused and first.library_path.is_file()
+    lib_mtime = first.library_path.stat().st_mtime_ns
+    second = generate(src, out=out)
+    assert second.reused and second.library_path.stat().st_mtime_ns == lib_mtime
+    # changed spec -> rebuilt, and the manifest records the new T
+    (src / "robot.toml").write_text(f'name = "dp"\nurdf = "{urdf}"\n[model]\nT = 0.003\n')
+    third = generate(src, out=out)
+    assert not third.reused
+    assert json.loads(third.manifest_path.read_text())["T"] == 0.003
+    # changed compiler flags -> rebuilt
+    fourth = generate(src, out=out, extra_cflags=["-DAMSFE_TEST_FLAG=1"])
+    assert not fourth.reused
+    # a corrupted manifest is repaired by rebuilding
+    fourth.manifest_path.write_text("{ not json")
+    fifth = generate(src, out=out, extra_cflags=["-DAMSFE_TEST_FLAG=1"])
+    assert not fifth.reused and json.loads(fifth.manifest_path.read_text())["T"] == 0.003
+    assert sorted(p.name for p in out.iterdir()) == ["dp"]  # no temporary folders left
