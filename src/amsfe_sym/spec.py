@@ -271,13 +271,16 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
     _no_unknown(data, _TOP_KEYS, where)
     if "urdf" not in data:
         raise SpecError(
-            describe(where, "a top-level key 'urdf'", "none", "add urdf = \"<file>.urdf\"")
+            describe(where, "a top-level key 'urdf'", "none", 'add urdf = "<file>.urdf"')
         )
     urdf = (path.parent / str(data["urdf"])).resolve()
     if not urdf.is_file():
         raise SpecError(
             describe(
-                f"{where}: urdf", "an existing file", str(urdf), "fix the path (relative to the spec)"
+                f"{where}: urdf",
+                "an existing file",
+                str(urdf),
+                "fix the path (relative to the spec)",
             )
         )
     name = _sanitize(str(data.get("name", path.parent.name)))
@@ -291,8 +294,12 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
     integrator = str(m.get("integrator", "semi_implicit"))
     if integrator not in INTEGRATORS:
         raise SpecError(
-            describe(f"{where} [model] integrator", f"one of {INTEGRATORS}", repr(integrator),
-                     "pick one of those")
+            describe(
+                f"{where} [model] integrator",
+                f"one of {INTEGRATORS}",
+                repr(integrator),
+                "pick one of those",
+            )
         )
     T = _positive(m.get("T", 0.001), f"{where} [model] T")
     joints = m.get("joints")
@@ -302,7 +309,9 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
         T=T,
         gravity=_vec3(m.get("gravity", (0.0, 0.0, -9.81)), f"{where} [model] gravity"),
         integrator=integrator,  # type: ignore[arg-type]
-        inverse_iterations=int(_positive(m.get("inverse_iterations", 6), f"{where} inverse_iterations")),
+        inverse_iterations=int(
+            _positive(m.get("inverse_iterations", 6), f"{where} inverse_iterations")
+        ),
         plant_substeps=int(_positive(m.get("plant_substeps", 10), f"{where} plant_substeps")),
     )
 
@@ -345,8 +354,12 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
     raw_theta = data.get("theta", [])
     if not isinstance(raw_theta, list):
         raise SpecError(
-            describe(f"{where} theta", "an array of tables [[theta]]", type(raw_theta).__name__,
-                     "write each parameter as a [[theta]] table")
+            describe(
+                f"{where} theta",
+                "an array of tables [[theta]]",
+                type(raw_theta).__name__,
+                "write each parameter as a [[theta]] table",
+            )
         )
     for i, th in enumerate(raw_theta):
         w = f"{where} [[theta]] #{i + 1}"
@@ -401,8 +414,12 @@ def _no_unknown(data: Mapping[str, Any], allowed: set[str], where: str) -> None:
     unknown = sorted(set(data) - allowed)
     if unknown:
         raise SpecError(
-            describe(where, f"keys among {sorted(allowed)}", f"unknown {unknown}",
-                     "remove or rename them (see docs/robot-spec.md)")
+            describe(
+                where,
+                f"keys among {sorted(allowed)}",
+                f"unknown {unknown}",
+                "remove or rename them (see docs/robot-spec.md)",
+            )
         )
 
 
@@ -445,7 +462,9 @@ def _opt_positive_vec(x: Any, where: str) -> tuple[float, ...] | None:
     if x is None:
         return None
     if not isinstance(x, Sequence) or isinstance(x, str):
-        raise SpecError(describe(where, "an array of numbers, one per joint", repr(x), "write [..]"))
+        raise SpecError(
+            describe(where, "an array of numbers, one per joint", repr(x), "write [..]")
+        )
     return tuple(_positive(v, where) for v in x)
 
 
@@ -453,5 +472,7 @@ def _opt_nonneg_vec(x: Any, where: str) -> tuple[float, ...] | None:
     if x is None:
         return None
     if not isinstance(x, Sequence) or isinstance(x, str):
-        raise SpecError(describe(where, "an array of numbers, one per joint", repr(x), "write [..]"))
+        raise SpecError(
+            describe(where, "an array of numbers, one per joint", repr(x), "write [..]")
+        )
     return tuple(_nonneg(v, where) for v in x)
