@@ -39,11 +39,13 @@ class _Libraries:
     def __init__(self) -> None:
         self._cache: dict[str, tuple[Robot, ModelLibrary]] = {}
 
-    def get(self, robot: str | Path) -> tuple[Robot, ModelLibrary]:
-        key = str(robot)
+    def get(
+        self, robot: str | Path, lock: dict[str, float] | None = None
+    ) -> tuple[Robot, ModelLibrary]:
+        key = f"{robot}|{sorted((lock or {}).items())}"
         if key not in self._cache:
-            res = generate(robot)
-            self._cache[key] = (load_robot(robot), ModelLibrary(res.out_dir))
+            res = generate(robot, lock=lock)
+            self._cache[key] = (load_robot(robot, lock=lock), ModelLibrary(res.out_dir))
         return self._cache[key]
 
 

@@ -213,7 +213,7 @@ def load_robot(robot: str | Path | RobotSpec, lock: dict[str, float] | None = No
     if lock:
         spec = spec.with_locked(lock)
     urdf_path = spec.urdf
-    _validate_urdf(urdf_path)
+    _validate_urdf(urdf_path, locked=set(spec.model.locked))
     try:
         full = pin.buildModelFromUrdf(str(urdf_path))
     except Exception as exc:  # Pinocchio raises plain RuntimeError / ValueError
@@ -288,6 +288,8 @@ def load_robot(robot: str | Path | RobotSpec, lock: dict[str, float] | None = No
     Ks = _per_joint(spec.actuators.Ks, DEFAULT_KS, n, "Ks", spec)
     Mm = _per_joint(spec.actuators.Mm, DEFAULT_MM, n, "Mm", spec)
     Fm = _per_joint(spec.actuators.Fm, DEFAULT_FM, n, "Fm", spec)
+    if spec.actuators.Ks is None:
+        Ks = _default_stiffness(model, joints, Mm, spec.model.T)
 
     # --- theta ---------------------------------------------------------------------------
     bindings = tuple(_bind_theta(t, model, joints, link_inertias, spec) for t in spec.theta)
@@ -315,8 +317,11 @@ def load_robot(robot: str | Path | RobotSpec, lock: dict[str, float] | None = No
 # URDF validation (before Pinocchio, which accepts several invalid things silently)
 
 
-def _validate_urdf(path: Path) -> None:
-    """Check XML, joint types, mimic, axes, masses and inertias of every link."""
+def _validate_urdf(path: Path, locked: set[str] | frozenset[str] = frozenset()) -> None:
+    """Check XML, joint types, mimic, axes, masses and inertias of every link.
+
+    A ``<mimic>`` tag is accepted on fixed joints and on joints the spec locks (a locked
+    joint follows no other joint)."""
     try:
         root = ET.parse(path).getroot()
     except ET.ParseError as exc:
@@ -342,7 +347,7 @@ def _validate_urdf(path: Path) -> None:
                     "make it fixed, or lock/replace it; floating bases are not modelled",
                 )
             )
-        if j.find("mimic") is not None:
+        if jtype != "fixed" and name not in locked and j.find("mimic") is not None:
             raise UnsupportedJointError(
                 describe(
                     f"{path}: joint {name!r}",
@@ -512,6 +517,30 @@ def _chain_tip(model: pin.Model) -> str:
     return best if best is not None else model.names[last]
 
 
+def _default_stiffness(
+    model: pin.Model, joints: tuple[JointInfo, ...], Mm: NDArray[np.float64], T: float
+) -> NDArray[np.float64]:
+    """Default Ks [N m/rad] when the spec gives none: 1000, lowered per joint so that the
+    joint's link-against-motor mode keeps w T <= 0.5 (w^2 = Ks (1/J + 1/Mm), J the smallest
+    diagonal entry of M seen at 32 random q); light wrists would otherwise make the discrete
+    model diverge at T = 1 ms."""
+    data = model.createData()
+    rng = np.random.default_rng(0)
+    J = np.full(len(joints), np.inf)
+    for _ in range(32):
+        q = pin.neutral(model)
+        for j in joints:
+            a = rng.uniform(-math.pi, math.pi)
+            if j.kind == "continuous":
+                q[j.idx_q], q[j.idx_q + 1] = math.cos(a), math.sin(a)
+            elif j.kind == "revolute":
+                q[j.idx_q] = a
+        J = np.minimum(J, np.diag(pin.crba(model, data, q)))
+    J = np.maximum(J, 1e-12)
+    cap = (0.5 / T) ** 2 / (1.0 / J + 1.0 / Mm)
+    return np.minimum(np.full(len(joints), DEFAULT_KS), cap)
+
+
 def _per_joint(
     values: tuple[float, ...] | None, default: float, n: int, what: str, spec: RobotSpec
 ) -> NDArray[np.float64]:
@@ -579,23 +608,48 @@ def _bind_theta(
     return ThetaBinding(spec=t, pin_joint=jid, unit=unit, origin=m0)
 
 
-def _camera(spec: RobotSpec, model: pin.Model, frame_id: int) -> CameraModel:
-    """Resolve the camera; defaults look at the workspace from the side, all of it in view."""
-    c = spec.camera
+def _workspace(
+    model: pin.Model, frame_id: int, offset: tuple[float, float, float], count: int = 256
+) -> tuple[NDArray[np.float64], float]:
+    """Centre [m] and radius [m] of the tracked point's reachable set, from random q."""
     data = model.createData()
-    # workspace estimate: reach from the root = sum of joint offsets and the tracked point
-    reach = 0.0
-    for i in range(1, model.njoints):
-        reach += float(np.linalg.norm(model.jointPlacements[i].translation))
-    pin.framesForwardKinematics(model, data, pin.neutral(model))
-    reach = max(reach + float(np.linalg.norm(spec.tracked.offset)), 0.1)
-    look_at = np.array(c.look_at if c.look_at is not None else (0.0, 0.0, 0.0))
+    rng = np.random.default_rng(0)  # deterministic: the default camera is part of the model
+    pts = []
+    for _ in range(count):
+        q = pin.neutral(model)
+        for jid in range(1, model.njoints):
+            j = model.joints[jid]
+            if j.nq == 2:  # continuous: (cos, sin)
+                a = rng.uniform(-math.pi, math.pi)
+                q[j.idx_q], q[j.idx_q + 1] = math.cos(a), math.sin(a)
+            else:
+                lo, hi = model.lowerPositionLimit[j.idx_q], model.upperPositionLimit[j.idx_q]
+                lo = max(lo, -math.pi) if np.isfinite(lo) else -math.pi
+                hi = min(hi, math.pi) if np.isfinite(hi) else math.pi
+                q[j.idx_q] = rng.uniform(lo, hi) if hi > lo else 0.0
+        pin.framesForwardKinematics(model, data, q)
+        pts.append(data.oMf[frame_id].act(np.asarray(offset, dtype=float)))
+    P = np.array(pts)
+    centre = 0.5 * (P.min(axis=0) + P.max(axis=0))
+    radius = float(np.max(np.linalg.norm(P - centre, axis=1)))
+    return centre, max(radius, 0.05)
+
+
+def _camera(spec: RobotSpec, model: pin.Model, frame_id: int) -> CameraModel:
+    """Resolve the camera.
+
+    Defaults (bare URDF, or keys left out): the camera looks at the centre of the tracked
+    point's workspace (sampled at random q) from 3 workspace radii away along -y, and the
+    focal length puts the whole workspace sphere inside 90 % of the shorter image side.
+    """
+    c = spec.camera
+    centre, radius = _workspace(model, frame_id, spec.tracked.offset)
+    look_at = np.array(c.look_at, dtype=float) if c.look_at is not None else centre
     up = np.array(c.up, dtype=float)
     if c.position is not None:
         position = np.array(c.position, dtype=float)
     else:
-        # default: on the -y side, far enough that a sphere of radius `reach` is in view
-        position = look_at + np.array([0.0, -3.0 * reach, 0.0])
+        position = look_at + np.array([0.0, -3.0 * radius, 0.0])
     fwd = look_at - position
     if np.linalg.norm(fwd) < 1e-9:
         raise SpecError(
@@ -617,9 +671,14 @@ def _camera(spec: RobotSpec, model: pin.Model, frame_id: int) -> CameraModel:
     x /= np.linalg.norm(x)
     y = np.cross(z, x)
     R_cw = np.vstack([x, y, z])
-    dist = float(np.linalg.norm(fwd))
+    # the sphere (centre, radius) seen from `position`: its farthest image offset is
+    # f * tan(angle to centre + half-angle of the sphere)
+    to_c = centre - position
+    dist = float(np.linalg.norm(to_c))
+    ang = math.acos(float(np.clip(np.dot(to_c / max(dist, 1e-12), z), -1.0, 1.0)))
+    half_angle = math.asin(min(radius / max(dist, 1e-12), 0.99))
     half = 0.45 * min(c.width, c.height)
-    f_default = half * max(dist - reach, 0.1 * dist) / reach
+    f_default = half / math.tan(min(ang + half_angle, 1.4))
     fx = c.fx if c.fx is not None else f_default
     fy = c.fy if c.fy is not None else fx
     cx = c.cx if c.cx is not None else c.width / 2.0
