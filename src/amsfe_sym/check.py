@@ -130,9 +130,12 @@ class _Oracle:
 
     def transition(self, x: Array, u: Array) -> Array:
         q, qd, qm, qmd, th = self.split(x)
-        T, r = self.T, self.r
+        T, r, n = self.T, self.r, self.n
         Ks = r.stiffness_at(th)
         delta = qm - q
+        if r.spec.model.integrator == "rk4":
+            xp = self.rk4(x[: 4 * n], u, th, np.zeros(2 * n), T, 1)
+            return np.concatenate([xp, th])
         if r.spec.model.integrator == "paper":
             q1 = q + T * qd
             mom = self.M(q, th) @ qd + T * (Ks * delta + self.f_link(q, qd, th))
@@ -146,10 +149,27 @@ class _Oracle:
             qm1 = qm + T * qmd1
         return np.concatenate([q1, qd1, qm1, qmd1, th])
 
-    def noise_gain(self, x: Array) -> Array:
+    def noise_gain(self, x: Array, u: Array) -> Array:
         n, p, T = self.n, self.r.p, self.T
         q, qd, _, _, th = self.split(x)
         G = np.zeros((4 * n + p, 2 * n + p))
+        if self.r.spec.model.integrator == "rk4":
+            # impulses at the start of the step, then one RK4 step: central differences
+            Minv = np.linalg.inv(self.M(q, th))
+            h = 1e-6
+            for i in range(2 * n):
+                dx = np.zeros(4 * n)
+                if i < n:
+                    dx[n : 2 * n] = Minv[:, i] * h
+                else:
+                    dx[3 * n + i - n] = h / self.r.Mm[i - n]
+                xp = x[: 4 * n]
+                zero = np.zeros(2 * n)
+                G[: 4 * n, i] = (
+                    self.rk4(xp + dx, u, th, zero, T, 1) - self.rk4(xp - dx, u, th, zero, T, 1)
+                ) / (2 * h)
+            G[4 * n :, 2 * n :] = T * np.eye(p)
+            return G
         mm = np.diag(1.0 / self.r.Mm)
         if self.r.spec.model.integrator == "paper":
             G[n : 2 * n, :n] = np.linalg.inv(self.M(q + T * qd, th))
@@ -164,6 +184,13 @@ class _Oracle:
         return G
 
     def plant_step(self, xp: Array, u: Array, theta: Array, tau_d: Array) -> Array:
+        S = self.r.spec.model.plant_substeps
+        return self.rk4(xp, u, theta, tau_d, self.T, S)
+
+    def rk4(
+        self, xp: Array, u: Array, theta: Array, tau_d: Array, duration: float, steps: int
+    ) -> Array:
+        """``steps`` RK4 steps over ``duration`` [s] of the Spong model, on pin.aba."""
         n, r = self.n, self.r
         m, d = self.model(theta)
         Ks = r.stiffness_at(theta)
@@ -175,10 +202,9 @@ class _Oracle:
             qmdd = (u + tau_d[n:] - r.Fm * qmd - Ks * delta) / r.Mm
             return np.concatenate([qd, qdd, qmd, qmdd])
 
-        S = r.spec.model.plant_substeps
-        h = self.T / S
+        h = duration / steps
         s = xp.copy()
-        for _ in range(S):
+        for _ in range(steps):
             k1 = rhs(s)
             k2 = rhs(s + 0.5 * h * k1)
             k3 = rhs(s + 0.5 * h * k2)
@@ -238,7 +264,7 @@ def run_checks(
         add("transition", rel_err(f("transition")(x, u)[0], oracle.transition(x, u)))
         A = f("transition_jacobian")(x, u)[0]
         add("transition_jacobian", rel_err(A, fd_jacobian(_bind(tr, u, first=False), x)))
-        add("noise_gain", rel_err(f("noise_gain")(x, u)[0], oracle.noise_gain(x)))
+        add("noise_gain", rel_err(f("noise_gain")(x, u)[0], oracle.noise_gain(x, u)))
         xs, As, Gs = f("transition_step")(x, u)
         add(
             "transition_step",
@@ -260,9 +286,19 @@ def run_checks(
         "tracked_point": ("pin frame placement", 1e-10),
         "camera": ("numpy pinhole of pin placement", 1e-10),
         "camera_jacobian": ("central finite differences", 1e-6),
-        "transition": ("eqs. (1a)-(1d) on pin numerics", 1e-10),
+        "transition": (
+            "numpy RK4 on pin.aba"
+            if robot.spec.model.integrator == "rk4"
+            else "eqs. (1a)-(1d) on pin numerics",
+            1e-10,
+        ),
         "transition_jacobian": ("central finite differences", 1e-6),
-        "noise_gain": ("eq. (4) Gamma from pin M^-1", 1e-10),
+        "noise_gain": (
+            "eq. (4) Gamma from pin M^-1"
+            if robot.spec.model.integrator != "rk4"
+            else "central differences of numpy RK4",
+            1e-10 if robot.spec.model.integrator != "rk4" else 1e-6,
+        ),
         "transition_step": ("transition, _jacobian, noise_gain", 1e-14),
         "transition_inverse": ("round trip F^-1(F(x)) = x", 1e-9),
         "plant_step": ("numpy RK4 on pin.aba", 1e-10),

@@ -42,8 +42,8 @@ __all__ = [
 
 ThetaKind = Literal["payload_mass", "link_mass", "joint_stiffness"]
 THETA_KINDS: tuple[str, ...] = ("payload_mass", "link_mass", "joint_stiffness")
-Integrator = Literal["paper", "semi_implicit"]
-INTEGRATORS: tuple[str, ...] = ("paper", "semi_implicit")
+Integrator = Literal["paper", "semi_implicit", "rk4"]
+INTEGRATORS: tuple[str, ...] = ("paper", "semi_implicit", "rk4")
 
 
 @dataclass(frozen=True)
@@ -55,8 +55,9 @@ class ModelSpec:
         locked: Joint name -> value [rad or m] for joints held fixed.
         T: Sampling interval [s] of the discrete model, eqs. (1a)-(1d).
         gravity: Gravity vector in the world frame [m/s^2].
-        integrator: ``"paper"`` (eqs. 1a-1d as printed: q advances with the old velocity)
-            or ``"semi_implicit"`` (q advances with the new velocity; stable for stiff joints).
+        integrator: ``"paper"`` (eqs. 1a-1d as printed: q advances with the old velocity),
+            ``"semi_implicit"`` (q advances with the new velocity; stable for stiff joints) or
+            ``"rk4"`` (one RK4 step of the continuous model; no systematic position error).
         inverse_iterations: Unrolled fixed-point steps of the inverse transition (eq. 22).
         plant_substeps: RK4 substeps per T of the continuous-time plant.
     """

@@ -1,0 +1,75 @@
+"""Controller interface and registry."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.sim.trajectory import Trajectory
+
+__all__ = ["CONTROLLERS", "Controller", "make_controller", "register"]
+
+FloatArray = NDArray[np.float64]
+
+
+class Controller(ABC):
+    """Computes the motor torque u(k) [N m] applied over [t_k, t_k + T].
+
+    Args:
+        lib: The generated library (the controller's model terms come from it).
+        trajectory: The desired trajectory q_d(t).
+        gains: Controller-specific gains (see each class); unknown keys are an error.
+    """
+
+    name: ClassVar[str]
+    gain_defaults: ClassVar[dict[str, Any]] = {}
+
+    def __init__(
+        self, lib: ModelLibrary, trajectory: Trajectory, gains: Mapping[str, Any] | None = None
+    ) -> None:
+        self.lib = lib
+        self.trajectory = trajectory
+        given = dict(gains or {})
+        unknown = sorted(set(given) - set(self.gain_defaults))
+        if unknown:
+            raise ConfigError(
+                describe(
+                    f"controller {self.name!r} gains",
+                    f"keys among {sorted(self.gain_defaults)}",
+                    f"unknown {unknown}",
+                    "remove or rename them",
+                )
+            )
+        self.gains = {**self.gain_defaults, **given}
+
+    @abstractmethod
+    def torque(
+        self, k: int, t: float, x_true: FloatArray, theta_true: FloatArray, x_hat: FloatArray
+    ) -> FloatArray:
+        """u(k) from the true plant state [q, qd, qm, qmd] and the estimate x_hat (eq. 2)."""
+
+
+CONTROLLERS: dict[str, type[Controller]] = {}
+
+
+def register(cls: type[Controller]) -> type[Controller]:
+    """Class decorator adding a controller to :data:`CONTROLLERS` under ``cls.name``."""
+    CONTROLLERS[cls.name] = cls
+    return cls
+
+
+def make_controller(
+    name: str, lib: ModelLibrary, trajectory: Trajectory, gains: Mapping[str, Any] | None = None
+) -> Controller:
+    """Build the controller registered as ``name`` (ConfigError listing names if unknown)."""
+    if name not in CONTROLLERS:
+        raise ConfigError(
+            describe("controller name", f"one of {sorted(CONTROLLERS)}", repr(name), "pick one")
+        )
+    return CONTROLLERS[name](lib, trajectory, gains)

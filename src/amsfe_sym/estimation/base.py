@@ -1,0 +1,432 @@
+"""Estimator base class: configuration, per-step report, input checks, common EKF steps.
+
+An estimator holds the posterior ``x(k|k), P(k|k)`` of step ``k``. :meth:`Estimator.step`
+advances it to ``k + 1``: predict with the input applied over ``[k, k+1]`` (paper eqs.
+(13)-(14)), update with the encoder sample taken at ``k + 1`` (eqs. (15)-(16), Joseph form),
+then use every camera frame delivered at ``k + 1``; how a late frame is used is what tells
+the estimators apart (see ``docs/estimation-algorithms.md``).
+
+Everything a step is given is checked before anything is changed: wrong shapes raise
+:class:`~amsfe_sym.errors.ShapeError`, a frame from the future raises
+:class:`~amsfe_sym.errors.MeasurementError`; a measurement holding NaN or inf, or a frame
+older than the history kept, is rejected with a logged warning and counted in the
+:class:`StepReport`, and the estimate is left as if it had not been given.
+"""
+
+from __future__ import annotations
+
+import logging
+import operator
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from amsfe_sym.errors import ConfigError, EstimatorError, MeasurementError, ShapeError, describe
+from amsfe_sym.estimation.ekf import (
+    PredictResult,
+    UpdateResult,
+    gate_threshold,
+    joseph_update,
+    measure,
+    predict,
+    require_positive_definite,
+    validate_spd,
+)
+from amsfe_sym.estimation.models import CameraFrame, MeasurementModel, TransitionModel
+
+__all__ = ["DEFAULT_CONFIG", "Estimator", "FilterConfig", "StepReport"]
+
+logger = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class FilterConfig:
+    """Settings shared by the estimators.
+
+    Attributes:
+        gate_probability: Chi-square gate on every camera innovation: a frame whose NIS
+            exceeds ``chi2.ppf(gate_probability, dim)`` is rejected. ``None`` disables it.
+        encoder_gate_probability: The same gate for encoder samples; ``None`` (the default)
+            disables it.  Encoders are the filter's primary, outlier-free sensor: a filter that
+            gates them out after a transient (a poor prior, a large late-frame correction)
+            runs open loop and never recovers, which we measured on paper-sim.
+        buffer_steps: History kept for late frames [steps]: a frame with
+            ``k - kappa > buffer_steps`` is rejected (replay, oosm, cloning).
+        camera_period: Camera period ``l`` [steps] (paper eq. (11)). Required by ``cloning``,
+            which clones the state at each scheduled exposure.
+        camera_phase: Exposures happen at steps ``k`` with ``k % camera_period == camera_phase``.
+        camera_max_latency: Largest delay ``d`` + jitter [steps] a frame may have; ``cloning``
+            drops a clone this many steps after its exposure (a dropped frame). ``None``
+            means ``buffer_steps``.
+    """
+
+    gate_probability: float | None = 0.9999
+    encoder_gate_probability: float | None = None
+    buffer_steps: int = 1000
+    camera_period: int | None = None
+    camera_phase: int = 0
+    camera_max_latency: int | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("gate_probability", "encoder_gate_probability"):
+            p = getattr(self, name)
+            if p is not None and not (0.0 < p < 1.0):
+                raise ConfigError(
+                    describe(name, "a probability in (0, 1) or None", repr(p), "e.g. 0.9999")
+                )
+        if not isinstance(self.buffer_steps, int) or self.buffer_steps < 1:
+            raise ConfigError(
+                describe(
+                    "buffer_steps",
+                    "an integer >= 1",
+                    repr(self.buffer_steps),
+                    "keep at least camera delay + jitter steps",
+                )
+            )
+        if self.camera_period is not None:
+            if not isinstance(self.camera_period, int) or self.camera_period < 1:
+                raise ConfigError(
+                    describe(
+                        "camera_period",
+                        "an integer >= 1 or None",
+                        repr(self.camera_period),
+                        "give l in steps",
+                    )
+                )
+            if not (0 <= self.camera_phase < self.camera_period):
+                raise ConfigError(
+                    describe(
+                        "camera_phase",
+                        f"an integer in [0, {self.camera_period})",
+                        repr(self.camera_phase),
+                        "use exposure_step % camera_period",
+                    )
+                )
+        if self.camera_max_latency is not None and (
+            not isinstance(self.camera_max_latency, int) or self.camera_max_latency < 0
+        ):
+            raise ConfigError(
+                describe(
+                    "camera_max_latency",
+                    "an integer >= 0 or None",
+                    repr(self.camera_max_latency),
+                    "give d + max jitter in steps",
+                )
+            )
+
+
+DEFAULT_CONFIG = FilterConfig()
+
+
+@dataclass
+class StepReport:
+    """What one :meth:`Estimator.step` did.
+
+    Attributes:
+        k: Step index of the new posterior.
+        encoder_accepted: An encoder update was applied.
+        encoder_nis: NIS of the encoder innovation (``None`` when there was no usable sample).
+        frames_applied: Camera frames delivered this step and applied.
+        frames_rejected: Frames delivered this step and refused (NaN/inf, older than the
+            buffer, no clone, gated out, numerically unusable); see ``rejections``.
+        frames_ignored: Frames delivered this step that this estimator never uses (``encoders``).
+        frame_nis: NIS of each delivered frame that reached the update (applied or gated).
+        rejections: One human-readable reason per rejected measurement.
+        replayed_steps: ``replay`` only: steps re-filtered because of late frames.
+        clones: ``cloning`` only: clones in flight after the step.
+    """
+
+    k: int
+    encoder_accepted: bool = False
+    encoder_nis: float | None = None
+    frames_applied: int = 0
+    frames_rejected: int = 0
+    frames_ignored: int = 0
+    frame_nis: list[float] = field(default_factory=list)
+    rejections: list[str] = field(default_factory=list)
+    replayed_steps: int = 0
+    clones: int = 0
+
+    def reject(self, reason: str, *, warn: bool = True) -> None:
+        """Count one rejected frame and record why (a logged warning unless ``warn``)."""
+        self.frames_rejected += 1
+        self.rejections.append(reason)
+        if warn:
+            logger.warning("step %d: %s", self.k, reason)
+        else:
+            logger.info("step %d: %s", self.k, reason)
+
+    def frame_result(self, kappa: int, accepted: bool, nis: float, gate: float) -> None:
+        """Record the outcome of a frame update (applied, or rejected by the gate)."""
+        self.frame_nis.append(nis)
+        if accepted:
+            self.frames_applied += 1
+        else:
+            self.reject(
+                f"camera frame kappa={kappa} gated out: NIS {nis:.4g} > {gate:.4g}", warn=False
+            )
+
+
+class Estimator(ABC):
+    """Base of the estimators: common bookkeeping, input checks, EKF predict and encoder update.
+
+    Args:
+        model: Transition model (``x(k+1) = F(x(k), u(k))``), see :class:`TransitionModel`.
+        encoder: Encoder measurement model, sampled every step (paper eq. (9), ``i = m``).
+        camera: Camera measurement model (eq. (9), ``i = c``).
+        x0: Initial posterior mean ``x(k0|k0)``, shape ``(nx,)``.
+        P0: Initial posterior covariance ``(nx, nx)``, symmetric positive definite.
+        config: Gate, buffer and camera schedule, see :class:`FilterConfig`.
+        k0: Step index of ``x0``.
+
+    Raises:
+        ShapeError: If ``x0``, ``P0`` or an ``R`` has the wrong shape.
+        ConfigError: If ``x0`` is not finite, or ``P0`` or an ``R`` is not symmetric positive
+            definite (the message names the matrix and its smallest eigenvalue).
+
+    Attributes:
+        k: Step index of the current posterior.
+        x: Current posterior mean ``x(k|k)``.
+        P: Current posterior covariance ``P(k|k)``.
+    """
+
+    name: ClassVar[str]
+    uses_frames: ClassVar[bool] = True
+
+    def __init__(
+        self,
+        model: TransitionModel,
+        encoder: MeasurementModel,
+        camera: MeasurementModel,
+        x0: ArrayLike,
+        P0: ArrayLike,
+        config: FilterConfig = DEFAULT_CONFIG,
+        k0: int = 0,
+    ) -> None:
+        if not isinstance(config, FilterConfig):
+            raise ConfigError(
+                describe(
+                    "config", "a FilterConfig", type(config).__name__, "pass FilterConfig(...)"
+                )
+            )
+        self.model = model
+        self.encoder = encoder
+        self.camera = camera
+        self.config = config
+        self.nx: int = int(model.nx)
+        x = np.array(x0, dtype=np.float64)
+        if x.shape != (self.nx,):
+            raise ShapeError(
+                describe("x0", f"shape ({self.nx},)", f"shape {x.shape}", "match the model's nx")
+            )
+        if not np.isfinite(x).all():
+            raise ConfigError(
+                describe("x0", "finite values", "NaN or inf", "fix the initial state")
+            )
+        self.x: FloatArray = x
+        self.P: FloatArray = validate_spd("P0", P0, self.nx)
+        self.R_encoder = validate_spd("encoder R", encoder.R, int(encoder.dim))
+        self.R_camera = validate_spd("camera R", camera.R, int(camera.dim))
+        self.k: int = operator.index(k0)
+        self.k0: int = self.k
+        self._gate_encoder = gate_threshold(config.encoder_gate_probability, int(encoder.dim))
+        self._gate_camera = gate_threshold(config.gate_probability, int(camera.dim))
+        nu = getattr(model, "nu", None)
+        self._nu: int | None = nu if isinstance(nu, int) else None
+
+    # ------------------------------------------------------------------ public API
+    def step(
+        self,
+        u: ArrayLike,
+        z_encoder: ArrayLike | None,
+        frames: Sequence[CameraFrame] = (),
+    ) -> StepReport:
+        """Advance ``k -> k+1``.
+
+        Predict with ``u`` (the input applied over ``[k, k+1]``), update with the encoder
+        measurement taken at ``k+1`` (``None``: no encoder sample), then apply every camera
+        frame delivered at ``k+1`` (their ``exposure_step <= k+1``).
+
+        Args:
+            u: Input over ``[k, k+1]``, 1-D.
+            z_encoder: Encoder measurement at ``k+1``, shape ``(encoder.dim,)``, or ``None``.
+            frames: Camera frames delivered at ``k+1``, in any order.
+
+        Returns:
+            The :class:`StepReport` of the step.
+
+        Raises:
+            ShapeError: If ``u``, ``z_encoder`` or a frame has the wrong shape.
+            MeasurementError: If a frame's exposure step is after ``k+1``.
+            EstimatorError: If ``u`` is not finite, or the covariance loses positive
+                definiteness.
+        """
+        k_new = self.k + 1
+        u_arr = self._check_input(u)
+        z_enc = self._check_encoder(z_encoder)
+        checked = self._check_frame_shapes(frames, k_new)
+        report = StepReport(k=k_new)
+        if z_enc is not None and not np.isfinite(z_enc).all():
+            logger.warning("step %d: encoder measurement holds NaN or inf; not used", k_new)
+            report.rejections.append("encoder measurement holds NaN or inf")
+            z_enc = None
+        usable = self._screen_frames(checked, k_new, report)
+        self._step(u_arr, z_enc, usable, report)
+        self.k = k_new
+        self._check_covariance()
+        return report
+
+    def estimate(self) -> tuple[FloatArray, FloatArray]:
+        """Return copies of the current posterior ``(x(k|k), P(k|k))``."""
+        return self.x.copy(), self.P.copy()
+
+    # ------------------------------------------------------------------ subclass hook
+    @abstractmethod
+    def _step(
+        self,
+        u: FloatArray,
+        z_encoder: FloatArray | None,
+        frames: list[CameraFrame],
+        report: StepReport,
+    ) -> None:
+        """Do the step; ``self.k`` is still the old index. Inputs are already checked."""
+
+    # ------------------------------------------------------------------ checks
+    def _check_input(self, u: ArrayLike) -> FloatArray:
+        u_arr = np.asarray(u, dtype=np.float64)
+        if u_arr.ndim != 1 or (self._nu is not None and u_arr.shape[0] != self._nu):
+            expected = f"shape ({self._nu},)" if self._nu is not None else "a 1-D array"
+            raise ShapeError(
+                describe("u", expected, f"shape {u_arr.shape}", "pass the input as a 1-D vector")
+            )
+        if not np.isfinite(u_arr).all():
+            raise EstimatorError(
+                describe(
+                    "u", "finite input", "NaN or inf", "the prediction needs the input applied"
+                )
+            )
+        return u_arr
+
+    def _check_encoder(self, z: ArrayLike | None) -> FloatArray | None:
+        if z is None:
+            return None
+        z_arr = np.asarray(z, dtype=np.float64)
+        if z_arr.shape != (self.encoder.dim,):
+            raise ShapeError(
+                describe(
+                    "z_encoder",
+                    f"shape ({self.encoder.dim},)",
+                    f"shape {z_arr.shape}",
+                    "pass None when there is no encoder sample",
+                )
+            )
+        return z_arr
+
+    def _check_frame_shapes(self, frames: Sequence[CameraFrame], k_new: int) -> list[CameraFrame]:
+        checked: list[CameraFrame] = []
+        dim = self.camera.dim
+        for frame in frames:
+            try:
+                kappa = operator.index(frame.exposure_step)
+            except (AttributeError, TypeError):
+                raise MeasurementError(
+                    describe(
+                        "camera frame",
+                        "a CameraFrame with an integer exposure_step",
+                        repr(frame),
+                        "build frames with CameraFrame(exposure_step=int, z=array)",
+                    )
+                ) from None
+            z = np.asarray(frame.z, dtype=np.float64)
+            if z.shape != (dim,):
+                raise ShapeError(
+                    describe(
+                        f"camera frame z (kappa={kappa})",
+                        f"shape ({dim},)",
+                        f"shape {z.shape}",
+                        "match the camera model's dim",
+                    )
+                )
+            if kappa > k_new:
+                raise MeasurementError(
+                    describe(
+                        "camera frame exposure_step",
+                        f"<= {k_new} (the step being entered)",
+                        f"{kappa}, a frame from the future",
+                        "stamp frames with the step at which the image was taken",
+                    )
+                )
+            checked.append(CameraFrame(exposure_step=kappa, z=z))
+        return checked
+
+    def _screen_frames(
+        self, frames: list[CameraFrame], k_new: int, report: StepReport
+    ) -> list[CameraFrame]:
+        """Drop (with a warning, counted) frames with NaN/inf or older than the history."""
+        if not self.uses_frames:
+            report.frames_ignored = len(frames)
+            return []
+        usable: list[CameraFrame] = []
+        oldest = max(k_new - self.config.buffer_steps, self.k0)
+        for frame in frames:
+            kappa = frame.exposure_step
+            if not np.isfinite(frame.z).all():
+                report.reject(f"camera frame kappa={kappa} holds NaN or inf")
+            elif kappa < oldest:
+                report.reject(
+                    f"camera frame kappa={kappa} is older than the history kept "
+                    f"(oldest usable exposure {oldest}; buffer_steps={self.config.buffer_steps})"
+                )
+            else:
+                usable.append(frame)
+        usable.sort(key=lambda f: f.exposure_step)
+        return usable
+
+    def _check_covariance(self) -> None:
+        require_positive_definite(self.P, f"{self.name}: P({self.k}|{self.k})")
+
+    # ------------------------------------------------------------------ common EKF steps
+    def _predict(self, u: FloatArray) -> PredictResult:
+        result = predict(self.model, self.x, self.P, u)
+        self.x, self.P = result.x, result.P
+        return result
+
+    def _encoder_update(
+        self, z: FloatArray | None, report: StepReport | None
+    ) -> UpdateResult | None:
+        """Encoder update of ``self.x, self.P``; returns the result (``None``: no sample)."""
+        if z is None:
+            return None
+        z_hat, H = measure(self.encoder, self.x)
+        result = joseph_update(self.x, self.P, z - z_hat, H, self.R_encoder, self._gate_encoder)
+        if result.accepted:
+            self.x, self.P = result.x, result.P
+        if report is not None:
+            report.encoder_nis = result.nis
+            report.encoder_accepted = result.accepted
+            if not result.accepted:
+                reason = f"encoder gated out: NIS {result.nis:.4g} > {self._gate_encoder:.4g}"
+                report.rejections.append(reason)
+                logger.info("step %d: %s", report.k, reason)
+        return result
+
+    def _frame_update_now(self, z: FloatArray) -> UpdateResult:
+        """Camera update of ``self.x, self.P`` with ``h`` evaluated at the current state."""
+        z_hat, H = measure(self.camera, self.x)
+        result = joseph_update(self.x, self.P, z - z_hat, H, self.R_camera, self._gate_camera)
+        if result.accepted:
+            self.x, self.P = result.x, result.P
+        return result
+
+    def _scheduled(self, k: int) -> bool:
+        period = self.config.camera_period
+        return period is not None and k % period == self.config.camera_phase
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(k={self.k}, nx={self.nx})"

@@ -1,0 +1,344 @@
+"""Scenarios: everything a simulation run needs beyond the robot, in one TOML file.
+
+Shipped scenarios live in ``scenarios/`` (``paper-sim``, ``paper-exp``); copy one and edit
+it.  Every key is documented in ``docs/scenarios.md``.  A run saves its resolved scenario
+as ``config.toml``, which ``amsfe simulate <run>/config.toml`` re-runs exactly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import sys
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from amsfe_sym.errors import ConfigError, describe
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+__all__ = ["Scenario", "dump_toml", "find_scenario", "load_scenario", "scenarios_dir"]
+
+
+@dataclass(frozen=True)
+class PlantConfig:
+    """The simulated truth.
+
+    Attributes:
+        q0, qd0: Initial link angles [rad] and rates [rad/s].
+        motor0: ``"equilibrium"`` (qm0 = q0 + Ks^-1 g(q0): the springs hold the arm still),
+            ``"link"`` (qm0 = q0), or explicit ``qm0`` / ``qmd0``.
+        qm0, qmd0: Explicit motor state (used when ``motor0 = "explicit"``).
+        link_torque_std, motor_torque_std: White disturbance torques [N m], held per step.
+    """
+
+    q0: tuple[float, ...]
+    qd0: tuple[float, ...]
+    motor0: str = "equilibrium"
+    qm0: tuple[float, ...] = ()
+    qmd0: tuple[float, ...] = ()
+    link_torque_std: float = 0.0
+    motor_torque_std: float = 0.0
+
+
+@dataclass(frozen=True)
+class EncoderSettings:
+    """Encoder noise: ``q_std`` [rad], ``qd_std`` [rad/s], ``counts_per_rev`` (0 = none)."""
+
+    q_std: float = 1e-3
+    qd_std: float = 1e-2
+    counts_per_rev: int = 0
+
+
+@dataclass(frozen=True)
+class CameraSettings:
+    """Camera timing and noise; ``period``/``delay`` of 0 take the robot spec's l and d."""
+
+    pixel_std: float = 0.5
+    round_to_pixel: bool = True
+    drop_probability: float = 0.0
+    jitter_steps: int = 0
+    period: int = 0
+    delay: int = 0
+    phase: int = 0
+
+
+@dataclass(frozen=True)
+class EstimateInit:
+    """The estimator's start: ``q``, ``qd``; ``motor`` = ``"encoders"`` (first encoder
+    sample) or ``"link"``; ``theta`` (empty = the robot spec's initial); 1-sigma ``std`` of
+    each block [same units]."""
+
+    q: tuple[float, ...]
+    qd: tuple[float, ...]
+    motor: str = "encoders"
+    theta: tuple[float, ...] = ()
+    std: Mapping[str, float] = field(
+        default_factory=lambda: {"q": 0.5, "qd": 0.5, "qm": 0.01, "qmd": 0.1, "theta": 0.2}
+    )
+
+
+@dataclass(frozen=True)
+class FilterSettings:
+    """The filter's noise model and options.
+
+    Attributes:
+        link_torque_std, motor_torque_std: Q of eq. (3) as torque standard deviations
+            [N m] held over one step (w = sigma T).
+        theta_rate_std: Random-walk intensity of theta [unit/s] (theta+ = theta + T w).
+        encoder_q_std, encoder_qd_std, camera_pixel_std: R [rad, rad/s, px]; 0 means
+            "the sensor's true noise, including quantization and rounding".
+        gate_probability: Chi-square innovation gate (0 disables).
+        buffer_steps: History kept for late frames [steps].
+    """
+
+    link_torque_std: float = 0.1
+    motor_torque_std: float = 0.1
+    theta_rate_std: float = 0.05
+    encoder_q_std: float = 0.0
+    encoder_qd_std: float = 0.0
+    camera_pixel_std: float = 0.0
+    gate_probability: float = 0.9999
+    buffer_steps: int = 1000
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A complete simulation set-up (see ``docs/scenarios.md``).
+
+    ``integrator`` overrides the robot spec's discrete model for the estimator ("" keeps the
+    robot's); the library is then generated under ``<robot>_<integrator>``.
+    """
+
+    name: str
+    robot: str
+    duration: float
+    integrator: str
+    seed: int
+    estimator: str
+    controller: str
+    trajectory: Mapping[str, Any]
+    plant: PlantConfig
+    estimate0: EstimateInit
+    encoders: EncoderSettings = EncoderSettings()
+    camera: CameraSettings = CameraSettings()
+    filter: FilterSettings = FilterSettings()
+    controller_gains: Mapping[str, Any] = field(default_factory=dict)
+    description: str = ""
+    source: Path | None = None
+
+    def with_overrides(self, **kw: Any) -> Scenario:
+        """Copy with top-level fields replaced (``None`` values are ignored)."""
+        return replace(self, **{k: v for k, v in kw.items() if v is not None})
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data for ``config.toml`` (robot path resolved so the run is self-contained)."""
+        d = asdict(self)
+        d.pop("source")
+        return d
+
+
+def scenarios_dir() -> Path:
+    """``$AMSFE_SCENARIOS_DIR``, the repository's ``scenarios/``, or the package data."""
+    env = os.environ.get("AMSFE_SCENARIOS_DIR")
+    if env:
+        return Path(env)
+    here = Path(__file__).resolve().parent
+    repo = here.parent.parent / "scenarios"
+    return repo if repo.is_dir() else here / "_data" / "scenarios"
+
+
+def find_scenario(name_or_path: str | os.PathLike[str]) -> Path:
+    """A scenario name (``paper-sim``), a ``.toml`` path, or a run folder's ``config.toml``."""
+    p = Path(name_or_path)
+    if p.is_file():
+        return p
+    if p.is_dir() and (p / "config.toml").is_file():
+        return p / "config.toml"
+    shipped = scenarios_dir() / f"{name_or_path}.toml"
+    if shipped.is_file():
+        return shipped
+    known = sorted(f.stem for f in scenarios_dir().glob("*.toml"))
+    raise ConfigError(
+        describe(
+            f"scenario {str(name_or_path)!r}",
+            "a shipped scenario name, a .toml file or a run folder",
+            "nothing by that name",
+            f"use one of {known}",
+        )
+    )
+
+
+_SECTIONS: dict[str, Any] = {
+    "plant": PlantConfig,
+    "estimate0": EstimateInit,
+    "encoders": EncoderSettings,
+    "camera": CameraSettings,
+    "filter": FilterSettings,
+}
+_TOP = {
+    "name",
+    "robot",
+    "integrator",
+    "duration",
+    "seed",
+    "estimator",
+    "controller",
+    "trajectory",
+    "controller_gains",
+    "description",
+    *_SECTIONS,
+}
+
+
+def load_scenario(name_or_path: str | os.PathLike[str]) -> Scenario:
+    """Parse and validate a scenario file.
+
+    Raises:
+        ConfigError: unknown keys, bad values, non-positive noise where a covariance must be
+            positive definite, a camera delay longer than the filter's buffer, ...
+    """
+    path = find_scenario(name_or_path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML ({exc}). Fix: correct the syntax.") from exc
+    return parse_scenario(data, path)
+
+
+def parse_scenario(data: Mapping[str, Any], path: Path) -> Scenario:
+    """Build a :class:`Scenario` from parsed TOML."""
+    where = str(path)
+    unknown = sorted(set(data) - _TOP)
+    if unknown:
+        raise ConfigError(
+            describe(where, f"keys among {sorted(_TOP)}", f"unknown {unknown}", "remove them")
+        )
+    for key in ("robot", "plant", "estimate0", "trajectory"):
+        if key not in data:
+            raise ConfigError(describe(where, f"a {key!r} entry", "none", f"add {key}"))
+    sections: dict[str, Any] = {}
+    for key, cls in _SECTIONS.items():
+        raw = dict(data.get(key, {}))
+        fields = {f.name for f in dataclasses.fields(cls)}
+        bad = sorted(set(raw) - fields)
+        if bad:
+            raise ConfigError(
+                describe(
+                    f"{where} [{key}]",
+                    f"keys among {sorted(fields)}",
+                    f"unknown {bad}",
+                    "remove or rename them (docs/scenarios.md)",
+                )
+            )
+        for k, v in list(raw.items()):
+            if isinstance(v, list):
+                raw[k] = tuple(float(x) for x in v)
+        sections[key] = cls(**raw)
+    robot = str(data["robot"])
+    if not Path(robot).is_absolute() and (path.parent / robot).exists():
+        robot = str((path.parent / robot).resolve())
+    sc = Scenario(
+        name=str(data.get("name", path.stem)),
+        robot=robot,
+        integrator=str(data.get("integrator", "")),
+        duration=float(data.get("duration", 10.0)),
+        seed=int(data.get("seed", 0)),
+        estimator=str(data.get("estimator", "oosm")),
+        controller=str(data.get("controller", "truth-ct")),
+        trajectory=dict(data["trajectory"]),
+        controller_gains=dict(data.get("controller_gains", {})),
+        description=str(data.get("description", "")),
+        source=path,
+        **sections,
+    )
+    validate(sc, where)
+    return sc
+
+
+def validate(sc: Scenario, where: str = "scenario") -> None:
+    """Value checks that need no robot: positive durations, noise, probabilities."""
+
+    def positive(v: float, what: str, allow_zero: bool = False) -> None:
+        ok = math.isfinite(v) and (v >= 0 if allow_zero else v > 0)
+        if not ok:
+            raise ConfigError(
+                describe(
+                    f"{where}: {what}",
+                    ">= 0" if allow_zero else "> 0",
+                    repr(v),
+                    "a covariance must be positive definite" if not allow_zero else "fix it",
+                )
+            )
+
+    positive(sc.duration, "duration")
+    if sc.integrator not in ("", "paper", "semi_implicit", "rk4"):
+        raise ConfigError(
+            describe(
+                f"{where}: integrator",
+                "'' (the robot's), paper, semi_implicit or rk4",
+                repr(sc.integrator),
+                "pick one",
+            )
+        )
+    f = sc.filter
+    positive(f.link_torque_std, "[filter] link_torque_std")
+    positive(f.motor_torque_std, "[filter] motor_torque_std")
+    positive(f.theta_rate_std, "[filter] theta_rate_std", allow_zero=True)
+    for name in ("encoder_q_std", "encoder_qd_std", "camera_pixel_std"):
+        positive(getattr(f, name), f"[filter] {name}", allow_zero=True)
+    positive(sc.encoders.q_std, "[encoders] q_std", allow_zero=True)
+    positive(sc.encoders.qd_std, "[encoders] qd_std", allow_zero=True)
+    positive(sc.camera.pixel_std, "[camera] pixel_std", allow_zero=True)
+    positive(sc.plant.link_torque_std, "[plant] link_torque_std", allow_zero=True)
+    positive(sc.plant.motor_torque_std, "[plant] motor_torque_std", allow_zero=True)
+    for k, v in sc.estimate0.std.items():
+        positive(float(v), f"[estimate0] std.{k}")
+    if sc.plant.motor0 not in ("equilibrium", "link", "explicit"):
+        raise ConfigError(
+            describe(
+                f"{where}: [plant] motor0",
+                "equilibrium | link | explicit",
+                repr(sc.plant.motor0),
+                "pick one",
+            )
+        )
+    if sc.estimate0.motor not in ("encoders", "link"):
+        raise ConfigError(
+            describe(
+                f"{where}: [estimate0] motor",
+                "encoders | link",
+                repr(sc.estimate0.motor),
+                "pick one",
+            )
+        )
+
+
+def dump_toml(data: Mapping[str, Any]) -> str:
+    """Write nested dicts of scalars, strings and lists as TOML (enough for ``config.toml``)."""
+
+    def value(v: Any) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, int | float):
+            return repr(float(v)) if isinstance(v, float) else str(v)
+        if isinstance(v, str):
+            return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+        if isinstance(v, list | tuple):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        if isinstance(v, Mapping):
+            return "{ " + ", ".join(f"{k} = {value(x)}" for k, x in v.items()) + " }"
+        raise ConfigError(f"cannot write {type(v).__name__} to TOML")
+
+    lines = [f"{k} = {value(v)}" for k, v in data.items() if not isinstance(v, Mapping)]
+    for k, v in data.items():
+        if isinstance(v, Mapping):
+            lines.append(f"\n[{k}]")
+            lines.extend(f"{kk} = {value(vv)}" for kk, vv in v.items())
+    return "\n".join(lines) + "\n"
