@@ -94,7 +94,8 @@ class FilterSettings:
         theta_rate_std: Random-walk intensity of theta [unit/s] (theta+ = theta + T w).
         encoder_q_std, encoder_qd_std, camera_pixel_std: R [rad, rad/s, px]; 0 means
             "the sensor's true noise, including quantization and rounding".
-        gate_probability: Chi-square innovation gate (0 disables).
+        gate_probability: Chi-square gate on camera innovations (0 disables).
+        camera_iterations: Iterated-EKF steps of the camera update (naive, replay); 1 = EKF.
         buffer_steps: History kept for late frames [steps].
     """
 
@@ -105,6 +106,7 @@ class FilterSettings:
     encoder_qd_std: float = 0.0
     camera_pixel_std: float = 0.0
     gate_probability: float = 0.9999
+    camera_iterations: int = 1
     buffer_steps: int = 1000
 
 
@@ -182,6 +184,15 @@ _SECTIONS: dict[str, Any] = {
     "camera": CameraSettings,
     "filter": FilterSettings,
 }
+_INT_FIELDS = {
+    "counts_per_rev",
+    "jitter_steps",
+    "period",
+    "delay",
+    "phase",
+    "buffer_steps",
+    "camera_iterations",
+}
 _TOP = {
     "name",
     "robot",
@@ -240,6 +251,10 @@ def parse_scenario(data: Mapping[str, Any], path: Path) -> Scenario:
         for k, v in list(raw.items()):
             if isinstance(v, list):
                 raw[k] = tuple(float(x) for x in v)
+            elif isinstance(v, float) and k in _INT_FIELDS:
+                raise ConfigError(
+                    describe(f"{where} [{key}] {k}", "an integer", repr(v), f"write {k} = {int(v)}")
+                )
         sections[key] = cls(**raw)
     robot = str(data["robot"])
     if not Path(robot).is_absolute() and (path.parent / robot).exists():

@@ -31,7 +31,6 @@ from amsfe_sym.codegen import generate
 from amsfe_sym.control import make_controller
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.estimation import FilterConfig, make_estimator
-from amsfe_sym.estimation.models import CameraFrame as EstFrame
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.runtime.models import (
     CameraMeasurement,
@@ -226,6 +225,7 @@ def run(
         P0=P0,
         config=FilterConfig(
             gate_probability=f.gate_probability or None,
+            camera_iterations=f.camera_iterations,
             buffer_steps=f.buffer_steps,
             camera_period=cam_cfg.period,
             camera_phase=cam_cfg.phase,
@@ -270,7 +270,7 @@ def run(
             frames_rec.append((fr.exposure_step, k, float(fr.z[0]), float(fr.z[1])))
         # 2. estimator k-1 -> k
         if k > 0:
-            rep = est.step(u, z, [EstFrame(fr.exposure_step, fr.z) for fr in delivered])
+            rep = est.step(u, z, delivered)
             counters["frames_applied"] += rep.frames_applied
             counters["frames_rejected"] += rep.frames_rejected
             counters["encoder_rejected"] += int(not rep.encoder_accepted)

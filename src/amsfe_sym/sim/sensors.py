@@ -37,6 +37,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from amsfe_sym.errors import ConfigError, MeasurementError, ShapeError, describe
+from amsfe_sym.estimation.models import CameraFrame
 
 if TYPE_CHECKING:
     from amsfe_sym.spec import CameraSpec
@@ -246,30 +247,6 @@ class Encoders:
 
 # --------------------------------------------------------------------------------------
 # camera, eqs. (7)-(11)
-
-
-@dataclass(frozen=True, eq=False)
-class CameraFrame:
-    """One delivered camera image: where the tracked point was seen, and when.
-
-    Attributes:
-        exposure_step: Step ``kappa`` at which the image was taken (the state the pixel
-            describes is ``x(kappa)``).
-        z: Measured pixel ``[u, v]`` [px], shape (2,), read-only.
-        delivery_step: Step at which the frame reached the estimator
-            (``kappa + d`` plus jitter); ``-1`` when unknown.
-
-    ``eq=False``: frames compare by identity (an array field has no scalar equality).
-    """
-
-    exposure_step: int
-    z: FloatArray
-    delivery_step: int = -1
-
-    @property
-    def delay(self) -> int:
-        """Steps from exposure to delivery, or -1 when the delivery step is unknown."""
-        return -1 if self.delivery_step < 0 else self.delivery_step - self.exposure_step
 
 
 @dataclass(frozen=True)
