@@ -1,4 +1,5 @@
-"""Load a robot: validate the URDF (yourdfpy), build the Pinocchio model, resolve the spec.
+"""Load a robot: validate the URDF (XML, yourdfpy, physics), build the Pinocchio model,
+resolve the spec.
 
 This is the first stage of the one-way pipeline (load -> symbolic -> codegen -> runtime).
 It refuses everything the later stages cannot model, with one clear error naming the file,
@@ -25,7 +26,7 @@ import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import pinocchio as pin
@@ -213,14 +214,14 @@ def load_robot(robot: str | Path | RobotSpec, lock: dict[str, float] | None = No
     if lock:
         spec = spec.with_locked(lock)
     urdf_path = spec.urdf
-    _validate_urdf(urdf_path, locked=set(spec.model.locked))
+    urdf = _validate_urdf(urdf_path, locked=set(spec.model.locked))
     try:
         full = pin.buildModelFromUrdf(str(urdf_path))
     except Exception as exc:  # Pinocchio raises plain RuntimeError / ValueError
         raise UrdfError(
             describe(str(urdf_path), "a URDF Pinocchio can parse", f"error {exc}", "fix the file")
         ) from exc
-    link_inertias = _link_inertias(urdf_path)
+    link_inertias = _link_inertias(urdf)
 
     # --- classify joints, decide which are modelled and which locked --------------------
     movable = [full.names[i] for i in range(1, full.njoints)]
@@ -317,11 +318,17 @@ def load_robot(robot: str | Path | RobotSpec, lock: dict[str, float] | None = No
 # URDF validation (before Pinocchio, which accepts several invalid things silently)
 
 
-def _validate_urdf(path: Path, locked: set[str] | frozenset[str] = frozenset()) -> None:
-    """Check XML, joint types, mimic, axes, masses and inertias of every link.
+def _validate_urdf(path: Path, locked: set[str] | frozenset[str] = frozenset()) -> Any:
+    """Check XML, joint types, mimic, links, axes, masses and inertias; return yourdfpy's URDF.
 
-    A ``<mimic>`` tag is accepted on fixed joints and on joints the spec locks (a locked
-    joint follows no other joint)."""
+    Order matters: a strict XML parse first (yourdfpy falls back to a recovering parser and
+    returns a robot without joints on malformed XML), then the joints' links (yourdfpy fails
+    with a bare ``list.remove`` error on a missing one), then yourdfpy's own parse and
+    ``validate()``, then the physical checks on its objects, which it does not make.
+    A ``<mimic>`` tag is accepted on fixed joints and on joints the spec locks.
+    """
+    import yourdfpy
+
     try:
         root = ET.parse(path).getroot()
     except ET.ParseError as exc:
@@ -337,25 +344,6 @@ def _validate_urdf(path: Path, locked: set[str] | frozenset[str] = frozenset()) 
         raise UrdfError(describe(str(path), "at least one <link>", "none", "add links"))
     for j in root.findall("joint"):
         name = j.get("name", "?")
-        jtype = j.get("type", "?")
-        if jtype not in _SUPPORTED_URDF_TYPES:
-            raise UnsupportedJointError(
-                describe(
-                    f"{path}: joint {name!r}",
-                    "type revolute, continuous, prismatic or fixed",
-                    f"type {jtype!r}",
-                    "make it fixed, or lock/replace it; floating bases are not modelled",
-                )
-            )
-        if jtype != "fixed" and name not in locked and j.find("mimic") is not None:
-            raise UnsupportedJointError(
-                describe(
-                    f"{path}: joint {name!r}",
-                    "independent joints",
-                    "a <mimic> joint",
-                    "remove <mimic> (model it as its own joint) or make it fixed",
-                )
-            )
         for tag in ("parent", "child"):
             el = j.find(tag)
             link = None if el is None else el.get("link")
@@ -368,42 +356,69 @@ def _validate_urdf(path: Path, locked: set[str] | frozenset[str] = frozenset()) 
                         "add the link or fix the name",
                     )
                 )
-        axis_el = j.find("axis")
-        if jtype != "fixed" and axis_el is not None:
-            axis = _floats(axis_el.get("xyz", "1 0 0"), 3, f"{path}: joint {name!r} axis")
-            if float(np.linalg.norm(axis)) < 1e-12:
-                raise UrdfError(
-                    describe(
-                        f"{path}: joint {name!r} <axis>",
-                        "a non-zero axis",
-                        "xyz = 0 0 0",
-                        'give the joint axis, e.g. xyz="0 0 1"',
-                    )
+    try:
+        urdf = yourdfpy.URDF.load(
+            str(path),
+            build_scene_graph=False,
+            build_collision_scene_graph=False,
+            load_meshes=False,
+            load_collision_meshes=False,
+        )
+        valid = urdf.validate()
+    except Exception as exc:  # yourdfpy raises plain ValueError / KeyError / lxml errors
+        raise UrdfError(
+            describe(str(path), "a URDF yourdfpy can parse", f"error {exc!r}", "fix the file")
+        ) from exc
+    if not valid:
+        raise UrdfError(
+            describe(
+                str(path),
+                "a URDF passing yourdfpy's validate()",
+                "a failed check",
+                "see yourdfpy's log messages above",
+            )
+        )
+    for j in urdf.robot.joints:
+        where = f"{path}: joint {j.name!r}"
+        if j.type not in _SUPPORTED_URDF_TYPES:
+            raise UnsupportedJointError(
+                describe(
+                    where,
+                    "type revolute, continuous, prismatic or fixed",
+                    f"type {j.type!r}",
+                    "make it fixed, or lock/replace it; floating bases are not modelled",
                 )
-    for ln in root.findall("link"):
-        name = ln.get("name", "?")
-        inertial = ln.find("inertial")
-        if inertial is None:
+            )
+        if j.type != "fixed" and j.name not in locked and j.mimic is not None:
+            raise UnsupportedJointError(
+                describe(
+                    where,
+                    "independent joints",
+                    "a <mimic> joint",
+                    "remove <mimic> (model it as its own joint), make it fixed or lock it",
+                )
+            )
+        if j.type != "fixed" and j.axis is not None and float(np.linalg.norm(j.axis)) < 1e-12:
+            raise UrdfError(
+                describe(
+                    f"{where} <axis>",
+                    "a non-zero axis",
+                    "xyz = 0 0 0",
+                    'give the joint axis, e.g. xyz="0 0 1"',
+                )
+            )
+    for ln in urdf.robot.links:
+        if ln.inertial is None:
             continue
-        mass_el = inertial.find("mass")
-        mass = 0.0 if mass_el is None else _floats(mass_el.get("value", "0"), 1, name)[0]
-        where = f"{path}: link {name!r}"
+        where = f"{path}: link {ln.name!r}"
+        mass = float(ln.inertial.mass if ln.inertial.mass is not None else 0.0)
         if not math.isfinite(mass) or mass < 0:
             raise UrdfError(
                 describe(f"{where} <mass>", "a finite mass >= 0 [kg]", f"{mass}", "fix the mass")
             )
-        ie = inertial.find("inertia")
-        if ie is None:
-            continue
-        vals = {k: float(ie.get(k, "0")) for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
-        inertia = np.array(
-            [
-                [vals["ixx"], vals["ixy"], vals["ixz"]],
-                [vals["ixy"], vals["iyy"], vals["iyz"]],
-                [vals["ixz"], vals["iyz"], vals["izz"]],
-            ]
-        )
-        _check_inertia(inertia, where)
+        if ln.inertial.inertia is not None:
+            _check_inertia(np.asarray(ln.inertial.inertia, dtype=float), where)
+    return urdf
 
 
 def _check_inertia(inertia: NDArray[np.float64], where: str) -> None:
@@ -433,45 +448,19 @@ def _check_inertia(inertia: NDArray[np.float64], where: str) -> None:
         )
 
 
-def _floats(text: str, count: int, where: str) -> list[float]:
-    try:
-        vals = [float(v) for v in text.split()]
-    except ValueError as exc:
-        raise UrdfError(describe(where, f"{count} numbers", repr(text), "fix the values")) from exc
-    if len(vals) != count:
-        raise UrdfError(describe(where, f"{count} numbers", repr(text), "fix the values"))
-    return vals
-
-
-def _link_inertias(path: Path) -> dict[str, tuple[float, NDArray[np.float64], NDArray[np.float64]]]:
-    """Each link's own (mass, com xyz, rotation of inertial frame @ I @ R^T) from the XML."""
-    root = ET.parse(path).getroot()
+def _link_inertias(urdf: Any) -> dict[str, tuple[float, NDArray[np.float64], NDArray[np.float64]]]:
+    """Each link's own (mass [kg], centre of mass [m], inertia about it in the link frame)."""
     out = {}
-    for ln in root.findall("link"):
-        inertial = ln.find("inertial")
-        if inertial is None:
+    for ln in urdf.robot.links:
+        if ln.inertial is None:
             continue
-        mass_el = inertial.find("mass")
-        mass = 0.0 if mass_el is None else float(mass_el.get("value", "0"))
-        origin = inertial.find("origin")
-        xyz = np.zeros(3)
-        R = np.eye(3)
-        if origin is not None:
-            xyz = np.array(_floats(origin.get("xyz", "0 0 0"), 3, "origin"))
-            rpy = _floats(origin.get("rpy", "0 0 0"), 3, "origin")
-            R = pin.rpy.rpyToMatrix(*rpy)
-        ie = inertial.find("inertia")
-        inertia = np.zeros((3, 3))
-        if ie is not None:
-            v = {k: float(ie.get(k, "0")) for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
-            inertia = np.array(
-                [
-                    [v["ixx"], v["ixy"], v["ixz"]],
-                    [v["ixy"], v["iyy"], v["iyz"]],
-                    [v["ixz"], v["iyz"], v["izz"]],
-                ]
-            )
-        out[ln.get("name", "")] = (mass, xyz, R @ inertia @ R.T)
+        mass = float(ln.inertial.mass or 0.0)
+        origin = np.eye(4) if ln.inertial.origin is None else np.asarray(ln.inertial.origin)
+        R = origin[:3, :3]
+        inertia = (
+            np.zeros((3, 3)) if ln.inertial.inertia is None else np.asarray(ln.inertial.inertia)
+        )
+        out[ln.name] = (mass, origin[:3, 3].copy(), R @ inertia @ R.T)
     return out
 
 
