@@ -5,7 +5,10 @@ Cascaded computed torque for the flexible-joint arm (Spong's singular-perturbati
 1. link loop: the spring torque the link needs,
    ``tau = M(q) (qdd_d + Kd (qd_d - qd) + Kp (q_d - q)) + b(q, qd)``;
 2. motor set point that produces it: ``qm_d = q + Ks^-1 tau``;
-3. motor loop: ``u = Ks (qm - q) + Fm qmd + Mm (Kpm (qm_d - qm) + Kdm (qd - qmd))``.
+3. motor loop: ``u = Ks (qm - q) + Fm qmd + Mm (qmdd_d + Kpm (qm_d - qm) + Kdm (qmd_d - qmd))``
+   with ``qmd_d`` and ``qmdd_d`` the backward differences of ``qm_d`` over the control steps
+   (on a soft arm ``Ks^-1 tau`` moves by radians at the trajectory's frequency, so leaving
+   these feedforward terms out costs 10-30 % amplitude error on paper-sim).
 
 It reads the true state and uses the true theta, so it isolates the estimator in
 estimation studies; it is not a controller one could run on hardware.
@@ -56,6 +59,8 @@ class TruthComputedTorque(Controller):
         self._M = lib.function("mass_matrix")
         self._b = lib.function("bias")
         self.n = lib.n
+        self.T = lib.T
+        self._prev: tuple[int, FloatArray, FloatArray] | None = None  # (k, qm_d, qmd_d)
 
     def torque(
         self, k: int, t: float, x_true: FloatArray, theta_true: FloatArray, x_hat: FloatArray
@@ -71,9 +76,15 @@ class TruthComputedTorque(Controller):
         acc = ref.qdd + self.Kd * (ref.qd - qd) + self.Kp * (ref.q - q)
         tau = M @ acc + b
         qm_d = q + tau / Ks
+        if self._prev is not None and self._prev[0] == k - 1:
+            qmd_d = (qm_d - self._prev[1]) / self.T
+            qmdd_d = (qmd_d - self._prev[2]) / self.T
+        else:  # first step (or a gap): no history to difference
+            qmd_d, qmdd_d = qd.copy(), np.zeros(n)
+        self._prev = (k, qm_d, qmd_d)
         u: FloatArray = (
             Ks * (qm - q)
             + self.Fm * qmd
-            + self.Mm * (self.Kpm * (qm_d - qm) + self.Kdm * (qd - qmd))
+            + self.Mm * (qmdd_d + self.Kpm * (qm_d - qm) + self.Kdm * (qmd_d - qmd))
         )
         return u
