@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.spec import data_dir
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -147,13 +148,8 @@ class Scenario:
 
 
 def scenarios_dir() -> Path:
-    """``$AMSFE_SCENARIOS_DIR``, the repository's ``scenarios/``, or the package data."""
-    env = os.environ.get("AMSFE_SCENARIOS_DIR")
-    if env:
-        return Path(env)
-    here = Path(__file__).resolve().parent
-    repo = here.parent.parent / "scenarios"
-    return repo if repo.is_dir() else here / "_data" / "scenarios"
+    """Folder of shipped scenarios (``$AMSFE_SCENARIOS_DIR`` overrides)."""
+    return data_dir("scenarios", "AMSFE_SCENARIOS_DIR")
 
 
 def find_scenario(name_or_path: str | os.PathLike[str]) -> Path:

@@ -34,6 +34,7 @@ __all__ = [
     "RobotSpec",
     "ThetaSpec",
     "TrackedSpec",
+    "data_dir",
     "default_spec",
     "find_robot",
     "load_spec",
@@ -191,16 +192,20 @@ class RobotSpec:
 # locating robots
 
 
-def robots_dir() -> Path:
-    """Folder of shipped robots: ``$AMSFE_ROBOTS_DIR``, the repo's ``robots/``, or package data."""
-    env = os.environ.get("AMSFE_ROBOTS_DIR")
+def data_dir(kind: str, env_var: str) -> Path:
+    """A folder of shipped data (``robots``, ``scenarios``): ``$<env_var>``, the repository's
+    ``<kind>/`` (editable install), else the copy packaged as ``amsfe_sym/_data/<kind>``."""
+    env = os.environ.get(env_var)
     if env:
         return Path(env)
     here = Path(__file__).resolve().parent
-    repo = here.parent.parent / "robots"
-    if repo.is_dir():
-        return repo
-    return here / "_data" / "robots"
+    repo = here.parent.parent / kind
+    return repo if repo.is_dir() else here / "_data" / kind
+
+
+def robots_dir() -> Path:
+    """Folder of shipped robots (``$AMSFE_ROBOTS_DIR`` overrides)."""
+    return data_dir("robots", "AMSFE_ROBOTS_DIR")
 
 
 def find_robot(name_or_path: str | os.PathLike[str]) -> Path:
