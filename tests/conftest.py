@@ -7,14 +7,22 @@ the README's main command, reuse them instead of compiling again.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
 
 from amsfe_sym.codegen import generate
 from amsfe_sym.load import Robot, load_robot
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.spec import robots_dir
+
+# In CI (CI=true) property tests draw a fixed sequence of examples, so a red run can be
+# reproduced; locally they explore new examples each run.
+settings.register_profile("ci", derandomize=True, print_blob=True)
+if os.environ.get("CI"):
+    settings.load_profile("ci")
 
 SHIPPED = sorted(d.name for d in robots_dir().iterdir() if (d / "robot.toml").is_file())
 DATA = Path(__file__).parent / "data"
