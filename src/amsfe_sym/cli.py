@@ -1,4 +1,4 @@
-"""The ``amsfe`` command line: generate, check, simulate, bench.
+"""The ``amsfe`` command line: generate, check, simulate, bench, study.
 
 Built as :func:`get_argument_parser` + :func:`main` (``main(argv)`` is what the tests call).
 Every command works with no arguments, on the paper's 2-link robot or its scenario.
@@ -65,8 +65,57 @@ def get_argument_parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
     b.add_argument("robot", nargs="?", default="paper_2link")
-    b.add_argument("--out", default=None)
+    b.add_argument("--out", default=None, help="parent folder of generated libraries")
     b.add_argument("--repeat", type=int, default=20000, help="calls per timing")
+    b.add_argument("--rounds", type=int, default=5, help="timing rounds (median reported)")
+    b.add_argument("--json", default=None, metavar="FILE", help="also write the report as JSON")
+    b.add_argument(
+        "--skip",
+        nargs="+",
+        choices=["generation", "calls", "estimators"],
+        default=[],
+        help="sections to leave out",
+    )
+    b.add_argument("--duration", type=float, default=2.0, help="simulated time per estimator [s]")
+    b.add_argument("--scenario", default=None, help="scenario of the estimator section")
+    b.add_argument(
+        "--estimators", nargs="+", default=None, help="estimators to time (default all five)"
+    )
+    b.add_argument(
+        "--compare-cflags",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="SETS",
+        help="recompile with comma-separated flag sets, e.g. --compare-cflags=-O0,-O1,'-O1 "
+        "-march=native' (no value: -O0..-O3, -Os, -O1 -march=native)",
+    )
+    b.add_argument("--compile-repeat", type=int, default=1, help="builds per flag set (min)")
+
+    st = sub.add_parser("study", help="Monte Carlo over seeds x estimators: tables, NEES, figures")
+    st.add_argument("scenario", nargs="?", default="paper-sim", help="scenario name or .toml")
+    st.add_argument("--seeds", type=int, default=20, help="number of seeds (default 20)")
+    st.add_argument("--first-seed", type=int, default=0, help="first seed (default 0)")
+    st.add_argument("--estimators", default="all", help="all | name,name (default all)")
+    st.add_argument("--duration", type=float, default=None, help="simulated time [s]")
+    st.add_argument("--workers", type=int, default=2, help="processes (default 2)")
+    st.add_argument("--out", default=None, help="folder (default runs/study-<scenario>-<stamp>)")
+    st.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario field, e.g. integrator=paper, filter.link_torque_std=2",
+    )
+    st.add_argument(
+        "--variant",
+        nargs="+",
+        action="append",
+        default=[],
+        metavar="LABEL KEY=VALUE",
+        help="a named scenario variant (repeatable): --variant paper integrator=paper",
+    )
+    st.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     return parser
 
 
@@ -82,6 +131,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _simulate(args)
         if args.command == "bench":
             return _bench(args)
+        if args.command == "study":
+            return _study(args)
     except AmsfeError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -140,6 +191,12 @@ def _bench(args: argparse.Namespace) -> int:
     from amsfe_sym.bench import run_bench
 
     return run_bench(args)
+
+
+def _study(args: argparse.Namespace) -> int:
+    from amsfe_sym.study import study_from_cli
+
+    return study_from_cli(args)
 
 
 if __name__ == "__main__":  # pragma: no cover

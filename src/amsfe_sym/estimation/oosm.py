@@ -299,7 +299,7 @@ class OosmEstimator(Estimator):
             # Hc Fb = Hc Phi^-1.  np.linalg.solve, not scipy.linalg.solve: on these small
             # systems scipy's wrapper with multithreaded OpenBLAS cost 0.9-1.9 ms a call
             # (measured in the study), numpy's ~5 us.
-            G = np.linalg.solve(Phi.T, Hc.T).T
+            G = np.asarray(np.linalg.solve(Phi.T, Hc.T).T, dtype=np.float64)
         except (np.linalg.LinAlgError, ValueError):
             raise EstimatorError(
                 describe(

@@ -1,0 +1,133 @@
+"""``amsfe bench``: it runs, prints every row, and its routes agree on the numbers.
+
+No timing is asserted (the machines are shared and noisy); only that each route computes
+the same outputs and that the report has the expected structure.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from amsfe_sym.bench import (
+    CALL_FUNCTIONS,
+    ESTIMATOR_NAMES,
+    CTimer,
+    PinocchioModel,
+    Timing,
+    _inputs,
+    _state,
+    time_calls,
+)
+from amsfe_sym.cli import main
+from amsfe_sym.codegen import generate
+from amsfe_sym.load import load_robot
+from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.spec import load_spec
+
+
+def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path: Path) -> None:
+    libraries.get("paper_2link")
+    out_json = tmp_path / "bench.json"
+    argv = ["bench", "--repeat", "200", "--rounds", "2", "--duration", "0.2"]
+    assert main([*argv, "--json", str(out_json)]) == 0
+    out = capsys.readouterr().out
+    for section in ("1. generation", "2. per-call cost", "3. estimator tick"):
+        assert section in out
+    for row in ("cold (force", "cached (second", *CALL_FUNCTIONS, "ekf_predict"):
+        assert row in out
+    for est in ESTIMATOR_NAMES:
+        assert f"   {est} " in out
+    assert "binding overhead" in out and "differ" not in out
+
+    report = json.loads(out_json.read_text())
+    assert report["robot"] == "paper_2link"
+    assert report["generation"]["cached"]["reused"] is True
+    assert report["generation"]["cold"]["reused"] is False
+    assert set(report["generation"]["cold"]["timings"]) >= {"symbolic", "codegen", "compile"}
+    rows = {r["function"]: r for r in report["calls"]}
+    assert set(rows) == {*CALL_FUNCTIONS, "ekf_predict"}
+    for name in CALL_FUNCTIONS:
+        r = rows[name]
+        # the ctypes binding, casadi.external and the SX VM give the same numbers
+        assert r["max_diff_external"] == 0.0, name
+        assert r["max_diff_sx_vm"] is not None and r["max_diff_sx_vm"] <= 1e-9, name
+        for route in ("ctypes", "pure_c", "external", "sx_vm"):
+            t = r[route]
+            assert t["median_us"] > 0 and t["min_us"] <= t["median_us"] and t["rounds"] == 2
+        assert r["overhead_us"] == pytest.approx(
+            r["ctypes"]["median_us"] - r["pure_c"]["median_us"], abs=1e-3
+        )
+    for name in ("mass_matrix", "camera_measure", "plant_step"):
+        assert rows[name]["max_diff_pinocchio"] <= 1e-9, name
+    ests = {r["estimator"]: r for r in report["estimators"]}
+    assert set(ests) == set(ESTIMATOR_NAMES)
+    for r in ests.values():
+        assert r["ticks"] == 201 and r["cost_per_tick_us"] > 0 and r["real_time_factor"] > 0
+    tick = report["tick_compiled_us"]
+    assert set(tick) == {"plant_step", "transition_step", "mass_matrix", "bias", "total"}
+    assert tick["total"] == pytest.approx(sum(v for k, v in tick.items() if k != "total"))
+
+
+def test_binding_matches_casadi_external(libraries) -> None:
+    _, lib = libraries.get("paper_2link")
+    x, u = _state(lib, np.random.default_rng(3))
+    for name in CALL_FUNCTIONS:
+        args = _inputs(lib, name, x, u)
+        ours = lib.function(name)(*args)
+        theirs = lib.external(name)(*args)
+        theirs = theirs if isinstance(theirs, tuple) else (theirs,)
+        assert len(ours) == len(theirs)
+        for a, b in zip(ours, theirs, strict=True):
+            np.testing.assert_array_equal(a, np.asarray(b).reshape(a.shape, order="F"))
+
+
+def test_pure_c_timer_computes_the_same_outputs(libraries, tmp_path: Path) -> None:
+    _, lib = libraries.get("paper_2link")
+    timer = CTimer(tmp_path)
+    x, u = _state(lib, np.random.default_rng(5))
+    args = _inputs(lib, "transition_step", x, u)
+    timing, checksum = timer.time(lib.library_path, "transition_step", args, rounds=2)
+    ref = lib.function("transition_step")(*args)
+    assert checksum == pytest.approx(sum(float(np.sum(r)) for r in ref), rel=1e-12)
+    assert timing.rounds == 2 and timing.calls >= 1000 and timing.median_us > 0
+
+
+def test_pinocchio_transition_matches_the_semi_implicit_library() -> None:
+    """The Pinocchio comparison model computes the same x+, A (but d/dtheta) and Gamma."""
+    spec = load_spec("paper_2link")
+    spec = replace(
+        spec,
+        name="paper_2link_semi",
+        model=replace(spec.model, integrator="semi_implicit"),
+    )
+    lib = ModelLibrary(generate(spec).out_dir)
+    robot = load_robot(spec)
+    pm = PinocchioModel(robot, np.eye(2 * lib.n + lib.p))
+    n = lib.n
+    for seed in range(3):
+        x, u = _state(lib, np.random.default_rng(seed))
+        xn, A, G = lib.function("transition_step")(x, u)
+        pxn, pA, pG = pm.transition_step(x, u)
+        np.testing.assert_allclose(pxn, xn, atol=1e-12)
+        np.testing.assert_allclose(pA[:, : 4 * n], A[:, : 4 * n], atol=1e-10)
+        np.testing.assert_allclose(pG, G, atol=1e-12)
+
+
+def test_compare_cflags_rebuilds_and_times(capsys, libraries) -> None:
+    libraries.get("paper_2link")
+    argv = ["bench", "--repeat", "200", "--rounds", "2", "--skip", "generation", "calls"]
+    assert main([*argv, "estimators", "--compare-cflags=-O0,-O1"]) == 0
+    out = capsys.readouterr().out
+    assert "compiler flags" in out
+    assert "   -O0 " in out and "   -O1 " in out
+
+
+def test_time_calls_sizes_rounds_by_budget() -> None:
+    t = time_calls(lambda: None, (), repeat=50, rounds=3)
+    assert isinstance(t, Timing) and t.calls == 50 and t.rounds == 3
+    assert 0 < t.min_us <= t.median_us
