@@ -185,3 +185,21 @@ def test_paper_exp_runs(tmp_path: Path) -> None:
     s = summarize(res)
     assert s["ticks"] == 201 and res.counters["frames_applied"] >= 45
     assert max(s["estimation_rmse"]["q"]) < 0.005
+
+
+def test_controller_reference_grid_equals_direct_evaluation(paper_sim) -> None:
+    from amsfe_sym.control import make_controller
+    from amsfe_sym.sim import trajectory_from_config
+
+    sc, lib = paper_sim
+    traj = trajectory_from_config(dict(sc.trajectory))
+    ctrl = make_controller("truth-ct", lib, traj)
+    t = np.arange(50) * lib.T
+    ctrl.prepare(t)
+    for k in (0, 17, 49):
+        direct = traj.evaluate(float(t[k]))
+        for a, b in zip(ctrl.reference(k, float(t[k])), direct, strict=True):
+            np.testing.assert_array_equal(a, b)
+    # off the grid (another time, or beyond it) it evaluates directly
+    off = ctrl.reference(3, 0.123)
+    np.testing.assert_array_equal(off[0], traj.evaluate(0.123).q)

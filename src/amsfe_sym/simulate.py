@@ -247,6 +247,7 @@ def run(
     P_diag = np.zeros((K, N))
     nees = np.zeros(K)
     q_des = traj.evaluate(t).q.reshape(K, n)
+    ctrl.prepare(t)
     u_rec = np.zeros((K, n))
     z_rec = np.zeros((K, 2 * n))
     frames_rec: list[tuple[float, float, float, float]] = []

@@ -48,6 +48,26 @@ class Controller(ABC):
             )
         self.gains = {**self.gain_defaults, **given}
 
+    def prepare(self, t: FloatArray) -> None:
+        """Precompute the desired trajectory on the run's time grid ``t`` [s] (one vectorised
+        evaluation instead of one per tick); :meth:`reference` then reads it by tick index."""
+        ref = self.trajectory.evaluate(t)
+        self._grid = (
+            t,
+            ref.q.reshape(t.size, -1),
+            ref.qd.reshape(t.size, -1),
+            ref.qdd.reshape(t.size, -1),
+        )
+
+    def reference(self, k: int, t: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Desired (q, qd, qdd) at tick ``k`` / time ``t`` [s] (from :meth:`prepare` if it
+        covers ``k`` at that time, else evaluated now)."""
+        grid = getattr(self, "_grid", None)
+        if grid is not None and 0 <= k < grid[0].size and grid[0][k] == t:
+            return grid[1][k], grid[2][k], grid[3][k]
+        ref = self.trajectory.evaluate(t)
+        return ref.q, ref.qd, ref.qdd
+
     @abstractmethod
     def torque(
         self, k: int, t: float, x_true: FloatArray, theta_true: FloatArray, x_hat: FloatArray

@@ -67,13 +67,13 @@ class TruthComputedTorque(Controller):
     ) -> FloatArray:
         n = self.n
         q, qd, qm, qmd = x_true[:n], x_true[n : 2 * n], x_true[2 * n : 3 * n], x_true[3 * n :]
-        ref = self.trajectory.evaluate(t)
+        q_d, qd_d, qdd_d = self.reference(k, t)
         Ks = self.Ks.copy()
         for i, j in self.stiffness_theta:
             Ks[j] = theta_true[i]
         M = self._M.call_into(q, theta_true)[0]
         b = self._b.call_into(q, qd, theta_true)[0]
-        acc = ref.qdd + self.Kd * (ref.qd - qd) + self.Kp * (ref.q - q)
+        acc = qdd_d + self.Kd * (qd_d - qd) + self.Kp * (q_d - q)
         tau = M @ acc + b
         qm_d = q + tau / Ks
         if self._prev is not None and self._prev[0] == k - 1:
