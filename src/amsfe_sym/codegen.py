@@ -218,6 +218,16 @@ def generate(
         cname = f"{spec.name}.c"
         gen = ca.CodeGenerator(cname, {"with_header": True, "with_mem": False})
         for f in model.functions.values():
+            for i in range(f.n_out()):  # the binding and the C contract need dense outputs
+                if not f.sparsity_out(i).is_dense():
+                    raise CodegenError(
+                        describe(
+                            f"{f.name()} output {f.name_out(i)}",
+                            "a dense output",
+                            "a sparse one",
+                            "wrap the expression in ca.densify",
+                        )
+                    )
             gen.add(f)
         cwd = os.getcwd()
         try:

@@ -135,9 +135,7 @@ class Transition:
         Fm = ca.DM(self.robot.Fm)
         delta = qm - q  # eq. (1d)
         if self.integrator == "rk4":
-            qd0 = qd + ldl_solve(self.tree.mass_matrix(q, th), wl)
-            x0 = ca.vertcat(q, qd0, qm, qmd + wm / Mm)
-            return ca.vertcat(self._rk4(x0, u, th, T), th + T * wt)
+            raise ValueError("rk4 transitions are built by rk4_functions() (MX graphs)")
         if self.integrator == "paper":
             q_next = q + T * qd  # (1a)
             mom = (
@@ -166,14 +164,7 @@ class Transition:
         Mm = ca.DM(self.robot.Mm)
         Fm = ca.DM(self.robot.Fm)
         if self.integrator == "rk4":
-            # backward RK4 (error O(T^5)) then fixed-point refinements x <- x - (F(x) - x+),
-            # which contract by ~ T |df/dx| per step
-            n = self.tree.n
-            xpn = xn[: 4 * n]
-            xp = self._rk4(xpn, u, th, -T)
-            for _ in range(K):
-                xp = xp - (self._rk4(xp, u, th, T) - xpn)
-            return ca.vertcat(xp, th)
+            raise ValueError("rk4 transitions are built by rk4_functions() (MX graphs)")
         if self.integrator == "paper":
             Mn = self.tree.mass_matrix(qn, th)
             target = ca.mtimes(Mn, qdn)  # M(q+) qd+
@@ -206,14 +197,80 @@ class Transition:
                 qd = qdn - ldl_solve(M, T * (Ks * delta - self.tree.bias(q, qd, th)))
         return ca.vertcat(q, qd, qm, qmd, th)
 
-    def _rk4(self, xp: ca.SX, u: ca.SX, theta: ca.SX, h: float) -> ca.SX:
-        """One RK4 step of length ``h`` of the undisturbed plant (u held)."""
-        zero = ca.SX.zeros(2 * self.tree.n, 1)
-        k1 = self.plant_rhs(xp, u, theta, zero)
-        k2 = self.plant_rhs(xp + 0.5 * h * k1, u, theta, zero)
-        k3 = self.plant_rhs(xp + 0.5 * h * k2, u, theta, zero)
-        k4 = self.plant_rhs(xp + h * k3, u, theta, zero)
-        return xp + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+    def rk4_functions(self) -> dict[str, ca.Function]:
+        """The ``rk4`` transition functions as MX graphs calling the SX right-hand side.
+
+        Inlining four dynamics evaluations (and their derivatives) in SX makes the code grow
+        tenfold (a 6-DOF arm: 375k lines, ~110 s to build); as calls, CasADi emits the
+        right-hand side and its derivative functions once.
+
+        Returns:
+            ``transition``, ``transition_jacobian``, ``noise_gain``, ``transition_step`` and
+            ``transition_inverse`` with the contract's names and shapes.
+        """
+        n, p, T, K = self.tree.n, self.tree.p, self.T, self.iterations
+        N = 4 * n + p
+        rhs = self.plant_rhs_function()
+        qs, ths, ws = ca.SX.sym("q", n), ca.SX.sym("theta", p), ca.SX.sym("w", n)
+        msolve = ca.Function(
+            "rk4_impulse", [qs, ths, ws], [ldl_solve(self.tree.mass_matrix(qs, ths), ws)]
+        )
+        Mm = ca.DM(self.robot.Mm)
+        x, u = ca.MX.sym("x", N), ca.MX.sym("u", n)
+        w = ca.MX.sym("w", 2 * n + p)
+        q, qd, qm, qmd, th = (x[0:n], x[n : 2 * n], x[2 * n : 3 * n], x[3 * n : 4 * n], x[4 * n :])
+        zero = ca.MX.zeros(2 * n, 1)
+
+        def step(xp: ca.MX, h: float) -> ca.MX:
+            k1 = rhs(xp, u, th, zero)
+            k2 = rhs(xp + 0.5 * h * k1, u, th, zero)
+            k3 = rhs(xp + 0.5 * h * k2, u, th, zero)
+            k4 = rhs(xp + h * k3, u, th, zero)
+            return xp + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+
+        xp0 = ca.vertcat(q, qd + msolve(q, th, w[0:n]), qm, qmd + w[n : 2 * n] / Mm)
+        Fw = ca.Function("rk4_noisy", [x, u, w], [ca.vertcat(step(xp0, T), th + T * w[2 * n :])])
+        F = Fw(x, u, ca.MX.zeros(2 * n + p, 1))
+        # dense outputs: the contract's buffers are plain column-major arrays
+        A = ca.densify(ca.jacobian(F, x))
+        G = ca.densify(
+            ca.Function("rk4_gain", [x, u, w], [ca.jacobian(Fw(x, u, w), w)])(
+                x, u, ca.MX.zeros(2 * n + p, 1)
+            )
+        )
+        xn = ca.MX.sym("x_next", N)
+        xpn = xn[: 4 * n]
+        th_n = xn[4 * n :]
+        back = ca.Function(
+            "rk4_back", [x, u], [step(x[: 4 * n], -T)]
+        )  # uses th = x[4n:] of its own argument
+        fwd_expr = step(x[: 4 * n], T)
+        fwd = ca.Function("rk4_fwd", [x, u], [fwd_expr])
+        fwd_jac = ca.Function(
+            "rk4_fwd_jac", [x, u], [ca.densify(ca.jacobian(fwd_expr, x)[:, : 4 * n])]
+        )
+        # Newton on F(x) = x+ from the backward-RK4 guess: the plain fixed point
+        # x <- x - (F(x) - x+) contracts only for T |df/dx| < 1, which stiff joints break
+        xp = back(xn, u)
+        for _ in range(K):
+            xf = ca.vertcat(xp, th_n)
+            xp = xp - ca.solve(fwd_jac(xf, u), fwd(xf, u) - xpn, "qr")
+        step_fn = ca.Function(
+            "transition_step", [x, u], [F, A, G], ["x", "u"], ["x_next", "A", "Gamma"]
+        )
+        xs, us = ca.MX.sym("x", N), ca.MX.sym("u", n)
+        _, A_s, G_s = step_fn(xs, us)
+        return {
+            "transition": ca.Function("transition", [x, u], [F], ["x", "u"], ["x_next"]),
+            "transition_jacobian": ca.Function(
+                "transition_jacobian", [xs, us], [A_s], ["x", "u"], ["A"]
+            ),
+            "noise_gain": ca.Function("noise_gain", [xs, us], [G_s], ["x", "u"], ["Gamma"]),
+            "transition_step": step_fn,
+            "transition_inverse": ca.Function(
+                "transition_inverse", [xn, u], [ca.vertcat(xp, th_n)], ["x_next", "u"], ["x"]
+            ),
+        }
 
     # ------------------------------------------------------------------ plant (truth)
     def plant_rhs(self, xp: ca.SX, u: ca.SX, theta: ca.SX, tau_d: ca.SX) -> ca.SX:
