@@ -254,6 +254,11 @@ class Estimator(ABC):
         self._gate_camera = gate_threshold(config.gate_probability, int(camera.dim))
         nu = getattr(model, "nu", None)
         self._nu: int | None = nu if isinstance(nu, int) else None
+        self._setup()
+
+    def _setup(self) -> None:  # noqa: B027 - an optional hook, not an abstract method
+        """Subclass hook run at the end of ``__init__`` (checked inputs in ``self``): check
+        estimator-specific configuration and allocate history buffers."""
 
     # ------------------------------------------------------------------ public API
     def step(

@@ -27,12 +27,12 @@ from __future__ import annotations
 from typing import ClassVar
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from amsfe_sym.errors import ConfigError, describe
-from amsfe_sym.estimation.base import DEFAULT_CONFIG, Estimator, FilterConfig, StepReport
+from amsfe_sym.estimation.base import Estimator, StepReport
 from amsfe_sym.estimation.ekf import joseph_update, measure, predict, require_positive_definite
-from amsfe_sym.estimation.models import CameraFrame, MeasurementModel, TransitionModel
+from amsfe_sym.estimation.models import CameraFrame
 
 __all__ = ["CloningEstimator"]
 
@@ -49,17 +49,8 @@ class CloningEstimator(Estimator):
 
     name: ClassVar[str] = "cloning"
 
-    def __init__(
-        self,
-        model: TransitionModel,
-        encoder: MeasurementModel,
-        camera: MeasurementModel,
-        x0: ArrayLike,
-        P0: ArrayLike,
-        config: FilterConfig = DEFAULT_CONFIG,
-        k0: int = 0,
-    ) -> None:
-        if config.camera_period is None:
+    def _setup(self) -> None:
+        if self.config.camera_period is None:
             raise ConfigError(
                 describe(
                     "FilterConfig.camera_period for 'cloning'",
@@ -69,10 +60,9 @@ class CloningEstimator(Estimator):
                     "knows at which steps to clone the state",
                 )
             )
-        super().__init__(model, encoder, camera, x0, P0, config, k0)
-        latency = config.camera_max_latency
+        latency = self.config.camera_max_latency
         self._max_latency = (
-            config.buffer_steps if latency is None else min(latency, config.buffer_steps)
+            self.config.buffer_steps if latency is None else min(latency, self.config.buffer_steps)
         )
         self._xa: FloatArray = self.x.copy()
         self._Pa: FloatArray = self.P.copy()

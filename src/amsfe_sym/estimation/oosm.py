@@ -32,10 +32,10 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from amsfe_sym.errors import EstimatorError, describe
-from amsfe_sym.estimation.base import DEFAULT_CONFIG, Estimator, FilterConfig, StepReport
+from amsfe_sym.estimation.base import Estimator, StepReport
 from amsfe_sym.estimation.ekf import (
     UpdateResult,
     cholesky_lower,
@@ -43,7 +43,7 @@ from amsfe_sym.estimation.ekf import (
     measure,
     symmetrize,
 )
-from amsfe_sym.estimation.models import CameraFrame, MeasurementModel, TransitionModel
+from amsfe_sym.estimation.models import CameraFrame
 
 __all__ = [
     "A1Correction",
@@ -224,18 +224,8 @@ class OosmEstimator(Estimator):
 
     name: ClassVar[str] = "oosm"
 
-    def __init__(
-        self,
-        model: TransitionModel,
-        encoder: MeasurementModel,
-        camera: MeasurementModel,
-        x0: ArrayLike,
-        P0: ArrayLike,
-        config: FilterConfig = DEFAULT_CONFIG,
-        k0: int = 0,
-    ) -> None:
-        super().__init__(model, encoder, camera, x0, P0, config, k0)
-        n, B = self.nx, config.buffer_steps
+    def _setup(self) -> None:
+        n, B = self.nx, self.config.buffer_steps
         self._A = np.empty((B, n, n))
         self._Q = np.empty((B, n, n))
         self._u: list[FloatArray | None] = [None] * B
@@ -341,18 +331,9 @@ class OosmAl1Estimator(OosmEstimator):
 
     name: ClassVar[str] = "oosm-al1"
 
-    def __init__(
-        self,
-        model: TransitionModel,
-        encoder: MeasurementModel,
-        camera: MeasurementModel,
-        x0: ArrayLike,
-        P0: ArrayLike,
-        config: FilterConfig = DEFAULT_CONFIG,
-        k0: int = 0,
-    ) -> None:
-        super().__init__(model, encoder, camera, x0, P0, config, k0)
-        size = config.buffer_steps + 1
+    def _setup(self) -> None:
+        super()._setup()
+        size = self.config.buffer_steps + 1
         self._post_x = np.empty((size, self.nx))
         self._post_P = np.empty((size, self.nx, self.nx))
         self._store_posterior(self.k)

@@ -20,11 +20,11 @@ from __future__ import annotations
 from typing import ClassVar
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from amsfe_sym.errors import EstimatorError
-from amsfe_sym.estimation.base import DEFAULT_CONFIG, Estimator, FilterConfig, StepReport
-from amsfe_sym.estimation.models import CameraFrame, MeasurementModel, TransitionModel
+from amsfe_sym.estimation.base import Estimator, StepReport
+from amsfe_sym.estimation.models import CameraFrame
 
 __all__ = ["ReplayEstimator"]
 
@@ -36,18 +36,8 @@ class ReplayEstimator(Estimator):
 
     name: ClassVar[str] = "replay"
 
-    def __init__(
-        self,
-        model: TransitionModel,
-        encoder: MeasurementModel,
-        camera: MeasurementModel,
-        x0: ArrayLike,
-        P0: ArrayLike,
-        config: FilterConfig = DEFAULT_CONFIG,
-        k0: int = 0,
-    ) -> None:
-        super().__init__(model, encoder, camera, x0, P0, config, k0)
-        size = config.buffer_steps + 1
+    def _setup(self) -> None:
+        size = self.config.buffer_steps + 1
         self._size = size
         self._xs = np.empty((size, self.nx))
         self._Ps = np.empty((size, self.nx, self.nx))
