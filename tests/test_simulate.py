@@ -153,6 +153,15 @@ def test_delay_longer_than_buffer_is_refused(paper_sim) -> None:
         run(bad, lib)
 
 
+def test_noise_free_camera_needs_an_explicit_filter_R(paper_sim) -> None:
+    sc, lib = paper_sim
+    exact = dataclasses.replace(sc.camera, pixel_std=0.0, round_to_pixel=False)
+    with pytest.raises(ConfigError, match="camera_pixel_std"):
+        run(dataclasses.replace(sc, camera=exact, duration=0.1), lib)
+    ok = dataclasses.replace(sc.filter, camera_pixel_std=0.1)
+    assert run(dataclasses.replace(sc, camera=exact, filter=ok, duration=0.1), lib).t.size == 101
+
+
 def test_unknown_names_are_refused(paper_sim, capsys) -> None:
     sc, lib = paper_sim
     with pytest.raises(ConfigError, match="cloning"):

@@ -188,9 +188,17 @@ def run(
         f.encoder_q_std**2 if f.encoder_q_std else enc_var[:n],
         f.encoder_qd_std**2 if f.encoder_qd_std else enc_var[n:],
     )
-    camera_model = CameraMeasurement(
-        lib, f.camera_pixel_std**2 if f.camera_pixel_std else max(cam_cfg.variance, 1e-6)
-    )
+    cam_var = f.camera_pixel_std**2 if f.camera_pixel_std else cam_cfg.variance
+    if cam_var <= 0:
+        raise ConfigError(
+            describe(
+                "[filter] camera_pixel_std",
+                "a positive camera noise for the filter's R",
+                "0, and a noise-free camera that does not round to pixels",
+                "set [filter] camera_pixel_std > 0 (an exact camera makes R singular)",
+            )
+        )
+    camera_model = CameraMeasurement(lib, cam_var)
     z0 = enc.measure(xp[L["qm"]], xp[L["qmd"]])
     e0 = sc.estimate0
     th0 = np.array(e0.theta, dtype=float) if e0.theta else lib.theta_initial
