@@ -852,10 +852,6 @@ def _fmt(v: float | None, width: int = 9, digits: int = 2) -> str:
     return f"{'-':>{width}}" if v is None else f"{v:>{width}.{digits}f}"
 
 
-def _t(t: Timing | None, width: int = 9) -> str:
-    return _fmt(None if t is None else t.median_us, width)
-
-
 def machine_info() -> dict[str, Any]:
     """CPU, cores, load and versions, for the report."""
     cpu = platform.processor() or platform.machine()
