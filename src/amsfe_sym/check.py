@@ -240,7 +240,7 @@ def run_checks(
     """Compare every generated function with its reference at ``samples`` random states."""
     rng = np.random.default_rng(seed)
     oracle = _Oracle(robot)
-    n, p = robot.n, robot.p
+    n = robot.n
     states = random_states(robot, samples, rng)
     inputs = [rng.uniform(-5.0, 5.0, n) for _ in states]
     f = lib.function
@@ -278,7 +278,6 @@ def run_checks(
             "plant_step",
             rel_err(f("plant_step")(xp, u, th, tau_d)[0], oracle.plant_step(xp, u, th, tau_d)),
         )
-    del p
     refs = {
         "mass_matrix": ("pin.crba", 1e-10),
         "bias": ("pin.nle", 1e-10),

@@ -632,7 +632,8 @@ def _camera(spec: RobotSpec, model: pin.Model, frame_id: int) -> CameraModel:
     focal length puts the whole workspace sphere inside 90 % of the shorter image side.
     """
     c = spec.camera
-    centre, radius = _workspace(model, frame_id, spec.tracked.offset)
+    if c.look_at is None or c.position is None or c.fx is None:  # a default needs the workspace
+        centre, radius = _workspace(model, frame_id, spec.tracked.offset)
     look_at = np.array(c.look_at, dtype=float) if c.look_at is not None else centre
     up = np.array(c.up, dtype=float)
     if c.position is not None:
@@ -660,15 +661,16 @@ def _camera(spec: RobotSpec, model: pin.Model, frame_id: int) -> CameraModel:
     x /= np.linalg.norm(x)
     y = np.cross(z, x)
     R_cw = np.vstack([x, y, z])
-    # the sphere (centre, radius) seen from `position`: its farthest image offset is
-    # f * tan(angle to centre + half-angle of the sphere)
-    to_c = centre - position
-    dist = float(np.linalg.norm(to_c))
-    ang = math.acos(float(np.clip(np.dot(to_c / max(dist, 1e-12), z), -1.0, 1.0)))
-    half_angle = math.asin(min(radius / max(dist, 1e-12), 0.99))
-    half = 0.45 * min(c.width, c.height)
-    f_default = half / math.tan(min(ang + half_angle, 1.4))
-    fx = c.fx if c.fx is not None else f_default
+    if c.fx is not None:
+        fx = c.fx
+    else:
+        # the sphere (centre, radius) seen from `position`: its farthest image offset is
+        # f * tan(angle to centre + half-angle of the sphere)
+        to_c = centre - position
+        dist = float(np.linalg.norm(to_c))
+        ang = math.acos(float(np.clip(np.dot(to_c / max(dist, 1e-12), z), -1.0, 1.0)))
+        half_angle = math.asin(min(radius / max(dist, 1e-12), 0.99))
+        fx = 0.45 * min(c.width, c.height) / math.tan(min(ang + half_angle, 1.4))
     fy = c.fy if c.fy is not None else fx
     cx = c.cx if c.cx is not None else c.width / 2.0
     cy = c.cy if c.cy is not None else c.height / 2.0

@@ -117,11 +117,7 @@ def run(
     rng = np.random.default_rng(sc.seed)
     rng_enc, rng_cam, rng_dist = rng.spawn(3)
     theta_true = lib.theta_true
-    act = lib.manifest["actuators"]
-    Ks = np.array(act["Ks"], dtype=float)
-    for i, t_ in enumerate(lib.manifest["theta"]):
-        if t_["kind"] == "joint_stiffness":
-            Ks[lib.manifest["joints"].index(t_["target"])] = theta_true[i]
+    Ks = lib.stiffness(theta_true)
 
     # ---------------------------------------------------------------- plant start
     q0 = _vec(sc.plant.q0, n, "[plant] q0")

@@ -44,14 +44,8 @@ class TruthComputedTorque(Controller):
     ) -> None:
         super().__init__(lib, trajectory, gains)
         act = lib.manifest["actuators"]
-        self.Ks = np.array(act["Ks"], dtype=float)
         self.Mm = np.array(act["Mm"], dtype=float)
         self.Fm = np.array(act["Fm"], dtype=float)
-        self.stiffness_theta = [
-            (i, lib.manifest["joints"].index(t["target"]))
-            for i, t in enumerate(lib.manifest["theta"])
-            if t["kind"] == "joint_stiffness"
-        ]
         wl = float(self.gains["link_bandwidth"])
         wm = float(self.gains["motor_bandwidth"])
         self.Kp, self.Kd = wl * wl, 2.0 * wl
@@ -68,9 +62,7 @@ class TruthComputedTorque(Controller):
         n = self.n
         q, qd, qm, qmd = x_true[:n], x_true[n : 2 * n], x_true[2 * n : 3 * n], x_true[3 * n :]
         q_d, qd_d, qdd_d = self.reference(k, t)
-        Ks = self.Ks.copy()
-        for i, j in self.stiffness_theta:
-            Ks[j] = theta_true[i]
+        Ks = self.lib.stiffness(theta_true)
         M = self._M.call_into(q, theta_true)[0]
         b = self._b.call_into(q, qd, theta_true)[0]
         acc = qdd_d + self.Kd * (qd_d - qd) + self.Kp * (q_d - q)

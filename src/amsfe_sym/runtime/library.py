@@ -241,6 +241,23 @@ class ModelLibrary:
         """State blocks q, qd, qm, qmd, theta as slices of x (eq. 2)."""
         return {k: slice(a, b) for k, (a, b) in self.manifest["state_layout"].items()}
 
+    @cached_property
+    def _stiffness_theta(self) -> list[tuple[int, int]]:
+        joints = self.manifest["joints"]
+        return [
+            (i, joints.index(t["target"]))
+            for i, t in enumerate(self.manifest["theta"])
+            if t["kind"] == "joint_stiffness"
+        ]
+
+    def stiffness(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Ks [N m/rad] per joint with the joint-stiffness parameters set to ``theta``
+        (the runtime twin of ``Robot.stiffness_at``, read from the manifest)."""
+        Ks = np.array(self.manifest["actuators"]["Ks"], dtype=float)
+        for i, j in self._stiffness_theta:
+            Ks[j] = theta[i]
+        return Ks
+
     @property
     def theta_true(self) -> NDArray[np.float64]:
         return np.array([t["true"] for t in self.manifest["theta"]], dtype=float)
