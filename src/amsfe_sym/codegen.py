@@ -19,6 +19,7 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import json
+import math
 import os
 import platform
 import shlex
@@ -52,6 +53,7 @@ _GENERATOR_MODULES = (
     "symbolic/dynamics.py",
     "symbolic/camera.py",
     "symbolic/transition.py",
+    "symbolic/control.py",
     "symbolic/model.py",
 )
 
@@ -351,7 +353,13 @@ def _manifest(
         "gravity": robot.gravity.tolist(),
         "state_layout": model.layout.as_dict(),
         "noise_layout": {"w_l": [0, n], "w_m": [n, 2 * n], "w_theta": [2 * n, 2 * n + p]},
-        "actuators": {"Ks": robot.Ks.tolist(), "Mm": robot.Mm.tolist(), "Fm": robot.Fm.tolist()},
+        "actuators": {
+            "Ks": robot.Ks.tolist(),
+            "Mm": robot.Mm.tolist(),
+            "Fm": robot.Fm.tolist(),
+            # JSON has no inf: a joint without a limit is null
+            "u_max": [float(v) if math.isfinite(v) else None for v in robot.u_max],
+        },
         "camera": {
             "K": cam.K.tolist(),
             "R_cw": cam.R_cw.tolist(),

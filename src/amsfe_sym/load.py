@@ -133,6 +133,7 @@ class Robot:
     Fm: NDArray[np.float64]
     theta: tuple[ThetaBinding, ...]
     gravity: NDArray[np.float64]
+    u_max: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
 
     @property
     def name(self) -> str:
@@ -291,6 +292,11 @@ def load_robot(robot: str | Path | RobotSpec, lock: dict[str, float] | None = No
     Fm = _per_joint(spec.actuators.Fm, DEFAULT_FM, n, "Fm", spec)
     if spec.actuators.Ks is None:
         Ks = _default_stiffness(model, joints, Mm, spec.model.T)
+    effort = np.array([float(model.effortLimit[j.idx_v]) for j in joints])
+    urdf_limit = np.where(np.isfinite(effort) & (effort > 0), effort, np.inf)
+    u_max = _per_joint(spec.actuators.u_max, 0.0, n, "u_max", spec)
+    if spec.actuators.u_max is None:
+        u_max = urdf_limit
 
     # --- theta ---------------------------------------------------------------------------
     bindings = tuple(_bind_theta(t, model, joints, link_inertias, spec) for t in spec.theta)
@@ -309,6 +315,7 @@ def load_robot(robot: str | Path | RobotSpec, lock: dict[str, float] | None = No
         Fm=Fm,
         theta=bindings,
         gravity=gravity,
+        u_max=u_max,
     )
     _check_mass_matrix(robot_obj)
     return robot_obj

@@ -80,11 +80,14 @@ class ActuatorSpec:
         Ks: Joint stiffness [N m/rad] (or [N/m] for a prismatic joint).
         Mm: Motor inertia reflected to the link side [kg m^2] (or [kg]).
         Fm: Motor viscous friction [N m s/rad] (or [N s/m]).
+        u_max: Motor torque limit [N m] (or [N]); default the URDF's ``effort`` limit where
+            it gives one (> 0), else none.
     """
 
     Ks: tuple[float, ...] | None = None
     Mm: tuple[float, ...] | None = None
     Fm: tuple[float, ...] | None = None
+    u_max: tuple[float, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -322,11 +325,12 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
     )
 
     a = _table(data, "actuators", where)
-    _no_unknown(a, {"Ks", "Mm", "Fm"}, f"{where} [actuators]")
+    _no_unknown(a, {"Ks", "Mm", "Fm", "u_max"}, f"{where} [actuators]")
     actuators = ActuatorSpec(
         Ks=_opt_positive_vec(a.get("Ks"), f"{where} [actuators] Ks"),
         Mm=_opt_positive_vec(a.get("Mm"), f"{where} [actuators] Mm"),
         Fm=_opt_nonneg_vec(a.get("Fm"), f"{where} [actuators] Fm"),
+        u_max=_opt_positive_vec(a.get("u_max"), f"{where} [actuators] u_max"),
     )
 
     t = _table(data, "tracked", where)

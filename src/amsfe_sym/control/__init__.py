@@ -1,7 +1,22 @@
-"""Controllers, selectable by name.  Until the DTSMC issue lands, ``truth-ct`` (a cascaded
-computed-torque law on the true state and true model) drives the plant."""
+"""Controllers, selectable by name (``amsfe simulate --controller NAME``).
+
+``amsfe``, ``dtsmc``, ``amsfe-paper``, ``dtsmc-paper`` and ``truth`` are the paper's discrete
+terminal sliding mode laws on generated code (:mod:`amsfe_sym.control.sliding`, derived in
+docs/control.md); ``truth-ct`` is a cascaded computed-torque law on the true state.
+"""
 
 from amsfe_sym.control.base import CONTROLLERS, Controller, make_controller
+from amsfe_sym.control.sliding import Amsfe, AmsfePaper, Dtsmc, DtsmcPaper, Truth
 from amsfe_sym.control.truth import TruthComputedTorque
 
-__all__ = ["CONTROLLERS", "Controller", "TruthComputedTorque", "make_controller"]
+__all__ = [
+    "CONTROLLERS",
+    "Amsfe",
+    "AmsfePaper",
+    "Controller",
+    "Dtsmc",
+    "DtsmcPaper",
+    "Truth",
+    "TruthComputedTorque",
+    "make_controller",
+]

@@ -48,6 +48,20 @@ class Controller(ABC):
             )
         self.gains = {**self.gain_defaults, **given}
 
+        act = lib.manifest["actuators"]
+        #: Actuator torque limit per joint [N m] (``inf``: none); :meth:`saturate` applies it.
+        limits = act.get("u_max") or [None] * lib.n
+        self.u_max = np.array([np.inf if v is None else float(v) for v in limits])
+        #: Sliding variable s(k) of eq. (33) of the last tick (NaN for laws without one).
+        self.s = np.full(lib.n, np.nan)
+        #: |dv - lam e(k+1)^p + lam e^p| of the last tick (the norm inside eq. 38), or NaN.
+        self.bound = np.full(lib.n, np.nan)
+
+    def saturate(self, u: FloatArray) -> tuple[FloatArray, bool]:
+        """Clip u to the actuator limit; return the applied torque and whether it clipped."""
+        clipped = np.clip(u, -self.u_max, self.u_max)
+        return clipped, bool(np.any(clipped != u))
+
     def prepare(self, t: FloatArray) -> None:
         """Precompute the desired trajectory on the run's time grid ``t`` [s] (one vectorised
         evaluation instead of one per tick); :meth:`reference` then reads it by tick index."""
@@ -70,9 +84,17 @@ class Controller(ABC):
 
     @abstractmethod
     def torque(
-        self, k: int, t: float, x_true: FloatArray, theta_true: FloatArray, x_hat: FloatArray
+        self,
+        k: int,
+        t: float,
+        x_true: FloatArray,
+        theta_true: FloatArray,
+        x_hat: FloatArray,
+        z_enc: FloatArray,
     ) -> FloatArray:
-        """u(k) from the true plant state [q, qd, qm, qmd] and the estimate x_hat (eq. 2)."""
+        """u(k) [N m], before saturation, from what the law may read: the true plant state
+        [q, qd, qm, qmd] and theta (oracles only), the estimate x_hat (eq. 2), and the encoder
+        sample z_enc = [qm, qmd] + noise (eq. 5) taken at t_k."""
 
 
 CONTROLLERS: dict[str, type[Controller]] = {}

@@ -57,7 +57,13 @@ class TruthComputedTorque(Controller):
         self._prev: tuple[int, FloatArray, FloatArray] | None = None  # (k, qm_d, qmd_d)
 
     def torque(
-        self, k: int, t: float, x_true: FloatArray, theta_true: FloatArray, x_hat: FloatArray
+        self,
+        k: int,
+        t: float,
+        x_true: FloatArray,
+        theta_true: FloatArray,
+        x_hat: FloatArray,
+        z_enc: FloatArray,
     ) -> FloatArray:
         n = self.n
         q, qd, qm, qmd = x_true[:n], x_true[n : 2 * n], x_true[2 * n : 3 * n], x_true[3 * n :]

@@ -108,6 +108,19 @@ class Trajectory(ABC):
             return TrajectoryPoint(point.q[0], point.qd[0], point.qdd[0])
         return point
 
+    def _higher(self, t: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Jerk and snap at times ``t`` (m,), each (m, n); zero unless a kind overrides it."""
+        z = np.zeros((t.size, self.n))
+        return z, z.copy()
+
+    def higher(self, t: float | ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Desired jerk [rad/s^3] and snap [rad/s^4] at time(s) ``t`` (shapes as
+        :meth:`evaluate`): the smooth feedforward of the cascaded laws needs them to
+        differentiate the desired motor angle exactly (amsfe_sym.symbolic.control)."""
+        times, scalar = _times(t)
+        j, s = self._higher(times)
+        return (j[0], s[0]) if scalar else (j, s)
+
 
 def _vector(value: Any, what: str) -> FloatArray:
     """A finite 1-D float vector from a scalar or a sequence (scalars give shape (1,))."""
@@ -189,6 +202,11 @@ class Sinusoid(Trajectory):
         qd = self.amplitude * self.omega * c
         qdd = -self.amplitude * self.omega**2 * s
         return TrajectoryPoint(q, qd, qdd)
+
+    def _higher(self, t: FloatArray) -> tuple[FloatArray, FloatArray]:
+        arg = np.outer(t, self.omega) + self.phase
+        a = self.amplitude
+        return -a * self.omega**3 * np.cos(arg), a * self.omega**4 * np.sin(arg)
 
     def __repr__(self) -> str:
         return (

@@ -13,6 +13,7 @@ import casadi as ca
 
 from amsfe_sym.load import Robot
 from amsfe_sym.symbolic.camera import depth, pinhole
+from amsfe_sym.symbolic.control import build_control_functions
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
 from amsfe_sym.symbolic.transition import StateLayout, Transition
 
@@ -109,5 +110,7 @@ def build_functions(robot: Robot) -> SymbolicModel:
     model = SymbolicModel(robot=robot, layout=L)
     model.functions = {f.name(): f for f in fns}
     model.functions["plant_step"] = tr.plant_step(spec.plant_substeps)
+    for f in build_control_functions(tree, tr):  # eqs. (29)-(37), (54) and the cascade
+        model.functions[f.name()] = f
     model.camera_depends_on_theta = bool(ca.depends_on(y, th)) if p else False
     return model

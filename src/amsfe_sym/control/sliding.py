@@ -1,0 +1,332 @@
+"""The paper's discrete terminal sliding mode controllers, on the generated laws.
+
+Each class reads its inputs (the fusion estimate, the encoders, or the true state), calls one
+generated law of :mod:`amsfe_sym.symbolic.control` (the maths lives there, once), and keeps
+the little memory the law needs between ticks.  docs/control.md derives the laws and says
+why the printed ones fail on the paper's arm.
+
+========================  =======================  ======================================
+name                      law                      reads
+========================  =======================  ======================================
+``amsfe-paper``           (37) as printed          the fusion estimate x(k|k)
+``dtsmc-paper``           (54) as printed          motor encoders (q = qm, qd = qmd)
+``amsfe``                 cascade on (31)-(34)     the fusion estimate x(k|k)
+``dtsmc``                 cascade, surface of (54) motor encoders, spring deflection removed
+``truth``                 ``amsfe``                the true state and theta (an oracle)
+========================  =======================  ======================================
+
+Gains (``[controller_gains]`` of a scenario; scalars apply to every joint): ``h``, ``lam``,
+``Lt``, ``eps`` (eqs. 31-34), ``p`` (the terminal power p1/p2), ``phi`` (boundary-layer width
+of sat(s/phi); 0 is the paper's sgn), and for the cascades ``wm`` (motor-loop bandwidth
+[rad/s]) and ``tau_max`` (largest spring torque the link loop may ask for [N m]; default the
+actuator limit).  They are inputs of the generated code: changing one never recompiles.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+import numpy as np
+
+from amsfe_sym.control.base import Controller, FloatArray, register
+from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.sim.trajectory import Trajectory
+
+__all__ = ["Amsfe", "AmsfePaper", "Dtsmc", "DtsmcPaper", "Truth"]
+
+#: The paper's gains (Sec. 5.1): h, lam, Lt, eps, p = 3/5; phi = 0 is its sgn.
+PAPER_GAINS: dict[str, Any] = {
+    "h": 2.0,
+    "lam": 1.5,
+    "Lt": 5.0,
+    "eps": 25.0,
+    "p": 0.6,
+    "phi": 0.0,
+    "xi_M": 3.0,  # bounds of (38)-(39), used only to evaluate the conditions along a run
+    "xi_F": 1.0,
+}
+_LAW_GAINS = ("h", "lam", "Lt", "eps", "p", "phi")
+
+
+class _SlidingBase(Controller):
+    """Gain parsing and the call of one generated law."""
+
+    law: ClassVar[str]
+
+    def __init__(
+        self, lib: ModelLibrary, trajectory: Trajectory, gains: Mapping[str, Any] | None = None
+    ) -> None:
+        super().__init__(lib, trajectory, gains)
+        n = lib.n
+        self.n, self.T = n, lib.T
+        self._g: dict[str, FloatArray] = {}
+        for key in (*_LAW_GAINS, *self._extra_gains()):
+            self._g[key] = self._gain(key, 1 if key == "p" else n)
+        p = float(self._g["p"][0])
+        if not 0.0 < p <= 1.0:
+            raise ConfigError(
+                describe(
+                    f"controller {self.name!r} gain p",
+                    "a terminal power p1/p2 in (0, 1]",
+                    repr(p),
+                    "use 0.6 (p1 = 3, p2 = 5, Sec. 5.1)",
+                )
+            )
+        self._law = lib.function(self.law)
+        self._mm = np.array(lib.manifest["actuators"]["Mm"], dtype=float)
+        self._fm = np.array(lib.manifest["actuators"]["Fm"], dtype=float)
+
+    def _extra_gains(self) -> tuple[str, ...]:
+        return ()
+
+    def _gain(self, key: str, size: int) -> FloatArray:
+        raw = self.gains[key]
+        try:
+            v = np.broadcast_to(np.asarray(raw, dtype=float), (size,)).copy()
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(
+                describe(
+                    f"controller {self.name!r} gain {key}",
+                    f"a number or {size} numbers",
+                    repr(raw),
+                    "give one value, or one per joint",
+                )
+            ) from exc
+        low_ok = v > 0 if key == "wm" else v >= 0
+        if not (np.all(np.isfinite(v) | (key == "tau_max")) and np.all(low_ok)):
+            raise ConfigError(
+                describe(
+                    f"controller {self.name!r} gain {key}",
+                    "finite values >= 0 (wm > 0)",
+                    repr(raw),
+                    "see docs/control.md for each gain",
+                )
+            )
+        return v
+
+    def set_gains(self, **gains: Any) -> None:
+        """Change gains at run time (no regeneration: gains are inputs of the compiled law)."""
+        unknown = sorted(set(gains) - set(self._g))
+        if unknown:
+            raise ConfigError(
+                describe(
+                    f"controller {self.name!r} gains",
+                    f"keys among {sorted(self._g)}",
+                    f"unknown {unknown}",
+                    "remove or rename them",
+                )
+            )
+        self.gains.update(gains)
+        for key in gains:
+            self._g[key] = self._gain(key, 1 if key == "p" else self.n)
+
+    def _gain_args(self) -> list[FloatArray]:
+        return [self._g[k] for k in (*_LAW_GAINS, *self._extra_gains())]
+
+
+class _Printed(_SlidingBase):
+    """Laws (37) / (54) as printed: ``Mhat/T [Fhat + ...]`` on one state vector.
+
+    Gain ``qmd_next`` says how Fhat's motor velocity at k+1 is estimated: ``"predict"`` from
+    (1c) with the previous torque u(k-1), or ``"hold"`` (qmd(k+1) = qmd(k)).  With the true
+    qmd(k+1) the law's u cancels (PAPER-NOTES section 4), so some such reading is forced.
+    """
+
+    gain_defaults: ClassVar[dict[str, Any]] = {**PAPER_GAINS, "qmd_next": "predict"}
+
+    def __init__(
+        self, lib: ModelLibrary, trajectory: Trajectory, gains: Mapping[str, Any] | None = None
+    ) -> None:
+        super().__init__(lib, trajectory, gains)
+        if self.gains["qmd_next"] not in ("predict", "hold"):
+            raise ConfigError(
+                describe(
+                    f"controller {self.name!r} gain qmd_next",
+                    "'predict' or 'hold'",
+                    repr(self.gains["qmd_next"]),
+                    "see docs/control.md",
+                )
+            )
+        self._u_prev = np.zeros(self.n)
+        self._vt_prev: FloatArray | None = None
+        self._Ks = lib.stiffness(lib.theta_initial)
+
+    def _state(self, x_hat: FloatArray, z_enc: FloatArray) -> FloatArray:
+        return x_hat
+
+    def torque(
+        self,
+        k: int,
+        t: float,
+        x_true: FloatArray,
+        theta_true: FloatArray,
+        x_hat: FloatArray,
+        z_enc: FloatArray,
+    ) -> FloatArray:
+        n = self.n
+        x = self._state(x_hat, z_enc)
+        q, qm, qmd = x[:n], x[2 * n : 3 * n], x[3 * n : 4 * n]
+        q_d, qd_d, _ = self.reference(k, t)
+        if self.gains["qmd_next"] == "predict":  # (1c) with u(k-1)
+            Ks = self.lib.stiffness(x[4 * n :])
+            qmd_next = qmd + self.T * (self._u_prev - self._fm * qmd - Ks * (qm - q)) / self._mm
+        else:
+            qmd_next = qmd
+        if self._vt_prev is None:  # first tick: no v_t(k-1) yet
+            self._vt_prev = qd_d - self._g["Lt"] * (q - q_d)
+        u, s, vt, _e_next, bound = self._law.call_into(
+            x, qmd_next, q_d, qd_d, self._vt_prev, *self._gain_args()
+        )
+        self._vt_prev = vt.copy()
+        self.s, self.bound = s.copy(), bound.copy()
+        return u.copy()
+
+    def saturate(self, u: FloatArray) -> tuple[FloatArray, bool]:
+        applied, clipped = super().saturate(u)
+        self._u_prev = applied.copy()
+        return applied, clipped
+
+
+@register
+class AmsfePaper(_Printed):
+    """``amsfe-paper``: law (37) as printed, on the fusion estimate."""
+
+    name = "amsfe-paper"
+    law = "control_amsfe_paper"
+
+
+@register
+class DtsmcPaper(_Printed):
+    """``dtsmc-paper``: the baseline (54) as printed, on the raw motor encoders
+    (q = qm, qd = qmd: the paper's "DTSMC without estimator"), theta at its initial value."""
+
+    name = "dtsmc-paper"
+    law = "control_dtsmc_paper"
+
+    def _state(self, x_hat: FloatArray, z_enc: FloatArray) -> FloatArray:
+        n = self.n
+        return np.concatenate([z_enc[:n], z_enc[n:], z_enc, self.lib.theta_initial])
+
+
+class _Cascade(_SlidingBase):
+    """The cascaded laws: terminal sliding mode on the link, motor loop with feedforward."""
+
+    gain_defaults: ClassVar[dict[str, Any]] = {
+        **PAPER_GAINS,
+        "eps": 5.0,
+        "phi": 3.0,
+        "wm": 30.0,
+        "tau_max": None,
+    }
+
+    def _extra_gains(self) -> tuple[str, ...]:
+        return ("wm", "tau_max")
+
+    def _gain(self, key: str, size: int) -> FloatArray:
+        if key == "tau_max" and self.gains.get("tau_max") is None:
+            return self.u_max.copy()
+        return super()._gain(key, size)
+
+    def prepare(self, t: FloatArray) -> None:
+        super().prepare(t)
+        jerk, snap = self.trajectory.higher(t)
+        grid = self._grid
+        self._ref = np.hstack(
+            [grid[1], grid[2], grid[3], jerk.reshape(t.size, -1), snap.reshape(t.size, -1)]
+        )
+
+    def _ref_at(self, k: int, t: float) -> FloatArray:
+        grid = getattr(self, "_grid", None)
+        if grid is not None and 0 <= k < grid[0].size and grid[0][k] == t:
+            return self._ref[k]
+        q, qd, qdd = self.trajectory.evaluate(t)
+        j, s = self.trajectory.higher(t)
+        return np.concatenate([q, qd, qdd, j, s])
+
+    def _state(
+        self, x_true: FloatArray, theta_true: FloatArray, x_hat: FloatArray, z_enc: FloatArray
+    ) -> FloatArray:
+        return x_hat
+
+    def torque(
+        self,
+        k: int,
+        t: float,
+        x_true: FloatArray,
+        theta_true: FloatArray,
+        x_hat: FloatArray,
+        z_enc: FloatArray,
+    ) -> FloatArray:
+        x = self._state(x_true, theta_true, x_hat, z_enc)
+        u, s, tau_d, _qm_d, _e_next, _qm_r, bound = self._law.call_into(
+            x, self._ref_at(k, t), *self._gain_args()
+        )
+        self.s, self.bound = s.copy(), bound.copy()
+        self.tau_d = tau_d.copy()
+        return u.copy()
+
+
+@register
+class Amsfe(_Cascade):
+    """``amsfe``: the terminal sliding surface (31)-(33) with the estimation-error term, on
+    the fusion estimate, through the flexible-joint cascade (docs/control.md)."""
+
+    name = "amsfe"
+    law = "control_amsfe"
+
+
+@register
+class Truth(_Cascade):
+    """``truth``: ``amsfe`` on the true state and the true theta: the bound that estimation
+    can approach (an oracle, not a controller one could run on hardware)."""
+
+    name = "truth"
+    law = "control_amsfe"
+
+    def _state(
+        self, x_true: FloatArray, theta_true: FloatArray, x_hat: FloatArray, z_enc: FloatArray
+    ) -> FloatArray:
+        return np.concatenate([x_true[: 4 * self.n], theta_true])
+
+
+@register
+class Dtsmc(_Cascade):
+    """``dtsmc``: the cascade with the baseline surface of (54) (``Lt = 0``) and no fusion
+    estimator.  It reads the motor encoders and removes the spring deflection it commanded
+    one tick before: ``q = qm - tau_d(k-1)/Ks``, ``qd = qmd`` (gain ``link_angle =
+    "commanded"``), or uses ``q = qm`` (``"motor"``); theta stays at its initial value."""
+
+    name = "dtsmc"
+    law = "control_dtsmc"
+    gain_defaults: ClassVar[dict[str, Any]] = {**_Cascade.gain_defaults, "link_angle": "commanded"}
+
+    def __init__(
+        self, lib: ModelLibrary, trajectory: Trajectory, gains: Mapping[str, Any] | None = None
+    ) -> None:
+        super().__init__(lib, trajectory, gains)
+        if self.gains["link_angle"] not in ("commanded", "motor"):
+            raise ConfigError(
+                describe(
+                    "controller 'dtsmc' gain link_angle",
+                    "'commanded' or 'motor'",
+                    repr(self.gains["link_angle"]),
+                    "see docs/control.md",
+                )
+            )
+        self._Ks = lib.stiffness(lib.theta_initial)
+        # before the first command: the static gravity torque at the trajectory's start
+        q0 = trajectory.evaluate(0.0).q
+        self.tau_d = lib.function("gravity")(q0, lib.theta_initial)[0]
+
+    def _extra_gains(self) -> tuple[str, ...]:
+        return ("wm", "tau_max")
+
+    def _state(
+        self, x_true: FloatArray, theta_true: FloatArray, x_hat: FloatArray, z_enc: FloatArray
+    ) -> FloatArray:
+        n = self.n
+        qm, qmd = z_enc[:n], z_enc[n:]
+        q = qm - self.tau_d / self._Ks if self.gains["link_angle"] == "commanded" else qm
+        return np.concatenate([q, qmd, qm, qmd, self.lib.theta_initial])
