@@ -11,7 +11,8 @@ name                      law                      reads
 ``amsfe-paper``           (37) as printed          the fusion estimate x(k|k)
 ``dtsmc-paper``           (54) as printed          motor encoders (q = qm, qd = qmd)
 ``amsfe``                 cascade on (31)-(34)     the fusion estimate x(k|k)
-``dtsmc``                 cascade, surface of (54) motor encoders, spring deflection removed
+``dtsmc``                 cascade, surface of (54) motor encoders, planned deflection removed
+``dtsmc-ekf``             cascade, surface of (54) the run's estimate (``encoders``: no camera)
 ``truth``                 ``amsfe``                the true state and theta (an oracle)
 ========================  =======================  ======================================
 
@@ -34,7 +35,7 @@ from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.sim.trajectory import Trajectory
 
-__all__ = ["Amsfe", "AmsfePaper", "Dtsmc", "DtsmcPaper", "Truth"]
+__all__ = ["Amsfe", "AmsfePaper", "Dtsmc", "DtsmcEstimate", "DtsmcPaper", "Truth"]
 
 #: The paper's gains (Sec. 5.1): h, lam, Lt, eps, p = 3/5; phi = 0 is its sgn.
 PAPER_GAINS: dict[str, Any] = {
@@ -122,8 +123,12 @@ class _SlidingBase(Controller):
         for key in gains:
             self._g[key] = self._gain(key, 1 if key == "p" else self.n)
 
+    #: Whether the generated law takes Lt (the baselines fix it to 0: the surface of (54)).
+    has_lt: ClassVar[bool] = True
+
     def _gain_args(self) -> list[FloatArray]:
-        return [self._g[k] for k in (*_LAW_GAINS, *self._extra_gains())]
+        keys = (*_LAW_GAINS, *self._extra_gains())
+        return [self._g[k] for k in keys if self.has_lt or k != "Lt"]
 
 
 class _Printed(_SlidingBase):
@@ -153,8 +158,11 @@ class _Printed(_SlidingBase):
         self._vt_prev: FloatArray | None = None
         self._Ks = lib.stiffness(lib.theta_initial)
 
-    def _state(self, x_hat: FloatArray, z_enc: FloatArray) -> FloatArray:
-        return x_hat
+    def _law_inputs(
+        self, x_hat: FloatArray, z_enc: FloatArray
+    ) -> tuple[list[FloatArray], FloatArray]:
+        """The law's leading inputs and the state vector [q, qd, qm, qmd, theta] they mean."""
+        return [x_hat], x_hat
 
     def torque(
         self,
@@ -166,7 +174,7 @@ class _Printed(_SlidingBase):
         z_enc: FloatArray,
     ) -> FloatArray:
         n = self.n
-        x = self._state(x_hat, z_enc)
+        lead, x = self._law_inputs(x_hat, z_enc)
         q, qm, qmd = x[:n], x[2 * n : 3 * n], x[3 * n : 4 * n]
         q_d, qd_d, _ = self.reference(k, t)
         if self.gains["qmd_next"] == "predict":  # (1c) with u(k-1)
@@ -177,7 +185,7 @@ class _Printed(_SlidingBase):
         if self._vt_prev is None:  # first tick: no v_t(k-1) yet
             self._vt_prev = qd_d - self._g["Lt"] * (q - q_d)
         u, s, vt, _e_next, bound = self._law.call_into(
-            x, qmd_next, q_d, qd_d, self._vt_prev, *self._gain_args()
+            *lead, qmd_next, q_d, qd_d, self._vt_prev, *self._gain_args()
         )
         self._vt_prev = vt.copy()
         self.s, self.bound = s.copy(), bound.copy()
@@ -204,10 +212,13 @@ class DtsmcPaper(_Printed):
 
     name = "dtsmc-paper"
     law = "control_dtsmc_paper"
+    has_lt = False
 
-    def _state(self, x_hat: FloatArray, z_enc: FloatArray) -> FloatArray:
-        n = self.n
-        return np.concatenate([z_enc[:n], z_enc[n:], z_enc, self.lib.theta_initial])
+    def _law_inputs(
+        self, x_hat: FloatArray, z_enc: FloatArray
+    ) -> tuple[list[FloatArray], FloatArray]:
+        n, th = self.n, self.lib.theta_initial
+        return [z_enc, th], np.concatenate([z_enc[:n], z_enc[n:], z_enc, th])
 
 
 class _Cascade(_SlidingBase):
@@ -215,14 +226,22 @@ class _Cascade(_SlidingBase):
 
     gain_defaults: ClassVar[dict[str, Any]] = {
         **PAPER_GAINS,
-        "eps": 5.0,
-        "phi": 3.0,
-        "wm": 30.0,
+        "phi": 5.0,
+        "wm": 20.0,
         "tau_max": None,
+        "wf": 50.0,
+        "vmax": 3.0,
     }
 
     def _extra_gains(self) -> tuple[str, ...]:
-        return ("wm", "tau_max")
+        return ("wm", "tau_max", "wf", "vmax")
+
+    def __init__(
+        self, lib: ModelLibrary, trajectory: Trajectory, gains: Mapping[str, Any] | None = None
+    ) -> None:
+        super().__init__(lib, trajectory, gains)
+        self._cf = np.zeros(2 * lib.n)
+        self._started = False
 
     def _gain(self, key: str, size: int) -> FloatArray:
         if key == "tau_max" and self.gains.get("tau_max") is None:
@@ -245,10 +264,11 @@ class _Cascade(_SlidingBase):
         j, s = self.trajectory.higher(t)
         return np.concatenate([q, qd, qdd, j, s])
 
-    def _state(
+    def _law_inputs(
         self, x_true: FloatArray, theta_true: FloatArray, x_hat: FloatArray, z_enc: FloatArray
-    ) -> FloatArray:
-        return x_hat
+    ) -> list[FloatArray]:
+        """The law's leading inputs (the state it acts on)."""
+        return [x_hat]
 
     def torque(
         self,
@@ -259,10 +279,15 @@ class _Cascade(_SlidingBase):
         x_hat: FloatArray,
         z_enc: FloatArray,
     ) -> FloatArray:
-        x = self._state(x_true, theta_true, x_hat, z_enc)
-        u, s, tau_d, _qm_d, _e_next, _qm_r, bound = self._law.call_into(
-            x, self._ref_at(k, t), *self._gain_args()
-        )
+        lead = self._law_inputs(x_true, theta_true, x_hat, z_enc)
+        ref = self._ref_at(k, t)
+        out = self._law.call_into(*lead, ref, self._cf, *self._gain_args())
+        if not self._started:  # start the command filter at rest on the first command
+            self._cf[: self.n] = out[7]
+            self._started = True
+            out = self._law.call_into(*lead, ref, self._cf, *self._gain_args())
+        u, s, tau_d, _qm_d, _e_next, bound, cf_next = out[:7]
+        self._cf = cf_next.copy()
         self.s, self.bound = s.copy(), bound.copy()
         self.tau_d = tau_d.copy()
         return u.copy()
@@ -285,48 +310,42 @@ class Truth(_Cascade):
     name = "truth"
     law = "control_amsfe"
 
-    def _state(
+    def _law_inputs(
         self, x_true: FloatArray, theta_true: FloatArray, x_hat: FloatArray, z_enc: FloatArray
-    ) -> FloatArray:
-        return np.concatenate([x_true[: 4 * self.n], theta_true])
+    ) -> list[FloatArray]:
+        return [np.concatenate([x_true[: 4 * self.n], theta_true])]
 
 
 @register
 class Dtsmc(_Cascade):
     """``dtsmc``: the cascade with the baseline surface of (54) (``Lt = 0``) and no fusion
-    estimator.  It reads the motor encoders and removes the spring deflection it commanded
-    one tick before: ``q = qm - tau_d(k-1)/Ks``, ``qd = qmd`` (gain ``link_angle =
-    "commanded"``), or uses ``q = qm`` (``"motor"``); theta stays at its initial value."""
+    estimator.  It reads the motor encoders and removes the spring deflection the plan
+    predicts: ``q = qm - (qm_r - q_d)``, ``qd = qmd - (qmd_r - qd_d)`` (``qm_r`` the motor
+    angle of the desired motion), computed inside the generated law; theta stays at its
+    initial value.  docs/control.md says why the simpler readings (q = qm, or removing the
+    deflection commanded one tick before) diverge."""
 
     name = "dtsmc"
     law = "control_dtsmc"
-    gain_defaults: ClassVar[dict[str, Any]] = {**_Cascade.gain_defaults, "link_angle": "commanded"}
+    has_lt = False
 
-    def __init__(
-        self, lib: ModelLibrary, trajectory: Trajectory, gains: Mapping[str, Any] | None = None
-    ) -> None:
-        super().__init__(lib, trajectory, gains)
-        if self.gains["link_angle"] not in ("commanded", "motor"):
-            raise ConfigError(
-                describe(
-                    "controller 'dtsmc' gain link_angle",
-                    "'commanded' or 'motor'",
-                    repr(self.gains["link_angle"]),
-                    "see docs/control.md",
-                )
-            )
-        self._Ks = lib.stiffness(lib.theta_initial)
-        # before the first command: the static gravity torque at the trajectory's start
-        q0 = trajectory.evaluate(0.0).q
-        self.tau_d = lib.function("gravity")(q0, lib.theta_initial)[0]
-
-    def _extra_gains(self) -> tuple[str, ...]:
-        return ("wm", "tau_max")
-
-    def _state(
+    def _law_inputs(
         self, x_true: FloatArray, theta_true: FloatArray, x_hat: FloatArray, z_enc: FloatArray
-    ) -> FloatArray:
-        n = self.n
-        qm, qmd = z_enc[:n], z_enc[n:]
-        q = qm - self.tau_d / self._Ks if self.gains["link_angle"] == "commanded" else qm
-        return np.concatenate([q, qmd, qm, qmd, self.lib.theta_initial])
+    ) -> list[FloatArray]:
+        return [z_enc, self.lib.theta_initial]
+
+
+@register
+class DtsmcEstimate(_Cascade):
+    """``dtsmc-ekf``: the cascade with the baseline surface of (54) (``Lt = 0``) on the run's
+    state estimate.  With ``--estimator encoders`` (an EKF on the motor encoders alone) it is
+    the strongest baseline without camera fusion: it isolates what the camera adds.  It calls
+    ``control_amsfe`` with ``Lt = 0``, which is the surface of ``control_dtsmc``."""
+
+    name = "dtsmc-ekf"
+    law = "control_amsfe"
+
+    def _gain_args(self) -> list[FloatArray]:
+        args = super()._gain_args()
+        args[_LAW_GAINS.index("Lt")] = np.zeros(self.n)
+        return args

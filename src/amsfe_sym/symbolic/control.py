@@ -38,10 +38,12 @@ Functions (every gain is an input, so changing a gain never recompiles):
     ``qm_d = qhat + Ks^-1 tau_d``, is realized by a motor loop with smooth feedforward
     (Spong's cascade for flexible joints):
     ``u = Ks (qmhat - qhat) + Fm qmdhat
-    + Mm (qmdd_r + wm^2 (qm_d - qmhat) + 2 wm (qmd_r - qmdhat))``,
+    + Mm (qmdd_r + cdd + wm^2 (qm_d - qmhat) + 2 wm (qmd_r + cd - qmdhat))``,
     where ``qm_r = q_d + Ks^-1 (M(q_d) qdd_d + b(q_d, qd_d))`` is the motor angle of the desired
-    motion and ``qmd_r``, ``qmdd_r`` its exact time derivatives (forward-mode AD along the
-    trajectory's jerk and snap).
+    motion, ``qmd_r``, ``qmdd_r`` its exact time derivatives (forward-mode AD along the
+    trajectory's jerk and snap), and ``cd``, ``cdd`` the rate and acceleration of the feedback
+    part ``qm_d - qm_r`` from a critically damped command filter of bandwidth ``wf`` (its
+    state ``cf`` is an input, its next state ``cf_next`` an output: no memory in the law).
 ``control_dtsmc``
     ``control_amsfe`` with ``Lt = 0`` (the baseline surface of (54)) on sensor values.
 
@@ -63,7 +65,7 @@ __all__ = ["CONTROL_GAINS", "build_control_functions", "fpow", "sat"]
 #: Gain inputs of every law, in order (each an n-vector except ``p``, a scalar).
 CONTROL_GAINS = ("h", "lam", "Lt", "eps", "p", "phi")
 #: Extra inputs of the cascaded laws: motor-loop bandwidth [rad/s], spring-torque limit [N m].
-CASCADE_GAINS = ("wm", "tau_max")
+CASCADE_GAINS = ("wm", "tau_max", "wf", "vmax")
 
 
 def fpow(x: ca.SX, p: ca.SX) -> ca.SX:
@@ -122,63 +124,123 @@ def build_control_functions(tree: RigidBodyTree, tr: Transition) -> list[ca.Func
         + ldl_solve(Mbar, Mm * (qmd_next - qmd) + T * Fm * qmd)
     )
 
-    def printed(name: str, Lt: ca.SX) -> ca.Function:
-        sf = _Surface(q, qd, q_d, qd_d, g["lam"], Lt, g["p"], T)
-        dv = sf.vt - vt_prev
-        reach = T * (g["h"] * sf.s + g["eps"] * sat(sf.s, g["phi"]))
-        u = ca.mtimes(Mbar, Fhat + dv + sf.lam_terms - reach) / T
-        ins = [("x", x), ("qmd_next", qmd_next), ("q_d", q_d), ("qd_d", qd_d)]
-        ins += [("vt_prev", vt_prev), *gin]
-        if name == "control_dtsmc_paper":  # Lt is fixed to 0: keep the input for one signature
-            ins = [(k, v if k != "Lt" else ca.SX.sym("Lt_unused", n)) for k, v in ins]
-        outs = [("u", u), ("s", sf.s), ("vt", sf.vt), ("e_next", sf.e_next)]
-        outs += [("bound", ca.fabs(dv + sf.lam_terms))]
-        return _fn(name, ins, outs)
-
-    fns = [printed("control_amsfe_paper", g["Lt"]), printed("control_dtsmc_paper", ca.SX.zeros(n))]
+    sf = _Surface(q, qd, q_d, qd_d, g["lam"], g["Lt"], g["p"], T)
+    dv = sf.vt - vt_prev
+    reach = T * (g["h"] * sf.s + g["eps"] * sat(sf.s, g["phi"]))
+    u = ca.mtimes(Mbar, Fhat + dv + sf.lam_terms - reach) / T
+    law37 = _fn(
+        "control_amsfe_paper",
+        [
+            ("x", x),
+            ("qmd_next", qmd_next),
+            ("q_d", q_d),
+            ("qd_d", qd_d),
+            ("vt_prev", vt_prev),
+            *gin,
+        ],
+        [
+            ("u", u),
+            ("s", sf.s),
+            ("vt", sf.vt),
+            ("e_next", sf.e_next),
+            ("bound", ca.fabs(dv + sf.lam_terms)),
+        ],
+    )
 
     # ---------------------------------------------------------------- the cascade (ours)
     ref = ca.SX.sym("ref", 5 * n)  # q_d, qd_d, qdd_d, qddd_d, qdddd_d
+    cf = ca.SX.sym("cf", 2 * n)  # command-filter state
+    rq, rqd, rqdd, _rj, _rs = (ref[i * n : (i + 1) * n] for i in range(5))
+    motor_ref = _motor_reference(tree, tr, ref, th)
+    qm_r, qmd_r, qmdd_r = motor_ref(ref, th)
+    sf = _Surface(q, qd, rq, rqd, g["lam"], g["Lt"], g["p"], T)
+    vt_next = rqd + T * rqdd - g["Lt"] * sf.e_next
+    dv = vt_next - sf.vt
+    reach = T * (g["h"] * sf.s + g["eps"] * sat(sf.s, g["phi"]))
+    M = tree.mass_matrix(q, th)
+    tau = tree.bias(q, qd, th) + ca.mtimes(M, dv + sf.lam_terms - reach) / T
+    tau = ca.fmin(ca.fmax(tau, -g["tau_max"]), g["tau_max"])
+    qm_d = q + tau / Ks
+    # command filter on the feedback part dq = qm_d - qm_r (critically damped, bandwidth wf):
+    # its states give the smooth angle, rate and acceleration the motor loop tracks
+    dq = qm_d - qm_r
+    wf = g["wf"]
+    c, cd = cf[:n], cf[n:]
+    cdd = wf * wf * (dq - c) - 2.0 * wf * cd
+    cd_next = cd + T * cdd
+    cf_next = ca.vertcat(c + T * cd_next, cd_next)
+    wm, vmax = g["wm"], g["vmax"]
+    # nested loops: a bounded rate correction from the angle error, then the rate loop (linear
+    # gains wm^2 and 2 wm: a critically damped PD; the bound keeps a saturated motor from
+    # overshooting)
+    v_cmd = qmd_r + cd + ca.fmin(ca.fmax(0.5 * wm * (qm_r + c - qm), -vmax), vmax)
+    u = Ks * (qm - q) + Fm * qmd + Mm * (qmdd_r + cdd + 2.0 * wm * (v_cmd - qmd))
+    cascade = _fn(
+        "control_amsfe",
+        [("x", x), ("ref", ref), ("cf", cf), *gin, *cin],
+        [
+            ("u", u),
+            ("s", sf.s),
+            ("tau_d", tau),
+            ("qm_d", qm_d),
+            ("e_next", sf.e_next),
+            ("bound", ca.fabs(dv + sf.lam_terms)),
+            ("cf_next", cf_next),
+            ("dq", dq),
+        ],
+    )
+
+    # ---------------------------------------------------------------- the baselines (Lt = 0)
+    z, thz = ca.SX.sym("z", 2 * n), ca.SX.sym("theta", p_)
+    no_lt = [(k, v) for k, v in gin if k != "Lt"]
+    zero = ca.SX.zeros(n)
+
+    def with_lt0(args: list[tuple[str, ca.SX]]) -> list[ca.SX]:
+        return [zero if k == "Lt" else v for k, v in args]
+
+    # (54): the raw encoders stand for the link (q = qm, qd = qmd)
+    x_raw = ca.vertcat(z[:n], z[n:], z, thz)
+    printed_args = [("qmd_next", qmd_next), ("q_d", q_d), ("qd_d", qd_d), ("vt_prev", vt_prev)]
+    out54 = law37(x_raw, *with_lt0(printed_args + gin))
+    law54 = _fn(
+        "control_dtsmc_paper",
+        [("z", z), ("theta", thz), *printed_args, *no_lt],
+        list(zip(["u", "s", "vt", "e_next", "bound"], out54, strict=True)),
+    )
+    # dtsmc: the planned spring deflection removed from the encoders
+    pr_m, pr_md, _ = motor_ref(ref, thz)
+    x_plan = ca.vertcat(z[:n] - (pr_m - rq), z[n:] - (pr_md - rqd), z, thz)
+    outc = cascade(x_plan, *with_lt0([("ref", ref), ("cf", cf), *gin, *cin]))
+    names = ["u", "s", "tau_d", "qm_d", "e_next", "bound", "cf_next", "dq"]
+    base = _fn(
+        "control_dtsmc",
+        [("z", z), ("theta", thz), ("ref", ref), ("cf", cf), *no_lt, *cin],
+        list(zip(names, outc, strict=True)),
+    )
+    return [law37, law54, cascade, base]
+
+
+def _motor_reference(tree: RigidBodyTree, tr: Transition, ref: ca.SX, th: ca.SX) -> ca.Function:
+    """``(ref, theta) -> (qm_r, qmd_r, qmdd_r)``: the motor angle of the desired motion,
+    ``qm_r = q_d + Ks^-1 (M(q_d) qdd_d + b(q_d, qd_d))``, and its exact first and second time
+    derivatives by forward-mode AD along the trajectory's jerk and snap."""
+    n = tree.n
     rq, rqd, rqdd, rj, rs = (ref[i * n : (i + 1) * n] for i in range(5))
-    # motor angle of the desired motion and its exact time derivatives
-    y = ca.SX.sym("y", 3 * n)
+    Ks = tr.stiffness(th)
+    y = ca.SX.sym("y", 3 * n)  # (q, qd, qdd)
     tau_ff = ca.mtimes(tree.mass_matrix(y[:n], th), y[2 * n :]) + tree.bias(y[:n], y[n : 2 * n], th)
-    qm_r_fn = ca.Function("qm_r", [y, th], [y[:n] + tau_ff / Ks])
+    qm_of_y = y[:n] + tau_ff / Ks
     ydot, yddot = ca.vertcat(rqd, rqdd, rj), ca.vertcat(rqdd, rj, rs)
     yy = ca.vertcat(rq, rqd, rqdd)
-    qm_r = qm_r_fn(yy, th)
-    d1 = ca.jtimes(qm_r_fn(y, th), y, ydot)  # d/dt at fixed direction ydot(t)
-    qmd_r = ca.substitute(d1, y, yy)
-    # d2/dt2 = d/dy (J ydot) ydot + J yddot, with ydot itself moving along yddot
-    yd_s = ca.SX.sym("yd", 3 * n)
-    d1s = ca.jtimes(qm_r_fn(y, th), y, yd_s)
-    d2 = ca.jtimes(d1s, y, yd_s) + ca.jtimes(d1s, yd_s, yddot)
-    qmdd_r = ca.substitute(ca.substitute(d2, yd_s, ydot), y, yy)
-
-    def cascade(name: str, Lt: ca.SX) -> ca.Function:
-        sf = _Surface(q, qd, rq, rqd, g["lam"], Lt, g["p"], T)
-        vt_next = rqd + T * rqdd - Lt * sf.e_next
-        dv = vt_next - sf.vt
-        reach = T * (g["h"] * sf.s + g["eps"] * sat(sf.s, g["phi"]))
-        M = tree.mass_matrix(q, th)
-        tau = tree.bias(q, qd, th) + ca.mtimes(M, dv + sf.lam_terms - reach) / T
-        tau = ca.fmin(ca.fmax(tau, -g["tau_max"]), g["tau_max"])
-        qm_d = q + tau / Ks
-        wm = g["wm"]
-        u = (
-            Ks * (qm - q)
-            + Fm * qmd
-            + Mm * (qmdd_r + wm * wm * (qm_d - qm) + 2.0 * wm * (qmd_r - qmd))
-        )
-        ins = [("x", x), ("ref", ref), *gin, *cin]
-        if name == "control_dtsmc":
-            ins = [(k, v if k != "Lt" else ca.SX.sym("Lt_unused", n)) for k, v in ins]
-        outs = [("u", u), ("s", sf.s), ("tau_d", tau), ("qm_d", qm_d), ("e_next", sf.e_next)]
-        outs += [("qm_r", qm_r), ("bound", ca.fabs(dv + sf.lam_terms))]
-        return _fn(name, ins, outs)
-
-    fns += [cascade("control_amsfe", g["Lt"]), cascade("control_dtsmc", ca.SX.zeros(n))]
-    return fns
+    # d/dt qm = J ydot; d2/dt2 qm = d/dy (J yd) yd + J yddot, with yd = ydot
+    yd = ca.SX.sym("yd", 3 * n)
+    d1 = ca.jtimes(qm_of_y, y, yd)
+    d2 = ca.jtimes(d1, y, yd) + ca.jtimes(d1, yd, yddot)
+    at = [yy, ydot]
+    qm_r = ca.substitute(qm_of_y, y, yy)
+    qmd_r = ca.substitute([d1], [y, yd], at)[0]
+    qmdd_r = ca.substitute([d2], [y, yd], at)[0]
+    return ca.Function("motor_reference", [ref, th], [qm_r, qmd_r, qmdd_r])
 
 
 def _fn(name: str, ins: list[tuple[str, ca.SX]], outs: list[tuple[str, ca.SX]]) -> ca.Function:
