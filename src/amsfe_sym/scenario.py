@@ -140,6 +140,14 @@ class Scenario:
         """Copy with top-level fields replaced (``None`` values are ignored)."""
         return replace(self, **{k: v for k, v in kw.items() if v is not None})
 
+    def gains_for(self, controller: str | None = None) -> dict[str, Any]:
+        """The gains of ``controller`` (default the scenario's): ``[controller_gains.NAME]``
+        over any flat keys of ``[controller_gains]`` (which apply to every controller)."""
+        name = controller or self.controller
+        flat = {k: v for k, v in self.controller_gains.items() if not isinstance(v, Mapping)}
+        own = self.controller_gains.get(name, {})
+        return {**flat, **own} if isinstance(own, Mapping) else flat
+
     def to_dict(self) -> dict[str, Any]:
         """Plain data for ``config.toml`` (robot path resolved so the run is self-contained)."""
         d = asdict(self)

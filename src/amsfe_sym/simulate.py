@@ -251,7 +251,7 @@ def run(
     traj = trajectory_from_config(dict(sc.trajectory))
     if traj.n != n:
         raise ConfigError(describe("[trajectory]", f"{n} joints", f"{traj.n}", "fix it"))
-    ctrl = make_controller(sc.controller, lib, traj, sc.controller_gains)
+    ctrl = make_controller(sc.controller, lib, traj, sc.gains_for())
     plant = lib.function("plant_step")
 
     # ---------------------------------------------------------------- records
@@ -414,7 +414,7 @@ def make_controller_gains(sc: Scenario) -> dict[str, Any]:
     from amsfe_sym.control import CONTROLLERS
 
     cls = CONTROLLERS.get(sc.controller)
-    return {**(cls.gain_defaults if cls else {}), **dict(sc.controller_gains)}
+    return {**(cls.gain_defaults if cls else {}), **sc.gains_for()}
 
 
 def write_run(res: RunResult, out: Path, plots: bool = True) -> Path:

@@ -27,7 +27,8 @@ Functions (every gain is an input, so changing a gain never recompiles):
     ``qmd(k+1)`` of (1c) cancels u out of (29b) exactly (PAPER-NOTES section 4).
 ``control_dtsmc_paper``
     The baseline (54): the same law with the surface ``s = e_dot + lam e^p``, i.e. (37) with
-    ``Lt = 0`` (then ``v_t = qd_d`` and ``sigma = e_dot``); applied to sensor values.
+    ``Lt = 0`` (then ``v_t = qd_d`` and ``sigma = e_dot``), on the raw motor encoders
+    ``z = [qm, qmd]`` read as the link (q = qm, qd = qmd) and the given theta.
 ``control_amsfe``
     The working variant (docs/control.md): the terminal sliding law of (31)-(37) designed on the
     rigid-link part of the model with the spring torque as the virtual input,
@@ -45,7 +46,12 @@ Functions (every gain is an input, so changing a gain never recompiles):
     part ``qm_d - qm_r`` from a critically damped command filter of bandwidth ``wf`` (its
     state ``cf`` is an input, its next state ``cf_next`` an output: no memory in the law).
 ``control_dtsmc``
-    ``control_amsfe`` with ``Lt = 0`` (the baseline surface of (54)) on sensor values.
+    ``control_amsfe`` with ``Lt = 0`` (the baseline surface of (54)) on the motor encoders
+    ``z = [qm, qmd]`` with the planned spring deflection removed:
+    ``q = qm - (qm_r - q_d)``, ``qd = qmd - (qmd_r - qd_d)``.
+``control_motor_reference``
+    ``(ref, theta) -> (qm_r, qmd_r, qmdd_r)``, the motor angle of the desired motion and its
+    exact derivatives (used by the cascades; exported for plots and tests).
 
 Outputs of every law: ``u`` [N m], ``s`` (33), ``e_next`` (the predicted error (40)) and
 ``bound`` = ``|dv - lam e(k+1)^p + lam e^p|`` per joint, the norm inside the gain condition (38)
@@ -217,7 +223,14 @@ def build_control_functions(tree: RigidBodyTree, tr: Transition) -> list[ca.Func
         [("z", z), ("theta", thz), ("ref", ref), ("cf", cf), *no_lt, *cin],
         list(zip(names, outc, strict=True)),
     )
-    return [law37, law54, cascade, base]
+    mref = ca.Function(
+        "control_motor_reference",
+        [ref, th],
+        [qm_r, qmd_r, qmdd_r],
+        ["ref", "theta"],
+        ["qm_r", "qmd_r", "qmdd_r"],
+    )
+    return [law37, law54, cascade, base, mref]
 
 
 def _motor_reference(tree: RigidBodyTree, tr: Transition, ref: ca.SX, th: ca.SX) -> ca.Function:
