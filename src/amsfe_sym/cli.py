@@ -56,7 +56,17 @@ def get_argument_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("simulate", help="run a scenario: plant, sensors, estimator, controller")
     s.add_argument("scenario", nargs="?", default="paper-sim", help="scenario name or .toml")
     s.add_argument("--estimator", default=None, help="encoders | naive | oosm | replay | cloning")
-    s.add_argument("--controller", default=None, help="controller name")
+    s.add_argument(
+        "--controller",
+        default=None,
+        help="one controller (default: the scenario's compare list, else its controller)",
+    )
+    s.add_argument(
+        "--compare",
+        default=None,
+        metavar="A,B,...",
+        help="controllers to compare on one seed (default: the scenario's compare list)",
+    )
     s.add_argument("--seed", type=int, default=None)
     s.add_argument("--duration", type=float, default=None, help="simulated time [s]")
     s.add_argument("--out", default=None, help="run folder (default runs/<scenario>-<stamp>)")

@@ -133,6 +133,7 @@ class Scenario:
     camera: CameraSettings = CameraSettings()
     filter: FilterSettings = FilterSettings()
     controller_gains: Mapping[str, Any] = field(default_factory=dict)
+    compare: tuple[str, ...] = ()
     description: str = ""
     source: Path | None = None
 
@@ -207,6 +208,7 @@ _TOP = {
     "controller",
     "trajectory",
     "controller_gains",
+    "compare",
     "description",
     *_SECTIONS,
 }
@@ -273,12 +275,21 @@ def parse_scenario(data: Mapping[str, Any], path: Path) -> Scenario:
         controller=str(data.get("controller", "truth-ct")),
         trajectory=dict(data["trajectory"]),
         controller_gains=dict(data.get("controller_gains", {})),
+        compare=_names(data.get("compare", []), f"{where}: compare"),
         description=str(data.get("description", "")),
         source=path,
         **sections,
     )
     validate(sc, where)
     return sc
+
+
+def _names(value: Any, what: str) -> tuple[str, ...]:
+    if not isinstance(value, list | tuple) or not all(isinstance(v, str) for v in value):
+        raise ConfigError(
+            describe(what, "a list of controller names", repr(value), 'e.g. ["amsfe", "dtsmc"]')
+        )
+    return tuple(value)
 
 
 def validate(sc: Scenario, where: str = "scenario") -> None:

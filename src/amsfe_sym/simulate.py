@@ -421,7 +421,7 @@ def write_run(res: RunResult, out: Path, plots: bool = True) -> Path:
     """Write config.toml, timeseries.csv, frames.csv, summary.json (+ figures) to ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     lib = res.lib
-    cfg = res.scenario.to_dict()
+    cfg = replace(res.scenario, compare=()).to_dict()  # re-runs this one run
     (out / "config.toml").write_text(
         f"# resolved scenario of run {out.name}: `amsfe simulate {out}/config.toml` re-runs it\n"
         + dump_toml(cfg)
@@ -433,8 +433,20 @@ def write_run(res: RunResult, out: Path, plots: bool = True) -> Path:
     names += [f"var_{s}" for s in state] + ["nees"]
     names += [f"q_des{i + 1}" for i in range(lib.n)] + [f"u{i + 1}" for i in range(lib.n)]
     names += [f"enc_qm{i + 1}" for i in range(lib.n)] + [f"enc_qmd{i + 1}" for i in range(lib.n)]
+    names += [f"s{i + 1}" for i in range(lib.n)] + ["saturated"]
     table = np.column_stack(
-        [res.t, res.x_true, res.x_hat, res.P_diag, res.nees, res.q_des, res.u, res.z_enc]
+        [
+            res.t,
+            res.x_true,
+            res.x_hat,
+            res.P_diag,
+            res.nees,
+            res.q_des,
+            res.u,
+            res.z_enc,
+            res.s,
+            res.saturated.astype(float),
+        ]
     )
     np.savetxt(
         out / "timeseries.csv",
@@ -469,12 +481,23 @@ def run_from_cli(args: Any) -> int:
         seed=args.seed,
         duration=args.duration,
     )
-    res = run(sc, progress=not args.no_progress)
+    compare = tuple(args.compare.split(",")) if args.compare else sc.compare
     stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
+    if compare and args.controller is None:
+        from amsfe_sym.reproduce import print_comparison, run_comparison, write_comparison
+
+        cmp = run_comparison(sc, compare, progress=not args.no_progress)
+        out = Path(args.out) if args.out else Path("runs") / f"{sc.name}-{stamp}"
+        write_comparison(cmp, out, plots=not args.no_plots)
+        print_comparison(cmp, out)
+        return 0
+    res = run(sc, progress=not args.no_progress)
     out = Path(args.out) if args.out else Path("runs") / f"{sc.name}-{sc.estimator}-{stamp}"
     write_run(res, out, plots=not args.no_plots)
     s = summarize(res)
     print(f"run folder: {out}")
+    if res.diverged_at is not None:
+        print(f"  diverged at t = {res.diverged_at:.3f} s (the run stops there)")
     print(
         f"  {s['ticks']} ticks ({s['sim_time_s']:.2f} s simulated) in {s['wall_time_s']:.2f} s "
         f"wall, {s['cost_per_tick_us']:.1f} us/tick"
