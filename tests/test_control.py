@@ -354,7 +354,7 @@ def test_paper_law_cancels_u_on_the_flexible_model(libraries) -> None:
 
 
 def test_gain_changed_at_run_time_changes_u_without_regenerating(libraries) -> None:
-    robot, lib = libraries.get("paper_2link")
+    _robot, lib = libraries.get("paper_2link")
     sc = load_scenario("paper-sim")
     traj = trajectory_from_config(dict(sc.trajectory))
     # a state near the plan (so no limit clips the difference)
