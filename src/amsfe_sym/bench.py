@@ -9,7 +9,7 @@ Three sections, side by side (docs/performance.md shows the numbers and explains
    that ``dlopen`` s the same library: no Python at all), ``casadi.external`` called with
    numpy arrays, the CasADi SX Function on its virtual machine, and numeric Pinocchio +
    numpy equivalents; the binding's *overhead* is its time minus the pure C time;
-3. **estimator ticks**: the closed-loop simulation (:func:`amsfe_sym.simulate.run`) with each
+3. **estimator ticks**: the closed-loop simulation (:func:`amsfe_sym.sim.loop.run`) with each
    of the five estimators, as wall time per tick and real-time factor.
 
 Optionally (``--compare-cflags``) the robot's generated C is recompiled with several flag
@@ -24,8 +24,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import platform
 import shutil
 import statistics
 import subprocess
@@ -34,7 +32,6 @@ import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -42,12 +39,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import CodegenError, ConfigError, describe
+from amsfe_sym.estimation.registry import ESTIMATORS
+from amsfe_sym.provenance import provenance
+from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.scenario import Scenario
 
 __all__ = [
     "CALL_FUNCTIONS",
     "DEFAULT_CFLAG_SETS",
     "ESTIMATOR_NAMES",
     "TICK_FUNCTIONS",
+    "BenchOptions",
     "CTimer",
     "Timing",
     "bench_calls",
@@ -71,7 +73,8 @@ CALL_FUNCTIONS: tuple[str, ...] = (
     "camera",
     "plant_step",
 )
-ESTIMATOR_NAMES: tuple[str, ...] = ("encoders", "naive", "oosm", "replay", "cloning")
+#: The estimators the tick section times by default: every registered one.
+ESTIMATOR_NAMES: tuple[str, ...] = tuple(ESTIMATORS)
 #: Flag sets of ``--compare-cflags`` when none are given.
 DEFAULT_CFLAG_SETS: tuple[str, ...] = ("-O0", "-O1", "-O2", "-O3", "-Os", "-O1 -march=native")
 #: Targets of the issue: cold generation (2-link, 6/7-DOF arm), cached generation [s],
@@ -339,9 +342,9 @@ def _inputs(lib: Any, name: str, x: FloatArray, u: FloatArray) -> list[FloatArra
         "tau_d": np.linspace(-0.05, 0.05, 2 * n),
     }
     out = []
-    for io in lib.manifest["functions"][name]["inputs"]:
-        rows, cols = io["shape"]
-        a = by_name.get(io["name"], np.linspace(-0.1, 0.1, rows * cols))
+    for io in lib.manifest.functions[name].inputs:
+        rows, cols = io.shape
+        a = by_name.get(io.name, np.linspace(-0.1, 0.1, rows * cols))
         out.append(np.array(a, dtype=float).reshape(rows) if cols == 1 else a)
     return out
 
@@ -363,150 +366,6 @@ def _as_arrays(out: Any, shapes: Sequence[tuple[int, ...]]) -> list[FloatArray]:
 
 def _max_diff(a: Sequence[FloatArray], b: Sequence[FloatArray]) -> float:
     return float(max(np.max(np.abs(p - q), initial=0.0) for p, q in zip(a, b, strict=True)))
-
-
-class PinocchioModel:
-    """Numeric Pinocchio + numpy equivalents of the generated functions (for comparison).
-
-    The transition is a semi-implicit Euler step (the ``semi_implicit`` integrator) built on
-    ``pin.computeABADerivatives``, which returns qdd = ABA(q, qd, tau), its derivatives and
-    M^-1 in one pass; x+, A = dF/dx (without the d/dtheta column) and Gamma are assembled in
-    numpy.  It is what a hand-written numeric EKF model would do, and it satisfies the
-    estimator's ``TransitionModel`` protocol, so :func:`amsfe_sym.estimation.ekf.predict`
-    can run on it.
-
-    Args:
-        robot: The loaded robot (:func:`amsfe_sym.load.load_robot`).
-        Qw: Process-noise covariance of w = [w_l, w_m, w_theta].
-    """
-
-    def __init__(self, robot: Any, Qw: FloatArray) -> None:
-        import pinocchio as pin
-
-        self.pin = pin
-        self.robot = robot
-        self.n, self.p, self.N = robot.n, robot.p, robot.N
-        self.T = float(robot.spec.model.T)
-        self.model = robot.pin_model_at(robot.theta_true)
-        self.data = self.model.createData()
-        self.Ks = robot.stiffness_at(robot.theta_true)
-        self.Mm, self.Fm = robot.Mm, robot.Fm
-        self.Qw = Qw
-        self.identity_q = self.model.nq == self.n
-        self.frame = robot.tracked_frame_id
-        self.offset = robot.tracked_offset
-        cam = robot.camera
-        self.R_cw, self.c, self.K = cam.R_cw, cam.position, cam.K
-        self._A = np.zeros((self.N, self.N))
-        self._G = np.zeros((self.N, 2 * self.n + self.p))
-
-    def q_pin(self, q: FloatArray) -> FloatArray:
-        return q if self.identity_q else np.asarray(self.robot.to_pin_q(q))
-
-    def mass_matrix(self, q: FloatArray) -> FloatArray:
-        return np.asarray(self.pin.crba(self.model, self.data, self.q_pin(q)))
-
-    def transition_step(self, x: FloatArray, u: FloatArray) -> tuple[FloatArray, ...]:
-        """x+, A, Gamma of one semi-implicit Euler step (eqs. 1, 3, 4 in that form)."""
-        n, T, Ks, Mm, Fm = self.n, self.T, self.Ks, self.Mm, self.Fm
-        q, qd, qm, qmd = x[:n], x[n : 2 * n], x[2 * n : 3 * n], x[3 * n : 4 * n]
-        delta = qm - q
-        dq_dq, dq_dv, Minv = self.pin.computeABADerivatives(
-            self.model, self.data, self.q_pin(q), qd, Ks * delta
-        )
-        qdd = self.data.ddq
-        qmdd = (u - Fm * qmd - Ks * delta) / Mm
-        qd1 = qd + T * qdd
-        qmd1 = qmd + T * qmdd
-        xn = np.concatenate([q + T * qd1, qd1, qm + T * qmd1, qmd1, x[4 * n :]])
-        MK = Minv * Ks  # d qdd / d qm (columns scaled by Ks)
-        dqd_dq = T * (dq_dq - MK)
-        dqd_dqd = np.eye(n) + T * dq_dv
-        dqd_dqm = T * MK
-        A, G = self._A, self._G
-        A[:] = 0.0
-        s = slice(0, n), slice(n, 2 * n), slice(2 * n, 3 * n), slice(3 * n, 4 * n)
-        A[s[1], s[0]], A[s[1], s[1]], A[s[1], s[2]] = dqd_dq, dqd_dqd, dqd_dqm
-        A[s[0], s[0]] = np.eye(n) + T * dqd_dq
-        A[s[0], s[1]], A[s[0], s[2]] = T * dqd_dqd, T * dqd_dqm
-        A[s[3], s[0]] = np.diag(T * Ks / Mm)
-        A[s[3], s[2]] = np.diag(-T * Ks / Mm)
-        A[s[3], s[3]] = np.diag(1.0 - T * Fm / Mm)
-        A[s[2]] = T * A[s[3]]
-        A[s[2], s[2]] += np.eye(n)
-        A[4 * n :, 4 * n :] = np.eye(self.p)
-        G[s[1], :n] = Minv
-        G[s[0], :n] = T * Minv
-        G[s[3], n : 2 * n] = np.diag(1.0 / Mm)
-        G[s[2], n : 2 * n] = np.diag(T / Mm)
-        G[4 * n :, 2 * n :] = T * np.eye(self.p)
-        return xn, A.copy(), G.copy()
-
-    # the TransitionModel protocol (for ekf.predict)
-    @property
-    def nx(self) -> int:
-        return self.N
-
-    def step(self, x: FloatArray, u: FloatArray) -> tuple[FloatArray, FloatArray]:
-        xn, A, self._last_G = self.transition_step(x, u)
-        return xn, A
-
-    def inverse(self, x_next: FloatArray, u: FloatArray) -> FloatArray:
-        raise NotImplementedError("the Pinocchio comparison model has no inverse transition")
-
-    def process_noise(self, x: FloatArray, u: FloatArray) -> FloatArray:
-        G = self._last_G
-        Q: FloatArray = G @ self.Qw @ G.T
-        return Q
-
-    def camera_measure(self, q: FloatArray) -> tuple[FloatArray, FloatArray, float]:
-        """Pixels y, dy/dq and depth of the tracked point (eqs. 6-8) from Pinocchio's frame
-        jacobian and a numpy pinhole."""
-        pin = self.pin
-        J = pin.computeFrameJacobian(
-            self.model, self.data, self.q_pin(q), self.frame, pin.LOCAL_WORLD_ALIGNED
-        )
-        oMf = self.data.oMf[self.frame]
-        lever = oMf.rotation @ self.offset
-        r = oMf.translation + lever
-        Jr = J[:3] - _skew(lever) @ J[3:]
-        pc = self.R_cw @ (r - self.c)
-        fx, fy = self.K[0, 0], self.K[1, 1]
-        y = np.array([fx * pc[0] / pc[2] + self.K[0, 2], fy * pc[1] / pc[2] + self.K[1, 2]])
-        dy_dpc = np.array(
-            [
-                [fx / pc[2], 0.0, -fx * pc[0] / pc[2] ** 2],
-                [0.0, fy / pc[2], -fy * pc[1] / pc[2] ** 2],
-            ]
-        )
-        return y, dy_dpc @ self.R_cw @ Jr, float(pc[2])
-
-    def plant_step(
-        self, xp: FloatArray, u: FloatArray, tau_d: FloatArray, substeps: int
-    ) -> FloatArray:
-        """``substeps`` RK4 steps over T of the continuous plant on ``pin.aba``."""
-        n, h = self.n, self.T / substeps
-        Ks, Mm, Fm = self.Ks, self.Mm, self.Fm
-        pin, model, data = self.pin, self.model, self.data
-
-        def rhs(z: FloatArray) -> FloatArray:
-            q, qd, qm, qmd = z[:n], z[n : 2 * n], z[2 * n : 3 * n], z[3 * n :]
-            d = Ks * (qm - q)
-            qdd = pin.aba(model, data, self.q_pin(q), qd, d + tau_d[:n])
-            return np.concatenate([qd, qdd, qmd, (u + tau_d[n:] - Fm * qmd - d) / Mm])
-
-        z = xp
-        for _ in range(substeps):
-            k1 = rhs(z)
-            k2 = rhs(z + 0.5 * h * k1)
-            k3 = rhs(z + 0.5 * h * k2)
-            k4 = rhs(z + h * k3)
-            z = z + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        return z
-
-
-def _skew(v: FloatArray) -> FloatArray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 @dataclass
@@ -555,6 +414,7 @@ def bench_calls(
         seed: Seed of the random state.
     """
     from amsfe_sym.estimation import ekf
+    from amsfe_sym.reference import PinocchioModel
     from amsfe_sym.runtime.models import CompiledTransition, noise_covariance
 
     rng = np.random.default_rng(seed)
@@ -613,7 +473,7 @@ def bench_calls(
 
 def _pinocchio_row(
     row: CallRow,
-    pm: PinocchioModel,
+    pm: Any,
     lib: Any,
     args: list[FloatArray],
     ref: list[FloatArray],
@@ -633,14 +493,14 @@ def _pinocchio_row(
         core_args = (pm.model, pm.data, pm.q_pin(q), qd, np.zeros(n))
         row.pinocchio_core = time_calls(pm.pin.computeABADerivatives, core_args, repeat, rounds)
         row.pinocchio_core_what = "pin.computeABADerivatives alone"
-        if lib.manifest["integrator"] == "semi_implicit":
+        if lib.manifest.integrator == "semi_implicit":
             xn, A, G = pm.transition_step(*args)
             cols = slice(0, 4 * n)  # Pinocchio's A has no d/dtheta column
             row.max_diff_pinocchio = _max_diff(
                 [xn, A[:, cols], G], [ref[0], ref[1][:, cols], ref[2]]
             )
         else:
-            integrator = lib.manifest["integrator"]
+            integrator = lib.manifest.integrator
             row.notes.append(
                 f"Pinocchio row is a semi-implicit step; the robot uses {integrator!r}"
             )
@@ -651,10 +511,10 @@ def _pinocchio_row(
         row.pinocchio_core = time_calls(pm.pin.computeFrameJacobian, core_args, repeat, rounds)
         row.pinocchio_core_what = "pin.computeFrameJacobian alone"
         y, J, d = pm.camera_measure(args[0])
-        if not lib.manifest.get("camera_depends_on_theta"):
+        if not lib.manifest.camera_depends_on_theta:
             row.max_diff_pinocchio = _max_diff([y, J, np.array([d])], ref)
     elif name == "plant_step":
-        substeps = int(lib.manifest["plant_substeps"])
+        substeps = lib.manifest.plant_substeps
         pargs = (args[0], args[1], args[3], substeps)
         row.pinocchio = time_calls(pm.plant_step, pargs, repeat, rounds)
         row.pinocchio_what = f"numpy RK4 on pin.aba ({4 * substeps} calls)"
@@ -669,7 +529,7 @@ def _pinocchio_row(
 # 3. estimator ticks
 
 
-def timing_scenario(lib: Any, duration: float, scenario: str | None = None) -> Any:
+def timing_scenario(lib: ModelLibrary, duration: float, scenario: str | None = None) -> Scenario:
     """The scenario the estimator section runs for the robot of ``lib``.
 
     ``scenario`` if given; ``paper-sim`` for ``paper_2link``; for any other robot,
@@ -689,11 +549,11 @@ def timing_scenario(lib: Any, duration: float, scenario: str | None = None) -> A
         return base
     n = lib.n
     q0 = tuple(0.3 for _ in range(n))
-    latency = int(lib.manifest["camera"]["delay"])
+    delay = lib.manifest.camera.delay
     return replace(
         base,
         name=f"bench-{lib.name}",
-        robot=str(lib.manifest.get("spec") or lib.manifest["urdf"]),
+        robot=lib.manifest.spec or lib.manifest.urdf,
         integrator="",
         trajectory={
             "kind": "sinusoid",
@@ -709,27 +569,27 @@ def timing_scenario(lib: Any, duration: float, scenario: str | None = None) -> A
             qd=(0.0,) * n,
             theta=tuple(float(v) for v in lib.theta_true),
         ),
-        filter=replace(base.filter, buffer_steps=max(base.filter.buffer_steps, latency + 10)),
+        filter=replace(base.filter, buffer_steps=max(base.filter.buffer_steps, delay + 10)),
     )
 
 
 def bench_estimators(
-    sc: Any, estimators: Sequence[str] = ESTIMATOR_NAMES, lib: Any = None
+    sc: Scenario, estimators: Sequence[str], lib: ModelLibrary
 ) -> list[dict[str, Any]]:
-    """Run ``sc`` once per estimator and report cost per tick and real-time factor.
+    """Run ``sc`` on ``lib`` once per estimator and report cost per tick and real-time
+    factor.
 
     A run that fails (e.g. an estimator refusing an indefinite covariance) is reported with
     its error instead of timings, and the other estimators still run.
     """
     from amsfe_sym.errors import AmsfeError
-    from amsfe_sym.simulate import library_for, run, summarize
+    from amsfe_sym.sim.loop import run
+    from amsfe_sym.sim.record import summarize
 
-    if lib is None:
-        lib = library_for(sc)
     rows: list[dict[str, Any]] = []
     for est in estimators:
         try:
-            res = run(sc.with_overrides(estimator=est), lib=lib)
+            res = run(sc.with_overrides(estimator=est), lib)
         except AmsfeError as exc:
             rows.append({"estimator": est, "error": str(exc)})
             continue
@@ -748,7 +608,7 @@ def bench_estimators(
     return rows
 
 
-#: Compiled functions every tick of :func:`amsfe_sym.simulate.run` calls once (the plant,
+#: Compiled functions every tick of :func:`amsfe_sym.sim.loop.run` calls once (the plant,
 #: the EKF predict, the ``truth-ct`` controller's M and b); the camera's functions run once
 #: per frame and are left out.
 TICK_FUNCTIONS: tuple[str, ...] = ("plant_step", "transition_step", "mass_matrix", "bias")
@@ -788,7 +648,7 @@ def bench_cflags(
     from amsfe_sym.codegen import compiler
     from amsfe_sym.runtime.library import ModelLibrary
 
-    src = lib.dir / lib.manifest["source"]
+    src = lib.dir / lib.manifest.source
     rng = np.random.default_rng(1)
     x, u = _state(lib, rng)
     args = _inputs(lib, function, x, u)
@@ -805,7 +665,7 @@ def bench_cflags(
                 "-fPIC",
                 "-shared",
                 "-o",
-                lib.manifest["library"],
+                lib.manifest.library,
                 str(src),
                 "-lm",
             ]
@@ -832,7 +692,7 @@ def bench_cflags(
                     "cflags": flags,
                     "compile_s": _round(min(times)),
                     "compile_s_all": [_round(t) for t in times],
-                    "library_kb": round((d / lib.manifest["library"]).stat().st_size / 1024, 1),
+                    "library_kb": round((d / lib.manifest.library).stat().st_size / 1024, 1),
                     "ctypes_us": t_py.median_us,
                     "pure_c_us": t_c.median_us,
                 }
@@ -853,55 +713,11 @@ def _fmt(v: float | None, width: int = 9, digits: int = 2) -> str:
 
 
 def machine_info() -> dict[str, Any]:
-    """CPU, cores, load and versions, for the report."""
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    """The report's provenance (:func:`amsfe_sym.provenance.provenance`) plus the C
+    compiler and flags the libraries are built with."""
     from amsfe_sym.codegen import cflags, compiler
 
-    def version(dist: str) -> str:
-        try:
-            return metadata.version(dist)
-        except metadata.PackageNotFoundError:
-            return "missing"
-
-    return {
-        "commit": _git_commit(),
-        "cpu": cpu,
-        "cores": os.cpu_count(),
-        "load_average": [round(v, 2) for v in os.getloadavg()],
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "casadi": version("casadi"),
-        "pinocchio": version("pin"),
-        "compiler": compiler(),
-        "cflags": " ".join(cflags()),
-    }
-
-
-def _git_commit() -> str:
-    """Short commit of the source tree (``+dirty`` with local changes), or ``unknown``."""
-    here = Path(__file__).resolve().parent
-    try:
-        rev = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"], cwd=here, capture_output=True, text=True
-        )
-        if rev.returncode != 0:
-            return "unknown"
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no", "."],
-            cwd=here,
-            capture_output=True,
-            text=True,
-        )
-        return rev.stdout.strip() + ("+dirty" if dirty.stdout.strip() else "")
-    except OSError:
-        return "unknown"
+    return {**provenance(), "compiler": compiler(), "cflags": " ".join(cflags())}
 
 
 def format_report(report: dict[str, Any]) -> str:
@@ -1009,23 +825,53 @@ def _tget(row: dict[str, Any], key: str, width: int = 9) -> str:
     return _fmt(None if t is None else t["median_us"], width)
 
 
-def run_bench(args: Any) -> int:
-    """``amsfe bench`` (see :mod:`amsfe_sym.cli`): print the tables, optionally write JSON."""
-    from amsfe_sym.codegen import generate
-    from amsfe_sym.load import load_robot
-    from amsfe_sym.runtime.library import ModelLibrary
-    from amsfe_sym.simulate import library_for
+@dataclass(frozen=True)
+class BenchOptions:
+    """What ``amsfe bench`` measures (the command line's options, typed).
 
-    robot_name = str(args.robot)
-    repeat = int(args.repeat)
-    rounds = int(getattr(args, "rounds", 5) or 5)
-    skip = set(getattr(args, "skip", None) or ())
+    Attributes:
+        robot: Robot name, folder or URDF.
+        out: Parent folder of generated libraries (None: the default).
+        repeat: Upper bound on calls per timing round.
+        rounds: Timing rounds (the median is reported).
+        json: Also write the report there.
+        skip: Sections left out: ``generation``, ``calls``, ``estimators``.
+        duration: Simulated time per estimator [s].
+        scenario: Scenario of the estimator section (None: see :func:`timing_scenario`).
+        estimators: Estimators to time (None: all registered).
+        compare_cflags: Flag sets to recompile with (None: no comparison; empty: the
+            defaults :data:`DEFAULT_CFLAG_SETS`).
+        compile_repeat: Builds per flag set (the fastest is reported).
+    """
+
+    robot: str = "paper_2link"
+    out: str | None = None
+    repeat: int = 20000
+    rounds: int = 5
+    json: str | None = None
+    skip: tuple[str, ...] = ()
+    duration: float = 2.0
+    scenario: str | None = None
+    estimators: tuple[str, ...] | None = None
+    compare_cflags: tuple[str, ...] | None = None
+    compile_repeat: int = 1
+
+
+def run_bench(opts: BenchOptions) -> int:
+    """``amsfe bench``: print the tables, optionally write JSON.
+
+    Raises:
+        ConfigError: non-positive ``repeat`` or ``rounds``.
+    """
+    from amsfe_sym.codegen import library_for, load_library
+    from amsfe_sym.load import load_robot
+
+    repeat, rounds = opts.repeat, opts.rounds
     if repeat < 1 or rounds < 1:
         raise ConfigError(
             describe("--repeat / --rounds", "positive integers", f"{repeat} / {rounds}", "fix them")
         )
-    res = generate(robot_name, out=getattr(args, "out", None))
-    lib = ModelLibrary(res.out_dir)
+    lib = load_library(opts.robot, out=opts.out)
     report: dict[str, Any] = {
         "robot": lib.name,
         "n": lib.n,
@@ -1036,42 +882,36 @@ def run_bench(args: Any) -> int:
         "machine": machine_info(),
         "library": str(lib.library_path),
     }
-    if "generation" not in skip:
-        report["generation"] = bench_generation(robot_name)
-    if "calls" not in skip:
-        robot = load_robot(robot_name)
+    if "generation" not in opts.skip:
+        report["generation"] = bench_generation(opts.robot)
+    if "calls" not in opts.skip:
+        robot = load_robot(opts.robot)
         report["calls"] = [_row_dict(r) for r in bench_calls(lib, robot, repeat, rounds)]
-    if "estimators" not in skip:
-        sc = timing_scenario(
-            lib, float(getattr(args, "duration", 2.0)), getattr(args, "scenario", None)
-        )
-        names = getattr(args, "estimators", None) or ESTIMATOR_NAMES
+    if "estimators" not in opts.skip:
+        sc = timing_scenario(lib, opts.duration, opts.scenario)
         sc_lib = library_for(sc)
         report["scenario"] = {
             "name": sc.name,
             "robot": sc_lib.name,
-            "integrator": sc_lib.manifest["integrator"],
+            "integrator": sc_lib.manifest.integrator,
             "duration": sc.duration,
             "seed": sc.seed,
         }
-        report["estimators"] = bench_estimators(sc, names, lib=sc_lib)
+        report["estimators"] = bench_estimators(sc, opts.estimators or ESTIMATOR_NAMES, sc_lib)
         report["tick_compiled_us"] = tick_compiled_us(sc_lib, rounds)
-    sets_arg = getattr(args, "compare_cflags", None)
-    if sets_arg is not None:
-        flag_sets = [f.strip() for f in str(sets_arg).split(",") if f.strip()]
+    if opts.compare_cflags is not None:
         report["cflags"] = bench_cflags(
             lib,
-            flag_sets or DEFAULT_CFLAG_SETS,
+            opts.compare_cflags or DEFAULT_CFLAG_SETS,
             repeat,
             rounds,
-            compile_repeat=int(getattr(args, "compile_repeat", 1) or 1),
+            compile_repeat=opts.compile_repeat,
         )
     print(format_report(report))
-    json_path = getattr(args, "json", None)
-    if json_path:
-        Path(json_path).parent.mkdir(parents=True, exist_ok=True)
-        Path(json_path).write_text(json.dumps(report, indent=2) + "\n")
-        print(f"wrote {json_path}")
+    if opts.json:
+        Path(opts.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(opts.json).write_text(json.dumps(report, indent=2) + "\n")
+        print(f"wrote {opts.json}")
     return 0
 
 

@@ -29,15 +29,12 @@ own checks: an unknown key or a bad value raises :class:`~amsfe_sym.errors.Confi
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import logging
 import math
 import multiprocessing as mp
 import os
-import platform
 import shlex
-import sys
 import time
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -50,12 +47,10 @@ from numpy.typing import NDArray
 
 from amsfe_sym.errors import AmsfeError, ConfigError, describe
 from amsfe_sym.estimation import ESTIMATORS
-from amsfe_sym.scenario import Scenario, load_scenario, validate
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
+from amsfe_sym.plots import plot_study
+from amsfe_sym.provenance import provenance
+from amsfe_sym.scenario import Scenario, apply_sets, load_scenario
+from amsfe_sym.sim.record import nees_band, window
 
 __all__ = [
     "StudyResult",
@@ -66,150 +61,13 @@ __all__ = [
     "nees_band",
     "parse_estimators",
     "run_study",
-    "study_from_cli",
 ]
 
 log = logging.getLogger(__name__)
 FloatArray = NDArray[np.float64]
 
-#: Top-level scenario keys ``--set`` may change (``seed`` and ``estimator`` are the study's).
-_TOP_SETTABLE = ("integrator", "duration", "controller")
-#: Dataclass sections of :class:`Scenario`.
-_SECTIONS = ("plant", "encoders", "camera", "filter", "estimate0")
-#: Mapping-valued entries whose existing keys ``--set`` may change.
-_MAPPINGS = ("trajectory", "controller_gains", "estimate0.std")
 #: A theta estimate has "settled" once it stays within this fraction of the true value.
 THETA_SETTLE_REL = 0.10
-
-
-# --------------------------------------------------------------------------- overrides
-def _parse_value(text: str) -> Any:
-    """A TOML value (number, bool, quoted string, list) or, failing that, the bare text."""
-    try:
-        return tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
-        return text.strip()
-
-
-def _coerce(key: str, current: Any, raw: str) -> Any:
-    """``raw`` converted to the type of ``current`` (the field's present value)."""
-    value = _parse_value(raw)
-
-    def bad(expected: str) -> ConfigError:
-        return ConfigError(
-            describe(f"--set {key}={raw}", expected, repr(value), f"give {key} a valid value")
-        )
-
-    if isinstance(current, bool):
-        if not isinstance(value, bool):
-            raise bad("true or false")
-        return value
-    if isinstance(current, int):
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise bad("an integer")
-        return value
-    if isinstance(current, float):
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise bad("a number")
-        return float(value)
-    if isinstance(current, tuple):
-        items: Any = value
-        if isinstance(value, str):
-            items = [s for s in value.strip("[]() ").split(",") if s.strip()]
-        elif not isinstance(value, list):
-            items = [value]
-        try:
-            return tuple(float(v) for v in items)
-        except (TypeError, ValueError):
-            raise bad("numbers separated by commas, e.g. 0.5,0.5") from None
-    if isinstance(current, str):
-        if isinstance(value, list | dict):
-            raise bad("a string")
-        return str(value).lower() if isinstance(value, bool) else str(value)
-    raise bad(f"a value like {current!r}")
-
-
-def _split_set(text: str) -> tuple[str, str]:
-    key, sep, raw = text.partition("=")
-    key = key.strip()
-    if not sep or not key or not raw.strip():
-        raise ConfigError(
-            describe(
-                f"--set {text!r}",
-                "KEY=VALUE, e.g. integrator=paper or filter.link_torque_std=2",
-                "no '=' or an empty side",
-                "write section.field=value",
-            )
-        )
-    return key, raw
-
-
-def _settable_keys(sc: Scenario) -> list[str]:
-    keys = list(_TOP_SETTABLE)
-    for sec in _SECTIONS:
-        keys += [f"{sec}.{f.name}" for f in dataclasses.fields(getattr(sc, sec))]
-    keys += [f"trajectory.{k}" for k in sc.trajectory]
-    keys += [f"controller_gains.{k}" for k in sc.controller_gains]
-    keys += [f"estimate0.std.{k}" for k in sc.estimate0.std]
-    return [k for k in keys if k != "estimate0.std"]
-
-
-def apply_sets(sc: Scenario, sets: Sequence[str]) -> Scenario:
-    """Scenario ``sc`` with ``KEY=VALUE`` overrides applied, then re-validated.
-
-    Keys: ``integrator``, ``duration``, ``controller``; ``section.field`` for the sections
-    plant, encoders, camera, filter, estimate0; ``trajectory.K``, ``controller_gains.K`` and
-    ``estimate0.std.K`` for keys the scenario already has.  Values are TOML literals
-    (``2``, ``0.01``, ``true``, ``"rk4"``) or bare words (``paper``); tuples are written
-    ``0.5,0.5``.
-
-    Raises:
-        ConfigError: unknown key, value of the wrong type, or a value the scenario's own
-            validation refuses (e.g. a negative noise standard deviation).
-    """
-    for text in sets:
-        key, raw = _split_set(text)
-        parts = key.split(".")
-        if len(parts) == 1 and key in _TOP_SETTABLE:
-            sc = dataclasses.replace(sc, **{key: _coerce(key, getattr(sc, key), raw)})
-        elif len(parts) == 2 and parts[0] in _SECTIONS:
-            sec = getattr(sc, parts[0])
-            names = {f.name for f in dataclasses.fields(sec)}
-            if parts[1] not in names or parts[1] == "std":
-                raise _unknown_key(key, sc)
-            new = _coerce(key, getattr(sec, parts[1]), raw)
-            sc = dataclasses.replace(sc, **{parts[0]: dataclasses.replace(sec, **{parts[1]: new})})
-        elif ".".join(parts[:-1]) in _MAPPINGS:
-            where, name = ".".join(parts[:-1]), parts[-1]
-            mapping: Mapping[str, Any] = (
-                sc.estimate0.std if where == "estimate0.std" else getattr(sc, where)
-            )
-            if name not in mapping:
-                raise _unknown_key(key, sc)
-            d = dict(mapping)
-            d[name] = _coerce(key, d[name], raw)
-            if where == "estimate0.std":
-                sc = dataclasses.replace(sc, estimate0=dataclasses.replace(sc.estimate0, std=d))
-            else:
-                changes: dict[str, Any] = {where: d}
-                sc = dataclasses.replace(sc, **changes)
-        else:
-            raise _unknown_key(key, sc)
-    validate(sc, f"{sc.name} with --set")
-    return sc
-
-
-def _unknown_key(key: str, sc: Scenario) -> ConfigError:
-    return ConfigError(
-        describe(
-            f"--set key {key!r}",
-            "integrator, duration, controller or section.field with section in "
-            + ", ".join(_SECTIONS)
-            + " (also trajectory.K, controller_gains.K, estimate0.std.K)",
-            "no such field",
-            "one of: " + ", ".join(_settable_keys(sc)),
-        )
-    )
 
 
 def parse_estimators(text: str | Sequence[str] | None) -> tuple[str, ...]:
@@ -232,31 +90,6 @@ def parse_estimators(text: str | Sequence[str] | None) -> tuple[str, ...]:
 
 
 # --------------------------------------------------------------------------- statistics
-def nees_band(dof: int, seeds: int, probability: float = 0.95) -> tuple[float, float]:
-    """Two-sided band of the across-seed average NEES.
-
-    With M independent seeds and an N-dimensional Gaussian error that the filter's P
-    describes, ``M * mean_m NEES_m(k)`` is chi-square with ``N M`` degrees of freedom, so
-    the average lies in ``[chi2.ppf(a/2, N M) / M, chi2.ppf(1 - a/2, N M) / M]`` with
-    probability ``1 - a``.
-    """
-    from scipy.stats import chi2
-
-    if dof < 1 or seeds < 1 or not (0.0 < probability < 1.0):
-        raise ConfigError(
-            describe("nees_band", "dof >= 1, seeds >= 1, 0 < p < 1", f"{dof}, {seeds}", "fix")
-        )
-    a = 1.0 - probability
-    return (
-        float(chi2.ppf(a / 2, dof * seeds) / seeds),
-        float(chi2.ppf(1 - a / 2, dof * seeds) / seeds),
-    )
-
-
-def _window(K: int) -> slice:
-    return slice(int(0.2 * K), K)
-
-
 def settle_time(
     t: FloatArray, est: FloatArray, true: float, rel: float = THETA_SETTLE_REL
 ) -> float:
@@ -297,7 +130,8 @@ def _run_task(task: _Task) -> dict[str, Any]:
     """One run (in a worker): the summary, the NEES and theta series, and optionally the
     error series of the figure seed."""
     from amsfe_sym.runtime.library import ModelLibrary
-    from amsfe_sym.simulate import run, summarize
+    from amsfe_sym.sim.loop import run
+    from amsfe_sym.sim.record import summarize
 
     lib = _LIBS.get(task.lib_dir)
     if lib is None:
@@ -319,7 +153,7 @@ def _run_task(task: _Task) -> dict[str, Any]:
     th_hat = res.x_hat[:, L["theta"]]
     th_true = res.x_true[0, L["theta"]]
     summary["variant"] = task.variant
-    w = _window(res.t.size)
+    w = window(res.t.size)
     z = (res.x_true - res.x_hat)[w] ** 2 / np.maximum(res.P_diag[w], 1e-300)
     summary["nes_block"] = {
         b: float(np.mean(z[:, sl])) for b, sl in L.items() if sl.stop > sl.start
@@ -387,7 +221,7 @@ def aggregate(
     M, K = nees.shape
     dof = int(summaries[0]["nees_dof"])
     lo, hi = nees_band(dof, M)
-    w = _window(K)
+    w = window(K)
     avg = nees.mean(axis=0)
     er = [s["estimation_rmse"] for s in summaries]
     settle = np.array([s["theta_settle_s"] for s in summaries], dtype=float).reshape(M, -1)
@@ -561,8 +395,9 @@ def run_study(
         ConfigError: Bad names, keys or values, or a scenario ``simulate.run`` refuses (found
             before the pool starts by a 2-step run of each variant and estimator).
     """
+    from amsfe_sym.codegen import library_for
     from amsfe_sym.runtime.library import ModelLibrary
-    from amsfe_sym.simulate import library_for, run
+    from amsfe_sym.sim.loop import run
 
     if seeds < 1 or workers < 1:
         raise ConfigError(
@@ -682,7 +517,7 @@ def run_study(
     doc = {
         "command": cmd,
         "scenario": base.name,
-        "machine": _machine(),
+        "provenance": provenance(),
         "workers": workers,
         "wall_time_s": round(wall, 2),
         "seeds": seed_list,
@@ -713,36 +548,6 @@ def _jsonable(x: Any) -> Any:
     if isinstance(x, Path):
         return str(x)
     return x
-
-
-def _git_revision() -> str:
-    """``<commit>[+dirty]`` of the source tree this module runs from, or ``"unknown"``."""
-    import subprocess
-
-    here = Path(__file__).resolve().parent
-
-    def git(*args: str) -> str:
-        return subprocess.run(
-            ["git", *args], cwd=here, capture_output=True, text=True, timeout=5, check=True
-        ).stdout.strip()
-
-    try:
-        rev = git("rev-parse", "--short=12", "HEAD")
-        dirty = git("status", "--porcelain", "--untracked-files=no")
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-    return rev + ("+dirty" if dirty else "") if rev else "unknown"
-
-
-def _machine() -> dict[str, Any]:
-    return {
-        "cpus": os.cpu_count(),
-        "platform": platform.platform(),
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "processor": platform.processor() or platform.machine(),
-        "git": _git_revision(),
-    }
 
 
 def _command_line(
@@ -784,7 +589,7 @@ def _report(
     workers: int,
     sets: Sequence[str] = (),
 ) -> str:
-    m = _machine()
+    m = provenance()
     lines = [
         f"# Study: {base.name}",
         "",
@@ -795,8 +600,8 @@ def _report(
         f"Seeds {first_seed}..{first_seed + seeds - 1} (M = {seeds}); metrics over the last "
         "80 % of each run; mean ± std over seeds (per joint: joint 1 / joint 2 ...). "
         "Cost per tick: median over seeds of the whole closed-loop tick (plant, sensors, "
-        f"estimator, controller), on {m['cpus']} cores shared with other jobs, {workers} "
-        f"worker(s) in parallel; wall time of the study {wall:.0f} s; source {m['git']}. "
+        f"estimator, controller), on {m['cores']} cores shared with other jobs, {workers} "
+        f"worker(s) in parallel; wall time of the study {wall:.0f} s; source {m['commit']}. "
         "'theta settle': median "
         f"over seeds of the time after which the estimate stays within "
         f"{100 * THETA_SETTLE_REL:.0f} % of the true value. 'frames used': applied / "
@@ -807,7 +612,7 @@ def _report(
         lines += ["Every variant: `" + " ".join(f"--set {x}" for x in sets) + "`.", ""]
     for v, sc in scen.items():
         lib = libs[v]
-        unit = lib.manifest["theta"][0].get("unit", "") if lib.p else ""
+        unit = lib.manifest.theta[0].unit if lib.p else ""
         title = v if len(scen) > 1 else "results"
         extra = f" (`--set {' '.join(variant_sets[v])}`)" if variant_sets[v] else ""
         lines += [
@@ -823,176 +628,3 @@ def _report(
             format_block_table(agg[v]),
         ]
     return "\n".join(lines)
-
-
-# --------------------------------------------------------------------------- figures
-def _decimate(n: int, max_points: int = 2500) -> slice:
-    return slice(None, None, max(1, n // max_points))
-
-
-def plot_study(
-    series: Mapping[str, Mapping[str, Any]],
-    lib: Any,
-    sc: Scenario,
-    fig_seed: int,
-    out: Path,
-    suffix: str = "",
-    seeds: int = 1,
-) -> list[Path]:
-    """The study's three figures for one variant; returns their paths."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    n, names = lib.n, list(series)
-    dpi = 90
-    paths: list[Path] = []
-    first = series[names[0]]
-    t = first["t"]
-    dec = _decimate(t.size)
-    w = _window(t.size)
-    title = f"{sc.name}"
-
-    # (a) estimation errors, paper Fig. 4 analog
-    labels = [f"q{j + 1} [rad]" for j in range(n)] + [f"qd{j + 1} [rad/s]" for j in range(n)]
-    fig, axes = plt.subplots(
-        2 * n,
-        len(names),
-        figsize=(2.9 * len(names) + 0.6, 1.9 * 2 * n + 0.6),
-        sharex=True,
-        sharey="row",
-        squeeze=False,
-    )
-    have = [s for s in series.values() if np.isfinite(s["err"]).all()] or [
-        {"err": np.ones((t.size, 2 * n))}
-    ]  # the figure seed's runs that did not fail
-    for r in range(2 * n):
-        late = max(float(np.percentile(np.abs(s["err"][w, r]), 99)) for s in have)
-        top = 1.15 * max(float(np.max(np.abs(s["err"][:, r]))) for s in have)
-        lin = max(2 * late, 1e-9)
-        for c, name in enumerate(names):
-            s = series[name]
-            ax = axes[r][c]
-            ax.fill_between(t[dec], -2 * s["sd"][dec, r], 2 * s["sd"][dec, r], color="0.85", lw=0)
-            ax.plot(t[dec], s["err"][dec, r], lw=0.6)
-            if top > 10 * lin:  # a large start transient: symlog shows it and the late error
-                ax.set_yscale("symlog", linthresh=lin)
-            ax.set_ylim(-max(top, lin), max(top, lin))
-            ax.grid(alpha=0.3)
-            if r == 0:
-                ax.set_title(name, fontsize=10)
-            if c == 0:
-                ax.set_ylabel(labels[r], fontsize=9)
-            if r == 2 * n - 1:
-                ax.set_xlabel("t [s]")
-            ax.tick_params(labelsize=7)
-    fig.suptitle(
-        f"{title}: true − estimate (grey ±2σ of the filter), seed {fig_seed}; symlog axes "
-        "are linear within 2x the 99th percentile of the last 80 %",
-        fontsize=10,
-    )
-    fig.tight_layout()
-    paths.append(out / f"errors{suffix}.png")
-    fig.savefig(paths[-1], dpi=dpi)
-    plt.close(fig)
-
-    # (b) theta, paper Fig. 5 analog
-    if lib.p:
-        theta_true = lib.theta_true
-        fig, axes = plt.subplots(lib.p, 2, figsize=(11, 3.4 * lib.p), squeeze=False, sharey="row")
-        for i, th in enumerate(lib.manifest["theta"]):
-            a0, a1 = axes[i]
-            for name in names:
-                s = series[name]
-                (ln,) = a0.plot(t[dec], s["theta_hat"][dec, i], lw=0.9, label=name)
-                allm = s["theta_all"][:, :, i]
-                mu, sd = allm.mean(axis=0), allm.std(axis=0)
-                a1.plot(t[dec], mu[dec], lw=0.9, color=ln.get_color(), label=name)
-                a1.fill_between(
-                    t[dec], (mu - sd)[dec], (mu + sd)[dec], color=ln.get_color(), alpha=0.15, lw=0
-                )
-            for ax in (a0, a1):
-                ax.axhline(theta_true[i], color="k", ls="--", lw=0.8, label="true")
-                ax.grid(alpha=0.3, which="both")
-                ax.set_xscale("log")
-                ax.set_xlim(t[1], t[-1])
-                ax.set_xlabel("t [s] (log scale)")
-            unit = th.get("unit", "")
-            a0.set_ylabel(f"{th['name']} ({th['kind']}) [{unit}]")
-            a0.set_title(f"seed {fig_seed}", fontsize=10)
-            a1.set_title(f"mean ± std over {seeds} seeds", fontsize=10)
-            a0.legend(fontsize=7)
-        fig.suptitle(f"{title}: theta estimate (paper Fig. 5 analog)", fontsize=10)
-        fig.tight_layout()
-        paths.append(out / f"theta{suffix}.png")
-        fig.savefig(paths[-1], dpi=dpi)
-        plt.close(fig)
-
-    # (c) average NEES with the 95 % band
-    dof = lib.N
-    fig, axes = plt.subplots(
-        len(names), 1, figsize=(8, 1.7 * len(names) + 0.8), sharex=True, squeeze=False
-    )
-    for c, name in enumerate(names):
-        ax = axes[c][0]
-        avg = series[name]["avg_nees"]
-        m = int(series[name].get("M", seeds))
-        lo, hi = nees_band(dof, m)
-        ax.plot(t[dec], avg[dec], lw=0.6, label=f"average NEES over {m} seeds")
-        ax.axhspan(lo, hi, color="tab:green", alpha=0.2, lw=0, label="95 % band")
-        ax.axhline(dof, color="k", lw=0.6, ls=":", label=f"N = {dof}")
-        ax.axvline(t[w.start], color="0.5", lw=0.6, ls="--")
-        inside = float(np.mean((avg[w] >= lo) & (avg[w] <= hi)))
-        ax.set_title(f"{name}: {100 * inside:.0f} % of the last 80 % inside", fontsize=9)
-        if np.nanmax(avg) > 10 * hi or np.nanmin(avg[w]) < 0.1 * lo:
-            ax.set_yscale("log")
-        ax.grid(alpha=0.3)
-        ax.tick_params(labelsize=7)
-    axes[0][0].legend(fontsize=7, loc="upper right")
-    axes[-1][0].set_xlabel("t [s]")
-    fig.suptitle(
-        f"{title}: NEES averaged over seeds with its 95 % chi-square band "
-        f"[{nees_band(dof, seeds)[0]:.2f}, {nees_band(dof, seeds)[1]:.2f}] (M = {seeds})",
-        fontsize=10,
-    )
-    fig.tight_layout()
-    paths.append(out / f"nees{suffix}.png")
-    fig.savefig(paths[-1], dpi=dpi)
-    plt.close(fig)
-    return paths
-
-
-# --------------------------------------------------------------------------- CLI
-def _parse_variant(items: Sequence[str]) -> tuple[str, list[str]]:
-    label, *sets = items
-    if "=" in label or not label:
-        raise ConfigError(
-            describe(
-                "--variant",
-                "LABEL KEY=VALUE [KEY=VALUE ...]",
-                repr(" ".join(items)),
-                "start with a label, e.g. --variant paper integrator=paper",
-            )
-        )
-    return label, list(sets)
-
-
-def study_from_cli(args: Any) -> int:
-    """``amsfe study`` (see :mod:`amsfe_sym.cli`)."""
-    variants = dict(_parse_variant(v) for v in (args.variant or [])) or None
-    res = run_study(
-        args.scenario,
-        seeds=args.seeds,
-        estimators=args.estimators,
-        duration=args.duration,
-        workers=args.workers,
-        out=args.out,
-        sets=list(args.set or []),
-        variants=variants,
-        first_seed=args.first_seed,
-        progress=not args.no_progress,
-    )
-    print(res.table)
-    print(f"study folder: {res.out} (study.md, study.json, {len(res.figures)} figures)")
-    return 0

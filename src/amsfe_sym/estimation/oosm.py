@@ -223,6 +223,7 @@ class OosmEstimator(Estimator):
     """
 
     name: ClassVar[str] = "oosm"
+    needs_history: ClassVar[bool] = True
 
     def _setup(self) -> None:
         n, B = self.nx, self.config.buffer_steps
