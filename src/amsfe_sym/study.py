@@ -392,12 +392,12 @@ def run_study(
         command: The command line recorded in ``study.md`` (default: rebuilt from arguments).
 
     Raises:
-        ConfigError: Bad names, keys or values, or a scenario ``simulate.run`` refuses (found
-            before the pool starts by a 2-step run of each variant and estimator).
+        ConfigError: Bad names, keys or values, or a scenario the run builders refuse (found
+            before the pool starts by building each variant and estimator's run).
     """
     from amsfe_sym.codegen import library_for
     from amsfe_sym.runtime.library import ModelLibrary
-    from amsfe_sym.sim.loop import run
+    from amsfe_sym.sim.builders import build_run
 
     if seeds < 1 or workers < 1:
         raise ConfigError(
@@ -415,8 +415,8 @@ def run_study(
     if fig_seed not in seed_list:
         raise ConfigError(describe("figure_seed", f"one of {seed_list}", str(fig_seed), "fix"))
 
-    # Libraries: generated (if needed) here, once; workers load them by path.  A 2-step run
-    # of every (variant, estimator) surfaces configuration errors before the pool starts.
+    # Libraries: generated (if needed) here, once; workers load them by path.  Building every
+    # (variant, estimator) run surfaces configuration errors before the pool starts.
     libs: dict[str, ModelLibrary] = {}
     quiet = logging.getLogger("amsfe_sym")
     old_level = quiet.level
@@ -425,7 +425,7 @@ def run_study(
         for v, sc in scen.items():
             libs[v] = library_for(sc)
             for name in names:
-                run(sc.with_overrides(estimator=name, duration=2 * libs[v].T), lib=libs[v])
+                build_run(sc.with_overrides(estimator=name), libs[v])
         tasks = [
             _Task(
                 variant=v,

@@ -8,7 +8,10 @@ same ones (to check a scenario before a pool starts, or to time a part alone):
    (:func:`~amsfe_sym.scenario.camera_timing`), disturbance torques;
 3. :func:`filter_config` and :func:`build_estimator`: the estimator, its noise models,
    x(0|0) and P(0|0);
-4. :func:`build_controller`: the desired trajectory and the controller.
+4. :func:`build_controller`: the desired trajectory and the controller;
+
+and :func:`build_run` does all four (``study`` uses it to check a scenario before its
+worker pool starts).
 
 Everything here reads the library (never the code generator), so it imports no CasADi and
 no Pinocchio.
@@ -38,9 +41,11 @@ from amsfe_sym.sim.trajectory import Trajectory
 from amsfe_sym.sim.trajectory import from_config as trajectory_from_config
 
 __all__ = [
+    "RunParts",
     "Sensors",
     "build_controller",
     "build_estimator",
+    "build_run",
     "build_sensors",
     "filter_config",
     "plant_start",
@@ -235,3 +240,43 @@ def build_controller(sc: Scenario, lib: ModelLibrary) -> tuple[Controller, Traje
     if traj.n != lib.n:
         raise ConfigError(describe("[trajectory]", f"{lib.n} joints", f"{traj.n}", "fix it"))
     return make_controller(sc.controller, lib, traj, sc.controller_gains), traj
+
+
+@dataclass
+class RunParts:
+    """Every part of a run, built and ready for the loop.
+
+    Attributes:
+        timing: The camera's resolved timing.
+        plant0: True initial plant state [q, qd, qm, qmd].
+        sensors: Encoders, camera, disturbance.
+        z0: The first encoder sample (taken at the plant start).
+        estimator: The estimator, at x(0|0), P(0|0).
+        controller: The controller.
+        trajectory: The desired trajectory.
+    """
+
+    timing: CameraTiming
+    plant0: FloatArray
+    sensors: Sensors
+    z0: FloatArray
+    estimator: Estimator
+    controller: Controller
+    trajectory: Trajectory
+
+
+def build_run(sc: Scenario, lib: ModelLibrary) -> RunParts:
+    """All parts of a run of ``sc`` on ``lib``, in the loop's order (the random streams of
+    ``sc.seed`` are drawn as the loop draws them).
+
+    Raises:
+        ConfigError: whatever a builder refuses (camera timing, names, shapes, noise).
+    """
+    timing = scenario_timing(sc, lib)
+    plant0 = plant_start(sc, lib)
+    sensors = build_sensors(sc, lib, np.random.default_rng(sc.seed), timing)
+    L = lib.layout
+    z0 = sensors.encoders.measure(plant0[L["qm"]], plant0[L["qmd"]])
+    estimator = build_estimator(sc, lib, sensors, z0)
+    controller, trajectory = build_controller(sc, lib)
+    return RunParts(timing, plant0, sensors, z0, estimator, controller, trajectory)

@@ -27,13 +27,7 @@ from numpy.typing import NDArray
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
-from amsfe_sym.sim.builders import (
-    build_controller,
-    build_estimator,
-    build_sensors,
-    plant_start,
-    scenario_timing,
-)
+from amsfe_sym.sim.builders import build_run
 
 __all__ = ["RunResult", "run"]
 
@@ -88,13 +82,16 @@ def run(scenario: Scenario, lib: ModelLibrary, progress: bool = False) -> RunRes
     K = round(sc.duration / T) + 1
     theta_true = lib.theta_true
 
-    timing = scenario_timing(sc, lib)
-    xp = plant_start(sc, lib)
-    sensors = build_sensors(sc, lib, np.random.default_rng(sc.seed), timing)
-    enc, camera, disturbance = sensors.encoders, sensors.camera, sensors.disturbance
-    z0 = enc.measure(xp[L["qm"]], xp[L["qmd"]])
-    est = build_estimator(sc, lib, sensors, z0)
-    ctrl, traj = build_controller(sc, lib)
+    parts = build_run(sc, lib)
+    xp, z0, est, ctrl, traj = (
+        parts.plant0,
+        parts.z0,
+        parts.estimator,
+        parts.controller,
+        parts.trajectory,
+    )
+    enc, camera = parts.sensors.encoders, parts.sensors.camera
+    disturbance = parts.sensors.disturbance
     plant = lib.function("plant_step")
 
     # ---------------------------------------------------------------- records
