@@ -52,17 +52,13 @@ __all__ = [
 
 DEFAULT_CFLAGS: tuple[str, ...] = ("-O1", "-fPIC", "-shared")
 MANIFEST = "manifest.json"
-#: Modules whose source decides what is generated (hashed into the cache key).
+#: Modules whose source decides what is generated (hashed into the cache key; globs are
+#: relative to the package folder, so a new module of a stage is hashed without a change here).
 _GENERATOR_MODULES = (
     "spec.py",
-    "load.py",
+    "load/*.py",
     "codegen.py",
-    "symbolic/spatial.py",
-    "symbolic/linalg.py",
-    "symbolic/dynamics.py",
-    "symbolic/camera.py",
-    "symbolic/transition.py",
-    "symbolic/model.py",
+    "symbolic/*.py",
 )
 
 
@@ -127,8 +123,9 @@ def content_hash(spec: RobotSpec, flags: Sequence[str]) -> tuple[str, dict[str, 
     """The cache key of ``spec`` built with ``flags``, and what went into it."""
     src = Path(__file__).resolve().parent
     gen = hashlib.sha256()
-    for rel in _GENERATOR_MODULES:
-        gen.update((src / rel).read_bytes())
+    for pattern in _GENERATOR_MODULES:
+        for path in sorted(src.glob(pattern)):
+            gen.update(path.read_bytes())
     cc = compiler()
     inputs: dict[str, Any] = {
         "robot": spec.fingerprint(),
