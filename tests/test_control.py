@@ -9,15 +9,13 @@ rate comes from Pinocchio's RNEA derivatives.
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import casadi as ca
 import numpy as np
 import pinocchio as pin
 import pytest
 
 from amsfe_sym.check import random_states
-from amsfe_sym.codegen import generate
+from amsfe_sym.codegen import generate, library_for
 from amsfe_sym.control import make_controller
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim import trajectory_from_config
@@ -45,8 +43,8 @@ class Reference:
     def __init__(self, robot, lib) -> None:
         self.robot, self.lib = robot, lib
         self.n, self.T = robot.n, lib.T
-        self.Mm = np.array(lib.manifest["actuators"]["Mm"])
-        self.Fm = np.array(lib.manifest["actuators"]["Fm"])
+        self.Mm = np.array(lib.manifest.actuators.Mm)
+        self.Fm = np.array(lib.manifest.actuators.Fm)
         assert robot.model.nq == robot.n  # revolute arms: q maps 1:1
 
     def _pin(self, th):
@@ -378,14 +376,15 @@ def test_gain_changed_at_run_time_changes_u_without_regenerating(libraries) -> N
 
 
 @pytest.fixture(scope="module")
-def paper_sim(libraries):
-    _robot, _ = libraries.get("paper_2link")
-    return load_scenario("paper-sim")
+def paper_sim():
+    sc = load_scenario("paper-sim")
+    return sc, library_for(sc)
 
 
 @pytest.mark.slow
 def test_truth_converges_into_band(paper_sim) -> None:
-    res = run(paper_sim.with_overrides(controller="truth", estimator="encoders"))
+    sc, lib = paper_sim
+    res = run(sc.with_overrides(controller="truth", estimator="encoders"), lib)
     c = summarize(res)["control"]
     assert res.diverged_at is None
     # measured 0.3 / 1.1 mrad (docs/control.md); band 3x
@@ -395,7 +394,8 @@ def test_truth_converges_into_band(paper_sim) -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_amsfe_stays_bounded_within_the_torque_limit(paper_sim, seed: int) -> None:
-    res = run(paper_sim.with_overrides(controller="amsfe", estimator="oosm", seed=seed))
+    sc, lib = paper_sim
+    res = run(sc.with_overrides(controller="amsfe", estimator="oosm", seed=seed), lib)
     s = summarize(res)
     assert res.diverged_at is None
     assert np.all(np.abs(res.u) <= 100.0 + 1e-12)
@@ -406,8 +406,8 @@ def test_amsfe_stays_bounded_within_the_torque_limit(paper_sim, seed: int) -> No
 def test_paper_law_divergence_is_detected_and_reported(paper_sim, tmp_path) -> None:
     from amsfe_sym.simulate import write_run
 
-    sc = replace(paper_sim.with_overrides(controller="amsfe-paper", duration=2.0))
-    res = run(sc)
+    sc, lib = paper_sim
+    res = run(sc.with_overrides(controller="amsfe-paper", duration=2.0), lib)
     assert res.diverged_at is not None and 0.0 < res.diverged_at < 2.0
     assert np.all(np.isfinite(res.u)) and np.all(np.isfinite(res.x_true))
     assert res.t[-1] == pytest.approx(res.diverged_at)

@@ -11,9 +11,10 @@ import pytest
 from scipy.stats import chi2
 
 from amsfe_sym.cli import main
+from amsfe_sym.codegen import library_for
 from amsfe_sym.errors import ConfigError
 from amsfe_sym.scenario import load_scenario
-from amsfe_sym.simulate import library_for, run, summarize
+from amsfe_sym.simulate import run, summarize
 
 
 @pytest.fixture(scope="module")
@@ -190,7 +191,7 @@ def test_dropped_and_jittered_frames(paper_sim, estimator: str) -> None:
 
 def test_paper_exp_runs(tmp_path: Path) -> None:
     sc = load_scenario("paper-exp").with_overrides(duration=2.0, estimator="cloning")
-    res = run(sc)
+    res = run(sc, library_for(sc))
     s = summarize(res)
     assert s["ticks"] == 201 and res.counters["frames_applied"] >= 45
     assert max(s["estimation_rmse"]["q"]) < 0.005

@@ -89,13 +89,13 @@ def _simulation_figures(cmp: Comparison, out: Path) -> list[Path]:
 
     if res0.lib.p:
         fig, ax = plt.subplots(figsize=(7, 3.5))
-        for i, th in enumerate(res0.lib.manifest["theta"]):
+        for i, th in enumerate(res0.lib.manifest.theta):
             c = L["theta"].start + i
-            ax.plot(res0.t, res0.x_true[:, c] - res0.x_hat[:, c], label=f"{th['name']} error")
+            ax.plot(res0.t, res0.x_true[:, c] - res0.x_hat[:, c], label=f"{th.name} error")
             sd = np.sqrt(np.maximum(res0.P_diag[:, c], 0.0))
             ax.fill_between(res0.t, -2 * sd, 2 * sd, color="0.85", label="±2σ (filter)")
         ax.set_xlabel("t [s]")
-        ax.set_ylabel(f"theta error (true − estimate) [{th.get('unit', '')}]")
+        ax.set_ylabel(f"theta error (true − estimate) [{th.unit}]")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
         ax.set_title(f"Fig. 5: estimation error of theta ({est})")
@@ -130,9 +130,9 @@ def _span(v: np.ndarray) -> tuple[float, float]:
 def _vision_angle(res: RunResult) -> tuple[np.ndarray, np.ndarray]:
     """Joint angle recovered from each delivered frame (the paper's arccos of eq. 55, done as
     a back-projection of the pixel onto the motion plane z = 0), at its exposure time."""
-    cam = res.lib.manifest["camera"]
-    K, R = np.array(cam["K"]), np.array(cam["R_cw"])
-    c = np.array(cam["position"])
+    cam = res.lib.manifest.camera
+    K, R = np.array(cam.K), np.array(cam.R_cw)
+    c = np.array(cam.position)
     if res.frames.size == 0:
         return np.zeros(0), np.zeros(0)
     pix = np.column_stack([res.frames[:, 2], res.frames[:, 3], np.ones(len(res.frames))])

@@ -28,7 +28,8 @@ import numpy as np
 
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
-from amsfe_sym.simulate import RunResult, run, summarize, write_run
+from amsfe_sym.sim.loop import RunResult, run
+from amsfe_sym.sim.record import summarize, write_run
 
 __all__ = ["Comparison", "run_comparison", "write_comparison"]
 
@@ -44,15 +45,14 @@ class Comparison:
 def run_comparison(
     scenario: Scenario,
     controllers: tuple[str, ...],
-    lib: ModelLibrary | None = None,
+    lib: ModelLibrary,
     progress: bool = False,
 ) -> Comparison:
-    """Run ``scenario`` once per controller (same seed, estimator and noise)."""
+    """Run ``scenario`` once per controller on ``lib`` (same seed, estimator and noise)."""
     results: dict[str, RunResult] = {}
     for name in controllers:
         sc = replace(scenario, controller=name, compare=())
-        results[name] = run(sc, lib=lib, progress=progress)
-        lib = results[name].lib
+        results[name] = run(sc, lib, progress=progress)
     return Comparison(scenario, results)
 
 

@@ -48,10 +48,9 @@ class Controller(ABC):
             )
         self.gains = {**self.gain_defaults, **given}
 
-        act = lib.manifest["actuators"]
+        limits = lib.manifest.actuators.u_max or (np.inf,) * lib.n
         #: Actuator torque limit per joint [N m] (``inf``: none); :meth:`saturate` applies it.
-        limits = act.get("u_max") or [None] * lib.n
-        self.u_max = np.array([np.inf if v is None else float(v) for v in limits])
+        self.u_max = np.array(limits, dtype=float)
         #: Sliding variable s(k) of eq. (33) of the last tick (NaN for laws without one).
         self.s = np.full(lib.n, np.nan)
         #: |dv - lam e(k+1)^p + lam e^p| of the last tick (the norm inside eq. 38), or NaN.

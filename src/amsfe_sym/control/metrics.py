@@ -30,7 +30,7 @@ def control_metrics(
     q: FloatArray,
     q_des: FloatArray,
     u: FloatArray,
-    saturated: FloatArray,
+    saturated: NDArray[np.bool_],
     window: slice,
 ) -> dict[str, Any]:
     """Tracking and effort over ``window`` of the run.

@@ -76,8 +76,8 @@ class _SlidingBase(Controller):
                 )
             )
         self._law = lib.function(self.law)
-        self._mm = np.array(lib.manifest["actuators"]["Mm"], dtype=float)
-        self._fm = np.array(lib.manifest["actuators"]["Fm"], dtype=float)
+        self._mm = np.array(lib.manifest.actuators.Mm, dtype=float)
+        self._fm = np.array(lib.manifest.actuators.Fm, dtype=float)
 
     def _extra_gains(self) -> tuple[str, ...]:
         return ()
