@@ -97,6 +97,19 @@ def test_compiled_equals_casadi_function(name: str, libraries) -> None:
             "transition_inverse": (x, u),
             "plant_step": (x[: 4 * n], u, th, rng.normal(size=2 * n)),
         }
+        # the control laws: every input drawn from its manifest shape (gains positive)
+        for fname, sig in lib.manifest.functions.items():
+            if fname.startswith("control_"):
+                args[fname] = tuple(
+                    x
+                    if io.name == "x"
+                    else th
+                    if io.name == "theta"
+                    else np.array([0.6])
+                    if io.name == "p"
+                    else rng.uniform(0.1, 2.0, io.shape[0])
+                    for io in sig.inputs
+                )
         assert set(args) == set(lib.manifest.functions)
         for fname, a in args.items():
             vm = fns[fname](*a)

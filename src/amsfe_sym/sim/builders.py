@@ -239,7 +239,7 @@ def build_controller(sc: Scenario, lib: ModelLibrary) -> tuple[Controller, Traje
     traj = trajectory_from_config(dict(sc.trajectory))
     if traj.n != lib.n:
         raise ConfigError(describe("[trajectory]", f"{lib.n} joints", f"{traj.n}", "fix it"))
-    return make_controller(sc.controller, lib, traj, sc.controller_gains), traj
+    return make_controller(sc.controller, lib, traj, sc.gains_for()), traj
 
 
 @dataclass
