@@ -16,6 +16,9 @@ full matrix is refused with :class:`~amsfe_sym.errors.ConfigError`.
 from __future__ import annotations
 
 import ctypes
+import os
+from collections.abc import Sequence
+from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -32,6 +35,7 @@ __all__ = [
     "CompiledEstimator",
     "RuntimeDiagnostics",
     "make_compiled_estimator",
+    "write_log",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -356,3 +360,45 @@ def make_compiled_estimator(name: str, **kwargs: Any) -> CompiledEstimator:
             )
         )
     return COMPILED_ESTIMATORS[name](**kwargs)
+
+
+def write_log(
+    path: str | os.PathLike[str],
+    est: CompiledEstimator,
+    u: FloatArray,
+    z: Sequence[FloatArray | None],
+    frames: Sequence[Sequence[CameraFrame]],
+) -> Path:
+    """Write the log read by ``examples/estimate_from_log.c`` (format in its header comment).
+
+    Args:
+        path: Output file.
+        est: A compiled estimator: its parameter block (as built at construction) is written.
+        u: Inputs ``u[j]`` over ``[k0 + j, k0 + j + 1]``, shape ``(K, n)``.
+        z: Encoder samples taken at ``k0 + j + 1`` (``None``: none), ``K`` entries.
+        frames: Frames delivered at ``k0 + j + 1``, ``K`` entries.
+
+    Returns:
+        The path written.
+    """
+    p = est._params
+
+    def nums(values: Any) -> str:
+        return " ".join(repr(float(v)) for v in np.ravel(values, order="F"))
+
+    lines = [
+        f"params {p.estimator} {p.buffer_steps} {p.camera_iterations} {p.camera_period} "
+        f"{p.camera_phase} {p.camera_max_latency} {p.max_frames_per_step} "
+        f"{p.gate_camera!r} {p.gate_encoder!r} {p.k0}",
+    ]
+    for key, arr in zip(("qw", "r_encoder", "r_camera", "x0", "P0"), est._arrays, strict=True):
+        lines.append(f"{key} {nums(arr)}")
+    ne = est.dims.ne
+    for j in range(len(u)):
+        zj = z[j]
+        lines.append(f"tick {nums(u[j])} {nums(np.full(ne, np.nan) if zj is None else zj)}")
+        for fr in sorted(frames[j], key=lambda f: f.exposure_step):
+            lines.append(f"frame {fr.exposure_step} {nums(fr.z)}")
+    out = Path(path)
+    out.write_text("\n".join(lines) + "\n")
+    return out
