@@ -63,9 +63,11 @@ def record(scenario: str = "paper-sim", duration: float | None = None) -> Record
     period = sc.camera.period or int(cam["period"])
     latency = (sc.camera.delay or int(cam["delay"])) + sc.camera.jitter_steps
     z0 = res.z_enc[0]
-    x0 = np.concatenate([sc.estimate0.q, sc.estimate0.qd, z0[:n], z0[n:], lib.theta_initial])
-    P0 = np.diag(np.r_[np.full(n, 0.25), np.full(n, 0.25), np.full(n, 1e-4), np.full(n, 0.01)])
-    P0 = np.diag(np.r_[np.diag(P0), np.full(p, 0.04)])
+    th0 = np.array(sc.estimate0.theta, dtype=float) if sc.estimate0.theta else lib.theta_initial
+    x0 = np.concatenate([sc.estimate0.q, sc.estimate0.qd, z0[:n], z0[n:], th0])
+    std = {"q": 0.5, "qd": 0.5, "qm": 0.01, "qmd": 0.1, "theta": 0.2, **dict(sc.estimate0.std)}
+    P0 = np.diag(np.repeat([std[b] for b in ("q", "qd", "qm", "qmd")], n) ** 2)
+    P0 = np.diag(np.r_[np.diag(P0), np.full(p, std["theta"] ** 2)])
     enc_var = np.r_[np.full(n, sc.encoders.q_std**2), np.full(n, sc.encoders.qd_std**2)]
     kwargs: dict[str, object] = {
         "model": CompiledTransition(
@@ -157,3 +159,11 @@ def test_compiled_refuses_a_full_covariance(paper_sim: Recording) -> None:
     kwargs["model"] = CompiledTransition(paper_sim.lib, Qw)
     with pytest.raises(ConfigError, match="diagonal"):
         make_compiled_estimator("oosm", **kwargs)
+
+
+@pytest.mark.parametrize("name", ["oosm", "cloning"])
+def test_compiled_equals_python_on_the_6dof_ur5(name: str) -> None:
+    """The same equivalence on the UR5 (N = 25, ur5-demo scenario, 1 s: 30 frames)."""
+    worst = compare(record("ur5-demo", duration=1.0), name)
+    print(name, worst)
+    assert worst["updated"] > 20
