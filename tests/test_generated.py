@@ -72,6 +72,36 @@ def test_manifest_contract(name: str, libraries) -> None:
     assert ext.size_out(0) == (n, n)
 
 
+def estimator_args(
+    fns: dict[str, ca.Function], x: np.ndarray, u: np.ndarray, rng: np.random.Generator
+) -> dict[str, tuple[object, ...]]:
+    """Valid inputs of the estimator functions (symbolic/estimator.py) at state x."""
+    N, n = x.shape[0], u.shape[0]
+    ne, nw, S = 2 * n, N - 2 * n, fns["est_clone_camera"].size_in(3)[0]
+    Na = (1 + S) * N
+
+    def spd(k: int) -> np.ndarray:
+        L = 0.1 * rng.normal(size=(k, k))
+        return L @ L.T + 0.01 * np.eye(k)
+
+    P, Q, Phi = spd(N), spd(N), np.eye(N) + 0.01 * rng.normal(size=(N, N))
+    xa = np.tile(x, 1 + S)
+    z, r, zc, rc = rng.normal(size=ne), np.full(ne, 1e-3), rng.normal(size=2), np.ones(2)
+    sel = np.eye(S)[0]
+    return {
+        "est_predict": (x, P, u, np.full(nw, 1e-4)),
+        "est_encoder_update": (x, P, z, r),
+        "est_camera_update": (x, P, x + 0.01, zc, rc),
+        "est_chol_check": (P,),
+        "est_oosm_accumulate": (Phi, Q, Phi.T, P),
+        "est_oosm_retrodict": (x, P, 0.01 * Q, np.ones(1), z, spd(N), r),
+        "est_oosm_correct": (x, P, x, P, 0.5 * P, Phi, zc, rc),
+        "est_clone_predict": (xa, spd(Na), u, np.full(nw, 1e-4)),
+        "est_clone_encoder": (xa, spd(Na), z, r),
+        "est_clone_camera": (xa, spd(Na), x, sel, zc, rc),
+    }
+
+
 @pytest.mark.parametrize("name", SHIPPED)
 def test_compiled_equals_casadi_function(name: str, libraries) -> None:
     """Compiled C (through the ctypes binding) vs the CasADi VM: equal to rounding."""
@@ -96,6 +126,7 @@ def test_compiled_equals_casadi_function(name: str, libraries) -> None:
             "transition_step": (x, u),
             "transition_inverse": (x, u),
             "plant_step": (x[: 4 * n], u, th, rng.normal(size=2 * n)),
+            **estimator_args(fns, x, u, rng),
         }
         # the control laws: every input drawn from its manifest shape (gains positive)
         for fname, sig in lib.manifest.functions.items():

@@ -60,7 +60,11 @@ _GENERATOR_MODULES = (
     "load/*.py",
     "codegen.py",
     "symbolic/*.py",
+    "runtime/c/amsfe_runtime.c",
+    "runtime/c/amsfe_runtime.h",
 )
+#: The hand-written C glue of the compiled estimators, built into every library.
+_RUNTIME_C = Path(__file__).resolve().parent / "runtime" / "c"
 
 
 @dataclass(frozen=True)
@@ -246,7 +250,9 @@ def generate(
         timings["codegen"] = time.perf_counter() - t
         t = time.perf_counter()
         libname = f"lib{spec.name}.so"
-        cmd = [compiler(), *flags, "-o", libname, cname, "-lm"]
+        shutil.copy(_RUNTIME_C / "amsfe_runtime.h", tmp)
+        glue = str(_RUNTIME_C / "amsfe_runtime.c")
+        cmd = [compiler(), *flags, "-I.", "-o", libname, cname, glue, "-lm"]
         _say(progress, f"[amsfe] {spec.name}: compiling ({' '.join(cmd)})")
         proc = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True)
         if proc.returncode != 0:
@@ -330,6 +336,7 @@ def _manifest(
         "library": libname,
         "source": cname,
         "header": cname[:-2] + ".h",
+        "runtime_header": "amsfe_runtime.h",
         "urdf": str(robot.spec.urdf),
         "spec": None if robot.spec.spec_path is None else str(robot.spec.spec_path),
         "joints": [j.name for j in robot.joints],

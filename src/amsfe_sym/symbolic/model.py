@@ -15,6 +15,7 @@ from amsfe_sym.load import Robot
 from amsfe_sym.symbolic.camera import depth, pinhole
 from amsfe_sym.symbolic.control import build_control_functions
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
+from amsfe_sym.symbolic.estimator import estimator_functions
 from amsfe_sym.symbolic.transition import StateLayout, Transition
 
 __all__ = ["MATRIX_OUTPUTS", "SymbolicModel", "build_functions"]
@@ -111,6 +112,10 @@ def build_functions(robot: Robot) -> SymbolicModel:
     model.functions = {f.name(): f for f in fns}
     model.functions["plant_step"] = tr.plant_step(spec.plant_substeps)
     for f in build_control_functions(tree, tr):  # eqs. (29)-(37), (54) and the cascade
+        model.functions[f.name()] = f
+    slots = robot.camera.delay // robot.camera.period + 1  # clones in flight (cloning)
+    blocks = {k: getattr(L, k) for k in ("q", "qd", "qm", "qmd", "theta")}
+    for f in estimator_functions(model.functions, n, p, blocks, slots):
         model.functions[f.name()] = f
     model.camera_depends_on_theta = bool(ca.depends_on(y, th)) if p else False
     return model

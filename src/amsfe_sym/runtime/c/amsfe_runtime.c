@@ -1,0 +1,671 @@
+/* amsfe_runtime.c: the hand-written glue of the compiled estimators (docs/runtime-c.md).
+ *
+ * Control flow and bookkeeping only: history ring buffers, the loops over a lag, gating
+ * decisions, statuses.  Every number is computed by the generated functions of
+ * symbolic/estimator.py (est_*) and the robot's transition_inverse, compiled into the same
+ * library.  Each branch mirrors the Python reference in estimation/ (named per function).
+ */
+#define _POSIX_C_SOURCE 200112L /* posix_memalign */
+#include "amsfe_runtime.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef long long cint;
+typedef int (*cfun)(const double **arg, double **res, cint *iw, double *w, int mem);
+typedef int (*cwork)(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w);
+
+#define DECLARE(f)                                                        \
+  int f(const double **arg, double **res, cint *iw, double *w, int mem); \
+  int f##_work(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w);    \
+  cint f##_n_out(void);                                                   \
+  const cint *f##_sparsity_in(cint i);
+DECLARE(est_predict)
+DECLARE(est_encoder_update)
+DECLARE(est_camera_update)
+DECLARE(est_chol_check)
+DECLARE(est_oosm_accumulate)
+DECLARE(est_oosm_retrodict)
+DECLARE(est_oosm_correct)
+DECLARE(est_clone_predict)
+DECLARE(est_clone_encoder)
+DECLARE(est_clone_camera)
+DECLARE(transition_inverse)
+
+static const cwork WORKS[] = {est_predict_work,        est_encoder_update_work,
+                              est_camera_update_work,  est_chol_check_work,
+                              est_oosm_accumulate_work, est_oosm_retrodict_work,
+                              est_oosm_correct_work,   est_clone_predict_work,
+                              est_clone_encoder_work,  est_clone_camera_work,
+                              transition_inverse_work};
+
+struct amsfe_est {
+  amsfe_params par; /* pointers in it point into this block */
+  amsfe_dims d;
+  int B, R, F, S, max_delay; /* oosm ring B, replay ring R = B + 1, frames per step, slots */
+  long k;
+  int failed, last_error;
+  amsfe_diag diag;
+  /* state */
+  double *x, *P, *x0, *P0, *qw, *re, *rc;
+  double *x1, *P1, *A1, *Q1, *x2, *P2; /* scratch */
+  double nis, s_ok, chk, ok2;
+  /* oosm */
+  double *A_buf, *Q_buf, *u_buf, *Phi, *Q, *Phi2, *Qb, *M, *C, *xs, *xr, *xr2;
+  double *last_nu, *last_Pprior, has_last;
+  /* replay */
+  double *r_x, *r_P, *r_u, *r_z, *r_fz;
+  int *r_hasz, *r_nf;
+  /* cloning */
+  double *xa, *Pa, *xa2, *Pa2, *sel, *cl;
+  long *clone_k;
+  int *clone_on;
+  /* work of the generated functions */
+  const double **arg;
+  double **res;
+  cint *iw;
+  double *w;
+  cint n_arg, n_res, inv_n_out;
+};
+
+/* ------------------------------------------------------------------ helpers */
+static long pmod(long a, long b) { return ((a % b) + b) % b; }
+
+static int finite(const double *v, long count) {
+  for (long i = 0; i < count; ++i)
+    if (!isfinite(v[i])) return 0;
+  return 1;
+}
+
+static void copy(double *dst, const double *src, long count) {
+  memcpy(dst, src, sizeof(double) * (size_t)count);
+}
+
+/* Call a generated function: inputs in[0..nin), outputs out[0..nout) (NULL: not wanted). */
+static int call(amsfe_est *e, cfun f, const double *const *in, int nin, double *const *out,
+                int nout) {
+  for (int i = 0; i < nin; ++i) e->arg[i] = in[i];
+  for (int i = 0; i < nout; ++i) e->res[i] = out[i];
+  return f(e->arg, e->res, e->iw, e->w, 0);
+}
+
+static int fail(amsfe_est *e, int status) {
+  e->failed = 1;
+  e->last_error = status;
+  return status;
+}
+
+typedef struct {
+  char *base;
+  size_t off;
+} carver;
+
+static void *carve(carver *c, size_t bytes) {
+  size_t o = (c->off + 15) & ~(size_t)15;
+  c->off = o + bytes;
+  return c->base ? (void *)(c->base + o) : NULL;
+}
+
+#define DBL(c, count) ((double *)carve((c), sizeof(double) * (size_t)(count)))
+
+static void model_dims(amsfe_dims *d) {
+  d->N = (int)est_predict_sparsity_in(0)[0];
+  d->n = (int)est_predict_sparsity_in(2)[0];
+  d->nw = (int)est_predict_sparsity_in(3)[0];
+  d->ne = (int)est_encoder_update_sparsity_in(2)[0];
+  d->nc = (int)est_camera_update_sparsity_in(3)[0];
+  d->clone_slots = (int)est_clone_camera_sparsity_in(3)[0];
+}
+
+void amsfe_dims_get(amsfe_dims *dims) { model_dims(dims); }
+
+/* Lay the object out in `base` (NULL: only measure); returns the bytes needed. */
+static size_t layout(amsfe_est *e, const amsfe_params *p, char *base) {
+  amsfe_dims d;
+  model_dims(&d);
+  long N = d.N, NN = (long)d.N * d.N, n = d.n;
+  long B = p->buffer_steps, R = B + 1, F = p->max_frames_per_step;
+  long S = d.clone_slots, Na = (1 + S) * N;
+  int est = p->estimator;
+  carver c = {base, 0};
+  amsfe_est tmp;
+  if (!e) e = &tmp;
+  carve(&c, sizeof(amsfe_est));
+  e->x = DBL(&c, N), e->P = DBL(&c, NN), e->x0 = DBL(&c, N), e->P0 = DBL(&c, NN);
+  e->qw = DBL(&c, d.nw), e->re = DBL(&c, d.ne), e->rc = DBL(&c, d.nc);
+  e->x1 = DBL(&c, N), e->P1 = DBL(&c, NN), e->A1 = DBL(&c, NN), e->Q1 = DBL(&c, NN);
+  e->x2 = DBL(&c, N), e->P2 = DBL(&c, NN);
+  e->last_nu = DBL(&c, d.ne), e->last_Pprior = DBL(&c, NN);
+  e->A_buf = e->Q_buf = e->u_buf = NULL;
+  e->r_x = e->r_P = e->r_u = e->r_z = e->r_fz = NULL;
+  e->xa = e->Pa = e->xa2 = e->Pa2 = e->sel = e->cl = NULL;
+  if (est == AMSFE_OOSM) {
+    e->A_buf = DBL(&c, B * NN), e->Q_buf = DBL(&c, B * NN), e->u_buf = DBL(&c, B * n);
+    e->Phi = DBL(&c, NN), e->Q = DBL(&c, NN), e->Phi2 = DBL(&c, NN), e->Qb = DBL(&c, NN);
+    e->M = DBL(&c, NN), e->C = DBL(&c, NN);
+    e->xs = DBL(&c, N), e->xr = DBL(&c, N), e->xr2 = DBL(&c, N);
+  }
+  if (est == AMSFE_REPLAY) {
+    e->r_x = DBL(&c, R * N), e->r_P = DBL(&c, R * NN), e->r_u = DBL(&c, R * n);
+    e->r_z = DBL(&c, R * d.ne), e->r_fz = DBL(&c, R * F * d.nc);
+    e->r_hasz = (int *)carve(&c, sizeof(int) * (size_t)R);
+    e->r_nf = (int *)carve(&c, sizeof(int) * (size_t)R);
+  }
+  if (est == AMSFE_CLONING) {
+    e->xa = DBL(&c, Na), e->Pa = DBL(&c, Na * Na), e->xa2 = DBL(&c, Na);
+    e->Pa2 = DBL(&c, Na * Na), e->sel = DBL(&c, S), e->cl = DBL(&c, N);
+    e->clone_k = (long *)carve(&c, sizeof(long) * (size_t)S);
+    e->clone_on = (int *)carve(&c, sizeof(int) * (size_t)S);
+  }
+  cint sa = 0, sr = 0, si = 0, sw = 0;
+  for (size_t i = 0; i < sizeof(WORKS) / sizeof(WORKS[0]); ++i) {
+    cint a, r, iw, w;
+    WORKS[i](&a, &r, &iw, &w);
+    sa = a > sa ? a : sa, sr = r > sr ? r : sr, si = iw > si ? iw : si, sw = w > sw ? w : sw;
+  }
+  e->n_arg = sa, e->n_res = sr;
+  e->arg = (const double **)carve(&c, sizeof(double *) * (size_t)(sa + 1));
+  e->res = (double **)carve(&c, sizeof(double *) * (size_t)(sr + 1));
+  e->iw = (cint *)carve(&c, sizeof(cint) * (size_t)(si + 1));
+  e->w = DBL(&c, sw + 1);
+  e->d = d;
+  return c.off + 16;
+}
+
+static int params_ok(const amsfe_params *p) {
+  amsfe_dims d;
+  model_dims(&d);
+  if (!p || !p->qw || !p->r_encoder || !p->r_camera || !p->x0 || !p->P0) return 0;
+  if (p->estimator < AMSFE_ENCODERS || p->estimator > AMSFE_CLONING) return 0;
+  if (p->buffer_steps < 1 || p->camera_iterations < 1 || p->max_frames_per_step < 1) return 0;
+  if (isnan(p->gate_camera) || isnan(p->gate_encoder)) return 0;
+  for (int i = 0; i < d.nw; ++i)
+    if (!(p->qw[i] >= 0 && isfinite(p->qw[i]))) return 0;
+  for (int i = 0; i < d.ne; ++i)
+    if (!(p->r_encoder[i] > 0 && isfinite(p->r_encoder[i]))) return 0;
+  for (int i = 0; i < d.nc; ++i)
+    if (!(p->r_camera[i] > 0 && isfinite(p->r_camera[i]))) return 0;
+  if (!finite(p->x0, d.N) || !finite(p->P0, (long)d.N * d.N)) return 0;
+  if (p->camera_period < 0 || (p->camera_period > 0 && (p->camera_phase < 0 ||
+                                                         p->camera_phase >= p->camera_period)))
+    return 0;
+  if (p->estimator == AMSFE_CLONING) {
+    if (p->camera_period < 1) return 0;
+    int lat = p->camera_max_delay < 0 || p->camera_max_delay > p->buffer_steps
+                  ? p->buffer_steps
+                  : p->camera_max_delay;
+    if (lat / p->camera_period + 1 > d.clone_slots) return 0; /* more clones than slots */
+  }
+  return 1;
+}
+
+size_t amsfe_est_memory_size(const amsfe_params *params) {
+  if (!params_ok(params)) return 0;
+  return layout(NULL, params, NULL);
+}
+
+static int scheduled(const amsfe_est *e, long k) {
+  int l = e->par.camera_period;
+  return l > 0 && pmod(k, l) == e->par.camera_phase;
+}
+
+/* cloning.CloningEstimator._add_clone: slot s takes x and P's rows/columns of the state */
+static void add_clone(amsfe_est *e, long kappa) {
+  int N = e->d.N, S = e->S, Na = (1 + S) * N, s = 0;
+  while (s < S && e->clone_on[s]) ++s;
+  if (s == S) return; /* cannot happen: init checked the slots against the latency */
+  int o = N * (1 + s);
+  for (int i = 0; i < N; ++i) e->xa[o + i] = e->xa[i];
+  for (int j = 0; j < Na; ++j)
+    for (int i = 0; i < N; ++i) e->Pa[(o + i) + (long)j * Na] = e->Pa[i + (long)j * Na];
+  for (int j = 0; j < N; ++j)
+    for (int i = 0; i < Na; ++i) e->Pa[i + (long)(o + j) * Na] = e->Pa[i + (long)j * Na];
+  e->clone_on[s] = 1;
+  e->clone_k[s] = kappa;
+}
+
+static void drop_clone(amsfe_est *e, int s) {
+  int N = e->d.N, Na = (1 + e->S) * N, o = N * (1 + s);
+  for (int i = 0; i < N; ++i) e->xa[o + i] = 0.0;
+  for (int j = 0; j < Na; ++j)
+    for (int i = 0; i < N; ++i) e->Pa[(o + i) + (long)j * Na] = 0.0;
+  for (int j = 0; j < N; ++j)
+    for (int i = 0; i < Na; ++i) e->Pa[i + (long)(o + j) * Na] = 0.0;
+  e->clone_on[s] = 0;
+}
+
+/* x, P <- the state block of xa, Pa (CloningEstimator._sync) */
+static void sync_clone(amsfe_est *e) {
+  int N = e->d.N, Na = (1 + e->S) * N;
+  copy(e->x, e->xa, N);
+  for (int j = 0; j < N; ++j) copy(e->P + (long)j * N, e->Pa + (long)j * Na, N);
+}
+
+static int pd(amsfe_est *e, const double *P) {
+  double ok = 0.0;
+  double *out[1] = {&ok};
+  const double *in[1] = {P};
+  call(e, est_chol_check, in, 1, out, 1);
+  return ok > 0.5;
+}
+
+/* block (o, o) of the augmented covariance into P1, then the PD check */
+static int clone_block_pd(amsfe_est *e, int s) {
+  int N = e->d.N, Na = (1 + e->S) * N, o = N * (1 + s);
+  for (int j = 0; j < N; ++j) copy(e->P1 + (long)j * N, e->Pa + o + (long)(o + j) * Na, N);
+  return pd(e, e->P1);
+}
+
+void amsfe_est_reset(amsfe_est *e) {
+  int N = e->d.N;
+  copy(e->x, e->x0, N);
+  copy(e->P, e->P0, (long)N * N);
+  e->k = e->par.k0;
+  e->failed = 0, e->last_error = 0, e->has_last = 0.0;
+  memset(&e->diag, 0, sizeof(e->diag));
+  e->diag.encoder_nis = NAN;
+  if (e->r_hasz) {
+    for (int j = 0; j < e->R; ++j) e->r_hasz[j] = 0, e->r_nf[j] = 0;
+    long s = pmod(e->k, e->R);
+    copy(e->r_x + s * N, e->x, N);
+    copy(e->r_P + s * (long)N * N, e->P, (long)N * N);
+  }
+  if (e->xa) {
+    int Na = (1 + e->S) * N;
+    memset(e->xa, 0, sizeof(double) * (size_t)Na);
+    memset(e->Pa, 0, sizeof(double) * (size_t)Na * (size_t)Na);
+    copy(e->xa, e->x, N);
+    for (int j = 0; j < N; ++j) copy(e->Pa + (long)j * Na, e->P + (long)j * N, N);
+    for (int s = 0; s < e->S; ++s) e->clone_on[s] = 0;
+    if (scheduled(e, e->k)) add_clone(e, e->k);
+  }
+}
+
+int amsfe_est_init(amsfe_est **out, const amsfe_params *p, void *memory, size_t size) {
+  if (!out || !memory) return AMSFE_ERR_MEMORY;
+  *out = NULL;
+  if (!params_ok(p)) return AMSFE_ERR_CONFIG;
+  if (((size_t)memory & 15u) != 0 || layout(NULL, p, NULL) > size) return AMSFE_ERR_MEMORY;
+  amsfe_est *e = (amsfe_est *)memory;
+  /* layout() sets the pointers inside e; the object itself sits at offset 0 */
+  memset(memory, 0, sizeof(amsfe_est));
+  layout(e, p, (char *)memory);
+  amsfe_dims d = e->d;
+  e->par = *p;
+  e->B = p->buffer_steps, e->R = p->buffer_steps + 1, e->F = p->max_frames_per_step;
+  e->S = d.clone_slots;
+  e->max_delay = p->camera_max_delay < 0 || p->camera_max_delay > p->buffer_steps
+                       ? p->buffer_steps
+                       : p->camera_max_delay;
+  e->inv_n_out = transition_inverse_n_out();
+  copy(e->x0, p->x0, d.N);
+  copy(e->P0, p->P0, (long)d.N * d.N);
+  copy(e->qw, p->qw, d.nw);
+  copy(e->re, p->r_encoder, d.ne);
+  copy(e->rc, p->r_camera, d.nc);
+  e->par.qw = e->qw, e->par.r_encoder = e->re, e->par.r_camera = e->rc;
+  e->par.x0 = e->x0, e->par.P0 = e->P0;
+  for (long j = 0; j < d.N; ++j) /* P0 symmetric and PD (validate_spd) */
+    for (long i = 0; i < j; ++i)
+      if (fabs(e->P0[i + j * d.N] - e->P0[j + i * d.N]) >
+          1e-9 * fmax(1.0, fabs(e->P0[i + j * d.N])))
+        return AMSFE_ERR_CONFIG;
+  if (!pd(e, e->P0)) return AMSFE_ERR_CONFIG;
+  amsfe_est_reset(e);
+  *out = e;
+  return AMSFE_OK;
+}
+
+amsfe_est *amsfe_est_create(const amsfe_params *p, int *status) {
+  int st = AMSFE_ERR_CONFIG;
+  amsfe_est *e = NULL;
+  size_t size = amsfe_est_memory_size(p);
+  if (size) {
+    void *mem = NULL;
+    if (posix_memalign(&mem, 16, size) != 0) {
+      st = AMSFE_ERR_MEMORY;
+    } else {
+      st = amsfe_est_init(&e, p, mem, size);
+      if (st != AMSFE_OK) free(mem);
+    }
+  }
+  if (status) *status = st;
+  return st == AMSFE_OK ? e : NULL;
+}
+
+void amsfe_est_destroy(amsfe_est *e) { free(e); }
+
+/* ------------------------------------------------------------------ EKF steps */
+/* ekf.predict on (x, P) with u; stores A, Qd in A1, Q1 */
+static int predict(amsfe_est *e, const double *u) {
+  int N = e->d.N;
+  const double *in[4] = {e->x, e->P, u, e->qw};
+  double *out[4] = {e->x1, e->P1, e->A1, e->Q1};
+  call(e, est_predict, in, 4, out, 4);
+  if (!finite(e->x1, N) || !finite(e->A1, (long)N * N)) return AMSFE_ERR_NONFINITE;
+  copy(e->x, e->x1, N);
+  copy(e->P, e->P1, (long)N * N);
+  return AMSFE_OK;
+}
+
+/* Estimator._encoder_update (z NULL: no sample); report: count it in diag */
+static int encoder_update(amsfe_est *e, const double *z, int report) {
+  int N = e->d.N;
+  e->has_last = 0.0;
+  if (report) e->diag.encoder_accepted = 0, e->diag.encoder_nis = NAN;
+  if (!z) return AMSFE_OK;
+  const double *in[4] = {e->x, e->P, z, e->re};
+  double *out[5] = {e->x2, e->P2, &e->nis, e->last_nu, &e->s_ok};
+  call(e, est_encoder_update, in, 4, out, 5);
+  if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
+  int accepted = e->nis <= e->par.gate_encoder;
+  if (report) {
+    e->diag.encoder_nis = e->nis;
+    e->diag.encoder_accepted = accepted;
+    if (accepted) ++e->diag.encoder_updates;
+    else ++e->diag.encoder_gated;
+  }
+  if (accepted) {
+    copy(e->last_Pprior, e->P, (long)N * N);
+    copy(e->x, e->x2, N);
+    copy(e->P, e->P2, (long)N * N);
+    e->has_last = 1.0;
+  }
+  return AMSFE_OK;
+}
+
+/* Estimator._frame_update_now: iterated EKF camera update of (x, P) */
+static int frame_now(amsfe_est *e, const double *z, double *nis) {
+  int N = e->d.N;
+  const double *in[5] = {e->x, e->P, e->x, z, e->rc};
+  double *out[5] = {e->x1, e->P1, &e->nis, &e->s_ok, &e->chk};
+  call(e, est_camera_update, in, 5, out, 5);
+  if (!isfinite(e->chk)) return AMSFE_ERR_NONFINITE;
+  if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
+  double first = e->nis;
+  if (nis) *nis = first;
+  if (!(first <= e->par.gate_camera)) return AMSFE_GATED;
+  for (int it = 1; it < e->par.camera_iterations; ++it) {
+    copy(e->x2, e->x1, N);
+    const double *in2[5] = {e->x, e->P, e->x2, z, e->rc};
+    call(e, est_camera_update, in2, 5, out, 5);
+    if (!isfinite(e->chk)) return AMSFE_ERR_NONFINITE;
+    if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
+  }
+  copy(e->x, e->x1, N);
+  copy(e->P, e->P1, (long)N * N);
+  return AMSFE_OK;
+}
+
+/* ------------------------------------------------------------------ replay */
+static void replay_store(amsfe_est *e, long j) {
+  long N = e->d.N, s = pmod(j, e->R);
+  copy(e->r_x + s * N, e->x, N);
+  copy(e->r_P + s * N * N, e->P, N * N);
+}
+
+/* ReplayEstimator._step's loop body for j -> j + 1 (report: j + 1 is the current step) */
+static int replay_step(amsfe_est *e, long j, int report) {
+  long s = pmod(j, e->R), s1 = pmod(j + 1, e->R);
+  int st = predict(e, e->r_u + s * e->d.n);
+  if (st) return st;
+  st = encoder_update(e, e->r_hasz[s1] ? e->r_z + s1 * e->d.ne : NULL, report);
+  if (st) return st;
+  for (int f = 0; f < e->r_nf[s1]; ++f) {
+    st = frame_now(e, e->r_fz + (s1 * e->F + f) * e->d.nc, NULL);
+    if (st < 0) return st;
+  }
+  replay_store(e, j + 1);
+  return AMSFE_OK;
+}
+
+/* ------------------------------------------------------------------ tick */
+int amsfe_est_tick(amsfe_est *e, const double *z_encoder, const double *u) {
+  if (!e || !u) return AMSFE_ERR_INPUT;
+  if (e->failed) return AMSFE_ERR_FAILED;
+  int N = e->d.N, n = e->d.n, st;
+  if (!finite(u, n)) return AMSFE_ERR_INPUT;
+  const double *z = z_encoder && finite(z_encoder, e->d.ne) ? z_encoder : NULL;
+  long k = e->k, k1 = k + 1;
+  e->diag.replayed_steps = 0;
+  if (!z) ++e->diag.encoder_missing;
+  switch (e->par.estimator) {
+    case AMSFE_REPLAY: {
+      long s = pmod(k, e->R), s1 = pmod(k1, e->R);
+      copy(e->r_u + s * n, u, n);
+      e->r_hasz[s1] = z != NULL;
+      if (z) copy(e->r_z + s1 * e->d.ne, z, e->d.ne);
+      e->r_nf[s1] = 0; /* the slot held step k1 - R, now forgotten */
+      st = replay_step(e, k, 1);
+      break;
+    }
+    case AMSFE_CLONING: {
+      int Na = (1 + e->S) * N;
+      for (int s = 0; s < e->S; ++s) /* clones expired at the end of step k */
+        if (e->clone_on[s] && k - e->clone_k[s] >= e->max_delay) drop_clone(e, s);
+      const double *in[4] = {e->xa, e->Pa, u, e->qw};
+      double *out[3] = {e->xa2, e->Pa2, NULL};
+      call(e, est_clone_predict, in, 4, out, 3);
+      if (!finite(e->xa2, Na) || !finite(e->Pa2, (long)Na * Na)) {
+        st = AMSFE_ERR_NONFINITE;
+        break;
+      }
+      copy(e->xa, e->xa2, Na);
+      copy(e->Pa, e->Pa2, (long)Na * Na);
+      e->diag.encoder_accepted = 0, e->diag.encoder_nis = NAN;
+      st = AMSFE_OK;
+      if (z) {
+        const double *ie[4] = {e->xa, e->Pa, z, e->re};
+        double *oe[4] = {e->xa2, e->Pa2, &e->nis, &e->s_ok};
+        call(e, est_clone_encoder, ie, 4, oe, 4);
+        if (!(e->s_ok > 0.5)) {
+          st = AMSFE_ERR_S_NOT_PD;
+          break;
+        }
+        int accepted = e->nis <= e->par.gate_encoder;
+        e->diag.encoder_nis = e->nis, e->diag.encoder_accepted = accepted;
+        if (accepted) {
+          ++e->diag.encoder_updates;
+          copy(e->xa, e->xa2, Na);
+          copy(e->Pa, e->Pa2, (long)Na * Na);
+        } else {
+          ++e->diag.encoder_gated;
+        }
+      }
+      if (scheduled(e, k1)) add_clone(e, k1);
+      sync_clone(e);
+      break;
+    }
+    default: /* encoders, naive, oosm */
+      if (e->par.estimator == AMSFE_OOSM) {
+        long s = pmod(k, e->B), NN = (long)N * N;
+        st = predict(e, u);
+        if (st) break;
+        copy(e->A_buf + s * NN, e->A1, NN);
+        copy(e->Q_buf + s * NN, e->Q1, NN);
+        copy(e->u_buf + s * n, u, n);
+      } else {
+        st = predict(e, u);
+        if (st) break;
+      }
+      st = encoder_update(e, z, 1);
+  }
+  if (st) return fail(e, st);
+  e->k = k1;
+  ++e->diag.ticks;
+  if (!pd(e, e->P)) return fail(e, AMSFE_ERR_NOT_PD);
+  if (e->par.estimator == AMSFE_CLONING) {
+    int alive = 0;
+    for (int s = 0; s < e->S; ++s) {
+      if (!e->clone_on[s] || k1 - e->clone_k[s] >= e->max_delay) continue;
+      ++alive;
+      if (!clone_block_pd(e, s)) return fail(e, AMSFE_ERR_NOT_PD);
+    }
+    e->diag.clones = alive;
+  }
+  return AMSFE_OK;
+}
+
+/* ------------------------------------------------------------------ late frames */
+/* OosmEstimator._late_frame (A1 over the lag) */
+static int oosm_late(amsfe_est *e, const double *z, long kappa, double *nis) {
+  long N = e->d.N, NN = N * N, k = e->k;
+  memset(e->Phi, 0, sizeof(double) * (size_t)NN);
+  memset(e->Q, 0, sizeof(double) * (size_t)NN);
+  for (long i = 0; i < N; ++i) e->Phi[i * (N + 1)] = 1.0;
+  for (long j = kappa; j < k; ++j) { /* eq. (23) */
+    long s = pmod(j, e->B);
+    const double *in[4] = {e->Phi, e->Q, e->A_buf + s * NN, e->Q_buf + s * NN};
+    double *out[2] = {e->Phi2, e->Qb};
+    call(e, est_oosm_accumulate, in, 4, out, 2);
+    copy(e->Phi, e->Phi2, NN);
+    copy(e->Q, e->Qb, NN);
+  }
+  {
+    const double *in[7] = {e->x, e->P, e->Q, &e->has_last, e->last_nu, e->last_Pprior, e->re};
+    double *out[4] = {e->xs, e->M, e->C, &e->s_ok};
+    call(e, est_oosm_retrodict, in, 7, out, 4);
+    if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
+  }
+  copy(e->xr, e->xs, N);
+  for (long j = k - 1; j >= kappa; --j) { /* eq. (24): the backward map, step by step */
+    const double *in[2] = {e->xr, e->u_buf + pmod(j, e->B) * e->d.n};
+    double *out[1] = {e->xr2};
+    for (cint i = 1; i < e->inv_n_out; ++i) e->res[i] = NULL; /* only x is wanted */
+    e->arg[0] = in[0], e->arg[1] = in[1], e->res[0] = out[0];
+    transition_inverse(e->arg, e->res, e->iw, e->w, 0);
+    copy(e->xr, e->xr2, N);
+  }
+  if (!finite(e->xr, N)) return AMSFE_ERR_NONFINITE;
+  double p_ok = 0.0;
+  const double *in[8] = {e->x, e->P, e->xr, e->M, e->C, e->Phi, z, e->rc};
+  double *out[6] = {e->x1, e->P1, &e->nis, &e->s_ok, &p_ok, &e->chk};
+  call(e, est_oosm_correct, in, 8, out, 6);
+  if (!isfinite(e->chk)) return AMSFE_ERR_NONFINITE;
+  if (!(e->s_ok > 0.5)) return AMSFE_REFUSED_INDEFINITE;
+  if (nis) *nis = e->nis;
+  if (!(e->nis <= e->par.gate_camera)) return AMSFE_GATED;
+  if (!(p_ok > 0.5)) return AMSFE_REFUSED_INDEFINITE;
+  copy(e->x, e->x1, N);
+  copy(e->P, e->P1, NN);
+  return AMSFE_OK;
+}
+
+/* ReplayEstimator: rewind to kappa, apply the frame there, re-filter up to now */
+static int replay_frame(amsfe_est *e, const double *z, long kappa, double *nis) {
+  long N = e->d.N, s = pmod(kappa, e->R), k = e->k;
+  if (e->r_nf[s] >= e->F) return AMSFE_REFUSED_FULL;
+  if (kappa < k) {
+    copy(e->x, e->r_x + s * N, N);
+    copy(e->P, e->r_P + s * N * N, N * N);
+  }
+  int st = frame_now(e, z, nis);
+  if (st < 0) return st;
+  copy(e->r_fz + (s * e->F + e->r_nf[s]) * e->d.nc, z, e->d.nc);
+  ++e->r_nf[s];
+  replay_store(e, kappa);
+  for (long j = kappa; j < k; ++j) {
+    int st2 = replay_step(e, j, j + 1 == k);
+    if (st2) return st2;
+  }
+  e->diag.replayed_steps = (int)(k - kappa);
+  return st;
+}
+
+/* CloningEstimator: update through the clone of kappa, then drop it */
+static int cloning_frame(amsfe_est *e, const double *z, long kappa, double *nis) {
+  int N = e->d.N, S = e->S, Na = (1 + S) * N, slot = -1;
+  for (int s = 0; s < S; ++s)
+    if (e->clone_on[s] && e->clone_k[s] == kappa) slot = s;
+  if (slot < 0) return scheduled(e, kappa) ? AMSFE_REFUSED_NO_CLONE_LEFT : AMSFE_REFUSED_NO_CLONE;
+  for (int s = 0; s < S; ++s) e->sel[s] = s == slot ? 1.0 : 0.0;
+  copy(e->cl, e->xa + N * (1 + slot), N);
+  const double *in[6] = {e->xa, e->Pa, e->cl, e->sel, z, e->rc};
+  double *out[5] = {e->xa2, e->Pa2, &e->nis, &e->s_ok, &e->chk};
+  call(e, est_clone_camera, in, 6, out, 5);
+  if (!isfinite(e->chk)) return AMSFE_ERR_NONFINITE;
+  if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
+  if (nis) *nis = e->nis;
+  int st = e->nis <= e->par.gate_camera ? AMSFE_OK : AMSFE_GATED;
+  if (st == AMSFE_OK) {
+    copy(e->xa, e->xa2, Na);
+    copy(e->Pa, e->Pa2, (long)Na * Na);
+  }
+  drop_clone(e, slot);
+  sync_clone(e);
+  int alive = 0;
+  for (int s = 0; s < S; ++s) alive += e->clone_on[s] && e->k - e->clone_k[s] < e->max_delay;
+  e->diag.clones = alive;
+  return st;
+}
+
+int amsfe_est_camera_frame(amsfe_est *e, const double *z, long kappa, double *nis) {
+  if (nis) *nis = NAN;
+  if (!e || !z) return AMSFE_ERR_INPUT;
+  if (e->failed) return AMSFE_ERR_FAILED;
+  if (kappa > e->k) return AMSFE_REFUSED_FUTURE; /* the reference raises; nothing changed */
+  int st;
+  long oldest = e->k - e->B > e->par.k0 ? e->k - e->B : e->par.k0;
+  e->diag.replayed_steps = 0;
+  if (e->par.estimator == AMSFE_ENCODERS) st = AMSFE_IGNORED;
+  else if (!finite(z, e->d.nc)) st = AMSFE_REFUSED_NONFINITE;
+  else if (kappa < oldest) st = AMSFE_REFUSED_TOO_OLD;
+  else {
+    switch (e->par.estimator) {
+      case AMSFE_NAIVE: st = frame_now(e, z, nis); break;
+      case AMSFE_OOSM:
+        st = kappa == e->k ? frame_now(e, z, nis) : oosm_late(e, z, kappa, nis);
+        break;
+      case AMSFE_REPLAY:
+        st = replay_frame(e, z, kappa, nis);
+        break;
+      default: st = cloning_frame(e, z, kappa, nis);
+    }
+    if (st < 0) return fail(e, st);
+    if (!pd(e, e->P)) return fail(e, AMSFE_ERR_NOT_PD);
+  }
+  if (st == AMSFE_OK) ++e->diag.frames_applied;
+  else if (st == AMSFE_GATED) ++e->diag.frames_gated;
+  else if (st == AMSFE_IGNORED) ++e->diag.frames_ignored;
+  else ++e->diag.frames_refused;
+  return st;
+}
+
+void amsfe_est_state(const amsfe_est *e, double *x, double *P) {
+  long N = e->d.N;
+  if (x) copy(x, e->x, N);
+  if (P) copy(P, e->P, N * N);
+}
+
+void amsfe_est_diagnostics(const amsfe_est *e, amsfe_diag *diag) {
+  *diag = e->diag;
+  diag->k = e->k;
+  diag->failed = e->failed;
+  diag->last_error = e->last_error;
+}
+
+const char *amsfe_status_string(int status) {
+  switch (status) {
+    case AMSFE_OK: return "ok";
+    case AMSFE_GATED: return "gated out (NIS above the chi-square gate)";
+    case AMSFE_REFUSED_NONFINITE: return "refused: the measurement holds NaN or inf";
+    case AMSFE_REFUSED_TOO_OLD: return "refused: older than the history kept (buffer_steps)";
+    case AMSFE_REFUSED_FUTURE: return "refused: exposure after the current step";
+    case AMSFE_REFUSED_INDEFINITE:
+      return "refused: the A1 update gives an indefinite covariance over this lag";
+    case AMSFE_REFUSED_NO_CLONE: return "refused: not a scheduled exposure (no clone)";
+    case AMSFE_REFUSED_NO_CLONE_LEFT:
+      return "refused: its clone was used already or is older than camera_max_delay";
+    case AMSFE_REFUSED_FULL: return "refused: max_frames_per_step frames stored for that step";
+    case AMSFE_IGNORED: return "ignored (the encoders estimator uses no frames)";
+    case AMSFE_ERR_INPUT: return "error: NULL pointer or non-finite input u";
+    case AMSFE_ERR_NOT_PD: return "error: the covariance lost positive definiteness";
+    case AMSFE_ERR_NONFINITE: return "error: the model gave NaN or inf";
+    case AMSFE_ERR_S_NOT_PD: return "error: an innovation covariance is not positive definite";
+    case AMSFE_ERR_FAILED: return "error: an earlier call failed; call amsfe_est_reset";
+    case AMSFE_ERR_CONFIG: return "error: bad parameter block";
+    case AMSFE_ERR_MEMORY: return "error: memory block too small or not 16-byte aligned";
+    default: return "unknown status";
+  }
+}

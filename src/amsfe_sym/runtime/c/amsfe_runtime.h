@@ -1,0 +1,135 @@
+/* amsfe_runtime.h: the estimators of amsfe_sym as plain C (docs/runtime-c.md).
+ *
+ * Compiled into every generated robot library together with the robot's generated
+ * functions (est_predict, est_encoder_update, ...); a program links only that library and
+ * includes this header.  One estimator object holds the posterior x(k|k), P(k|k) and the
+ * history its late-frame update needs, all inside one memory block the caller owns; no call
+ * after amsfe_est_init allocates.
+ *
+ * A step of the filter, k -> k+1, is one amsfe_est_tick (predict with u over [k, k+1],
+ * paper eqs. 13-14, then the encoder sample taken at k+1, eqs. 15-17), followed by one
+ * amsfe_est_camera_frame per camera frame delivered at k+1 (in increasing exposure step, as
+ * the Python reference sorts them).  The control law will be appended to the tick (encoder
+ * sample in, torque out): see docs/runtime-c.md.
+ *
+ * Matrices are dense, column-major (symmetric ones read the same either way).
+ */
+#ifndef AMSFE_RUNTIME_H
+#define AMSFE_RUNTIME_H
+
+#include <stddef.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ---- statuses: >= 0 a decision, < 0 an error (the estimator then refuses to go on until
+ * amsfe_est_reset; its state is left as it was before the failing call where possible). */
+enum amsfe_status {
+  AMSFE_OK = 0,                  /* tick done, or frame applied */
+  AMSFE_GATED = 1,               /* frame innovation beyond the chi-square gate: not used */
+  AMSFE_REFUSED_NONFINITE = 2,   /* the measurement holds NaN or inf: not used */
+  AMSFE_REFUSED_TOO_OLD = 3,     /* exposure older than the history kept (buffer_steps) */
+  AMSFE_REFUSED_FUTURE = 4,      /* exposure after the current step: nothing changed */
+  AMSFE_REFUSED_INDEFINITE = 5,  /* oosm: A1 gives an indefinite covariance over this lag */
+  AMSFE_REFUSED_NO_CLONE = 6,    /* cloning: the exposure was not scheduled (no clone) */
+  AMSFE_REFUSED_NO_CLONE_LEFT = 7, /* cloning: its clone was used already or has expired */
+  AMSFE_REFUSED_FULL = 8,        /* replay: max_frames_per_step frames stored for that step */
+  AMSFE_IGNORED = 9,             /* encoders: frames are not used */
+  AMSFE_ERR_INPUT = -1,          /* NULL pointer, or u holds NaN or inf: nothing changed */
+  AMSFE_ERR_NOT_PD = -2,         /* P(k|k) (or a clone's block) lost positive definiteness */
+  AMSFE_ERR_NONFINITE = -3,      /* the model (transition, inverse, camera) gave NaN or inf */
+  AMSFE_ERR_S_NOT_PD = -4,       /* an innovation covariance H P H^T + R is not PD */
+  AMSFE_ERR_FAILED = -5,         /* an earlier call failed: call amsfe_est_reset */
+  AMSFE_ERR_CONFIG = -6,         /* bad parameter block (see amsfe_est_init) */
+  AMSFE_ERR_MEMORY = -7          /* the memory block is too small or misaligned */
+};
+
+enum amsfe_estimator {
+  AMSFE_ENCODERS = 0, /* encoder updates only */
+  AMSFE_NAIVE = 1,    /* a late frame used as if taken now */
+  AMSFE_OOSM = 2,     /* the paper's A1 over the lag (eqs. 19-27) */
+  AMSFE_REPLAY = 3,   /* rewind to the exposure and re-filter (exact, linear-Gaussian) */
+  AMSFE_CLONING = 4   /* stochastic cloning at each scheduled exposure (exact) */
+};
+
+/* Sizes of the library's model: n joints, N = 4n + p states, nw = 2n + p noise inputs,
+ * ne = 2n encoder values, clone_slots clones the cloning functions carry. */
+typedef struct {
+  int n, N, nw, ne, nc, clone_slots;
+} amsfe_dims;
+
+/* Parameter block: copied by amsfe_est_init (the arrays need not outlive the call). */
+typedef struct {
+  int estimator;          /* enum amsfe_estimator */
+  int buffer_steps;       /* history kept for late frames [steps] (>= camera delay) */
+  int camera_iterations;  /* iterated-EKF steps of a frame applied now (naive, oosm lag 0,
+                             replay); 1 = plain EKF */
+  int camera_period;      /* l [steps]; 0 = unknown (cloning needs it) */
+  int camera_phase;       /* exposures at k % l == phase */
+  int camera_max_delay; /* cloning drops a clone this many steps after exposure; -1 =
+                             buffer_steps */
+  int max_frames_per_step; /* replay: frames stored per step (>= 1) */
+  double gate_camera;     /* NIS threshold chi2.ppf(p, 2); INFINITY disables the gate */
+  double gate_encoder;    /* the same for encoder samples (INFINITY: not gated) */
+  const double *qw;       /* [nw] diagonal of Qw (eq. 3), >= 0 */
+  const double *r_encoder; /* [ne] diagonal of the encoder R, > 0 */
+  const double *r_camera; /* [2] diagonal of the camera R [px^2], > 0 */
+  const double *x0;       /* [N] initial x(k0|k0) */
+  const double *P0;       /* [N*N] initial P(k0|k0), symmetric positive definite */
+  long k0;                /* step index of x0 */
+} amsfe_params;
+
+/* Counters and the outcome of the last calls. */
+typedef struct {
+  long k;                  /* step of the current posterior */
+  int failed;              /* an error status was returned; 0 after reset */
+  int last_error;          /* that status */
+  int encoder_accepted;    /* last tick: an encoder update was applied */
+  double encoder_nis;      /* last tick: its NIS (NaN when no usable sample) */
+  int replayed_steps;      /* replay: steps re-filtered by the last camera_frame */
+  int clones;              /* cloning: clones in flight that survive this step */
+  long ticks, encoder_updates, encoder_gated, encoder_missing;
+  long frames_applied, frames_gated, frames_refused, frames_ignored;
+} amsfe_diag;
+
+typedef struct amsfe_est amsfe_est;
+
+/* The library's model sizes. */
+void amsfe_dims_get(amsfe_dims *dims);
+
+/* Bytes of the memory block amsfe_est_init needs for these parameters (0: bad parameters). */
+size_t amsfe_est_memory_size(const amsfe_params *params);
+
+/* Build an estimator inside `memory` (caller-owned, `size` bytes, 16-byte aligned; it holds
+ * the object and every history buffer).  On success *out points into `memory`.  Returns
+ * AMSFE_OK, AMSFE_ERR_CONFIG (bad parameter: negative variance, P0 not PD, cloning without a
+ * period or with more clones in flight than clone_slots, ...) or AMSFE_ERR_MEMORY. */
+int amsfe_est_init(amsfe_est **out, const amsfe_params *params, void *memory, size_t size);
+
+/* Convenience: malloc the block and init (NULL on failure, *status says why). */
+amsfe_est *amsfe_est_create(const amsfe_params *params, int *status);
+void amsfe_est_destroy(amsfe_est *est);
+
+/* Back to x0, P0, k0 with empty history and zero counters. */
+void amsfe_est_reset(amsfe_est *est);
+
+/* One step k -> k+1: predict with u [n] over [k, k+1], then the encoder sample z_encoder
+ * [ne] taken at k+1 (NULL: none; NaN/inf: not used, counted as missing). */
+int amsfe_est_tick(amsfe_est *est, const double *z_encoder, const double *u);
+
+/* A camera frame z [2] exposed at step `exposure_step` (<= the current step), delivered now.
+ * *nis (may be NULL) receives its NIS, or NaN when it did not reach the update. */
+int amsfe_est_camera_frame(amsfe_est *est, const double *z, long exposure_step, double *nis);
+
+/* Copy out x(k|k) [N] and P(k|k) [N*N] (either may be NULL). */
+void amsfe_est_state(const amsfe_est *est, double *x, double *P);
+void amsfe_est_diagnostics(const amsfe_est *est, amsfe_diag *diag);
+
+/* A short English name of a status. */
+const char *amsfe_status_string(int status);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* AMSFE_RUNTIME_H */

@@ -1,0 +1,404 @@
+"""The compiled estimators: the C runtime of a generated library driven through ctypes.
+
+:class:`CompiledEstimator` has the interface of the Python estimators
+(:class:`~amsfe_sym.estimation.base.Estimator`: ``step(u, z_encoder, frames) -> StepReport``,
+``x``, ``P``, ``k``) and the same input checks (it inherits them), but every number is
+computed by the library's C runtime (``runtime/c/amsfe_runtime.{c,h}`` over the generated
+``est_*`` functions, docs/runtime-c.md): a step is one ``amsfe_est_tick`` (predict, eqs.
+13-14, encoder update, 15-17) and one ``amsfe_est_camera_frame`` per usable frame, in
+increasing exposure step.  The Python estimators stay the reference; the tests require both
+to agree to 1e-8 with the same decisions.
+
+The C runtime takes diagonal noise covariances (``Qw``, encoder ``R``, camera ``R``): a
+full matrix is refused with :class:`~amsfe_sym.errors.ConfigError`.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amsfe_sym.errors import ConfigError, EstimatorError, describe
+from amsfe_sym.estimation.base import Estimator, StepReport
+from amsfe_sym.estimation.models import CameraFrame
+from amsfe_sym.runtime.models import CameraMeasurement, CompiledTransition, EncoderMeasurement
+
+__all__ = [
+    "COMPILED_ESTIMATORS",
+    "STATUS",
+    "CompiledEstimator",
+    "RuntimeDiagnostics",
+    "make_compiled_estimator",
+    "write_log",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Status codes of amsfe_runtime.h.
+STATUS = {
+    "ok": 0,
+    "gated": 1,
+    "refused_nonfinite": 2,
+    "refused_too_old": 3,
+    "refused_future": 4,
+    "refused_indefinite": 5,
+    "refused_no_clone": 6,
+    "refused_no_clone_left": 7,
+    "refused_full": 8,
+    "ignored": 9,
+}
+
+
+class _Params(ctypes.Structure):
+    _fields_ = [
+        ("estimator", ctypes.c_int),
+        ("buffer_steps", ctypes.c_int),
+        ("camera_iterations", ctypes.c_int),
+        ("camera_period", ctypes.c_int),
+        ("camera_phase", ctypes.c_int),
+        ("camera_max_delay", ctypes.c_int),
+        ("max_frames_per_step", ctypes.c_int),
+        ("gate_camera", ctypes.c_double),
+        ("gate_encoder", ctypes.c_double),
+        ("qw", ctypes.c_void_p),
+        ("r_encoder", ctypes.c_void_p),
+        ("r_camera", ctypes.c_void_p),
+        ("x0", ctypes.c_void_p),
+        ("P0", ctypes.c_void_p),
+        ("k0", ctypes.c_long),
+    ]
+
+
+class RuntimeDiagnostics(ctypes.Structure):
+    """``amsfe_diag`` of amsfe_runtime.h: counters and the outcome of the last calls."""
+
+    _fields_ = [
+        ("k", ctypes.c_long),
+        ("failed", ctypes.c_int),
+        ("last_error", ctypes.c_int),
+        ("encoder_accepted", ctypes.c_int),
+        ("encoder_nis", ctypes.c_double),
+        ("replayed_steps", ctypes.c_int),
+        ("clones", ctypes.c_int),
+        ("ticks", ctypes.c_long),
+        ("encoder_updates", ctypes.c_long),
+        ("encoder_gated", ctypes.c_long),
+        ("encoder_missing", ctypes.c_long),
+        ("frames_applied", ctypes.c_long),
+        ("frames_gated", ctypes.c_long),
+        ("frames_refused", ctypes.c_long),
+        ("frames_ignored", ctypes.c_long),
+    ]
+
+
+class _Dims(ctypes.Structure):
+    _fields_ = [(k, ctypes.c_int) for k in ("n", "N", "nw", "ne", "nc", "clone_slots")]
+
+
+_P = ctypes.c_void_p
+
+
+def _bind(cdll: ctypes.CDLL) -> dict[str, Any]:
+    spec: dict[str, tuple[Any, list[Any]]] = {
+        "amsfe_dims_get": (None, [_P]),
+        "amsfe_est_memory_size": (ctypes.c_size_t, [_P]),
+        "amsfe_est_init": (ctypes.c_int, [_P, _P, _P, ctypes.c_size_t]),
+        "amsfe_est_reset": (None, [_P]),
+        "amsfe_est_tick": (ctypes.c_int, [_P, _P, _P]),
+        "amsfe_est_camera_frame": (ctypes.c_int, [_P, _P, ctypes.c_long, _P]),
+        "amsfe_est_state": (None, [_P, _P, _P]),
+        "amsfe_est_diagnostics": (None, [_P, _P]),
+        "amsfe_status_string": (ctypes.c_char_p, [ctypes.c_int]),
+    }
+    out = {}
+    for name, (restype, argtypes) in spec.items():
+        fn = cdll[name]
+        fn.restype = restype
+        fn.argtypes = argtypes
+        out[name] = fn
+    return out
+
+
+def _diagonal(name: str, M: Any) -> FloatArray:
+    arr = np.asarray(M, dtype=np.float64)
+    d = np.diag(arr).copy()
+    if not np.array_equal(arr, np.diag(d)):
+        raise ConfigError(
+            describe(
+                name,
+                "a diagonal matrix (the C runtime takes its diagonal as a tuning input)",
+                "off-diagonal entries",
+                "use a diagonal covariance, or the Python estimator",
+            )
+        )
+    return d
+
+
+class CompiledEstimator(Estimator):
+    """An estimator computed by the library's C runtime (see the module docstring).
+
+    Args:
+        model: A :class:`~amsfe_sym.runtime.models.CompiledTransition` (its diagonal ``Qw``).
+        encoder: An :class:`~amsfe_sym.runtime.models.EncoderMeasurement` of the same library.
+        camera: A :class:`~amsfe_sym.runtime.models.CameraMeasurement` of the same library.
+        x0, P0, config, k0: As for :class:`~amsfe_sym.estimation.base.Estimator`.
+        max_frames_per_step: ``replay``: frames stored per step.
+
+    Raises:
+        ConfigError: Other model types, a non-diagonal covariance, or a configuration the
+            runtime refuses (e.g. ``cloning`` with more clones in flight than the library's
+            clone slots).
+    """
+
+    code: ClassVar[int]
+
+    def __init__(self, *args: Any, max_frames_per_step: int = 4, **kwargs: Any) -> None:
+        self._max_frames = max_frames_per_step
+        super().__init__(*args, **kwargs)
+
+    def _setup(self) -> None:
+        model, enc, cam = self.model, self.encoder, self.camera
+        if not (
+            isinstance(model, CompiledTransition)
+            and isinstance(enc, EncoderMeasurement)
+            and isinstance(cam, CameraMeasurement)
+        ):
+            raise ConfigError(
+                describe(
+                    "models of a compiled estimator",
+                    "CompiledTransition, EncoderMeasurement, CameraMeasurement",
+                    f"{type(model).__name__}, {type(enc).__name__}, {type(cam).__name__}",
+                    "build them from the generated library (amsfe_sym.runtime.models)",
+                )
+            )
+        lib = model.lib
+        self.lib = lib
+        cdll = ctypes.CDLL(str(lib.library_path))
+        self._c = _bind(cdll)
+        dims = _Dims()
+        self._c["amsfe_dims_get"](ctypes.byref(dims))
+        self.dims = dims
+        cfg = self.config
+        self._arrays = [
+            _diagonal("Qw", model.Qw),
+            _diagonal("encoder R", self.R_encoder),
+            _diagonal("camera R", self.R_camera),
+            self.x.copy(),
+            np.asfortranarray(self.P),
+        ]
+        ptr = [a.ctypes.data for a in self._arrays]
+        latency = cfg.camera_max_delay
+        self._params = _Params(
+            self.code,
+            cfg.buffer_steps,
+            cfg.camera_iterations,
+            cfg.camera_period or 0,
+            cfg.camera_phase,
+            -1 if latency is None else latency,
+            self._max_frames,
+            self._gate_camera,
+            self._gate_encoder,
+            *ptr,
+            self.k,
+        )
+        size = self._c["amsfe_est_memory_size"](ctypes.byref(self._params))
+        if size == 0:
+            raise ConfigError(
+                describe(
+                    f"compiled {self.name} configuration",
+                    "parameters the C runtime accepts",
+                    f"{cfg} (clone slots in the library: {dims.clone_slots})",
+                    "check variances > 0, camera_period for cloning, and that "
+                    "camera_max_delay // camera_period + 1 <= clone slots",
+                )
+            )
+        self._mem = np.zeros(size // 8 + 4)  # numpy data is 16-byte aligned
+        handle = ctypes.c_void_p()
+        status = self._c["amsfe_est_init"](
+            ctypes.byref(handle), ctypes.byref(self._params), self._mem.ctypes.data, size
+        )
+        if status != 0:
+            raise ConfigError(
+                describe("amsfe_est_init", "AMSFE_OK", self.status_string(status), "fix the inputs")
+            )
+        self._h = handle
+        self._xbuf = np.zeros(self.nx)
+        self._Pbuf = np.zeros((self.nx, self.nx), order="F")
+        self._zbuf = np.zeros(int(enc.dim))
+        self._ubuf = np.zeros(self.dims.n)
+        self._fbuf = np.zeros(2)
+        self._nis = ctypes.c_double()
+        self._diag = RuntimeDiagnostics()
+        self._fetch()
+
+    # ------------------------------------------------------------------ C calls
+    def status_string(self, status: int) -> str:
+        """The runtime's description of a status code."""
+        text: bytes = self._c["amsfe_status_string"](status)
+        return text.decode()
+
+    def diagnostics(self) -> RuntimeDiagnostics:
+        """The runtime's counters (a fresh copy)."""
+        diag = RuntimeDiagnostics()
+        self._c["amsfe_est_diagnostics"](self._h, ctypes.byref(diag))
+        return diag
+
+    def _fetch(self) -> None:
+        self._c["amsfe_est_state"](self._h, self._xbuf.ctypes.data, self._Pbuf.ctypes.data)
+        self.x = self._xbuf.copy()
+        self.P = np.ascontiguousarray(self._Pbuf)
+
+    def _error(self, what: str, status: int) -> EstimatorError:
+        return EstimatorError(
+            describe(
+                f"compiled {self.name}: {what} at step {self.k + 1}",
+                "a usable numerical result",
+                f"status {status}: {self.status_string(status)}",
+                "check the inputs and the model at the current state (the runtime must be "
+                "reset before it runs again)",
+            )
+        )
+
+    def _step(
+        self,
+        u: FloatArray,
+        z_encoder: FloatArray | None,
+        frames: list[CameraFrame],
+        report: StepReport,
+    ) -> None:
+        self._ubuf[:] = u
+        zp = None
+        if z_encoder is not None:
+            self._zbuf[:] = z_encoder
+            zp = self._zbuf.ctypes.data
+        status = self._c["amsfe_est_tick"](self._h, zp, self._ubuf.ctypes.data)
+        if status < 0:
+            raise self._error("tick", status)
+        replayed = 0
+        for frame in frames:
+            self._report_frame(frame, report)
+            self._c["amsfe_est_diagnostics"](self._h, ctypes.byref(self._diag))
+            replayed = max(replayed, self._diag.replayed_steps)
+        d = self._diag
+        self._c["amsfe_est_diagnostics"](self._h, ctypes.byref(d))
+        # the reference counts the steps re-filtered beyond the regular k -> k+1 one; the
+        # runtime's counter includes that one (its tick ran it before the frame came)
+        report.replayed_steps = max(0, replayed - 1)
+        report.clones = d.clones
+        if z_encoder is not None:
+            report.encoder_nis = float(d.encoder_nis)
+            report.encoder_accepted = bool(d.encoder_accepted)
+            if not d.encoder_accepted:
+                report.rejections.append(
+                    f"encoder gated out: NIS {d.encoder_nis:.4g} > {self._gate_encoder:.4g}"
+                )
+        self._fetch()
+
+    def _report_frame(self, frame: CameraFrame, report: StepReport) -> None:
+        kappa = frame.exposure_step
+        self._fbuf[:] = frame.z
+        status = self._c["amsfe_est_camera_frame"](
+            self._h, self._fbuf.ctypes.data, kappa, ctypes.byref(self._nis)
+        )
+        nis = float(self._nis.value)
+        if status < 0:
+            raise self._error(f"camera frame kappa={kappa}", status)
+        if status in (STATUS["ok"], STATUS["gated"]):
+            report.frame_result(kappa, status == STATUS["ok"], nis, self._gate_camera)
+        elif status == STATUS["refused_indefinite"]:
+            report.reject(
+                f"camera frame kappa={kappa} (lag {self.k + 1 - kappa}): the A1 update gives an "
+                "indefinite covariance (the one-step retrodiction does not hold over this lag; "
+                "use 'replay' or 'cloning')"
+            )
+        else:
+            report.reject(f"camera frame kappa={kappa}: {self.status_string(status)}")
+
+    def _check_covariance(self) -> None:
+        """Done by the runtime after every call (a failure is an error status)."""
+
+    def reset(self) -> None:
+        """Back to ``x0, P0, k0`` with empty history."""
+        self._c["amsfe_est_reset"](self._h)
+        self.k = self.k0
+        self._fetch()
+
+
+def _subclass(name: str, code: int, uses_frames: bool = True) -> type[CompiledEstimator]:
+    return type(
+        f"Compiled{name.capitalize()}Estimator",
+        (CompiledEstimator,),
+        {"name": name, "code": code, "uses_frames": uses_frames, "__module__": __name__},
+    )
+
+
+#: The compiled estimators by name (the names of ``amsfe_sym.estimation.ESTIMATORS``).
+COMPILED_ESTIMATORS: dict[str, type[CompiledEstimator]] = {
+    "encoders": _subclass("encoders", 0, uses_frames=False),
+    "naive": _subclass("naive", 1),
+    "oosm": _subclass("oosm", 2),
+    "replay": _subclass("replay", 3),
+    "cloning": _subclass("cloning", 4),
+}
+
+
+def make_compiled_estimator(name: str, **kwargs: Any) -> CompiledEstimator:
+    """Build the compiled estimator ``name`` with the arguments of ``make_estimator``."""
+    if name not in COMPILED_ESTIMATORS:
+        raise ConfigError(
+            describe(
+                "compiled estimator name",
+                "one of " + ", ".join(repr(n) for n in COMPILED_ESTIMATORS),
+                repr(name),
+                "pick a name from that list",
+            )
+        )
+    return COMPILED_ESTIMATORS[name](**kwargs)
+
+
+def write_log(
+    path: str | os.PathLike[str],
+    est: CompiledEstimator,
+    u: FloatArray,
+    z: Sequence[FloatArray | None],
+    frames: Sequence[Sequence[CameraFrame]],
+) -> Path:
+    """Write the log read by ``examples/estimate_from_log.c`` (format in its header comment).
+
+    Args:
+        path: Output file.
+        est: A compiled estimator: its parameter block (as built at construction) is written.
+        u: Inputs ``u[j]`` over ``[k0 + j, k0 + j + 1]``, shape ``(K, n)``.
+        z: Encoder samples taken at ``k0 + j + 1`` (``None``: none), ``K`` entries.
+        frames: Frames delivered at ``k0 + j + 1``, ``K`` entries.
+
+    Returns:
+        The path written.
+    """
+    p = est._params
+
+    def nums(values: Any) -> str:
+        return " ".join(repr(float(v)) for v in np.ravel(values, order="F"))
+
+    lines = [
+        f"params {p.estimator} {p.buffer_steps} {p.camera_iterations} {p.camera_period} "
+        f"{p.camera_phase} {p.camera_max_delay} {p.max_frames_per_step} "
+        f"{p.gate_camera!r} {p.gate_encoder!r} {p.k0}",
+    ]
+    for key, arr in zip(("qw", "r_encoder", "r_camera", "x0", "P0"), est._arrays, strict=True):
+        lines.append(f"{key} {nums(arr)}")
+    ne = est.dims.ne
+    for j in range(len(u)):
+        zj = z[j]
+        lines.append(f"tick {nums(u[j])} {nums(np.full(ne, np.nan) if zj is None else zj)}")
+        for fr in sorted(frames[j], key=lambda f: f.exposure_step):
+            lines.append(f"frame {fr.exposure_step} {nums(fr.z)}")
+    out = Path(path)
+    out.write_text("\n".join(lines) + "\n")
+    return out

@@ -1,0 +1,300 @@
+"""The estimators' numerics as generated functions (the compiled runtime, docs/runtime-c.md).
+
+Each function is an MX graph over the robot's own ``transition_step`` and ``camera_measure``
+(so the model is emitted once, whatever the integrator) with dense matrix products emitted as
+loops (code grows as ``N^2``, not ``N^3``), and small SX helpers for the Cholesky
+factorisations whose pivots decide positive definiteness.  They compute; they never decide:
+the hand-written C glue (``runtime/c/amsfe_runtime.c``) compares NIS with the gates, reads the
+``*_ok`` flags and keeps the history buffers.  Every function mirrors one function of the Python
+reference (``estimation/ekf.py``, ``estimation/oosm.py``) line by line, so both paths agree to
+rounding.  Tuning enters as inputs: ``qw`` (diagonal of Qw), ``r`` (diagonal of R).
+
+Names and signatures (``N`` states, ``n`` joints, ``m = 2n + p`` noise inputs, ``ne = 2n``):
+
+- ``est_predict(x[N], P[N,N], u[n], qw[m]) -> x_pred, P_pred, A, Qd`` (eqs. 13-14);
+- ``est_encoder_update(x, P, z[ne], r[ne]) -> x_post, P_post, nis, nu[ne], s_ok`` (15-17,
+  Joseph form);
+- ``est_camera_update(x_prior, P, x_lin, z[2], r[2]) -> x_post, P_post, nis, s_ok, chk``: one
+  Gauss-Newton step of the iterated EKF linearised at ``x_lin`` (``x_lin = x_prior``: the plain
+  EKF update);
+- ``est_chol_check(P) -> ok``: 1 when Cholesky succeeds (every pivot > 0, no NaN);
+- ``est_oosm_accumulate(Phi, Q, A, Qd) -> A Phi, A Q A^T + Qd`` (eq. 23, one step);
+- ``est_oosm_retrodict(x, P, Q, has_last, nu, P_prior, r) -> x_shift, M, C, s_ok``
+  (eqs. 24-27 corrected, before the backward map);
+- ``est_oosm_correct(x, P, x_r, M, C, Phi, z[2], r[2]) -> x_new, P_new, nis, szz_ok, p_ok,
+  chk`` (eqs. 19-20, 26);
+- ``est_clone_predict(xa[Na], Pa[Na,Na], u, qw) -> xa_pred, Pa_pred, P_state``,
+  ``est_clone_encoder(xa, Pa, z[ne], r[ne]) -> xa_post, Pa_post, nis, s_ok`` and
+  ``est_clone_camera(xa, Pa, c[N], sel[S], z[2], r[2]) -> xa_post, Pa_post, nis, s_ok, chk``:
+  stochastic cloning on the augmented state ``xa = [x; c_1; ..; c_S]`` with ``S`` clone slots
+  (``Na = (1 + S) N``); a free slot holds zeros (its rows and columns stay exactly zero), the
+  one-hot ``sel`` picks the slot the frame's clone is in, ``c`` is that clone.
+
+``chk`` is the sum of the absolute values of the model outputs the update used (``h``,
+``dh/dx``, ``Hc Fb``): non-finite exactly when one of them is, which the Python reference
+raises on.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+__all__ = ["estimator_functions"]
+
+
+def _chol_factor(S: ca.SX) -> tuple[list[list[ca.SX]], ca.SX]:
+    """Unrolled lower Cholesky factor of ``S`` and a flag: 1 when every pivot is > 0.
+
+    A NaN pivot compares false, so the flag is 0 for a non-finite ``S`` too (LAPACK ``potrf``
+    refuses the same matrices).
+    """
+    m = S.shape[0]
+    L = [[ca.SX(0.0) for _ in range(m)] for _ in range(m)]
+    ok = ca.SX(1.0)
+    for j in range(m):
+        d = S[j, j]
+        for k in range(j):
+            d = d - L[j][k] * L[j][k]
+        ok = ok * (d > 0)
+        ljj = ca.sqrt(d)
+        L[j][j] = ljj
+        for i in range(j + 1, m):
+            s = S[i, j]
+            for k in range(j):
+                s = s - L[i][k] * L[j][k]
+            L[i][j] = s / ljj
+    return L, ok
+
+
+def _chol_solve_function(m: int, cols: int, name: str) -> ca.Function:
+    """SX ``(S[m,m], B[m,cols]) -> (S^-1 B, ok)`` by Cholesky (``ok`` as in _chol_factor)."""
+    S, B = ca.SX.sym("S", m, m), ca.SX.sym("B", m, cols)
+    L, ok = _chol_factor(S)
+    X = []
+    for c in range(cols):
+        y: list[ca.SX] = []
+        for i in range(m):  # L y = b
+            s = B[i, c]
+            for k in range(i):
+                s = s - L[i][k] * y[k]
+            y.append(s / L[i][i])
+        xs: list[ca.SX] = [ca.SX(0.0)] * m
+        for i in range(m - 1, -1, -1):  # L^T x = y
+            s = y[i]
+            for k in range(i + 1, m):
+                s = s - L[k][i] * xs[k]
+            xs[i] = s / L[i][i]
+        X.append(ca.vertcat(*xs))
+    return ca.Function(name, [S, B], [ca.horzcat(*X), ok], ["S", "B"], ["X", "ok"])
+
+
+def _chol_check_function(N: int) -> ca.Function:
+    P = ca.SX.sym("P", N, N)
+    _, ok = _chol_factor(P)
+    return ca.Function("est_chol_check", [P], [ok], ["P"], ["ok"])
+
+
+def _sym(X: ca.MX) -> ca.MX:
+    return 0.5 * (X + X.T)
+
+
+def _abs_sum(*terms: ca.MX) -> ca.MX:
+    return sum((ca.sum1(ca.sum2(ca.fabs(t))) for t in terms), ca.MX(0.0))
+
+
+def _joseph(
+    x: ca.MX, P: ca.MX, nu: ca.MX, H: ca.MX | ca.DM, r: ca.MX, solve: ca.Function
+) -> tuple[ca.MX, ca.MX, ca.MX, ca.MX]:
+    """ekf.joseph_update: ``(x+, P+, nis, s_ok)``, Joseph form, no gating (the glue gates)."""
+    N = P.shape[0]
+    PHt = ca.mtimes(P, H.T)
+    S = _sym(ca.mtimes(H, PHt) + ca.diag(r))
+    X, ok = solve(S, ca.horzcat(nu, PHt.T))
+    S_inv_nu, K = X[:, 0], X[:, 1:].T
+    nis = ca.dot(nu, S_inv_nu)
+    x_post = x + ca.mtimes(PHt, S_inv_nu)
+    IKH = ca.DM.eye(N) - ca.mtimes(K, H)
+    KR = K * ca.repmat(r.T, N, 1)
+    P_post = _sym(ca.mtimes(ca.mtimes(IKH, P), IKH.T) + ca.mtimes(KR, K.T))
+    return x_post, P_post, nis, ok
+
+
+def estimator_functions(
+    functions: dict[str, ca.Function],
+    n: int,
+    p: int,
+    layout: dict[str, slice],
+    clone_slots: int,
+) -> list[ca.Function]:
+    """The estimator functions of one robot, built over its model functions.
+
+    Args:
+        functions: The robot's functions (needs ``transition_step`` and ``camera_measure``).
+        n: Joints.
+        p: Parameters theta.
+        layout: State blocks ``q, qd, qm, qmd, theta`` as slices (eq. 2).
+        clone_slots: ``S``, clones the cloning functions carry (camera delay // period + 1).
+
+    Returns:
+        The functions listed in the module docstring.
+    """
+    N, m, ne = 4 * n + p, 2 * n + p, 2 * n
+    step, cam = functions["transition_step"], functions["camera_measure"]
+    sq, sqm, sqmd, sth = layout["q"], layout["qm"], layout["qmd"], layout["theta"]
+    H_enc = ca.DM.zeros(ne, N)
+    for i in range(n):
+        H_enc[i, sqm.start + i] = 1.0
+        H_enc[n + i, sqmd.start + i] = 1.0
+    solve_enc = _chol_solve_function(ne, 1 + N, "est_solve_encoder")
+    solve_cam = _chol_solve_function(2, 1 + N, "est_solve_camera")
+    solve_retro = _chol_solve_function(ne, N, "est_solve_retro")
+    chol_check = _chol_check_function(N)
+
+    def sym(name: str, rows: int, cols: int = 1) -> ca.MX:
+        return ca.MX.sym(name, rows, cols)
+
+    x, P, u, qw = sym("x", N), sym("P", N, N), sym("u", n), sym("qw", m)
+
+    def camera_h(xs: ca.MX) -> tuple[ca.MX, ca.MX]:
+        y, J, _depth = cam(xs[sq], xs[sth])
+        H = ca.MX.zeros(2, N)
+        H[:, sq] = J
+        return y, H
+
+    # eqs. (13)-(14)
+    x1, A, G = step(x, u)
+    Qd = ca.mtimes(G * ca.repmat(qw.T, N, 1), G.T)
+    predict = ca.Function(
+        "est_predict",
+        [x, P, u, qw],
+        [x1, _sym(ca.mtimes(ca.mtimes(A, P), A.T) + Qd), A, Qd],
+        ["x", "P", "u", "qw"],
+        ["x_pred", "P_pred", "A", "Qd"],
+    )
+
+    # eqs. (15)-(17), encoders (linear)
+    z_e, r_e = sym("z", ne), sym("r", ne)
+    nu_e = z_e - ca.mtimes(H_enc, x)
+    xe, Pe, nis_e, ok_e = _joseph(x, P, nu_e, H_enc, r_e, solve_enc)
+    encoder = ca.Function(
+        "est_encoder_update",
+        [x, P, z_e, r_e],
+        [xe, Pe, nis_e, nu_e, ok_e],
+        ["x", "P", "z", "r"],
+        ["x_post", "P_post", "nis", "nu", "s_ok"],
+    )
+
+    # camera, one iterated-EKF step at x_lin
+    x_lin, z_c, r_c = sym("x_lin", N), sym("z", 2), sym("r", 2)
+    y, Hc = camera_h(x_lin)
+    nu_c = z_c - y - ca.mtimes(Hc, x - x_lin)
+    xc, Pc, nis_c, ok_c = _joseph(x, P, nu_c, Hc, r_c, solve_cam)
+    camera = ca.Function(
+        "est_camera_update",
+        [x, P, x_lin, z_c, r_c],
+        [xc, Pc, nis_c, ok_c, _abs_sum(y, Hc)],
+        ["x_prior", "P", "x_lin", "z", "r"],
+        ["x_post", "P_post", "nis", "s_ok", "chk"],
+    )
+
+    # oosm, eq. (23) one step of the accumulation
+    Phi, Q, Aj, Qj = sym("Phi", N, N), sym("Q", N, N), sym("A", N, N), sym("Qd", N, N)
+    accumulate = ca.Function(
+        "est_oosm_accumulate",
+        [Phi, Q, Aj, Qj],
+        [ca.mtimes(Aj, Phi), ca.mtimes(ca.mtimes(Aj, Q), Aj.T) + Qj],
+        ["Phi", "Q", "A", "Qd"],
+        ["Phi_next", "Q_next"],
+    )
+
+    # oosm retrodiction, eqs. (24)-(27) corrected (oosm.a1_retrodict)
+    has_last, nu_l, P_prior = sym("has_last", 1), sym("nu", ne), sym("P_prior", N, N)
+    Qs = _sym(Q)
+    S_l = _sym(ca.mtimes(H_enc, ca.mtimes(P_prior, H_enc.T)) + ca.diag(r_e))
+    HQ = ca.mtimes(H_enc, Qs)
+    S_inv_HQ, ok_l = solve_retro(S_l, HQ)
+    v_hat = ca.mtimes(S_inv_HQ.T, nu_l)
+    Pvv = Qs - ca.mtimes(HQ.T, S_inv_HQ)
+    Pxv = Qs - ca.mtimes(ca.mtimes(P_prior, H_enc.T), S_inv_HQ)
+    D = P - Qs
+    last = has_last > 0
+    retrodict = ca.Function(
+        "est_oosm_retrodict",
+        [x, P, Q, has_last, nu_l, P_prior, r_e],
+        [
+            ca.if_else(last, x - v_hat, x),
+            ca.if_else(last, _sym(P + Pvv - Pxv - Pxv.T), D),
+            ca.if_else(last, P - Pxv, D),
+            ca.if_else(last, ok_l, 1.0),
+        ],
+        ["x", "P", "Q", "has_last", "nu", "P_prior", "r"],
+        ["x_shift", "M", "C", "s_ok"],
+    )
+
+    # oosm correction, eqs. (19)-(20), (26) (oosm.a1_correct)
+    x_r, M, C = sym("x_r", N), sym("M", N, N), sym("C", N, N)
+    y_r, Hr = camera_h(x_r)
+    G_r = ca.solve(Phi.T, Hr.T, "qr").T  # Hc Fb = Hc Phi^-1
+    Szz = _sym(ca.mtimes(ca.mtimes(G_r, M), G_r.T) + ca.diag(r_c))
+    nu_r = z_c - y_r
+    Pxz = ca.mtimes(C, G_r.T)
+    Xz, ok_z = solve_cam(Szz, ca.horzcat(nu_r, Pxz.T))
+    nis_r = ca.dot(nu_r, Xz[:, 0])
+    W = Xz[:, 1:].T
+    P_new = _sym(P - ca.mtimes(W, Pxz.T))
+    correct = ca.Function(
+        "est_oosm_correct",
+        [x, P, x_r, M, C, Phi, z_c, r_c],
+        [x + ca.mtimes(W, nu_r), P_new, nis_r, ok_z, chol_check(P_new), _abs_sum(y_r, Hr, G_r)],
+        ["x", "P", "x_r", "M", "C", "Phi", "z", "r"],
+        ["x_new", "P_new", "nis", "szz_ok", "p_ok", "chk"],
+    )
+
+    # cloning (estimation/cloning.py) on the augmented state with S slots
+    S_, Na = clone_slots, (1 + clone_slots) * N
+    xa, Pa = sym("xa", Na), sym("Pa", Na, Na)
+    xp, Pp, Ap, _Qp = predict(xa[:N], Pa[:N, :N], u, qw)
+    cross = ca.mtimes(Ap, Pa[:N, N:])
+    Pa_pred = ca.vertcat(ca.horzcat(Pp, cross), ca.horzcat(cross.T, Pa[N:, N:]))
+    clone_predict = ca.Function(
+        "est_clone_predict",
+        [xa, Pa, u, qw],
+        [ca.vertcat(xp, xa[N:]), Pa_pred, Pp],
+        ["xa", "Pa", "u", "qw"],
+        ["xa_pred", "Pa_pred", "P_state"],
+    )
+    H_aug = ca.horzcat(H_enc, ca.DM.zeros(ne, Na - N))
+    nu_a = z_e - ca.mtimes(H_aug, xa)
+    solve_enc_a = _chol_solve_function(ne, 1 + Na, "est_solve_clone_encoder")
+    xea, Pea, nis_ea, ok_ea = _joseph(xa, Pa, nu_a, H_aug, r_e, solve_enc_a)
+    clone_encoder = ca.Function(
+        "est_clone_encoder",
+        [xa, Pa, z_e, r_e],
+        [xea, Pea, nis_ea, ok_ea],
+        ["xa", "Pa", "z", "r"],
+        ["xa_post", "Pa_post", "nis", "s_ok"],
+    )
+    c, sel = sym("c", N), sym("sel", S_)
+    y_c, Hcc = camera_h(c)
+    Hca = ca.horzcat(ca.MX.zeros(2, N), *[sel[i] * Hcc for i in range(S_)])
+    solve_cam_a = _chol_solve_function(2, 1 + Na, "est_solve_clone_camera")
+    xca, Pca, nis_ca, ok_ca = _joseph(xa, Pa, z_c - y_c, Hca, r_c, solve_cam_a)
+    clone_camera = ca.Function(
+        "est_clone_camera",
+        [xa, Pa, c, sel, z_c, r_c],
+        [xca, Pca, nis_ca, ok_ca, _abs_sum(y_c, Hcc)],
+        ["xa", "Pa", "c", "sel", "z", "r"],
+        ["xa_post", "Pa_post", "nis", "s_ok", "chk"],
+    )
+    return [
+        predict,
+        encoder,
+        camera,
+        chol_check,
+        accumulate,
+        retrodict,
+        correct,
+        clone_predict,
+        clone_encoder,
+        clone_camera,
+    ]
