@@ -164,6 +164,9 @@ class _Printed(_SlidingBase):
         """The law's leading inputs and the state vector [q, qd, qm, qmd, theta] they mean."""
         return [x_hat], x_hat
 
+    def _pick(self, x_true: FloatArray, theta_true: FloatArray, x_hat: FloatArray) -> FloatArray:
+        return x_hat
+
     def torque(
         self,
         k: int,
@@ -174,7 +177,7 @@ class _Printed(_SlidingBase):
         z_enc: FloatArray,
     ) -> FloatArray:
         n = self.n
-        lead, x = self._law_inputs(x_hat, z_enc)
+        lead, x = self._law_inputs(self._pick(x_true, theta_true, x_hat), z_enc)
         q, qm, qmd = x[:n], x[2 * n : 3 * n], x[3 * n : 4 * n]
         q_d, qd_d, _ = self.reference(k, t)
         if self.gains["qmd_next"] == "predict":  # (1c) with u(k-1)
@@ -203,6 +206,26 @@ class AmsfePaper(_Printed):
 
     name = "amsfe-paper"
     law = "control_amsfe_paper"
+    gain_defaults: ClassVar[dict[str, Any]] = {**_Printed.gain_defaults, "state": "estimate"}
+
+    def __init__(
+        self, lib: ModelLibrary, trajectory: Trajectory, gains: Mapping[str, Any] | None = None
+    ) -> None:
+        super().__init__(lib, trajectory, gains)
+        if self.gains["state"] not in ("estimate", "true"):
+            raise ConfigError(
+                describe(
+                    "controller 'amsfe-paper' gain state",
+                    "'estimate' (the fusion estimate) or 'true' (an oracle)",
+                    repr(self.gains["state"]),
+                    "see docs/control.md",
+                )
+            )
+
+    def _pick(self, x_true: FloatArray, theta_true: FloatArray, x_hat: FloatArray) -> FloatArray:
+        if self.gains["state"] == "true":  # isolates the law from the estimator
+            return np.concatenate([x_true[: 4 * self.n], theta_true])
+        return x_hat
 
 
 @register

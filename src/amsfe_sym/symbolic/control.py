@@ -63,7 +63,6 @@ from __future__ import annotations
 import casadi as ca
 
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
-from amsfe_sym.symbolic.linalg import ldl_solve
 from amsfe_sym.symbolic.transition import Transition
 
 __all__ = ["CONTROL_GAINS", "build_control_functions", "fpow", "sat"]
@@ -107,7 +106,13 @@ class _Surface:
 
 
 def build_control_functions(tree: RigidBodyTree, tr: Transition) -> list[ca.Function]:
-    """The four generated control laws of the module docstring, for one robot."""
+    """The generated control laws of the module docstring, for one robot.
+
+    Code size: every product ``M(q) w`` is one RNEA pass (``rnea(q, 0, w)`` without gravity)
+    and ``b + M a`` is ``rnea(q, qd, a)``, never an assembled M (n passes); the baselines and
+    the cascade's motor reference are MX calls of one emitted function each, so nothing is
+    generated twice (the 6-DOF UR5: see docs/codegen.md).
+    """
     robot = tree.robot
     n, p_, T = tree.n, tree.p, float(robot.spec.model.T)
     N = 4 * n + p_
@@ -116,24 +121,27 @@ def build_control_functions(tree: RigidBodyTree, tr: Transition) -> list[ca.Func
     q, qd, qm, qmd, th = tr.split(x)
     g = {k: ca.SX.sym(k, 1 if k == "p" else n) for k in (*CONTROL_GAINS, *CASCADE_GAINS)}
     gin = [(k, g[k]) for k in CONTROL_GAINS]
-    cin = [(k, g[k]) for k in CASCADE_GAINS]
     q_d, qd_d = ca.SX.sym("q_d", n), ca.SX.sym("qd_d", n)
     Ks = tr.stiffness(th)
+    zero_n = ca.SX.zeros(n, 1)
+
+    def m_times(qq: ca.SX, w: ca.SX) -> ca.SX:  # M(qq) w in one RNEA pass
+        return tree.rnea(qq, zero_n, w, th, with_gravity=False)
 
     # ---------------------------------------------------------------- (37) and (54) as printed
     qmd_next, vt_prev = ca.SX.sym("qmd_next", n), ca.SX.sym("vt_prev", n)
     qbar = q + T * qd  # (29a)
-    Mbar = tree.mass_matrix(qbar, th)
-    Fhat = (
-        qd
-        - ldl_solve(Mbar, ca.mtimes(tree.mass_matrix(q, th), qd) + T * tr.f_link(q, qd, th))
-        + ldl_solve(Mbar, Mm * (qmd_next - qmd) + T * Fm * qmd)
-    )
-
+    # the link force of (1b), f = d/dq (1/2 qd^T M(q) qd) - g(q), by reverse AD of one pass
+    qs = ca.SX.sym("q_f", n)
+    ke = 0.5 * ca.dot(qd, tree.rnea(qs, zero_n, qd, th, with_gravity=False))
+    f_link = ca.substitute(ca.gradient(ke, qs), qs, q) - tree.gravity_torque(q, th)
     sf = _Surface(q, qd, q_d, qd_d, g["lam"], g["Lt"], g["p"], T)
     dv = sf.vt - vt_prev
     reach = T * (g["h"] * sf.s + g["eps"] * sat(sf.s, g["phi"]))
-    u = ca.mtimes(Mbar, Fhat + dv + sf.lam_terms - reach) / T
+    # u = Mbar/T [Fhat + dv + ...] with Mbar Fhat = Mbar qd - M(q) qd - T f + Mm (qmd+ - qmd)
+    # + T Fm qmd written out, so no solve is needed (F of (29b) at the estimates)
+    Mbar_F = m_times(qbar, qd) - m_times(q, qd) - T * f_link + Mm * (qmd_next - qmd) + T * Fm * qmd
+    u = (Mbar_F + m_times(qbar, dv + sf.lam_terms - reach)) / T
     law37 = _fn(
         "control_amsfe_paper",
         [
@@ -156,15 +164,14 @@ def build_control_functions(tree: RigidBodyTree, tr: Transition) -> list[ca.Func
     # ---------------------------------------------------------------- the cascade (ours)
     ref = ca.SX.sym("ref", 5 * n)  # q_d, qd_d, qdd_d, qddd_d, qdddd_d
     cf = ca.SX.sym("cf", 2 * n)  # command-filter state
-    rq, rqd, rqdd, _rj, _rs = (ref[i * n : (i + 1) * n] for i in range(5))
-    motor_ref = _motor_reference(tree, tr, ref, th)
-    qm_r, qmd_r, qmdd_r = motor_ref(ref, th)
+    mr = [ca.SX.sym(k, n) for k in ("qm_r", "qmd_r", "qmdd_r")]
+    qm_r, qmd_r, qmdd_r = mr
+    rq, rqd, rqdd = ref[:n], ref[n : 2 * n], ref[2 * n : 3 * n]
     sf = _Surface(q, qd, rq, rqd, g["lam"], g["Lt"], g["p"], T)
     vt_next = rqd + T * rqdd - g["Lt"] * sf.e_next
     dv = vt_next - sf.vt
     reach = T * (g["h"] * sf.s + g["eps"] * sat(sf.s, g["phi"]))
-    M = tree.mass_matrix(q, th)
-    tau = tree.bias(q, qd, th) + ca.mtimes(M, dv + sf.lam_terms - reach) / T
+    tau = tree.rnea(q, qd, (dv + sf.lam_terms - reach) / T, th)  # b + M a_d
     tau = ca.fmin(ca.fmax(tau, -g["tau_max"]), g["tau_max"])
     qm_d = q + tau / Ks
     # command filter on the feedback part dq = qm_d - qm_r (critically damped, bandwidth wf):
@@ -181,68 +188,70 @@ def build_control_functions(tree: RigidBodyTree, tr: Transition) -> list[ca.Func
     # overshooting)
     v_cmd = qmd_r + cd + ca.fmin(ca.fmax(0.5 * wm * (qm_r + c - qm), -vmax), vmax)
     u = Ks * (qm - q) + Fm * qmd + Mm * (qmdd_r + cdd + 2.0 * wm * (v_cmd - qmd))
-    cascade = _fn(
-        "control_amsfe",
-        [("x", x), ("ref", ref), ("cf", cf), *gin, *cin],
+    out_names = ["u", "s", "tau_d", "qm_d", "e_next", "bound", "cf_next", "dq"]
+    core = ca.Function(
+        "control_cascade_core",
+        [x, ref, cf, *g.values(), *mr],
         [
-            ("u", u),
-            ("s", sf.s),
-            ("tau_d", tau),
-            ("qm_d", qm_d),
-            ("e_next", sf.e_next),
-            ("bound", ca.fabs(dv + sf.lam_terms)),
-            ("cf_next", cf_next),
-            ("dq", dq),
+            ca.densify(e)
+            for e in (u, sf.s, tau, qm_d, sf.e_next, ca.fabs(dv + sf.lam_terms), cf_next, dq)
         ],
     )
+    mref = _motor_reference(tree, tr, n, p_)
 
-    # ---------------------------------------------------------------- the baselines (Lt = 0)
-    z, thz = ca.SX.sym("z", 2 * n), ca.SX.sym("theta", p_)
-    no_lt = [(k, v) for k, v in gin if k != "Lt"]
-    zero = ca.SX.zeros(n)
+    # MX wrappers: the law and its baselines call ``core`` / ``mref`` / ``law37`` (emitted once)
+    gm = {k: ca.MX.sym(k, 1 if k == "p" else n) for k in g}
+    xm, refm, cfm = ca.MX.sym("x", N), ca.MX.sym("ref", 5 * n), ca.MX.sym("cf", 2 * n)
+    zm, thm = ca.MX.sym("z", 2 * n), ca.MX.sym("theta", p_)
+    gain_names = [*CONTROL_GAINS, *CASCADE_GAINS]
 
-    def with_lt0(args: list[tuple[str, ca.SX]]) -> list[ca.SX]:
-        return [zero if k == "Lt" else v for k, v in args]
+    def gains_with(lt: ca.MX) -> list[ca.MX]:
+        return [lt if k == "Lt" else gm[k] for k in g]
 
-    # (54): the raw encoders stand for the link (q = qm, qd = qmd)
-    x_raw = ca.vertcat(z[:n], z[n:], z, thz)
-    printed_args = [("qmd_next", qmd_next), ("q_d", q_d), ("qd_d", qd_d), ("vt_prev", vt_prev)]
-    out54 = law37(x_raw, *with_lt0(printed_args + gin))
-    law54 = _fn(
-        "control_dtsmc_paper",
-        [("z", z), ("theta", thz), *printed_args, *no_lt],
-        list(zip(["u", "s", "vt", "e_next", "bound"], out54, strict=True)),
+    no_lt = [k for k in gain_names if k != "Lt"]
+    m_r = mref.call([refm, xm[4 * n :]])
+    cascade = ca.Function(
+        "control_amsfe",
+        [xm, refm, cfm, *(gm[k] for k in gain_names)],
+        core.call([xm, refm, cfm, *gains_with(gm["Lt"]), *m_r]),
+        ["x", "ref", "cf", *gain_names],
+        out_names,
     )
-    # dtsmc: the planned spring deflection removed from the encoders
-    pr_m, pr_md, _ = motor_ref(ref, thz)
-    x_plan = ca.vertcat(z[:n] - (pr_m - rq), z[n:] - (pr_md - rqd), z, thz)
-    outc = cascade(x_plan, *with_lt0([("ref", ref), ("cf", cf), *gin, *cin]))
-    names = ["u", "s", "tau_d", "qm_d", "e_next", "bound", "cf_next", "dq"]
-    base = _fn(
+    # dtsmc: the planned spring deflection removed from the encoders, the surface of (54)
+    m_z = mref.call([refm, thm])
+    x_plan = ca.vertcat(zm[:n] - (m_z[0] - refm[:n]), zm[n:] - (m_z[1] - refm[n : 2 * n]), zm, thm)
+    base = ca.Function(
         "control_dtsmc",
-        [("z", z), ("theta", thz), ("ref", ref), ("cf", cf), *no_lt, *cin],
-        list(zip(names, outc, strict=True)),
+        [zm, thm, refm, cfm, *(gm[k] for k in no_lt)],
+        core.call([x_plan, refm, cfm, *gains_with(ca.MX.zeros(n, 1)), *m_z]),
+        ["z", "theta", "ref", "cf", *no_lt],
+        out_names,
     )
-    mref = ca.Function(
-        "control_motor_reference",
-        [ref, th],
-        [qm_r, qmd_r, qmdd_r],
-        ["ref", "theta"],
-        ["qm_r", "qmd_r", "qmdd_r"],
+    # (54): the raw encoders stand for the link (q = qm, qd = qmd), Lt = 0
+    pm = [ca.MX.sym(k, n) for k in ("qmd_next", "q_d", "qd_d", "vt_prev")]
+    law_gains = [k for k in CONTROL_GAINS if k != "Lt"]
+    x_raw = ca.vertcat(zm[:n], zm[n:], zm, thm)
+    law54 = ca.Function(
+        "control_dtsmc_paper",
+        [zm, thm, *pm, *(gm[k] for k in law_gains)],
+        law37.call(
+            [x_raw, *pm, *[ca.MX.zeros(n, 1) if k == "Lt" else gm[k] for k in CONTROL_GAINS]]
+        ),
+        ["z", "theta", "qmd_next", "q_d", "qd_d", "vt_prev", *law_gains],
+        ["u", "s", "vt", "e_next", "bound"],
     )
     return [law37, law54, cascade, base, mref]
 
 
-def _motor_reference(tree: RigidBodyTree, tr: Transition, ref: ca.SX, th: ca.SX) -> ca.Function:
-    """``(ref, theta) -> (qm_r, qmd_r, qmdd_r)``: the motor angle of the desired motion,
-    ``qm_r = q_d + Ks^-1 (M(q_d) qdd_d + b(q_d, qd_d))``, and its exact first and second time
-    derivatives by forward-mode AD along the trajectory's jerk and snap."""
-    n = tree.n
+def _motor_reference(tree: RigidBodyTree, tr: Transition, n: int, p: int) -> ca.Function:
+    """``control_motor_reference``: ``(ref, theta) -> (qm_r, qmd_r, qmdd_r)``, the motor angle
+    of the desired motion, ``qm_r = q_d + Ks^-1 RNEA(q_d, qd_d, qdd_d)``, and its exact first
+    and second time derivatives by forward-mode AD along the trajectory's jerk and snap."""
+    ref, th = ca.SX.sym("ref", 5 * n), ca.SX.sym("theta", p)
     rq, rqd, rqdd, rj, rs = (ref[i * n : (i + 1) * n] for i in range(5))
     Ks = tr.stiffness(th)
     y = ca.SX.sym("y", 3 * n)  # (q, qd, qdd)
-    tau_ff = ca.mtimes(tree.mass_matrix(y[:n], th), y[2 * n :]) + tree.bias(y[:n], y[n : 2 * n], th)
-    qm_of_y = y[:n] + tau_ff / Ks
+    qm_of_y = y[:n] + tree.rnea(y[:n], y[n : 2 * n], y[2 * n :], th) / Ks
     ydot, yddot = ca.vertcat(rqd, rqdd, rj), ca.vertcat(rqdd, rj, rs)
     yy = ca.vertcat(rq, rqd, rqdd)
     # d/dt qm = J ydot; d2/dt2 qm = d/dy (J yd) yd + J yddot, with yd = ydot
@@ -253,7 +262,13 @@ def _motor_reference(tree: RigidBodyTree, tr: Transition, ref: ca.SX, th: ca.SX)
     qm_r = ca.substitute(qm_of_y, y, yy)
     qmd_r = ca.substitute([d1], [y, yd], at)[0]
     qmdd_r = ca.substitute([d2], [y, yd], at)[0]
-    return ca.Function("motor_reference", [ref, th], [qm_r, qmd_r, qmdd_r])
+    return ca.Function(
+        "control_motor_reference",
+        [ref, th],
+        [ca.densify(qm_r), ca.densify(qmd_r), ca.densify(qmdd_r)],
+        ["ref", "theta"],
+        ["qm_r", "qmd_r", "qmdd_r"],
+    )
 
 
 def _fn(name: str, ins: list[tuple[str, ca.SX]], outs: list[tuple[str, ca.SX]]) -> ca.Function:
