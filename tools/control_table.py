@@ -58,46 +58,29 @@ def _stat(rows: list[dict[str, Any]], key: str) -> tuple[list[float], list[float
     return v.mean(axis=0).tolist(), v.std(axis=0).tolist()
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("scenario")
-    ap.add_argument("--seeds", type=int, default=20)
-    ap.add_argument("--duration", type=float, default=None)
-    ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--pairs", default=None, help="ctrl/est,ctrl/est (default: all)")
-    ap.add_argument("--out", default=None, help="JSON with every run's row and the table")
-    args = ap.parse_args()
-    pairs = tuple(tuple(p.split("/")) for p in args.pairs.split(",")) if args.pairs else PAIRS
-    jobs = [(args.scenario, c, e, s, args.duration) for c, e in pairs for s in range(args.seeds)]
-    from amsfe_sym.codegen import library_for
-    from amsfe_sym.scenario import load_scenario
-
-    library_for(load_scenario(args.scenario))  # build once before the workers start
-    with mp.get_context("spawn").Pool(args.workers) as pool:
-        rows = pool.map(_one, jobs, chunksize=1)
+def print_table(scenario: str, seeds: int, pairs: tuple, rows: list[dict[str, Any]]) -> list:
+    """Print the markdown table; return its entries (means and stds per controller)."""
     table = []
-    print(f"{args.scenario}: {args.seeds} seeds, mean +- std over the runs that did not diverge")
+    print(f"{scenario}: {seeds} seeds; mean ± std (and median) over the runs that did not diverge")
     print(
-        "| controller | estimator | diverged | tracking RMSE [mrad] | max error [mrad] | "
-        "RMS u [N m] | TV(u) [N m/s] | saturated [%] |"
+        "| controller | estimator | diverged | tracking RMSE [mrad] | median RMSE [mrad] | "
+        "max error [mrad] | RMS u [N m] | TV(u) [N m/s] | saturated [%] |"
     )
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|")
     for c, e in pairs:
         rs = [r for r in rows if r["controller"] == c and r["estimator"] == e]
         ok = [r for r in rs if r["diverged_at_s"] is None]
+        div = [r["diverged_at_s"] for r in rs if r["diverged_at_s"] is not None]
         entry: dict[str, Any] = {
             "controller": c,
             "estimator": e,
             "runs": len(rs),
-            "diverged": len(rs) - len(ok),
+            "diverged": len(div),
         }
+        when = f" (t = {min(div):.2f}-{max(div):.2f} s)" if div else ""
         if not ok:
-            t = [r["diverged_at_s"] for r in rs]
-            entry["diverged_at_s"] = [float(np.min(t)), float(np.max(t))]
-            print(
-                f"| {c} | {e} | {len(rs)}/{len(rs)} (t = {min(t):.2f}-{max(t):.2f} s) "
-                "| - | - | - | - | - |"
-            )
+            entry["diverged_at_s"] = [min(div), max(div)]
+            print(f"| {c} | {e} | {len(rs)}/{len(rs)}{when} | - | - | - | - | - | - |")
             table.append(entry)
             continue
         for key in (
@@ -108,6 +91,8 @@ def main() -> None:
             "saturated_fraction",
         ):
             entry[key] = _stat(ok, key)
+        med = np.median(np.array([r["tracking_rmse"] for r in ok], dtype=float), axis=0)
+        entry["tracking_rmse_median"] = med.tolist()
 
         def fmt(key: str, scale: float = 1.0, digits: int = 2, entry: dict = entry) -> str:
             m, sd = entry[key]
@@ -117,11 +102,39 @@ def main() -> None:
             )
 
         print(
-            f"| {c} | {e} | {entry['diverged']}/{len(rs)} | {fmt('tracking_rmse', 1e3)} | "
-            f"{fmt('tracking_max_error', 1e3)} | {fmt('u_rms', 1, 1)} | "
+            f"| {c} | {e} | {len(div)}/{len(rs)}{when} | {fmt('tracking_rmse', 1e3)} | "
+            + " / ".join(f"{1e3 * v:.2f}" for v in med)
+            + f" | {fmt('tracking_max_error', 1e3)} | {fmt('u_rms', 1, 1)} | "
             f"{fmt('u_total_variation_per_s', 1, 0)} | {fmt('saturated_fraction', 100, 1)} |"
         )
         table.append(entry)
+    return table
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("scenario")
+    ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--duration", type=float, default=None)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--pairs", default=None, help="ctrl/est,ctrl/est (default: all)")
+    ap.add_argument("--out", default=None, help="JSON with every run's row and the table")
+    ap.add_argument("--from-json", default=None, help="re-print the table of a saved JSON")
+    args = ap.parse_args()
+    if args.from_json:
+        d = json.loads(Path(args.from_json).read_text())
+        pairs = tuple(dict.fromkeys((r["controller"], r["estimator"]) for r in d["runs"]))
+        print_table(d["scenario"], d["seeds"], pairs, d["runs"])
+        return
+    pairs = tuple(tuple(p.split("/")) for p in args.pairs.split(",")) if args.pairs else PAIRS
+    jobs = [(args.scenario, c, e, s, args.duration) for c, e in pairs for s in range(args.seeds)]
+    from amsfe_sym.codegen import library_for
+    from amsfe_sym.scenario import load_scenario
+
+    library_for(load_scenario(args.scenario))  # build once before the workers start
+    with mp.get_context("spawn").Pool(args.workers) as pool:
+        rows = pool.map(_one, jobs, chunksize=1)
+    table = print_table(args.scenario, args.seeds, pairs, rows)
     if args.out:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(

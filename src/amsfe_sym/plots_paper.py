@@ -116,8 +116,12 @@ def _simulation_figures(cmp: Comparison, out: Path) -> list[Path]:
             ax.grid(alpha=0.3)
         axes[0].legend(fontsize=8)
         axes[0].set_ylim(*_span(res0.q_des[:, j]))
-        fig.suptitle(f"Fig. {6 + j}: tracking of joint {j + 1}, proposed vs DTSMC")
-        _save(fig, out / f"fig{6 + j:02d}_joint{j + 1}_tracking.png", paths)
+        if j < 2:  # the paper's Figs. 6-7 are its two joints
+            fig.suptitle(f"Fig. {6 + j}: tracking of joint {j + 1}, proposed vs DTSMC")
+            _save(fig, out / f"fig{6 + j:02d}_joint{j + 1}_tracking.png", paths)
+        else:
+            fig.suptitle(f"Tracking of joint {j + 1}, proposed vs DTSMC")
+            _save(fig, out / f"tracking_joint{j + 1}.png", paths)
     return paths
 
 
@@ -207,16 +211,19 @@ def _control_figures(cmp: Comparison, out: Path, n: int) -> list[Path]:
     _save(fig, out / "sliding_surface.png", paths)
 
     fig, axes = plt.subplots(n, 2, figsize=(12, 2.8 * n + 0.6), squeeze=False)
+    # the zoom: the last 0.25 s of the longest run (a diverged run ends earlier: not shown)
+    t_end = max(float(res.t[-1]) for res in cmp.results.values())
     for (name, res), color in zip(cmp.results.items(), _COLORS, strict=False):
         t = res.t
-        t_end = float(t[-1])
-        zoom = (t >= t_end - 0.25) if res.diverged_at is None else (t >= t_end - 0.1)
+        zoom = t >= t_end - 0.25
         for j in range(n):
             axes[j][0].plot(t, res.u[:, j], color=color, lw=0.7, label=_label(name, res))
-            axes[j][1].plot(t[zoom], res.u[zoom, j], color=color, lw=0.8)
+            if np.any(zoom):
+                axes[j][1].plot(t[zoom], res.u[zoom, j], color=color, lw=0.8)
     for j in range(n):
         axes[j][0].set_ylabel(f"u{j + 1} [N m]")
         axes[j][1].set_ylabel(f"u{j + 1} [N m] (last 0.25 s)")
+        axes[j][1].set_xlim(t_end - 0.25, t_end)
         for ax in axes[j]:
             ax.grid(alpha=0.3)
             ax.set_xlabel("t [s]")

@@ -7,7 +7,8 @@ camera frames), writes each run's folder under ``<out>/<controller>/``, a
 
 - trajectories of the simulation study (paper-sim): ``fig04_estimation_errors.png`` (q1, qd1,
   q2, qd2 estimation errors of the fusion estimate), ``fig05_theta_error.png``, one
-  ``fig06_joint1_tracking.png``, ``fig07_joint2_tracking.png``, ... per joint (proposed vs
+  ``fig06_joint1_tracking.png``, ``fig07_joint2_tracking.png`` (``tracking_joint3.png``, ... on
+  longer arms) (proposed vs
   the baselines), ``sliding_surface.png`` (s(k)) and ``torque.png`` (u(k), with a zoom that
   shows the chattering);
 - the experiment (paper-exp, one link on a circle): ``fig12_encoder_vision_fused.png``,
