@@ -15,6 +15,7 @@ Anyone can also load a function with plain CasADi: :meth:`ModelLibrary.external`
 from __future__ import annotations
 
 import ctypes
+import hashlib
 import json
 import os
 from functools import cached_property
@@ -26,7 +27,7 @@ from numpy.typing import NDArray
 
 from amsfe_sym.errors import CodegenError, ShapeError, describe
 
-__all__ = ["CompiledFunction", "ModelLibrary"]
+__all__ = ["CompiledFunction", "ModelLibrary", "file_sha256"]
 
 _c_int_p = ctypes.POINTER(ctypes.c_longlong)
 _c_double_p = ctypes.POINTER(ctypes.c_double)
@@ -161,6 +162,34 @@ def _np_shape(io: dict[str, Any]) -> tuple[int, ...]:
     return (rows, cols) if io.get("matrix", cols > 1) else (rows,)
 
 
+def file_sha256(path: Path) -> str:
+    """sha256 hex digest of a file's bytes (the library's own hash in the manifest)."""
+    h = hashlib.sha256()
+    with path.open("rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _verify_library(path: Path, expected: object) -> None:
+    """Refuse (one line, never a segfault) a library whose bytes are not those generated."""
+    try:
+        found = file_sha256(path)
+    except OSError as exc:
+        found = f"an unreadable file ({exc.strerror})"
+    if not isinstance(expected, str):
+        found = "a manifest without library_sha256 (made by an older toolkit)"
+    if found != expected:
+        raise CodegenError(
+            describe(
+                str(path),
+                "the library whose sha256 the manifest records",
+                found if " " in found else f"sha256 {found[:12]}... (damaged or replaced)",
+                f"rebuild it: amsfe generate --force (into {path.parent.parent})",
+            )
+        )
+
+
 class ModelLibrary:
     """A generated robot library: its manifest plus lazily bound functions.
 
@@ -179,6 +208,7 @@ class ModelLibrary:
             ) from exc
         self.dir = mpath.parent
         self.library_path = self.dir / self.manifest["library"]
+        _verify_library(self.library_path, self.manifest.get("library_sha256"))
         try:
             self._lib = ctypes.CDLL(str(self.library_path))
         except OSError as exc:
