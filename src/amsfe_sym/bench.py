@@ -266,7 +266,12 @@ class CTimer:
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0:
             raise CodegenError(
-                describe(f"C timing of {function}", "exit code 0", proc.stderr.strip(), "rebuild")
+                describe(
+                    f"C timing of {function}",
+                    "exit code 0",
+                    proc.stderr.strip(),
+                    "regenerate the library (amsfe generate --force) and retry",
+                )
             )
         lines = proc.stdout.split("\n")
         return [float(v) / 1000.0 for v in lines[0].split()], float(lines[1])
@@ -820,7 +825,7 @@ def bench_cflags(
                             f"compiling with {flags!r}",
                             "success",
                             proc.stderr[-1000:],
-                            "fix the flags",
+                            "drop or correct the flag set the compiler refused",
                         )
                     )
             blib = ModelLibrary(d)
@@ -1022,7 +1027,12 @@ def run_bench(args: Any) -> int:
     skip = set(getattr(args, "skip", None) or ())
     if repeat < 1 or rounds < 1:
         raise ConfigError(
-            describe("--repeat / --rounds", "positive integers", f"{repeat} / {rounds}", "fix them")
+            describe(
+                "--repeat / --rounds",
+                "positive integers",
+                f"{repeat} / {rounds}",
+                "pass e.g. --repeat 20000 --rounds 5",
+            )
         )
     res = generate(robot_name, out=getattr(args, "out", None))
     lib = ModelLibrary(res.out_dir)

@@ -312,7 +312,12 @@ def generate(
             ctypes.CDLL(str(tmp / libname))
         except OSError as exc:
             raise CodegenError(
-                describe(f"loading {libname}", "a loadable library", str(exc), "rebuild")
+                describe(
+                    f"loading {libname}",
+                    "a loadable library",
+                    str(exc),
+                    "check the compiler and $AMSFE_CFLAGS (the build produced an unusable .so)",
+                )
             ) from exc
         manifest = _manifest(model, key, hash_inputs, libname, cname, timings)
         manifest["library_sha256"] = file_sha256(tmp / libname)

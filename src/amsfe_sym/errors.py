@@ -11,6 +11,7 @@ __all__ = [
     "AmsfeError",
     "CodegenError",
     "ConfigError",
+    "ConvergenceError",
     "EstimatorError",
     "MeasurementError",
     "ModelError",
@@ -65,3 +66,9 @@ class EstimatorError(AmsfeError, RuntimeError):
 
 class MeasurementError(AmsfeError, ValueError):
     """A measurement is unusable (NaN or inf, outside the image, wrong size)."""
+
+
+class ConvergenceError(EstimatorError):
+    """An iterative generated function (the inverse transition, eq. 22) did not converge:
+    its ``residual`` output is above the tolerance, so its result is not used.  Estimators
+    treat it like a refused frame (counted, estimate untouched)."""

@@ -424,7 +424,14 @@ def _validate_urdf(path: Path, locked: set[str] | frozenset[str] = frozenset()) 
 def _check_inertia(inertia: NDArray[np.float64], where: str) -> None:
     """Positive semi-definite and principal moments satisfying the triangle inequality."""
     if not np.all(np.isfinite(inertia)):
-        raise UrdfError(describe(f"{where} <inertia>", "finite values", "inf or NaN", "fix it"))
+        raise UrdfError(
+            describe(
+                f"{where} <inertia>",
+                "finite values",
+                "inf or NaN",
+                "write the six inertia entries as finite numbers [kg m^2]",
+            )
+        )
     eig = np.linalg.eigvalsh(inertia)
     scale = max(float(np.max(np.abs(eig))), 1e-12)
     if eig[0] < -_INERTIA_TOL * scale:
@@ -559,12 +566,22 @@ def _bind_theta(
         names = [j.name for j in joints]
         if t.target not in names:
             raise SpecError(
-                describe(f"{where} target", f"a modelled joint {names}", repr(t.target), "fix it")
+                describe(
+                    f"{where} target",
+                    f"a modelled joint {names}",
+                    repr(t.target),
+                    "name one of the modelled joints as target",
+                )
             )
         return ThetaBinding(spec=t, q_index=names.index(t.target))
     if not model.existFrame(t.target):
         raise SpecError(
-            describe(f"{where} target", "a link or frame name", repr(t.target), "fix it")
+            describe(
+                f"{where} target",
+                "a link or frame name",
+                repr(t.target),
+                "name a link of the URDF as target",
+            )
         )
     frame = model.frames[model.getFrameId(t.target)]
     jid = frame.parentJoint

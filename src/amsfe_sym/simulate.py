@@ -240,7 +240,14 @@ def run(
     # ---------------------------------------------------------------- controller
     traj = trajectory_from_config(dict(sc.trajectory))
     if traj.n != n:
-        raise ConfigError(describe("[trajectory]", f"{n} joints", f"{traj.n}", "fix it"))
+        raise ConfigError(
+            describe(
+                "[trajectory]",
+                f"{n} joints (the robot's)",
+                f"{traj.n}",
+                "give one value per modelled joint in the trajectory table",
+            )
+        )
     ctrl = make_controller(sc.controller, lib, traj, sc.controller_gains)
     plant = lib.function("plant_step")
 

@@ -51,7 +51,12 @@ class CompiledFunction:
             work = lib[f"{name}_work"]
         except AttributeError as exc:
             raise CodegenError(
-                describe(f"function {name!r}", "a symbol in the library", "none", "regenerate")
+                describe(
+                    f"function {name!r}",
+                    "a symbol in the library",
+                    "none",
+                    "regenerate it: amsfe generate <robot> --force",
+                )
             ) from exc
         self._f.restype = ctypes.c_int
         sz = [ctypes.c_longlong(0) for _ in range(4)]
@@ -213,7 +218,12 @@ class ModelLibrary:
             self._lib = ctypes.CDLL(str(self.library_path))
         except OSError as exc:
             raise CodegenError(
-                describe(str(self.library_path), "a loadable library", str(exc), "regenerate")
+                describe(
+                    str(self.library_path),
+                    "a loadable library",
+                    str(exc),
+                    "regenerate it: amsfe generate <robot> --force",
+                )
             ) from exc
         self._fns: dict[str, CompiledFunction] = {}
 
@@ -234,7 +244,7 @@ class ModelLibrary:
                         f"function {name!r}",
                         f"one of {sorted(sigs)}",
                         "unknown name",
-                        "check the manifest",
+                        "use a name listed in manifest.json (or regenerate with a newer toolkit)",
                     )
                 )
             self._fns[name] = CompiledFunction(self._lib, name, sigs[name])
