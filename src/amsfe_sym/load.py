@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 
 from amsfe_sym.errors import ModelError, SpecError, UnsupportedJointError, UrdfError, describe
 from amsfe_sym.spec import RobotSpec, ThetaSpec, load_spec
+from amsfe_sym.urdf_topology import check_topology
 
 __all__ = ["CameraModel", "JointInfo", "Robot", "ThetaBinding", "load_robot"]
 
@@ -356,6 +357,7 @@ def _validate_urdf(path: Path, locked: set[str] | frozenset[str] = frozenset()) 
                         "add the link or fix the name",
                     )
                 )
+    check_topology(root, path)  # one tree: before urdfdom/yourdfpy's misleading messages
     try:
         urdf = yourdfpy.URDF.load(
             str(path),
