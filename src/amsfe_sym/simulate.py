@@ -31,6 +31,7 @@ from amsfe_sym.codegen import generate
 from amsfe_sym.control import make_controller
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.estimation import FilterConfig, make_estimator
+from amsfe_sym.preflight import check_scenario_shapes
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.runtime.models import (
     CameraMeasurement,
@@ -93,6 +94,7 @@ def _vec(values: tuple[float, ...], n: int, what: str) -> FloatArray:
 def library_for(sc: Scenario) -> ModelLibrary:
     """Generate (or reuse) the library of the scenario's robot, with its integrator override."""
     spec = load_spec(sc.robot)
+    check_scenario_shapes(sc, spec)  # every wrong-length vector, before generating
     if sc.integrator and sc.integrator != spec.model.integrator:
         spec = replace(
             spec,
