@@ -341,7 +341,9 @@ def test_damaged_library_is_rebuilt_by_check(
     data = bytearray(lib.read_bytes())
     for i in range(len(data) // 2, len(data) // 2 + 64):
         data[i] ^= 0xFF
-    lib.write_bytes(bytes(data))
+    damaged = lib.with_name(lib.name + ".damaged")  # a new inode: the old one is mapped here
+    damaged.write_bytes(bytes(data))
+    os.replace(damaged, lib)
     assert main(["generate", "paper_1link"]) == 0
     assert "generated in" in capsys.readouterr().out  # not "up to date (cached)"
     assert main(["check", "paper_1link", "--samples", "2"]) == 0

@@ -25,6 +25,15 @@ def built(tmp_path: Path) -> Path:
     return generate(ROBOT, out=tmp_path).out_dir
 
 
+def _overwrite(path: Path, data: bytes) -> None:
+    """Replace a file by a new one (a new inode): the old library may still be mapped in
+    this process (generate loads it once), and rewriting a mapped file in place would crash
+    the test process itself with SIGBUS."""
+    tmp = path.with_name(path.name + ".damaged")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
+
+
 def _lib(out_dir: Path) -> Path:
     return out_dir / json.loads((out_dir / "manifest.json").read_text())["library"]
 
@@ -38,7 +47,7 @@ def test_manifest_records_the_library_hash(built: Path) -> None:
 def test_truncated_library_is_rebuilt_not_reused(built: Path) -> None:
     lib = _lib(built)
     good = lib.read_bytes()
-    lib.write_bytes(good[:100])
+    _overwrite(lib, good[:100])
     res = generate(ROBOT, out=built.parent)
     assert not res.reused
     assert len(lib.read_bytes()) == len(good)
@@ -56,7 +65,7 @@ def test_runtime_refuses_a_damaged_library(built: Path, damage: str) -> None:
         mid = len(data) // 2
         for i in range(mid, mid + 64):
             data[i] ^= 0xFF
-    lib.write_bytes(bytes(data))
+    _overwrite(lib, bytes(data))
     with pytest.raises(CodegenError, match="sha256") as info:
         ModelLibrary(built)
     assert "\n" not in str(info.value)

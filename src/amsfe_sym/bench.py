@@ -26,7 +26,6 @@ import json
 import math
 import os
 import platform
-import shutil
 import statistics
 import subprocess
 import sys
@@ -791,7 +790,7 @@ def bench_cflags(
     in pure C.  Compile time is the fastest of ``compile_repeat`` builds.
     """
     from amsfe_sym.codegen import compiler
-    from amsfe_sym.runtime.library import ModelLibrary
+    from amsfe_sym.runtime.library import ModelLibrary, file_sha256
 
     src = lib.dir / lib.manifest["source"]
     rng = np.random.default_rng(1)
@@ -803,7 +802,6 @@ def bench_cflags(
         for i, flags in enumerate(flag_sets):
             d = Path(tmp) / f"build{i}"
             d.mkdir()
-            shutil.copy(lib.dir / "manifest.json", d / "manifest.json")
             cmd = [
                 compiler(),
                 *flags.split(),
@@ -828,6 +826,10 @@ def bench_cflags(
                             "drop or correct the flag set the compiler refused",
                         )
                     )
+            # this build is ours: record its own hash, as generate does
+            built = file_sha256(d / lib.manifest["library"])
+            manifest = {**lib.manifest, "library_sha256": built}
+            (d / "manifest.json").write_text(json.dumps(manifest))
             blib = ModelLibrary(d)
             f = blib.function(function)
             t_py = time_calls(f.call_into, args, repeat, rounds)
