@@ -104,9 +104,9 @@ CASES: list[tuple[str, dict[str, str], list[str], list[str]]] = [
     ),
     (
         "toml_period_float",
-        {"s.toml": _scenario(period="2.0")},
+        {"s.toml": _scenario(jitter_steps="2.0")},
         ["simulate", "s.toml"],
-        ["[camera] period", "write period = 2"],
+        ["[camera] jitter_steps", "write jitter_steps = 2"],
     ),
     (
         "toml_bool_as_int",
@@ -348,3 +348,47 @@ def test_damaged_library_is_rebuilt_by_check(
     assert "generated in" in capsys.readouterr().out  # not "up to date (cached)"
     assert main(["check", "paper_1link", "--samples", "2"]) == 0
     assert os.path.getsize(lib) == len(data)
+
+
+# ---- run folders: complete or absent; --out never silently overwrites
+RUN = ["simulate", "--duration", "0.05", "--no-progress", "--no-plots"]
+
+
+def test_out_at_an_existing_file_is_refused(tmp_path: Path, capsys) -> None:
+    target = tmp_path / "notes.txt"
+    target.write_text("mine")
+    for extra in ([], ["--force"]):
+        assert main([*RUN, "--out", str(target), *extra]) == 2
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert len(lines) == 1 and "an existing file" in lines[0], lines
+    assert target.read_text() == "mine"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+def test_out_at_an_existing_run_folder_needs_force(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "run"
+    assert main([*RUN, "--out", str(out)]) == 0
+    (out / "old-figure.png").write_text("from an older run")
+    before = (out / "timeseries.csv").read_text()
+    assert main([*RUN, "--out", str(out), "--seed", "5"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "an existing folder" in err[0] and "--force" in err[0]
+    assert (out / "timeseries.csv").read_text() == before  # untouched
+    assert main([*RUN, "--out", str(out), "--seed", "5", "--force"]) == 0
+    assert not (out / "old-figure.png").exists()  # replaced as a whole, not mixed
+    assert (out / "timeseries.csv").read_text() != before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # no hidden leftovers
+
+
+def test_a_failure_while_writing_leaves_no_run_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import amsfe_sym.plots
+
+    def boom(*args: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(amsfe_sym.plots, "plot_run", boom)
+    out = tmp_path / "run"
+    assert main(["simulate", "--duration", "0.05", "--no-progress", "--out", str(out)]) == 130
+    assert list(tmp_path.iterdir()) == []

@@ -17,7 +17,6 @@ from amsfe_sym.bench import (
     CALL_FUNCTIONS,
     ESTIMATOR_NAMES,
     CTimer,
-    PinocchioModel,
     Timing,
     _inputs,
     _state,
@@ -26,6 +25,7 @@ from amsfe_sym.bench import (
 from amsfe_sym.cli import main
 from amsfe_sym.codegen import generate
 from amsfe_sym.load import load_robot
+from amsfe_sym.reference import PinocchioModel
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.spec import load_spec
 

@@ -17,7 +17,7 @@ def test_c_program_matches_python(libraries, tmp_path: Path) -> None:
     if shutil.which(compiler()) is None:
         pytest.skip("no C compiler")
     _, lib = libraries.get("paper_2link")
-    m = lib.manifest
+    m = lib.manifest.raw
     exe = tmp_path / "embed"
     src = Path(__file__).parent / "c" / "embed_transition.c"
     # link against the already-built shared library: nothing is compiled twice

@@ -31,7 +31,7 @@ CONTRACT = {
 @pytest.mark.parametrize("name", SHIPPED)
 def test_manifest_contract(name: str, libraries) -> None:
     robot, lib = libraries.get(name)
-    m = lib.manifest
+    m = lib.manifest.raw
     n, p = robot.n, robot.p
     N = 4 * n + p
     assert (m["n"], m["p"], m["N"]) == (n, p, N)
@@ -98,7 +98,7 @@ def test_compiled_equals_casadi_function(name: str, libraries) -> None:
             "transition_inverse": (x, u),
             "plant_step": (x[: 4 * n], u, th, rng.normal(size=2 * n)),
         }
-        assert set(args) == set(lib.manifest["functions"])
+        assert set(args) == set(lib.manifest.functions)
         for fname, a in args.items():
             vm = fns[fname](*a)
             vm = vm if isinstance(vm, tuple) else (vm,)
@@ -156,7 +156,7 @@ def test_third_party_urdfs(rel: str, lock: dict[str, float] | None, libraries) -
 def test_paper_integrator_inverse_and_jacobian_inverse(libraries) -> None:
     """The backward map's jacobian is the inverse of the forward one (PAPER-NOTES 1)."""
     robot, lib = libraries.get("paper_2link")
-    assert lib.manifest["integrator"] == "paper"
+    assert lib.manifest.integrator == "paper"
     rng = np.random.default_rng(9)
     tr, jac, inv = (
         lib.function(k) for k in ("transition", "transition_jacobian", "transition_inverse")

@@ -11,9 +11,10 @@ import pytest
 from scipy.stats import chi2
 
 from amsfe_sym.cli import main
+from amsfe_sym.codegen import library_for
 from amsfe_sym.errors import ConfigError
 from amsfe_sym.scenario import load_scenario
-from amsfe_sym.simulate import library_for, run, summarize
+from amsfe_sym.simulate import run, summarize
 
 
 @pytest.fixture(scope="module")
@@ -198,7 +199,7 @@ def test_dropped_and_jittered_frames(paper_sim, estimator: str) -> None:
 
 def test_paper_exp_runs(tmp_path: Path) -> None:
     sc = load_scenario("paper-exp").with_overrides(duration=2.0, estimator="cloning")
-    res = run(sc)
+    res = run(sc, library_for(sc))
     s = summarize(res)
     assert s["ticks"] == 201 and res.counters["frames_applied"] >= 45
     assert res.counters["frames_applied"] == res.counters["frames_delivered"]
@@ -224,7 +225,7 @@ def test_controller_reference_grid_equals_direct_evaluation(paper_sim) -> None:
 
 
 def test_run_folder_values_match_the_run(paper_sim, tmp_path: Path) -> None:
-    """timeseries.csv and frames.csv hold the run's values (10 significant digits), and
+    """timeseries.csv and frames.csv hold the run's values (full precision), and
     every frame is where the camera saw the true tracked point at its exposure step."""
     from amsfe_sym.simulate import write_run
 
@@ -234,12 +235,12 @@ def test_run_folder_values_match_the_run(paper_sim, tmp_path: Path) -> None:
     ts = np.loadtxt(tmp_path / "run" / "timeseries.csv", delimiter=",", skiprows=1)
     N, n = lib.N, lib.n
     cols = [res.t, res.x_true, res.x_hat, res.P_diag, res.nees, res.q_des, res.u, res.z_enc]
-    expect = np.column_stack(cols)
-    assert ts.shape == expect.shape == (1001, 1 + 3 * N + 1 + 4 * n)
-    np.testing.assert_allclose(ts, expect, rtol=1e-9, atol=1e-12)
+    expect = np.column_stack([*cols, res.tau_d])
+    assert ts.shape == expect.shape == (1001, 1 + 3 * N + 1 + 6 * n)
+    np.testing.assert_array_equal(ts, expect)  # full precision (%.17g)
     fr = np.loadtxt(tmp_path / "run" / "frames.csv", delimiter=",", skiprows=1, ndmin=2)
     np.testing.assert_allclose(fr, res.frames, rtol=1e-9)
-    period, delay = lib.manifest["camera"]["period"], lib.manifest["camera"]["delay"]
+    period, delay = lib.manifest.camera.period, lib.manifest.camera.delay
     assert fr.shape == (8, 4)  # exposures 0, 125, ..., 875, delivered by step 1000
     assert np.all(fr[:, 0] % period == 0) and np.all(fr[:, 1] - fr[:, 0] == delay)
     cam = lib.function("camera")

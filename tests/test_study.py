@@ -190,6 +190,7 @@ def test_study_end_to_end(tmp_path, capsys) -> None:
 
 
 def test_study_in_process_matches_simulate_and_supports_variants(tmp_path) -> None:
+    from amsfe_sym.codegen import library_for
     from amsfe_sym.simulate import run, summarize
 
     res = run_study(
@@ -210,7 +211,8 @@ def test_study_in_process_matches_simulate_and_supports_variants(tmp_path) -> No
             assert (tmp_path / "s" / f"{f}-{v}.png").is_file()
     # a study run is exactly `amsfe simulate` with the same seed
     sc = load_scenario("paper-exp").with_overrides(estimator="replay", seed=4, duration=0.5)
-    ref = summarize(run(apply_sets(sc, ["encoders.q_std=0.01"])))
+    poor = apply_sets(sc, ["encoders.q_std=0.01"])
+    ref = summarize(run(poor, library_for(poor)))
     mine = next(
         r
         for r in res.runs
@@ -222,7 +224,7 @@ def test_study_in_process_matches_simulate_and_supports_variants(tmp_path) -> No
 
 
 def test_a_failing_run_is_recorded_not_fatal(tmp_path, monkeypatch) -> None:
-    import amsfe_sym.simulate as simulate
+    import amsfe_sym.sim.loop as simulate
     from amsfe_sym.errors import EstimatorError
 
     real_run = simulate.run

@@ -16,8 +16,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from amsfe_sym.codegen import library_for
 from amsfe_sym.scenario import load_scenario
-from amsfe_sym.simulate import library_for, run, summarize
+from amsfe_sym.simulate import run, summarize
 
 ESTIMATORS = ("encoders", "naive", "oosm", "replay", "cloning")
 

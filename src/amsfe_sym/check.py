@@ -23,11 +23,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-import pinocchio as pin
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.load import Robot
+from amsfe_sym.reference import PinocchioOracle
 from amsfe_sym.runtime.library import ModelLibrary
 
 __all__ = ["CheckResult", "format_table", "random_states", "run_checks"]
@@ -94,130 +94,6 @@ def random_states(robot: Robot, count: int, rng: np.random.Generator) -> list[Ar
     return out
 
 
-class _Oracle:
-    """Pinocchio-based numeric reference for one robot."""
-
-    def __init__(self, robot: Robot) -> None:
-        self.r = robot
-        self.n = robot.n
-        self.T = robot.spec.model.T
-
-    def model(self, theta: Array) -> tuple[pin.Model, pin.Data]:
-        m = self.r.pin_model_at(theta)
-        return m, m.createData()
-
-    def M(self, q: Array, theta: Array) -> Array:
-        m, d = self.model(theta)
-        M = pin.crba(m, d, self.r.to_pin_q(q))
-        return np.triu(M) + np.triu(M, 1).T
-
-    def nle(self, q: Array, qd: Array, theta: Array) -> Array:
-        m, d = self.model(theta)
-        return np.asarray(pin.nle(m, d, self.r.to_pin_q(q), qd))
-
-    def g(self, q: Array, theta: Array) -> Array:
-        m, d = self.model(theta)
-        return np.asarray(pin.computeGeneralizedGravity(m, d, self.r.to_pin_q(q)))
-
-    def f_link(self, q: Array, qd: Array, theta: Array) -> Array:
-        m, d = self.model(theta)
-        C = pin.computeCoriolisMatrix(m, d, self.r.to_pin_q(q), qd)
-        return np.asarray(C.T @ qd) - self.g(q, theta)
-
-    def point(self, q: Array, theta: Array) -> Array:
-        m, d = self.model(theta)
-        pin.framesForwardKinematics(m, d, self.r.to_pin_q(q))
-        return np.asarray(d.oMf[self.r.tracked_frame_id].act(self.r.tracked_offset))
-
-    def split(self, x: Array) -> tuple[Array, Array, Array, Array, Array]:
-        n = self.n
-        return x[:n], x[n : 2 * n], x[2 * n : 3 * n], x[3 * n : 4 * n], x[4 * n :]
-
-    def transition(self, x: Array, u: Array) -> Array:
-        q, qd, qm, qmd, th = self.split(x)
-        T, r, n = self.T, self.r, self.n
-        Ks = r.stiffness_at(th)
-        delta = qm - q
-        if r.spec.model.integrator == "rk4":
-            xp = self.rk4(x[: 4 * n], u, th, np.zeros(2 * n), T, 1)
-            return np.concatenate([xp, th])
-        if r.spec.model.integrator == "paper":
-            q1 = q + T * qd
-            mom = self.M(q, th) @ qd + T * (Ks * delta + self.f_link(q, qd, th))
-            qd1 = np.linalg.solve(self.M(q1, th), mom)
-            qm1 = qm + T * qmd
-            qmd1 = qmd + T * (u - r.Fm * qmd - Ks * delta) / r.Mm
-        else:
-            qd1 = qd + T * np.linalg.solve(self.M(q, th), Ks * delta - self.nle(q, qd, th))
-            q1 = q + T * qd1
-            qmd1 = qmd + T * (u - r.Fm * qmd - Ks * delta) / r.Mm
-            qm1 = qm + T * qmd1
-        return np.concatenate([q1, qd1, qm1, qmd1, th])
-
-    def noise_gain(self, x: Array, u: Array) -> Array:
-        n, p, T = self.n, self.r.p, self.T
-        q, qd, _, _, th = self.split(x)
-        G = np.zeros((4 * n + p, 2 * n + p))
-        if self.r.spec.model.integrator == "rk4":
-            # impulses at the start of the step, then one RK4 step: central differences
-            Minv = np.linalg.inv(self.M(q, th))
-            h = 1e-6
-            for i in range(2 * n):
-                dx = np.zeros(4 * n)
-                if i < n:
-                    dx[n : 2 * n] = Minv[:, i] * h
-                else:
-                    dx[3 * n + i - n] = h / self.r.Mm[i - n]
-                xp = x[: 4 * n]
-                zero = np.zeros(2 * n)
-                G[: 4 * n, i] = (
-                    self.rk4(xp + dx, u, th, zero, T, 1) - self.rk4(xp - dx, u, th, zero, T, 1)
-                ) / (2 * h)
-            G[4 * n :, 2 * n :] = T * np.eye(p)
-            return G
-        mm = np.diag(1.0 / self.r.Mm)
-        if self.r.spec.model.integrator == "paper":
-            G[n : 2 * n, :n] = np.linalg.inv(self.M(q + T * qd, th))
-            G[3 * n : 4 * n, n : 2 * n] = mm
-        else:
-            Minv = np.linalg.inv(self.M(q, th))
-            G[:n, :n] = T * Minv
-            G[n : 2 * n, :n] = Minv
-            G[2 * n : 3 * n, n : 2 * n] = T * mm
-            G[3 * n : 4 * n, n : 2 * n] = mm
-        G[4 * n :, 2 * n :] = T * np.eye(p)
-        return G
-
-    def plant_step(self, xp: Array, u: Array, theta: Array, tau_d: Array) -> Array:
-        S = self.r.spec.model.plant_substeps
-        return self.rk4(xp, u, theta, tau_d, self.T, S)
-
-    def rk4(
-        self, xp: Array, u: Array, theta: Array, tau_d: Array, duration: float, steps: int
-    ) -> Array:
-        """``steps`` RK4 steps over ``duration`` [s] of the Spong model, on pin.aba."""
-        n, r = self.n, self.r
-        m, d = self.model(theta)
-        Ks = r.stiffness_at(theta)
-
-        def rhs(s: Array) -> Array:
-            q, qd, qm, qmd = s[:n], s[n : 2 * n], s[2 * n : 3 * n], s[3 * n :]
-            delta = qm - q
-            qdd = pin.aba(m, d, r.to_pin_q(q), qd, Ks * delta + tau_d[:n])
-            qmdd = (u + tau_d[n:] - r.Fm * qmd - Ks * delta) / r.Mm
-            return np.concatenate([qd, qdd, qmd, qmdd])
-
-        h = duration / steps
-        s = xp.copy()
-        for _ in range(steps):
-            k1 = rhs(s)
-            k2 = rhs(s + 0.5 * h * k1)
-            k3 = rhs(s + 0.5 * h * k2)
-            k4 = rhs(s + h * k3)
-            s = s + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-        return s
-
-
 def fd_jacobian(fun: Callable[[Array], Array], x: Array, h: float = 1e-6) -> Array:
     """Central finite-difference jacobian of ``fun`` at ``x`` (step ``h`` per coordinate)."""
     cols = []
@@ -252,7 +128,7 @@ def run_checks(
             describe("check samples", "at least 1 random state", str(samples), "pass --samples 50")
         )
     rng = np.random.default_rng(seed)
-    oracle = _Oracle(robot)
+    oracle = PinocchioOracle(robot)
     n = robot.n
     states = random_states(robot, samples, rng)
     inputs = [rng.uniform(-5.0, 5.0, n) for _ in states]

@@ -13,7 +13,7 @@ import sys
 from collections.abc import Sequence
 from typing import Any, NoReturn
 
-from amsfe_sym.errors import AmsfeError, SpecError, describe
+from amsfe_sym.errors import AmsfeError, ConfigError, SpecError, describe
 
 __all__ = ["get_argument_parser", "main"]
 
@@ -61,6 +61,17 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"error: {self.prog}: {message} (see {self.prog} -h)\n")
 
 
+def _add_set(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario field, e.g. integrator=paper, filter.link_torque_std=2, "
+        'camera.delay=0 (see docs/scenarios.md; "robot" restores the robot\'s camera timing)',
+    )
+
+
 def get_argument_parser() -> argparse.ArgumentParser:
     """The argument parser of ``amsfe``."""
     parser = _Parser(
@@ -92,13 +103,17 @@ def get_argument_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("simulate", help="run a scenario: plant, sensors, estimator, controller")
     s.add_argument("scenario", nargs="?", default="paper-sim", help="scenario name or .toml")
-    s.add_argument("--estimator", default=None, help="encoders | naive | oosm | replay | cloning")
+    s.add_argument(
+        "--estimator", default=None, help="estimator name (an unknown name lists the known ones)"
+    )
     s.add_argument("--controller", default=None, help="controller name")
     s.add_argument("--seed", type=_SEED, default=None)
     s.add_argument("--duration", type=_DURATION, default=None, help="simulated time [s]")
     s.add_argument("--out", default=None, help="run folder (default runs/<scenario>-<stamp>)")
     s.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     s.add_argument("--no-plots", action="store_true", help="skip the figures")
+    s.add_argument("--force", action="store_true", help="replace an existing --out run folder")
+    _add_set(s)
 
     b = sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
     b.add_argument("robot", nargs="?", default="paper_2link")
@@ -139,13 +154,7 @@ def get_argument_parser() -> argparse.ArgumentParser:
     st.add_argument("--duration", type=_DURATION, default=None, help="simulated time [s]")
     st.add_argument("--workers", type=_COUNT, default=2, help="processes (default 2)")
     st.add_argument("--out", default=None, help="folder (default runs/study-<scenario>-<stamp>)")
-    st.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scenario field, e.g. integrator=paper, filter.link_torque_std=2",
-    )
+    _add_set(st)
     st.add_argument(
         "--variant",
         nargs="+",
@@ -240,21 +249,109 @@ def _check(args: argparse.Namespace) -> int:
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from amsfe_sym.simulate import run_from_cli
+    """``amsfe simulate``: load the scenario, apply the overrides, generate its library, run,
+    write the run folder and print the headline numbers."""
+    from datetime import datetime, timezone
+    from pathlib import Path
 
-    return run_from_cli(args)
+    import numpy as np
+
+    from amsfe_sym.codegen import library_for
+    from amsfe_sym.scenario import apply_sets, load_scenario
+    from amsfe_sym.sim.loop import run
+    from amsfe_sym.sim.record import check_out, summarize, write_run
+
+    sc = load_scenario(args.scenario).with_overrides(
+        estimator=args.estimator,
+        controller=args.controller,
+        seed=args.seed,
+        duration=args.duration,
+    )
+    if args.set:
+        sc = apply_sets(sc, args.set)
+    stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
+    out = Path(args.out) if args.out else Path("runs") / f"{sc.name}-{sc.estimator}-{stamp}"
+    check_out(out, args.force)  # before the run: nothing is computed for nothing
+    res = run(sc, library_for(sc), progress=not args.no_progress)
+    write_run(res, out, plots=not args.no_plots, force=args.force)
+    s = summarize(res)
+    print(f"run folder: {out}")
+    print(
+        f"  {s['ticks']} ticks ({s['sim_time_s']:.2f} s simulated) in {s['wall_time_s']:.2f} s "
+        f"wall, {s['cost_per_tick_us']:.1f} us/tick"
+    )
+    er = s["estimation_rmse"]
+    print(
+        f"  estimation RMSE (last 80 %): q {np.round(er['q'], 5).tolist()} rad, "
+        f"qd {np.round(er['qd'], 4).tolist()} rad/s, theta {np.round(er['theta'], 4).tolist()}"
+    )
+    print(
+        f"  theta: true {s['theta_final']['true']}, final estimate "
+        f"{np.round(s['theta_final']['estimate'], 4).tolist()}"
+    )
+    print(
+        f"  tracking RMSE: {np.round(s['tracking_rmse']['q'], 4).tolist()} rad; "
+        f"mean NEES {s['nees_mean']:.2f} (N = {s['nees_dof']})"
+    )
+    return 0
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from amsfe_sym.bench import run_bench
+    from amsfe_sym.bench import BenchOptions, run_bench
 
-    return run_bench(args)
+    sets = args.compare_cflags
+    return run_bench(
+        BenchOptions(
+            robot=str(args.robot),
+            out=args.out,
+            repeat=args.repeat,
+            rounds=args.rounds,
+            json=args.json,
+            skip=tuple(args.skip),
+            duration=args.duration,
+            scenario=args.scenario,
+            estimators=tuple(args.estimators) if args.estimators else None,
+            compare_cflags=None
+            if sets is None
+            else tuple(f.strip() for f in str(sets).split(",") if f.strip()),
+            compile_repeat=args.compile_repeat,
+        )
+    )
+
+
+def _parse_variant(items: Sequence[str]) -> tuple[str, list[str]]:
+    label, *sets = items
+    if "=" in label or not label:
+        raise ConfigError(
+            describe(
+                "--variant",
+                "LABEL KEY=VALUE [KEY=VALUE ...]",
+                repr(" ".join(items)),
+                "start with a label, e.g. --variant paper integrator=paper",
+            )
+        )
+    return label, list(sets)
 
 
 def _study(args: argparse.Namespace) -> int:
-    from amsfe_sym.study import study_from_cli
+    from amsfe_sym.study import run_study
 
-    return study_from_cli(args)
+    variants = dict(_parse_variant(v) for v in (args.variant or [])) or None
+    res = run_study(
+        args.scenario,
+        seeds=args.seeds,
+        estimators=args.estimators,
+        duration=args.duration,
+        workers=args.workers,
+        out=args.out,
+        sets=list(args.set or []),
+        variants=variants,
+        first_seed=args.first_seed,
+        progress=not args.no_progress,
+    )
+    print(res.table)
+    print(f"study folder: {res.out} (study.md, study.json, {len(res.figures)} figures)")
+    return 0
 
 
 if __name__ == "__main__":  # pragma: no cover

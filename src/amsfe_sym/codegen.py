@@ -31,7 +31,7 @@ import subprocess
 import tempfile
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -40,7 +40,8 @@ import casadi as ca
 
 from amsfe_sym import __version__
 from amsfe_sym.errors import CodegenError, describe
-from amsfe_sym.runtime.library import file_sha256
+from amsfe_sym.runtime.library import ModelLibrary, file_sha256
+from amsfe_sym.scenario import Scenario, camera_timing
 from amsfe_sym.spec import RobotSpec, load_spec
 
 __all__ = [
@@ -50,21 +51,19 @@ __all__ = [
     "content_hash",
     "default_out_dir",
     "generate",
+    "library_for",
+    "load_library",
 ]
 
 DEFAULT_CFLAGS: tuple[str, ...] = ("-O1", "-fPIC", "-shared")
 MANIFEST = "manifest.json"
-#: Modules whose source decides what is generated (hashed into the cache key).
+#: Modules whose source decides what is generated (hashed into the cache key; globs are
+#: relative to the package folder, so a new module of a stage is hashed without a change here).
 _GENERATOR_MODULES = (
     "spec.py",
-    "load.py",
+    "load/*.py",
     "codegen.py",
-    "symbolic/spatial.py",
-    "symbolic/linalg.py",
-    "symbolic/dynamics.py",
-    "symbolic/camera.py",
-    "symbolic/transition.py",
-    "symbolic/model.py",
+    "symbolic/*.py",
 )
 
 
@@ -129,8 +128,9 @@ def content_hash(spec: RobotSpec, flags: Sequence[str]) -> tuple[str, dict[str, 
     """The cache key of ``spec`` built with ``flags``, and what went into it."""
     src = Path(__file__).resolve().parent
     gen = hashlib.sha256()
-    for rel in _GENERATOR_MODULES:
-        gen.update((src / rel).read_bytes())
+    for pattern in _GENERATOR_MODULES:
+        for path in sorted(src.glob(pattern)):
+            gen.update(path.read_bytes())
     cc = compiler()
     inputs: dict[str, Any] = {
         "robot": spec.fingerprint(),
@@ -430,3 +430,43 @@ def _manifest(
         "hash_inputs": hash_inputs,
         "timings_s": {k: round(v, 4) for k, v in timings.items()},
     }
+
+
+# --------------------------------------------------------------------------- libraries
+def load_library(
+    robot: str | os.PathLike[str] | RobotSpec = "paper_2link", **generate_kwargs: Any
+) -> ModelLibrary:
+    """Generate (or reuse from the cache) and load the library of ``robot``
+    (``generate_kwargs`` as :func:`generate`)."""
+    return ModelLibrary(generate(robot, **generate_kwargs).out_dir)
+
+
+def library_for(sc: Scenario, out: str | os.PathLike[str] | None = None) -> ModelLibrary:
+    """Generate (or reuse) and load the library a scenario runs on.
+
+    The scenario's ``integrator`` (when set and different from the robot's) gives a library
+    of its own, ``<robot>_<integrator>``.  The camera timing and the filter's buffer are
+    checked against the robot spec first (:func:`~amsfe_sym.scenario.camera_timing`), so a
+    bad scenario fails before anything is generated.
+
+    Raises:
+        ConfigError: the scenario's camera timing does not fit the robot or the filter.
+    """
+    from amsfe_sym.estimation.registry import estimator_class
+    from amsfe_sym.preflight import check_scenario_shapes
+
+    spec = load_spec(sc.robot)
+    check_scenario_shapes(sc, spec)  # every wrong-length vector, before generating
+    camera_timing(
+        sc,
+        spec.camera.period,
+        spec.camera.delay,
+        needs_history=estimator_class(sc.estimator).needs_history,
+    )
+    if sc.integrator and sc.integrator != spec.model.integrator:
+        spec = replace(
+            spec,
+            name=f"{spec.name}_{sc.integrator}",
+            model=replace(spec.model, integrator=sc.integrator),  # type: ignore[arg-type]
+        )
+    return load_library(spec, out=out)

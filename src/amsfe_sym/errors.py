@@ -15,6 +15,7 @@ __all__ = [
     "EstimatorError",
     "MeasurementError",
     "ModelError",
+    "RunFolderError",
     "ShapeError",
     "SpecError",
     "UnsupportedJointError",
@@ -72,3 +73,8 @@ class ConvergenceError(EstimatorError):
     """An iterative generated function (the inverse transition, eq. 22) did not converge:
     its ``residual`` output is above the tolerance, so its result is not used.  Estimators
     treat it like a refused frame (counted, estimate untouched)."""
+
+
+class RunFolderError(AmsfeError, FileExistsError):
+    """A run's output folder cannot be written as asked (it exists and ``--force`` is off,
+    or it is a file)."""

@@ -10,21 +10,25 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import sys
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from amsfe_sym._toml import tomllib
 from amsfe_sym.errors import ConfigError, describe
-from amsfe_sym.spec import data_dir
+from amsfe_sym.spec import INTEGRATORS, data_dir
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
-
-__all__ = ["Scenario", "dump_toml", "find_scenario", "load_scenario", "scenarios_dir"]
+__all__ = [
+    "CameraTiming",
+    "Scenario",
+    "apply_sets",
+    "camera_timing",
+    "dump_toml",
+    "find_scenario",
+    "load_scenario",
+    "scenarios_dir",
+]
 
 
 @dataclass(frozen=True)
@@ -59,14 +63,18 @@ class EncoderSettings:
 
 @dataclass(frozen=True)
 class CameraSettings:
-    """Camera timing and noise; ``period``/``delay`` of 0 take the robot spec's l and d."""
+    """Camera timing and noise.
+
+    ``period`` (l) and ``delay`` (d) [steps]: ``None`` (the key left out, or ``"robot"``)
+    takes the robot spec's; :func:`camera_timing` resolves and checks them.
+    """
 
     pixel_std: float = 0.5
     round_to_pixel: bool = True
     drop_probability: float = 0.0
     jitter_steps: int = 0
-    period: int = 0
-    delay: int = 0
+    period: int | None = None
+    delay: int | None = None
     phase: int = 0
 
 
@@ -180,6 +188,8 @@ _SECTIONS: dict[str, Any] = {
     "camera": CameraSettings,
     "filter": FilterSettings,
 }
+#: ``[camera]`` keys whose "the robot's" value is ``None`` (key left out, or ``"robot"``).
+_ROBOT_DEFAULT = ("period", "delay")
 _TOP = {
     "name",
     "robot",
@@ -241,7 +251,12 @@ def parse_scenario(data: Mapping[str, Any], path: Path) -> Scenario:
                 )
             )
         types = {f.name: str(f.type) for f in dataclasses.fields(cls)}
-        raw = {k: _typed(v, types[k], f"{where} [{key}] {k}") for k, v in raw.items()}
+        raw = {
+            k: _robot_default(f"{where} [camera] {k}", k, v)
+            if key == "camera" and k in _ROBOT_DEFAULT
+            else _typed(v, types[k], f"{where} [{key}] {k}")
+            for k, v in raw.items()
+        }
         sections[key] = cls(**raw)
     top = {
         k: _typed(data[k], str(f.type), f"{where}: {k}")
@@ -310,6 +325,28 @@ def _typed(v: Any, ann: str, what: str) -> Any:
     return v
 
 
+def _robot_default(where: str, key: str, v: Any) -> int | None:
+    """A ``[camera] period``/``delay`` entry: ``"robot"`` -> None, else an integer."""
+    if v == "robot":
+        return None
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise ConfigError(
+            describe(
+                where, 'an integer or "robot"', repr(v), f'write {key} = "robot" or leave it out'
+            )
+        )
+    if key == "period" and v == 0:
+        raise ConfigError(
+            describe(
+                where,
+                "an integer >= 1",
+                "0 (the old way to say 'the robot's period')",
+                'leave period out (or write "robot"); note that delay = 0 now means no delay',
+            )
+        )
+    return v
+
+
 def validate(sc: Scenario, where: str = "scenario") -> None:
     """Value checks that need no robot: positive durations, noise, probabilities."""
 
@@ -345,11 +382,11 @@ def validate(sc: Scenario, where: str = "scenario") -> None:
                     f"write std.{k} = 0.1 (no quotes)",
                 )
             )
-    if sc.integrator not in ("", "paper", "semi_implicit", "rk4"):
+    if sc.integrator and sc.integrator not in INTEGRATORS:
         raise ConfigError(
             describe(
                 f"{where}: integrator",
-                "'' (the robot's), paper, semi_implicit or rk4",
+                "'' (the robot's) or one of " + ", ".join(INTEGRATORS),
                 repr(sc.integrator),
                 'write integrator = "rk4" (or "" for the robot spec\'s)',
             )
@@ -403,9 +440,241 @@ def dump_toml(data: Mapping[str, Any]) -> str:
             return "{ " + ", ".join(f"{k} = {value(x)}" for k, x in v.items()) + " }"
         raise ConfigError(f"cannot write {type(v).__name__} to TOML")
 
-    lines = [f"{k} = {value(v)}" for k, v in data.items() if not isinstance(v, Mapping)]
+    # None is "not set" (e.g. [camera] delay = the robot's): the key is left out
+    lines = [
+        f"{k} = {value(v)}" for k, v in data.items() if not isinstance(v, Mapping) and v is not None
+    ]
     for k, v in data.items():
         if isinstance(v, Mapping):
             lines.append(f"\n[{k}]")
-            lines.extend(f"{kk} = {value(vv)}" for kk, vv in v.items())
+            lines.extend(f"{kk} = {value(vv)}" for kk, vv in v.items() if vv is not None)
     return "\n".join(lines) + "\n"
+
+
+@dataclass(frozen=True)
+class CameraTiming:
+    """The camera's resolved timing (paper Sec. 3.2, eq. 11), all in steps of T.
+
+    Attributes:
+        period: l, steps between exposures (>= 1).
+        delay: d, steps from exposure to delivery (>= 0; 0 = delivered at once).
+        phase: Exposures at steps k with ``k % period == phase``.
+        jitter_steps: Largest extra random delay.
+    """
+
+    period: int
+    delay: int
+    phase: int
+    jitter_steps: int
+
+    @property
+    def max_delay(self) -> int:
+        """The largest delay a frame may have: ``delay + jitter_steps``."""
+        return self.delay + self.jitter_steps
+
+
+def camera_timing(
+    sc: Scenario, robot_period: int, robot_delay: int, needs_history: bool = True
+) -> CameraTiming:
+    """The one place a scenario's camera period and delay are resolved and checked.
+
+    ``None`` in the scenario takes the robot's (``robot_period``, ``robot_delay``: the robot
+    spec's ``[camera]``, or the library manifest's, which records the same values).  Needs
+    no library, so it runs before anything is generated.
+
+    Args:
+        sc: The scenario.
+        robot_period, robot_delay: The robot's l and d [steps].
+        needs_history: Whether the estimator keeps a history for late frames (``replay``,
+            ``oosm``, ``cloning``): then ``[filter] buffer_steps`` must cover the largest
+            delay.
+
+    Raises:
+        ConfigError: period < 1, delay < 0, a phase outside [0, period), or a buffer
+            shorter than delay + jitter.
+    """
+    cam = sc.camera
+    period = robot_period if cam.period is None else cam.period
+    delay = robot_delay if cam.delay is None else cam.delay
+    where = f"{sc.name}: [camera]"
+    if period < 1:
+        raise ConfigError(
+            describe(
+                f"{where} period", "an integer >= 1", repr(period), "write period = 125 (steps)"
+            )
+        )
+    if delay < 0 or cam.jitter_steps < 0:
+        raise ConfigError(
+            describe(
+                f"{where} delay / jitter_steps",
+                "integers >= 0",
+                f"{delay} / {cam.jitter_steps}",
+                "use delays in whole steps >= 0 (omit delay for the robot's)",
+            )
+        )
+    if not 0 <= cam.phase < period:
+        raise ConfigError(
+            describe(
+                f"{where} phase",
+                f"an integer in [0, {period})",
+                repr(cam.phase),
+                "write a phase smaller than the period, e.g. phase = 0",
+            )
+        )
+    timing = CameraTiming(period, delay, cam.phase, cam.jitter_steps)
+    if needs_history and timing.max_delay > sc.filter.buffer_steps:
+        raise ConfigError(
+            describe(
+                "[filter] buffer_steps",
+                f">= camera delay + jitter = {timing.max_delay} steps",
+                str(sc.filter.buffer_steps),
+                "raise buffer_steps or shorten the delay",
+            )
+        )
+    return timing
+
+
+# --------------------------------------------------------------------------- --set
+#: Top-level scenario keys ``--set`` may change (``seed`` and ``estimator`` are the study's).
+_TOP_SETTABLE = ("integrator", "duration", "controller")
+#: Dataclass sections of :class:`Scenario`.
+_SET_SECTIONS = tuple(_SECTIONS)
+#: Mapping-valued entries whose existing keys ``--set`` may change.
+_MAPPINGS = ("trajectory", "controller_gains", "estimate0.std")
+#: ``--set`` keys whose value may be ``"robot"`` (None: the robot's value).
+_OPTIONAL_INT = tuple(f"camera.{k}" for k in _ROBOT_DEFAULT)
+
+
+def _parse_value(text: str) -> Any:
+    """A TOML value (number, bool, quoted string, list) or, failing that, the bare text."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text.strip()
+
+
+def _coerce(key: str, current: Any, raw: str) -> Any:
+    """``raw`` converted to the type of ``current`` (the field's present value)."""
+    value = _parse_value(raw)
+
+    def bad(expected: str) -> ConfigError:
+        return ConfigError(
+            describe(f"--set {key}={raw}", expected, repr(value), f"give {key} a valid value")
+        )
+
+    if key in _OPTIONAL_INT:  # None (or "robot") = the robot's value
+        if value == "robot":
+            return None
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise bad('an integer or "robot"')
+        return value
+    if isinstance(current, bool):
+        if not isinstance(value, bool):
+            raise bad("true or false")
+        return value
+    if isinstance(current, int):
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise bad("an integer")
+        return value
+    if isinstance(current, float):
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise bad("a number")
+        return float(value)
+    if isinstance(current, tuple):
+        items: Any = value
+        if isinstance(value, str):
+            items = [s for s in value.strip("[]() ").split(",") if s.strip()]
+        elif not isinstance(value, list):
+            items = [value]
+        try:
+            return tuple(float(v) for v in items)
+        except (TypeError, ValueError):
+            raise bad("numbers separated by commas, e.g. 0.5,0.5") from None
+    if isinstance(current, str):
+        if isinstance(value, list | dict):
+            raise bad("a string")
+        return str(value).lower() if isinstance(value, bool) else str(value)
+    raise bad(f"a value like {current!r}")
+
+
+def _split_set(text: str) -> tuple[str, str]:
+    key, sep, raw = text.partition("=")
+    key = key.strip()
+    if not sep or not key or not raw.strip():
+        raise ConfigError(
+            describe(
+                f"--set {text!r}",
+                "KEY=VALUE, e.g. integrator=paper or filter.link_torque_std=2",
+                "no '=' or an empty side",
+                "write section.field=value",
+            )
+        )
+    return key, raw
+
+
+def _settable_keys(sc: Scenario) -> list[str]:
+    keys = list(_TOP_SETTABLE)
+    for sec in _SET_SECTIONS:
+        keys += [f"{sec}.{f.name}" for f in dataclasses.fields(getattr(sc, sec))]
+    keys += [f"trajectory.{k}" for k in sc.trajectory]
+    keys += [f"controller_gains.{k}" for k in sc.controller_gains]
+    keys += [f"estimate0.std.{k}" for k in sc.estimate0.std]
+    return [k for k in keys if k != "estimate0.std"]
+
+
+def apply_sets(sc: Scenario, sets: Sequence[str]) -> Scenario:
+    """Scenario ``sc`` with ``KEY=VALUE`` overrides applied, then re-validated.
+
+    Keys: ``integrator``, ``duration``, ``controller``; ``section.field`` for the sections
+    plant, encoders, camera, filter, estimate0; ``trajectory.K``, ``controller_gains.K`` and
+    ``estimate0.std.K`` for keys the scenario already has.  Values are TOML literals
+    (``2``, ``0.01``, ``true``, ``"rk4"``) or bare words (``paper``); tuples are written
+    ``0.5,0.5``.
+
+    Raises:
+        ConfigError: unknown key, value of the wrong type, or a value the scenario's own
+            validation refuses (e.g. a negative noise standard deviation).
+    """
+    for text in sets:
+        key, raw = _split_set(text)
+        parts = key.split(".")
+        if len(parts) == 1 and key in _TOP_SETTABLE:
+            sc = dataclasses.replace(sc, **{key: _coerce(key, getattr(sc, key), raw)})
+        elif len(parts) == 2 and parts[0] in _SET_SECTIONS:
+            sec = getattr(sc, parts[0])
+            names = {f.name for f in dataclasses.fields(sec)}
+            if parts[1] not in names or parts[1] == "std":
+                raise _unknown_key(key, sc)
+            new = _coerce(key, getattr(sec, parts[1]), raw)
+            sc = dataclasses.replace(sc, **{parts[0]: dataclasses.replace(sec, **{parts[1]: new})})
+        elif ".".join(parts[:-1]) in _MAPPINGS:
+            where, name = ".".join(parts[:-1]), parts[-1]
+            mapping: Mapping[str, Any] = (
+                sc.estimate0.std if where == "estimate0.std" else getattr(sc, where)
+            )
+            if name not in mapping:
+                raise _unknown_key(key, sc)
+            d = dict(mapping)
+            d[name] = _coerce(key, d[name], raw)
+            if where == "estimate0.std":
+                sc = dataclasses.replace(sc, estimate0=dataclasses.replace(sc.estimate0, std=d))
+            else:
+                changes: dict[str, Any] = {where: d}
+                sc = dataclasses.replace(sc, **changes)
+        else:
+            raise _unknown_key(key, sc)
+    validate(sc, f"{sc.name} with --set")
+    return sc
+
+
+def _unknown_key(key: str, sc: Scenario) -> ConfigError:
+    return ConfigError(
+        describe(
+            f"--set key {key!r}",
+            "integrator, duration, controller or section.field with section in "
+            + ", ".join(_SET_SECTIONS)
+            + " (also trajectory.K, controller_gains.K, estimate0.std.K)",
+            "no such field",
+            "one of: " + ", ".join(_settable_keys(sc)),
+        )
+    )

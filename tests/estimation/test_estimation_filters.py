@@ -78,7 +78,7 @@ class Scenario:
     n_steps: int = 70
 
     @property
-    def max_latency(self) -> int:
+    def max_delay(self) -> int:
         return self.d + self.jitter
 
 
@@ -162,10 +162,10 @@ def in_order_kf(system: System, run: Run, k_end: int) -> tuple[FloatArray, Float
 def build(name: str, system: System, sc: Scenario, **overrides: object) -> Estimator:
     settings: dict[str, object] = dict(
         gate_probability=None,  # exactness: the reference has no gate (see module docstring)
-        buffer_steps=sc.max_latency + 2,
+        buffer_steps=sc.max_delay + 2,
         camera_period=sc.l,
         camera_phase=sc.phase,
-        camera_max_latency=sc.max_latency,
+        camera_max_delay=sc.max_delay,
     )
     settings.update(overrides)
     config = FilterConfig(**settings)  # type: ignore[arg-type]
@@ -406,7 +406,7 @@ def test_frame_older_than_buffer_is_rejected_and_counted(
 ) -> None:
     system = make_system()
     sc = Scenario(l=3, d=2)
-    est = build(name, system, sc, buffer_steps=4, camera_max_latency=4)
+    est = build(name, system, sc, buffer_steps=4, camera_max_delay=4)
     run = simulate(system, sc, seed=9)
     advance(est, run, 8)
     with caplog.at_level(logging.WARNING, logger=LOGGER):
@@ -530,7 +530,7 @@ def test_cloning_bookkeeping(caplog: pytest.LogCaptureFixture) -> None:
     assert est.clones_in_flight == (0,)  # k0 = 0 is a scheduled exposure
     for _k in range(6):
         est.step(np.zeros(2), np.zeros(2))
-    # after step 6: exposures 0, 2, 4, 6; the clone of 0 expired (6 - 0 >= max latency 5)
+    # after step 6: exposures 0, 2, 4, 6; the clone of 0 expired (6 - 0 >= max delay 5)
     assert est.clones_in_flight == (2, 4, 6)
     xa, Pa = est.augmented_estimate()
     assert xa.shape == (20,) and Pa.shape == (20, 20)

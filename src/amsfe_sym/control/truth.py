@@ -43,9 +43,9 @@ class TruthComputedTorque(Controller):
         self, lib: ModelLibrary, trajectory: Trajectory, gains: Mapping[str, Any] | None = None
     ) -> None:
         super().__init__(lib, trajectory, gains)
-        act = lib.manifest["actuators"]
-        self.Mm = np.array(act["Mm"], dtype=float)
-        self.Fm = np.array(act["Fm"], dtype=float)
+        act = lib.manifest.actuators
+        self.Mm = np.array(act.Mm, dtype=float)
+        self.Fm = np.array(act.Fm, dtype=float)
         wl = float(self.gains["link_bandwidth"])
         wm = float(self.gains["motor_bandwidth"])
         self.Kp, self.Kd = wl * wl, 2.0 * wl

@@ -66,7 +66,7 @@ class FilterConfig:
         camera_period: Camera period ``l`` [steps] (paper eq. (11)). Required by ``cloning``,
             which clones the state at each scheduled exposure.
         camera_phase: Exposures happen at steps ``k`` with ``k % camera_period == camera_phase``.
-        camera_max_latency: Largest delay ``d`` + jitter [steps] a frame may have; ``cloning``
+        camera_max_delay: Largest delay ``d`` + jitter [steps] a frame may have; ``cloning``
             drops a clone this many steps after its exposure (a dropped frame). ``None``
             means ``buffer_steps``.
     """
@@ -77,7 +77,7 @@ class FilterConfig:
     buffer_steps: int = 1000
     camera_period: int | None = None
     camera_phase: int = 0
-    camera_max_latency: int | None = None
+    camera_max_delay: int | None = None
 
     def __post_init__(self) -> None:
         for name in ("gate_probability", "encoder_gate_probability"):
@@ -123,14 +123,14 @@ class FilterConfig:
                         "use exposure_step % camera_period",
                     )
                 )
-        if self.camera_max_latency is not None and (
-            not isinstance(self.camera_max_latency, int) or self.camera_max_latency < 0
+        if self.camera_max_delay is not None and (
+            not isinstance(self.camera_max_delay, int) or self.camera_max_delay < 0
         ):
             raise ConfigError(
                 describe(
-                    "camera_max_latency",
+                    "camera_max_delay",
                     "an integer >= 0 or None",
-                    repr(self.camera_max_latency),
+                    repr(self.camera_max_delay),
                     "give d + max jitter in steps",
                 )
             )
@@ -213,6 +213,9 @@ class Estimator(ABC):
 
     name: ClassVar[str]
     uses_frames: ClassVar[bool] = True
+    #: Whether late frames are served from a history of ``buffer_steps`` steps (then the
+    #: buffer must cover the camera's largest delay).
+    needs_history: ClassVar[bool] = False
 
     def __init__(
         self,

@@ -14,7 +14,7 @@ only the state: with ``A = dF/dx``,
 augmented state through ``Ha = [H, 0]``, so it also refines the clones (smoothing). When the
 frame of ``kappa`` arrives, ``Ha = [0, .., Hc(c), .., 0]`` updates the state through the
 cross-covariance, and the clone is dropped. A clone whose frame has not come
-``camera_max_latency`` steps after its exposure is dropped (a lost frame). Several clones may
+``camera_max_delay`` steps after its exposure is dropped (a lost frame). Several clones may
 be in flight (delay > period). Updates use the Joseph form on the augmented state.
 
 Linear-Gaussian: exactly the in-order Kalman filter (the tests check this to 1e-9). Cost: the
@@ -48,6 +48,7 @@ class CloningEstimator(Estimator):
     """
 
     name: ClassVar[str] = "cloning"
+    needs_history: ClassVar[bool] = True
 
     def _setup(self) -> None:
         if self.config.camera_period is None:
@@ -56,13 +57,15 @@ class CloningEstimator(Estimator):
                     "FilterConfig.camera_period for 'cloning'",
                     "the camera period l in steps",
                     "None",
-                    "set camera_period (and camera_phase, camera_max_latency) so the estimator "
+                    "set camera_period (and camera_phase, camera_max_delay) so the estimator "
                     "knows at which steps to clone the state",
                 )
             )
-        latency = self.config.camera_max_latency
-        self._max_latency = (
-            self.config.buffer_steps if latency is None else min(latency, self.config.buffer_steps)
+        max_delay = self.config.camera_max_delay
+        self._max_delay = (
+            self.config.buffer_steps
+            if max_delay is None
+            else min(max_delay, self.config.buffer_steps)
         )
         self._xa: FloatArray = self.x.copy()
         self._Pa: FloatArray = self.P.copy()
@@ -160,7 +163,7 @@ class CloningEstimator(Estimator):
                 why = (
                     "was not a scheduled exposure"
                     if not self._scheduled(kappa)
-                    else "has no clone left (already used, or older than camera_max_latency)"
+                    else "has no clone left (already used, or older than camera_max_delay)"
                 )
                 report.reject(f"camera frame kappa={kappa} {why}; rejected")
                 continue
@@ -173,7 +176,7 @@ class CloningEstimator(Estimator):
             report.frame_result(kappa, accepted, nis, self._gate_camera)
             self._drop_clone(index)
         for index in range(len(self._clones) - 1, -1, -1):
-            if k_new - self._clones[index] >= self._max_latency:
+            if k_new - self._clones[index] >= self._max_delay:
                 self._drop_clone(index)
         report.clones = len(self._clones)
         self._sync()

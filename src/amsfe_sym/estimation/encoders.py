@@ -32,3 +32,8 @@ class EncodersEstimator(Estimator):
     ) -> None:
         self._predict(u)
         self._encoder_update(z_encoder, report)
+        self._frames_now(frames, report)
+
+    def _frames_now(self, frames: list[CameraFrame], report: StepReport) -> None:
+        """Use the frames delivered at this step, after the encoder update: none here
+        (:class:`~amsfe_sym.estimation.naive.NaiveEstimator` applies them)."""

@@ -15,13 +15,13 @@ has ``nx`` entries, in the order of the paper's eq. (2) for the robot models.
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 import scipy.linalg as sla
 from numpy.typing import ArrayLike, NDArray
 
+from amsfe_sym.camera_frame import CameraFrame
 from amsfe_sym.errors import ModelError, ShapeError, describe
 
 __all__ = [
@@ -91,30 +91,6 @@ class MeasurementModel(Protocol):
     def predict(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Return ``(h(x), dh/dx)``: prediction ``(dim,)`` and jacobian ``(dim, nx)``."""
         ...
-
-
-@dataclass(frozen=True, eq=False)
-class CameraFrame:
-    """One camera measurement, delivered some steps after it was taken (the one frame type of
-    the toolkit: the camera model of ``amsfe_sym.sim`` produces it, the estimators consume it).
-
-    Attributes:
-        exposure_step: kappa, the step index at which the image was taken (paper Sec. 3.2).
-        z: Measurement ``(dim,)``, in the camera model's units (pixels for the pinhole map).
-        delivery_step: Step at which the frame reached the estimator (``kappa + d`` plus
-            jitter); ``-1`` when unknown.
-
-    ``eq=False``: frames compare by identity (an array field has no scalar equality).
-    """
-
-    exposure_step: int
-    z: FloatArray
-    delivery_step: int = -1
-
-    @property
-    def delay(self) -> int:
-        """Steps from exposure to delivery, or -1 when the delivery step is unknown."""
-        return -1 if self.delivery_step < 0 else self.delivery_step - self.exposure_step
 
 
 def _as_matrix(name: str, value: ArrayLike, shape: tuple[int, int] | None = None) -> FloatArray:

@@ -10,29 +10,21 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-import numpy as np
-from numpy.typing import NDArray
-
-from amsfe_sym.estimation.base import Estimator, StepReport
+from amsfe_sym.estimation.base import StepReport
+from amsfe_sym.estimation.encoders import EncodersEstimator
 from amsfe_sym.estimation.models import CameraFrame
 
 __all__ = ["NaiveEstimator"]
 
 
-class NaiveEstimator(Estimator):
-    """EKF that applies every delivered frame at the current step, whatever its age."""
+class NaiveEstimator(EncodersEstimator):
+    """EKF that applies every delivered frame at the current step, whatever its age (the
+    encoder EKF's step, then every frame as if taken now)."""
 
     name: ClassVar[str] = "naive"
+    uses_frames: ClassVar[bool] = True
 
-    def _step(
-        self,
-        u: NDArray[np.float64],
-        z_encoder: NDArray[np.float64] | None,
-        frames: list[CameraFrame],
-        report: StepReport,
-    ) -> None:
-        self._predict(u)
-        self._encoder_update(z_encoder, report)
+    def _frames_now(self, frames: list[CameraFrame], report: StepReport) -> None:
         for frame in frames:
             result = self._frame_update_now(frame.z)
             report.frame_result(frame.exposure_step, result.accepted, result.nis, self._gate_camera)

@@ -124,6 +124,14 @@ def a1_retrodict(
     v_hat = S_inv_HQ.T @ last.nu  # Q H^T S^-1 nu (Q, S symmetric)
     Pvv = Q - (H @ Q).T @ S_inv_HQ
     Pxv = Q - (last.P_prior @ H.T) @ S_inv_HQ
+    return _retrodiction(x_post, P_post, v_hat, Pvv, Pxv)
+
+
+def _retrodiction(
+    x_post: FloatArray, P_post: FloatArray, v_hat: FloatArray, Pvv: FloatArray, Pxv: FloatArray
+) -> A1Retrodiction:
+    """The common tail of A1 and Al1: ``M = P + Pvv - Pxv - Pxv^T`` (eq. (27) corrected),
+    ``C = P - Pxv`` and ``x_shift = x - v_hat`` (eq. (24))."""
     M = symmetrize(P_post + Pvv - Pxv - Pxv.T)
     return A1Retrodiction(x_post - v_hat, M, P_post - Pxv, v_hat)
 
@@ -170,8 +178,7 @@ def al1_retrodict(
     v_hat = T.T @ (x_post - x_pred)
     Pxv = P_post @ T
     Pvv = Q - T.T @ Q + T.T @ P_post @ T
-    M = symmetrize(P_post + Pvv - Pxv - Pxv.T)
-    return A1Retrodiction(x_post - v_hat, M, P_post - Pxv, v_hat)
+    return _retrodiction(x_post, P_post, v_hat, Pvv, Pxv)
 
 
 def a1_correct(
@@ -223,6 +230,7 @@ class OosmEstimator(Estimator):
     """
 
     name: ClassVar[str] = "oosm"
+    needs_history: ClassVar[bool] = True
 
     def _setup(self) -> None:
         n, B = self.nx, self.config.buffer_steps

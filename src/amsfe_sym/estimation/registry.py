@@ -12,7 +12,7 @@ from amsfe_sym.estimation.naive import NaiveEstimator
 from amsfe_sym.estimation.oosm import OosmEstimator
 from amsfe_sym.estimation.replay import ReplayEstimator
 
-__all__ = ["ESTIMATORS", "make_estimator"]
+__all__ = ["ESTIMATORS", "estimator_class", "make_estimator"]
 
 ESTIMATORS: dict[str, type[Estimator]] = {
     cls.name: cls
@@ -24,6 +24,25 @@ ESTIMATORS: dict[str, type[Estimator]] = {
         CloningEstimator,
     )
 }
+
+
+def estimator_class(name: str) -> type[Estimator]:
+    """The estimator class registered as ``name``.
+
+    Raises:
+        ConfigError: If ``name`` is unknown (the message lists the known names).
+    """
+    try:
+        return ESTIMATORS[name]
+    except (KeyError, TypeError):
+        raise ConfigError(
+            describe(
+                "estimator name",
+                "one of " + ", ".join(repr(n) for n in ESTIMATORS),
+                repr(name),
+                "pick a name from that list",
+            )
+        ) from None
 
 
 def make_estimator(name: str, **kwargs: Any) -> Estimator:
@@ -38,15 +57,4 @@ def make_estimator(name: str, **kwargs: Any) -> Estimator:
     Raises:
         ConfigError: If ``name`` is unknown (the message lists the known names).
     """
-    try:
-        cls = ESTIMATORS[name]
-    except (KeyError, TypeError):
-        raise ConfigError(
-            describe(
-                "estimator name",
-                "one of " + ", ".join(repr(n) for n in ESTIMATORS),
-                repr(name),
-                "pick a name from that list",
-            )
-        ) from None
-    return cls(**kwargs)
+    return estimator_class(name)(**kwargs)

@@ -35,6 +35,7 @@ class ReplayEstimator(Estimator):
     """Exact (linear-Gaussian) late-frame handling by rewind and re-filtering."""
 
     name: ClassVar[str] = "replay"
+    needs_history: ClassVar[bool] = True
 
     def _setup(self) -> None:
         size = self.config.buffer_steps + 1

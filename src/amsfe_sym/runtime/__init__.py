@@ -1,5 +1,10 @@
-"""Runtime: load generated libraries and call them with little overhead; no symbols here."""
+"""Runtime: load generated libraries and call them with little overhead; no symbols here.
+
+Imports numpy and ctypes only: never CasADi, Pinocchio or the code generator
+(``tests/test_layers.py`` checks it).  Building a library is :mod:`amsfe_sym.codegen`'s job.
+"""
 
 from amsfe_sym.runtime.library import CompiledFunction, ModelLibrary
+from amsfe_sym.runtime.manifest import Manifest, read_manifest
 
-__all__ = ["CompiledFunction", "ModelLibrary"]
+__all__ = ["CompiledFunction", "Manifest", "ModelLibrary", "read_manifest"]

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
-import json
 import os
 from functools import cached_property
 from pathlib import Path
@@ -26,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import CodegenError, ShapeError, describe
+from amsfe_sym.runtime.manifest import FunctionSignature, Manifest, read_manifest
 
 __all__ = ["CompiledFunction", "ModelLibrary", "file_sha256"]
 
@@ -39,10 +39,10 @@ class CompiledFunction:
     Args:
         lib: The loaded shared library.
         name: Function name (as in the manifest).
-        signature: The manifest's ``functions[name]`` entry.
+        signature: The manifest's signature of the function.
     """
 
-    def __init__(self, lib: ctypes.CDLL, name: str, signature: dict[str, Any]) -> None:
+    def __init__(self, lib: ctypes.CDLL, name: str, signature: FunctionSignature) -> None:
         self.name = name
         try:
             # a private function pointer (lib[name], not the CDLL's shared attribute), called
@@ -63,12 +63,12 @@ class CompiledFunction:
         work.restype = ctypes.c_int
         work(*[ctypes.byref(s) for s in sz])
         sz_arg, sz_res, sz_iw, sz_w = (int(s.value) for s in sz)
-        self.input_names = [i["name"] for i in signature["inputs"]]
-        self.output_names = [o["name"] for o in signature["outputs"]]
-        self.input_shapes = [tuple(i["shape"]) for i in signature["inputs"]]
-        self.output_shapes = [tuple(o["shape"]) for o in signature["outputs"]]
-        self._in = [np.zeros(_np_shape(i), order="F") for i in signature["inputs"]]
-        self._out = [np.zeros(_np_shape(o), order="F") for o in signature["outputs"]]
+        self.input_names = [i.name for i in signature.inputs]
+        self.output_names = [o.name for o in signature.outputs]
+        self.input_shapes = [i.shape for i in signature.inputs]
+        self.output_shapes = [o.shape for o in signature.outputs]
+        self._in = [np.zeros(i.np_shape, order="F") for i in signature.inputs]
+        self._out = [np.zeros(o.np_shape, order="F") for o in signature.outputs]
         self._iw = np.zeros(max(sz_iw, 1), dtype=np.int64)
         self._w = np.zeros(max(sz_w, 1))
         self._arg = (ctypes.c_void_p * max(sz_arg, 1))()
@@ -161,12 +161,6 @@ def _scratch(target: Any, buf: NDArray[np.float64]) -> Any:
     return target if isinstance(target, _Sink) else np.empty_like(buf)
 
 
-def _np_shape(io: dict[str, Any]) -> tuple[int, ...]:
-    """numpy shape of a manifest input/output: (rows,) for vectors, (rows, cols) for matrices."""
-    rows, cols = io["shape"]
-    return (rows, cols) if io.get("matrix", cols > 1) else (rows,)
-
-
 def file_sha256(path: Path) -> str:
     """sha256 hex digest of a file's bytes (the library's own hash in the manifest)."""
     h = hashlib.sha256()
@@ -205,15 +199,10 @@ class ModelLibrary:
     def __init__(self, path: str | os.PathLike[str]) -> None:
         p = Path(path)
         mpath = p / "manifest.json" if p.is_dir() else p
-        try:
-            self.manifest: dict[str, Any] = json.loads(mpath.read_text())
-        except (OSError, ValueError) as exc:
-            raise CodegenError(
-                describe(str(mpath), "a readable manifest.json", str(exc), "run `amsfe generate`")
-            ) from exc
+        self.manifest: Manifest = read_manifest(mpath)
         self.dir = mpath.parent
-        self.library_path = self.dir / self.manifest["library"]
-        _verify_library(self.library_path, self.manifest.get("library_sha256"))
+        self.library_path = self.dir / self.manifest.library
+        _verify_library(self.library_path, self.manifest.raw.get("library_sha256"))
         try:
             self._lib = ctypes.CDLL(str(self.library_path))
         except OSError as exc:
@@ -227,17 +216,10 @@ class ModelLibrary:
             ) from exc
         self._fns: dict[str, CompiledFunction] = {}
 
-    @classmethod
-    def for_robot(cls, robot: str = "paper_2link", **generate_kwargs: Any) -> ModelLibrary:
-        """Generate (or reuse from the cache) and load the library of ``robot``."""
-        from amsfe_sym.codegen import generate
-
-        return cls(generate(robot, **generate_kwargs).out_dir)
-
     def function(self, name: str) -> CompiledFunction:
         """The compiled function ``name`` (bound once, then reused)."""
         if name not in self._fns:
-            sigs = self.manifest["functions"]
+            sigs = self.manifest.functions
             if name not in sigs:
                 raise CodegenError(
                     describe(
@@ -258,50 +240,50 @@ class ModelLibrary:
 
     @property
     def name(self) -> str:
-        return str(self.manifest["name"])
+        return self.manifest.name
 
     @property
     def n(self) -> int:
-        return int(self.manifest["n"])
+        return self.manifest.n
 
     @property
     def p(self) -> int:
-        return int(self.manifest["p"])
+        return self.manifest.p
 
     @property
     def N(self) -> int:
-        return int(self.manifest["N"])
+        return self.manifest.N
 
     @property
     def T(self) -> float:
-        return float(self.manifest["T"])
+        return self.manifest.T
 
     @cached_property
     def layout(self) -> dict[str, slice]:
         """State blocks q, qd, qm, qmd, theta as slices of x (eq. 2)."""
-        return {k: slice(a, b) for k, (a, b) in self.manifest["state_layout"].items()}
+        return {k: slice(a, b) for k, (a, b) in self.manifest.state_layout.items()}
 
     @cached_property
     def _stiffness_theta(self) -> list[tuple[int, int]]:
-        joints = self.manifest["joints"]
+        joints = self.manifest.joints
         return [
-            (i, joints.index(t["target"]))
-            for i, t in enumerate(self.manifest["theta"])
-            if t["kind"] == "joint_stiffness"
+            (i, joints.index(t.target))
+            for i, t in enumerate(self.manifest.theta)
+            if t.kind == "joint_stiffness"
         ]
 
     def stiffness(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
         """Ks [N m/rad] per joint with the joint-stiffness parameters set to ``theta``
         (the runtime twin of ``Robot.stiffness_at``, read from the manifest)."""
-        Ks = np.array(self.manifest["actuators"]["Ks"], dtype=float)
+        Ks = np.array(self.manifest.actuators.Ks, dtype=float)
         for i, j in self._stiffness_theta:
             Ks[j] = theta[i]
         return Ks
 
     @property
     def theta_true(self) -> NDArray[np.float64]:
-        return np.array([t["true"] for t in self.manifest["theta"]], dtype=float)
+        return np.array([t.true for t in self.manifest.theta], dtype=float)
 
     @property
     def theta_initial(self) -> NDArray[np.float64]:
-        return np.array([t["initial"] for t in self.manifest["theta"]], dtype=float)
+        return np.array([t.initial for t in self.manifest.theta], dtype=float)

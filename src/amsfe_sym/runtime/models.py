@@ -161,7 +161,7 @@ class CameraMeasurement:
     """
 
     def __init__(self, lib: ModelLibrary, pixel_var: ArrayLike) -> None:
-        if lib.manifest.get("camera_depends_on_theta"):
+        if lib.manifest.camera_depends_on_theta:
             raise ConfigError(
                 describe(
                     "camera model",

@@ -1,6 +1,14 @@
-"""Simulation: sensors (encoders, camera, torque noise) and desired trajectories.
+"""Simulation: sensors (encoders, camera, torque noise), desired trajectories, and the
+closed loop.
 
-Pure numpy; all randomness comes from a :class:`numpy.random.Generator` passed in.
+- ``sensors``, ``trajectory``: the signals (pure numpy; all randomness comes from a
+  :class:`numpy.random.Generator` passed in); re-exported here;
+- ``builders``: a scenario + a library -> plant start, sensors, estimator, controller;
+- ``loop``: :func:`~amsfe_sym.sim.loop.run`, the closed-loop simulation;
+- ``record``: the run folder and the summary metrics.
+
+Importing this package does not import the closed loop (``builders``, ``loop``,
+``record``); import those modules by name.
 """
 
 from amsfe_sym.sim.sensors import (

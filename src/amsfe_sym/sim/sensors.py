@@ -36,8 +36,8 @@ from typing import TYPE_CHECKING, Any, TypeGuard
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from amsfe_sym.camera_frame import CameraFrame
 from amsfe_sym.errors import ConfigError, MeasurementError, ShapeError, describe
-from amsfe_sym.estimation.models import CameraFrame
 
 if TYPE_CHECKING:
     from amsfe_sym.spec import CameraSpec
