@@ -29,7 +29,7 @@ from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.sim.builders import build_run
 
-__all__ = ["RunResult", "run"]
+__all__ = ["REFUSAL_KINDS", "RunResult", "refusal_kind", "run"]
 
 FloatArray = NDArray[np.float64]
 
@@ -54,7 +54,8 @@ class RunResult:
             true theta, ``plant_step`` replays ``x_true`` exactly.
         frames: Delivered camera frames: rows (exposure step, delivery step, u px, v px).
         wall_time_s: Wall time of the loop [s].
-        counters: Sensor and estimator counts (frames applied, rejected, ...).
+        counters: Sensor and estimator counts (frames applied, rejected, and
+            ``refused_<kind>``: why frames were refused, see :data:`REFUSAL_KINDS`).
     """
 
     scenario: Scenario
@@ -71,6 +72,25 @@ class RunResult:
     wall_time_s: float
     counters: dict[str, int] = field(default_factory=dict)
     tau_d: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+
+
+#: Why an estimator refused a camera frame, from its report's reason: (kind, words).
+REFUSAL_KINDS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("nan", ("NaN or inf",)),
+    ("too_late", ("older than the history", "no clone left")),
+    ("gated", ("gated out",)),  # outliers, pixels far outside the predicted image point
+    ("indefinite", ("indefinite covariance",)),
+    ("no_convergence", ("did not converge",)),
+    ("unscheduled", ("not a scheduled exposure",)),
+)
+
+
+def refusal_kind(reason: str) -> str:
+    """The counter (``refused_<kind>`` in ``summary.json``) of one refusal reason."""
+    for kind, words in REFUSAL_KINDS:
+        if any(w in reason for w in words):
+            return kind
+    return "other"
 
 
 def run(scenario: Scenario, lib: ModelLibrary, progress: bool = False) -> RunResult:
@@ -111,6 +131,8 @@ def run(scenario: Scenario, lib: ModelLibrary, progress: bool = False) -> RunRes
     tau_rec = np.zeros((K, 2 * n))
     frames_rec: list[tuple[float, float, float, float]] = []
     counters = {"frames_applied": 0, "frames_rejected": 0, "encoder_rejected": 0}
+    counters.update({f"refused_{kind}": 0 for kind, _ in REFUSAL_KINDS})
+    counters["refused_other"] = 0
 
     bar = None
     if progress:
@@ -133,6 +155,8 @@ def run(scenario: Scenario, lib: ModelLibrary, progress: bool = False) -> RunRes
             rep = est.step(u, z, delivered)
             counters["frames_applied"] += rep.frames_applied
             counters["frames_rejected"] += rep.frames_rejected
+            for reason in rep.rejections:
+                counters[f"refused_{refusal_kind(reason)}"] += 1
             counters["encoder_rejected"] += int(not rep.encoder_accepted)
         xh, P = est.x, est.P
         # 3. controller
