@@ -148,14 +148,26 @@ def test_theta_kinds_vs_pinocchio(tmp_path) -> None:
         M_ref = pin.crba(ref, ref.createData(), q)
         M_ref = np.triu(M_ref) + np.triu(M_ref, 1).T
         assert rel_err(np.array(fns["mass_matrix"](q, th)), M_ref) <= 1e-10
-    # the stiffness parameter replaces Ks of the elbow in the transition
-    x = np.concatenate(
-        [np.zeros(6), np.zeros(6), np.full(6, 0.01), np.zeros(6), [0.0, 2.275, 123.0]]
-    )
-    A = np.array(fns["transition_jacobian"](x, np.zeros(6)))
-    n = 6
-    d_qd_d_k3 = A[n : 2 * n, 4 * n + 2]
-    assert np.max(np.abs(d_qd_d_k3)) > 0  # Ks(elbow) = theta_3 enters the link momentum
+    # the stiffness parameter replaces Ks of the elbow in the transition (semi-implicit):
+    # d qd+/d k3 = T M^-1 e3 (qm3 - q3), d q+ = T d qd+, d qmd+ = -T (qm3 - q3)/Mm3 e3,
+    # d qm+ = T d qmd+; checked in closed form and by central differences
+    n, T = 6, robot.spec.model.T
+    q = rng.uniform(-1, 1, n)
+    x = np.concatenate([q, rng.uniform(-1, 1, n), q + rng.uniform(-0.05, 0.05, n)])
+    x = np.concatenate([x, rng.uniform(-1, 1, n), [1.0, 2.275, 123.0]])
+    u = rng.uniform(-5, 5, n)
+    col = np.array(fns["transition_jacobian"](x, u))[:, 4 * n + 2]
+    M = np.array(fns["mass_matrix"](q, x[4 * n :]))
+    defl = x[2 * n + 2] - x[2]
+    d_qd = T * np.linalg.solve(M, np.eye(n)[2]) * defl
+    d_qmd = -T * defl / robot.Mm[2] * np.eye(n)[2]
+    closed = np.concatenate([T * d_qd, d_qd, T * d_qmd, d_qmd, np.eye(3)[2]])  # theta+ = theta
+    assert rel_err(col, closed) <= 1e-10
+    h = 1e-3 * 123.0
+    e = np.zeros(4 * n + 3)
+    e[4 * n + 2] = h
+    fd = (np.array(fns["transition"](x + e, u)) - np.array(fns["transition"](x - e, u))) / (2 * h)
+    assert rel_err(col, fd.ravel()) <= 1e-8  # F is affine in k3 (central differences exact)
 
 
 def _urdf_link_inertia(urdf, link):

@@ -24,7 +24,7 @@ CONTRACT = {
     "camera_jacobian": (["q", "theta"], ["dy_dq"]),
     "transition": (["x", "u"], ["x_next"]),
     "transition_jacobian": (["x", "u"], ["A"]),
-    "transition_inverse": (["x_next", "u"], ["x"]),
+    "transition_inverse": (["x_next", "u"], ["x", "residual"]),
 }
 
 
@@ -60,6 +60,7 @@ def test_manifest_contract(name: str, libraries) -> None:
         "y": [2, 1],
         "dy_dq": [2, n],
         "A": [N, N],
+        "residual": [1, 1],
     }
     for fname, (ins, outs) in CONTRACT.items():
         sig = m["functions"][fname]

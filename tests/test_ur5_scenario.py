@@ -48,17 +48,21 @@ def test_ur5_demo_converges_and_is_consistent(ur5_demo, estimator: str) -> None:
         assert np.all(np.isfinite(getattr(res, name))), name
     assert np.all(res.P_diag > 0)
     s = summarize(res)
-    # theta: starts at 2.5 kg, ends within 20 g of the true 2 kg with a small variance
+    # theta: starts at 2.5 kg, ends within 1 g of the true 2 kg (measured 0.35 g, sd 0.46 g)
     th = res.x_hat[:, L["theta"]][:, 0]
     assert th[0] == pytest.approx(2.5)
-    assert abs(th[-1] - 2.0) < 0.02, th[-1]
-    assert np.sqrt(res.P_diag[-1, L["theta"]][0]) < 0.01
-    # link angles: estimated to < 2 mrad RMSE on every joint over the last 80 %
+    assert abs(th[-1] - 2.0) < 1e-3, th[-1]
+    assert np.sqrt(res.P_diag[-1, L["theta"]][0]) < 1e-3
+    # link angles: < 2 mrad RMSE on every joint over the last 80 % (measured 1.02 mrad)
     assert max(s["estimation_rmse"]["q"]) < 2e-3, s["estimation_rmse"]["q"]
-    # consistency: mean NEES within a factor 2 of N = 25 (measured 23-25 over seeds)
-    assert 12.5 < s["nees_mean"] < 50.0, s["nees_mean"]
+    # consistency: mean NEES 31.7-31.8 at seed 0, 1 s (N = 25)
+    assert 20.0 < s["nees_mean"] < 45.0, s["nees_mean"]
     # the camera frames are delivered and (for the late-frame estimators) all applied
     assert s["counters"]["frames_delivered"] >= 29
     assert s["counters"]["frames_out_of_image"] == 0
     if estimator in ("oosm", "replay", "cloning"):
         assert s["counters"]["frames_applied"] == s["counters"]["frames_delivered"]
+        # the frames are used: the estimate is not the encoders-only one (these bounds alone
+        # would pass with the camera unused: encoders-only RMSE 1.02 mrad, 0.35 g)
+        enc = run(sc.with_overrides(estimator="encoders"), lib=lib)
+        assert np.max(np.abs(res.x_hat[:, L["q"]] - enc.x_hat[:, L["q"]])) > 1e-6

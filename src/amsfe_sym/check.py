@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.load import Robot
 from amsfe_sym.reference import PinocchioOracle
 from amsfe_sym.runtime.library import ModelLibrary
@@ -32,17 +33,21 @@ from amsfe_sym.runtime.library import ModelLibrary
 __all__ = ["CheckResult", "format_table", "random_states", "run_checks"]
 
 Array = NDArray[np.float64]
+#: Round-trip tolerance of ``transition_inverse`` (norm-wise relative, floor 1).
+INVERSE_TOL = 1e-9
 
 
 @dataclass(frozen=True)
 class CheckResult:
-    """One row of ``amsfe check``: a function, its reference, the worst error seen."""
+    """One row of ``amsfe check``: a function, its reference, the worst error seen, and the
+    inputs where it failed (``transition_inverse``: each state whose round trip failed)."""
 
     function: str
     reference: str
     max_error: float
     tolerance: float
     samples: int
+    failed_at: tuple[str, ...] = ()
 
     @property
     def passed(self) -> bool:
@@ -113,7 +118,15 @@ def _bind(
 def run_checks(
     robot: Robot, lib: ModelLibrary, samples: int = 50, seed: int = 0
 ) -> list[CheckResult]:
-    """Compare every generated function with its reference at ``samples`` random states."""
+    """Compare every generated function with its reference at ``samples`` random states.
+
+    Raises:
+        ConfigError: ``samples`` < 1 (a check over no state cannot fail).
+    """
+    if samples < 1:
+        raise ConfigError(
+            describe("check samples", "at least 1 random state", str(samples), "pass --samples 50")
+        )
     rng = np.random.default_rng(seed)
     oracle = PinocchioOracle(robot)
     n = robot.n
@@ -123,6 +136,7 @@ def run_checks(
     cam = f("camera")
     tr = f("transition")
     errs: dict[str, list[float]] = {}
+    inverse_failures: list[str] = []
 
     def add(name: str, e: float) -> None:
         errs.setdefault(name, []).append(e)
@@ -147,7 +161,15 @@ def run_checks(
             max(rel_err(xs, tr(x, u)[0]), rel_err(As, A), rel_err(Gs, f("noise_gain")(x, u)[0])),
         )
         xn = tr(x, u)[0]
-        add("transition_inverse", rel_err(f("transition_inverse")(xn, u)[0], x, floor=1.0))
+        xb, residual = f("transition_inverse")(xn, u)
+        e_inv = rel_err(xb, x, floor=1.0)
+        add("transition_inverse", e_inv)
+        if not e_inv <= INVERSE_TOL:
+            inverse_failures.append(
+                f"x = {np.array2string(x, precision=3, max_line_width=10**6)}, "
+                f"u = {np.array2string(u, precision=3, max_line_width=10**6)}: "
+                f"round trip {e_inv:.2e}, residual output {residual[0]:.2e}"
+            )
         tau_d = rng.normal(0.0, 0.1, 2 * n)
         xp = x[: 4 * n]
         add(
@@ -175,11 +197,19 @@ def run_checks(
             1e-10 if robot.spec.model.integrator != "rk4" else 1e-6,
         ),
         "transition_step": ("transition, _jacobian, noise_gain", 1e-14),
-        "transition_inverse": ("round trip F^-1(F(x)) = x", 1e-9),
+        "transition_inverse": ("round trip F^-1(F(x)) = x", INVERSE_TOL),
         "plant_step": ("numpy RK4 on pin.aba", 1e-10),
     }
     return [
-        CheckResult(name, refs[name][0], max(v), refs[name][1], len(v)) for name, v in errs.items()
+        CheckResult(
+            name,
+            refs[name][0],
+            max(v, key=lambda e: math.inf if math.isnan(e) else e),
+            refs[name][1],
+            len(v),
+            tuple(inverse_failures) if name == "transition_inverse" else (),
+        )
+        for name, v in errs.items()
     ]
 
 

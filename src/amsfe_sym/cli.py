@@ -8,8 +8,10 @@ Errors of the toolkit print one ``error: ...`` line (expected, found, fix) and e
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from collections.abc import Sequence
+from typing import Any, NoReturn
 
 from amsfe_sym.errors import AmsfeError, ConfigError, SpecError, describe
 
@@ -22,6 +24,41 @@ def _lock_arg(text: str) -> tuple[str, float]:
         return name, float(value) if value else 0.0
     except ValueError as exc:
         raise argparse.ArgumentTypeError(f"--lock {text!r}: expected JOINT or JOINT=VALUE") from exc
+
+
+def _number(kind: type, low: float, inclusive: bool, fix: str) -> Any:
+    """An argparse ``type=`` that accepts a finite ``kind`` >= ``low`` (> when not inclusive)
+    and otherwise says, in one line, what it expected, what it found and how to fix it."""
+    bound = f"{'>=' if inclusive else '>'} {low:g}"
+    expected = f"{'an integer' if kind is int else 'a finite number'} {bound}"
+
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            value = None
+        ok = value is not None and math.isfinite(value)
+        if not ok or (value < low if inclusive else value <= low):
+            raise argparse.ArgumentTypeError(
+                describe("value", expected, repr(text), fix).removeprefix("value: ")
+            )
+        return value
+
+    parse.__name__ = kind.__name__  # argparse names the type in its own messages
+    return parse
+
+
+_SEED = _number(int, 0, True, "pass a seed >= 0, e.g. --seed 0")
+_COUNT = _number(int, 1, True, "pass a count >= 1")
+_SAMPLES = _number(int, 1, True, "pass --samples 50 (a check over no state cannot fail)")
+_DURATION = _number(float, 0.0, False, "pass a simulated time in seconds, e.g. --duration 2")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: ``error: amsfe simulate: argument --seed: ...``, exit 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"error: {self.prog}: {message} (see {self.prog} -h)\n")
 
 
 def _add_set(p: argparse.ArgumentParser) -> None:
@@ -37,7 +74,7 @@ def _add_set(p: argparse.ArgumentParser) -> None:
 
 def get_argument_parser() -> argparse.ArgumentParser:
     """The argument parser of ``amsfe``."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="amsfe",
         description="Code-generated elastic-joint robot models, multirate sensor fusion, DTSMC.",
     )
@@ -61,8 +98,8 @@ def get_argument_parser() -> argparse.ArgumentParser:
     c.add_argument("robot", nargs="?", default="paper_2link")
     c.add_argument("--out", default=None, help="parent folder of generated libraries")
     c.add_argument("--lock", nargs="+", type=_lock_arg, default=[], metavar="JOINT[=VALUE]")
-    c.add_argument("--samples", type=int, default=50, help="random states (default 50)")
-    c.add_argument("--seed", type=int, default=0)
+    c.add_argument("--samples", type=_SAMPLES, default=50, help="random states (default 50)")
+    c.add_argument("--seed", type=_SEED, default=0)
 
     s = sub.add_parser("simulate", help="run a scenario: plant, sensors, estimator, controller")
     s.add_argument("scenario", nargs="?", default="paper-sim", help="scenario name or .toml")
@@ -80,18 +117,19 @@ def get_argument_parser() -> argparse.ArgumentParser:
         metavar="A,B,...",
         help="controllers to compare on one seed (default: the scenario's compare list)",
     )
-    s.add_argument("--seed", type=int, default=None)
-    s.add_argument("--duration", type=float, default=None, help="simulated time [s]")
+    s.add_argument("--seed", type=_SEED, default=None)
+    s.add_argument("--duration", type=_DURATION, default=None, help="simulated time [s]")
     s.add_argument("--out", default=None, help="run folder (default runs/<scenario>-<stamp>)")
     s.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     s.add_argument("--no-plots", action="store_true", help="skip the figures")
+    s.add_argument("--force", action="store_true", help="replace an existing --out run folder")
     _add_set(s)
 
     b = sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
     b.add_argument("robot", nargs="?", default="paper_2link")
     b.add_argument("--out", default=None, help="parent folder of generated libraries")
-    b.add_argument("--repeat", type=int, default=20000, help="calls per timing")
-    b.add_argument("--rounds", type=int, default=5, help="timing rounds (median reported)")
+    b.add_argument("--repeat", type=_COUNT, default=20000, help="calls per timing")
+    b.add_argument("--rounds", type=_COUNT, default=5, help="timing rounds (median reported)")
     b.add_argument("--json", default=None, metavar="FILE", help="also write the report as JSON")
     b.add_argument(
         "--skip",
@@ -100,7 +138,9 @@ def get_argument_parser() -> argparse.ArgumentParser:
         default=[],
         help="sections to leave out",
     )
-    b.add_argument("--duration", type=float, default=2.0, help="simulated time per estimator [s]")
+    b.add_argument(
+        "--duration", type=_DURATION, default=2.0, help="simulated time per estimator [s]"
+    )
     b.add_argument("--scenario", default=None, help="scenario of the estimator section")
     b.add_argument(
         "--estimators", nargs="+", default=None, help="estimators to time (default all five)"
@@ -114,15 +154,15 @@ def get_argument_parser() -> argparse.ArgumentParser:
         help="recompile with comma-separated flag sets, e.g. --compare-cflags=-O0,-O1,'-O1 "
         "-march=native' (no value: -O0..-O3, -Os, -O1 -march=native)",
     )
-    b.add_argument("--compile-repeat", type=int, default=1, help="builds per flag set (min)")
+    b.add_argument("--compile-repeat", type=_COUNT, default=1, help="builds per flag set (min)")
 
     st = sub.add_parser("study", help="Monte Carlo over seeds x estimators: tables, NEES, figures")
     st.add_argument("scenario", nargs="?", default="paper-sim", help="scenario name or .toml")
-    st.add_argument("--seeds", type=int, default=20, help="number of seeds (default 20)")
-    st.add_argument("--first-seed", type=int, default=0, help="first seed (default 0)")
+    st.add_argument("--seeds", type=_COUNT, default=20, help="number of seeds (default 20)")
+    st.add_argument("--first-seed", type=_SEED, default=0, help="first seed (default 0)")
     st.add_argument("--estimators", default="all", help="all | name,name (default all)")
-    st.add_argument("--duration", type=float, default=None, help="simulated time [s]")
-    st.add_argument("--workers", type=int, default=2, help="processes (default 2)")
+    st.add_argument("--duration", type=_DURATION, default=None, help="simulated time [s]")
+    st.add_argument("--workers", type=_COUNT, default=2, help="processes (default 2)")
     st.add_argument("--out", default=None, help="folder (default runs/study-<scenario>-<stamp>)")
     _add_set(st)
     st.add_argument(
@@ -139,7 +179,10 @@ def get_argument_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``amsfe`` with ``argv`` (default: ``sys.argv[1:]``); returns the exit code."""
-    args = get_argument_parser().parse_args(argv)
+    try:
+        args = get_argument_parser().parse_args(argv)
+    except SystemExit as exc:  # bad arguments (one line, exit 2) or -h (exit 0)
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
     try:
         if args.command == "generate":
             return _generate(args)
@@ -154,7 +197,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     except AmsfeError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    raise SpecError(describe("command", "generate|check|simulate|bench", args.command, "see -h"))
+    except KeyboardInterrupt:
+        print(
+            f"interrupted: amsfe {args.command} stopped by Ctrl-C; nothing half-written was kept",
+            file=sys.stderr,
+        )
+        return 130
+    raise SpecError(
+        describe(
+            "command",
+            "generate|check|simulate|bench|study",
+            args.command,
+            "run amsfe -h for the commands",
+        )
+    )
 
 
 def _generate(args: argparse.Namespace) -> int:
@@ -193,6 +249,9 @@ def _check(args: argparse.Namespace) -> int:
     print(format_table(results))
     failed = [r.function for r in results if not r.passed]
     if failed:
+        for r in results:
+            for where in r.failed_at:
+                print(f"{r.function} failed at {where}")
         print(f"FAILED: {', '.join(failed)}")
         return 1
     print(f"all {len(results)} functions pass")
@@ -210,7 +269,7 @@ def _simulate(args: argparse.Namespace) -> int:
     from amsfe_sym.codegen import library_for
     from amsfe_sym.scenario import apply_sets, load_scenario
     from amsfe_sym.sim.loop import run
-    from amsfe_sym.sim.record import summarize, write_run
+    from amsfe_sym.sim.record import check_out, summarize, write_run
 
     sc = load_scenario(args.scenario).with_overrides(
         estimator=args.estimator,
@@ -226,14 +285,16 @@ def _simulate(args: argparse.Namespace) -> int:
     if compare and args.controller is None:  # the paper's comparison on one seed
         from amsfe_sym.reproduce import print_comparison, run_comparison, write_comparison
 
-        cmp = run_comparison(sc, compare, lib, progress=not args.no_progress)
         out = Path(args.out) if args.out else Path("runs") / f"{sc.name}-{stamp}"
-        write_comparison(cmp, out, plots=not args.no_plots)
+        check_out(out, args.force)  # before the runs
+        cmp = run_comparison(sc, compare, lib, progress=not args.no_progress)
+        write_comparison(cmp, out, plots=not args.no_plots, force=args.force)
         print_comparison(cmp, out)
         return 0
-    res = run(sc, lib, progress=not args.no_progress)
     out = Path(args.out) if args.out else Path("runs") / f"{sc.name}-{sc.estimator}-{stamp}"
-    write_run(res, out, plots=not args.no_plots)
+    check_out(out, args.force)  # before the run: nothing is computed for nothing
+    res = run(sc, lib, progress=not args.no_progress)
+    write_run(res, out, plots=not args.no_plots, force=args.force)
     s = summarize(res)
     print(f"run folder: {out}")
     if res.diverged_at is not None:

@@ -7,7 +7,11 @@ Pinocchio versions, and the compiler with its flags.  An unchanged robot is neit
 regenerated nor recompiled; the cache check reads only files, never Pinocchio.
 
 Output is written to a temporary folder and moved into place only when the library has
-compiled and loaded, so bad input or a failed build leaves ``generated/`` as it was.
+compiled and loaded, so bad input, a failed build or Ctrl-C leaves ``generated/`` as it was.
+The manifest records the library's own sha256: the cache reuses, and the runtime loads, only
+a library whose bytes still match it (a truncated or damaged ``.so`` is rebuilt here and
+refused by :class:`~amsfe_sym.runtime.library.ModelLibrary`).  Hidden temporary folders left
+by a killed run (its pid gone, or older than an hour) are removed by the next build.
 
 Compiler flags: ``-O1`` by default (see docs/codegen.md for the measurements behind it);
 override with ``$AMSFE_CFLAGS`` or ``--cflags``.  ``-march=native`` ties the library to
@@ -37,13 +41,14 @@ import casadi as ca
 
 from amsfe_sym import __version__
 from amsfe_sym.errors import CodegenError, describe
-from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.runtime.library import ModelLibrary, file_sha256
 from amsfe_sym.scenario import Scenario, camera_timing
 from amsfe_sym.spec import RobotSpec, load_spec
 
 __all__ = [
     "DEFAULT_CFLAGS",
     "GenerateResult",
+    "clean_stale_tmp",
     "content_hash",
     "default_out_dir",
     "generate",
@@ -155,18 +160,62 @@ def _has_dist(name: str) -> bool:
 
 
 def _cached(out_dir: Path, key: str) -> Path | None:
-    """The library path if ``out_dir`` holds a complete build with hash ``key``."""
+    """The library path if ``out_dir`` holds a complete build with hash ``key`` whose
+    library still has the sha256 recorded in the manifest (a truncated or damaged ``.so``
+    is not reused: it is rebuilt)."""
     mpath = out_dir / MANIFEST
     try:
         manifest = json.loads(mpath.read_text())
     except (OSError, ValueError):
         return None
-    if manifest.get("content_hash") != key:
+    if not isinstance(manifest, dict) or manifest.get("content_hash") != key:
         return None
     lib = out_dir / str(manifest.get("library", ""))
-    if not lib.is_file():
+    try:
+        if not lib.is_file() or file_sha256(lib) != manifest.get("library_sha256"):
+            return None
+    except OSError:
         return None
     return lib
+
+
+#: A hidden temporary build folder older than this is left over from a killed run [s].
+STALE_TMP_SECONDS = 3600.0
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, owned by someone else
+        return True
+    return True
+
+
+def clean_stale_tmp(parent: Path, name: str, max_age: float = STALE_TMP_SECONDS) -> list[Path]:
+    """Remove ``parent/.<name>-<pid>-*`` and ``parent/.<name>.old-<pid>-*`` folders left by a
+    killed :func:`generate`: those whose process is gone, or older than ``max_age`` [s].
+
+    Returns:
+        The folders removed.
+    """
+    removed = []
+    now = time.time()
+    for prefix in (f".{name}-", f".{name}.old-"):
+        for d in parent.glob(prefix + "*"):
+            pid_text = d.name[len(prefix) :].partition("-")[0]
+            if not d.is_dir() or not pid_text.isdigit():  # not ours (another robot's name)
+                continue
+            try:
+                age = now - d.stat().st_mtime
+            except OSError:
+                continue
+            dead = not _pid_alive(int(pid_text))
+            if dead or age > max_age:
+                shutil.rmtree(d, ignore_errors=True)
+                removed.append(d)
+    return removed
 
 
 def generate(
@@ -223,7 +272,8 @@ def generate(
     _say(progress, f"[amsfe] {spec.name}: symbolic model built in {timings['symbolic']:.2f} s")
 
     parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{spec.name}-", dir=parent))
+    clean_stale_tmp(parent, spec.name)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{spec.name}-{os.getpid()}-", dir=parent))
     tmp.chmod(0o755)
     try:
         t = time.perf_counter()
@@ -269,9 +319,15 @@ def generate(
             ctypes.CDLL(str(tmp / libname))
         except OSError as exc:
             raise CodegenError(
-                describe(f"loading {libname}", "a loadable library", str(exc), "rebuild")
+                describe(
+                    f"loading {libname}",
+                    "a loadable library",
+                    str(exc),
+                    "check the compiler and $AMSFE_CFLAGS (the build produced an unusable .so)",
+                )
             ) from exc
         manifest = _manifest(model, key, hash_inputs, libname, cname, timings)
+        manifest["library_sha256"] = file_sha256(tmp / libname)
         (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
         _replace_dir(tmp, out_dir)
     except BaseException:
@@ -411,8 +467,10 @@ def library_for(sc: Scenario, out: str | os.PathLike[str] | None = None) -> Mode
         ConfigError: the scenario's camera timing does not fit the robot or the filter.
     """
     from amsfe_sym.estimation.registry import estimator_class
+    from amsfe_sym.preflight import check_scenario_shapes
 
     spec = load_spec(sc.robot)
+    check_scenario_shapes(sc, spec)  # every wrong-length vector, before generating
     camera_timing(
         sc,
         spec.camera.period,

@@ -11,9 +11,11 @@ __all__ = [
     "AmsfeError",
     "CodegenError",
     "ConfigError",
+    "ConvergenceError",
     "EstimatorError",
     "MeasurementError",
     "ModelError",
+    "RunFolderError",
     "ShapeError",
     "SpecError",
     "UnsupportedJointError",
@@ -65,3 +67,14 @@ class EstimatorError(AmsfeError, RuntimeError):
 
 class MeasurementError(AmsfeError, ValueError):
     """A measurement is unusable (NaN or inf, outside the image, wrong size)."""
+
+
+class ConvergenceError(EstimatorError):
+    """An iterative generated function (the inverse transition, eq. 22) did not converge:
+    its ``residual`` output is above the tolerance, so its result is not used.  Estimators
+    treat it like a refused frame (counted, estimate untouched)."""
+
+
+class RunFolderError(AmsfeError, FileExistsError):
+    """A run's output folder cannot be written as asked (it exists and ``--force`` is off,
+    or it is a file)."""

@@ -21,6 +21,8 @@ A diverged run is drawn up to the time it diverged, and the figures say so.
 from __future__ import annotations
 
 import json
+import shutil
+import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -30,7 +32,7 @@ import numpy as np
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.sim.loop import RunResult, run
-from amsfe_sym.sim.record import summarize, write_run
+from amsfe_sym.sim.record import check_out, summarize, write_run
 
 __all__ = ["Comparison", "run_comparison", "write_comparison"]
 
@@ -78,18 +80,30 @@ def comparison_table(cmp: Comparison) -> dict[str, Any]:
     }
 
 
-def write_comparison(cmp: Comparison, out: Path, plots: bool = True) -> Path:
-    """Write each run to ``out/<controller>/``, ``comparison.json`` and the figures."""
-    out.mkdir(parents=True, exist_ok=True)
-    for name, res in cmp.results.items():
-        write_run(res, out / name, plots=False)
-    path = out / "comparison.json"
-    path.write_text(json.dumps(comparison_table(cmp), indent=2) + "\n")
-    if plots:
-        from amsfe_sym.plots_paper import plot_comparison
+def write_comparison(cmp: Comparison, out: Path, plots: bool = True, force: bool = False) -> Path:
+    """Write each run to ``out/<controller>/``, ``comparison.json`` and the figures.
 
-        plot_comparison(cmp, out)
-    return path
+    The folder is built beside ``out`` under a hidden name and renamed at the end, so it is
+    complete or absent; an existing ``out`` is refused unless ``force`` (see ``check_out``).
+    """
+    check_out(out, force)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}-", dir=out.parent))
+    try:
+        for name, res in cmp.results.items():
+            write_run(res, tmp / name, plots=False)
+        (tmp / "comparison.json").write_text(json.dumps(comparison_table(cmp), indent=2) + "\n")
+        if plots:
+            from amsfe_sym.plots_paper import plot_comparison
+
+            plot_comparison(cmp, tmp)
+        if out.exists():
+            shutil.rmtree(out)
+        tmp.rename(out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out / "comparison.json"
 
 
 def print_comparison(cmp: Comparison, out: Path) -> None:

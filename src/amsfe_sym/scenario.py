@@ -197,15 +197,6 @@ _SECTIONS: dict[str, Any] = {
     "camera": CameraSettings,
     "filter": FilterSettings,
 }
-_INT_FIELDS = {
-    "counts_per_rev",
-    "jitter_steps",
-    "period",
-    "delay",
-    "phase",
-    "buffer_steps",
-    "camera_iterations",
-}
 #: ``[camera]`` keys whose "the robot's" value is ``None`` (key left out, or ``"robot"``).
 _ROBOT_DEFAULT = ("period", "delay")
 _TOP = {
@@ -245,7 +236,12 @@ def parse_scenario(data: Mapping[str, Any], path: Path) -> Scenario:
     unknown = sorted(set(data) - _TOP)
     if unknown:
         raise ConfigError(
-            describe(where, f"keys among {sorted(_TOP)}", f"unknown {unknown}", "remove them")
+            describe(
+                where,
+                f"keys among {sorted(_TOP)}",
+                f"unknown {unknown}",
+                "remove or rename them (docs/scenarios.md)",
+            )
         )
     for key in ("robot", "plant", "estimate0", "trajectory"):
         if key not in data:
@@ -264,31 +260,34 @@ def parse_scenario(data: Mapping[str, Any], path: Path) -> Scenario:
                     "remove or rename them (docs/scenarios.md)",
                 )
             )
-        for k, v in list(raw.items()):
-            if key == "camera" and k in _ROBOT_DEFAULT:
-                raw[k] = _robot_default(f"{where} [camera] {k}", k, v)
-            elif isinstance(v, list):
-                raw[k] = tuple(float(x) for x in v)
-            elif isinstance(v, float) and k in _INT_FIELDS:
-                raise ConfigError(
-                    describe(f"{where} [{key}] {k}", "an integer", repr(v), f"write {k} = {int(v)}")
-                )
+        types = {f.name: str(f.type) for f in dataclasses.fields(cls)}
+        raw = {
+            k: _robot_default(f"{where} [camera] {k}", k, v)
+            if key == "camera" and k in _ROBOT_DEFAULT
+            else _typed(v, types[k], f"{where} [{key}] {k}")
+            for k, v in raw.items()
+        }
         sections[key] = cls(**raw)
-    robot = str(data["robot"])
+    top = {
+        k: _typed(data[k], str(f.type), f"{where}: {k}")
+        for f in dataclasses.fields(Scenario)
+        if (k := f.name) in data and k not in _SECTIONS and k != "compare"
+    }
+    robot = top["robot"]
     if not Path(robot).is_absolute() and (path.parent / robot).exists():
         robot = str((path.parent / robot).resolve())
     sc = Scenario(
-        name=str(data.get("name", path.stem)),
+        name=top.get("name", path.stem),
         robot=robot,
-        integrator=str(data.get("integrator", "")),
-        duration=float(data.get("duration", 10.0)),
-        seed=int(data.get("seed", 0)),
-        estimator=str(data.get("estimator", "oosm")),
-        controller=str(data.get("controller", "truth-ct")),
-        trajectory=dict(data["trajectory"]),
-        controller_gains=dict(data.get("controller_gains", {})),
+        integrator=top.get("integrator", ""),
+        duration=top.get("duration", 10.0),
+        seed=top.get("seed", 0),
+        estimator=top.get("estimator", "oosm"),
+        controller=top.get("controller", "truth-ct"),
+        trajectory=top["trajectory"],
+        controller_gains=top.get("controller_gains", {}),
         compare=_names(data.get("compare", []), f"{where}: compare"),
-        description=str(data.get("description", "")),
+        description=top.get("description", ""),
         source=path,
         **sections,
     )
@@ -302,6 +301,47 @@ def _names(value: Any, what: str) -> tuple[str, ...]:
             describe(what, "a list of controller names", repr(value), 'e.g. ["amsfe", "dtsmc"]')
         )
     return tuple(value)
+
+
+def _typed(v: Any, ann: str, what: str) -> Any:
+    """``v`` as the type the dataclass field annotation ``ann`` names, or a one-line
+    :class:`ConfigError` (a string where a number is expected is not read letter by letter)."""
+
+    def number(x: Any) -> bool:
+        return isinstance(x, int | float) and not isinstance(x, bool)
+
+    def bad(expected: str, fix: str) -> ConfigError:
+        kind = "a string" if isinstance(v, str) else type(v).__name__
+        return ConfigError(describe(what, expected, f"{v!r} ({kind})", fix))
+
+    key = what.rsplit(" ", 1)[-1]
+    if ann == "float":
+        if not number(v):
+            raise bad("a number", f"write a number without quotes, e.g. {key} = 1.0")
+        return float(v)
+    if ann == "int":
+        if isinstance(v, float) and v.is_integer():
+            raise bad("an integer", f"write {key} = {int(v)}")
+        if not isinstance(v, int) or isinstance(v, bool):
+            raise bad("an integer", f"write a whole number without quotes, e.g. {key} = 0")
+        return v
+    if ann == "bool":
+        if not isinstance(v, bool):
+            raise bad("true or false", f"write {key} = true or {key} = false")
+        return v
+    if ann == "str":
+        if not isinstance(v, str):
+            raise bad("a string", f'quote it, e.g. {key} = "{v}"')
+        return v
+    if ann.startswith("tuple"):
+        if not isinstance(v, list) or not all(number(x) for x in v):
+            raise bad("a list of numbers", f"write e.g. {key} = [0.0, 0.0] (one per joint)")
+        return tuple(float(x) for x in v)
+    if ann.startswith("Mapping") or ann.startswith("dict"):
+        if not isinstance(v, Mapping):
+            raise bad("a table", f"write e.g. {key} = {{ ... }} or a [{key}] section")
+        return dict(v)
+    return v
 
 
 def _robot_default(where: str, key: str, v: Any) -> int | None:
@@ -329,26 +369,45 @@ def _robot_default(where: str, key: str, v: Any) -> int | None:
 def validate(sc: Scenario, where: str = "scenario") -> None:
     """Value checks that need no robot: positive durations, noise, probabilities."""
 
-    def positive(v: float, what: str, allow_zero: bool = False) -> None:
+    def positive(v: float, what: str, allow_zero: bool = False, fix: str = "") -> None:
         ok = math.isfinite(v) and (v >= 0 if allow_zero else v > 0)
         if not ok:
+            default_fix = (
+                "use a standard deviation >= 0 (0 = none)"
+                if allow_zero
+                else "use a standard deviation > 0 (a covariance must be positive definite)"
+            )
             raise ConfigError(
                 describe(
                     f"{where}: {what}",
-                    ">= 0" if allow_zero else "> 0",
+                    "a finite number " + (">= 0" if allow_zero else "> 0"),
                     repr(v),
-                    "a covariance must be positive definite" if not allow_zero else "fix it",
+                    fix or default_fix,
                 )
             )
 
-    positive(sc.duration, "duration")
+    positive(sc.duration, "duration", fix="set the simulated time in seconds, e.g. duration = 10.0")
+    if sc.seed < 0:
+        raise ConfigError(
+            describe(f"{where}: seed", "an integer >= 0", repr(sc.seed), "write seed = 0")
+        )
+    for k, v in sc.estimate0.std.items():
+        if not isinstance(v, int | float) or isinstance(v, bool):
+            raise ConfigError(
+                describe(
+                    f"{where}: [estimate0] std.{k}",
+                    "a number",
+                    repr(v),
+                    f"write std.{k} = 0.1 (no quotes)",
+                )
+            )
     if sc.integrator and sc.integrator not in INTEGRATORS:
         raise ConfigError(
             describe(
                 f"{where}: integrator",
                 "'' (the robot's) or one of " + ", ".join(INTEGRATORS),
                 repr(sc.integrator),
-                "pick one",
+                'write integrator = "rk4" (or "" for the robot spec\'s)',
             )
         )
     f = sc.filter
@@ -370,7 +429,7 @@ def validate(sc: Scenario, where: str = "scenario") -> None:
                 f"{where}: [plant] motor0",
                 "equilibrium | link | explicit",
                 repr(sc.plant.motor0),
-                "pick one",
+                'write motor0 = "equilibrium" (springs hold the arm still at t = 0)',
             )
         )
     if sc.estimate0.motor not in ("encoders", "link"):
@@ -379,7 +438,7 @@ def validate(sc: Scenario, where: str = "scenario") -> None:
                 f"{where}: [estimate0] motor",
                 "encoders | link",
                 repr(sc.estimate0.motor),
-                "pick one",
+                'write motor = "encoders" (motor states from the first encoder sample)',
             )
         )
 
@@ -458,19 +517,28 @@ def camera_timing(
     delay = robot_delay if cam.delay is None else cam.delay
     where = f"{sc.name}: [camera]"
     if period < 1:
-        raise ConfigError(describe(f"{where} period", "an integer >= 1", repr(period), "fix it"))
+        raise ConfigError(
+            describe(
+                f"{where} period", "an integer >= 1", repr(period), "write period = 125 (steps)"
+            )
+        )
     if delay < 0 or cam.jitter_steps < 0:
         raise ConfigError(
             describe(
                 f"{where} delay / jitter_steps",
                 "integers >= 0",
                 f"{delay} / {cam.jitter_steps}",
-                "fix them",
+                "use delays in whole steps >= 0 (omit delay for the robot's)",
             )
         )
     if not 0 <= cam.phase < period:
         raise ConfigError(
-            describe(f"{where} phase", f"an integer in [0, {period})", repr(cam.phase), "fix it")
+            describe(
+                f"{where} phase",
+                f"an integer in [0, {period})",
+                repr(cam.phase),
+                "write a phase smaller than the period, e.g. phase = 0",
+            )
         )
     timing = CameraTiming(period, delay, cam.phase, cam.jitter_steps)
     if needs_history and timing.max_delay > sc.filter.buffer_steps:

@@ -374,7 +374,11 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
                 raise SpecError(describe(w, f"key {key!r}", "it missing", f"add {key} = ..."))
         kind = str(th["kind"])
         if kind not in THETA_KINDS:
-            raise SpecError(describe(f"{w} kind", f"one of {THETA_KINDS}", repr(kind), "pick one"))
+            raise SpecError(
+                describe(
+                    f"{w} kind", f"one of {THETA_KINDS}", repr(kind), "use one of the kinds listed"
+                )
+            )
         thetas.append(
             ThetaSpec(
                 name=str(th["name"]),

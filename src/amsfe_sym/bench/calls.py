@@ -4,8 +4,8 @@ and the compiler-flag comparison."""
 
 from __future__ import annotations
 
+import json
 import math
-import shutil
 import subprocess
 import tempfile
 import time
@@ -275,7 +275,7 @@ def bench_cflags(
     in pure C.  Compile time is the fastest of ``compile_repeat`` builds.
     """
     from amsfe_sym.codegen import compiler
-    from amsfe_sym.runtime.library import ModelLibrary
+    from amsfe_sym.runtime.library import ModelLibrary, file_sha256
 
     src = lib.dir / lib.manifest.source
     rng = np.random.default_rng(1)
@@ -287,7 +287,6 @@ def bench_cflags(
         for i, flags in enumerate(flag_sets):
             d = Path(tmp) / f"build{i}"
             d.mkdir()
-            shutil.copy(lib.dir / "manifest.json", d / "manifest.json")
             cmd = [
                 compiler(),
                 *flags.split(),
@@ -309,9 +308,13 @@ def bench_cflags(
                             f"compiling with {flags!r}",
                             "success",
                             proc.stderr[-1000:],
-                            "fix the flags",
+                            "drop or correct the flag set the compiler refused",
                         )
                     )
+            # this build is ours: record its own hash, as generate does
+            manifest = json.loads((lib.dir / "manifest.json").read_text())
+            manifest["library_sha256"] = file_sha256(d / lib.manifest.library)
+            (d / "manifest.json").write_text(json.dumps(manifest))
             blib = ModelLibrary(d)
             f = blib.function(function)
             t_py = time_calls(f.call_into, args, repeat, rounds)

@@ -183,7 +183,12 @@ def run_bench(opts: BenchOptions) -> int:
     repeat, rounds = opts.repeat, opts.rounds
     if repeat < 1 or rounds < 1:
         raise ConfigError(
-            describe("--repeat / --rounds", "positive integers", f"{repeat} / {rounds}", "fix them")
+            describe(
+                "--repeat / --rounds",
+                "positive integers",
+                f"{repeat} / {rounds}",
+                "pass e.g. --repeat 20000 --rounds 5",
+            )
         )
     lib = load_library(opts.robot, out=opts.out)
     report: dict[str, Any] = {

@@ -204,7 +204,12 @@ class CTimer:
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0:
             raise CodegenError(
-                describe(f"C timing of {function}", "exit code 0", proc.stderr.strip(), "rebuild")
+                describe(
+                    f"C timing of {function}",
+                    "exit code 0",
+                    proc.stderr.strip(),
+                    "regenerate the library (amsfe generate --force) and retry",
+                )
             )
         lines = proc.stdout.split("\n")
         return [float(v) / 1000.0 for v in lines[0].split()], float(lines[1])

@@ -111,6 +111,11 @@ def make_controller(
     """Build the controller registered as ``name`` (ConfigError listing names if unknown)."""
     if name not in CONTROLLERS:
         raise ConfigError(
-            describe("controller name", f"one of {sorted(CONTROLLERS)}", repr(name), "pick one")
+            describe(
+                "controller name",
+                f"one of {sorted(CONTROLLERS)}",
+                repr(name),
+                "use a listed name (scenario controller = ..., or --controller)",
+            )
         )
     return CONTROLLERS[name](lib, trajectory, gains)

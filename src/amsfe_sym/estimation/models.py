@@ -57,7 +57,12 @@ class TransitionModel(Protocol):
         ...
 
     def inverse(self, x_next: FloatArray, u: FloatArray) -> FloatArray:
-        """Return ``x`` with ``F(x, u) = x_next``: the backward map of the paper's eq. (22)."""
+        """Return ``x`` with ``F(x, u) = x_next``: the backward map of the paper's eq. (22).
+
+        Raises:
+            ConvergenceError: An iterative inverse did not converge; estimators refuse the
+                frame that needed it (counted, estimate untouched).
+        """
         ...
 
     def process_noise(self, x: FloatArray, u: FloatArray) -> FloatArray:

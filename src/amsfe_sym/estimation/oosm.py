@@ -34,7 +34,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.errors import EstimatorError, describe
+from amsfe_sym.errors import ConvergenceError, EstimatorError, describe
 from amsfe_sym.estimation.base import Estimator, StepReport
 from amsfe_sym.estimation.ekf import (
     UpdateResult,
@@ -282,7 +282,11 @@ class OosmEstimator(Estimator):
             u_j = self._u[j % B]
             if u_j is None:  # cannot happen: the base class refuses frames older than the buffer
                 raise EstimatorError(f"oosm: no stored input for step {j}")
-            x_r = self.model.inverse(x_r, u_j)
+            try:
+                x_r = self.model.inverse(x_r, u_j)
+            except ConvergenceError as exc:
+                report.reject(f"camera frame kappa={kappa} (lag {k - kappa}): {exc}")
+                return
         if x_r.shape != (n,) or not np.isfinite(x_r).all():
             raise EstimatorError(
                 describe(

@@ -71,12 +71,22 @@ def bind_theta(
         names = [j.name for j in joints]
         if t.target not in names:
             raise SpecError(
-                describe(f"{where} target", f"a modelled joint {names}", repr(t.target), "fix it")
+                describe(
+                    f"{where} target",
+                    f"a modelled joint {names}",
+                    repr(t.target),
+                    "name one of the modelled joints as target",
+                )
             )
         return ThetaBinding(spec=t, q_index=names.index(t.target))
     if not model.existFrame(t.target):
         raise SpecError(
-            describe(f"{where} target", "a link or frame name", repr(t.target), "fix it")
+            describe(
+                f"{where} target",
+                "a link or frame name",
+                repr(t.target),
+                "name a link of the URDF as target",
+            )
         )
     frame = model.frames[model.getFrameId(t.target)]
     jid = frame.parentJoint

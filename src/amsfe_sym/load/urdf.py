@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import UnsupportedJointError, UrdfError, describe
+from amsfe_sym.load.topology import check_topology
 
 __all__ = ["check_inertia", "link_inertias", "validate_urdf"]
 
@@ -58,6 +59,7 @@ def validate_urdf(path: Path, locked: set[str] | frozenset[str] = frozenset()) -
                         "add the link or fix the name",
                     )
                 )
+    check_topology(root, path)  # one tree: before urdfdom/yourdfpy's misleading messages
     try:
         urdf = yourdfpy.URDF.load(
             str(path),
@@ -126,7 +128,14 @@ def validate_urdf(path: Path, locked: set[str] | frozenset[str] = frozenset()) -
 def check_inertia(inertia: NDArray[np.float64], where: str) -> None:
     """Positive semi-definite and principal moments satisfying the triangle inequality."""
     if not np.all(np.isfinite(inertia)):
-        raise UrdfError(describe(f"{where} <inertia>", "finite values", "inf or NaN", "fix it"))
+        raise UrdfError(
+            describe(
+                f"{where} <inertia>",
+                "finite values",
+                "inf or NaN",
+                "write the six inertia entries as finite numbers [kg m^2]",
+            )
+        )
     eig = np.linalg.eigvalsh(inertia)
     scale = max(float(np.max(np.abs(eig))), 1e-12)
     if eig[0] < -_INERTIA_TOL * scale:

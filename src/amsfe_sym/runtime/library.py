@@ -15,6 +15,7 @@ Anyone can also load a function with plain CasADi: :meth:`ModelLibrary.external`
 from __future__ import annotations
 
 import ctypes
+import hashlib
 import os
 from functools import cached_property
 from pathlib import Path
@@ -26,7 +27,7 @@ from numpy.typing import NDArray
 from amsfe_sym.errors import CodegenError, ShapeError, describe
 from amsfe_sym.runtime.manifest import FunctionSignature, Manifest, read_manifest
 
-__all__ = ["CompiledFunction", "ModelLibrary"]
+__all__ = ["CompiledFunction", "ModelLibrary", "file_sha256"]
 
 _c_int_p = ctypes.POINTER(ctypes.c_longlong)
 _c_double_p = ctypes.POINTER(ctypes.c_double)
@@ -50,7 +51,12 @@ class CompiledFunction:
             work = lib[f"{name}_work"]
         except AttributeError as exc:
             raise CodegenError(
-                describe(f"function {name!r}", "a symbol in the library", "none", "regenerate")
+                describe(
+                    f"function {name!r}",
+                    "a symbol in the library",
+                    "none",
+                    "regenerate it: amsfe generate <robot> --force",
+                )
             ) from exc
         self._f.restype = ctypes.c_int
         sz = [ctypes.c_longlong(0) for _ in range(4)]
@@ -155,6 +161,34 @@ def _scratch(target: Any, buf: NDArray[np.float64]) -> Any:
     return target if isinstance(target, _Sink) else np.empty_like(buf)
 
 
+def file_sha256(path: Path) -> str:
+    """sha256 hex digest of a file's bytes (the library's own hash in the manifest)."""
+    h = hashlib.sha256()
+    with path.open("rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _verify_library(path: Path, expected: object) -> None:
+    """Refuse (one line, never a segfault) a library whose bytes are not those generated."""
+    try:
+        found = file_sha256(path)
+    except OSError as exc:
+        found = f"an unreadable file ({exc.strerror})"
+    if not isinstance(expected, str):
+        found = "a manifest without library_sha256 (made by an older toolkit)"
+    if found != expected:
+        raise CodegenError(
+            describe(
+                str(path),
+                "the library whose sha256 the manifest records",
+                found if " " in found else f"sha256 {found[:12]}... (damaged or replaced)",
+                f"rebuild it: amsfe generate --force (into {path.parent.parent})",
+            )
+        )
+
+
 class ModelLibrary:
     """A generated robot library: its manifest plus lazily bound functions.
 
@@ -168,11 +202,17 @@ class ModelLibrary:
         self.manifest: Manifest = read_manifest(mpath)
         self.dir = mpath.parent
         self.library_path = self.dir / self.manifest.library
+        _verify_library(self.library_path, self.manifest.raw.get("library_sha256"))
         try:
             self._lib = ctypes.CDLL(str(self.library_path))
         except OSError as exc:
             raise CodegenError(
-                describe(str(self.library_path), "a loadable library", str(exc), "regenerate")
+                describe(
+                    str(self.library_path),
+                    "a loadable library",
+                    str(exc),
+                    "regenerate it: amsfe generate <robot> --force",
+                )
             ) from exc
         self._fns: dict[str, CompiledFunction] = {}
 
@@ -186,7 +226,7 @@ class ModelLibrary:
                         f"function {name!r}",
                         f"one of {sorted(sigs)}",
                         "unknown name",
-                        "check the manifest",
+                        "use a name listed in manifest.json (or regenerate with a newer toolkit)",
                     )
                 )
             self._fns[name] = CompiledFunction(self._lib, name, sigs[name])

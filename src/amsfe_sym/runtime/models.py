@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from amsfe_sym.errors import ConfigError, ShapeError, describe
+from amsfe_sym.errors import ConfigError, ConvergenceError, ShapeError, describe
 from amsfe_sym.runtime.library import ModelLibrary
 
 __all__ = ["CameraMeasurement", "CompiledTransition", "EncoderMeasurement", "noise_covariance"]
@@ -52,10 +52,12 @@ class CompiledTransition:
         lib: The generated library.
         Qw: Covariance of w = [w_l, w_m, w_theta], (2n + p) x (2n + p) (see
             :func:`noise_covariance`).
+        inverse_tol: Relative tolerance on the inverse's residual (see :meth:`inverse`).
     """
 
-    def __init__(self, lib: ModelLibrary, Qw: ArrayLike) -> None:
+    def __init__(self, lib: ModelLibrary, Qw: ArrayLike, inverse_tol: float = 1e-10) -> None:
         self.lib = lib
+        self.inverse_tol = inverse_tol
         self._step = lib.function("transition_step")
         self._gain = lib.function("noise_gain")
         self._inv = lib.function("transition_inverse")
@@ -68,7 +70,10 @@ class CompiledTransition:
         if not np.allclose(Q, Q.T) or np.min(np.linalg.eigvalsh(Q)) < 0:
             raise ConfigError(
                 describe(
-                    "Qw", "a symmetric positive semi-definite matrix", str(np.diag(Q)), "fix it"
+                    "Qw",
+                    "a symmetric positive semi-definite matrix",
+                    str(np.diag(Q)),
+                    "build it with noise_covariance() from standard deviations >= 0",
                 )
             )
         self.Qw = Q
@@ -88,7 +93,24 @@ class CompiledTransition:
         return xn.copy(), A.copy()
 
     def inverse(self, x_next: FloatArray, u: FloatArray) -> FloatArray:
-        return self._inv.call_into(x_next, u)[0].copy()
+        """x = F^-1(x_next, u) (eq. 22), refused unless the generated iterations converged.
+
+        Raises:
+            ConvergenceError: The generated ``residual`` output, max|F(x, u) - x_next|, is
+                above ``inverse_tol * max(1, max|x_next|)`` (or not finite).
+        """
+        x, res = self._inv.call_into(x_next, u)
+        limit = self.inverse_tol * max(1.0, float(np.max(np.abs(x_next), initial=0.0)))
+        if not res[0] <= limit:  # also catches NaN
+            raise ConvergenceError(
+                describe(
+                    "transition_inverse (eq. 22)",
+                    f"a residual max|F(x, u) - x_next| <= {limit:.1e}",
+                    f"{res[0]:.3g} (the unrolled iterations did not converge)",
+                    "raise [model] inverse_iterations, shorten T or soften Ks in the spec",
+                )
+            )
+        return x.copy()
 
     def gamma(self, x: FloatArray, u: FloatArray) -> FloatArray:
         """Noise gain Gamma(x, u) = dF/dw (eq. 4)."""

@@ -238,7 +238,14 @@ def build_controller(sc: Scenario, lib: ModelLibrary) -> tuple[Controller, Traje
     """The desired trajectory (``[trajectory]``) and the controller tracking it."""
     traj = trajectory_from_config(dict(sc.trajectory))
     if traj.n != lib.n:
-        raise ConfigError(describe("[trajectory]", f"{lib.n} joints", f"{traj.n}", "fix it"))
+        raise ConfigError(
+            describe(
+                "[trajectory]",
+                f"{lib.n} joints (the robot's)",
+                f"{traj.n}",
+                "give one value per modelled joint in the trajectory table",
+            )
+        )
     return make_controller(sc.controller, lib, traj, sc.gains_for()), traj
 
 

@@ -29,7 +29,7 @@ from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.sim.builders import build_run
 
-__all__ = ["DIVERGED_TRACKING_ERROR", "RunResult", "run"]
+__all__ = ["DIVERGED_TRACKING_ERROR", "REFUSAL_KINDS", "RunResult", "refusal_kind", "run"]
 
 log = logging.getLogger(__name__)
 
@@ -51,9 +51,13 @@ class RunResult:
         q_des: Desired link angles, (K, n).
         u: Motor torques [N m], (K, n).
         z_enc: Encoder samples, (K, 2n).
+        tau_d: Disturbance torques [tau_l, tau_m] [N m] applied to the plant over
+            [t_k, t_k + T], (K, 2n) (the last row, after the run, is zero): with ``u`` and the
+            true theta, ``plant_step`` replays ``x_true`` exactly.
         frames: Delivered camera frames: rows (exposure step, delivery step, u px, v px).
         wall_time_s: Wall time of the loop [s].
-        counters: Sensor and estimator counts (frames applied, rejected, ...).
+        counters: Sensor and estimator counts (frames applied, rejected, and
+            ``refused_<kind>``: why frames were refused, see :data:`REFUSAL_KINDS`).
         s: Sliding variable s(k) of eq. (33) per joint, (K, n) (NaN for laws without one).
         bound: The norm inside the gain condition (38) per joint, (K, n) (NaN if none).
         saturated: Whether the actuator limit clipped u(k), (K,).
@@ -78,6 +82,26 @@ class RunResult:
     bound: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
     saturated: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
     diverged_at: float | None = None
+    tau_d: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+
+
+#: Why an estimator refused a camera frame, from its report's reason: (kind, words).
+REFUSAL_KINDS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("nan", ("NaN or inf",)),
+    ("too_late", ("older than the history", "no clone left")),
+    ("gated", ("gated out",)),  # outliers, pixels far outside the predicted image point
+    ("indefinite", ("indefinite covariance",)),
+    ("no_convergence", ("did not converge",)),
+    ("unscheduled", ("not a scheduled exposure",)),
+)
+
+
+def refusal_kind(reason: str) -> str:
+    """The counter (``refused_<kind>`` in ``summary.json``) of one refusal reason."""
+    for kind, words in REFUSAL_KINDS:
+        if any(w in reason for w in words):
+            return kind
+    return "other"
 
 
 def run(scenario: Scenario, lib: ModelLibrary, progress: bool = False) -> RunResult:
@@ -122,6 +146,9 @@ def run(scenario: Scenario, lib: ModelLibrary, progress: bool = False) -> RunRes
     frames_rec: list[tuple[float, float, float, float]] = []
     counters = {"frames_applied": 0, "frames_rejected": 0, "encoder_rejected": 0}
     diverged_at: float | None = None
+    tau_rec = np.zeros((K, 2 * n))
+    counters.update({f"refused_{kind}": 0 for kind, _ in REFUSAL_KINDS})
+    counters["refused_other"] = 0
 
     bar = None
     if progress:
@@ -150,6 +177,8 @@ def run(scenario: Scenario, lib: ModelLibrary, progress: bool = False) -> RunRes
             rep = est.step(u, z, delivered)
             counters["frames_applied"] += rep.frames_applied
             counters["frames_rejected"] += rep.frames_rejected
+            for reason in rep.rejections:
+                counters[f"refused_{refusal_kind(reason)}"] += 1
             counters["encoder_rejected"] += int(not rep.encoder_accepted)
         xh, P = est.x, est.P
         # 3. controller, then the actuator limit
@@ -172,6 +201,7 @@ def run(scenario: Scenario, lib: ModelLibrary, progress: bool = False) -> RunRes
         if k + 1 < K:
             dist = disturbance.sample()
             tau = np.concatenate([dist.link, dist.motor])
+            tau_rec[k] = tau
             xp = plant.call_into(xp, u, theta_true, tau)[0].copy()
         if bar is not None and k % 250 == 0:
             bar.update(min(250, K - bar.n))

@@ -4,6 +4,9 @@
 from __future__ import annotations
 
 import json
+import os
+import shutil
+import tempfile
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -11,9 +14,10 @@ from typing import Any
 import numpy as np
 
 from amsfe_sym.control.metrics import control_metrics, sliding_conditions
-from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.errors import ConfigError, RunFolderError, describe
 from amsfe_sym.provenance import provenance
 from amsfe_sym.scenario import Scenario, dump_toml
+from amsfe_sym.sim.builders import scenario_timing
 from amsfe_sym.sim.loop import RunResult
 
 __all__ = ["WINDOW_START", "nees_band", "summarize", "window", "write_run"]
@@ -48,6 +52,12 @@ def nees_band(dof: int, seeds: int, probability: float = 0.95) -> tuple[float, f
     )
 
 
+def _camera_used(res: RunResult) -> dict[str, int]:
+    """The camera timing [steps] the run used (the scenario's, else the robot's)."""
+    t = scenario_timing(res.scenario, res.lib)
+    return {"period": t.period, "delay": t.delay, "phase": t.phase, "jitter_steps": t.jitter_steps}
+
+
 def summarize(res: RunResult) -> dict[str, Any]:
     """``summary.json``: RMSEs over the last 80 % of the run, NEES, timings, counters."""
     lib, sc = res.lib, res.scenario
@@ -65,7 +75,9 @@ def summarize(res: RunResult) -> dict[str, Any]:
     sliding = sliding_conditions(res.s, res.bound, gains, lib.T, s)
     return {
         "scenario": sc.name,
-        "robot": lib.name,
+        "robot": sc.robot,
+        "model": {"library": lib.name, "integrator": lib.manifest.integrator},
+        "camera": _camera_used(res),
         "estimator": sc.estimator,
         "controller": sc.controller,
         "seed": sc.seed,
@@ -99,17 +111,70 @@ def controller_gains(sc: Scenario) -> dict[str, Any]:
     return {**(cls.gain_defaults if cls else {}), **sc.gains_for()}
 
 
-def write_run(res: RunResult, out: Path, plots: bool = True) -> Path:
+def check_out(out: Path, force: bool = False) -> None:
+    """Refuse ``out`` if it is a file, or an existing folder and ``force`` is off.
+
+    Raises:
+        RunFolderError: one line saying what is there and how to proceed.
+    """
+    if out.is_file() or (out.exists() and not out.is_dir()):
+        raise RunFolderError(
+            describe(
+                f"run folder {out}",
+                "a new folder",
+                "an existing file",
+                "choose another --out (a file is never replaced)",
+            )
+        )
+    if out.is_dir() and not force:
+        raise RunFolderError(
+            describe(
+                f"run folder {out}",
+                "a new folder",
+                "an existing folder",
+                "choose another --out, or pass --force to replace it",
+            )
+        )
+
+
+def write_run(res: RunResult, out: Path, plots: bool = True, force: bool = False) -> Path:
     """Write config.toml, timeseries.csv, frames.csv, summary.json (+ figures) to ``out``.
 
-    ``summary.json`` also records the :func:`~amsfe_sym.provenance.provenance` of the run.
+    Complete or absent: everything is written to a hidden sibling folder, which is renamed to
+    ``out`` at the end (an existing ``out`` is replaced only with ``force``); an error or
+    Ctrl-C on the way removes it.  ``summary.json`` also records the
+    :func:`~amsfe_sym.provenance.provenance` of the run.
+
+    Raises:
+        RunFolderError: ``out`` is a file, or exists and ``force`` is off.
     """
-    out.mkdir(parents=True, exist_ok=True)
+    check_out(out, force)
+    final = out
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out = Path(tempfile.mkdtemp(prefix=f".{final.name}.tmp-{os.getpid()}-", dir=final.parent))
+    try:
+        _write(res, out, final, plots)
+        if final.exists():
+            old = final.with_name(f".{final.name}.old-{os.getpid()}")
+            final.rename(old)
+            out.rename(final)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            out.rename(final)
+    except BaseException:
+        shutil.rmtree(out, ignore_errors=True)
+        raise
+    return final / "summary.json"
+
+
+def _write(res: RunResult, out: Path, final: Path, plots: bool) -> None:
+    """The files of :func:`write_run`, into ``out`` (named ``final`` in the config)."""
     lib = res.lib
     cfg = replace(res.scenario, compare=()).to_dict()  # re-runs this one run
+    cfg["camera"].update(_camera_used(res))  # the timing used, not "the robot's"
     (out / "config.toml").write_text(
-        f"# resolved scenario of run {out.name}: `amsfe simulate {out}/config.toml` re-runs it\n"
-        + dump_toml(cfg)
+        f"# resolved scenario of run {final.name}: "
+        f"`amsfe simulate {final}/config.toml` re-runs it\n" + dump_toml(cfg)
     )
     names = ["t"]
     state = [f"{b}{i + 1}" for b in ("q", "qd", "qm", "qmd") for i in range(lib.n)]
@@ -119,6 +184,7 @@ def write_run(res: RunResult, out: Path, plots: bool = True) -> Path:
     names += [f"q_des{i + 1}" for i in range(lib.n)] + [f"u{i + 1}" for i in range(lib.n)]
     names += [f"enc_qm{i + 1}" for i in range(lib.n)] + [f"enc_qmd{i + 1}" for i in range(lib.n)]
     names += [f"s{i + 1}" for i in range(lib.n)] + ["saturated"]
+    names += [f"tau_l{i + 1}" for i in range(lib.n)] + [f"tau_m{i + 1}" for i in range(lib.n)]
     table = np.column_stack(
         [
             res.t,
@@ -131,6 +197,7 @@ def write_run(res: RunResult, out: Path, plots: bool = True) -> Path:
             res.z_enc,
             res.s,
             res.saturated.astype(float),
+            res.tau_d,
         ]
     )
     np.savetxt(
@@ -139,7 +206,7 @@ def write_run(res: RunResult, out: Path, plots: bool = True) -> Path:
         delimiter=",",
         header=",".join(names),
         comments="",
-        fmt="%.10g",
+        fmt="%.17g",  # round-trip precision: the run replays from this file to 1e-12
     )
     np.savetxt(
         out / "frames.csv",
@@ -156,4 +223,3 @@ def write_run(res: RunResult, out: Path, plots: bool = True) -> Path:
         from amsfe_sym.plots import plot_run
 
         plot_run(res, out)
-    return out / "summary.json"

@@ -92,7 +92,12 @@ def _check_std(value: object, what: str) -> StdLike:
         )
     if not np.all(np.isfinite(arr)) or np.any(arr < 0.0):
         raise ConfigError(
-            describe(what, "finite standard deviations >= 0", repr(value), "fix the entries")
+            describe(
+                what,
+                "finite standard deviations >= 0",
+                repr(value),
+                "replace negative, NaN or inf entries by a std >= 0 (0 = no noise)",
+            )
         )
     return tuple(float(x) for x in arr)
 
@@ -136,7 +141,14 @@ def _vector(value: ArrayLike, n: int, what: str) -> FloatArray:
 def _positive_int(value: object, what: str, minimum: int) -> int:
     """Return ``value`` as an ``int`` if it is an integer (not a bool) >= ``minimum``."""
     if not _is_int(value) or operator.index(value) < minimum:
-        raise ConfigError(describe(what, f"an integer >= {minimum}", repr(value), "fix the value"))
+        raise ConfigError(
+            describe(
+                what,
+                f"an integer >= {minimum}",
+                repr(value),
+                f"write a whole number >= {minimum} without quotes",
+            )
+        )
     return operator.index(value)
 
 

@@ -128,14 +128,26 @@ def _vector(value: Any, what: str) -> FloatArray:
         arr = np.atleast_1d(np.asarray(value, dtype=float))
     except (TypeError, ValueError) as exc:
         raise ConfigError(
-            describe(what, "a number or a list of numbers", repr(value), "fix the value")
+            describe(
+                what,
+                "a number or a list of numbers",
+                repr(value),
+                "write a number or a list like [0.0, 0.0] without quotes",
+            )
         ) from exc
     if arr.ndim != 1 or arr.size == 0:
         raise ConfigError(
-            describe(what, "a number or a non-empty flat list", f"shape {arr.shape}", "")
+            describe(
+                what,
+                "a number or a non-empty flat list",
+                f"shape {arr.shape}",
+                "write one number per joint in a flat list",
+            )
         )
     if not np.all(np.isfinite(arr)):
-        raise ConfigError(describe(what, "finite numbers", repr(value), "fix the value"))
+        raise ConfigError(
+            describe(what, "finite numbers", repr(value), "replace nan/inf by finite numbers")
+        )
     return arr
 
 

@@ -40,7 +40,7 @@ def parse_estimators(text: str | Sequence[str] | None) -> tuple[str, ...]:
                 "--estimators",
                 "all or a comma-separated list of " + ", ".join(ESTIMATORS),
                 repr(bad) if bad else "an empty list",
-                "fix the names",
+                "use names from that list, e.g. --estimators oosm,replay",
             )
         )
     return tuple(dict.fromkeys(names))
@@ -105,7 +105,12 @@ def run_study(
 
     if seeds < 1 or workers < 1:
         raise ConfigError(
-            describe("--seeds / --workers", "integers >= 1", f"{seeds} / {workers}", "fix them")
+            describe(
+                "--seeds / --workers",
+                "integers >= 1",
+                f"{seeds} / {workers}",
+                "pass e.g. --seeds 20 --workers 2",
+            )
         )
     names = parse_estimators(estimators)
     base = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)

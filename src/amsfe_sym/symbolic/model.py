@@ -16,7 +16,7 @@ from amsfe_sym.symbolic.camera import depth, pinhole
 from amsfe_sym.symbolic.control import build_control_functions
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
 from amsfe_sym.symbolic.estimator import estimator_functions
-from amsfe_sym.symbolic.transition import StateLayout, Transition
+from amsfe_sym.symbolic.transition import StateLayout, Transition, with_residual
 
 __all__ = ["MATRIX_OUTPUTS", "SymbolicModel", "build_functions"]
 
@@ -59,9 +59,11 @@ def _transition_functions(
     step = _fn("transition_step", [("x", x), ("u", u)], [("x_next", F), ("A", A), ("Gamma", G)])
     xm, um = ca.MX.sym("x", N), ca.MX.sym("u", n)
     _, A_m, G_m = step(xm, um)
+    fwd = _fn("transition", [("x", x), ("u", u)], [("x_next", F)])
+    inv = _fn("transition_inverse_x", [("x_next", xn), ("u", u)], [("x", tr.inverse(xn, u))])
     return [
-        _fn("transition", [("x", x), ("u", u)], [("x_next", F)]),
-        _fn("transition_inverse", [("x_next", xn), ("u", u)], [("x", tr.inverse(xn, u))]),
+        fwd,
+        with_residual(inv, fwd),
         step,
         ca.Function("transition_jacobian", [xm, um], [A_m], ["x", "u"], ["A"]),
         ca.Function("noise_gain", [xm, um], [G_m], ["x", "u"], ["Gamma"]),

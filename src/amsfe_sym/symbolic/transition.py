@@ -30,7 +30,10 @@ own encoders (docs/estimation.md).  RK4 is 4th order, explicit, stable for w T <
 
 The inverse solves the same equations for x given x+ exactly in the motor and q parts and
 by a fixed number of unrolled chord (simplified Newton) steps for qd, whose contraction
-factor is O(T); the round trip is checked in the tests and by ``amsfe check``.
+factor is O(T); the rk4 inverse by unrolled Newton steps.  A fixed number of steps can fail
+to converge (stiff joints on light links), so every generated ``transition_inverse`` has a
+second output ``residual`` = inf-norm of F(x, u) - x+ at the returned x (see
+:func:`with_residual`), which the runtime checks; ``amsfe check`` tests the round trip.
 """
 
 from __future__ import annotations
@@ -42,7 +45,22 @@ import casadi as ca
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
 from amsfe_sym.symbolic.linalg import ldl_solve
 
-__all__ = ["StateLayout", "Transition"]
+__all__ = ["StateLayout", "Transition", "with_residual"]
+
+
+def with_residual(inverse: ca.Function, forward: ca.Function) -> ca.Function:
+    """``transition_inverse`` (x_next, u) -> (x, residual) from an inverse that returns x.
+
+    ``residual = max_i |F(x, u) - x_next|_i`` is the inf-norm of the forward map at the
+    returned x against its target [state units]: the unrolled iterations of eq. (22) report
+    whether they converged, in the generated code itself (the runtime refuses a large one).
+    Both are called, not inlined, so the forward map is emitted once in the C file.
+    """
+    N, n = inverse.size_in(0)[0], inverse.size_in(1)[0]
+    xn, u = ca.MX.sym("x_next", N), ca.MX.sym("u", n)
+    x = inverse(xn, u)
+    res = ca.norm_inf(forward(x, u) - xn)
+    return ca.Function("transition_inverse", [xn, u], [x, res], ["x_next", "u"], ["x", "residual"])
 
 
 @dataclass(frozen=True)
@@ -174,6 +192,12 @@ class Transition:
                 qmd = (Mm * qmdn - T * u + T * Ks * (qmn - q)) / (Mm - T * Fm + T * T * Ks)
                 return qmn - T * qmd, qmd
 
+            # Chord (simplified Newton) matrix: d(resid)/d(qd) without the O(T qd) terms,
+            # M(q+) + T^2 Ks (1 - c) with c = T^2 Ks / (Mm - T Fm + T^2 Ks) (q = q+ - T qd
+            # moves qm - q).  With M(q+) alone the steps diverge where a link's inertia is
+            # below ~T^2 Ks (a light wrist: Unitree Z1, tests/test_inverse_convergence.py).
+            c = T * T * Ks / (Mm - T * Fm + T * T * Ks)
+            chord = Mn + ca.diag(T * T * Ks * (1 - c))
             qd = qdn
             for _ in range(K):
                 q = qn - T * qd
@@ -183,7 +207,7 @@ class Transition:
                     + T * (Ks * (qm - q) + self.f_link(q, qd, th))
                     - target
                 )
-                qd = qd - ldl_solve(Mn, resid)  # chord step with the fixed matrix M(q+)
+                qd = qd - ldl_solve(chord, resid)
             q = qn - T * qd
             qm, qmd = motor(q)
         else:
@@ -260,15 +284,16 @@ class Transition:
         )
         xs, us = ca.MX.sym("x", N), ca.MX.sym("u", n)
         _, A_s, G_s = step_fn(xs, us)
+        transition = ca.Function("transition", [x, u], [F], ["x", "u"], ["x_next"])
         return {
-            "transition": ca.Function("transition", [x, u], [F], ["x", "u"], ["x_next"]),
             "transition_jacobian": ca.Function(
                 "transition_jacobian", [xs, us], [A_s], ["x", "u"], ["A"]
             ),
             "noise_gain": ca.Function("noise_gain", [xs, us], [G_s], ["x", "u"], ["Gamma"]),
             "transition_step": step_fn,
-            "transition_inverse": ca.Function(
-                "transition_inverse", [xn, u], [ca.vertcat(xp, th_n)], ["x_next", "u"], ["x"]
+            "transition": transition,
+            "transition_inverse": with_residual(
+                ca.Function("rk4_inverse_x", [xn, u], [ca.vertcat(xp, th_n)]), transition
             ),
         }
 

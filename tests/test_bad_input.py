@@ -1,0 +1,394 @@
+"""Bad input, as a new user would type it: one line (expected, found, fix), exit 2, no
+traceback, nothing written (issue 10, deliverables 1 and 6).
+
+Every case runs the CLI in-process (``amsfe_sym.cli.main``) from an empty working folder
+with ``$AMSFE_GENERATED_DIR`` pointing into it, and asserts the exit code, that stderr is
+exactly one ``error: ...`` line holding the expected words, and that the folder holds only
+the input files the case wrote.  A few run ``amsfe`` as a subprocess (exit codes, Ctrl-C).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from amsfe_sym.cli import main
+from amsfe_sym.scenario import scenarios_dir
+
+BAD_URDFS = Path(__file__).parent / "data" / "bad_urdfs"
+PAPER_SIM = (scenarios_dir() / "paper-sim.toml").read_text()
+
+
+def _scenario(**edits: str) -> str:
+    """paper-sim.toml with the line starting ``key =`` replaced by ``key = value``."""
+    text = PAPER_SIM
+    for key, value in edits.items():
+        text, count = re.subn(rf"(?m)^{key} = .*$", f"{key} = {value}", text, count=1)
+        assert count == 1, key
+    return text
+
+
+def _spec(extra: str) -> str:
+    urdf = Path(__file__).parent.parent / "robots" / "paper_2link"
+    return f'name = "bad"\nurdf = "{next(urdf.glob("*.urdf"))}"\n{extra}'
+
+
+# (id, files to write {name: text}, argv, words the one line must contain)
+CASES: list[tuple[str, dict[str, str], list[str], list[str]]] = [
+    # ---- CLI numbers (argparse types)
+    ("seed_negative", {}, ["simulate", "--seed", "-1"], ["--seed", "an integer >= 0", "'-1'"]),
+    ("seed_text", {}, ["simulate", "--seed", "zero"], ["--seed", "'zero'"]),
+    ("duration_nan", {}, ["simulate", "--duration", "nan"], ["--duration", "finite", "'nan'"]),
+    ("duration_inf", {}, ["simulate", "--duration", "inf"], ["--duration", "'inf'"]),
+    ("duration_zero", {}, ["simulate", "--duration", "0"], ["--duration", "> 0", "'0'"]),
+    ("duration_negative", {}, ["simulate", "--duration", "-2"], ["--duration", "'-2'"]),
+    ("check_samples_zero", {}, ["check", "--samples", "0"], ["--samples", ">= 1", "cannot fail"]),
+    ("check_samples_negative", {}, ["check", "--samples", "-3"], ["--samples", "'-3'"]),
+    ("check_seed_text", {}, ["check", "--seed", "x"], ["--seed", "'x'"]),
+    ("study_seeds_zero", {}, ["study", "--seeds", "0"], ["--seeds", ">= 1"]),
+    ("study_workers_zero", {}, ["study", "--workers", "0"], ["--workers", ">= 1"]),
+    ("study_first_seed_negative", {}, ["study", "--first-seed", "-1"], ["--first-seed"]),
+    ("study_duration_nan", {}, ["study", "--duration", "nan"], ["--duration"]),
+    ("bench_repeat_zero", {}, ["bench", "--repeat", "0"], ["--repeat", ">= 1"]),
+    ("bench_rounds_text", {}, ["bench", "--rounds", "abc"], ["--rounds", "'abc'"]),
+    ("bench_duration_zero", {}, ["bench", "--duration", "0"], ["--duration"]),
+    ("lock_value_text", {}, ["generate", "--lock", "j1=abc"], ["--lock", "JOINT=VALUE"]),
+    ("unknown_option", {}, ["simulate", "--bogus"], ["unrecognized arguments: --bogus"]),
+    ("unknown_command", {}, ["simulte"], ["invalid choice", "simulte"]),
+    # ---- names that do not exist
+    ("scenario_unknown", {}, ["simulate", "no-such-scenario"], ["no-such-scenario", "paper-sim"]),
+    ("robot_unknown", {}, ["generate", "no_such_robot"], ["no_such_robot"]),
+    # ---- scenario TOML: types
+    (
+        "toml_seed_string",
+        {"s.toml": _scenario(seed='"zero"')},
+        ["simulate", "s.toml"],
+        ["seed", "an integer", "'zero' (a string)"],
+    ),
+    (
+        "toml_duration_string",
+        {"s.toml": _scenario(duration='"ten"')},
+        ["simulate", "s.toml"],
+        ["duration", "a number", "'ten' (a string)"],
+    ),
+    (
+        "toml_q0_string",
+        {"s.toml": _scenario(q0='"zero"')},
+        ["simulate", "s.toml"],
+        ["[plant] q0", "a list of numbers", "'zero'"],
+    ),
+    (
+        "toml_q0_strings_in_list",
+        {"s.toml": _scenario(q0='["a", "b"]')},
+        ["simulate", "s.toml"],
+        ["q0", "a list of numbers"],
+    ),
+    (
+        "toml_seed_float",
+        {"s.toml": _scenario(seed="1.0")},
+        ["simulate", "s.toml"],
+        ["seed", "write seed = 1"],
+    ),
+    (
+        "toml_seed_negative",
+        {"s.toml": _scenario(seed="-3")},
+        ["simulate", "s.toml"],
+        ["seed", ">= 0", "-3"],
+    ),
+    (
+        "toml_period_float",
+        {"s.toml": _scenario(jitter_steps="2.0")},
+        ["simulate", "s.toml"],
+        ["[camera] jitter_steps", "write jitter_steps = 2"],
+    ),
+    (
+        "toml_bool_as_int",
+        {"s.toml": _scenario(round_to_pixel="1")},
+        ["simulate", "s.toml"],
+        ["round_to_pixel", "true or false"],
+    ),
+    (
+        "toml_std_string",
+        {"s.toml": _scenario(std='{ q = "a" }')},
+        ["simulate", "s.toml"],
+        ["std.q", "a number"],
+    ),
+    (
+        "toml_name_number",
+        {"s.toml": _scenario(name="3")},
+        ["simulate", "s.toml"],
+        ["name", "a string"],
+    ),
+    # ---- scenario TOML: values
+    (
+        "toml_duration_negative",
+        {"s.toml": _scenario(duration="-1.0")},
+        ["simulate", "s.toml"],
+        ["duration", "> 0", "-1.0", "simulated time"],
+    ),
+    (
+        "toml_duration_nan",
+        {"s.toml": _scenario(duration="nan")},
+        ["simulate", "s.toml"],
+        ["duration", "nan"],
+    ),
+    (
+        "toml_filter_std_zero",
+        {
+            "s.toml": PAPER_SIM.replace(
+                "[filter]\nlink_torque_std = 0.1", "[filter]\nlink_torque_std = 0.0"
+            )
+        },
+        ["simulate", "s.toml"],
+        ["link_torque_std", "positive definite"],
+    ),
+    (
+        "toml_integrator",
+        {"s.toml": _scenario(integrator='"euler"')},
+        ["simulate", "s.toml"],
+        ["integrator", "'euler'", "rk4"],
+    ),
+    (
+        "toml_motor0",
+        {"s.toml": _scenario(motor0='"nope"')},
+        ["simulate", "s.toml"],
+        ["motor0", "'nope'", "equilibrium"],
+    ),
+    (
+        "toml_unknown_key",
+        {"s.toml": PAPER_SIM + "\n[extra]\nx = 1\n"},
+        ["simulate", "s.toml"],
+        ["unknown ['extra']"],
+    ),
+    (
+        "toml_unknown_section_key",
+        {"s.toml": PAPER_SIM.replace("[plant]\n", "[plant]\nq9 = 1\n")},
+        ["simulate", "s.toml"],
+        ["[plant]", "unknown ['q9']"],
+    ),
+    (
+        "toml_syntax",
+        {"s.toml": PAPER_SIM + "\nthis is not toml\n"},
+        ["simulate", "s.toml"],
+        ["not valid TOML"],
+    ),
+    (
+        "toml_no_plant",
+        {"s.toml": PAPER_SIM.replace("[plant]", "[plant_]")},
+        ["simulate", "s.toml"],
+        ["unknown ['plant_']"],
+    ),
+    (
+        "toml_robot_unknown",
+        {"s.toml": _scenario(robot='"nosuchrobot"')},
+        ["simulate", "s.toml"],
+        ["nosuchrobot"],
+    ),
+    # ---- scenario vectors vs the robot: every one in one message, before generating
+    (
+        "vectors_all_together",
+        {"s.toml": _scenario(q0="[0.5, 0.5, 0.1]", q="[0.9]")},
+        ["simulate", "s.toml"],
+        ["expected 2 values", "[plant] q0 has 3", "[estimate0] q has 1"],
+    ),
+    (
+        "vectors_theta",
+        {"s.toml": _scenario(theta="[0.1, 0.2, 0.3]")},
+        ["simulate", "s.toml"],
+        ["[estimate0] theta has 3"],
+    ),
+    # ---- URDF topology and defects (generate)
+    *[
+        (f"urdf_{f}", {}, ["generate", str(BAD_URDFS / f"{f}.urdf")], words)
+        for f, words in [
+            ("two_parents", ["link 'link2'", "one parent joint", "'joint2' and 'joint3'"]),
+            ("kinematic_loop", ["kinematic loop", "link1", "a URDF is a tree"]),
+            ("duplicate_joint", ["joint 'joint1'", "unique joint names", "2 times"]),
+            ("duplicate_link", ["link 'link1'", "unique link names"]),
+            ("self_parent", ["joint 'joint2'", "differ"]),
+            ("two_roots", ["island", "one root link"]),
+            ("malformed_xml", ["well-formed XML"]),
+            ("missing_link", ["ghost_link"]),
+            ("negative_mass", ["mass"]),
+            ("floating_joint", ["float_joint"]),
+        ]
+    ],
+    # ---- robot spec
+    (
+        "spec_unknown_key",
+        {"r/robot.toml": _spec("colour = 1\n")},
+        ["generate", "r/robot.toml"],
+        ["colour"],
+    ),
+    (
+        "spec_ks_length",
+        {"r/robot.toml": _spec("[actuators]\nKs = [1.0]\n")},
+        ["generate", "r/robot.toml"],
+        ["Ks", "expected 2 values", "found 1"],
+    ),
+    (
+        "spec_integrator",
+        {"r/robot.toml": _spec('[model]\nintegrator = "euler"\n')},
+        ["generate", "r/robot.toml"],
+        ["integrator", "'euler'"],
+    ),
+]
+
+
+@pytest.fixture()
+def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """An empty working folder that also receives generated libraries."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("AMSFE_GENERATED_DIR", str(tmp_path / "generated"))
+    return tmp_path
+
+
+def _files(folder: Path) -> set[str]:
+    return {str(p.relative_to(folder)) for p in folder.rglob("*")}
+
+
+@pytest.mark.parametrize(
+    ("files", "argv", "words"), [c[1:] for c in CASES], ids=[c[0] for c in CASES]
+)
+def test_bad_input_one_line_exit_2_nothing_written(
+    files: dict[str, str],
+    argv: list[str],
+    words: list[str],
+    workdir: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    for name, text in files.items():
+        (workdir / name).parent.mkdir(parents=True, exist_ok=True)
+        (workdir / name).write_text(text)
+    before = _files(workdir)
+    code = main([*argv, "--out", str(workdir / "out")] if argv[0] == "simulate" else argv)
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert code == 2, err
+    assert len(lines) == 1 and lines[0].startswith("error: "), err
+    assert "Traceback" not in err
+    for w in words:
+        assert w in lines[0], (w, lines[0])
+    assert "Fix: fix it" not in lines[0]
+    assert _files(workdir) == before  # nothing written: no run folder, no library, no temp
+
+
+def test_at_least_thirty_cases() -> None:
+    assert len(CASES) >= 30
+
+
+def test_duration_message_is_not_about_covariances(
+    workdir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (workdir / "s.toml").write_text(_scenario(duration="-1.0"))
+    assert main(["simulate", "s.toml"]) == 2
+    assert "covariance" not in capsys.readouterr().err
+
+
+def _amsfe(*args: str, **kw: object) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "amsfe_sym.cli", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **kw,  # type: ignore[call-overload]
+    )
+
+
+@pytest.mark.parametrize(
+    ("argv", "code"),
+    [(["simulate", "--seed", "-1"], 2), (["check", "--samples", "0"], 2), (["--help"], 0)],
+)
+def test_exit_codes_as_a_process(argv: list[str], code: int, tmp_path: Path) -> None:
+    proc = _amsfe(*argv, cwd=tmp_path)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == code, err
+    assert "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_ctrl_c_during_generate_leaves_nothing(tmp_path: Path) -> None:
+    """SIGINT while the UR5 is being built: exit 130, one line, no folder left behind."""
+    out = tmp_path / "gen"
+    proc = _amsfe("generate", "ur5", "--out", str(out), "--force")
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not (out.exists() and any(out.iterdir())):
+        time.sleep(0.1)  # wait until the hidden build folder exists (mid-build)
+    assert proc.poll() is None, "generate finished before it could be interrupted"
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("[amsfe]")]
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err
+    assert len(lines) == 1 and lines[0].startswith("interrupted: amsfe generate"), err
+    assert not out.exists() or list(out.iterdir()) == []
+
+
+def test_damaged_library_is_rebuilt_by_check(
+    workdir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A library with flipped bytes (same size) used to segfault check; now it is rebuilt."""
+    assert main(["generate", "paper_1link"]) == 0
+    lib = workdir / "generated" / "paper_1link" / "libpaper_1link.so"
+    data = bytearray(lib.read_bytes())
+    for i in range(len(data) // 2, len(data) // 2 + 64):
+        data[i] ^= 0xFF
+    damaged = lib.with_name(lib.name + ".damaged")  # a new inode: the old one is mapped here
+    damaged.write_bytes(bytes(data))
+    os.replace(damaged, lib)
+    assert main(["generate", "paper_1link"]) == 0
+    assert "generated in" in capsys.readouterr().out  # not "up to date (cached)"
+    assert main(["check", "paper_1link", "--samples", "2"]) == 0
+    assert os.path.getsize(lib) == len(data)
+
+
+# ---- run folders: complete or absent; --out never silently overwrites
+RUN = ["simulate", "--duration", "0.05", "--no-progress", "--no-plots"]
+
+
+def test_out_at_an_existing_file_is_refused(tmp_path: Path, capsys) -> None:
+    target = tmp_path / "notes.txt"
+    target.write_text("mine")
+    for extra in ([], ["--force"]):
+        assert main([*RUN, "--out", str(target), *extra]) == 2
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert len(lines) == 1 and "an existing file" in lines[0], lines
+    assert target.read_text() == "mine"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+def test_out_at_an_existing_run_folder_needs_force(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "run"
+    assert main([*RUN, "--out", str(out)]) == 0
+    (out / "old-figure.png").write_text("from an older run")
+    before = (out / "timeseries.csv").read_text()
+    assert main([*RUN, "--out", str(out), "--seed", "5"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "an existing folder" in err[0] and "--force" in err[0]
+    assert (out / "timeseries.csv").read_text() == before  # untouched
+    assert main([*RUN, "--out", str(out), "--seed", "5", "--force"]) == 0
+    assert not (out / "old-figure.png").exists()  # replaced as a whole, not mixed
+    assert (out / "timeseries.csv").read_text() != before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # no hidden leftovers
+
+
+def test_a_failure_while_writing_leaves_no_run_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import amsfe_sym.plots
+
+    def boom(*args: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(amsfe_sym.plots, "plot_run", boom)
+    out = tmp_path / "run"
+    assert main(["simulate", "--duration", "0.05", "--no-progress", "--out", str(out)]) == 130
+    assert list(tmp_path.iterdir()) == []

@@ -1,0 +1,98 @@
+"""The generation cache trusts only what it verified (issue 10, deliverable 2).
+
+Each test builds the 1-link arm (about 2 s) into its own temporary folder.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import pytest
+
+from amsfe_sym.codegen import clean_stale_tmp, generate
+from amsfe_sym.errors import CodegenError
+from amsfe_sym.runtime.library import ModelLibrary, file_sha256
+
+ROBOT = "paper_1link"
+
+
+@pytest.fixture()
+def built(tmp_path: Path) -> Path:
+    """A fresh build of the 1-link arm; returns its ``generated/<name>/`` folder."""
+    return generate(ROBOT, out=tmp_path).out_dir
+
+
+def _overwrite(path: Path, data: bytes) -> None:
+    """Replace a file by a new one (a new inode): the old library may still be mapped in
+    this process (generate loads it once), and rewriting a mapped file in place would crash
+    the test process itself with SIGBUS."""
+    tmp = path.with_name(path.name + ".damaged")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
+
+
+def _lib(out_dir: Path) -> Path:
+    return out_dir / json.loads((out_dir / "manifest.json").read_text())["library"]
+
+
+def test_manifest_records_the_library_hash(built: Path) -> None:
+    manifest = json.loads((built / "manifest.json").read_text())
+    assert manifest["library_sha256"] == file_sha256(_lib(built))
+    assert generate(ROBOT, out=built.parent).reused
+
+
+def test_truncated_library_is_rebuilt_not_reused(built: Path) -> None:
+    lib = _lib(built)
+    good = lib.read_bytes()
+    _overwrite(lib, good[:100])
+    res = generate(ROBOT, out=built.parent)
+    assert not res.reused
+    assert len(lib.read_bytes()) == len(good)
+    assert file_sha256(lib) == json.loads((built / "manifest.json").read_text())["library_sha256"]
+    ModelLibrary(built).function("transition")  # loads and binds
+
+
+@pytest.mark.parametrize("damage", ["truncate", "flip"])
+def test_runtime_refuses_a_damaged_library(built: Path, damage: str) -> None:
+    lib = _lib(built)
+    data = bytearray(lib.read_bytes())
+    if damage == "truncate":
+        data = data[:100]
+    else:  # same size, flipped bytes in the middle (used to segfault in check/simulate)
+        mid = len(data) // 2
+        for i in range(mid, mid + 64):
+            data[i] ^= 0xFF
+    _overwrite(lib, bytes(data))
+    with pytest.raises(CodegenError, match="sha256") as info:
+        ModelLibrary(built)
+    assert "\n" not in str(info.value)
+    assert "amsfe generate --force" in str(info.value)
+
+
+def test_manifest_without_hash_is_refused(built: Path) -> None:
+    mpath = built / "manifest.json"
+    manifest = json.loads(mpath.read_text())
+    del manifest["library_sha256"]
+    mpath.write_text(json.dumps(manifest))
+    with pytest.raises(CodegenError, match="without library_sha256"):
+        ModelLibrary(built)
+    assert not generate(ROBOT, out=built.parent).reused  # and generate rebuilds it
+
+
+def test_stale_temporary_folders_are_cleaned(tmp_path: Path) -> None:
+    dead = tmp_path / f".{ROBOT}-99999999-abc"  # no such pid
+    old = tmp_path / f".{ROBOT}-{os.getpid()}-old"  # alive but over an hour old
+    live = tmp_path / f".{ROBOT}-{os.getpid()}-new"  # a build in progress: kept
+    other = tmp_path / f".{ROBOT}-extra-1-x"  # another robot's name ('paper_1link-extra')
+    for d in (dead, old, live, other):
+        d.mkdir()
+    hour_ago = time.time() - 7200
+    os.utime(old, (hour_ago, hour_ago))
+    removed = clean_stale_tmp(tmp_path, ROBOT)
+    assert sorted(removed) == sorted([dead, old])
+    assert live.is_dir() and other.is_dir()
+    generate(ROBOT, out=tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([ROBOT, live.name, other.name])
