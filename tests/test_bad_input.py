@@ -351,7 +351,7 @@ def test_damaged_library_is_rebuilt_by_check(
 
 
 # ---- run folders: complete or absent; --out never silently overwrites
-RUN = ["simulate", "--duration", "0.05", "--no-progress", "--no-plots"]
+RUN = ["simulate", "--controller", "amsfe", "--duration", "0.05", "--no-progress", "--no-plots"]
 
 
 def test_out_at_an_existing_file_is_refused(tmp_path: Path, capsys) -> None:
@@ -390,5 +390,6 @@ def test_a_failure_while_writing_leaves_no_run_folder(
 
     monkeypatch.setattr(amsfe_sym.plots, "plot_run", boom)
     out = tmp_path / "run"
-    assert main(["simulate", "--duration", "0.05", "--no-progress", "--out", str(out)]) == 130
+    args = ["simulate", "--controller", "amsfe", "--duration", "0.05", "--no-progress"]
+    assert main([*args, "--out", str(out)]) == 130
     assert list(tmp_path.iterdir()) == []

@@ -84,7 +84,8 @@ def test_a_short_buffer_is_refused_before_anything_is_generated(tmp_path: Path) 
 
 def test_simulate_takes_set_and_records_provenance(tmp_path: Path, capsys) -> None:
     out = tmp_path / "run"
-    argv = ["simulate", "paper-exp", "--duration", "0.2", "--no-plots", "--no-progress"]
+    argv = ["simulate", "paper-exp", "--controller", "amsfe", "--duration", "0.2", "--no-plots"]
+    argv += ["--no-progress"]
     assert main([*argv, "--set", "camera.delay=0", "--out", str(out)]) == 0
     assert "delay = 0" in (out / "config.toml").read_text()
     prov = json.loads((out / "summary.json").read_text())["provenance"]

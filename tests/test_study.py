@@ -69,7 +69,8 @@ def test_apply_sets_changes_the_named_fields_only() -> None:
             "camera.round_to_pixel=false",
             "plant.q0=0.1,0.2",
             "estimate0.std.q=0.3",
-            "controller_gains.link_bandwidth=4",
+            "controller_gains.truth-ct.link_bandwidth=4",
+            "controller_gains.amsfe.wm=30",
         ],
     )
     assert sc.integrator == "paper"
@@ -79,7 +80,8 @@ def test_apply_sets_changes_the_named_fields_only() -> None:
     assert sc.camera.delay == 200 and sc.camera.round_to_pixel is False
     assert sc.plant.q0 == (0.1, 0.2)
     assert sc.estimate0.std["q"] == 0.3 and sc.estimate0.std["qd"] == base.estimate0.std["qd"]
-    assert sc.controller_gains["link_bandwidth"] == 4.0
+    assert sc.controller_gains["truth-ct"]["link_bandwidth"] == 4.0
+    assert sc.gains_for("amsfe")["wm"] == 30.0 and sc.gains_for("amsfe")["h"] == 2.0
     # untouched
     assert sc.filter.motor_torque_std == base.filter.motor_torque_std
     assert sc.encoders.qd_std == base.encoders.qd_std

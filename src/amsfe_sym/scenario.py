@@ -646,7 +646,8 @@ def apply_sets(sc: Scenario, sets: Sequence[str]) -> Scenario:
 
     Keys: ``integrator``, ``duration``, ``controller``; ``section.field`` for the sections
     plant, encoders, camera, filter, estimate0; ``trajectory.K``, ``controller_gains.K`` and
-    ``estimate0.std.K`` for keys the scenario already has.  Values are TOML literals
+    ``estimate0.std.K`` for keys the scenario already has; ``controller_gains.NAME.K`` for a
+    gain of controller NAME (its table must exist).  Values are TOML literals
     (``2``, ``0.01``, ``true``, ``"rk4"``) or bare words (``paper``); tuples are written
     ``0.5,0.5``.
 
@@ -666,6 +667,17 @@ def apply_sets(sc: Scenario, sets: Sequence[str]) -> Scenario:
                 raise _unknown_key(key, sc)
             new = _coerce(key, getattr(sec, parts[1]), raw)
             sc = dataclasses.replace(sc, **{parts[0]: dataclasses.replace(sec, **{parts[1]: new})})
+        elif (
+            len(parts) == 3
+            and parts[0] == "controller_gains"
+            and isinstance(sc.controller_gains.get(parts[1]), Mapping)
+        ):  # controller_gains.NAME.K: one controller's gain (added if the table lacks it; the
+            # controller refuses a key it does not know)
+            table = dict(sc.controller_gains[parts[1]])
+            old = table.get(parts[2])
+            table[parts[2]] = _coerce(key, old, raw) if old is not None else _parse_value(raw)
+            gains = {**sc.controller_gains, parts[1]: table}
+            sc = dataclasses.replace(sc, controller_gains=gains)
         elif ".".join(parts[:-1]) in _MAPPINGS:
             where, name = ".".join(parts[:-1]), parts[-1]
             mapping: Mapping[str, Any] = (

@@ -237,6 +237,7 @@ def run(scenario: Scenario, lib: ModelLibrary, progress: bool = False) -> RunRes
         bound=bound_rec[cut],
         saturated=saturated[cut],
         diverged_at=diverged_at,
+        tau_d=tau_rec[cut],
     )
 
 
