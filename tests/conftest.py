@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
-from amsfe_sym.codegen import generate
+from amsfe_sym.codegen import ALL_PARTS, generate
 from amsfe_sym.load import Robot, load_robot
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.spec import robots_dir
@@ -48,11 +48,14 @@ class _Libraries:
         self._cache: dict[str, tuple[Robot, ModelLibrary]] = {}
 
     def get(
-        self, robot: str | Path, lock: dict[str, float] | None = None
+        self,
+        robot: str | Path,
+        lock: dict[str, float] | None = None,
+        parts: tuple[str, ...] = ALL_PARTS,
     ) -> tuple[Robot, ModelLibrary]:
-        key = f"{robot}|{sorted((lock or {}).items())}"
+        key = f"{robot}|{sorted((lock or {}).items())}|{parts}"
         if key not in self._cache:
-            res = generate(robot, lock=lock)
+            res = generate(robot, lock=lock, parts=parts)
             self._cache[key] = (load_robot(robot, lock=lock), ModelLibrary(res.out_dir))
         return self._cache[key]
 

@@ -185,8 +185,9 @@ def test_every_function_against_reference(name: str, libraries) -> None:
     ids=["ur5", "double_pendulum_continuous", "panda_prismatic", "so101"],
 )
 def test_third_party_urdfs(rel: str, lock: dict[str, float] | None, libraries) -> None:
-    """Real third-party URDFs, bare (default spec): generate and pass every check."""
-    robot, lib = libraries.get(erd_urdf(rel), lock=lock)
+    """Real third-party URDFs, bare (default spec): generate and pass every check (the model
+    part: the control laws are checked on paper_2link and the UR5 in test_control.py)."""
+    robot, lib = libraries.get(erd_urdf(rel), lock=lock, parts=("model",))
     if lock:
         assert not set(lock) & {j.name for j in robot.joints}
     results = run_checks(robot, lib, samples=20, seed=2)
@@ -245,3 +246,14 @@ def test_cache_reuse_and_invalidation(tmp_path) -> None:
     fifth = generate(src, out=out, extra_cflags=["-DAMSFE_TEST_FLAG=1"])
     assert not fifth.reused and json.loads(fifth.manifest_path.read_text())["T"] == 0.003
     assert sorted(p.name for p in out.iterdir()) == ["dp"]  # no temporary folders left
+
+
+def test_a_model_only_library_has_no_laws_and_keeps_the_full_one(tmp_path) -> None:
+    full = generate("paper_2link", out=tmp_path)
+    part = generate("paper_2link", out=tmp_path, parts=("model",))
+    assert part.out_dir.name == "paper_2link-model" and not part.reused
+    names = set(json.loads(part.manifest_path.read_text())["functions"])
+    assert "transition_inverse" in names
+    assert not any(n.startswith(("control_", "est_")) for n in names)
+    assert generate("paper_2link", out=tmp_path).reused  # the full library was not evicted
+    assert full.out_dir.name == "paper_2link"

@@ -68,6 +68,20 @@ _GENERATOR_MODULES = (
     "runtime/c/amsfe_runtime.c",
     "runtime/c/amsfe_runtime.h",
 )
+#: Every function group (see :data:`amsfe_sym.symbolic.model.PARTS`, kept equal).
+ALL_PARTS: tuple[str, ...] = ("model", "control", "estimator")
+
+
+def _check_parts(parts: Sequence[str]) -> tuple[str, ...]:
+    """``parts`` in canonical order, with ``model`` always in."""
+    bad = sorted(set(parts) - set(ALL_PARTS))
+    if bad:
+        raise CodegenError(
+            describe("generate parts", f"names among {list(ALL_PARTS)}", f"{bad}", "fix them")
+        )
+    return tuple(k for k in ALL_PARTS if k == "model" or k in parts)
+
+
 #: The hand-written C glue of the compiled estimators, built into every library.
 _RUNTIME_C = Path(__file__).resolve().parent / "runtime" / "c"
 
@@ -129,8 +143,10 @@ def _compiler_version(cc: str) -> str:
     return out.stdout.splitlines()[0] if out.stdout else cc
 
 
-def content_hash(spec: RobotSpec, flags: Sequence[str]) -> tuple[str, dict[str, Any]]:
-    """The cache key of ``spec`` built with ``flags``, and what went into it."""
+def content_hash(
+    spec: RobotSpec, flags: Sequence[str], parts: Sequence[str] = ALL_PARTS
+) -> tuple[str, dict[str, Any]]:
+    """The cache key of ``spec`` built with ``flags`` (and ``parts``), and what went into it."""
     src = Path(__file__).resolve().parent
     gen = hashlib.sha256()
     for pattern in _GENERATOR_MODULES:
@@ -147,6 +163,8 @@ def content_hash(spec: RobotSpec, flags: Sequence[str]) -> tuple[str, dict[str, 
         "cflags": list(flags),
         "machine": platform.machine(),
     }
+    if tuple(parts) != ALL_PARTS:  # (absent for a full library: its key is unchanged)
+        inputs["parts"] = list(parts)
     key = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()
     return key, inputs
 
@@ -225,6 +243,7 @@ def generate(
     extra_cflags: Sequence[str] | None = None,
     force: bool = False,
     progress: bool = False,
+    parts: Sequence[str] = ALL_PARTS,
 ) -> GenerateResult:
     """Generate (or reuse) the compiled model library of a robot.
 
@@ -235,6 +254,10 @@ def generate(
         extra_cflags: Extra compiler flags (hashed into the cache key).
         force: Rebuild even if the cache matches.
         progress: Print stage timings to stderr.
+        parts: Function groups to build, among ``model`` (always), ``control`` and
+            ``estimator``.  A partial library goes to ``<out>/<name>-<parts>/`` so it never
+            evicts the full one from the cache (checks of third-party arms need the model
+            only, and skip most of the compile time).
 
     Returns:
         A :class:`GenerateResult`.
@@ -248,9 +271,10 @@ def generate(
     if lock:
         spec = spec.with_locked(lock)
     flags = cflags(extra_cflags)
-    key, hash_inputs = content_hash(spec, flags)
+    parts = _check_parts(parts)
+    key, hash_inputs = content_hash(spec, flags, parts)
     parent = Path(out) if out is not None else default_out_dir()
-    out_dir = parent / spec.name
+    out_dir = parent / (spec.name if parts == ALL_PARTS else f"{spec.name}-{'-'.join(parts)}")
     if not force:
         lib = _cached(out_dir, key)
         if lib is not None:
@@ -267,7 +291,7 @@ def generate(
     robot_obj = load_robot(spec)
     timings["load"] = time.perf_counter() - t
     t = time.perf_counter()
-    model = build_functions(robot_obj)
+    model = build_functions(robot_obj, parts)
     timings["symbolic"] = time.perf_counter() - t
     _say(progress, f"[amsfe] {spec.name}: symbolic model built in {timings['symbolic']:.2f} s")
 
@@ -300,9 +324,11 @@ def generate(
         timings["codegen"] = time.perf_counter() - t
         t = time.perf_counter()
         libname = f"lib{spec.name}.so"
-        shutil.copy(_RUNTIME_C / "amsfe_runtime.h", tmp)
-        glue = str(_RUNTIME_C / "amsfe_runtime.c")
-        cmd = [compiler(), *flags, "-I.", "-o", libname, cname, glue, "-lm"]
+        glue = []
+        if "estimator" in parts:  # the C glue calls the est_* functions
+            shutil.copy(_RUNTIME_C / "amsfe_runtime.h", tmp)
+            glue = [str(_RUNTIME_C / "amsfe_runtime.c")]
+        cmd = [compiler(), *flags, "-I.", "-o", libname, cname, *glue, "-lm"]
         _say(progress, f"[amsfe] {spec.name}: compiling ({' '.join(cmd)})")
         proc = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True)
         if proc.returncode != 0:
@@ -392,7 +418,7 @@ def _manifest(
         "library": libname,
         "source": cname,
         "header": cname[:-2] + ".h",
-        "runtime_header": "amsfe_runtime.h",
+        "runtime_header": "amsfe_runtime.h" if "est_predict" in model.functions else None,
         "urdf": str(robot.spec.urdf),
         "spec": None if robot.spec.spec_path is None else str(robot.spec.spec_path),
         "joints": [j.name for j in robot.joints],

@@ -18,7 +18,7 @@ from amsfe_sym.symbolic.dynamics import RigidBodyTree
 from amsfe_sym.symbolic.estimator import estimator_functions
 from amsfe_sym.symbolic.transition import StateLayout, Transition, with_residual
 
-__all__ = ["MATRIX_OUTPUTS", "SymbolicModel", "build_functions"]
+__all__ = ["MATRIX_OUTPUTS", "PARTS", "SymbolicModel", "build_functions"]
 
 #: Outputs that are matrices even when they have one column (e.g. dy/dq of a 1-joint arm).
 MATRIX_OUTPUTS = frozenset({"M", "dy_dq", "A", "Gamma"})
@@ -70,8 +70,14 @@ def _transition_functions(
     ]
 
 
-def build_functions(robot: Robot) -> SymbolicModel:
-    """Build every model function of ``robot`` (eqs. 1-8, 22) as CasADi SX Functions."""
+#: The groups of generated functions: the model (dynamics, camera, transition, plant), the
+#: control laws (``control_*``) and the compiled estimators (``est_*``, with the C glue).
+PARTS = ("model", "control", "estimator")
+
+
+def build_functions(robot: Robot, parts: tuple[str, ...] = PARTS) -> SymbolicModel:
+    """Build the model functions of ``robot`` (eqs. 1-8, 22) as CasADi Functions, plus the
+    control laws and the compiled estimators when ``parts`` names them."""
     tree = RigidBodyTree(robot)
     spec = robot.spec.model
     tr = Transition(tree, spec.integrator, spec.inverse_iterations)
@@ -113,11 +119,13 @@ def build_functions(robot: Robot) -> SymbolicModel:
     model = SymbolicModel(robot=robot, layout=L)
     model.functions = {f.name(): f for f in fns}
     model.functions["plant_step"] = tr.plant_step(spec.plant_substeps)
-    for f in build_control_functions(tree, tr):  # eqs. (29)-(37), (54) and the cascade
-        model.functions[f.name()] = f
-    slots = robot.camera.delay // robot.camera.period + 1  # clones in flight (cloning)
-    blocks = {k: getattr(L, k) for k in ("q", "qd", "qm", "qmd", "theta")}
-    for f in estimator_functions(model.functions, n, p, blocks, slots):
-        model.functions[f.name()] = f
+    if "control" in parts:
+        for f in build_control_functions(tree, tr):  # eqs. (29)-(37), (54) and the cascade
+            model.functions[f.name()] = f
+    if "estimator" in parts:
+        slots = robot.camera.delay // robot.camera.period + 1  # clones in flight (cloning)
+        blocks = {k: getattr(L, k) for k in ("q", "qd", "qm", "qmd", "theta")}
+        for f in estimator_functions(model.functions, n, p, blocks, slots):
+            model.functions[f.name()] = f
     model.camera_depends_on_theta = bool(ca.depends_on(y, th)) if p else False
     return model
