@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import shlex
 import sys
 from collections.abc import Sequence
 from typing import Any, NoReturn
@@ -100,6 +101,7 @@ def get_argument_parser() -> argparse.ArgumentParser:
     c.add_argument("--lock", nargs="+", type=_lock_arg, default=[], metavar="JOINT[=VALUE]")
     c.add_argument("--samples", type=_SAMPLES, default=50, help="random states (default 50)")
     c.add_argument("--seed", type=_SEED, default=0)
+    c.add_argument("--cflags", default=None, help="extra compiler flags (quoted)")
 
     s = sub.add_parser("simulate", help="run a scenario: plant, sensors, estimator, controller")
     s.add_argument("scenario", nargs="?", default="paper-sim", help="scenario name or .toml")
@@ -234,12 +236,18 @@ def _generate(args: argparse.Namespace) -> int:
 
 def _check(args: argparse.Namespace) -> int:
     from amsfe_sym.check import format_table, run_checks
-    from amsfe_sym.codegen import generate
+    from amsfe_sym.codegen import cached_library, generate
     from amsfe_sym.load import load_robot
     from amsfe_sym.runtime.library import ModelLibrary
 
     lock = dict(args.lock)
-    res = generate(args.robot, out=args.out, lock=lock, progress=True)
+    extra = shlex.split(args.cflags) if args.cflags else None
+    # the checks cover the model functions: reuse the full library if it is built, else build
+    # the model part only (the control laws are checked against numpy in the test suite)
+    kw = {"out": args.out, "lock": lock, "extra_cflags": extra}
+    res = cached_library(args.robot, **kw) or generate(
+        args.robot, progress=True, parts=("model",), **kw
+    )
     robot = load_robot(args.robot, lock=lock)
     results = run_checks(robot, ModelLibrary(res.out_dir), samples=args.samples, seed=args.seed)
     print(

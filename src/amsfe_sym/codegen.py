@@ -48,6 +48,7 @@ from amsfe_sym.spec import RobotSpec, load_spec
 __all__ = [
     "DEFAULT_CFLAGS",
     "GenerateResult",
+    "cached_library",
     "clean_stale_tmp",
     "content_hash",
     "default_out_dir",
@@ -234,6 +235,28 @@ def clean_stale_tmp(parent: Path, name: str, max_age: float = STALE_TMP_SECONDS)
                 shutil.rmtree(d, ignore_errors=True)
                 removed.append(d)
     return removed
+
+
+def cached_library(
+    robot: str | os.PathLike[str] | RobotSpec = "paper_2link",
+    out: str | os.PathLike[str] | None = None,
+    lock: dict[str, float] | None = None,
+    extra_cflags: Sequence[str] | None = None,
+    parts: Sequence[str] = ALL_PARTS,
+) -> GenerateResult | None:
+    """The verified cached library :func:`generate` would reuse, or None (builds nothing)."""
+    t_start = time.perf_counter()
+    spec = robot if isinstance(robot, RobotSpec) else load_spec(robot)
+    if lock:
+        spec = spec.with_locked(lock)
+    parts = _check_parts(parts)
+    key, _ = content_hash(spec, cflags(extra_cflags), parts)
+    parent = Path(out) if out is not None else default_out_dir()
+    out_dir = parent / (spec.name if parts == ALL_PARTS else f"{spec.name}-{'-'.join(parts)}")
+    lib = _cached(out_dir, key)
+    if lib is None:
+        return None
+    return GenerateResult(out_dir, out_dir / MANIFEST, lib, True, time.perf_counter() - t_start, {})
 
 
 def generate(
