@@ -319,8 +319,11 @@ def test_ctrl_c_during_generate_leaves_nothing(tmp_path: Path) -> None:
     out = tmp_path / "gen"
     proc = _amsfe("generate", "ur5", "--out", str(out), "--force")
     deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and not (out.exists() and any(out.iterdir())):
-        time.sleep(0.1)  # wait until the hidden build folder exists (mid-build)
+    while time.monotonic() < deadline and not (
+        out.exists() and any(p.is_dir() for p in out.iterdir())
+    ):
+        time.sleep(0.1)  # wait until the hidden build folder exists (mid-build; the build
+        # lock file comes earlier, during the symbolic stage)
     assert proc.poll() is None, "generate finished before it could be interrupted"
     time.sleep(0.5)
     proc.send_signal(signal.SIGINT)

@@ -20,7 +20,9 @@ the CPU; it is allowed, and since the flags are hashed, a changed flag rebuilds.
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
+import fcntl
 import hashlib
 import json
 import math
@@ -31,7 +33,7 @@ import shutil
 import subprocess
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from importlib import metadata
 from pathlib import Path
@@ -305,6 +307,31 @@ def generate(
                 out_dir, out_dir / MANIFEST, lib, True, time.perf_counter() - t_start, {}
             )
 
+    # one build per library at a time, across processes (pytest-xdist workers, study
+    # workers, two shells): the others wait and then find it in the cache
+    with _build_lock(parent / f".{out_dir.name}.lock"):
+        if not force:
+            lib = _cached(out_dir, key)
+            if lib is not None:
+                return GenerateResult(
+                    out_dir, out_dir / MANIFEST, lib, True, time.perf_counter() - t_start, {}
+                )
+        return _build(spec, parts, flags, key, hash_inputs, parent, out_dir, progress, t_start)
+
+
+def _build(
+    spec: RobotSpec,
+    parts: tuple[str, ...],
+    flags: list[str],
+    key: str,
+    hash_inputs: dict[str, Any],
+    parent: Path,
+    out_dir: Path,
+    progress: bool,
+    t_start: float,
+) -> GenerateResult:
+    """Load, build the symbols, generate C, compile and move into ``out_dir`` (see
+    :func:`generate`)."""
     # heavy imports only when building
     from amsfe_sym.load import load_robot
     from amsfe_sym.symbolic.model import build_functions
@@ -391,6 +418,27 @@ def generate(
         time.perf_counter() - t_start,
         timings,
     )
+
+
+@contextlib.contextmanager
+def _build_lock(path: Path) -> Iterator[None]:
+    """An exclusive advisory lock on ``path`` (released when the process dies).
+
+    The file is removed afterwards, so a failed or interrupted build leaves nothing behind;
+    a process that opened it just before the removal may then build the same library once
+    more, which the atomic move into place keeps harmless.
+    """
+    created = not path.parent.exists()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            path.unlink(missing_ok=True)
+            fcntl.flock(fh, fcntl.LOCK_UN)
+            if created and not any(path.parent.iterdir()):  # bad input: leave no folder
+                path.parent.rmdir()
 
 
 def _replace_dir(new: Path, target: Path) -> None:
