@@ -26,25 +26,16 @@ if TYPE_CHECKING:
     from amsfe_sym.scenario import Scenario
     from amsfe_sym.sim.loop import RunResult
 
-__all__ = ["plot_run", "plot_study"]
+__all__ = ["estimation_error_axes", "plot_run", "plot_study"]
 
 
-def plot_run(res: RunResult, out: Path) -> list[Path]:
-    """Write the run's figures to ``out``; returns their paths."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    lib, t = res.lib, res.t
-    n, L = lib.n, lib.layout
+def estimation_error_axes(res: RunResult, axes: Any) -> None:
+    """Fill a 2 x n grid of axes with the q (top) and qd (bottom) estimation errors of every
+    joint and the filter's +-2 sigma band (the paper's Fig. 4 / 13)."""
+    t, L = res.t, res.lib.layout
     e = res.x_true - res.x_hat
     sd = np.sqrt(np.maximum(res.P_diag, 0.0))
-    paths = []
-    title = f"{res.scenario.name}: estimator {res.scenario.estimator}, seed {res.scenario.seed}"
-
-    fig, axes = plt.subplots(2, n, figsize=(5 * n, 6), sharex=True, squeeze=False)
-    for j in range(n):
+    for j in range(res.lib.n):
         for row, (block, unit) in enumerate((("q", "rad"), ("qd", "rad/s"))):
             c = L[block].start + j
             ax = axes[row][j]
@@ -56,6 +47,23 @@ def plot_run(res: RunResult, out: Path) -> list[Path]:
             ax.set_ylim(-lim, lim)
         axes[1][j].set_xlabel("t [s]")
     axes[0][0].legend(loc="upper right", fontsize=8)
+
+
+def plot_run(res: RunResult, out: Path) -> list[Path]:
+    """Write the run's figures to ``out``; returns their paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    lib, t = res.lib, res.t
+    n, L = lib.n, lib.layout
+    sd = np.sqrt(np.maximum(res.P_diag, 0.0))
+    paths = []
+    title = f"{res.scenario.name}: estimator {res.scenario.estimator}, seed {res.scenario.seed}"
+
+    fig, axes = plt.subplots(2, n, figsize=(5 * n, 6), sharex=True, squeeze=False)
+    estimation_error_axes(res, axes)
     fig.suptitle(f"Estimation errors (paper Fig. 4) — {title}")
     fig.tight_layout()
     paths.append(out / "estimation_errors.png")

@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from amsfe_sym.plots import estimation_error_axes
+
 if TYPE_CHECKING:
     from amsfe_sym.reproduce import Comparison
     from amsfe_sym.simulate import RunResult
@@ -54,24 +56,6 @@ def plot_comparison(cmp: Comparison, out: Path) -> list[Path]:
     return paths + _control_figures(cmp, out, first.lib.n)
 
 
-def _estimation_errors(res: RunResult, ax_grid: Any, n: int) -> None:
-    L = res.lib.layout
-    t = res.t
-    e = res.x_true - res.x_hat
-    sd = np.sqrt(np.maximum(res.P_diag, 0.0))
-    for j in range(n):
-        for row, (block, unit) in enumerate((("q", "rad"), ("qd", "rad/s"))):
-            c = L[block].start + j
-            ax = ax_grid[row][j]
-            ax.fill_between(t, -2 * sd[:, c], 2 * sd[:, c], color="0.85", label="±2σ (filter)")
-            ax.plot(t, e[:, c], lw=0.8, label="true − estimate")
-            ax.set_ylabel(f"{block}{j + 1} estimation error [{unit}]")
-            ax.set_xlabel("t [s]")
-            ax.grid(alpha=0.3)
-            lim = max(5 * float(np.percentile(np.abs(e[len(t) // 5 :, c]), 99)), 1e-6)
-            ax.set_ylim(-max(lim, 0.05 * np.max(np.abs(e[:, c]))), max(lim, 0.05))
-
-
 def _simulation_figures(cmp: Comparison, out: Path) -> list[Path]:
     plt = _plt()
     paths: list[Path] = []
@@ -79,8 +63,7 @@ def _simulation_figures(cmp: Comparison, out: Path) -> list[Path]:
     n, L = res0.lib.n, res0.lib.layout
     est = res0.scenario.estimator
     fig, axes = plt.subplots(2, n, figsize=(5 * n, 6), squeeze=False)
-    _estimation_errors(res0, axes, n)
-    axes[0][0].legend(loc="upper right", fontsize=8)
+    estimation_error_axes(res0, axes)
     fig.suptitle(
         f"Fig. 4: estimation errors of q and qd ({est} fusion estimate, {name0} in the loop, "
         f"seed {res0.scenario.seed})"
@@ -173,8 +156,7 @@ def _experiment_figures(cmp: Comparison, out: Path) -> list[Path]:
     _save(fig, out / "fig12_encoder_vision_fused.png", paths)
 
     fig, axes = plt.subplots(2, 1, figsize=(8, 5), squeeze=False)
-    _estimation_errors(res0, axes, 1)
-    axes[0][0].legend(fontsize=8)
+    estimation_error_axes(res0, axes)
     fig.suptitle(f"Fig. 13: estimation error of the fused estimate ({res0.scenario.estimator})")
     _save(fig, out / "fig13_estimation_error.png", paths)
 

@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from amsfe_sym._toml import tomllib
+from amsfe_sym._toml import dump_toml, tomllib
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.spec import INTEGRATORS, data_dir
 
@@ -441,33 +441,6 @@ def validate(sc: Scenario, where: str = "scenario") -> None:
                 'write motor = "encoders" (motor states from the first encoder sample)',
             )
         )
-
-
-def dump_toml(data: Mapping[str, Any]) -> str:
-    """Write nested dicts of scalars, strings and lists as TOML (enough for ``config.toml``)."""
-
-    def value(v: Any) -> str:
-        if isinstance(v, bool):
-            return "true" if v else "false"
-        if isinstance(v, int | float):
-            return repr(float(v)) if isinstance(v, float) else str(v)
-        if isinstance(v, str):
-            return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
-        if isinstance(v, list | tuple):
-            return "[" + ", ".join(value(x) for x in v) + "]"
-        if isinstance(v, Mapping):
-            return "{ " + ", ".join(f"{k} = {value(x)}" for k, x in v.items()) + " }"
-        raise ConfigError(f"cannot write {type(v).__name__} to TOML")
-
-    # None is "not set" (e.g. [camera] delay = the robot's): the key is left out
-    lines = [
-        f"{k} = {value(v)}" for k, v in data.items() if not isinstance(v, Mapping) and v is not None
-    ]
-    for k, v in data.items():
-        if isinstance(v, Mapping):
-            lines.append(f"\n[{k}]")
-            lines.extend(f"{kk} = {value(vv)}" for kk, vv in v.items() if vv is not None)
-    return "\n".join(lines) + "\n"
 
 
 @dataclass(frozen=True)
