@@ -207,7 +207,7 @@ def run(scenario: Scenario, lib: ModelLibrary, progress: bool = False) -> RunRes
             bar.update(min(250, K - bar.n))
     wall = time.perf_counter() - t0
     if bar is not None:
-        bar.update(K - bar.n)
+        bar.update(last - bar.n)  # a diverged run ends early, and so does its bar
         bar.close()
     stats = camera.stats
     counters.update(
