@@ -156,7 +156,6 @@ class _Printed(_SlidingBase):
             )
         self._u_prev = np.zeros(self.n)
         self._vt_prev: FloatArray | None = None
-        self._Ks = lib.stiffness(lib.theta_initial)
 
     def _law_inputs(
         self, x_hat: FloatArray, z_enc: FloatArray
