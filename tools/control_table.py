@@ -31,17 +31,34 @@ PAIRS = (
 )
 
 
-def _one(job: tuple[str, str, str, int, float | None]) -> dict[str, Any]:
+def run_once(
+    scenario: str,
+    ctrl: str,
+    est: str,
+    seed: int,
+    duration: float | None,
+    gains: dict[str, float] | None = None,
+) -> dict[str, Any]:
+    """``summary.json`` of one run: ``scenario`` with controller ``ctrl`` (its gains updated by
+    ``gains``), estimator ``est`` and ``seed`` (also used by tools/tune_controllers.py)."""
+    from dataclasses import replace
+
     from amsfe_sym.codegen import library_for
     from amsfe_sym.scenario import load_scenario
     from amsfe_sym.sim.loop import run
     from amsfe_sym.sim.record import summarize
 
-    scenario, ctrl, est, seed, duration = job
     sc = load_scenario(scenario).with_overrides(
         controller=ctrl, estimator=est, seed=seed, duration=duration
     )
-    s = summarize(run(sc, library_for(sc)))
+    if gains:
+        sc = replace(sc, controller_gains={ctrl: {**sc.gains_for(ctrl), **gains}})
+    return summarize(run(sc, library_for(sc)))
+
+
+def _one(job: tuple[str, str, str, int, float | None]) -> dict[str, Any]:
+    scenario, ctrl, est, seed, duration = job
+    s = run_once(scenario, ctrl, est, seed, duration)
     return {
         "controller": ctrl,
         "estimator": est,

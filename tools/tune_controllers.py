@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import itertools
 import multiprocessing as mp
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -25,17 +24,10 @@ GRID = {"phi": (5.0, 20.0), "wm": (10.0, 20.0), "wf": (10.0, 30.0, 50.0)}
 
 
 def _one(job: tuple[str, str, str, int, float, dict[str, float]]) -> dict[str, Any]:
-    from amsfe_sym.codegen import library_for
-    from amsfe_sym.scenario import load_scenario
-    from amsfe_sym.sim.loop import run
-    from amsfe_sym.sim.record import summarize
+    from control_table import run_once  # tools/control_table.py (this script's folder)
 
     scenario, ctrl, est, seed, duration, point = job
-    base = load_scenario(scenario).with_overrides(
-        controller=ctrl, estimator=est, seed=seed, duration=duration
-    )
-    sc = replace(base, controller_gains={ctrl: {**base.gains_for(ctrl), **point}})
-    s = summarize(run(sc, library_for(sc)))
+    s = run_once(scenario, ctrl, est, seed, duration, gains=point)
     return {
         "controller": ctrl,
         "seed": seed,
