@@ -115,9 +115,11 @@ def test_compiled_controller_tick_by_tick(paper_sim: tuple[Scenario, ModelLibrar
             ref = np.concatenate([q[k], qd[k], qdd[k], jerk[k], snap[k]])
             x_hat = x + 1e-3 * rng.standard_normal(lib.N)
             z = x[2 * lib.n : 4 * lib.n] + 1e-4 * rng.standard_normal(2 * lib.n)
-            u_py, sat = ctrl.saturate(ctrl.torque(k, float(t[k]), x[: 4 * lib.n], x[4 * lib.n :], x_hat, z))
+            u_py, sat = ctrl.saturate(
+                ctrl.torque(k, float(t[k]), x[: 4 * lib.n], x[4 * lib.n :], x_hat, z)
+            )
             u_c = cc.torque(k, ref, x_hat, z, x)
             np.testing.assert_allclose(u_c, u_py, rtol=1e-12, atol=1e-12, err_msg=f"{name} k={k}")
             assert cc.saturated == sat
             np.testing.assert_allclose(cc.s, ctrl.s, rtol=1e-12, atol=1e-12)
-            x[:lib.n] += 1e-3 * np.sin(k)  # move the state a little
+            x[: lib.n] += 1e-3 * np.sin(k)  # move the state a little

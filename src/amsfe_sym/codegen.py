@@ -495,7 +495,9 @@ def _manifest(
         "source": cname,
         "header": cname[:-2] + ".h",
         "runtime_header": "amsfe_runtime.h" if "est_predict" in model.functions else None,
-        "loop_header": "amsfe_loop.h" if "control_amsfe" in model.functions and "est_predict" in model.functions else None,
+        "loop_header": "amsfe_loop.h"
+        if "control_amsfe" in model.functions and "est_predict" in model.functions
+        else None,
         "urdf": str(robot.spec.urdf),
         "spec": None if robot.spec.spec_path is None else str(robot.spec.spec_path),
         "joints": [j.name for j in robot.joints],

@@ -380,7 +380,8 @@ class CompiledSimulation:
         self.K, self.n, self.N = K, n, N
         cam = inputs.camera
         E = inputs.cam_uniform.size
-        self._arrays = [
+        jitter = np.ascontiguousarray(inputs.cam_jitter, dtype=np.int32)
+        self._arrays: list[NDArray[Any]] = [
             _f64(inputs.x_plant0, 4 * n),
             _f64(inputs.theta_true),
             _f64(inputs.ref, K * 5 * n),
@@ -388,10 +389,10 @@ class CompiledSimulation:
             _f64(inputs.tau_d, K * 2 * n),
             _f64(inputs.cam_noise, 2 * E),
             _f64(inputs.cam_uniform, E),
-            np.ascontiguousarray(inputs.cam_jitter, dtype=np.int32),
+            jitter,
         ]
         a = [arr.ctypes.data for arr in self._arrays]
-        max_jitter = int(self._arrays[7].max()) if E else 0
+        max_jitter = int(jitter.max()) if E else 0
         self._params = _SimParams(
             K,
             a[0],

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 import time
+from typing import Any
 
 import numpy as np
 
@@ -43,7 +44,7 @@ _CHUNK = 500
 def controller_params(ctrl: Controller, lib: ModelLibrary) -> ControllerParams:
     """The C parameter block of the Python controller ``ctrl`` (its gains, already checked)."""
     act = lib.manifest.actuators
-    common = {
+    common: dict[str, Any] = {
         "name": ctrl.name,
         "T": lib.T,
         "u_max": np.array(ctrl.u_max, dtype=float),
@@ -225,4 +226,5 @@ def run_compiled(scenario: Scenario, lib: ModelLibrary, progress: bool = False) 
         saturated=rec.saturated[cut],
         diverged_at=diverged_at,
         tau_d=tau_d,
+        runtime="compiled",
     )

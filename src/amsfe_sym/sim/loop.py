@@ -71,6 +71,7 @@ class RunResult:
         saturated: Whether the actuator limit clipped u(k), (K,).
         diverged_at: Time [s] the loop was stopped because it diverged (the arrays end
             there), or None.
+        runtime: Which loop made the run: ``"python"`` (the reference) or ``"compiled"``.
     """
 
     scenario: Scenario
@@ -91,6 +92,7 @@ class RunResult:
     saturated: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
     diverged_at: float | None = None
     tau_d: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    runtime: str = "python"
 
 
 #: Why an estimator refused a camera frame, from its report's reason: (kind, words).
