@@ -16,13 +16,20 @@ scenario and its Python parts into these inputs.
 from __future__ import annotations
 
 import ctypes
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.runtime.compiled_estimator import (
+    CompiledEstimator,
+    estimator_log_lines,
+    log_numbers,
+)
 
 __all__ = [
     "CONTROLLER_CODES",
@@ -32,6 +39,7 @@ __all__ = [
     "SimulationInputs",
     "SimulationRecords",
     "SimulationState",
+    "write_loop_log",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -469,3 +477,45 @@ class CompiledSimulation:
         """The runtime's description of a status code."""
         text: bytes = self._c["amsfe_status_string"](status)
         return text.decode()
+
+
+def write_loop_log(
+    path: str | os.PathLike[str],
+    est: CompiledEstimator,
+    params: ControllerParams,
+    z: FloatArray,
+    ref: FloatArray,
+    frames: FloatArray,
+) -> Path:
+    """Write the log read by ``examples/control_from_log.c`` (format in its header comment).
+
+    Args:
+        path: Output file.
+        est: A freshly built compiled estimator (its parameter block is written).
+        params: The controller's parameter block.
+        z: Encoder samples per step, (K, 2n).
+        ref: Reference per step [q_d, qd_d, qdd_d, jerk_d, snap_d], (K, 5n).
+        frames: Delivered frames, rows (exposure step, delivery step, u, v) as recorded
+            by a run; each goes before the step it was delivered at.
+    """
+    lines = estimator_log_lines(est)
+    lines.append(
+        f"ctrl {CONTROLLER_CODES[params.name]} {params.T!r} {params.p!r} "
+        f"{int(params.qmd_next_hold)} {int(params.state_true)} "
+        f"{params.link_bandwidth!r} {params.motor_bandwidth!r}"
+    )
+    n = params.u_max.size
+    for key in ("h", "lam", "Lt", "eps", "phi", "wm", "tau_max", "wf", "vmax"):
+        lines.append(f"{key} {log_numbers(params.gains.get(key, np.zeros(n)))}")
+    for key in ("u_max", "Mm", "Fm", "Ks", "ks_theta", "theta_initial"):
+        lines.append(f"{key} {log_numbers(getattr(params, key))}")
+    by_step: dict[int, list[FloatArray]] = {}
+    for row in np.asarray(frames, dtype=float).reshape(-1, 4):
+        by_step.setdefault(int(row[1]), []).append(row)
+    for k in range(len(z)):
+        for row in by_step.get(k, []):
+            lines.append(f"frame {int(row[0])} {log_numbers(row[2:])}")
+        lines.append(f"step {log_numbers(z[k])} {log_numbers(ref[k])}")
+    out = Path(path)
+    out.write_text("\n".join(lines) + "\n")
+    return out
