@@ -17,6 +17,8 @@ Two comparisons, for every estimator x controller pair on paper-sim:
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -123,3 +125,61 @@ def test_compiled_controller_tick_by_tick(paper_sim: tuple[Scenario, ModelLibrar
             assert cc.saturated == sat
             np.testing.assert_allclose(cc.s, ctrl.s, rtol=1e-12, atol=1e-12)
             x[: lib.n] += 1e-3 * np.sin(k)  # move the state a little
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("controller", ["amsfe", "truth-ct"])
+def test_c_loop_on_the_6dof_ur5(controller: str) -> None:
+    """The UR5 (ur5-control: unknown payload, rk4 estimator model): both comparisons."""
+    sc = load_scenario("ur5-control").with_overrides(controller=controller, duration=0.3, seed=1)
+    lib = library_for(sc)
+    c = run(sc, lib, runtime="compiled")
+    assert_same_run(run(sc, lib, runtime="python", compiled_estimator=True), c)
+    assert_same_run(run(sc, lib), c)
+
+
+def test_a_runs_files_are_the_same_on_both_runtimes(tmp_path: Path) -> None:
+    """``amsfe simulate --runtime compiled|python`` write the same files with the same
+    columns and keys; only the timing and the runtime's name differ."""
+    import csv
+    import json
+
+    from amsfe_sym.cli import main
+
+    folders = {}
+    for rt in ("compiled", "python"):
+        folders[rt] = tmp_path / rt
+        argv = ["simulate", "--controller", "amsfe", "--duration", "0.3", "--no-progress"]
+        assert main([*argv, "--runtime", rt, "--out", str(folders[rt])]) == 0
+    names = {rt: sorted(p.name for p in f.iterdir()) for rt, f in folders.items()}
+    assert names["compiled"] == names["python"]
+    rows = {}
+    for rt, f in folders.items():
+        with (f / "timeseries.csv").open() as fh:
+            rows[rt] = list(csv.reader(fh))
+    assert rows["compiled"][0] == rows["python"][0]
+    a = np.array(rows["compiled"][1:], dtype=float)
+    b = np.array(rows["python"][1:], dtype=float)
+    np.testing.assert_allclose(a, b, rtol=1e-8, atol=1e-8)
+    sums = {rt: json.loads((f / "summary.json").read_text()) for rt, f in folders.items()}
+    assert sums["compiled"].keys() == sums["python"].keys()
+    assert (sums["compiled"]["runtime"], sums["python"]["runtime"]) == ("compiled", "python")
+    timing = {"runtime", "wall_time_s", "cost_per_tick_us", "provenance"}
+    for key in set(sums["python"]) - timing:
+        _same_leaves(sums["compiled"][key], sums["python"][key], key)
+
+
+def _same_leaves(a: object, b: object, where: str) -> None:
+    """Equal structure, numbers within 1e-6 (metrics of signals equal to 1e-8)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        assert a.keys() == b.keys(), where
+        for k in a:
+            _same_leaves(a[k], b[k], f"{where}.{k}")
+    elif isinstance(a, list) and isinstance(b, list):
+        assert len(a) == len(b), where
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            _same_leaves(x, y, f"{where}[{i}]")
+    elif isinstance(a, float) and isinstance(b, float):
+        np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-9, err_msg=where)
+    else:
+        assert a == b, where
