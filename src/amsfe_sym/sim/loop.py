@@ -156,7 +156,7 @@ def run(
     K = round(sc.duration / T) + 1
     theta_true = lib.theta_true
 
-    parts = build_run(sc, lib, compiled=compiled_estimator)
+    parts = build_run(sc, lib, compiled=True) if compiled_estimator else build_run(sc, lib)
     xp, z0, est, ctrl, traj = (
         parts.plant0,
         parts.z0,
