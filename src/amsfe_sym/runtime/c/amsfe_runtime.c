@@ -67,6 +67,7 @@ struct amsfe_est {
   cint *iw;
   double *w;
   cint n_arg, n_res, inv_n_out;
+  double inv_tol, inv_residual, inv_limit; /* the inverse's convergence check */
 };
 
 /* ------------------------------------------------------------------ helpers */
@@ -299,6 +300,8 @@ int amsfe_est_init(amsfe_est **out, const amsfe_params *p, void *memory, size_t 
                        ? p->buffer_steps
                        : p->camera_max_delay;
   e->inv_n_out = transition_inverse_n_out();
+  e->inv_tol = AMSFE_INVERSE_TOL;
+  e->inv_residual = NAN, e->inv_limit = NAN;
   copy(e->x0, p->x0, d.N);
   copy(e->P0, p->P0, (long)d.N * d.N);
   copy(e->qw, p->qw, d.nw);
@@ -530,11 +533,17 @@ static int oosm_late(amsfe_est *e, const double *z, long kappa, double *nis) {
   }
   copy(e->xr, e->xs, N);
   for (long j = k - 1; j >= kappa; --j) { /* eq. (24): the backward map, step by step */
-    const double *in[2] = {e->xr, e->u_buf + pmod(j, e->B) * e->d.n};
-    double *out[1] = {e->xr2};
-    for (cint i = 1; i < e->inv_n_out; ++i) e->res[i] = NULL; /* only x is wanted */
-    e->arg[0] = in[0], e->arg[1] = in[1], e->res[0] = out[0];
+    double residual = NAN, scale = 1.0;
+    for (long i = 0; i < N; ++i) scale = fmax(scale, fabs(e->xr[i])); /* max(1, |x_next|) */
+    for (cint i = 2; i < e->inv_n_out; ++i) e->res[i] = NULL;
+    e->arg[0] = e->xr, e->arg[1] = e->u_buf + pmod(j, e->B) * e->d.n;
+    e->res[0] = e->xr2, e->res[1] = &residual;
     transition_inverse(e->arg, e->res, e->iw, e->w, 0);
+    /* CompiledTransition.inverse: refused unless residual <= tol max(1, |x_next|) (NaN too) */
+    if (!(residual <= e->inv_tol * scale)) {
+      e->inv_residual = residual, e->inv_limit = e->inv_tol * scale;
+      return AMSFE_REFUSED_NO_CONVERGENCE;
+    }
     copy(e->xr, e->xr2, N);
   }
   if (!finite(e->xr, N)) return AMSFE_ERR_NONFINITE;
@@ -645,6 +654,17 @@ void amsfe_est_diagnostics(const amsfe_est *e, amsfe_diag *diag) {
   diag->last_error = e->last_error;
 }
 
+int amsfe_est_set_inverse_tolerance(amsfe_est *e, double tol) {
+  if (!e || !(tol > 0)) return AMSFE_ERR_INPUT;
+  e->inv_tol = tol;
+  return AMSFE_OK;
+}
+
+void amsfe_est_inverse_residual(const amsfe_est *e, double *residual, double *limit) {
+  if (residual) *residual = e ? e->inv_residual : NAN;
+  if (limit) *limit = e ? e->inv_limit : NAN;
+}
+
 const char *amsfe_status_string(int status) {
   switch (status) {
     case AMSFE_OK: return "ok";
@@ -659,6 +679,8 @@ const char *amsfe_status_string(int status) {
       return "refused: its clone was used already or is older than camera_max_delay";
     case AMSFE_REFUSED_FULL: return "refused: max_frames_per_step frames stored for that step";
     case AMSFE_IGNORED: return "ignored (the encoders estimator uses no frames)";
+    case AMSFE_REFUSED_NO_CONVERGENCE:
+      return "refused: the inverse transition (eq. 22) did not converge over the lag";
     case AMSFE_ERR_INPUT: return "error: NULL pointer or non-finite input u";
     case AMSFE_ERR_NOT_PD: return "error: the covariance lost positive definiteness";
     case AMSFE_ERR_NONFINITE: return "error: the model gave NaN or inf";
