@@ -33,10 +33,16 @@ from amsfe_sym.spec import load_spec
 def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path: Path) -> None:
     libraries.get("paper_2link")
     out_json = tmp_path / "bench.json"
-    argv = ["bench", "--repeat", "200", "--rounds", "2", "--duration", "0.2"]
+    argv = ["bench", "--repeat", "200", "--rounds", "2", "--duration", "0.2", "--joints", "1"]
     assert main([*argv, "--json", str(out_json)]) == 0
     out = capsys.readouterr().out
-    for section in ("1. generation", "2. per-call cost", "3. estimator tick"):
+    for section in (
+        "1. generation",
+        "2. per-call cost",
+        "3. estimator tick",
+        "4. one est",
+        "5. sc",
+    ):
         assert section in out
     for row in ("cold (force", "cached (second", *CALL_FUNCTIONS, "ekf_predict"):
         assert row in out
@@ -68,6 +74,9 @@ def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path
     assert set(ests) == set(ESTIMATOR_NAMES)
     for r in ests.values():
         assert r["ticks"] == 201 and r["cost_per_tick_us"] > 0 and r["real_time_factor"] > 0
+    (row,) = report["tick"]["rows"]  # section 4: oosm by default
+    assert row["estimator"] == "oosm" and row["max_dx_compiled_python"] <= 1e-10
+    assert [r["joints"] for r in report["scaling"]["rows"]] == [1]  # section 5
     tick = report["tick_compiled_us"]
     assert set(tick) == {"plant_step", "transition_step", "mass_matrix", "bias", "total"}
     assert tick["total"] == pytest.approx(sum(v for k, v in tick.items() if k != "total"))
@@ -121,6 +130,7 @@ def test_pinocchio_transition_matches_the_semi_implicit_library() -> None:
 def test_compare_cflags_rebuilds_and_times(capsys, libraries) -> None:
     libraries.get("paper_2link")
     argv = ["bench", "--repeat", "200", "--rounds", "2", "--skip", "generation", "calls"]
+    argv += ["tick", "scaling"]
     assert main([*argv, "estimators", "--compare-cflags=-O0,-O1"]) == 0
     out = capsys.readouterr().out
     assert "compiler flags" in out

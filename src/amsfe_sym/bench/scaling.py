@@ -123,7 +123,8 @@ def bench_scaling(
             gen_s = time.perf_counter() - t0
             lib = ModelLibrary(res.out_dir)
             src = res.out_dir / lib.manifest.source
-            lines = sum(1 for _ in src.open())
+            with src.open() as fh:
+                lines = sum(1 for _ in fh)
             stats, _ = compiled_tick(exe, "oosm", _synthetic_inputs(lib, ticks), work)
             rows.append(
                 {
