@@ -33,10 +33,18 @@ from amsfe_sym.spec import load_spec
 def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path: Path) -> None:
     libraries.get("paper_2link")
     out_json = tmp_path / "bench.json"
-    argv = ["bench", "--repeat", "200", "--rounds", "2", "--duration", "0.2"]
+    argv = ["bench", "--repeat", "200", "--rounds", "2", "--duration", "0.2", "--joints", "1"]
+    argv += ["--loop-duration", "0.3"]
     assert main([*argv, "--json", str(out_json)]) == 0
     out = capsys.readouterr().out
-    for section in ("1. generation", "2. per-call cost", "3. estimator tick"):
+    for section in (
+        "1. generation",
+        "2. per-call cost",
+        "3. estimator tick",
+        "4. one est",
+        "5. sc",
+        "closed loop: paper-sim",
+    ):
         assert section in out
     for row in ("cold (force", "cached (second", *CALL_FUNCTIONS, "ekf_predict"):
         assert row in out
@@ -45,6 +53,10 @@ def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path
     assert "binding overhead" in out and "differ" not in out
 
     report = json.loads(out_json.read_text())
+    loop = report["closed_loop"]
+    for rt in ("compiled", "python"):
+        assert loop[rt]["sim_time_s"] == pytest.approx(0.301)  # 301 ticks of 1 ms
+        assert loop[rt]["real_time_factor"] > 0
     assert report["robot"] == "paper_2link"
     assert report["generation"]["cached"]["reused"] is True
     assert report["generation"]["cold"]["reused"] is False
@@ -68,6 +80,9 @@ def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path
     assert set(ests) == set(ESTIMATOR_NAMES)
     for r in ests.values():
         assert r["ticks"] == 201 and r["cost_per_tick_us"] > 0 and r["real_time_factor"] > 0
+    (row,) = report["tick"]["rows"]  # section 4: oosm by default
+    assert row["estimator"] == "oosm" and row["max_dx_compiled_python"] <= 1e-10
+    assert [r["joints"] for r in report["scaling"]["rows"]] == [1]  # section 5
     tick = report["tick_compiled_us"]
     assert set(tick) == {"plant_step", "transition_step", "mass_matrix", "bias", "total"}
     assert tick["total"] == pytest.approx(sum(v for k, v in tick.items() if k != "total"))
@@ -121,6 +136,7 @@ def test_pinocchio_transition_matches_the_semi_implicit_library() -> None:
 def test_compare_cflags_rebuilds_and_times(capsys, libraries) -> None:
     libraries.get("paper_2link")
     argv = ["bench", "--repeat", "200", "--rounds", "2", "--skip", "generation", "calls"]
+    argv += ["tick", "loop", "scaling"]
     assert main([*argv, "estimators", "--compare-cflags=-O0,-O1"]) == 0
     out = capsys.readouterr().out
     assert "compiler flags" in out

@@ -159,3 +159,54 @@ def test_compiled_equals_python_on_the_6dof_ur5(name: str) -> None:
     worst = compare(record("ur5-demo", duration=1.0), name)
     print(name, worst)
     assert worst["updated"] > 20
+
+
+@pytest.mark.slow
+def test_non_converged_inverse_is_refused_identically(
+    paper_sim: Recording, tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    """Issue 10 on the C path: a backward step of eq. (24) whose generated residual is above
+    the tolerance refuses the frame, with the decision and the reason of the Python path.
+
+    The paper_2link arm with its ``paper`` integrator and one chord step in the inverse
+    (``inverse_iterations = 1``): residuals ~1e-6..1e-4 against the default tolerance 1e-10,
+    so every late frame of oosm is refused on both paths, far from the threshold."""
+    import shutil
+
+    from amsfe_sym.codegen import generate
+    from amsfe_sym.sim.loop import refusal_kind
+    from amsfe_sym.spec import robots_dir
+
+    folder = tmp_path_factory.mktemp("inv1") / "paper_2link_inv1"
+    folder.mkdir()
+    src = robots_dir() / "paper_2link"
+    shutil.copy(src / "paper_2link.urdf", folder)
+    spec = (src / "robot.toml").read_text()
+    spec = spec.replace('name = "paper_2link"', 'name = "paper_2link_inv1"')
+    spec = spec.replace("inverse_iterations = 6 ", "inverse_iterations = 1 ")
+    assert "inverse_iterations = 1 " in spec
+    (folder / "robot.toml").write_text(spec)
+    gen = generate(folder / "robot.toml", extra_cflags=["-O0"], out=folder.parent / "gen")
+    lib = ModelLibrary(gen.out_dir)
+    kwargs = dict(paper_sim.kwargs)
+    old = kwargs["model"], kwargs["encoder"], kwargs["camera"]
+    assert isinstance(old[0], CompiledTransition) and isinstance(old[1], EncoderMeasurement)
+    assert isinstance(old[2], CameraMeasurement)
+    kwargs["model"] = CompiledTransition(lib, old[0].Qw)
+    kwargs["encoder"] = EncoderMeasurement(lib, np.diag(old[1].R)[:2], np.diag(old[1].R)[2:])
+    kwargs["camera"] = CameraMeasurement(lib, np.diag(old[2].R))
+    py: Estimator = make_estimator("oosm", **kwargs)  # type: ignore[arg-type]
+    c = make_compiled_estimator("oosm", **kwargs)
+    refused = 0
+    for k in range(2000):
+        rp = py.step(paper_sim.u[k], paper_sim.z[k + 1], paper_sim.frames[k + 1])
+        rc = c.step(paper_sim.u[k], paper_sim.z[k + 1], paper_sim.frames[k + 1])
+        assert decisions(rp) == decisions(rc), f"step {k + 1}: {rp} != {rc}"
+        kinds = [refusal_kind(r) for r in rc.rejections]
+        assert [refusal_kind(r) for r in rp.rejections] == kinds
+        for a, b in zip(rp.rejections, rc.rejections, strict=True):
+            assert a.split(", found ")[0] == b.split(", found ")[0]  # same kappa, lag, limit
+        refused += kinds.count("no_convergence")
+        assert np.max(np.abs(py.x - c.x)) <= TOL and np.max(np.abs(py.P - c.P)) <= TOL
+    assert refused >= 10 and c.diagnostics().frames_applied == 0
+    assert c.status_string(10).startswith("refused: the inverse transition")

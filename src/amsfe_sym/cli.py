@@ -55,6 +55,20 @@ _SAMPLES = _number(int, 1, True, "pass --samples 50 (a check over no state canno
 _DURATION = _number(float, 0.0, False, "pass a simulated time in seconds, e.g. --duration 2")
 
 
+def _JOINT_RANGE(text: str) -> tuple[int, ...]:
+    """``A-B`` (or one number) -> the chain lengths A..B of ``amsfe bench --joints``."""
+    lo, _, hi = text.partition("-")
+    try:
+        a, b = int(lo), int(hi or lo)
+    except ValueError:
+        a, b = 0, -1
+    if not 1 <= a <= b <= 40:
+        raise argparse.ArgumentTypeError(
+            f"expected A-B with 1 <= A <= B <= 40, found {text!r}; pass e.g. --joints 1-12"
+        )
+    return tuple(range(a, b + 1))
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors: ``error: amsfe simulate: argument --seed: ...``, exit 2."""
 
@@ -142,12 +156,25 @@ def get_argument_parser() -> argparse.ArgumentParser:
     b.add_argument(
         "--skip",
         nargs="+",
-        choices=["generation", "calls", "estimators"],
+        choices=["generation", "calls", "estimators", "tick", "loop", "scaling"],
         default=[],
         help="sections to leave out",
     )
     b.add_argument(
+        "--joints",
+        type=_JOINT_RANGE,
+        default=None,
+        metavar="A-B",
+        help="chain lengths of the scaling table (default 1-12)",
+    )
+    b.add_argument(
         "--duration", type=_DURATION, default=2.0, help="simulated time per estimator [s]"
+    )
+    b.add_argument(
+        "--loop-duration",
+        type=_DURATION,
+        default=10.0,
+        help="simulated time of the closed-loop section [s] (default 10)",
     )
     b.add_argument("--scenario", default=None, help="scenario of the estimator section")
     b.add_argument(
@@ -358,6 +385,8 @@ def _bench(args: argparse.Namespace) -> int:
             if sets is None
             else tuple(f.strip() for f in str(sets).split(",") if f.strip()),
             compile_repeat=args.compile_repeat,
+            joints=args.joints or tuple(range(1, 13)),
+            loop_duration=args.loop_duration,
         )
     )
 

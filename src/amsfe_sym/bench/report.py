@@ -9,6 +9,9 @@ from typing import Any
 
 from amsfe_sym.bench.calls import CallRow, bench_calls, bench_cflags, tick_compiled_us
 from amsfe_sym.bench.generation import bench_generation
+from amsfe_sym.bench.loop import bench_closed_loop
+from amsfe_sym.bench.scaling import bench_scaling
+from amsfe_sym.bench.tick import bench_tick
 from amsfe_sym.bench.ticks import ESTIMATOR_NAMES, bench_estimators, timing_scenario
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.provenance import provenance
@@ -118,6 +121,7 @@ def format_report(report: dict[str, Any]) -> str:
                 f"   compiled maths per tick, pure C ({sc['robot']}): {parts} = "
                 f"{tick['total']:.2f} us"
             )
+    lines += _tick_lines(report)
     flags = report.get("cflags")
     if flags:
         lines += [
@@ -132,6 +136,80 @@ def format_report(report: dict[str, Any]) -> str:
                 f"{r['ctypes_us']:>14.2f}{r['pure_c_us']:>13.3f}"
             )
     return "\n".join(lines)
+
+
+def _tick_lines(report: dict[str, Any]) -> list[str]:
+    """Sections 4 (one tick three ways), the closed loop and 5 (scaling with joints)."""
+    lines: list[str] = []
+    tick = report.get("tick")
+    if tick:
+        lines += [
+            "",
+            f"4. one estimator tick (predict + encoder update, no frame): scenario "
+            f"{tick['scenario']} (library {tick['library']}), {tick['ticks']} ticks; [us]",
+            f"   {'estimator':<10}{'compiled C':>12}{'p99':>9}{'python':>10}{'p99':>9}"
+            f"{'baseline':>10}{'p99':>9}{'x python':>10}{'x baseline':>12}",
+        ]
+        for r in tick["rows"]:
+            c, py, b = r["compiled"], r["python"], r.get("baseline")
+            lines.append(
+                f"   {r['estimator']:<10}{c['median_us']:>12.2f}{c['p99_us']:>9.2f}"
+                f"{py['median_us']:>10.1f}{py['p99_us']:>9.1f}"
+                f"{_fmt(b and b['median_us'], 10, 1)}{_fmt(b and b['p99_us'], 9, 1)}"
+                f"{_fmt(r.get('speedup_python'), 10, 1)}{_fmt(r.get('speedup_baseline'), 12, 1)}"
+            )
+            if "compiled_with_law_us" in r:
+                lines.append(
+                    f"   {r['estimator']} tick + control_amsfe (pure C, {tick['law_us']:.2f} us): "
+                    f"{r['compiled_with_law_us']:.2f} us (target <= 5 us 2-link, <= 40 us 6-DOF)"
+                )
+        lines.append(
+            "   compiled = amsfe_est_tick in pure C; python = the reference estimator's step; "
+            "baseline = Pinocchio computeABADerivatives (semi-implicit Euler) + numpy EKF"
+        )
+    loop = report.get("closed_loop")
+    if loop:
+        lines += [
+            "",
+            f"closed loop: {loop['scenario']} ({loop['estimator']} + {loop['controller']}: "
+            "plant substeps, sensors, estimator, controller), real-time factor "
+            "= simulated / wall time",
+            f"   {'runtime':<10}{'simulated [s]':>14}{'wall [s]':>10}{'us/tick':>10}"
+            f"{'x real time':>13}",
+        ]
+        for rt in ("compiled", "python"):
+            r = loop.get(rt, {})
+            if "error" in r:
+                lines.append(f"   {rt:<10}failed: {r['error']}")
+            elif r:
+                lines.append(
+                    f"   {rt:<10}{r['sim_time_s']:>14.2f}{r['wall_s']:>10.3f}"
+                    f"{r['us_per_tick']:>10.1f}{r['real_time_factor']:>13.1f}"
+                )
+        if "speedup" in loop:
+            lines.append(
+                f"   compiled / python: {loop['speedup']}x per tick "
+                "(targets: >= 300x real time paper-sim, >= 30x 6-DOF arm)"
+            )
+    sc = report.get("scaling")
+    if sc:
+        lines += [
+            "",
+            f"5. scaling with joints: serial chains, {sc['integrator']} model, oosm tick in pure C",
+            f"   {'joints':>6}{'N':>5}{'lines of C':>12}{'generate [s]':>14}{'tick [us]':>11}"
+            f"{'p99':>9}",
+        ]
+        for r in sc["rows"]:
+            lines.append(
+                f"   {r['joints']:>6}{r['N']:>5}{r['c_lines']:>12}{r['generate_s']:>14.2f}"
+                f"{r['tick_us']:>11.2f}{r['tick_p99_us']:>9.2f}"
+            )
+        if "exponent_tick" in sc:
+            lines.append(
+                f"   growth exponent (log-log fit, n >= 2): tick {sc['exponent_tick']:.2f}, "
+                f"generate {sc['exponent_generate']:.2f} (covariance update: O(N^3), 3)"
+            )
+    return lines
 
 
 def _tget(row: dict[str, Any], key: str, width: int = 9) -> str:
@@ -156,6 +234,7 @@ class BenchOptions:
         compare_cflags: Flag sets to recompile with (None: no comparison; empty: the
             defaults :data:`DEFAULT_CFLAG_SETS`).
         compile_repeat: Builds per flag set (the fastest is reported).
+        joints: Chain lengths of the scaling table (section 5).
     """
 
     robot: str = "paper_2link"
@@ -169,6 +248,8 @@ class BenchOptions:
     estimators: tuple[str, ...] | None = None
     compare_cflags: tuple[str, ...] | None = None
     compile_repeat: int = 1
+    joints: tuple[int, ...] = tuple(range(1, 13))
+    loop_duration: float = 10.0
 
 
 def run_bench(opts: BenchOptions) -> int:
@@ -218,6 +299,24 @@ def run_bench(opts: BenchOptions) -> int:
         }
         report["estimators"] = bench_estimators(sc, opts.estimators or ESTIMATOR_NAMES, sc_lib)
         report["tick_compiled_us"] = tick_compiled_us(sc_lib, rounds)
+    if "tick" not in opts.skip:
+        sc = timing_scenario(lib, opts.duration, opts.scenario)
+        sc_lib = library_for(sc)
+        robot = load_robot(sc.robot)
+        report["tick"] = {
+            "scenario": sc.name,
+            "library": sc_lib.name,
+            **bench_tick(sc, sc_lib, robot, opts.estimators or ("oosm",), rounds),
+        }
+    if "loop" not in opts.skip:  # the closed loop's real-time factor, 10 s, both runtimes
+        sc = timing_scenario(lib, opts.loop_duration, opts.scenario)
+        sc_lib = library_for(sc)
+        py_duration = opts.loop_duration if lib.n <= 2 else min(opts.loop_duration, 2.0)
+        report["closed_loop"] = bench_closed_loop(
+            sc, sc_lib, rounds=min(rounds, 3), python_duration=py_duration
+        )
+    if "scaling" not in opts.skip:
+        report["scaling"] = bench_scaling(opts.joints, progress=True)
     if opts.compare_cflags is not None:
         report["cflags"] = bench_cflags(
             lib,

@@ -27,7 +27,12 @@ from numpy.typing import NDArray
 from amsfe_sym.errors import ConfigError, EstimatorError, describe
 from amsfe_sym.estimation.base import Estimator, StepReport
 from amsfe_sym.estimation.models import CameraFrame
-from amsfe_sym.runtime.models import CameraMeasurement, CompiledTransition, EncoderMeasurement
+from amsfe_sym.runtime.models import (
+    CameraMeasurement,
+    CompiledTransition,
+    EncoderMeasurement,
+    inverse_not_converged,
+)
 
 __all__ = [
     "COMPILED_ESTIMATORS",
@@ -54,6 +59,7 @@ STATUS = {
     "refused_no_clone_left": 7,
     "refused_full": 8,
     "ignored": 9,
+    "refused_no_convergence": 10,
 }
 
 
@@ -117,6 +123,8 @@ def _bind(cdll: ctypes.CDLL) -> dict[str, Any]:
         "amsfe_est_state": (None, [_P, _P, _P]),
         "amsfe_est_diagnostics": (None, [_P, _P]),
         "amsfe_status_string": (ctypes.c_char_p, [ctypes.c_int]),
+        "amsfe_est_set_inverse_tolerance": (ctypes.c_int, [_P, ctypes.c_double]),
+        "amsfe_est_inverse_residual": (None, [_P, _P, _P]),
     }
     out = {}
     for name, (restype, argtypes) in spec.items():
@@ -230,6 +238,17 @@ class CompiledEstimator(Estimator):
                 describe("amsfe_est_init", "AMSFE_OK", self.status_string(status), "fix the inputs")
             )
         self._h = handle
+        # the same convergence check of eq. (22) as CompiledTransition.inverse
+        status = self._c["amsfe_est_set_inverse_tolerance"](handle, float(model.inverse_tol))
+        if status != 0:
+            raise ConfigError(
+                describe(
+                    "inverse_tol of the transition model",
+                    "a positive tolerance",
+                    repr(model.inverse_tol),
+                    "build CompiledTransition with inverse_tol > 0",
+                )
+            )
         self._xbuf = np.zeros(self.nx)
         self._Pbuf = np.zeros((self.nx, self.nx), order="F")
         self._zbuf = np.zeros(int(enc.dim))
@@ -318,6 +337,15 @@ class CompiledEstimator(Estimator):
                 f"camera frame kappa={kappa} (lag {self.k + 1 - kappa}): the A1 update gives an "
                 "indefinite covariance (the one-step retrodiction does not hold over this lag; "
                 "use 'replay' or 'cloning')"
+            )
+        elif status == STATUS["refused_no_convergence"]:
+            residual, limit = ctypes.c_double(), ctypes.c_double()
+            self._c["amsfe_est_inverse_residual"](
+                self._h, ctypes.byref(residual), ctypes.byref(limit)
+            )
+            report.reject(
+                f"camera frame kappa={kappa} (lag {self.k + 1 - kappa}): "
+                + inverse_not_converged(residual.value, limit.value)
             )
         else:
             report.reject(f"camera frame kappa={kappa}: {self.status_string(status)}")

@@ -14,7 +14,13 @@ from numpy.typing import ArrayLike, NDArray
 from amsfe_sym.errors import ConfigError, ConvergenceError, ShapeError, describe
 from amsfe_sym.runtime.library import ModelLibrary
 
-__all__ = ["CameraMeasurement", "CompiledTransition", "EncoderMeasurement", "noise_covariance"]
+__all__ = [
+    "CameraMeasurement",
+    "CompiledTransition",
+    "EncoderMeasurement",
+    "inverse_not_converged",
+    "noise_covariance",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -40,6 +46,17 @@ def noise_covariance(
     sm = np.broadcast_to(np.asarray(motor_torque_std, dtype=float), (n,))
     st = np.broadcast_to(np.asarray(theta_rate_std, dtype=float), (p,))
     return np.diag(np.concatenate([(sl * T) ** 2, (sm * T) ** 2, st**2]))
+
+
+def inverse_not_converged(residual: float, limit: float) -> str:
+    """The message of a refused inverse transition (eq. 22): its generated ``residual``
+    max|F(x, u) - x_next| is above ``limit`` (shared by the Python and the C runtime paths)."""
+    return describe(
+        "transition_inverse (eq. 22)",
+        f"a residual max|F(x, u) - x_next| <= {limit:.1e}",
+        f"{residual:.3g} (the unrolled iterations did not converge)",
+        "raise [model] inverse_iterations, shorten T or soften Ks in the spec",
+    )
 
 
 class CompiledTransition:
@@ -102,14 +119,7 @@ class CompiledTransition:
         x, res = self._inv.call_into(x_next, u)
         limit = self.inverse_tol * max(1.0, float(np.max(np.abs(x_next), initial=0.0)))
         if not res[0] <= limit:  # also catches NaN
-            raise ConvergenceError(
-                describe(
-                    "transition_inverse (eq. 22)",
-                    f"a residual max|F(x, u) - x_next| <= {limit:.1e}",
-                    f"{res[0]:.3g} (the unrolled iterations did not converge)",
-                    "raise [model] inverse_iterations, shorten T or soften Ks in the spec",
-                )
-            )
+            raise ConvergenceError(inverse_not_converged(float(res[0]), limit))
         return x.copy()
 
     def gamma(self, x: FloatArray, u: FloatArray) -> FloatArray:

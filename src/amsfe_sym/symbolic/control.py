@@ -63,6 +63,7 @@ from __future__ import annotations
 import casadi as ca
 
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
+from amsfe_sym.symbolic.estimator import EXPAND_MAX_STATES
 from amsfe_sym.symbolic.transition import Transition
 
 __all__ = ["CONTROL_GAINS", "build_control_functions", "fpow", "sat"]
@@ -240,6 +241,8 @@ def build_control_functions(tree: RigidBodyTree, tr: Transition) -> list[ca.Func
         ["z", "theta", "qmd_next", "q_d", "qd_d", "vt_prev", *law_gains],
         ["u", "s", "vt", "e_next", "bound"],
     )
+    if N <= EXPAND_MAX_STATES:  # the tick's law as straight-line SX (small arms only)
+        cascade = cascade.expand()
     return [law37, law54, cascade, base, mref]
 
 

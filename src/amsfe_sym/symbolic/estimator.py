@@ -2,7 +2,9 @@
 
 Each function is an MX graph over the robot's own ``transition_step`` and ``camera_measure``
 (so the model is emitted once, whatever the integrator) with dense matrix products emitted as
-loops (code grows as ``N^2``, not ``N^3``), and small SX helpers for the Cholesky
+loops (code grows as ``N^2``, not ``N^3``); for small state dimensions (``N <=
+EXPAND_MAX_STATES``) the per-frame functions of :data:`EXPANDED` are expanded into SX
+(straight-line code, 5x faster); small SX helpers for the Cholesky
 factorisations whose pivots decide positive definiteness.  They compute; they never decide:
 the hand-written C glue (``runtime/c/amsfe_runtime.c``) compares NIS with the gates, reads the
 ``*_ok`` flags and keeps the history buffers.  Every function mirrors one function of the Python
@@ -39,7 +41,17 @@ from __future__ import annotations
 
 import casadi as ca
 
-__all__ = ["estimator_functions"]
+__all__ = ["EXPANDED", "EXPAND_MAX_STATES", "estimator_functions"]
+
+#: Up to this many states the per-frame functions of :data:`EXPANDED` are expanded into SX
+#: (straight-line C without MX call and loop overhead; paper_2link, pure C at -O1:
+#: est_camera_update 5.1 -> 1.0 us, est_oosm_retrodict 7.6 -> 1.7 us, at 3-4x the lines).
+#: The tick's algebra (predict, encoder update, Cholesky check, eq. 23) runs in the C glue's
+#: dense kernels instead (docs/runtime-c.md); ``est_predict`` etc. stay for cloning and tests.
+EXPAND_MAX_STATES = 10
+#: The functions expanded (``est_oosm_correct`` holds a QR solve, which has no SX form; the
+#: cloning updates on the augmented state grow as ``Na^3``: 22k lines for the 2-link arm).
+EXPANDED = frozenset({"est_camera_update", "est_oosm_retrodict"})
 
 
 def _chol_factor(S: ca.SX) -> tuple[list[list[ca.SX]], ca.SX]:
@@ -286,7 +298,7 @@ def estimator_functions(
         ["xa", "Pa", "c", "sel", "z", "r"],
         ["xa_post", "Pa_post", "nis", "s_ok", "chk"],
     )
-    return [
+    out = [
         predict,
         encoder,
         camera,
@@ -298,3 +310,6 @@ def estimator_functions(
         clone_encoder,
         clone_camera,
     ]
+    if N <= EXPAND_MAX_STATES:
+        out = [f.expand() if f.name() in EXPANDED else f for f in out]
+    return out

@@ -45,7 +45,12 @@ import casadi as ca
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
 from amsfe_sym.symbolic.linalg import ldl_solve
 
-__all__ = ["StateLayout", "Transition", "with_residual"]
+__all__ = ["EXPAND_MAX_JOINTS", "StateLayout", "Transition", "with_residual"]
+
+#: Up to this many joints the rk4 ``transition_step`` is expanded into SX (straight-line C).
+#: UR5 (6 joints): 16 us and 60k lines (5 s at -O1) expanded, 41 us and 14k lines as MX
+#: calls; code grows about as n^3, so longer chains keep the MX form (docs/performance.md).
+EXPAND_MAX_JOINTS = 7
 
 
 def with_residual(inverse: ca.Function, forward: ca.Function) -> ca.Function:
@@ -221,28 +226,100 @@ class Transition:
                 qd = qdn - ldl_solve(M, T * (Ks * delta - self.tree.bias(q, qd, th)))
         return ca.vertcat(q, qd, qm, qmd, th)
 
-    def rk4_functions(self) -> dict[str, ca.Function]:
-        """The ``rk4`` transition functions as MX graphs calling the SX right-hand side.
+    def rk4_stage_function(self) -> ca.Function:
+        """One RK4 stage and its jacobian: ``(xp[4n], u[n], theta[p]) -> (k, J)``, SX.
 
-        Inlining four dynamics evaluations (and their derivatives) in SX makes the code grow
-        tenfold (a 6-DOF arm: 375k lines, ~110 s to build); as calls, CasADi emits the
-        right-hand side and its derivative functions once.
+        ``k = f(xp, u, theta)`` is the plant's right-hand side without disturbance and
+        ``J = dk/d[xp; theta]`` (4n x N, sparse: the qd, qmd and qmdd rows are structurally
+        linear).  The acceleration rows use the inverse-dynamics derivative instead of
+        differentiating through the LDL^T solve: ``M(q) qdd + b(q, qd) = Ks (qm - q)``
+        differentiated at fixed ``qdd`` gives ``dqdd/dz = M^-1 (d(Ks (qm - q))/dz -
+        dRNEA(q, qd, a)/dz |_{a = qdd})`` (DESIGN: half the code of the direct jacobian).
+        """
+        n, p = self.tree.n, self.tree.p
+        xp, u, th = ca.SX.sym("xp", 4 * n), ca.SX.sym("u", n), ca.SX.sym("theta", p)
+        f = self.plant_rhs(xp, u, th, ca.SX.zeros(2 * n, 1))
+        z = ca.vertcat(xp, th)
+        q, qd, qm = xp[0:n], xp[n : 2 * n], xp[2 * n : 3 * n]
+        a = ca.SX.sym("a", n)
+        dtau = ca.jacobian(self.stiffness(th) * (qm - q), z) - ca.substitute(
+            ca.jacobian(self.tree.rnea(q, qd, a, th), z), a, f[n : 2 * n]
+        )
+        dqdd = ldl_solve(self.tree.mass_matrix(q, th), ca.densify(dtau))
+        J = ca.jacobian(f, z)  # the other rows (linear in z)
+        J = ca.vertcat(J[0:n, :], dqdd, J[2 * n :, :])
+        return ca.Function("rk4_stage", [xp, u, th], [f, J], ["xp", "u", "theta"], ["k", "J"])
+
+    def rk4_step_function(self, expand: bool = True) -> ca.Function:
+        """x+ = F(x, u), A = dF/dx and Gamma = dF/dw of the ``rk4`` model in one function.
+
+        A is propagated through the four stages (forward sensitivities: ``dk_i/dx = J_i
+        [dxp_i/dx; E_theta]`` with the sparse stage jacobians of :meth:`rk4_stage_function`),
+        not by differentiating the MX graph (that took ~390 us on a 7-DOF arm).  Gamma
+        follows from A: the impulses enter as ``qd += M(q)^-1 w_l``, ``qmd += w_m / Mm`` at
+        the start of the step and ``theta += T w_theta``.  With ``expand`` the whole graph is
+        SX, straight-line C (UR5: 16 us; as MX calls 41 us).
+
+        Returns:
+            ``transition_step (x, u) -> (x_next, A, Gamma)`` (the inverse's Newton steps use
+            its A too).
+        """
+        n, p, T = self.tree.n, self.tree.p, self.T
+        N = 4 * n + p
+        stage = self.rk4_stage_function()
+        qs, ths = ca.SX.sym("q", n), ca.SX.sym("theta", p)
+        minv = ca.Function(
+            "rk4_minv", [qs, ths], [ldl_solve(self.tree.mass_matrix(qs, ths), ca.SX.eye(n))]
+        )
+        x, u = ca.MX.sym("x", N), ca.MX.sym("u", n)
+        xp, th = x[: 4 * n], x[4 * n :]
+        eye = ca.DM.eye(N)
+        I0, E = eye[: 4 * n, :], eye[4 * n :, :]
+        k1, d1 = stage(xp, u, th)
+        ks, ds = [k1], [d1]
+        for c in (0.5, 0.5, 1.0):
+            xi = xp + c * T * ks[-1]
+            Si = I0 + c * T * ds[-1]
+            ki, Ji = stage(xi, u, th)
+            ks.append(ki)
+            ds.append(ca.mtimes(Ji, ca.vertcat(Si, E)))
+        xp_next = xp + (T / 6.0) * (ks[0] + 2 * ks[1] + 2 * ks[2] + ks[3])
+        A_top = I0 + (T / 6.0) * (ds[0] + 2 * ds[1] + 2 * ds[2] + ds[3])
+        A = ca.densify(ca.vertcat(A_top, E))
+        Mm = ca.DM(self.robot.Mm)
+        G = ca.densify(
+            ca.horzcat(
+                ca.mtimes(A[:, n : 2 * n], minv(x[:n], th)),
+                A[:, 3 * n : 4 * n] / ca.repmat(Mm.T, N, 1),
+                ca.vertcat(ca.DM.zeros(4 * n, p), T * ca.DM.eye(p)),
+            )
+        )
+        step = ca.Function(
+            "transition_step",
+            [x, u],
+            [ca.vertcat(xp_next, th), A, G],
+            ["x", "u"],
+            ["x_next", "A", "Gamma"],
+        )
+        return step.expand() if expand else step
+
+    def rk4_functions(self) -> dict[str, ca.Function]:
+        """The ``rk4`` transition functions.
+
+        ``transition_step`` (x+, A, Gamma) is :meth:`rk4_step_function`; ``transition`` is an
+        MX graph calling the SX right-hand side four times (inlining four dynamics
+        evaluations in SX makes the code grow tenfold); the inverse is Newton on the forward
+        map from the backward-RK4 guess.
 
         Returns:
             ``transition``, ``transition_jacobian``, ``noise_gain``, ``transition_step`` and
             ``transition_inverse`` with the contract's names and shapes.
         """
-        n, p, T, K = self.tree.n, self.tree.p, self.T, self.iterations
-        N = 4 * n + p
+        n, T, K = self.tree.n, self.T, self.iterations
+        N = 4 * n + self.tree.p
         rhs = self.plant_rhs_function()
-        qs, ths, ws = ca.SX.sym("q", n), ca.SX.sym("theta", p), ca.SX.sym("w", n)
-        msolve = ca.Function(
-            "rk4_impulse", [qs, ths, ws], [ldl_solve(self.tree.mass_matrix(qs, ths), ws)]
-        )
-        Mm = ca.DM(self.robot.Mm)
         x, u = ca.MX.sym("x", N), ca.MX.sym("u", n)
-        w = ca.MX.sym("w", 2 * n + p)
-        q, qd, qm, qmd, th = (x[0:n], x[n : 2 * n], x[2 * n : 3 * n], x[3 * n : 4 * n], x[4 * n :])
+        th = x[4 * n :]
         zero = ca.MX.zeros(2 * n, 1)
 
         def step(xp: ca.MX, h: float) -> ca.MX:
@@ -252,36 +329,20 @@ class Transition:
             k4 = rhs(xp + h * k3, u, th, zero)
             return xp + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
 
-        xp0 = ca.vertcat(q, qd + msolve(q, th, w[0:n]), qm, qmd + w[n : 2 * n] / Mm)
-        Fw = ca.Function("rk4_noisy", [x, u, w], [ca.vertcat(step(xp0, T), th + T * w[2 * n :])])
-        F = Fw(x, u, ca.MX.zeros(2 * n + p, 1))
-        # dense outputs: the contract's buffers are plain column-major arrays
-        A = ca.densify(ca.jacobian(F, x))
-        G = ca.densify(
-            ca.Function("rk4_gain", [x, u, w], [ca.jacobian(Fw(x, u, w), w)])(
-                x, u, ca.MX.zeros(2 * n + p, 1)
-            )
-        )
+        F = ca.vertcat(step(x[: 4 * n], T), th)
+        step_fn = self.rk4_step_function(expand=n <= EXPAND_MAX_JOINTS)
         xn = ca.MX.sym("x_next", N)
         xpn = xn[: 4 * n]
         th_n = xn[4 * n :]
         back = ca.Function(
             "rk4_back", [x, u], [step(x[: 4 * n], -T)]
         )  # uses th = x[4n:] of its own argument
-        fwd_expr = step(x[: 4 * n], T)
-        fwd = ca.Function("rk4_fwd", [x, u], [fwd_expr])
-        fwd_jac = ca.Function(
-            "rk4_fwd_jac", [x, u], [ca.densify(ca.jacobian(fwd_expr, x)[:, : 4 * n])]
-        )
         # Newton on F(x) = x+ from the backward-RK4 guess: the plain fixed point
         # x <- x - (F(x) - x+) contracts only for T |df/dx| < 1, which stiff joints break
         xp = back(xn, u)
-        for _ in range(K):
-            xf = ca.vertcat(xp, th_n)
-            xp = xp - ca.solve(fwd_jac(xf, u), fwd(xf, u) - xpn, "qr")
-        step_fn = ca.Function(
-            "transition_step", [x, u], [F, A, G], ["x", "u"], ["x_next", "A", "Gamma"]
-        )
+        for _ in range(K):  # the step's own A (one copy of the stages in the C file)
+            fx, jx, _G = step_fn(ca.vertcat(xp, th_n), u)
+            xp = xp - ca.solve(jx[: 4 * n, : 4 * n], fx[: 4 * n] - xpn, "qr")
         xs, us = ca.MX.sym("x", N), ca.MX.sym("u", n)
         _, A_s, G_s = step_fn(xs, us)
         transition = ca.Function("transition", [x, u], [F], ["x", "u"], ["x_next"])

@@ -1,9 +1,10 @@
 /* amsfe_loop.c: controllers, the real-time tick and the closed-loop simulation in C
  * (amsfe_loop.h, docs/runtime-c.md).
  *
- * Control flow and bookkeeping only: every model number comes from the robot's generated
+ * Control flow and bookkeeping: every model number comes from the robot's generated
  * functions (control_*, plant_step, camera_measure, mass_matrix, bias) compiled into the
- * same library.  Each branch mirrors its Python reference, named in the comments
+ * same library; the only arithmetic here is the actuator limit, the printed laws' qmd(k+1)
+ * reading, truth-ct's cascade, the sensors' noise, and the NEES.  Each branch mirrors its Python reference, named in the comments
  * (control/sliding.py, control/truth.py, sim/loop.py, sim/sensors.py); the tests run both
  * and compare every recorded signal.
  */
@@ -579,6 +580,7 @@ static void count_frame(amsfe_sim_state *st, int status) {
     case AMSFE_REFUSED_NO_CLONE_LEFT: st->refused_too_late++; break;
     case AMSFE_REFUSED_INDEFINITE: st->refused_indefinite++; break;
     case AMSFE_REFUSED_NO_CLONE: st->refused_unscheduled++; break;
+    case AMSFE_REFUSED_NO_CONVERGENCE: st->refused_no_convergence++; break;
     default: st->refused_other++;
   }
   st->frames_rejected++;

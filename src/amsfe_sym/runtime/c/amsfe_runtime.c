@@ -1,11 +1,22 @@
 /* amsfe_runtime.c: the hand-written glue of the compiled estimators (docs/runtime-c.md).
  *
- * Control flow and bookkeeping only: history ring buffers, the loops over a lag, gating
- * decisions, statuses.  Every number is computed by the generated functions of
- * symbolic/estimator.py (est_*) and the robot's transition_inverse, compiled into the same
- * library.  Each branch mirrors the Python reference in estimation/ (named per function).
+ * Control flow and bookkeeping: history ring buffers, the loops over a lag, gating decisions,
+ * statuses.  The model's numbers (x+, A, Gamma, the inverse, the camera) come from the
+ * generated functions compiled into the same library (transition_step, transition_inverse,
+ * est_* of symbolic/estimator.py).  The EKF's dense linear algebra of the tick (eqs. 13-17:
+ * A P A^T + Gamma Qw Gamma^T, the encoder update whose H selects qm and qmd, the Cholesky
+ * check, the eq. 23 accumulation) is the small set of loops in "dense kernels" below, the C
+ * counterpart of the numpy lines of the Python reference: CasADi's MX matrix products cost
+ * 6-12 ns per multiply-add in generated code and SX expansion grows as N^3 (docs/performance.md).
+ * Each branch mirrors the Python reference in estimation/ (named per function).
  */
 #define _POSIX_C_SOURCE 200112L /* posix_memalign */
+/* The glue is small: optimise it fully whatever the library's flags (-O1 by default, chosen
+ * for the size of the generated files); O3 vectorises the kernels' axpy loops.  No
+ * -ffast-math: sums keep their order, so results do not depend on the flags. */
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC optimize("O3")
+#endif
 #include "amsfe_runtime.h"
 
 #include <math.h>
@@ -13,6 +24,7 @@
 #include <string.h>
 
 typedef long long cint;
+#define AMSFE_MAX_ENCODERS 256 /* 2n: up to 128 joints */
 typedef int (*cfun)(const double **arg, double **res, cint *iw, double *w, int mem);
 typedef int (*cwork)(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w);
 
@@ -32,13 +44,14 @@ DECLARE(est_clone_predict)
 DECLARE(est_clone_encoder)
 DECLARE(est_clone_camera)
 DECLARE(transition_inverse)
+DECLARE(transition_step)
 
 static const cwork WORKS[] = {est_predict_work,        est_encoder_update_work,
                               est_camera_update_work,  est_chol_check_work,
                               est_oosm_accumulate_work, est_oosm_retrodict_work,
                               est_oosm_correct_work,   est_clone_predict_work,
                               est_clone_encoder_work,  est_clone_camera_work,
-                              transition_inverse_work};
+                              transition_inverse_work, transition_step_work};
 
 struct amsfe_est {
   amsfe_params par; /* pointers in it point into this block */
@@ -51,6 +64,8 @@ struct amsfe_est {
   double *x, *P, *x0, *P0, *qw, *re, *rc;
   double *x1, *P1, *A1, *Q1, *x2, *P2; /* scratch */
   double nis, s_ok, chk, ok2;
+  double *G, *T1, *L1, *S1, *K1, *W1; /* dense-kernel scratch */
+  int enc_rows[AMSFE_MAX_ENCODERS];     /* state row of each encoder value (H, eq. 5) */
   /* oosm */
   double *A_buf, *Q_buf, *u_buf, *Phi, *Q, *Phi2, *Qb, *M, *C, *xs, *xr, *xr2;
   double *last_nu, *last_Pprior, has_last;
@@ -67,6 +82,7 @@ struct amsfe_est {
   cint *iw;
   double *w;
   cint n_arg, n_res, inv_n_out;
+  double inv_tol, inv_residual, inv_limit; /* the inverse's convergence check */
 };
 
 /* ------------------------------------------------------------------ helpers */
@@ -109,6 +125,150 @@ static void *carve(carver *c, size_t bytes) {
 
 #define DBL(c, count) ((double *)carve((c), sizeof(double) * (size_t)(count)))
 
+/* ------------------------------------------------------------------ dense kernels */
+/* Column-major N x N unless said.  Symmetric results are computed on the lower triangle and
+ * mirrored, so they are exactly symmetric (the reference symmetrizes). */
+
+/* out = A X A^T + add (X and add symmetric; add may be NULL); T: N x N scratch. */
+static void sandwich(int N, const double *A, const double *X, const double *add, double *out,
+                     double *T) {
+  memset(T, 0, sizeof(double) * (size_t)N * N);
+  for (int j = 0; j < N; ++j) /* T = A X */
+    for (int k = 0; k < N; ++k) {
+      double xkj = X[k + (long)j * N];
+      if (xkj == 0.0) continue;
+      const double *a = A + (long)k * N;
+      double *t = T + (long)j * N;
+      for (int i = 0; i < N; ++i) t[i] += a[i] * xkj;
+    }
+  for (int j = 0; j < N; ++j) { /* lower triangle of T A^T */
+    double *o = out + (long)j * N;
+    for (int i = j; i < N; ++i) o[i] = add ? add[i + (long)j * N] : 0.0;
+    for (int k = 0; k < N; ++k) {
+      double ajk = A[j + (long)k * N];
+      if (ajk == 0.0) continue;
+      const double *t = T + (long)k * N;
+      for (int i = j; i < N; ++i) o[i] += t[i] * ajk;
+    }
+  }
+  for (int j = 0; j < N; ++j)
+    for (int i = j + 1; i < N; ++i) out[j + (long)i * N] = out[i + (long)j * N];
+}
+
+/* Qd = G diag(qw) G^T (G: N x nw), exactly symmetric (eq. 14's process noise). */
+static void noise_cov(int N, int nw, const double *G, const double *qw, double *Qd) {
+  for (int j = 0; j < N; ++j)
+    for (int i = j; i < N; ++i) {
+      double q = 0.0;
+      for (int m = 0; m < nw; ++m) q += G[i + (long)m * N] * qw[m] * G[j + (long)m * N];
+      Qd[i + (long)j * N] = Qd[j + (long)i * N] = q;
+    }
+}
+
+/* C = A B (N x N) */
+static void matmul(int N, const double *A, const double *B, double *C) {
+  memset(C, 0, sizeof(double) * (size_t)N * N);
+  for (int j = 0; j < N; ++j)
+    for (int k = 0; k < N; ++k) {
+      double bkj = B[k + (long)j * N];
+      if (bkj == 0.0) continue;
+      const double *a = A + (long)k * N;
+      double *c = C + (long)j * N;
+      for (int i = 0; i < N; ++i) c[i] += a[i] * bkj;
+    }
+}
+
+/* Lower Cholesky factor of the m x m S (leading dimension m) into L; 1 when every pivot is
+ * > 0 (a NaN pivot gives 0), as est_chol_check and LAPACK potrf. */
+static int cholesky(int m, const double *S, double *L) {
+  for (int j = 0; j < m; ++j) {
+    double d = S[j + (long)j * m];
+    for (int k = 0; k < j; ++k) d -= L[j + (long)k * m] * L[j + (long)k * m];
+    if (!(d > 0)) return 0;
+    double ljj = sqrt(d);
+    L[j + (long)j * m] = ljj;
+    for (int i = j + 1; i < m; ++i) {
+      double v = S[i + (long)j * m];
+      for (int k = 0; k < j; ++k) v -= L[i + (long)k * m] * L[j + (long)k * m];
+      L[i + (long)j * m] = v / ljj;
+    }
+  }
+  return 1;
+}
+
+/* b <- S^-1 b with S = L L^T (m x m, leading dimension m) */
+static void chol_solve(int m, const double *L, double *b) {
+  for (int i = 0; i < m; ++i) {
+    double v = b[i];
+    for (int k = 0; k < i; ++k) v -= L[i + (long)k * m] * b[k];
+    b[i] = v / L[i + (long)i * m];
+  }
+  for (int i = m - 1; i >= 0; --i) {
+    double v = b[i];
+    for (int k = i + 1; k < m; ++k) v -= L[k + (long)i * m] * b[k];
+    b[i] = v / L[i + (long)i * m];
+  }
+}
+
+/* Row of the state the encoder value r measures (eq. 5: H selects qm, then qmd). */
+#define enc_row(e, r) ((e)->enc_rows[r])
+
+/* ekf.joseph_update with the encoders' H (a selection of qm, qmd): S = P_hh + R,
+ * K = P H^T S^-1, x+ = x + K nu, P+ = (I - K H) P (I - K H)^T + K R K^T.  Returns 1, or 0
+ * when S is not positive definite.  Writes x2, P2, nis, last_nu. */
+static int encoder_kernel(amsfe_est *e, const double *z) {
+  int N = e->d.N, ne = e->d.ne;
+  const double *P = e->P, *x = e->x;
+  double *S = e->S1, *L = e->L1, *K = e->K1, *W = e->W1;
+  for (int r = 0; r < ne; ++r) e->last_nu[r] = z[r] - x[enc_row(e, r)];
+  for (int c2 = 0; c2 < ne; ++c2)
+    for (int r = 0; r < ne; ++r)
+      S[r + c2 * ne] = P[enc_row(e, r) + (long)enc_row(e, c2) * N] + (r == c2 ? e->re[r] : 0.0);
+  for (int c2 = 0; c2 < ne; ++c2) /* symmetrize(H P H^T + R) */
+    for (int r = c2 + 1; r < ne; ++r)
+      S[r + c2 * ne] = S[c2 + r * ne] = 0.5 * (S[r + c2 * ne] + S[c2 + r * ne]);
+  if (!cholesky(ne, S, L)) return 0;
+  double sn[ne]; /* S^-1 nu */
+  for (int r = 0; r < ne; ++r) sn[r] = e->last_nu[r];
+  chol_solve(ne, L, sn);
+  double nis = 0.0;
+  for (int r = 0; r < ne; ++r) nis += e->last_nu[r] * sn[r];
+  e->nis = nis;
+  for (int i = 0; i < N; ++i) { /* x+ = x + P H^T S^-1 nu */
+    double s = 0.0;
+    for (int r = 0; r < ne; ++r) s += P[i + (long)enc_row(e, r) * N] * sn[r];
+    e->x2[i] = x[i] + s;
+  }
+  /* K^T = S^-1 H P (ne x N), stored as K (N x ne) */
+  for (int i = 0; i < N; ++i) {
+    double col[ne];
+    for (int r = 0; r < ne; ++r) col[r] = P[enc_row(e, r) + (long)i * N];
+    chol_solve(ne, L, col);
+    for (int r = 0; r < ne; ++r) K[i + (long)r * N] = col[r];
+  }
+  /* W = (I - K H) P = P - K P[rows, :] */
+  for (int j = 0; j < N; ++j)
+    for (int i = 0; i < N; ++i) {
+      double s = P[i + (long)j * N];
+      for (int r = 0; r < ne; ++r) s -= K[i + (long)r * N] * P[enc_row(e, r) + (long)j * N];
+      W[i + (long)j * N] = s;
+    }
+  /* P+ = W (I - K H)^T + K R K^T = W - W[:, rows] K^T + K R K^T, lower triangle */
+  double *P2 = e->P2;
+  for (int j = 0; j < N; ++j)
+    for (int i = j; i < N; ++i) {
+      double s = W[i + (long)j * N];
+      for (int r = 0; r < ne; ++r) {
+        double kj = K[j + (long)r * N];
+        s += (e->re[r] * K[i + (long)r * N] - W[i + (long)enc_row(e, r) * N]) * kj;
+      }
+      P2[i + (long)j * N] = s;
+    }
+  for (int j = 0; j < N; ++j)
+    for (int i = j + 1; i < N; ++i) P2[j + (long)i * N] = P2[i + (long)j * N];
+  return 1;
+}
+
 static void model_dims(amsfe_dims *d) {
   d->N = (int)est_predict_sparsity_in(0)[0];
   d->n = (int)est_predict_sparsity_in(2)[0];
@@ -137,6 +297,8 @@ static size_t layout(amsfe_est *e, const amsfe_params *p, char *base) {
   e->x1 = DBL(&c, N), e->P1 = DBL(&c, NN), e->A1 = DBL(&c, NN), e->Q1 = DBL(&c, NN);
   e->x2 = DBL(&c, N), e->P2 = DBL(&c, NN);
   e->last_nu = DBL(&c, d.ne), e->last_Pprior = DBL(&c, NN);
+  e->G = DBL(&c, N * d.nw), e->T1 = DBL(&c, NN), e->L1 = DBL(&c, NN);
+  e->S1 = DBL(&c, (long)d.ne * d.ne), e->K1 = DBL(&c, N * d.ne), e->W1 = DBL(&c, NN);
   e->A_buf = e->Q_buf = e->u_buf = NULL;
   e->r_x = e->r_P = e->r_u = e->r_z = e->r_fz = NULL;
   e->xa = e->Pa = e->xa2 = e->Pa2 = e->sel = e->cl = NULL;
@@ -177,6 +339,7 @@ static int params_ok(const amsfe_params *p) {
   amsfe_dims d;
   model_dims(&d);
   if (!p || !p->qw || !p->r_encoder || !p->r_camera || !p->x0 || !p->P0) return 0;
+  if (d.ne > AMSFE_MAX_ENCODERS) return 0;
   if (p->estimator < AMSFE_ENCODERS || p->estimator > AMSFE_CLONING) return 0;
   if (p->buffer_steps < 1 || p->camera_iterations < 1 || p->max_frames_per_step < 1) return 0;
   if (isnan(p->gate_camera) || isnan(p->gate_encoder)) return 0;
@@ -242,13 +405,8 @@ static void sync_clone(amsfe_est *e) {
   for (int j = 0; j < N; ++j) copy(e->P + (long)j * N, e->Pa + (long)j * Na, N);
 }
 
-static int pd(amsfe_est *e, const double *P) {
-  double ok = 0.0;
-  double *out[1] = {&ok};
-  const double *in[1] = {P};
-  call(e, est_chol_check, in, 1, out, 1);
-  return ok > 0.5;
-}
+/* require_positive_definite: Cholesky succeeds (est_chol_check's decision) */
+static int pd(amsfe_est *e, const double *P) { return cholesky(e->d.N, P, e->L1); }
 
 /* block (o, o) of the augmented covariance into P1, then the PD check */
 static int clone_block_pd(amsfe_est *e, int s) {
@@ -299,6 +457,9 @@ int amsfe_est_init(amsfe_est **out, const amsfe_params *p, void *memory, size_t 
                        ? p->buffer_steps
                        : p->camera_max_delay;
   e->inv_n_out = transition_inverse_n_out();
+  e->inv_tol = AMSFE_INVERSE_TOL;
+  for (int r = 0; r < d.ne; ++r) e->enc_rows[r] = r < d.n ? 2 * d.n + r : 3 * d.n + (r - d.n);
+  e->inv_residual = NAN, e->inv_limit = NAN;
   copy(e->x0, p->x0, d.N);
   copy(e->P0, p->P0, (long)d.N * d.N);
   copy(e->qw, p->qw, d.nw);
@@ -340,10 +501,12 @@ void amsfe_est_destroy(amsfe_est *e) { free(e); }
 /* ekf.predict on (x, P) with u; stores A, Qd in A1, Q1 */
 static int predict(amsfe_est *e, const double *u) {
   int N = e->d.N;
-  const double *in[4] = {e->x, e->P, u, e->qw};
-  double *out[4] = {e->x1, e->P1, e->A1, e->Q1};
-  call(e, est_predict, in, 4, out, 4);
+  const double *in[2] = {e->x, u};
+  double *out[3] = {e->x1, e->A1, e->G};
+  call(e, transition_step, in, 2, out, 3); /* x+, A, Gamma (eqs. 13, 4) */
   if (!finite(e->x1, N) || !finite(e->A1, (long)N * N)) return AMSFE_ERR_NONFINITE;
+  noise_cov(N, e->d.nw, e->G, e->qw, e->Q1);
+  sandwich(N, e->A1, e->P, e->Q1, e->P1, e->T1); /* eq. (14) */
   copy(e->x, e->x1, N);
   copy(e->P, e->P1, (long)N * N);
   return AMSFE_OK;
@@ -355,10 +518,7 @@ static int encoder_update(amsfe_est *e, const double *z, int report) {
   e->has_last = 0.0;
   if (report) e->diag.encoder_accepted = 0, e->diag.encoder_nis = NAN;
   if (!z) return AMSFE_OK;
-  const double *in[4] = {e->x, e->P, z, e->re};
-  double *out[5] = {e->x2, e->P2, &e->nis, e->last_nu, &e->s_ok};
-  call(e, est_encoder_update, in, 4, out, 5);
-  if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
+  if (!encoder_kernel(e, z)) return AMSFE_ERR_S_NOT_PD;
   int accepted = e->nis <= e->par.gate_encoder;
   if (report) {
     e->diag.encoder_nis = e->nis;
@@ -516,9 +676,9 @@ static int oosm_late(amsfe_est *e, const double *z, long kappa, double *nis) {
   for (long i = 0; i < N; ++i) e->Phi[i * (N + 1)] = 1.0;
   for (long j = kappa; j < k; ++j) { /* eq. (23) */
     long s = pmod(j, e->B);
-    const double *in[4] = {e->Phi, e->Q, e->A_buf + s * NN, e->Q_buf + s * NN};
-    double *out[2] = {e->Phi2, e->Qb};
-    call(e, est_oosm_accumulate, in, 4, out, 2);
+    const double *Aj = e->A_buf + s * NN;
+    matmul((int)N, Aj, e->Phi, e->Phi2);
+    sandwich((int)N, Aj, e->Q, e->Q_buf + s * NN, e->Qb, e->T1);
     copy(e->Phi, e->Phi2, NN);
     copy(e->Q, e->Qb, NN);
   }
@@ -530,11 +690,17 @@ static int oosm_late(amsfe_est *e, const double *z, long kappa, double *nis) {
   }
   copy(e->xr, e->xs, N);
   for (long j = k - 1; j >= kappa; --j) { /* eq. (24): the backward map, step by step */
-    const double *in[2] = {e->xr, e->u_buf + pmod(j, e->B) * e->d.n};
-    double *out[1] = {e->xr2};
-    for (cint i = 1; i < e->inv_n_out; ++i) e->res[i] = NULL; /* only x is wanted */
-    e->arg[0] = in[0], e->arg[1] = in[1], e->res[0] = out[0];
+    double residual = NAN, scale = 1.0;
+    for (long i = 0; i < N; ++i) scale = fmax(scale, fabs(e->xr[i])); /* max(1, |x_next|) */
+    for (cint i = 2; i < e->inv_n_out; ++i) e->res[i] = NULL;
+    e->arg[0] = e->xr, e->arg[1] = e->u_buf + pmod(j, e->B) * e->d.n;
+    e->res[0] = e->xr2, e->res[1] = &residual;
     transition_inverse(e->arg, e->res, e->iw, e->w, 0);
+    /* CompiledTransition.inverse: refused unless residual <= tol max(1, |x_next|) (NaN too) */
+    if (!(residual <= e->inv_tol * scale)) {
+      e->inv_residual = residual, e->inv_limit = e->inv_tol * scale;
+      return AMSFE_REFUSED_NO_CONVERGENCE;
+    }
     copy(e->xr, e->xr2, N);
   }
   if (!finite(e->xr, N)) return AMSFE_ERR_NONFINITE;
@@ -645,6 +811,17 @@ void amsfe_est_diagnostics(const amsfe_est *e, amsfe_diag *diag) {
   diag->last_error = e->last_error;
 }
 
+int amsfe_est_set_inverse_tolerance(amsfe_est *e, double tol) {
+  if (!e || !(tol > 0)) return AMSFE_ERR_INPUT;
+  e->inv_tol = tol;
+  return AMSFE_OK;
+}
+
+void amsfe_est_inverse_residual(const amsfe_est *e, double *residual, double *limit) {
+  if (residual) *residual = e ? e->inv_residual : NAN;
+  if (limit) *limit = e ? e->inv_limit : NAN;
+}
+
 const char *amsfe_status_string(int status) {
   switch (status) {
     case AMSFE_OK: return "ok";
@@ -659,6 +836,8 @@ const char *amsfe_status_string(int status) {
       return "refused: its clone was used already or is older than camera_max_delay";
     case AMSFE_REFUSED_FULL: return "refused: max_frames_per_step frames stored for that step";
     case AMSFE_IGNORED: return "ignored (the encoders estimator uses no frames)";
+    case AMSFE_REFUSED_NO_CONVERGENCE:
+      return "refused: the inverse transition (eq. 22) did not converge over the lag";
     case AMSFE_ERR_INPUT: return "error: NULL pointer or non-finite input u";
     case AMSFE_ERR_NOT_PD: return "error: the covariance lost positive definiteness";
     case AMSFE_ERR_NONFINITE: return "error: the model gave NaN or inf";

@@ -42,8 +42,15 @@ enum amsfe_status {
   AMSFE_ERR_S_NOT_PD = -4,       /* an innovation covariance H P H^T + R is not PD */
   AMSFE_ERR_FAILED = -5,         /* an earlier call failed: call amsfe_est_reset */
   AMSFE_ERR_CONFIG = -6,         /* bad parameter block (see amsfe_est_init) */
-  AMSFE_ERR_MEMORY = -7          /* the memory block is too small or misaligned */
+  AMSFE_ERR_MEMORY = -7,         /* the memory block is too small or misaligned */
+  AMSFE_REFUSED_NO_CONVERGENCE = 10 /* oosm: the inverse transition (eq. 22) of a step of the
+                                       lag did not converge (its residual output above the
+                                       tolerance, or NaN): the frame is not used */
 };
+
+/* Default tolerance of the inverse transition's residual (relative to max(1, |x_next|_inf)),
+ * the Python reference's CompiledTransition.inverse_tol. */
+#define AMSFE_INVERSE_TOL 1e-10
 
 enum amsfe_estimator {
   AMSFE_ENCODERS = 0, /* encoder updates only */
@@ -125,6 +132,16 @@ int amsfe_est_camera_frame(amsfe_est *est, const double *z, long exposure_step, 
 /* Copy out x(k|k) [N] and P(k|k) [N*N] (either may be NULL). */
 void amsfe_est_state(const amsfe_est *est, double *x, double *P);
 void amsfe_est_diagnostics(const amsfe_est *est, amsfe_diag *diag);
+
+/* Tolerance of the inverse's convergence check: a backward step of eq. (24) whose generated
+ * residual max|F(x, u) - x_next| exceeds tol * max(1, max|x_next|) (or is NaN) refuses the
+ * frame with AMSFE_REFUSED_NO_CONVERGENCE.  Set by amsfe_est_init to AMSFE_INVERSE_TOL and
+ * kept by reset.  Returns AMSFE_OK, or AMSFE_ERR_INPUT (NULL, or tol not > 0). */
+int amsfe_est_set_inverse_tolerance(amsfe_est *est, double tol);
+
+/* The residual of the inverse step that made the last AMSFE_REFUSED_NO_CONVERGENCE (NaN
+ * before any), and the limit it was compared with (either may be NULL). */
+void amsfe_est_inverse_residual(const amsfe_est *est, double *residual, double *limit);
 
 /* A short English name of a status. */
 const char *amsfe_status_string(int status);
