@@ -64,6 +64,19 @@ def _run_task(task: Task) -> dict[str, Any]:
             "error": f"{type(exc).__name__}: {exc}",
         }
         return {"summary": failed, "failed": True}
+    if res.diverged_at is not None:  # a lost arm: its series end early; count it, do not pool it
+        sc = task.scenario
+        return {
+            "summary": {
+                "variant": task.variant,
+                "scenario": sc.name,
+                "estimator": sc.estimator,
+                "seed": sc.seed,
+                "error": f"the closed loop ({sc.controller}) diverged at t = "
+                f"{res.diverged_at:.3f} s",
+            },
+            "failed": True,
+        }
     summary = summarize(res)
     L = lib.layout
     th_hat = res.x_hat[:, L["theta"]]
