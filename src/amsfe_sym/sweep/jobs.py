@@ -14,6 +14,7 @@ processes on one machine build each library once and share it.
 from __future__ import annotations
 
 import inspect
+import logging
 import math
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
@@ -159,5 +160,15 @@ def run_job(job: Job) -> dict[str, Any]:
 
 
 def run_batch(jobs: Sequence[Job]) -> list[dict[str, Any]]:
-    """:func:`run_job` of each job, in order (what one Dask task runs)."""
-    return [run_job(j) for j in jobs]
+    """:func:`run_job` of each job, in order (what one Dask task runs).
+
+    The toolkit's warnings (a refused camera frame, a diverged loop) are held back while it
+    runs: thousands of runs would flood the terminal, and the table counts them
+    (``counters.refused_*``, ``status``)."""
+    logger = logging.getLogger("amsfe_sym")
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    try:
+        return [run_job(j) for j in jobs]
+    finally:
+        logger.setLevel(level)
