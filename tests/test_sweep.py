@@ -379,3 +379,30 @@ def test_cli_sweep_report_and_bad_input(tmp_path: Path, capsys: pytest.CaptureFi
     assert main(["sweep", str(other), "--out", str(out), "--workers", "0"]) == 2
     assert "another" in capsys.readouterr().err
     shutil.rmtree(out / "figures")
+
+
+@pytest.mark.slow
+def test_a_robot_axis_runs_on_its_own_library(tmp_path: Path) -> None:
+    # builds one derived library (cached under generated/ for later runs): the plant carries
+    # 0.4 kg, the model's nominal payload stays the spec's
+    spec = parse_sweep(
+        {
+            "sweep": {
+                "scenario": "paper-sim",
+                "duration": 0.2,
+                "estimators": ["oosm"],
+                "controllers": ["dtsmc"],
+            },
+            "axes": {"robot.theta.payload.true": [0.4]},
+        }
+    )
+    (job,) = expand_jobs(spec)
+    row = run_job(job)
+    assert row["status"] == "ok", row["error"]
+    from amsfe_sym.sweep.jobs import _library
+
+    lib = _library(job.scenario, job.robot)
+    base = load_spec("paper_2link")
+    assert lib.theta_true.tolist() == [0.4]
+    assert lib.theta_initial.tolist() == [base.theta[0].initial]
+    assert lib.name.startswith("paper_2link_r") and lib.name.endswith("_rk4")

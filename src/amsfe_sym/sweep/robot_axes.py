@@ -14,8 +14,9 @@ the model error of a run is ``true - initial``.  Two kinds of axis keys:
     count p grows by n: AMSFE estimates the springs too, DTSMC keeps the nominal ones.
 
 Each distinct set of values is a derived :class:`~amsfe_sym.spec.RobotSpec` with a name of
-its own (``<robot>-r<hash>``), so its library is cached beside the robot's and never evicts
-it; a worker derives it from the scenario's robot on its own machine.
+its own (``<robot>_r<hash>``: a C identifier, as CasADi needs), so its library is cached
+beside the robot's and never evicts it; a worker derives it from the scenario's robot on its
+own machine.
 """
 
 from __future__ import annotations
@@ -129,4 +130,4 @@ def derive_spec(spec: RobotSpec, values: Mapping[str, float]) -> RobotSpec:
             replace(t, true=float(v)) if parts[3] == "true" else replace(t, initial=float(v))
         )
     tag = hashlib.sha256(json.dumps(dict(values), sort_keys=True).encode()).hexdigest()[:10]
-    return replace(spec, name=f"{spec.name}-r{tag}", theta=tuple(theta))
+    return replace(spec, name=f"{spec.name}_r{tag}", theta=tuple(theta))
