@@ -125,6 +125,12 @@ def get_argument_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     s.add_argument("--no-plots", action="store_true", help="skip the figures")
     s.add_argument("--force", action="store_true", help="replace an existing --out run folder")
+    s.add_argument(
+        "--runtime",
+        choices=("compiled", "python"),
+        default="compiled",
+        help="compiled: the loop in generated C (default); python: the readable reference",
+    )
     _add_set(s)
 
     b = sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
@@ -176,6 +182,12 @@ def get_argument_parser() -> argparse.ArgumentParser:
         help="a named scenario variant (repeatable): --variant paper integrator=paper",
     )
     st.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    st.add_argument(
+        "--runtime",
+        choices=("compiled", "python"),
+        default="compiled",
+        help="compiled: the loop in generated C (default); python: the reference",
+    )
 
     sw = sub.add_parser(
         "sweep", help="scenario grid x estimators x controllers x seeds on Dask (docs/sweeps.md)"
@@ -330,13 +342,13 @@ def _simulate(args: argparse.Namespace) -> int:
 
         out = Path(args.out) if args.out else Path("runs") / f"{sc.name}-{stamp}"
         check_out(out, args.force)  # before the runs
-        cmp = run_comparison(sc, compare, lib, progress=not args.no_progress)
+        cmp = run_comparison(sc, compare, lib, progress=not args.no_progress, runtime=args.runtime)
         write_comparison(cmp, out, plots=not args.no_plots, force=args.force)
         print_comparison(cmp, out)
         return 0
     out = Path(args.out) if args.out else Path("runs") / f"{sc.name}-{sc.estimator}-{stamp}"
     check_out(out, args.force)  # before the run: nothing is computed for nothing
-    res = run(sc, lib, progress=not args.no_progress)
+    res = run(sc, lib, progress=not args.no_progress, runtime=args.runtime)
     write_run(res, out, plots=not args.no_plots, force=args.force)
     s = summarize(res)
     print(f"run folder: {out}")
@@ -414,6 +426,7 @@ def _study(args: argparse.Namespace) -> int:
         variants=variants,
         first_seed=args.first_seed,
         progress=not args.no_progress,
+        runtime=args.runtime,
     )
     print(res.table)
     print(f"study folder: {res.out} (study.md, study.json, {len(res.figures)} figures)")

@@ -70,6 +70,8 @@ _GENERATOR_MODULES = (
     "symbolic/*.py",
     "runtime/c/amsfe_runtime.c",
     "runtime/c/amsfe_runtime.h",
+    "runtime/c/amsfe_loop.c",
+    "runtime/c/amsfe_loop.h",
 )
 #: Every function group (see :data:`amsfe_sym.symbolic.model.PARTS`, kept equal).
 ALL_PARTS: tuple[str, ...] = ("model", "control", "estimator")
@@ -378,6 +380,9 @@ def _build(
         if "estimator" in parts:  # the C glue calls the est_* functions
             shutil.copy(_RUNTIME_C / "amsfe_runtime.h", tmp)
             glue = [str(_RUNTIME_C / "amsfe_runtime.c")]
+        if set(parts) == set(ALL_PARTS):  # the loop calls the laws, the plant, the estimators
+            shutil.copy(_RUNTIME_C / "amsfe_loop.h", tmp)
+            glue.append(str(_RUNTIME_C / "amsfe_loop.c"))
         cmd = [compiler(), *flags, "-I.", "-o", libname, cname, *glue, "-lm"]
         _say(progress, f"[amsfe] {spec.name}: compiling ({' '.join(cmd)})")
         proc = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True)
@@ -490,6 +495,9 @@ def _manifest(
         "source": cname,
         "header": cname[:-2] + ".h",
         "runtime_header": "amsfe_runtime.h" if "est_predict" in model.functions else None,
+        "loop_header": "amsfe_loop.h"
+        if "control_amsfe" in model.functions and "est_predict" in model.functions
+        else None,
         "urdf": str(robot.spec.urdf),
         "spec": None if robot.spec.spec_path is None else str(robot.spec.spec_path),
         "joints": [j.name for j in robot.joints],

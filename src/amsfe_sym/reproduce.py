@@ -50,12 +50,14 @@ def run_comparison(
     controllers: tuple[str, ...],
     lib: ModelLibrary,
     progress: bool = False,
+    runtime: str = "compiled",
 ) -> Comparison:
-    """Run ``scenario`` once per controller on ``lib`` (same seed, estimator and noise)."""
+    """Run ``scenario`` once per controller on ``lib`` (same seed, estimator and noise), on
+    the ``runtime`` of :func:`amsfe_sym.sim.loop.run`."""
     results: dict[str, RunResult] = {}
     for name in controllers:
         sc = replace(scenario, controller=name, compare=())
-        results[name] = run(sc, lib, progress=progress)
+        results[name] = run(sc, lib, progress=progress, runtime=runtime)
     return Comparison(scenario, results)
 
 

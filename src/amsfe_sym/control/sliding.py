@@ -123,6 +123,10 @@ class _SlidingBase(Controller):
         for key in gains:
             self._g[key] = self._gain(key, 1 if key == "p" else self.n)
 
+    def law_gains(self) -> dict[str, FloatArray]:
+        """The gains as the generated law takes them (per joint; ``p`` one value), copies."""
+        return {k: v.copy() for k, v in self._g.items()}
+
     #: Whether the generated law takes Lt (the baselines fix it to 0: the surface of (54)).
     has_lt: ClassVar[bool] = True
 

@@ -34,6 +34,8 @@ __all__ = [
     "STATUS",
     "CompiledEstimator",
     "RuntimeDiagnostics",
+    "estimator_log_lines",
+    "log_numbers",
     "make_compiled_estimator",
     "write_log",
 ]
@@ -362,6 +364,24 @@ def make_compiled_estimator(name: str, **kwargs: Any) -> CompiledEstimator:
     return COMPILED_ESTIMATORS[name](**kwargs)
 
 
+def log_numbers(values: Any) -> str:
+    """Numbers of a log line: column-major, shortest round-trip repr."""
+    return " ".join(repr(float(v)) for v in np.ravel(values, order="F"))
+
+
+def estimator_log_lines(est: CompiledEstimator) -> list[str]:
+    """The estimator block of a log (its parameter block as built at construction)."""
+    p = est._params
+    lines = [
+        f"params {p.estimator} {p.buffer_steps} {p.camera_iterations} {p.camera_period} "
+        f"{p.camera_phase} {p.camera_max_delay} {p.max_frames_per_step} "
+        f"{p.gate_camera!r} {p.gate_encoder!r} {p.k0}",
+    ]
+    for key, arr in zip(("qw", "r_encoder", "r_camera", "x0", "P0"), est._arrays, strict=True):
+        lines.append(f"{key} {log_numbers(arr)}")
+    return lines
+
+
 def write_log(
     path: str | os.PathLike[str],
     est: CompiledEstimator,
@@ -381,24 +401,14 @@ def write_log(
     Returns:
         The path written.
     """
-    p = est._params
-
-    def nums(values: Any) -> str:
-        return " ".join(repr(float(v)) for v in np.ravel(values, order="F"))
-
-    lines = [
-        f"params {p.estimator} {p.buffer_steps} {p.camera_iterations} {p.camera_period} "
-        f"{p.camera_phase} {p.camera_max_delay} {p.max_frames_per_step} "
-        f"{p.gate_camera!r} {p.gate_encoder!r} {p.k0}",
-    ]
-    for key, arr in zip(("qw", "r_encoder", "r_camera", "x0", "P0"), est._arrays, strict=True):
-        lines.append(f"{key} {nums(arr)}")
+    lines = estimator_log_lines(est)
     ne = est.dims.ne
     for j in range(len(u)):
         zj = z[j]
-        lines.append(f"tick {nums(u[j])} {nums(np.full(ne, np.nan) if zj is None else zj)}")
+        zj_or_nan = np.full(ne, np.nan) if zj is None else zj
+        lines.append(f"tick {log_numbers(u[j])} {log_numbers(zj_or_nan)}")
         for fr in sorted(frames[j], key=lambda f: f.exposure_step):
-            lines.append(f"frame {fr.exposure_step} {nums(fr.z)}")
+            lines.append(f"frame {fr.exposure_step} {log_numbers(fr.z)}")
     out = Path(path)
     out.write_text("\n".join(lines) + "\n")
     return out

@@ -281,6 +281,15 @@ class ModelLibrary:
         return Ks
 
     @property
+    def stiffness_theta_index(self) -> NDArray[np.int32]:
+        """Per joint, the index of the theta entry holding its stiffness, or -1 (the table
+        :meth:`stiffness` reads; the C controllers take it as ``ks_theta``)."""
+        index = np.full(self.n, -1, dtype=np.int32)
+        for i, j in self._stiffness_theta:
+            index[j] = i
+        return index
+
+    @property
     def theta_true(self) -> NDArray[np.float64]:
         return np.array([t.true for t in self.manifest.theta], dtype=float)
 

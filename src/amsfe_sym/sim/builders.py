@@ -28,6 +28,7 @@ from amsfe_sym.control import Controller, make_controller
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.estimation import Estimator, FilterConfig, make_estimator
 from amsfe_sym.estimation.registry import estimator_class
+from amsfe_sym.runtime.compiled_estimator import make_compiled_estimator
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.runtime.models import (
     CameraMeasurement,
@@ -165,7 +166,9 @@ def filter_config(sc: Scenario, timing: CameraTiming) -> FilterConfig:
     )
 
 
-def build_estimator(sc: Scenario, lib: ModelLibrary, sensors: Sensors, z0: FloatArray) -> Estimator:
+def build_estimator(
+    sc: Scenario, lib: ModelLibrary, sensors: Sensors, z0: FloatArray, compiled: bool = False
+) -> Estimator:
     """The estimator of ``sc`` with its models, x(0|0) and P(0|0).
 
     Args:
@@ -173,6 +176,8 @@ def build_estimator(sc: Scenario, lib: ModelLibrary, sensors: Sensors, z0: Float
         lib: The library (the compiled transition and camera).
         sensors: The run's sensors: R defaults to their true noise (quantization included).
         z0: The first encoder sample [qm, qmd] (``[estimate0] motor = "encoders"``).
+        compiled: Build the library's C estimator (same arguments, same numbers) instead
+            of the Python reference.
 
     Raises:
         ConfigError: an unknown estimator, a singular camera R, bad initial values.
@@ -223,7 +228,8 @@ def build_estimator(sc: Scenario, lib: ModelLibrary, sensors: Sensors, z0: Float
         )
         ** 2
     )
-    return make_estimator(
+    make = make_compiled_estimator if compiled else make_estimator
+    return make(
         sc.estimator,
         model=model,
         encoder=encoder_model,
@@ -272,9 +278,10 @@ class RunParts:
     trajectory: Trajectory
 
 
-def build_run(sc: Scenario, lib: ModelLibrary) -> RunParts:
+def build_run(sc: Scenario, lib: ModelLibrary, compiled: bool = False) -> RunParts:
     """All parts of a run of ``sc`` on ``lib``, in the loop's order (the random streams of
-    ``sc.seed`` are drawn as the loop draws them).
+    ``sc.seed`` are drawn as the loop draws them); ``compiled``: the estimator is the
+    library's C one.
 
     Raises:
         ConfigError: whatever a builder refuses (camera timing, names, shapes, noise).
@@ -284,6 +291,6 @@ def build_run(sc: Scenario, lib: ModelLibrary) -> RunParts:
     sensors = build_sensors(sc, lib, np.random.default_rng(sc.seed), timing)
     L = lib.layout
     z0 = sensors.encoders.measure(plant0[L["qm"]], plant0[L["qmd"]])
-    estimator = build_estimator(sc, lib, sensors, z0)
+    estimator = build_estimator(sc, lib, sensors, z0, compiled)
     controller, trajectory = build_controller(sc, lib)
     return RunParts(timing, plant0, sensors, z0, estimator, controller, trajectory)

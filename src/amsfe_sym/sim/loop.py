@@ -25,11 +25,19 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.sim.builders import build_run
 
-__all__ = ["DIVERGED_TRACKING_ERROR", "REFUSAL_KINDS", "RunResult", "refusal_kind", "run"]
+__all__ = [
+    "DIVERGED_TRACKING_ERROR",
+    "REFUSAL_KINDS",
+    "RUNTIMES",
+    "RunResult",
+    "refusal_kind",
+    "run",
+]
 
 log = logging.getLogger(__name__)
 
@@ -63,6 +71,7 @@ class RunResult:
         saturated: Whether the actuator limit clipped u(k), (K,).
         diverged_at: Time [s] the loop was stopped because it diverged (the arrays end
             there), or None.
+        runtime: Which loop made the run: ``"python"`` (the reference) or ``"compiled"``.
     """
 
     scenario: Scenario
@@ -83,6 +92,7 @@ class RunResult:
     saturated: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
     diverged_at: float | None = None
     tau_d: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    runtime: str = "python"
 
 
 #: Why an estimator refused a camera frame, from its report's reason: (kind, words).
@@ -104,21 +114,49 @@ def refusal_kind(reason: str) -> str:
     return "other"
 
 
-def run(scenario: Scenario, lib: ModelLibrary, progress: bool = False) -> RunResult:
+#: The runtimes of :func:`run`: the compiled C loop, or this module's Python reference.
+RUNTIMES = ("compiled", "python")
+
+
+def run(
+    scenario: Scenario,
+    lib: ModelLibrary,
+    progress: bool = False,
+    runtime: str = "python",
+    compiled_estimator: bool = False,
+) -> RunResult:
     """Simulate ``scenario`` on the library ``lib`` and return the recorded signals
     (nothing is written; :func:`amsfe_sym.sim.record.write_run` writes a run folder).
+
+    Args:
+        scenario: The scenario.
+        lib: Its library (:func:`amsfe_sym.codegen.library_for`).
+        progress: Show a progress bar.
+        runtime: ``"python"``: the readable reference loop below; ``"compiled"``: the same
+            loop in the library's C runtime (:func:`amsfe_sym.sim.compiled.run_compiled`),
+            which reproduces it (docs/runtime-c.md says how closely).
+        compiled_estimator: Python loop only: use the library's C estimator (isolates the
+            loop from the estimators' arithmetic when comparing the two runtimes).
 
     Raises:
         ConfigError: a setting the builders refuse.  A diverging closed loop is not an
             error: the run stops there and ``RunResult.diverged_at`` says when.
     """
+    if runtime not in RUNTIMES:
+        raise ConfigError(
+            describe("runtime", f"one of {list(RUNTIMES)}", repr(runtime), "use 'compiled'")
+        )
+    if runtime == "compiled":
+        from amsfe_sym.sim.compiled import run_compiled  # it builds on this module
+
+        return run_compiled(scenario, lib, progress)
     sc = scenario
     n, N, T = lib.n, lib.N, lib.T
     L = lib.layout
     K = round(sc.duration / T) + 1
     theta_true = lib.theta_true
 
-    parts = build_run(sc, lib)
+    parts = build_run(sc, lib, compiled=True) if compiled_estimator else build_run(sc, lib)
     xp, z0, est, ctrl, traj = (
         parts.plant0,
         parts.z0,

@@ -81,6 +81,7 @@ def summarize(res: RunResult) -> dict[str, Any]:
         "estimator": sc.estimator,
         "controller": sc.controller,
         "seed": sc.seed,
+        "runtime": res.runtime,
         "ticks": int(K),
         "T": lib.T,
         "sim_time_s": float(res.t[-1]),

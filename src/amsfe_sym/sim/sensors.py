@@ -256,6 +256,14 @@ class Encoders:
             z_q = np.round(z_q / res) * res
         return np.concatenate([z_q, z_qd])
 
+    def noise_batch(self, count: int) -> FloatArray:
+        """The scaled noise of the next ``count`` calls of :meth:`measure`, drawn in one batch
+        from the same stream, shape (count, 2n) [rad, rad/s]: row i is what the i-th call
+        adds before quantizing (the compiled loop reads it; the stream is used up)."""
+        noise = self._rng.standard_normal(count * 2 * self.n).reshape(count, 2 * self.n)
+        n = self.n
+        return np.hstack([self._q_std * noise[:, :n], self._qd_std * noise[:, n:]])
+
 
 # --------------------------------------------------------------------------------------
 # camera, eqs. (7)-(11)
@@ -546,6 +554,19 @@ class Camera:
         z.setflags(write=False)
         heapq.heappush(self._queue, _Pending(k + cfg.delay + jitter, k, z))
 
+    def draw_batch(self, exposures: int) -> tuple[FloatArray, FloatArray, NDArray[np.int32]]:
+        """The random draws of the next ``exposures`` exposures, in :meth:`tick`'s order
+        (2 normals, 1 uniform, 1 jitter each): noise (E, 2), uniforms (E,), jitters (E,)
+        [steps].  For the compiled loop; the stream is used up."""
+        noise = np.zeros((exposures, 2))
+        uniform = np.zeros(exposures)
+        jitter = np.zeros(exposures, dtype=np.int32)
+        for e in range(exposures):
+            noise[e] = self._rng.standard_normal(2)
+            uniform[e] = self._rng.random()
+            jitter[e] = int(self._rng.integers(0, self.config.jitter_steps + 1))
+        return noise, uniform, jitter
+
     def _inside(self, y: FloatArray) -> bool:
         cfg = self.config
         return bool(np.all(np.isfinite(y)) and 0.0 <= y[0] < cfg.width and 0.0 <= y[1] < cfg.height)
@@ -599,3 +620,9 @@ class Disturbance:
         """Draw this step's link and motor torques [N m]."""
         w = self._rng.standard_normal(2 * self.n)
         return TorqueNoise(link=self.std_link * w[: self.n], motor=self.std_motor * w[self.n :])
+
+    def sample_batch(self, count: int) -> FloatArray:
+        """The next ``count`` samples in one batch, rows [link, motor] [N m], (count, 2n)."""
+        w = self._rng.standard_normal(count * 2 * self.n).reshape(count, 2 * self.n)
+        n = self.n
+        return np.hstack([self.std_link * w[:, :n], self.std_motor * w[:, n:]])

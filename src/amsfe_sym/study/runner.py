@@ -78,6 +78,7 @@ def run_study(
     figure_seed: int | None = None,
     progress: bool = False,
     command: str | None = None,
+    runtime: str = "compiled",
 ) -> StudyResult:
     """Run the Monte Carlo study and write its folder.
 
@@ -94,6 +95,7 @@ def run_study(
         figure_seed: Seed shown in the error and theta figures (default ``first_seed``).
         progress: Show a progress bar.
         command: The command line recorded in ``study.md`` (default: rebuilt from arguments).
+        runtime: ``"compiled"`` (the C loop) or ``"python"`` (the reference loop).
 
     Raises:
         ConfigError: Bad names, keys or values, or a scenario the run builders refuse (found
@@ -134,13 +136,14 @@ def run_study(
         for v, sc in scen.items():
             libs[v] = library_for(sc)
             for name in names:
-                build_run(sc.with_overrides(estimator=name), libs[v])
+                build_run(sc.with_overrides(estimator=name), libs[v], runtime == "compiled")
         tasks = [
             Task(
                 variant=v,
                 scenario=sc.with_overrides(estimator=name, seed=seed),
                 lib_dir=str(libs[v].dir),
                 keep_series=seed == fig_seed,
+                runtime=runtime,
             )
             for v, sc in scen.items()
             for seed in seed_list
@@ -220,6 +223,7 @@ def run_study(
         sets,
         variants or {},
         first_seed,
+        runtime,
     )
     md = _report(cmd, base, scen, variant_sets, libs, agg, seeds, first_seed, wall, workers, sets)
     (folder / "study.md").write_text(md)
@@ -228,6 +232,7 @@ def run_study(
         "scenario": base.name,
         "provenance": provenance(),
         "workers": workers,
+        "runtime": runtime,
         "wall_time_s": round(wall, 2),
         "seeds": seed_list,
         "estimators": list(names),
@@ -269,8 +274,11 @@ def _command_line(
     sets: Sequence[str],
     variants: Mapping[str, Sequence[str]],
     first_seed: int,
+    runtime: str = "compiled",
 ) -> str:
     parts = ["amsfe", "study", str(scenario), "--seeds", str(seeds)]
+    if runtime != "compiled":
+        parts += ["--runtime", runtime]
     if first_seed:
         parts += ["--first-seed", str(first_seed)]
     if tuple(names) != tuple(ESTIMATORS):

@@ -25,6 +25,7 @@ class Task:
     scenario: Scenario
     lib_dir: str
     keep_series: bool
+    runtime: str = "compiled"
 
 
 _LIBS: dict[str, Any] = {}
@@ -52,7 +53,7 @@ def _run_task(task: Task) -> dict[str, Any]:
     if lib is None:
         lib = _LIBS[task.lib_dir] = ModelLibrary(task.lib_dir)
     try:
-        res = run(task.scenario, lib=lib)
+        res = run(task.scenario, lib=lib, runtime=task.runtime)
     except AmsfeError as exc:  # one diverging run must not sink the study: record it
         sc = task.scenario
         failed = {

@@ -1,0 +1,664 @@
+/* amsfe_loop.c: controllers, the real-time tick and the closed-loop simulation in C
+ * (amsfe_loop.h, docs/runtime-c.md).
+ *
+ * Control flow and bookkeeping only: every model number comes from the robot's generated
+ * functions (control_*, plant_step, camera_measure, mass_matrix, bias) compiled into the
+ * same library.  Each branch mirrors its Python reference, named in the comments
+ * (control/sliding.py, control/truth.py, sim/loop.py, sim/sensors.py); the tests run both
+ * and compare every recorded signal.
+ */
+#include "amsfe_loop.h"
+
+#include <math.h>
+#include <string.h>
+
+typedef long long cint;
+typedef int (*cwork)(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w);
+
+#define DECLARE(f)                                                        \
+  int f(const double **arg, double **res, cint *iw, double *w, int mem); \
+  int f##_work(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w);    \
+  const cint *f##_sparsity_in(cint i);
+DECLARE(control_amsfe)
+DECLARE(control_dtsmc)
+DECLARE(control_amsfe_paper)
+DECLARE(control_dtsmc_paper)
+DECLARE(plant_step)
+DECLARE(camera_measure)
+DECLARE(mass_matrix)
+DECLARE(bias)
+
+static const cwork WORKS[] = {control_amsfe_work,       control_dtsmc_work,
+                              control_amsfe_paper_work, control_dtsmc_paper_work,
+                              plant_step_work,          camera_measure_work,
+                              mass_matrix_work,         bias_work};
+
+/* Work arrays of the generated functions, sized for the largest. */
+typedef struct {
+  const double **arg;
+  double **res;
+  cint *iw;
+  double *w;
+} gwork;
+
+typedef struct {
+  char *base;
+  size_t off;
+} carver;
+
+static void *carve(carver *c, size_t bytes) {
+  size_t o = (c->off + 15) & ~(size_t)15;
+  c->off = o + bytes;
+  return c->base ? (void *)(c->base + o) : NULL;
+}
+#define DBL(c, count) ((double *)carve((c), sizeof(double) * (size_t)(count)))
+
+static void carve_work(carver *c, gwork *g) {
+  cint sa = 0, sr = 0, si = 0, sw = 0;
+  for (size_t i = 0; i < sizeof(WORKS) / sizeof(WORKS[0]); ++i) {
+    cint a, r, iw, w;
+    WORKS[i](&a, &r, &iw, &w);
+    sa = a > sa ? a : sa, sr = r > sr ? r : sr, si = iw > si ? iw : si, sw = w > sw ? w : sw;
+  }
+  g->arg = (const double **)carve(c, sizeof(double *) * (size_t)(sa + 1));
+  g->res = (double **)carve(c, sizeof(double *) * (size_t)(sr + 1));
+  g->iw = (cint *)carve(c, sizeof(cint) * (size_t)(si + 1));
+  g->w = DBL(c, sw + 1);
+}
+
+typedef int (*cfun)(const double **arg, double **res, cint *iw, double *w, int mem);
+
+static int gcall(gwork *g, cfun f, const double *const *in, int nin, double *const *out,
+                 int nout) {
+  for (int i = 0; i < nin; ++i) g->arg[i] = in[i];
+  for (int i = 0; i < nout; ++i) g->res[i] = out[i];
+  return f(g->arg, g->res, g->iw, g->w, 0);
+}
+
+static int all_finite(const double *v, long count) {
+  for (long i = 0; i < count; ++i)
+    if (!isfinite(v[i])) return 0;
+  return 1;
+}
+
+/* ================================================================== controller */
+struct amsfe_ctrl {
+  amsfe_ctrl_params par; /* its pointers point into this block */
+  amsfe_dims d;
+  int p_theta;
+  gwork g;
+  double *h, *lam, *Lt, *eps, *phi, *wm, *tau_max, *wf, *vmax, *u_max, *Mm, *Fm, *Ks,
+      *theta0, *zeros;
+  int *ks_theta;
+  double pp; /* the terminal power, as a 1-vector input */
+  /* memory between ticks */
+  long ticks;
+  double *u_prev;  /* the last applied (limited) torque */
+  double *cf;      /* cascade: command-filter state [2n] */
+  int started;     /* cascade: the filter was started on the first command */
+  double *vt_prev; /* printed laws: v_t(k-1) */
+  int have_vt;
+  double *prev_qm_d, *prev_qmd_d; /* truth-ct: the previous motor set point and rate */
+  long prev_k;
+  int have_prev;
+  /* scratch */
+  double *x, *qmd_next, *Ksv, *o[8], *M, *b, *acc;
+};
+
+static int ctrl_layout(amsfe_ctrl *c, const amsfe_ctrl_params *p, char *base) {
+  amsfe_dims d;
+  amsfe_dims_get(&d);
+  long n = d.n, N = d.N;
+  carver cv = {base, 0};
+  amsfe_ctrl tmp;
+  if (!c) c = &tmp;
+  carve(&cv, sizeof(amsfe_ctrl));
+  double **vecs[] = {&c->h,  &c->lam,     &c->Lt, &c->eps, &c->phi, &c->wm,
+                     &c->tau_max, &c->wf, &c->vmax, &c->u_max, &c->Mm, &c->Fm,
+                     &c->Ks, &c->zeros, &c->u_prev, &c->vt_prev, &c->prev_qm_d,
+                     &c->prev_qmd_d, &c->qmd_next, &c->Ksv, &c->b, &c->acc};
+  for (size_t i = 0; i < sizeof(vecs) / sizeof(vecs[0]); ++i) *vecs[i] = DBL(&cv, n);
+  c->theta0 = DBL(&cv, d.N - 4 * n + 1);
+  c->ks_theta = (int *)carve(&cv, sizeof(int) * (size_t)n);
+  c->cf = DBL(&cv, 2 * n);
+  c->x = DBL(&cv, N);
+  for (int i = 0; i < 8; ++i) c->o[i] = DBL(&cv, 2 * n);
+  c->M = DBL(&cv, n * n);
+  carve_work(&cv, &c->g);
+  (void)p;
+  return (int)(cv.off + 16);
+}
+
+static int ctrl_params_ok(const amsfe_ctrl_params *p) {
+  amsfe_dims d;
+  amsfe_dims_get(&d);
+  if (!p || p->controller < AMSFE_CTRL_AMSFE || p->controller > AMSFE_CTRL_TRUTH_CT) return 0;
+  if (!(p->T > 0) || !p->u_max || !p->Mm || !p->Fm || !p->Ks || !p->ks_theta ||
+      !p->theta_initial)
+    return 0;
+  if (p->controller == AMSFE_CTRL_TRUTH_CT) return isfinite(p->link_bandwidth) &&
+                                                  isfinite(p->motor_bandwidth);
+  if (!p->h || !p->lam || !p->Lt || !p->eps || !p->phi || !(p->p > 0 && p->p <= 1)) return 0;
+  if (p->controller <= AMSFE_CTRL_TRUTH && (!p->wm || !p->tau_max || !p->wf || !p->vmax))
+    return 0;
+  for (int j = 0; j < d.n; ++j)
+    if (p->ks_theta[j] >= d.N - 4 * d.n) return 0;
+  return 1;
+}
+
+size_t amsfe_ctrl_memory_size(const amsfe_ctrl_params *params) {
+  if (!ctrl_params_ok(params)) return 0;
+  return (size_t)ctrl_layout(NULL, params, NULL);
+}
+
+static void vcopy(double *dst, const double *src, long count) {
+  if (src) memcpy(dst, src, sizeof(double) * (size_t)count);
+}
+
+void amsfe_ctrl_reset(amsfe_ctrl *c) {
+  long n = c->d.n;
+  c->ticks = 0;
+  memset(c->u_prev, 0, sizeof(double) * (size_t)n);
+  memset(c->cf, 0, sizeof(double) * (size_t)(2 * n));
+  c->started = 0;
+  c->have_vt = 0;
+  c->have_prev = 0;
+  c->prev_k = 0;
+}
+
+int amsfe_ctrl_init(amsfe_ctrl **out, const amsfe_ctrl_params *p, void *memory, size_t size) {
+  if (!out || !memory) return AMSFE_ERR_INPUT;
+  if (!ctrl_params_ok(p)) return AMSFE_ERR_CONFIG;
+  if ((size_t)ctrl_layout(NULL, p, NULL) > size || ((size_t)memory & 15u)) return AMSFE_ERR_MEMORY;
+  memset(memory, 0, size);
+  amsfe_ctrl *c = (amsfe_ctrl *)memory;
+  ctrl_layout(c, p, (char *)memory);
+  amsfe_dims_get(&c->d);
+  long n = c->d.n;
+  c->p_theta = c->d.N - 4 * c->d.n;
+  c->par = *p;
+  int laws = p->controller != AMSFE_CTRL_TRUTH_CT;
+  if (laws) {
+    vcopy(c->h, p->h, n), vcopy(c->lam, p->lam, n), vcopy(c->Lt, p->Lt, n);
+    vcopy(c->eps, p->eps, n), vcopy(c->phi, p->phi, n);
+  }
+  if (p->controller <= AMSFE_CTRL_TRUTH) {
+    vcopy(c->wm, p->wm, n), vcopy(c->tau_max, p->tau_max, n);
+    vcopy(c->wf, p->wf, n), vcopy(c->vmax, p->vmax, n);
+  }
+  vcopy(c->u_max, p->u_max, n), vcopy(c->Mm, p->Mm, n), vcopy(c->Fm, p->Fm, n);
+  vcopy(c->Ks, p->Ks, n), vcopy(c->theta0, p->theta_initial, c->p_theta);
+  memcpy(c->ks_theta, p->ks_theta, sizeof(int) * (size_t)n);
+  c->pp = p->p;
+  /* the block's copies replace the caller's pointers */
+  c->par.h = c->h, c->par.lam = c->lam, c->par.Lt = c->Lt, c->par.eps = c->eps;
+  c->par.phi = c->phi, c->par.wm = c->wm, c->par.tau_max = c->tau_max, c->par.wf = c->wf;
+  c->par.vmax = c->vmax, c->par.u_max = c->u_max, c->par.Mm = c->Mm, c->par.Fm = c->Fm;
+  c->par.Ks = c->Ks, c->par.ks_theta = c->ks_theta, c->par.theta_initial = c->theta0;
+  amsfe_ctrl_reset(c);
+  *out = c;
+  return AMSFE_OK;
+}
+
+/* Ks at theta (runtime/library.py: ModelLibrary.stiffness). */
+static void stiffness(const amsfe_ctrl *c, const double *theta, double *Ks) {
+  for (int j = 0; j < c->d.n; ++j) Ks[j] = c->ks_theta[j] >= 0 ? theta[c->ks_theta[j]] : c->Ks[j];
+}
+
+/* _Cascade.torque: control_amsfe / control_dtsmc, the command filter started at rest. */
+static int cascade(amsfe_ctrl *c, const double *lead0, const double *lead1, const double *ref,
+                   double *u, amsfe_ctrl_out *out) {
+  long n = c->d.n;
+  int dtsmc = c->par.controller == AMSFE_CTRL_DTSMC;
+  const double *lt = c->par.controller == AMSFE_CTRL_DTSMC_EKF ? c->zeros : c->Lt;
+  const double *in[16];
+  int m = 0;
+  in[m++] = lead0;
+  if (dtsmc) in[m++] = lead1;
+  in[m++] = ref, in[m++] = c->cf, in[m++] = c->h, in[m++] = c->lam;
+  if (!dtsmc) in[m++] = lt;
+  in[m++] = c->eps, in[m++] = &c->pp, in[m++] = c->phi, in[m++] = c->wm;
+  in[m++] = c->tau_max, in[m++] = c->wf, in[m++] = c->vmax;
+  cfun f = dtsmc ? control_dtsmc : control_amsfe;
+  if (gcall(&c->g, f, in, m, c->o, 8)) return AMSFE_ERR_NONFINITE;
+  if (!c->started) { /* start the command filter at rest on the first command */
+    memcpy(c->cf, c->o[7], sizeof(double) * (size_t)n);
+    c->started = 1;
+    if (gcall(&c->g, f, in, m, c->o, 8)) return AMSFE_ERR_NONFINITE;
+  }
+  memcpy(c->cf, c->o[6], sizeof(double) * (size_t)(2 * n));
+  memcpy(u, c->o[0], sizeof(double) * (size_t)n);
+  if (out && out->s) memcpy(out->s, c->o[1], sizeof(double) * (size_t)n);
+  if (out && out->bound) memcpy(out->bound, c->o[5], sizeof(double) * (size_t)n);
+  if (out && out->tau_d) memcpy(out->tau_d, c->o[2], sizeof(double) * (size_t)n);
+  return AMSFE_OK;
+}
+
+/* _Printed.torque: (37) / (54) as printed, with qmd(k+1) predicted by (1c) or held. */
+static int printed(amsfe_ctrl *c, const double *x, const double *z, const double *ref, double *u,
+                   amsfe_ctrl_out *out) {
+  long n = c->d.n;
+  const double *q = x, *qm = x + 2 * n, *qmd = x + 3 * n, *q_d = ref, *qd_d = ref + n;
+  if (!c->par.qmd_next_hold) {
+    stiffness(c, x + 4 * n, c->Ksv);
+    for (long j = 0; j < n; ++j)
+      c->qmd_next[j] = /* as numpy evaluates qmd + T * (...) / Mm */
+          qmd[j] + (c->par.T * (c->u_prev[j] - c->Fm[j] * qmd[j] - c->Ksv[j] * (qm[j] - q[j]))) /
+                       c->Mm[j];
+  } else {
+    memcpy(c->qmd_next, qmd, sizeof(double) * (size_t)n);
+  }
+  if (!c->have_vt) { /* first tick: no v_t(k-1) yet */
+    for (long j = 0; j < n; ++j) c->vt_prev[j] = qd_d[j] - c->Lt[j] * (q[j] - q_d[j]);
+    c->have_vt = 1;
+  }
+  const double *in[16];
+  int m = 0;
+  int paper54 = c->par.controller == AMSFE_CTRL_DTSMC_PAPER;
+  if (paper54) {
+    in[m++] = z, in[m++] = c->theta0;
+  } else {
+    in[m++] = x;
+  }
+  in[m++] = c->qmd_next, in[m++] = q_d, in[m++] = qd_d, in[m++] = c->vt_prev;
+  in[m++] = c->h, in[m++] = c->lam;
+  if (!paper54) in[m++] = c->Lt;
+  in[m++] = c->eps, in[m++] = &c->pp, in[m++] = c->phi;
+  cfun f = paper54 ? control_dtsmc_paper : control_amsfe_paper;
+  if (gcall(&c->g, f, in, m, c->o, 5)) return AMSFE_ERR_NONFINITE;
+  memcpy(c->vt_prev, c->o[2], sizeof(double) * (size_t)n);
+  memcpy(u, c->o[0], sizeof(double) * (size_t)n);
+  if (out && out->s) memcpy(out->s, c->o[1], sizeof(double) * (size_t)n);
+  if (out && out->bound) memcpy(out->bound, c->o[4], sizeof(double) * (size_t)n);
+  return AMSFE_OK;
+}
+
+/* control/truth.py: TruthComputedTorque.torque. */
+static int truth_ct(amsfe_ctrl *c, long k, const double *xt, const double *ref, double *u) {
+  long n = c->d.n;
+  const double *q = xt, *qd = xt + n, *qm = xt + 2 * n, *qmd = xt + 3 * n, *th = xt + 4 * n;
+  const double *q_d = ref, *qd_d = ref + n, *qdd_d = ref + 2 * n;
+  double wl = c->par.link_bandwidth, wm = c->par.motor_bandwidth, T = c->par.T;
+  double Kp = wl * wl, Kd = 2.0 * wl, Kpm = wm * wm, Kdm = 2.0 * wm;
+  stiffness(c, th, c->Ksv);
+  const double *in[3] = {q, th, NULL};
+  double *res[1] = {c->M};
+  if (gcall(&c->g, mass_matrix, in, 2, res, 1)) return AMSFE_ERR_NONFINITE;
+  const double *inb[3] = {q, qd, th};
+  res[0] = c->b;
+  if (gcall(&c->g, bias, inb, 3, res, 1)) return AMSFE_ERR_NONFINITE;
+  for (long j = 0; j < n; ++j) c->acc[j] = qdd_d[j] + Kd * (qd_d[j] - qd[j]) + Kp * (q_d[j] - q[j]);
+  double *qm_d = c->o[0], *qmd_d = c->o[1], *qmdd_d = c->o[2];
+  for (long i = 0; i < n; ++i) {
+    double tau = 0.0;
+    for (long j = 0; j < n; ++j) tau += c->M[i + j * n] * c->acc[j];
+    tau += c->b[i];
+    qm_d[i] = q[i] + tau / c->Ksv[i];
+  }
+  int have = c->have_prev && c->prev_k == k - 1;
+  for (long j = 0; j < n; ++j) {
+    if (have) {
+      qmd_d[j] = (qm_d[j] - c->prev_qm_d[j]) / T;
+      qmdd_d[j] = (qmd_d[j] - c->prev_qmd_d[j]) / T;
+    } else { /* first step (or a gap): no history to difference */
+      qmd_d[j] = qd[j];
+      qmdd_d[j] = 0.0;
+    }
+  }
+  memcpy(c->prev_qm_d, qm_d, sizeof(double) * (size_t)n);
+  memcpy(c->prev_qmd_d, qmd_d, sizeof(double) * (size_t)n);
+  c->prev_k = k, c->have_prev = 1;
+  for (long j = 0; j < n; ++j)
+    u[j] = c->Ksv[j] * (qm[j] - q[j]) + c->Fm[j] * qmd[j] +
+           c->Mm[j] * (qmdd_d[j] + Kpm * (qm_d[j] - qm[j]) + Kdm * (qmd_d[j] - qmd[j]));
+  return AMSFE_OK;
+}
+
+int amsfe_ctrl_torque(amsfe_ctrl *c, long k, const double *ref, const double *x_hat,
+                      const double *z, const double *x_true, double *u, amsfe_ctrl_out *out) {
+  if (!c || !ref || !u) return AMSFE_ERR_INPUT;
+  long n = c->d.n;
+  int ctl = c->par.controller;
+  int oracle = ctl == AMSFE_CTRL_TRUTH || ctl == AMSFE_CTRL_TRUTH_CT ||
+               (ctl == AMSFE_CTRL_AMSFE_PAPER && c->par.state_true);
+  int encoders = ctl == AMSFE_CTRL_DTSMC || ctl == AMSFE_CTRL_DTSMC_PAPER;
+  if ((oracle && !x_true) || (encoders && !z) || (!oracle && !encoders && !x_hat))
+    return AMSFE_ERR_INPUT;
+  if (out && out->s)
+    for (long j = 0; j < n; ++j) out->s[j] = NAN;
+  if (out && out->bound)
+    for (long j = 0; j < n; ++j) out->bound[j] = NAN;
+  int st;
+  switch (ctl) {
+    case AMSFE_CTRL_AMSFE:
+    case AMSFE_CTRL_DTSMC_EKF:
+      st = cascade(c, x_hat, NULL, ref, u, out);
+      break;
+    case AMSFE_CTRL_TRUTH:
+      st = cascade(c, x_true, NULL, ref, u, out);
+      break;
+    case AMSFE_CTRL_DTSMC:
+      st = cascade(c, z, c->theta0, ref, u, out);
+      break;
+    case AMSFE_CTRL_AMSFE_PAPER:
+      st = printed(c, oracle ? x_true : x_hat, z, ref, u, out);
+      break;
+    case AMSFE_CTRL_DTSMC_PAPER:
+      /* the law's state is [qm, qmd, qm, qmd, theta0] (q = qm, qd = qmd) */
+      memcpy(c->x, z, sizeof(double) * (size_t)(2 * n));
+      memcpy(c->x + 2 * n, z, sizeof(double) * (size_t)(2 * n));
+      memcpy(c->x + 4 * n, c->theta0, sizeof(double) * (size_t)c->p_theta);
+      st = printed(c, c->x, z, ref, u, out);
+      break;
+    default:
+      st = truth_ct(c, k, x_true, ref, u);
+  }
+  if (st != AMSFE_OK) return st;
+  int clipped = 0;
+  for (long j = 0; j < n; ++j) { /* Controller.saturate: np.clip */
+    double v = u[j], lim = c->u_max[j];
+    double w = v < -lim ? -lim : v;
+    w = w > lim ? lim : w;
+    clipped |= w != v;
+    u[j] = w;
+  }
+  if (out) out->saturated = clipped;
+  memcpy(c->u_prev, u, sizeof(double) * (size_t)n);
+  c->ticks++;
+  return AMSFE_OK;
+}
+
+/* ================================================================== the real-time tick */
+static void sort_frames(amsfe_frame *f, int count) { /* insertion sort: stable, tiny counts */
+  for (int i = 1; i < count; ++i) {
+    amsfe_frame v = f[i];
+    int j = i - 1;
+    while (j >= 0 && f[j].exposure_step > v.exposure_step) f[j + 1] = f[j], --j;
+    f[j + 1] = v;
+  }
+}
+
+int amsfe_loop_tick(amsfe_est *est, amsfe_ctrl *ctrl, const double *z, amsfe_frame *frames,
+                    int n_frames, int *frame_status, const double *ref, const double *x_true,
+                    double *u, amsfe_ctrl_out *out) {
+  if (!est || !ctrl || !u || (n_frames > 0 && !frames)) return AMSFE_ERR_INPUT;
+  amsfe_dims d = ctrl->d;
+  if (ctrl->ticks > 0) {
+    int st = amsfe_est_tick(est, z, ctrl->u_prev);
+    if (st < 0) return st;
+    sort_frames(frames, n_frames);
+    for (int i = 0; i < n_frames; ++i) {
+      double nis;
+      st = amsfe_est_camera_frame(est, frames[i].z, frames[i].exposure_step, &nis);
+      if (st < 0) return st;
+      if (frame_status) frame_status[i] = st;
+    }
+  }
+  amsfe_est_state(est, ctrl->x, NULL);
+  (void)d;
+  return amsfe_ctrl_torque(ctrl, ctrl->ticks, ref, ctrl->x, z, x_true, u, out);
+}
+
+/* ================================================================== the simulation */
+typedef struct {
+  long delivery, exposure;
+  double z[2];
+} pending;
+
+struct amsfe_sim {
+  amsfe_sim_params par;
+  amsfe_dims d;
+  amsfe_est *est;
+  amsfe_ctrl *ctrl;
+  amsfe_sim_state st;
+  gwork g;
+  long exposures, last_delivered_exposure;
+  int have_last, in_flight;
+  pending *queue;
+  amsfe_frame *due;
+  int *status;
+  double *xp, *xp_next, *xt, *xh, *P, *L, *err, *z, *u, *y, *J, *depth, *s, *bound;
+};
+
+static size_t sim_layout(amsfe_sim *s, const amsfe_sim_params *p, char *base) {
+  amsfe_dims d;
+  amsfe_dims_get(&d);
+  long n = d.n, N = d.N;
+  carver cv = {base, 0};
+  amsfe_sim tmp;
+  if (!s) s = &tmp;
+  carve(&cv, sizeof(amsfe_sim));
+  s->queue = (pending *)carve(&cv, sizeof(pending) * (size_t)p->max_in_flight);
+  s->due = (amsfe_frame *)carve(&cv, sizeof(amsfe_frame) * (size_t)p->max_in_flight);
+  s->status = (int *)carve(&cv, sizeof(int) * (size_t)p->max_in_flight);
+  s->xp = DBL(&cv, 4 * n), s->xp_next = DBL(&cv, 4 * n), s->xt = DBL(&cv, N);
+  s->xh = DBL(&cv, N), s->P = DBL(&cv, N * N), s->L = DBL(&cv, N * N), s->err = DBL(&cv, N);
+  s->z = DBL(&cv, 2 * n), s->u = DBL(&cv, n), s->y = DBL(&cv, 2), s->J = DBL(&cv, 2 * N);
+  s->depth = DBL(&cv, 1), s->s = DBL(&cv, n), s->bound = DBL(&cv, n);
+  carve_work(&cv, &s->g);
+  return cv.off + 16;
+}
+
+static int sim_params_ok(const amsfe_sim_params *p) {
+  if (!p || p->K < 1 || !p->x_plant0 || !p->theta_true || !p->ref || !p->enc_noise || !p->tau_d)
+    return 0;
+  if (p->cam_period < 1 || p->cam_phase < 0 || p->cam_phase >= p->cam_period ||
+      p->cam_delay < 0 || p->max_in_flight < 1 || p->n_exposures < 0)
+    return 0;
+  if (p->n_exposures > 0 && (!p->cam_noise || !p->cam_uniform || !p->cam_jitter)) return 0;
+  return p->enc_resolution >= 0 && p->diverged_error > 0;
+}
+
+size_t amsfe_sim_memory_size(const amsfe_sim_params *params) {
+  if (!sim_params_ok(params)) return 0;
+  return sim_layout(NULL, params, NULL);
+}
+
+int amsfe_sim_init(amsfe_sim **out, const amsfe_sim_params *p, amsfe_est *est, amsfe_ctrl *ctrl,
+                   void *memory, size_t size) {
+  if (!out || !memory || !est || !ctrl) return AMSFE_ERR_INPUT;
+  if (!sim_params_ok(p)) return AMSFE_ERR_CONFIG;
+  if (sim_layout(NULL, p, NULL) > size || ((size_t)memory & 15u)) return AMSFE_ERR_MEMORY;
+  memset(memory, 0, size);
+  amsfe_sim *s = (amsfe_sim *)memory;
+  sim_layout(s, p, (char *)memory);
+  amsfe_dims_get(&s->d);
+  s->par = *p, s->est = est, s->ctrl = ctrl;
+  memcpy(s->xp, p->x_plant0, sizeof(double) * (size_t)(4 * s->d.n));
+  *out = s;
+  return AMSFE_OK;
+}
+
+void amsfe_sim_get_state(const amsfe_sim *s, amsfe_sim_state *state) { *state = s->st; }
+
+/* Camera._inside */
+static int inside(const amsfe_sim *s, const double *y) {
+  return isfinite(y[0]) && isfinite(y[1]) && y[0] >= 0.0 && y[0] < s->par.cam_width &&
+         y[1] >= 0.0 && y[1] < s->par.cam_height;
+}
+
+/* Camera._expose at step k: project, draw (always), decide, queue. */
+static int expose(amsfe_sim *s, long k, const double *q) {
+  const amsfe_sim_params *p = &s->par;
+  long e = s->exposures;
+  if (e >= p->n_exposures) return AMSFE_ERR_INPUT; /* the caller drew too few */
+  const double *in[2] = {q, p->theta_true};
+  double *res[3] = {s->y, s->J, s->depth};
+  if (gcall(&s->g, camera_measure, in, 2, res, 3)) return AMSFE_ERR_NONFINITE;
+  if (!(s->depth[0] > 0)) s->y[0] = s->y[1] = NAN;
+  s->exposures++;
+  s->st.frames_exposed++;
+  if (!inside(s, s->y)) {
+    s->st.frames_out_of_image++, s->st.frames_out_of_image_true++;
+    return AMSFE_OK;
+  }
+  double z[2];
+  for (int i = 0; i < 2; ++i) {
+    z[i] = s->y[i] + p->pixel_std * p->cam_noise[2 * e + i];
+    if (p->round_to_pixel) z[i] = nearbyint(z[i]); /* np.round: half to even */
+  }
+  if (!inside(s, z)) {
+    s->st.frames_out_of_image++;
+    return AMSFE_OK;
+  }
+  if (p->cam_uniform[e] < p->drop_probability) {
+    s->st.frames_dropped++;
+    return AMSFE_OK;
+  }
+  if (s->in_flight >= p->max_in_flight) return AMSFE_ERR_MEMORY;
+  pending *slot = &s->queue[s->in_flight++];
+  slot->delivery = k + p->cam_delay + p->cam_jitter[e];
+  slot->exposure = k;
+  slot->z[0] = z[0], slot->z[1] = z[1];
+  return AMSFE_OK;
+}
+
+/* Camera.tick: expose if due, then hand out the frames due now, sorted by exposure. */
+static int camera_tick(amsfe_sim *s, long k, const double *q, int *count) {
+  const amsfe_sim_params *p = &s->par;
+  *count = 0;
+  if (k % p->cam_period == p->cam_phase) {
+    int st = expose(s, k, q);
+    if (st != AMSFE_OK) return st;
+  }
+  int keep = 0;
+  for (int i = 0; i < s->in_flight; ++i) {
+    pending *f = &s->queue[i];
+    if (f->delivery <= k) {
+      s->due[*count].exposure_step = f->exposure;
+      s->due[*count].z[0] = f->z[0], s->due[*count].z[1] = f->z[1];
+      ++*count;
+    } else {
+      s->queue[keep++] = *f;
+    }
+  }
+  s->in_flight = keep;
+  sort_frames(s->due, *count);
+  for (int i = 0; i < *count; ++i) {
+    long ex = s->due[i].exposure_step;
+    if (s->have_last && ex < s->last_delivered_exposure) s->st.frames_out_of_order++;
+    if (!s->have_last || ex > s->last_delivered_exposure) s->last_delivered_exposure = ex;
+    s->have_last = 1;
+  }
+  s->st.frames_delivered += *count;
+  return AMSFE_OK;
+}
+
+/* e^T P^-1 e by Cholesky (P symmetric positive definite; NaN if it is not). */
+static double nees(long N, const double *P, double *L, const double *e, double *w) {
+  for (long j = 0; j < N; ++j) {
+    double dsum = P[j + j * N];
+    for (long k = 0; k < j; ++k) dsum -= L[j + k * N] * L[j + k * N];
+    if (!(dsum > 0)) return NAN;
+    double ljj = sqrt(dsum);
+    L[j + j * N] = ljj;
+    for (long i = j + 1; i < N; ++i) {
+      double v = P[i + j * N];
+      for (long k = 0; k < j; ++k) v -= L[i + k * N] * L[j + k * N];
+      L[i + j * N] = v / ljj;
+    }
+  }
+  double acc = 0.0;
+  for (long i = 0; i < N; ++i) { /* w = L^-1 e */
+    double v = e[i];
+    for (long k = 0; k < i; ++k) v -= L[i + k * N] * w[k];
+    w[i] = v / L[i + i * N];
+    acc += w[i] * w[i];
+  }
+  return acc;
+}
+
+/* sim/loop.py's REFUSAL_KINDS, from the runtime's statuses. */
+static void count_frame(amsfe_sim_state *st, int status) {
+  switch (status) {
+    case AMSFE_OK: st->frames_applied++; return;
+    case AMSFE_IGNORED: return;
+    case AMSFE_GATED: st->refused_gated++; break;
+    case AMSFE_REFUSED_NONFINITE: st->refused_nan++; break;
+    case AMSFE_REFUSED_TOO_OLD:
+    case AMSFE_REFUSED_NO_CLONE_LEFT: st->refused_too_late++; break;
+    case AMSFE_REFUSED_INDEFINITE: st->refused_indefinite++; break;
+    case AMSFE_REFUSED_NO_CLONE: st->refused_unscheduled++; break;
+    default: st->refused_other++;
+  }
+  st->frames_rejected++;
+}
+
+int amsfe_sim_run(amsfe_sim *s, long ticks, const amsfe_sim_records *rec) {
+  const amsfe_sim_params *p = &s->par;
+  amsfe_sim_state *st = &s->st;
+  long n = s->d.n, N = s->d.N, pth = N - 4 * n;
+  if (!rec) return AMSFE_ERR_INPUT;
+  if (st->status < 0) return st->status;
+  long end = st->k + ticks < p->K ? st->k + ticks : p->K;
+  if (st->diverged) end = st->k;
+  amsfe_ctrl_out out = {s->s, s->bound, NULL, 0};
+  for (long k = st->k; k < end; ++k) {
+    const double *xp = s->xp;
+    memcpy(s->xt, xp, sizeof(double) * (size_t)(4 * n));
+    memcpy(s->xt + 4 * n, p->theta_true, sizeof(double) * (size_t)pth);
+    /* 1. sensors at t_k (Encoders.measure; row 0 made z0) */
+    if (!all_finite(xp, 4 * n)) return st->status = AMSFE_ERR_NONFINITE;
+    const double *v = p->enc_noise + k * 2 * n;
+    for (long j = 0; j < n; ++j) {
+      double zq = xp[2 * n + j] + v[j];
+      if (p->enc_resolution > 0) zq = nearbyint(zq / p->enc_resolution) * p->enc_resolution;
+      s->z[j] = zq;
+      s->z[n + j] = xp[3 * n + j] + v[n + j];
+    }
+    int nf;
+    int cst = camera_tick(s, k, xp, &nf);
+    if (cst != AMSFE_OK) return st->status = cst;
+    if (rec->frames)
+      for (int i = 0; i < nf; ++i) {
+        if (st->frames_recorded >= rec->frames_capacity) return st->status = AMSFE_ERR_MEMORY;
+        double *row = rec->frames + 4 * st->frames_recorded++;
+        row[0] = (double)s->due[i].exposure_step, row[1] = (double)k;
+        row[2] = s->due[i].z[0], row[3] = s->due[i].z[1];
+      }
+    /* 2.-3. estimator k-1 -> k, controller, actuator limit */
+    int tst = amsfe_loop_tick(s->est, s->ctrl, s->z, s->due, nf, s->status, p->ref + k * 5 * n,
+                              s->xt, s->u, &out);
+    if (tst < 0) return st->status = tst;
+    if (k > 0) {
+      amsfe_diag dg;
+      amsfe_est_diagnostics(s->est, &dg);
+      for (int i = 0; i < nf; ++i) count_frame(st, s->status[i]);
+      if (!dg.encoder_accepted) {
+        st->encoder_rejected++;
+        if (isnan(dg.encoder_nis)) st->refused_nan++; else st->refused_gated++;
+      }
+    }
+    /* record */
+    amsfe_est_state(s->est, s->xh, s->P);
+    for (long i = 0; i < N; ++i) s->err[i] = s->xt[i] - s->xh[i];
+    if (rec->x_true) memcpy(rec->x_true + k * N, s->xt, sizeof(double) * (size_t)N);
+    if (rec->x_hat) memcpy(rec->x_hat + k * N, s->xh, sizeof(double) * (size_t)N);
+    if (rec->P_diag)
+      for (long i = 0; i < N; ++i) rec->P_diag[k * N + i] = s->P[i + i * N];
+    if (rec->nees) rec->nees[k] = nees(N, s->P, s->L, s->err, s->J);
+    if (rec->u) memcpy(rec->u + k * n, s->u, sizeof(double) * (size_t)n);
+    if (rec->z_enc) memcpy(rec->z_enc + k * 2 * n, s->z, sizeof(double) * (size_t)(2 * n));
+    if (rec->s) memcpy(rec->s + k * n, s->s, sizeof(double) * (size_t)n);
+    if (rec->bound) memcpy(rec->bound + k * n, s->bound, sizeof(double) * (size_t)n);
+    if (rec->saturated) rec->saturated[k] = (unsigned char)out.saturated;
+    st->ticks_done = k + 1;
+    st->k = k + 1;
+    /* _diverged: not finite, or the link tracking error beyond the limit */
+    int bad = !all_finite(xp, 4 * n) || !all_finite(s->u, n);
+    for (long j = 0; j < n && !bad; ++j)
+      bad = fabs(xp[j] - p->ref[k * 5 * n + j]) > p->diverged_error;
+    if (bad) {
+      st->diverged = 1;
+      return AMSFE_OK;
+    }
+    /* 4. plant over [t_k, t_k + T] */
+    if (k + 1 < p->K) {
+      const double *in[4] = {s->xp, s->u, p->theta_true, p->tau_d + k * 2 * n};
+      double *res[1] = {s->xp_next};
+      if (gcall(&s->g, plant_step, in, 4, res, 1)) return st->status = AMSFE_ERR_NONFINITE;
+      memcpy(s->xp, s->xp_next, sizeof(double) * (size_t)(4 * n));
+    }
+  }
+  return AMSFE_OK;
+}
