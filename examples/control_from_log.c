@@ -185,9 +185,11 @@ int main(int argc, char **argv) {
     }
   }
   if (timing && nt) {
+    double sum = 0.0;
+    for (size_t i = 0; i < nt; ++i) sum += tick_ns[i];
     qsort(tick_ns, nt, sizeof(double), cmp);
-    fprintf(stderr, "ticks %zu: median %.0f ns, p99 %.0f ns\n", nt, tick_ns[nt / 2],
-            tick_ns[(size_t)(0.99 * (double)(nt - 1))]);
+    fprintf(stderr, "ticks %zu: median %.0f ns, p99 %.0f ns, mean %.0f ns\n", nt,
+            tick_ns[nt / 2], tick_ns[(size_t)(0.99 * (double)(nt - 1))], sum / (double)nt);
   }
   amsfe_est_destroy(est);
   fclose(f);

@@ -214,7 +214,7 @@ def test_study_in_process_matches_simulate_and_supports_variants(tmp_path) -> No
     # a study run is exactly `amsfe simulate` with the same seed
     sc = load_scenario("paper-exp").with_overrides(estimator="replay", seed=4, duration=0.5)
     poor = apply_sets(sc, ["encoders.q_std=0.01"])
-    ref = summarize(run(poor, library_for(poor)))
+    ref = summarize(run(poor, library_for(poor), runtime="compiled"))  # simulate's default
     mine = next(
         r
         for r in res.runs
@@ -231,12 +231,12 @@ def test_a_failing_run_is_recorded_not_fatal(tmp_path, monkeypatch) -> None:
 
     real_run = simulate.run
 
-    def flaky_run(sc, lib=None, progress=False):  # type: ignore[no-untyped-def]
+    def flaky_run(sc, lib=None, progress=False, runtime="compiled"):  # type: ignore[no-untyped-def]
         if sc.seed == 1 and sc.estimator == "cloning" and sc.duration > 0.1:
             raise EstimatorError("P lost definiteness at step 7 (test)")
         if sc.estimator == "naive" and sc.duration > 0.1:
             raise EstimatorError("naive always fails (test)")
-        return real_run(sc, lib=lib, progress=progress)
+        return real_run(sc, lib=lib, progress=progress, runtime=runtime)
 
     monkeypatch.setattr(simulate, "run", flaky_run)
     res = run_study(
