@@ -79,6 +79,22 @@ ALLOWED: dict[str, set[str]] = {
         "plots",
         "sim",
     },
+    # apps: the sweep package runs simulations (codegen for its libraries), never the CLI,
+    # study or bench
+    "sweep": {
+        "errors",
+        "_toml",
+        "spec",
+        "scenario",
+        "preflight",
+        "codegen",
+        "control",
+        "estimation",
+        "sim",
+        "provenance",
+        "runtime",
+        "sweep",
+    },
 }
 
 

@@ -1,4 +1,4 @@
-"""The ``amsfe`` command line: generate, check, simulate, bench, study.
+"""The ``amsfe`` command line: generate, check, simulate, bench, study, sweep.
 
 Built as :func:`get_argument_parser` + :func:`main` (``main(argv)`` is what the tests call).
 Every command works with no arguments, on the paper's 2-link robot or its scenario.
@@ -215,6 +215,39 @@ def get_argument_parser() -> argparse.ArgumentParser:
         default="compiled",
         help="compiled: the loop in generated C (default); python: the reference",
     )
+
+    sw = sub.add_parser(
+        "sweep", help="scenario grid x estimators x controllers x seeds on Dask (docs/sweeps.md)"
+    )
+    sw.add_argument("spec", help="sweep file (.toml), e.g. sweeps/camera-delay.toml")
+    sw.add_argument("--out", default=None, help="sweep folder (default runs/sweep-<name>)")
+    sw.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a local cluster)",
+    )
+    sw.add_argument(
+        "--workers",
+        type=_number(int, 0, True, "pass --workers 2 (0: no Dask, runs in this process)"),
+        default=None,
+        help="local worker processes (default: the cores; 0: in this process, no Dask)",
+    )
+    sw.add_argument("--batch", type=_COUNT, default=None, help="runs per task (default auto)")
+    sw.add_argument("--retry-errors", action="store_true", help="run the error rows again")
+    sw.add_argument(
+        "--force", action="store_true", help="start afresh in a folder of another sweep"
+    )
+    sw.add_argument(
+        "--report",
+        action="store_true",
+        help="run nothing: print the table of the folder's results (and write the figures)",
+    )
+    sw.add_argument("--metric", default=None, help="metric of the table and figures")
+    sw.add_argument("--x", default=None, help="axis of the line plots (default [report] x)")
+    sw.add_argument("--y", default=None, help="second axis: heatmaps (default [report] y)")
+    sw.add_argument("--no-plots", action="store_true", help="skip the figures")
+    sw.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     return parser
 
 
@@ -235,6 +268,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _bench(args)
         if args.command == "study":
             return _study(args)
+        if args.command == "sweep":
+            return _sweep(args)
     except AmsfeError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -247,7 +282,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     raise SpecError(
         describe(
             "command",
-            "generate|check|simulate|bench|study",
+            "generate|check|simulate|bench|study|sweep",
             args.command,
             "run amsfe -h for the commands",
         )
@@ -424,6 +459,65 @@ def _study(args: argparse.Namespace) -> int:
     )
     print(res.table)
     print(f"study folder: {res.out} (study.md, study.json, {len(res.figures)} figures)")
+    return 0
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    """``amsfe sweep``: run the sweep (or, with ``--report``, only read its folder), then
+    print the seed table of the chosen metric and write the figures."""
+    from pathlib import Path
+
+    from amsfe_sym.sweep import SweepOptions, load_sweep, run_sweep
+    from amsfe_sym.sweep.report import format_report, write_figures
+    from amsfe_sym.sweep.table import read_rows
+
+    spec = load_sweep(args.spec)
+    out = Path(args.out) if args.out else Path("runs") / f"sweep-{spec.name}"
+    metric = args.metric or spec.report.metric
+    x = spec.report.x if args.x is None else args.x
+    y = spec.report.y if args.y is None else args.y
+    for flag, axis in (("--x", x), ("--y", y)):
+        if axis and axis not in spec.axes:
+            raise ConfigError(
+                describe(flag, f"an axis of the sweep {list(spec.axes)}", repr(axis), "name one")
+            )
+    if args.report:
+        table = read_rows(out) if out.is_dir() else None
+        if table is None or not len(table):
+            raise ConfigError(
+                describe(
+                    f"--report on {str(out)!r}",
+                    "a sweep folder with results",
+                    "no rows",
+                    f"run amsfe sweep {args.spec} first (or pass its --out)",
+                )
+            )
+    else:
+        res = run_sweep(
+            spec,
+            SweepOptions(
+                out=out,
+                scheduler=args.scheduler,
+                workers=args.workers,
+                batch=args.batch,
+                retry_errors=args.retry_errors,
+                force=args.force,
+                progress=not args.no_progress,
+            ),
+        )
+        table = res.table
+        rate = f", {res.runs_per_s:.2f} runs/s" if res.ran else ""
+        print(
+            f"sweep {spec.name}: {res.ran} runs in {res.wall_time_s:.1f} s{rate} "
+            f"({res.workers} workers, batches of {res.batch}); {res.skipped} already done; "
+            f"{res.errors} errors, {res.diverged} diverged"
+        )
+    axes = [a for a in (x, y) if a]
+    print(format_report(table, metric, axes))
+    if not args.no_plots and axes:
+        for path in write_figures(table, metric, x, y, out / "figures"):
+            print(f"figure: {path}")
+    print(f"sweep folder: {out} (results.parquet, sweep.json)")
     return 0
 
 

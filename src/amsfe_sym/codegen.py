@@ -560,13 +560,16 @@ def load_library(
     return ModelLibrary(generate(robot, **generate_kwargs).out_dir)
 
 
-def library_for(sc: Scenario, out: str | os.PathLike[str] | None = None) -> ModelLibrary:
+def library_for(
+    sc: Scenario, out: str | os.PathLike[str] | None = None, robot: RobotSpec | None = None
+) -> ModelLibrary:
     """Generate (or reuse) and load the library a scenario runs on.
 
     The scenario's ``integrator`` (when set and different from the robot's) gives a library
     of its own, ``<robot>_<integrator>``.  The camera timing and the filter's buffer are
     checked against the robot spec first (:func:`~amsfe_sym.scenario.camera_timing`), so a
-    bad scenario fails before anything is generated.
+    bad scenario fails before anything is generated.  ``robot`` replaces the spec of
+    ``sc.robot`` (a derived spec, e.g. a sweep's other true payload; give it its own name).
 
     Raises:
         ConfigError: the scenario's camera timing does not fit the robot or the filter.
@@ -574,7 +577,7 @@ def library_for(sc: Scenario, out: str | os.PathLike[str] | None = None) -> Mode
     from amsfe_sym.estimation.registry import estimator_class
     from amsfe_sym.preflight import check_scenario_shapes
 
-    spec = load_spec(sc.robot)
+    spec = robot if robot is not None else load_spec(sc.robot)
     check_scenario_shapes(sc, spec)  # every wrong-length vector, before generating
     camera_timing(
         sc,
