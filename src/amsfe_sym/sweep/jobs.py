@@ -13,7 +13,6 @@ processes on one machine build each library once and share it.
 
 from __future__ import annotations
 
-import inspect
 import logging
 import math
 from collections.abc import Mapping, Sequence
@@ -115,25 +114,6 @@ def flatten(summary: Mapping[str, Any]) -> dict[str, float]:
     return out
 
 
-def _run_kwargs(runtime: str) -> dict[str, Any]:
-    """``{"runtime": runtime}`` if ``sim.loop.run`` takes it; the Python loop needs none."""
-    from amsfe_sym.errors import ConfigError, describe
-    from amsfe_sym.sim.loop import run
-
-    if "runtime" in inspect.signature(run).parameters:
-        return {"runtime": runtime}
-    if runtime != "python":
-        raise ConfigError(
-            describe(
-                "[sweep] runtime",
-                '"python" (this toolkit\'s run() has no runtime argument)',
-                repr(runtime),
-                'write runtime = "python"',
-            )
-        )
-    return {}
-
-
 def run_job(job: Job) -> dict[str, Any]:
     """Run one job and return its row (an exception becomes an ``error`` row, never lost).
 
@@ -147,9 +127,8 @@ def run_job(job: Job) -> dict[str, Any]:
         from amsfe_sym.sim.loop import run
         from amsfe_sym.sim.record import summarize
 
-        kwargs = _run_kwargs(job.runtime)
         lib = _library(job.scenario, job.robot)
-        summary = summarize(run(job.scenario, lib, **kwargs))
+        summary = summarize(run(job.scenario, lib, runtime=job.runtime))
     except Exception as exc:  # a failing run is a row with its error, not a lost sweep
         row.update(status="error", error=f"{type(exc).__name__}: {exc}".strip())
         return row

@@ -10,7 +10,7 @@ A sweep file reads::
     controllers = ["amsfe"]          # default: the scenario's controller
     seeds = [0, 1, 2]                # or { first = 0, count = 3 }
     set = ["filter.buffer_steps=600"]  # fixed --set overrides of every run
-    runtime = "python"               # passed to sim.loop.run(runtime=...) when it takes one
+    runtime = "compiled"             # or "python" (the reference loop): sim.loop.run(runtime=)
 
     [axes]                           # every combination is run
     "camera.delay" = [0, 125, 250]               # a list, or a range:
@@ -86,7 +86,7 @@ class SweepSpec:
         estimators, controllers: Names run at every axis point.
         seeds: Seeds run at every point.
         sets: The fixed ``--set`` overrides (already in ``scenario``).
-        runtime: ``"python"`` or ``"compiled"`` (passed to ``run`` only if it takes it).
+        runtime: ``"compiled"`` (the C loop, default) or ``"python"`` (the reference loop).
         report: Defaults of the figures and the report table.
         source: The file, if it came from one.
     """
@@ -98,7 +98,7 @@ class SweepSpec:
     controllers: tuple[str, ...]
     seeds: tuple[int, ...]
     sets: tuple[str, ...] = ()
-    runtime: str = "python"
+    runtime: str = "compiled"
     report: ReportDefaults = field(default_factory=ReportDefaults)
     description: str = ""
     source: Path | None = None
@@ -133,7 +133,7 @@ class Job:
             columns).
         scenario: The run's scenario (axes, seed, estimator and controller applied).
         robot: The ``robot.*`` axis values of this run (empty: the scenario's robot as is).
-        runtime: Passed to ``run(..., runtime=...)`` if ``run`` takes it.
+        runtime: Passed to ``run(..., runtime=...)``.
     """
 
     run_id: str
@@ -141,7 +141,7 @@ class Job:
     labels: dict[str, AxisValue]
     scenario: Scenario
     robot: dict[str, float] = field(default_factory=dict)
-    runtime: str = "python"
+    runtime: str = "compiled"
 
 
 def _bad(where: str, expected: str, found: Any, fix: str) -> ConfigError:
@@ -341,10 +341,13 @@ def parse_sweep(data: Mapping[str, Any], path: Path | None = None) -> SweepSpec:
         sets = [f"duration={float(duration)!r}", *sets]
     if sets:
         sc = apply_sets(sc, sets)
-    runtime = sw.get("runtime", "python")
+    runtime = sw.get("runtime", "compiled")
     if runtime not in ("python", "compiled"):
         raise _bad(
-            f"{where}: [sweep] runtime", "python | compiled", runtime, 'write runtime = "python"'
+            f"{where}: [sweep] runtime",
+            "python | compiled",
+            runtime,
+            'write runtime = "compiled" or "python"',
         )
     axes_raw = data.get("axes", {})
     if not isinstance(axes_raw, Mapping):
