@@ -34,7 +34,7 @@ def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path
     libraries.get("paper_2link")
     out_json = tmp_path / "bench.json"
     argv = ["bench", "--repeat", "200", "--rounds", "2", "--duration", "0.2", "--joints", "1"]
-    argv += ["--loop-duration", "0.3"]
+    argv += ["--loop-duration", "0.3", "--loop-scenarios", "paper-sim"]
     assert main([*argv, "--json", str(out_json)]) == 0
     out = capsys.readouterr().out
     for section in (
@@ -53,7 +53,7 @@ def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path
     assert "binding overhead" in out and "differ" not in out
 
     report = json.loads(out_json.read_text())
-    loop = report["closed_loop"]
+    (loop,) = report["closed_loop"]
     for rt in ("compiled", "python"):
         assert loop[rt]["sim_time_s"] == pytest.approx(0.301)  # 301 ticks of 1 ms
         assert loop[rt]["real_time_factor"] > 0

@@ -171,6 +171,13 @@ def get_argument_parser() -> argparse.ArgumentParser:
         "--duration", type=_DURATION, default=2.0, help="simulated time per estimator [s]"
     )
     b.add_argument(
+        "--loop-scenarios",
+        default=None,
+        metavar="A,B",
+        help="scenarios of the closed-loop section (default: the robot's timing scenario, "
+        "and ur5-control for the 2-link arm)",
+    )
+    b.add_argument(
         "--loop-duration",
         type=_DURATION,
         default=10.0,
@@ -422,6 +429,7 @@ def _bench(args: argparse.Namespace) -> int:
             compile_repeat=args.compile_repeat,
             joints=args.joints or tuple(range(1, 13)),
             loop_duration=args.loop_duration,
+            loop_scenarios=tuple(args.loop_scenarios.split(",")) if args.loop_scenarios else None,
         )
     )
 

@@ -167,8 +167,7 @@ def _tick_lines(report: dict[str, Any]) -> list[str]:
             "   compiled = amsfe_est_tick in pure C; python = the reference estimator's step; "
             "baseline = Pinocchio computeABADerivatives (semi-implicit Euler) + numpy EKF"
         )
-    loop = report.get("closed_loop")
-    if loop:
+    for loop in report.get("closed_loop", []):
         lines += [
             "",
             f"closed loop: {loop['scenario']} ({loop['estimator']} + {loop['controller']}: "
@@ -250,6 +249,7 @@ class BenchOptions:
     compile_repeat: int = 1
     joints: tuple[int, ...] = tuple(range(1, 13))
     loop_duration: float = 10.0
+    loop_scenarios: tuple[str, ...] | None = None
 
 
 def run_bench(opts: BenchOptions) -> int:
@@ -309,12 +309,24 @@ def run_bench(opts: BenchOptions) -> int:
             **bench_tick(sc, sc_lib, robot, opts.estimators or ("oosm",), rounds),
         }
     if "loop" not in opts.skip:  # the closed loop's real-time factor, 10 s, both runtimes
-        sc = timing_scenario(lib, opts.loop_duration, opts.scenario)
-        sc_lib = library_for(sc)
-        py_duration = opts.loop_duration if lib.n <= 2 else min(opts.loop_duration, 2.0)
-        report["closed_loop"] = bench_closed_loop(
-            sc, sc_lib, rounds=min(rounds, 3), python_duration=py_duration
-        )
+        if opts.loop_scenarios:
+            scs = [timing_scenario(lib, opts.loop_duration, s) for s in opts.loop_scenarios]
+        else:  # the robot's, and for the paper's arm also a 6-DOF arm
+            scs = [timing_scenario(lib, opts.loop_duration, opts.scenario)]
+            if lib.n <= 2 and opts.scenario is None:
+                scs.append(timing_scenario(lib, opts.loop_duration, "ur5-control"))
+        report["closed_loop"] = []
+        for sc in scs:
+            sc_lib = library_for(sc)
+            arm = sc_lib.n > 2  # the Python loop of an arm is slow: 2 s of it, one round
+            report["closed_loop"].append(
+                bench_closed_loop(
+                    sc,
+                    sc_lib,
+                    rounds=1 if arm else min(rounds, 3),
+                    python_duration=min(opts.loop_duration, 2.0) if arm else None,
+                )
+            )
     if "scaling" not in opts.skip:
         report["scaling"] = bench_scaling(opts.joints, progress=True)
     if opts.compare_cflags is not None:
