@@ -104,17 +104,17 @@ def main() -> None:
                 row["reference_vs_perturbed_reference"] = compare(ref, pert, lib.T)
             rows.append(row)
             r = row["c_vs_reference"]
-            print(
+            line = (
                 f"{ctrl:12s} {est:9s} loop {row['c_vs_python_loop'].get('max_rel_diff', -1):.1e}"
                 f" ref {r.get('max_rel_diff', -1):.1e} (>1e-8 at {r.get('first_above_1e-8_s')})"
-                + (
-                    f" perturbed {row['reference_vs_perturbed_reference'].get('max_rel_diff', -1):.1e}"
-                    f" (>1e-8 at {row['reference_vs_perturbed_reference'].get('first_above_1e-8_s')})"
-                    if args.perturb
-                    else ""
-                ),
-                flush=True,
             )
+            if args.perturb:
+                pr = row["reference_vs_perturbed_reference"]
+                line += (
+                    f" perturbed {pr.get('max_rel_diff', -1):.1e}"
+                    f" (>1e-8 at {pr.get('first_above_1e-8_s')})"
+                )
+            print(line, flush=True)
     if args.out:
         doc = {
             "command": "tools/loop_equivalence.py "
