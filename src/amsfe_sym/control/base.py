@@ -61,6 +61,13 @@ class Controller(ABC):
         clipped = np.clip(u, -self.u_max, self.u_max)
         return clipped, bool(np.any(clipped != u))
 
+    def c_parameters(self) -> dict[str, Any] | None:
+        """What the C runtime's parameter block of this controller holds beyond the actuator
+        data (``amsfe_ctrl_params`` of amsfe_loop.h: ``gains`` per joint, ``p`` and the
+        flags), or ``None`` when the controller has no C counterpart (then only
+        ``--runtime python`` runs it)."""
+        return None
+
     def prepare(self, t: FloatArray) -> None:
         """Precompute the desired trajectory on the run's time grid ``t`` [s] (one vectorised
         evaluation instead of one per tick); :meth:`reference` then reads it by tick index."""

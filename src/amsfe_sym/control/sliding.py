@@ -127,6 +127,16 @@ class _SlidingBase(Controller):
         """The gains as the generated law takes them (per joint; ``p`` one value), copies."""
         return {k: v.copy() for k, v in self._g.items()}
 
+    def c_parameters(self) -> dict[str, Any] | None:
+        gains = self.law_gains()
+        p = float(gains.pop("p")[0])
+        return {
+            "gains": gains,
+            "p": p,
+            "qmd_next_hold": self.gains.get("qmd_next") == "hold",  # the printed laws
+            "state_true": self.gains.get("state") == "true",  # amsfe-paper's oracle reading
+        }
+
     #: Whether the generated law takes Lt (the baselines fix it to 0: the surface of (54)).
     has_lt: ClassVar[bool] = True
 

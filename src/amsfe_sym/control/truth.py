@@ -56,6 +56,14 @@ class TruthComputedTorque(Controller):
         self.T = lib.T
         self._prev: tuple[int, FloatArray, FloatArray] | None = None  # (k, qm_d, qmd_d)
 
+    def c_parameters(self) -> dict[str, Any] | None:
+        return {
+            "gains": {},
+            "p": 1.0,
+            "link_bandwidth": float(self.gains["link_bandwidth"]),
+            "motor_bandwidth": float(self.gains["motor_bandwidth"]),
+        }
+
     def torque(
         self,
         k: int,

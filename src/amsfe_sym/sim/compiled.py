@@ -13,14 +13,11 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Any
 
 import numpy as np
 
 from amsfe_sym.control import Controller
-from amsfe_sym.control.sliding import _Printed, _SlidingBase
-from amsfe_sym.control.truth import TruthComputedTorque
-from amsfe_sym.errors import EstimatorError, MeasurementError, describe
+from amsfe_sym.errors import ConfigError, EstimatorError, MeasurementError, describe
 from amsfe_sym.runtime.compiled_estimator import CompiledEstimator
 from amsfe_sym.runtime.compiled_loop import (
     CompiledController,
@@ -42,28 +39,16 @@ _CHUNK = 500
 
 
 def controller_params(ctrl: Controller, lib: ModelLibrary) -> ControllerParams:
-    """The C parameter block of the Python controller ``ctrl`` (its gains, already checked)."""
-    act = lib.manifest.actuators
-    common: dict[str, Any] = {
-        "name": ctrl.name,
-        "T": lib.T,
-        "u_max": np.array(ctrl.u_max, dtype=float),
-        "Mm": np.array(act.Mm, dtype=float),
-        "Fm": np.array(act.Fm, dtype=float),
-        "Ks": np.array(act.Ks, dtype=float),
-        "ks_theta": lib.stiffness_theta_index,
-        "theta_initial": lib.theta_initial,
-    }
-    if isinstance(ctrl, TruthComputedTorque):
-        return ControllerParams(
-            gains={},
-            p=1.0,
-            link_bandwidth=float(ctrl.gains["link_bandwidth"]),
-            motor_bandwidth=float(ctrl.gains["motor_bandwidth"]),
-            **common,
-        )
-    if not isinstance(ctrl, _SlidingBase):
-        raise EstimatorError(
+    """The C parameter block of the Python controller ``ctrl`` (its gains, already checked,
+    from :meth:`~amsfe_sym.control.base.Controller.c_parameters`) and the library's actuator
+    data.
+
+    Raises:
+        ConfigError: the controller has no C counterpart.
+    """
+    own = ctrl.c_parameters()
+    if own is None:
+        raise ConfigError(
             describe(
                 "controller of a compiled run",
                 "a controller the C runtime has (amsfe_sym.runtime.compiled_loop)",
@@ -71,14 +56,17 @@ def controller_params(ctrl: Controller, lib: ModelLibrary) -> ControllerParams:
                 "use --runtime python",
             )
         )
-    gains = ctrl.law_gains()
-    p = float(gains.pop("p")[0])
+    act = lib.manifest.actuators
     return ControllerParams(
-        gains=gains,
-        p=p,
-        qmd_next_hold=isinstance(ctrl, _Printed) and ctrl.gains["qmd_next"] == "hold",
-        state_true=ctrl.gains.get("state") == "true",
-        **common,
+        name=ctrl.name,
+        T=lib.T,
+        u_max=np.array(ctrl.u_max, dtype=float),
+        Mm=np.array(act.Mm, dtype=float),
+        Fm=np.array(act.Fm, dtype=float),
+        Ks=np.array(act.Ks, dtype=float),
+        ks_theta=lib.stiffness_theta_index,
+        theta_initial=lib.theta_initial,
+        **own,
     )
 
 
