@@ -72,6 +72,7 @@ _GENERATOR_MODULES = (
     "runtime/c/amsfe_runtime.h",
     "runtime/c/amsfe_loop.c",
     "runtime/c/amsfe_loop.h",
+    "runtime/c/amsfe_internal.h",
 )
 #: Every function group (see :data:`amsfe_sym.symbolic.model.PARTS`, kept equal).
 ALL_PARTS: tuple[str, ...] = ("model", "control", "estimator")

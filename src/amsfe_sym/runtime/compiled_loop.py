@@ -132,6 +132,7 @@ class SimulationState(ctypes.Structure):
         ("diverged", ctypes.c_int),
         ("status", ctypes.c_int),
         *((k, ctypes.c_long) for k in _COUNTERS),
+        ("plant_nonfinite", ctypes.c_int),
     ]
 
     def counters(self) -> dict[str, int]:

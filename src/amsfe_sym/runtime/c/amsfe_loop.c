@@ -13,13 +13,8 @@
 #include <math.h>
 #include <string.h>
 
-typedef long long cint;
-typedef int (*cwork)(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w);
+#include "amsfe_internal.h"
 
-#define DECLARE(f)                                                        \
-  int f(const double **arg, double **res, cint *iw, double *w, int mem); \
-  int f##_work(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w);    \
-  const cint *f##_sparsity_in(cint i);
 DECLARE(control_amsfe)
 DECLARE(control_dtsmc)
 DECLARE(control_amsfe_paper)
@@ -33,54 +28,6 @@ static const cwork WORKS[] = {control_amsfe_work,       control_dtsmc_work,
                               control_amsfe_paper_work, control_dtsmc_paper_work,
                               plant_step_work,          camera_measure_work,
                               mass_matrix_work,         bias_work};
-
-/* Work arrays of the generated functions, sized for the largest. */
-typedef struct {
-  const double **arg;
-  double **res;
-  cint *iw;
-  double *w;
-} gwork;
-
-typedef struct {
-  char *base;
-  size_t off;
-} carver;
-
-static void *carve(carver *c, size_t bytes) {
-  size_t o = (c->off + 15) & ~(size_t)15;
-  c->off = o + bytes;
-  return c->base ? (void *)(c->base + o) : NULL;
-}
-#define DBL(c, count) ((double *)carve((c), sizeof(double) * (size_t)(count)))
-
-static void carve_work(carver *c, gwork *g) {
-  cint sa = 0, sr = 0, si = 0, sw = 0;
-  for (size_t i = 0; i < sizeof(WORKS) / sizeof(WORKS[0]); ++i) {
-    cint a, r, iw, w;
-    WORKS[i](&a, &r, &iw, &w);
-    sa = a > sa ? a : sa, sr = r > sr ? r : sr, si = iw > si ? iw : si, sw = w > sw ? w : sw;
-  }
-  g->arg = (const double **)carve(c, sizeof(double *) * (size_t)(sa + 1));
-  g->res = (double **)carve(c, sizeof(double *) * (size_t)(sr + 1));
-  g->iw = (cint *)carve(c, sizeof(cint) * (size_t)(si + 1));
-  g->w = DBL(c, sw + 1);
-}
-
-typedef int (*cfun)(const double **arg, double **res, cint *iw, double *w, int mem);
-
-static int gcall(gwork *g, cfun f, const double *const *in, int nin, double *const *out,
-                 int nout) {
-  for (int i = 0; i < nin; ++i) g->arg[i] = in[i];
-  for (int i = 0; i < nout; ++i) g->res[i] = out[i];
-  return f(g->arg, g->res, g->iw, g->w, 0);
-}
-
-static int all_finite(const double *v, long count) {
-  for (long i = 0; i < count; ++i)
-    if (!isfinite(v[i])) return 0;
-  return 1;
-}
 
 /* ================================================================== controller */
 struct amsfe_ctrl {
@@ -106,7 +53,7 @@ struct amsfe_ctrl {
   double *x, *qmd_next, *Ksv, *o[8], *M, *b, *acc;
 };
 
-static int ctrl_layout(amsfe_ctrl *c, const amsfe_ctrl_params *p, char *base) {
+static int ctrl_layout(amsfe_ctrl *c, char *base) {
   amsfe_dims d;
   amsfe_dims_get(&d);
   long n = d.n, N = d.N;
@@ -125,8 +72,7 @@ static int ctrl_layout(amsfe_ctrl *c, const amsfe_ctrl_params *p, char *base) {
   c->x = DBL(&cv, N);
   for (int i = 0; i < 8; ++i) c->o[i] = DBL(&cv, 2 * n);
   c->M = DBL(&cv, n * n);
-  carve_work(&cv, &c->g);
-  (void)p;
+  carve_work(&cv, WORKS, sizeof(WORKS) / sizeof(WORKS[0]), &c->g);
   return (int)(cv.off + 16);
 }
 
@@ -149,7 +95,7 @@ static int ctrl_params_ok(const amsfe_ctrl_params *p) {
 
 size_t amsfe_ctrl_memory_size(const amsfe_ctrl_params *params) {
   if (!ctrl_params_ok(params)) return 0;
-  return (size_t)ctrl_layout(NULL, params, NULL);
+  return (size_t)ctrl_layout(NULL, NULL);
 }
 
 static void vcopy(double *dst, const double *src, long count) {
@@ -170,10 +116,10 @@ void amsfe_ctrl_reset(amsfe_ctrl *c) {
 int amsfe_ctrl_init(amsfe_ctrl **out, const amsfe_ctrl_params *p, void *memory, size_t size) {
   if (!out || !memory) return AMSFE_ERR_INPUT;
   if (!ctrl_params_ok(p)) return AMSFE_ERR_CONFIG;
-  if ((size_t)ctrl_layout(NULL, p, NULL) > size || ((size_t)memory & 15u)) return AMSFE_ERR_MEMORY;
+  if ((size_t)ctrl_layout(NULL, NULL) > size || ((size_t)memory & 15u)) return AMSFE_ERR_MEMORY;
   memset(memory, 0, size);
   amsfe_ctrl *c = (amsfe_ctrl *)memory;
-  ctrl_layout(c, p, (char *)memory);
+  ctrl_layout(c, (char *)memory);
   amsfe_dims_get(&c->d);
   long n = c->d.n;
   c->p_theta = c->d.N - 4 * c->d.n;
@@ -383,7 +329,6 @@ int amsfe_loop_tick(amsfe_est *est, amsfe_ctrl *ctrl, const double *z, amsfe_fra
                     int n_frames, int *frame_status, const double *ref, const double *x_true,
                     double *u, amsfe_ctrl_out *out) {
   if (!est || !ctrl || !u || (n_frames > 0 && !frames)) return AMSFE_ERR_INPUT;
-  amsfe_dims d = ctrl->d;
   if (ctrl->ticks > 0) {
     int st = amsfe_est_tick(est, z, ctrl->u_prev);
     if (st < 0) return st;
@@ -396,7 +341,6 @@ int amsfe_loop_tick(amsfe_est *est, amsfe_ctrl *ctrl, const double *z, amsfe_fra
     }
   }
   amsfe_est_state(est, ctrl->x, NULL);
-  (void)d;
   return amsfe_ctrl_torque(ctrl, ctrl->ticks, ref, ctrl->x, z, x_true, u, out);
 }
 
@@ -436,7 +380,7 @@ static size_t sim_layout(amsfe_sim *s, const amsfe_sim_params *p, char *base) {
   s->xh = DBL(&cv, N), s->P = DBL(&cv, N * N), s->L = DBL(&cv, N * N), s->err = DBL(&cv, N);
   s->z = DBL(&cv, 2 * n), s->u = DBL(&cv, n), s->y = DBL(&cv, 2), s->J = DBL(&cv, 2 * N);
   s->depth = DBL(&cv, 1), s->s = DBL(&cv, n), s->bound = DBL(&cv, n);
-  carve_work(&cv, &s->g);
+  carve_work(&cv, WORKS, sizeof(WORKS) / sizeof(WORKS[0]), &s->g);
   return cv.off + 16;
 }
 
@@ -545,27 +489,14 @@ static int camera_tick(amsfe_sim *s, long k, const double *q, int *count) {
   return AMSFE_OK;
 }
 
-/* e^T P^-1 e by Cholesky (P symmetric positive definite; NaN if it is not). */
-static double nees(long N, const double *P, double *L, const double *e, double *w) {
-  for (long j = 0; j < N; ++j) {
-    double dsum = P[j + j * N];
-    for (long k = 0; k < j; ++k) dsum -= L[j + k * N] * L[j + k * N];
-    if (!(dsum > 0)) return NAN;
-    double ljj = sqrt(dsum);
-    L[j + j * N] = ljj;
-    for (long i = j + 1; i < N; ++i) {
-      double v = P[i + j * N];
-      for (long k = 0; k < j; ++k) v -= L[i + k * N] * L[j + k * N];
-      L[i + j * N] = v / ljj;
-    }
-  }
+/* e^T P^-1 e by the estimators' Cholesky kernels (NaN if P is not positive definite); L and
+ * w are scratch (N x N, N). */
+static double nees(int N, const double *P, double *L, const double *e, double *w) {
+  if (!amsfe_cholesky(N, P, L)) return NAN;
+  memcpy(w, e, sizeof(double) * (size_t)N);
+  amsfe_chol_solve(N, L, w);
   double acc = 0.0;
-  for (long i = 0; i < N; ++i) { /* w = L^-1 e */
-    double v = e[i];
-    for (long k = 0; k < i; ++k) v -= L[i + k * N] * w[k];
-    w[i] = v / L[i + i * N];
-    acc += w[i] * w[i];
-  }
+  for (int i = 0; i < N; ++i) acc += e[i] * w[i];
   return acc;
 }
 
@@ -600,7 +531,10 @@ int amsfe_sim_run(amsfe_sim *s, long ticks, const amsfe_sim_records *rec) {
     memcpy(s->xt, xp, sizeof(double) * (size_t)(4 * n));
     memcpy(s->xt + 4 * n, p->theta_true, sizeof(double) * (size_t)pth);
     /* 1. sensors at t_k (Encoders.measure; row 0 made z0) */
-    if (!all_finite(xp, 4 * n)) return st->status = AMSFE_ERR_NONFINITE;
+    if (!all_finite(xp, 4 * n)) {
+      st->plant_nonfinite = 1;
+      return st->status = AMSFE_ERR_NONFINITE;
+    }
     const double *v = p->enc_noise + k * 2 * n;
     for (long j = 0; j < n; ++j) {
       double zq = xp[2 * n + j] + v[j];
@@ -638,7 +572,7 @@ int amsfe_sim_run(amsfe_sim *s, long ticks, const amsfe_sim_records *rec) {
     if (rec->x_hat) memcpy(rec->x_hat + k * N, s->xh, sizeof(double) * (size_t)N);
     if (rec->P_diag)
       for (long i = 0; i < N; ++i) rec->P_diag[k * N + i] = s->P[i + i * N];
-    if (rec->nees) rec->nees[k] = nees(N, s->P, s->L, s->err, s->J);
+    if (rec->nees) rec->nees[k] = nees((int)N, s->P, s->L, s->err, s->J);
     if (rec->u) memcpy(rec->u + k * n, s->u, sizeof(double) * (size_t)n);
     if (rec->z_enc) memcpy(rec->z_enc + k * 2 * n, s->z, sizeof(double) * (size_t)(2 * n));
     if (rec->s) memcpy(rec->s + k * n, s->s, sizeof(double) * (size_t)n);

@@ -144,6 +144,7 @@ typedef struct {
   long frames_exposed, frames_delivered, frames_dropped, frames_out_of_image,
       frames_out_of_image_true, frames_out_of_order;
   long frames_recorded;
+  int plant_nonfinite; /* the error is the plant state turning NaN or inf (not the estimator) */
 } amsfe_sim_state;
 
 typedef struct amsfe_sim amsfe_sim;

@@ -23,16 +23,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-typedef long long cint;
-#define AMSFE_MAX_ENCODERS 256 /* 2n: up to 128 joints */
-typedef int (*cfun)(const double **arg, double **res, cint *iw, double *w, int mem);
-typedef int (*cwork)(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w);
+#include "amsfe_internal.h"
 
-#define DECLARE(f)                                                        \
-  int f(const double **arg, double **res, cint *iw, double *w, int mem); \
-  int f##_work(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w);    \
-  cint f##_n_out(void);                                                   \
-  const cint *f##_sparsity_in(cint i);
+#define AMSFE_MAX_ENCODERS 256 /* 2n: up to 128 joints */
 DECLARE(est_predict)
 DECLARE(est_encoder_update)
 DECLARE(est_camera_update)
@@ -76,34 +69,16 @@ struct amsfe_est {
   double *xa, *Pa, *xa2, *Pa2, *sel, *cl;
   long *clone_k;
   int *clone_on;
-  /* work of the generated functions */
-  const double **arg;
-  double **res;
-  cint *iw;
-  double *w;
-  cint n_arg, n_res, inv_n_out;
+  gwork g; /* work of the generated functions */
+  cint inv_n_out;
   double inv_tol, inv_residual, inv_limit; /* the inverse's convergence check */
 };
 
 /* ------------------------------------------------------------------ helpers */
 static long pmod(long a, long b) { return ((a % b) + b) % b; }
 
-static int finite(const double *v, long count) {
-  for (long i = 0; i < count; ++i)
-    if (!isfinite(v[i])) return 0;
-  return 1;
-}
-
 static void copy(double *dst, const double *src, long count) {
   memcpy(dst, src, sizeof(double) * (size_t)count);
-}
-
-/* Call a generated function: inputs in[0..nin), outputs out[0..nout) (NULL: not wanted). */
-static int call(amsfe_est *e, cfun f, const double *const *in, int nin, double *const *out,
-                int nout) {
-  for (int i = 0; i < nin; ++i) e->arg[i] = in[i];
-  for (int i = 0; i < nout; ++i) e->res[i] = out[i];
-  return f(e->arg, e->res, e->iw, e->w, 0);
 }
 
 static int fail(amsfe_est *e, int status) {
@@ -111,19 +86,6 @@ static int fail(amsfe_est *e, int status) {
   e->last_error = status;
   return status;
 }
-
-typedef struct {
-  char *base;
-  size_t off;
-} carver;
-
-static void *carve(carver *c, size_t bytes) {
-  size_t o = (c->off + 15) & ~(size_t)15;
-  c->off = o + bytes;
-  return c->base ? (void *)(c->base + o) : NULL;
-}
-
-#define DBL(c, count) ((double *)carve((c), sizeof(double) * (size_t)(count)))
 
 /* ------------------------------------------------------------------ dense kernels */
 /* Column-major N x N unless said.  Symmetric results are computed on the lower triangle and
@@ -178,9 +140,8 @@ static void matmul(int N, const double *A, const double *B, double *C) {
     }
 }
 
-/* Lower Cholesky factor of the m x m S (leading dimension m) into L; 1 when every pivot is
- * > 0 (a NaN pivot gives 0), as est_chol_check and LAPACK potrf. */
-static int cholesky(int m, const double *S, double *L) {
+/* amsfe_internal.h (shared with the loop's NEES). */
+int amsfe_cholesky(int m, const double *S, double *L) {
   for (int j = 0; j < m; ++j) {
     double d = S[j + (long)j * m];
     for (int k = 0; k < j; ++k) d -= L[j + (long)k * m] * L[j + (long)k * m];
@@ -196,8 +157,7 @@ static int cholesky(int m, const double *S, double *L) {
   return 1;
 }
 
-/* b <- S^-1 b with S = L L^T (m x m, leading dimension m) */
-static void chol_solve(int m, const double *L, double *b) {
+void amsfe_chol_solve(int m, const double *L, double *b) {
   for (int i = 0; i < m; ++i) {
     double v = b[i];
     for (int k = 0; k < i; ++k) v -= L[i + (long)k * m] * b[k];
@@ -227,10 +187,10 @@ static int encoder_kernel(amsfe_est *e, const double *z) {
   for (int c2 = 0; c2 < ne; ++c2) /* symmetrize(H P H^T + R) */
     for (int r = c2 + 1; r < ne; ++r)
       S[r + c2 * ne] = S[c2 + r * ne] = 0.5 * (S[r + c2 * ne] + S[c2 + r * ne]);
-  if (!cholesky(ne, S, L)) return 0;
+  if (!amsfe_cholesky(ne, S, L)) return 0;
   double sn[ne]; /* S^-1 nu */
   for (int r = 0; r < ne; ++r) sn[r] = e->last_nu[r];
-  chol_solve(ne, L, sn);
+  amsfe_chol_solve(ne, L, sn);
   double nis = 0.0;
   for (int r = 0; r < ne; ++r) nis += e->last_nu[r] * sn[r];
   e->nis = nis;
@@ -243,7 +203,7 @@ static int encoder_kernel(amsfe_est *e, const double *z) {
   for (int i = 0; i < N; ++i) {
     double col[ne];
     for (int r = 0; r < ne; ++r) col[r] = P[enc_row(e, r) + (long)i * N];
-    chol_solve(ne, L, col);
+    amsfe_chol_solve(ne, L, col);
     for (int r = 0; r < ne; ++r) K[i + (long)r * N] = col[r];
   }
   /* W = (I - K H) P = P - K P[rows, :] */
@@ -320,17 +280,7 @@ static size_t layout(amsfe_est *e, const amsfe_params *p, char *base) {
     e->clone_k = (long *)carve(&c, sizeof(long) * (size_t)S);
     e->clone_on = (int *)carve(&c, sizeof(int) * (size_t)S);
   }
-  cint sa = 0, sr = 0, si = 0, sw = 0;
-  for (size_t i = 0; i < sizeof(WORKS) / sizeof(WORKS[0]); ++i) {
-    cint a, r, iw, w;
-    WORKS[i](&a, &r, &iw, &w);
-    sa = a > sa ? a : sa, sr = r > sr ? r : sr, si = iw > si ? iw : si, sw = w > sw ? w : sw;
-  }
-  e->n_arg = sa, e->n_res = sr;
-  e->arg = (const double **)carve(&c, sizeof(double *) * (size_t)(sa + 1));
-  e->res = (double **)carve(&c, sizeof(double *) * (size_t)(sr + 1));
-  e->iw = (cint *)carve(&c, sizeof(cint) * (size_t)(si + 1));
-  e->w = DBL(&c, sw + 1);
+  carve_work(&c, WORKS, sizeof(WORKS) / sizeof(WORKS[0]), &e->g);
   e->d = d;
   return c.off + 16;
 }
@@ -349,7 +299,7 @@ static int params_ok(const amsfe_params *p) {
     if (!(p->r_encoder[i] > 0 && isfinite(p->r_encoder[i]))) return 0;
   for (int i = 0; i < d.nc; ++i)
     if (!(p->r_camera[i] > 0 && isfinite(p->r_camera[i]))) return 0;
-  if (!finite(p->x0, d.N) || !finite(p->P0, (long)d.N * d.N)) return 0;
+  if (!all_finite(p->x0, d.N) || !all_finite(p->P0, (long)d.N * d.N)) return 0;
   if (p->camera_period < 0 || (p->camera_period > 0 && (p->camera_phase < 0 ||
                                                          p->camera_phase >= p->camera_period)))
     return 0;
@@ -406,7 +356,7 @@ static void sync_clone(amsfe_est *e) {
 }
 
 /* require_positive_definite: Cholesky succeeds (est_chol_check's decision) */
-static int pd(amsfe_est *e, const double *P) { return cholesky(e->d.N, P, e->L1); }
+static int pd(amsfe_est *e, const double *P) { return amsfe_cholesky(e->d.N, P, e->L1); }
 
 /* block (o, o) of the augmented covariance into P1, then the PD check */
 static int clone_block_pd(amsfe_est *e, int s) {
@@ -503,8 +453,8 @@ static int predict(amsfe_est *e, const double *u) {
   int N = e->d.N;
   const double *in[2] = {e->x, u};
   double *out[3] = {e->x1, e->A1, e->G};
-  call(e, transition_step, in, 2, out, 3); /* x+, A, Gamma (eqs. 13, 4) */
-  if (!finite(e->x1, N) || !finite(e->A1, (long)N * N)) return AMSFE_ERR_NONFINITE;
+  gcall(&e->g, transition_step, in, 2, out, 3); /* x+, A, Gamma (eqs. 13, 4) */
+  if (!all_finite(e->x1, N) || !all_finite(e->A1, (long)N * N)) return AMSFE_ERR_NONFINITE;
   noise_cov(N, e->d.nw, e->G, e->qw, e->Q1);
   sandwich(N, e->A1, e->P, e->Q1, e->P1, e->T1); /* eq. (14) */
   copy(e->x, e->x1, N);
@@ -540,7 +490,7 @@ static int frame_now(amsfe_est *e, const double *z, double *nis) {
   int N = e->d.N;
   const double *in[5] = {e->x, e->P, e->x, z, e->rc};
   double *out[5] = {e->x1, e->P1, &e->nis, &e->s_ok, &e->chk};
-  call(e, est_camera_update, in, 5, out, 5);
+  gcall(&e->g, est_camera_update, in, 5, out, 5);
   if (!isfinite(e->chk)) return AMSFE_ERR_NONFINITE;
   if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
   double first = e->nis;
@@ -549,7 +499,7 @@ static int frame_now(amsfe_est *e, const double *z, double *nis) {
   for (int it = 1; it < e->par.camera_iterations; ++it) {
     copy(e->x2, e->x1, N);
     const double *in2[5] = {e->x, e->P, e->x2, z, e->rc};
-    call(e, est_camera_update, in2, 5, out, 5);
+    gcall(&e->g, est_camera_update, in2, 5, out, 5);
     if (!isfinite(e->chk)) return AMSFE_ERR_NONFINITE;
     if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
   }
@@ -585,8 +535,8 @@ int amsfe_est_tick(amsfe_est *e, const double *z_encoder, const double *u) {
   if (!e || !u) return AMSFE_ERR_INPUT;
   if (e->failed) return AMSFE_ERR_FAILED;
   int N = e->d.N, n = e->d.n, st;
-  if (!finite(u, n)) return AMSFE_ERR_INPUT;
-  const double *z = z_encoder && finite(z_encoder, e->d.ne) ? z_encoder : NULL;
+  if (!all_finite(u, n)) return AMSFE_ERR_INPUT;
+  const double *z = z_encoder && all_finite(z_encoder, e->d.ne) ? z_encoder : NULL;
   long k = e->k, k1 = k + 1;
   e->diag.replayed_steps = 0;
   if (!z) ++e->diag.encoder_missing;
@@ -606,8 +556,8 @@ int amsfe_est_tick(amsfe_est *e, const double *z_encoder, const double *u) {
         if (e->clone_on[s] && k - e->clone_k[s] >= e->max_delay) drop_clone(e, s);
       const double *in[4] = {e->xa, e->Pa, u, e->qw};
       double *out[3] = {e->xa2, e->Pa2, NULL};
-      call(e, est_clone_predict, in, 4, out, 3);
-      if (!finite(e->xa2, Na) || !finite(e->Pa2, (long)Na * Na)) {
+      gcall(&e->g, est_clone_predict, in, 4, out, 3);
+      if (!all_finite(e->xa2, Na) || !all_finite(e->Pa2, (long)Na * Na)) {
         st = AMSFE_ERR_NONFINITE;
         break;
       }
@@ -618,7 +568,7 @@ int amsfe_est_tick(amsfe_est *e, const double *z_encoder, const double *u) {
       if (z) {
         const double *ie[4] = {e->xa, e->Pa, z, e->re};
         double *oe[4] = {e->xa2, e->Pa2, &e->nis, &e->s_ok};
-        call(e, est_clone_encoder, ie, 4, oe, 4);
+        gcall(&e->g, est_clone_encoder, ie, 4, oe, 4);
         if (!(e->s_ok > 0.5)) {
           st = AMSFE_ERR_S_NOT_PD;
           break;
@@ -685,17 +635,17 @@ static int oosm_late(amsfe_est *e, const double *z, long kappa, double *nis) {
   {
     const double *in[7] = {e->x, e->P, e->Q, &e->has_last, e->last_nu, e->last_Pprior, e->re};
     double *out[4] = {e->xs, e->M, e->C, &e->s_ok};
-    call(e, est_oosm_retrodict, in, 7, out, 4);
+    gcall(&e->g, est_oosm_retrodict, in, 7, out, 4);
     if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
   }
   copy(e->xr, e->xs, N);
   for (long j = k - 1; j >= kappa; --j) { /* eq. (24): the backward map, step by step */
     double residual = NAN, scale = 1.0;
     for (long i = 0; i < N; ++i) scale = fmax(scale, fabs(e->xr[i])); /* max(1, |x_next|) */
-    for (cint i = 2; i < e->inv_n_out; ++i) e->res[i] = NULL;
-    e->arg[0] = e->xr, e->arg[1] = e->u_buf + pmod(j, e->B) * e->d.n;
-    e->res[0] = e->xr2, e->res[1] = &residual;
-    transition_inverse(e->arg, e->res, e->iw, e->w, 0);
+    for (cint i = 2; i < e->inv_n_out; ++i) e->g.res[i] = NULL;
+    e->g.arg[0] = e->xr, e->g.arg[1] = e->u_buf + pmod(j, e->B) * e->d.n;
+    e->g.res[0] = e->xr2, e->g.res[1] = &residual;
+    transition_inverse(e->g.arg, e->g.res, e->g.iw, e->g.w, 0);
     /* CompiledTransition.inverse: refused unless residual <= tol max(1, |x_next|) (NaN too) */
     if (!(residual <= e->inv_tol * scale)) {
       e->inv_residual = residual, e->inv_limit = e->inv_tol * scale;
@@ -703,11 +653,11 @@ static int oosm_late(amsfe_est *e, const double *z, long kappa, double *nis) {
     }
     copy(e->xr, e->xr2, N);
   }
-  if (!finite(e->xr, N)) return AMSFE_ERR_NONFINITE;
+  if (!all_finite(e->xr, N)) return AMSFE_ERR_NONFINITE;
   double p_ok = 0.0;
   const double *in[8] = {e->x, e->P, e->xr, e->M, e->C, e->Phi, z, e->rc};
   double *out[6] = {e->x1, e->P1, &e->nis, &e->s_ok, &p_ok, &e->chk};
-  call(e, est_oosm_correct, in, 8, out, 6);
+  gcall(&e->g, est_oosm_correct, in, 8, out, 6);
   if (!isfinite(e->chk)) return AMSFE_ERR_NONFINITE;
   if (!(e->s_ok > 0.5)) return AMSFE_REFUSED_INDEFINITE;
   if (nis) *nis = e->nis;
@@ -749,7 +699,7 @@ static int cloning_frame(amsfe_est *e, const double *z, long kappa, double *nis)
   copy(e->cl, e->xa + N * (1 + slot), N);
   const double *in[6] = {e->xa, e->Pa, e->cl, e->sel, z, e->rc};
   double *out[5] = {e->xa2, e->Pa2, &e->nis, &e->s_ok, &e->chk};
-  call(e, est_clone_camera, in, 6, out, 5);
+  gcall(&e->g, est_clone_camera, in, 6, out, 5);
   if (!isfinite(e->chk)) return AMSFE_ERR_NONFINITE;
   if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
   if (nis) *nis = e->nis;
@@ -775,7 +725,7 @@ int amsfe_est_camera_frame(amsfe_est *e, const double *z, long kappa, double *ni
   long oldest = e->k - e->B > e->par.k0 ? e->k - e->B : e->par.k0;
   e->diag.replayed_steps = 0;
   if (e->par.estimator == AMSFE_ENCODERS) st = AMSFE_IGNORED;
-  else if (!finite(z, e->d.nc)) st = AMSFE_REFUSED_NONFINITE;
+  else if (!all_finite(z, e->d.nc)) st = AMSFE_REFUSED_NONFINITE;
   else if (kappa < oldest) st = AMSFE_REFUSED_TOO_OLD;
   else {
     switch (e->par.estimator) {

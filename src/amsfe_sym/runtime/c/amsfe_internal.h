@@ -1,0 +1,84 @@
+/* amsfe_internal.h: what amsfe_runtime.c and amsfe_loop.c share inside a generated library.
+ * Not part of the public API (not copied next to the library): the calling convention of
+ * CasADi's generated functions, the carving of caller-owned memory blocks, and the dense
+ * Cholesky kernels (defined in amsfe_runtime.c, hidden from the library's exports). */
+#ifndef AMSFE_INTERNAL_H
+#define AMSFE_INTERNAL_H
+
+#include <math.h>
+#include <stddef.h>
+
+typedef long long cint;
+typedef int (*cfun)(const double **arg, double **res, cint *iw, double *w, int mem);
+typedef int (*cwork)(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w);
+
+/* The symbols a generated function `f` exports. */
+#define DECLARE(f)                                                        \
+  int f(const double **arg, double **res, cint *iw, double *w, int mem); \
+  int f##_work(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w);    \
+  cint f##_n_out(void);                                                   \
+  const cint *f##_sparsity_in(cint i);
+
+/* Work arrays of generated functions, sized for the largest of a set. */
+typedef struct {
+  const double **arg;
+  double **res;
+  cint *iw;
+  double *w;
+} gwork;
+
+/* Carves 16-byte aligned pieces out of one block; with base NULL it only measures. */
+typedef struct {
+  char *base;
+  size_t off;
+} carver;
+
+static inline void *carve(carver *c, size_t bytes) {
+  size_t o = (c->off + 15) & ~(size_t)15;
+  c->off = o + bytes;
+  return c->base ? (void *)(c->base + o) : NULL;
+}
+
+#define DBL(c, count) ((double *)carve((c), sizeof(double) * (size_t)(count)))
+
+/* Carve the work arrays of the largest of `count` generated functions. */
+static inline void carve_work(carver *c, const cwork *works, size_t count, gwork *g) {
+  cint sa = 0, sr = 0, si = 0, sw = 0;
+  for (size_t i = 0; i < count; ++i) {
+    cint a, r, iw, w;
+    works[i](&a, &r, &iw, &w);
+    sa = a > sa ? a : sa, sr = r > sr ? r : sr, si = iw > si ? iw : si, sw = w > sw ? w : sw;
+  }
+  g->arg = (const double **)carve(c, sizeof(double *) * (size_t)(sa + 1));
+  g->res = (double **)carve(c, sizeof(double *) * (size_t)(sr + 1));
+  g->iw = (cint *)carve(c, sizeof(cint) * (size_t)(si + 1));
+  g->w = DBL(c, sw + 1);
+}
+
+/* Call a generated function: inputs in[0..nin), outputs out[0..nout) (NULL: not wanted). */
+static inline int gcall(const gwork *g, cfun f, const double *const *in, int nin,
+                        double *const *out, int nout) {
+  for (int i = 0; i < nin; ++i) g->arg[i] = in[i];
+  for (int i = 0; i < nout; ++i) g->res[i] = out[i];
+  return f(g->arg, g->res, g->iw, g->w, 0);
+}
+
+static inline int all_finite(const double *v, long count) {
+  for (long i = 0; i < count; ++i)
+    if (!isfinite(v[i])) return 0;
+  return 1;
+}
+
+#if defined(__GNUC__)
+#define AMSFE_HIDDEN __attribute__((visibility("hidden")))
+#else
+#define AMSFE_HIDDEN
+#endif
+
+/* Lower Cholesky factor of the m x m S into L; 1 when every pivot is > 0 (a NaN pivot gives
+ * 0), as est_chol_check and LAPACK potrf. */
+AMSFE_HIDDEN int amsfe_cholesky(int m, const double *S, double *L);
+/* b <- S^-1 b with S = L L^T (m x m, leading dimension m). */
+AMSFE_HIDDEN void amsfe_chol_solve(int m, const double *L, double *b);
+
+#endif /* AMSFE_INTERNAL_H */
