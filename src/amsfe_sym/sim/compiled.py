@@ -28,7 +28,13 @@ from amsfe_sym.runtime.compiled_loop import (
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.sim.builders import RunParts, build_run, build_sensors
-from amsfe_sym.sim.loop import DIVERGED_TRACKING_ERROR, REFUSAL_KINDS, RunResult
+from amsfe_sym.sim.loop import (
+    CAMERA_COUNTERS,
+    DECISION_COUNTERS,
+    DIVERGED_TRACKING_ERROR,
+    RunResult,
+    tick_bar,
+)
 
 __all__ = ["controller_params", "run_compiled", "simulation_inputs"]
 
@@ -143,16 +149,7 @@ def run_compiled(scenario: Scenario, lib: ModelLibrary, progress: bool = False) 
     inputs, q_des = simulation_inputs(sc, lib, K, parts)
     sim = CompiledSimulation(str(lib.library_path), est._h, ctrl, inputs, N)
 
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(
-            total=K,
-            desc=f"{sc.name} [{sc.estimator}, {sc.controller}, compiled]",
-            unit="tick",
-            mininterval=0.5,
-        )
+    bar = tick_bar(sc, K, "compiled") if progress else None
     t0 = time.perf_counter()
     while True:
         state = sim.run(_CHUNK if bar is not None else K)
@@ -165,7 +162,7 @@ def run_compiled(scenario: Scenario, lib: ModelLibrary, progress: bool = False) 
         bar.close()
     if state.status < 0:
         what = sim.status_string(state.status)
-        cls = MeasurementError if state.k < K and state.status == -3 else EstimatorError
+        cls = MeasurementError if state.plant_nonfinite else EstimatorError
         raise cls(
             describe(
                 f"compiled run of {sc.name} at step {state.k}",
@@ -177,17 +174,7 @@ def run_compiled(scenario: Scenario, lib: ModelLibrary, progress: bool = False) 
     last = int(state.ticks_done)
     rec = sim.rec
     c = state.counters()
-    counters = {
-        "frames_applied": c["frames_applied"],
-        "frames_rejected": c["frames_rejected"],
-        "encoder_rejected": c["encoder_rejected"],
-        **{f"refused_{kind}": c[f"refused_{kind}"] for kind, _ in REFUSAL_KINDS},
-        "refused_other": c["refused_other"],
-        "frames_exposed": c["frames_exposed"],
-        "frames_delivered": c["frames_delivered"],
-        "frames_dropped": c["frames_dropped"],
-        "frames_out_of_image": c["frames_out_of_image"],
-    }
+    counters = {k: c[k] for k in (*DECISION_COUNTERS, *CAMERA_COUNTERS)}
     diverged_at = None
     tau_d = inputs.tau_d[:last].copy()
     if state.diverged:  # the Python loop stops before the plant step: no torque recorded

@@ -21,6 +21,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,12 +32,15 @@ from amsfe_sym.scenario import Scenario
 from amsfe_sym.sim.builders import build_run
 
 __all__ = [
+    "CAMERA_COUNTERS",
+    "DECISION_COUNTERS",
     "DIVERGED_TRACKING_ERROR",
     "REFUSAL_KINDS",
     "RUNTIMES",
     "RunResult",
     "refusal_kind",
     "run",
+    "tick_bar",
 ]
 
 log = logging.getLogger(__name__)
@@ -104,6 +108,31 @@ REFUSAL_KINDS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("no_convergence", ("did not converge",)),
     ("unscheduled", ("not a scheduled exposure",)),
 )
+
+
+#: The counters of a run's ``summary.json``, in their order: the estimator's decisions, then
+#: what happened to the camera's frames (both runtimes fill the same names).
+DECISION_COUNTERS: tuple[str, ...] = (
+    "frames_applied",
+    "frames_rejected",
+    "encoder_rejected",
+    *(f"refused_{kind}" for kind, _ in REFUSAL_KINDS),
+    "refused_other",
+)
+CAMERA_COUNTERS = ("frames_exposed", "frames_delivered", "frames_dropped", "frames_out_of_image")
+
+
+def tick_bar(sc: Scenario, total: int, runtime: str) -> Any:
+    """The progress bar of a run of ``total`` ticks."""
+    from tqdm import tqdm
+
+    label = "" if runtime == "python" else f", {runtime}"
+    return tqdm(
+        total=total,
+        desc=f"{sc.name} [{sc.estimator}, {sc.controller}{label}]",
+        unit="tick",
+        mininterval=0.5,
+    )
 
 
 def refusal_kind(reason: str) -> str:
@@ -182,22 +211,11 @@ def run(
     bound_rec = np.full((K, n), np.nan)
     saturated = np.zeros(K, dtype=bool)
     frames_rec: list[tuple[float, float, float, float]] = []
-    counters = {"frames_applied": 0, "frames_rejected": 0, "encoder_rejected": 0}
+    counters = dict.fromkeys(DECISION_COUNTERS, 0)
     diverged_at: float | None = None
     tau_rec = np.zeros((K, 2 * n))
-    counters.update({f"refused_{kind}": 0 for kind, _ in REFUSAL_KINDS})
-    counters["refused_other"] = 0
 
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(
-            total=K,
-            desc=f"{sc.name} [{sc.estimator}, {sc.controller}]",
-            unit="tick",
-            mininterval=0.5,
-        )
+    bar = tick_bar(sc, K, "python") if progress else None
     u = np.zeros(n)
     x_t = np.zeros(N)
     x_t[4 * n :] = theta_true
@@ -249,12 +267,7 @@ def run(
         bar.close()
     stats = camera.stats
     counters.update(
-        {
-            "frames_exposed": int(stats.exposed),
-            "frames_delivered": int(stats.delivered),
-            "frames_dropped": int(stats.dropped),
-            "frames_out_of_image": int(stats.out_of_image),
-        }
+        {name: int(getattr(stats, name.removeprefix("frames_"))) for name in CAMERA_COUNTERS}
     )
     cut = slice(0, last)
     return RunResult(
