@@ -26,6 +26,7 @@ import struct
 import subprocess
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -116,13 +117,20 @@ def python_tick(name: str, inp: TickInputs) -> tuple[TickStats, FloatArray]:
     from amsfe_sym.estimation import make_estimator
 
     est = make_estimator(name, **inp.kwargs)
+    return _time_ticks(est.step, inp), est.x.copy()
+
+
+def _time_ticks(
+    step: Callable[[FloatArray, FloatArray | None], object], inp: TickInputs
+) -> TickStats:
+    """Per-call cost of ``step(u, z)`` over the recorded inputs (``z`` None where missing)."""
     ns = np.empty(len(inp.u))
     for k in range(len(inp.u)):
         z = inp.z[k] if np.isfinite(inp.z[k]).all() else None
         t0 = time.perf_counter_ns()
-        est.step(inp.u[k], z)
+        step(inp.u[k], z)
         ns[k] = time.perf_counter_ns() - t0
-    return TickStats.from_ns(ns), est.x.copy()
+    return TickStats.from_ns(ns)
 
 
 def write_tick_input(path: Path, name: str, inp: TickInputs) -> Path:
@@ -151,21 +159,10 @@ def write_tick_input(path: Path, name: str, inp: TickInputs) -> Path:
 
 def build_tick_timer(workdir: Path) -> Path:
     """Compile ``tick_timer.c`` (``-O1``) into ``workdir``; the executable's path."""
-    from amsfe_sym.codegen import compiler
+    from amsfe_sym.bench.timing import compile_program
 
     exe = workdir / "amsfe_tick_timer"
-    cmd = [compiler(), "-O1", "-o", str(exe), str(_TIMER_SOURCE), "-ldl", "-lm"]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode != 0:
-        raise CodegenError(
-            describe(
-                "compiling the C tick timer",
-                "a successful build",
-                proc.stderr[-1000:],
-                "install a C compiler or set $CC",
-            )
-        )
-    return exe
+    return compile_program(_TIMER_SOURCE, exe, ["-ldl", "-lm"], "the C tick timer")
 
 
 def compiled_tick(
@@ -241,13 +238,7 @@ def baseline_tick(robot: Any, inp: TickInputs) -> tuple[TickStats, FloatArray]:
     """Per-tick cost of :class:`BaselineEkf` over the recorded inputs; and its final x."""
     kw = inp.kwargs
     ekf = BaselineEkf(robot, kw["model"].Qw, kw["encoder"].R, kw["x0"], kw["P0"])
-    ns = np.empty(len(inp.u))
-    for k in range(len(inp.u)):
-        z = inp.z[k] if np.isfinite(inp.z[k]).all() else None
-        t0 = time.perf_counter_ns()
-        ekf.tick(inp.u[k], z)
-        ns[k] = time.perf_counter_ns() - t0
-    return TickStats.from_ns(ns), ekf.x.copy()
+    return _time_ticks(ekf.tick, inp), ekf.x.copy()
 
 
 def bench_tick(

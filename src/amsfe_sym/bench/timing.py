@@ -159,6 +159,28 @@ int main(int argc, char **argv) {
 """
 
 
+def compile_program(source: Path, exe: Path, libs: Sequence[str], what: str) -> Path:
+    """Compile the C program ``source`` (``-O1``) into ``exe`` with ``libs`` (e.g. ``-ldl``).
+
+    Raises:
+        CodegenError: the compiler failed (its message says why).
+    """
+    from amsfe_sym.codegen import compiler
+
+    cmd = [compiler(), "-O1", "-o", str(exe), str(source), *libs]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise CodegenError(
+            describe(
+                f"compiling {what}",
+                "a successful build",
+                proc.stderr[-1000:],
+                "install a C compiler or set $CC",
+            )
+        )
+    return exe
+
+
 class CTimer:
     """The pure-C timing loop, compiled once (``-O1``) into a temporary folder.
 
@@ -167,22 +189,9 @@ class CTimer:
     """
 
     def __init__(self, workdir: Path) -> None:
-        from amsfe_sym.codegen import compiler
-
         src = workdir / "amsfe_timer.c"
         src.write_text(_C_TIMER)
-        self.exe = workdir / "amsfe_timer"
-        cmd = [compiler(), "-O1", "-o", str(self.exe), str(src), "-ldl"]
-        proc = subprocess.run(cmd, capture_output=True, text=True)
-        if proc.returncode != 0:
-            raise CodegenError(
-                describe(
-                    "compiling the C timing loop",
-                    "a successful build",
-                    proc.stderr[-1000:],
-                    "install a C compiler or set $CC",
-                )
-            )
+        self.exe = compile_program(src, workdir / "amsfe_timer", ["-ldl"], "the C timing loop")
 
     def time(
         self, library: Path, function: str, inputs: Sequence[FloatArray], rounds: int
