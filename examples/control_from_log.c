@@ -1,7 +1,8 @@
 /* control_from_log: an arm's real-time loop, estimator + controller, without Python.
  *
  * Links only the generated robot library and includes only its headers (amsfe_loop.h and
- * amsfe_runtime.h, copied next to the library by `amsfe generate`):
+ * amsfe_runtime.h, copied next to the library by `amsfe generate`) and this folder's
+ * amsfe_log.h (the log reading both examples share):
  *
  *   D=generated/paper_2link_rk4
  *   cc -O2 examples/control_from_log.c -I$D -L$D -lpaper_2link_rk4 -Wl,-rpath,$D -lm \
@@ -22,35 +23,12 @@
  * Output per step: "u <k> <u: n> <x: N>" (torque and estimate x(k|k)), 17 significant digits.
  */
 #include <math.h>
-#include <stdio.h>
 #include <stdlib.h>
-#include <string.h>
-#include <time.h>
 
+#include "amsfe_log.h" /* read_numbers, now_ns, the estimator block; amsfe_runtime.h */
 #include "amsfe_loop.h"
 
 #define MAX_FRAMES 64
-
-static int read_numbers(char *rest, double *out, int count) {
-  char *end = rest;
-  for (int i = 0; i < count; ++i) {
-    out[i] = strtod(end, &rest);
-    if (rest == end) return 0;
-    end = rest;
-  }
-  return 1;
-}
-
-static double now_ns(void) {
-  struct timespec t;
-  clock_gettime(CLOCK_MONOTONIC, &t);
-  return 1e9 * (double)t.tv_sec + (double)t.tv_nsec;
-}
-
-static int cmp(const void *a, const void *b) {
-  double x = *(const double *)a, y = *(const double *)b;
-  return (x > y) - (x < y);
-}
 
 static void *aligned(size_t size) {
   void *p = NULL;
@@ -71,8 +49,8 @@ int main(int argc, char **argv) {
   amsfe_dims d;
   amsfe_dims_get(&d);
   int n = d.n, np = d.N - 4 * d.n;
-  double *qw = malloc(sizeof(double) * d.nw), *re = malloc(sizeof(double) * d.ne), rc[2];
-  double *x0 = malloc(sizeof(double) * d.N), *P0 = malloc(sizeof(double) * d.N * d.N);
+  est_block blk;
+  est_block_init(&blk, &d);
   double *x = malloc(sizeof(double) * d.N), *u = malloc(sizeof(double) * n);
   double *z = malloc(sizeof(double) * 2 * n), *ref = malloc(sizeof(double) * 5 * n);
   double *theta0 = malloc(sizeof(double) * (np + 1)), *ks_d = malloc(sizeof(double) * n);
@@ -82,9 +60,7 @@ int main(int argc, char **argv) {
   double *vec[NV];
   for (int i = 0; i < NV; ++i) vec[i] = malloc(sizeof(double) * n);
   int *ks_theta = malloc(sizeof(int) * n);
-  amsfe_params par;
   amsfe_ctrl_params cp;
-  memset(&par, 0, sizeof(par));
   memset(&cp, 0, sizeof(cp));
   amsfe_est *est = NULL;
   amsfe_ctrl *ctrl = NULL;
@@ -103,28 +79,7 @@ int main(int argc, char **argv) {
     int ok = 1, vi = -1;
     for (int i = 0; i < NV; ++i)
       if (strcmp(key, vec_names[i]) == 0) vi = i;
-    if (strcmp(key, "params") == 0) {
-      ok = sscanf(rest, "%d %d %d %d %d %d %d %lf %lf %ld", &par.estimator, &par.buffer_steps,
-                  &par.camera_iterations, &par.camera_period, &par.camera_phase,
-                  &par.camera_max_delay, &par.max_frames_per_step, &par.gate_camera,
-                  &par.gate_encoder, &par.k0) == 10;
-    } else if (strcmp(key, "qw") == 0) {
-      ok = read_numbers(rest, qw, d.nw);
-    } else if (strcmp(key, "r_encoder") == 0) {
-      ok = read_numbers(rest, re, d.ne);
-    } else if (strcmp(key, "r_camera") == 0) {
-      ok = read_numbers(rest, rc, 2);
-    } else if (strcmp(key, "x0") == 0) {
-      ok = read_numbers(rest, x0, d.N);
-    } else if (strcmp(key, "P0") == 0) {
-      ok = read_numbers(rest, P0, d.N * d.N);
-      par.qw = qw, par.r_encoder = re, par.r_camera = rc, par.x0 = x0, par.P0 = P0;
-      int status;
-      est = amsfe_est_create(&par, &status);
-      if (!est) {
-        fprintf(stderr, "amsfe_est_create: %s\n", amsfe_status_string(status));
-        return 1;
-      }
+    if (est_block_line(&blk, &d, key, rest, &ok, &est)) {
     } else if (strcmp(key, "ctrl") == 0) {
       ok = sscanf(rest, "%d %lf %lf %d %d %lf %lf", &cp.controller, &cp.T, &cp.p,
                   &cp.qmd_next_hold, &cp.state_true, &cp.link_bandwidth,
@@ -187,7 +142,7 @@ int main(int argc, char **argv) {
   if (timing && nt) {
     double sum = 0.0;
     for (size_t i = 0; i < nt; ++i) sum += tick_ns[i];
-    qsort(tick_ns, nt, sizeof(double), cmp);
+    qsort(tick_ns, nt, sizeof(double), cmp_double);
     fprintf(stderr, "ticks %zu: median %.0f ns, p99 %.0f ns, mean %.0f ns\n", nt,
             tick_ns[nt / 2], tick_ns[(size_t)(0.99 * (double)(nt - 1))], sum / (double)nt);
   }

@@ -1,7 +1,7 @@
 /* estimate_from_log: run a compiled amsfe_sym estimator over a recorded log, without Python.
  *
  * Links only the generated robot library (generated/<robot>/lib<robot>.so) and includes only
- * its amsfe_runtime.h:
+ * its amsfe_runtime.h (and this folder's amsfe_log.h, the log reading both examples share):
  *
  *   cc -O2 examples/estimate_from_log.c -Igenerated/paper_2link_rk4 \
  *      -Lgenerated/paper_2link_rk4 -lpaper_2link_rk4 -Wl,-rpath,generated/paper_2link_rk4 \
@@ -18,22 +18,7 @@
  * Output: per frame "frame <k> <kappa> <status> <nis>", per step (after its frames)
  * "est <k> <x: N> <P: N*N>", all with 17 significant digits.
  */
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-#include <time.h>
-
-#include "amsfe_runtime.h"
-
-static int read_numbers(char *rest, double *out, int count) {
-  char *end = rest;
-  for (int i = 0; i < count; ++i) {
-    out[i] = strtod(end, &rest);
-    if (rest == end) return 0;
-    end = rest;
-  }
-  return 1;
-}
+#include "amsfe_log.h" /* read_numbers, now_ns, the estimator block; amsfe_runtime.h */
 
 static void print_state(const amsfe_est *est, const amsfe_dims *d, double *x, double *P) {
   amsfe_diag diag;
@@ -43,17 +28,6 @@ static void print_state(const amsfe_est *est, const amsfe_dims *d, double *x, do
   for (int i = 0; i < d->N; ++i) printf(" %.17g", x[i]);
   for (int i = 0; i < d->N * d->N; ++i) printf(" %.17g", P[i]);
   printf("\n");
-}
-
-static double now_ns(void) {
-  struct timespec t;
-  clock_gettime(CLOCK_MONOTONIC, &t);
-  return 1e9 * (double)t.tv_sec + (double)t.tv_nsec;
-}
-
-static int cmp(const void *a, const void *b) {
-  double x = *(const double *)a, y = *(const double *)b;
-  return (x > y) - (x < y);
 }
 
 int main(int argc, char **argv) {
@@ -69,12 +43,10 @@ int main(int argc, char **argv) {
   }
   amsfe_dims d;
   amsfe_dims_get(&d);
-  double *qw = malloc(sizeof(double) * d.nw), *re = malloc(sizeof(double) * d.ne);
-  double rc[2], *x0 = malloc(sizeof(double) * d.N), *P0 = malloc(sizeof(double) * d.N * d.N);
+  est_block blk;
+  est_block_init(&blk, &d);
   double *x = malloc(sizeof(double) * d.N), *P = malloc(sizeof(double) * d.N * d.N);
   double *u = malloc(sizeof(double) * d.n), *z = malloc(sizeof(double) * d.ne), zc[2];
-  amsfe_params par;
-  memset(&par, 0, sizeof(par));
   amsfe_est *est = NULL;
   size_t cap = 1 << 16, nt = 0;
   double *tick_ns = timing ? malloc(sizeof(double) * cap) : NULL, frame_ns = 0.0;
@@ -88,28 +60,7 @@ int main(int argc, char **argv) {
     if (sscanf(line, "%15s %n", key, &used) != 1) continue;
     char *rest = line + used;
     int ok = 1;
-    if (strcmp(key, "params") == 0) {
-      ok = sscanf(rest, "%d %d %d %d %d %d %d %lf %lf %ld", &par.estimator, &par.buffer_steps,
-                  &par.camera_iterations, &par.camera_period, &par.camera_phase,
-                  &par.camera_max_delay, &par.max_frames_per_step, &par.gate_camera,
-                  &par.gate_encoder, &par.k0) == 10;
-    } else if (strcmp(key, "qw") == 0) {
-      ok = read_numbers(rest, qw, d.nw);
-    } else if (strcmp(key, "r_encoder") == 0) {
-      ok = read_numbers(rest, re, d.ne);
-    } else if (strcmp(key, "r_camera") == 0) {
-      ok = read_numbers(rest, rc, 2);
-    } else if (strcmp(key, "x0") == 0) {
-      ok = read_numbers(rest, x0, d.N);
-    } else if (strcmp(key, "P0") == 0) {
-      ok = read_numbers(rest, P0, d.N * d.N);
-      par.qw = qw, par.r_encoder = re, par.r_camera = rc, par.x0 = x0, par.P0 = P0;
-      int status;
-      est = amsfe_est_create(&par, &status);
-      if (!est) {
-        fprintf(stderr, "amsfe_est_create: %s\n", amsfe_status_string(status));
-        return 1;
-      }
+    if (est_block_line(&blk, &d, key, rest, &ok, &est)) {
     } else if (strcmp(key, "tick") == 0 && est) {
       if (have_step) print_state(est, &d, x, P);
       ok = read_numbers(rest, u, d.n);
@@ -148,7 +99,7 @@ int main(int argc, char **argv) {
   }
   if (have_step) print_state(est, &d, x, P);
   if (timing && nt) {
-    qsort(tick_ns, nt, sizeof(double), cmp);
+    qsort(tick_ns, nt, sizeof(double), cmp_double);
     fprintf(stderr, "ticks %zu: median %.0f ns, p99 %.0f ns; frames %ld: mean %.0f ns\n", nt,
             tick_ns[nt / 2], tick_ns[(size_t)(0.99 * (double)(nt - 1))], frames,
             frames ? frame_ns / (double)frames : 0.0);
