@@ -30,7 +30,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from amsfe_sym.control.base import Controller, FloatArray, register
+from amsfe_sym.control.base import Controller, FloatArray, LawInputs, register
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.signals.trajectory import Trajectory
@@ -180,15 +180,8 @@ class _Printed(_SlidingBase):
     def _pick(self, x_true: FloatArray, theta_true: FloatArray, x_hat: FloatArray) -> FloatArray:
         return x_hat
 
-    def torque(
-        self,
-        k: int,
-        t: float,
-        x_true: FloatArray,
-        theta_true: FloatArray,
-        x_hat: FloatArray,
-        z_enc: FloatArray,
-    ) -> FloatArray:
+    def torque(self, tick: LawInputs) -> FloatArray:
+        k, t, x_true, theta_true, x_hat, z_enc = tick
         n = self.n
         lead, x = self._law_inputs(self._pick(x_true, theta_true, x_hat), z_enc)
         q, qm, qmd = x[:n], x[2 * n : 3 * n], x[3 * n : 4 * n]
@@ -306,15 +299,8 @@ class _Cascade(_SlidingBase):
         """The law's leading inputs (the state it acts on)."""
         return [x_hat]
 
-    def torque(
-        self,
-        k: int,
-        t: float,
-        x_true: FloatArray,
-        theta_true: FloatArray,
-        x_hat: FloatArray,
-        z_enc: FloatArray,
-    ) -> FloatArray:
+    def torque(self, tick: LawInputs) -> FloatArray:
+        k, t, x_true, theta_true, x_hat, z_enc = tick
         lead = self._law_inputs(x_true, theta_true, x_hat, z_enc)
         ref = self._ref_at(k, t)
         out = self._law.call_into(*lead, ref, self._cf, *self._gain_args())

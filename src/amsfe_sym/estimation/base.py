@@ -38,7 +38,7 @@ from amsfe_sym.estimation.ekf import (
 )
 from amsfe_sym.estimation.models import CameraFrame, MeasurementModel, TransitionModel
 
-__all__ = ["DEFAULT_CONFIG", "Estimator", "FilterConfig", "StepReport"]
+__all__ = ["DEFAULT_CONFIG", "Estimator", "FilterConfig", "StepInputs", "StepReport"]
 
 logger = logging.getLogger(__name__)
 
@@ -137,6 +137,22 @@ class FilterConfig:
 
 
 DEFAULT_CONFIG = FilterConfig()
+
+
+@dataclass(frozen=True, slots=True)
+class StepInputs:
+    """The checked inputs of one :meth:`Estimator.step` (what ``_step`` receives).
+
+    Attributes:
+        u: Input over ``[k, k+1]`` [N m], shape (n,).
+        z_encoder: Finite encoder measurement at ``k+1`` (eq. 5), or ``None``.
+        frames: Camera frames delivered at ``k+1`` that passed the screening, in delivery
+            order.
+    """
+
+    u: FloatArray
+    z_encoder: FloatArray | None
+    frames: list[CameraFrame]
 
 
 @dataclass
@@ -300,7 +316,7 @@ class Estimator(ABC):
             report.rejections.append("encoder measurement holds NaN or inf")
             z_enc = None
         usable = self._screen_frames(checked, k_new, report)
-        self._step(u_arr, z_enc, usable, report)
+        self._step(StepInputs(u_arr, z_enc, usable), report)
         self.k = k_new
         self._check_covariance()
         return report
@@ -311,13 +327,7 @@ class Estimator(ABC):
 
     # ------------------------------------------------------------------ subclass hook
     @abstractmethod
-    def _step(
-        self,
-        u: FloatArray,
-        z_encoder: FloatArray | None,
-        frames: list[CameraFrame],
-        report: StepReport,
-    ) -> None:
+    def _step(self, step: StepInputs, report: StepReport) -> None:
         """Do the step; ``self.k`` is still the old index. Inputs are already checked."""
 
     # ------------------------------------------------------------------ checks

@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import ConfigError, EstimatorError, describe
-from amsfe_sym.estimation.base import Estimator, StepReport
+from amsfe_sym.estimation.base import Estimator, StepInputs, StepReport
 from amsfe_sym.estimation.models import CameraFrame
 from amsfe_sym.runtime.models import (
     CameraMeasurement,
@@ -286,13 +286,8 @@ class CompiledEstimator(Estimator):
             )
         )
 
-    def _step(
-        self,
-        u: FloatArray,
-        z_encoder: FloatArray | None,
-        frames: list[CameraFrame],
-        report: StepReport,
-    ) -> None:
+    def _step(self, step: StepInputs, report: StepReport) -> None:
+        u, z_encoder, frames = step.u, step.z_encoder, step.frames
         self._ubuf[:] = u
         zp = None
         if z_encoder is not None:

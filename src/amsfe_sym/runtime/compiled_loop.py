@@ -232,7 +232,7 @@ class SimulationInputs:
 
 @dataclass
 class SimulationRecords:
-    """What a compiled run recorded (rows ``0 .. ticks``; see ``sim.loop.RunResult``)."""
+    """What a compiled run recorded (rows ``0 .. ticks``; see ``sim.result.RunResult``)."""
 
     x_true: FloatArray
     x_hat: FloatArray
