@@ -9,7 +9,7 @@ from typing import Any, ClassVar, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.errors import ConfigError, check_known_keys, describe
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.signals.trajectory import Trajectory
 
@@ -56,16 +56,7 @@ class Controller(ABC):
         self.lib = lib
         self.trajectory = trajectory
         given = dict(gains or {})
-        unknown = sorted(set(given) - set(self.gain_defaults))
-        if unknown:
-            raise ConfigError(
-                describe(
-                    f"controller {self.name!r} gains",
-                    f"keys among {sorted(self.gain_defaults)}",
-                    f"unknown {unknown}",
-                    "remove or rename them",
-                )
-            )
+        check_known_keys(f"controller {self.name!r} gains", given, self.gain_defaults)
         self.gains = {**self.gain_defaults, **given}
 
         limits = lib.manifest.actuators.u_max or (np.inf,) * lib.n

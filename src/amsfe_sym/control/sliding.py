@@ -31,7 +31,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from amsfe_sym.control.base import Controller, FloatArray, LawInputs, register
-from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.errors import ConfigError, check_known_keys, describe
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.signals.trajectory import Trajectory
 
@@ -109,16 +109,7 @@ class _SlidingBase(Controller):
 
     def set_gains(self, **gains: Any) -> None:
         """Change gains at run time (no regeneration: gains are inputs of the compiled law)."""
-        unknown = sorted(set(gains) - set(self._g))
-        if unknown:
-            raise ConfigError(
-                describe(
-                    f"controller {self.name!r} gains",
-                    f"keys among {sorted(self._g)}",
-                    f"unknown {unknown}",
-                    "remove or rename them",
-                )
-            )
+        check_known_keys(f"controller {self.name!r} gains", gains, self._g)
         self.gains.update(gains)
         for key in gains:
             self._g[key] = self._gain(key, 1 if key == "p" else self.n)

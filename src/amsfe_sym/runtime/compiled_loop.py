@@ -86,7 +86,7 @@ class ControllerParams:
     motor_bandwidth: float = 0.0
     _keep: list[Any] = field(default_factory=list, repr=False)
 
-    def struct(self) -> CtrlParams:
+    def struct(self) -> ctypes.Structure:
         """The C struct (its arrays are kept alive by this object)."""
         if self.name not in CONTROLLER_CODES:
             raise ConfigError(

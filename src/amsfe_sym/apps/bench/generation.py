@@ -3,15 +3,13 @@
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
-from amsfe_sym.apps.bench.timing import round4
-from amsfe_sym.errors import CodegenError, describe
+from amsfe_sym.apps.bench.timing import round4, run_checked
 
 __all__ = ["bench_generation"]
 
@@ -29,16 +27,13 @@ print(json.dumps({"import_s": t1 - t0, "seconds": r.seconds, "reused": r.reused,
 
 def _generate_in_subprocess(robot: str, out: Path, force: bool) -> dict[str, Any]:
     t0 = time.perf_counter()
-    proc = subprocess.run(
+    proc = run_checked(
         [sys.executable, "-c", _GEN_SCRIPT, robot, str(out), "1" if force else "0"],
-        capture_output=True,
-        text=True,
+        f"generate({robot!r})",
+        "success",
+        "see above",
     )
     wall = time.perf_counter() - t0
-    if proc.returncode != 0:
-        raise CodegenError(
-            describe(f"generate({robot!r})", "success", proc.stderr.strip()[-2000:], "see above")
-        )
     res: dict[str, Any] = json.loads(proc.stdout.strip().splitlines()[-1])
     res["process_wall_s"] = wall
     return {k: (round4(v) if isinstance(v, float) else v) for k, v in res.items()}
