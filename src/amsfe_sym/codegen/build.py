@@ -188,6 +188,8 @@ def _build(
         t = time.perf_counter()
         cname = f"{spec.name}.c"
         gen = ca.CodeGenerator(cname, {"with_header": True, "with_mem": False})
+        for f in model.internal.values():  # first: the contract's MX graphs call them
+            gen.add(f)
         for f in model.functions.values():
             for i in range(f.n_out()):  # the binding and the C contract need dense outputs
                 if not f.sparsity_out(i).is_dense():
@@ -210,9 +212,12 @@ def _build(
         t = time.perf_counter()
         libname = f"lib{spec.name}.so"
         glue = []
+        (tmp / "amsfe_model_config.h").write_text(model_config_header(model))
+        if model.chained:  # the contract functions written in C over the generated stage
+            glue.append(str(_RUNTIME_C / "amsfe_model.c"))
         if "estimator" in parts:  # the C glue calls the est_* functions
             shutil.copy(_RUNTIME_C / "amsfe_runtime.h", tmp)
-            glue = [str(_RUNTIME_C / "amsfe_runtime.c")]
+            glue.append(str(_RUNTIME_C / "amsfe_runtime.c"))
         if set(parts) == set(ALL_PARTS):  # the loop calls the laws, the plant, the estimators
             shutil.copy(_RUNTIME_C / "amsfe_loop.h", tmp)
             glue.append(str(_RUNTIME_C / "amsfe_loop.c"))
@@ -255,6 +260,24 @@ def _build(
         False,
         time.perf_counter() - t_start,
         timings,
+    )
+
+
+def model_config_header(model: Any) -> str:
+    """``amsfe_model_config.h``: the constants the hand-written C of ``runtime/c`` needs from
+    the model (n, p, T [s], the motor inertias Mm [kg m^2]) and whether the library has the
+    chained rk4 step (``AMSFE_MODEL_CHAIN``)."""
+    robot = model.robot
+    mm = ", ".join(repr(float(v)) for v in robot.Mm)
+    return (
+        "/* written by amsfe_sym.codegen for this library: do not edit */\n"
+        "#ifndef AMSFE_MODEL_CONFIG_H\n#define AMSFE_MODEL_CONFIG_H\n"
+        f"#define AMSFE_MODEL_N {robot.n}\n"
+        f"#define AMSFE_MODEL_P {robot.p}\n"
+        f"#define AMSFE_MODEL_T {float(robot.spec.model.T)!r}\n"
+        f"#define AMSFE_MODEL_MM {{{mm}}}\n"
+        f"#define AMSFE_MODEL_CHAIN {1 if model.chained else 0}\n"
+        "#endif\n"
     )
 
 

@@ -197,6 +197,7 @@ def build_control_functions(tree: RigidBodyTree, tr: Transition) -> list[ca.Func
             ca.densify(e)
             for e in (u, sf.s, tau, qm_d, sf.e_next, ca.fabs(dv + sf.lam_terms), cf_next, dq)
         ],
+        {"cse": True},
     )
     mref = _motor_reference(tree, tr, n, p_)
 
@@ -271,6 +272,7 @@ def _motor_reference(tree: RigidBodyTree, tr: Transition, n: int, p: int) -> ca.
         [ca.densify(qm_r), ca.densify(qmd_r), ca.densify(qmdd_r)],
         ["ref", "theta"],
         ["qm_r", "qmd_r", "qmdd_r"],
+        {"cse": True},
     )
 
 
@@ -281,4 +283,5 @@ def _fn(name: str, ins: list[tuple[str, ca.SX]], outs: list[tuple[str, ca.SX]]) 
         [ca.densify(e) for _, e in outs],
         [k for k, _ in ins],
         [k for k, _ in outs],
+        {"cse": True},
     )

@@ -39,12 +39,24 @@ DECLARE(est_clone_camera)
 DECLARE(transition_inverse)
 DECLARE(transition_step)
 
+#include "amsfe_model_config.h"
+#if AMSFE_MODEL_CHAIN
+/* rk4 libraries: the step chained from the generated stage (amsfe_model.c), the same numbers
+ * as the generated transition_step in a fraction of its code */
+DECLARE(transition_step_chain)
+#define STEP transition_step_chain
+#define STEP_WORK transition_step_chain_work
+#else
+#define STEP transition_step
+#define STEP_WORK transition_step_work
+#endif
+
 static const cwork WORKS[] = {est_predict_work,        est_encoder_update_work,
                               est_camera_update_work,  est_chol_check_work,
                               est_oosm_accumulate_work, est_oosm_retrodict_work,
                               est_oosm_correct_work,   est_clone_predict_work,
                               est_clone_encoder_work,  est_clone_camera_work,
-                              transition_inverse_work, transition_step_work};
+                              transition_inverse_work, STEP_WORK};
 
 struct amsfe_est {
   amsfe_params par; /* pointers in it point into this block */
@@ -453,7 +465,7 @@ static int predict(amsfe_est *e, const double *u) {
   int N = e->d.N;
   const double *in[2] = {e->x, u};
   double *out[3] = {e->x1, e->A1, e->G};
-  gcall(&e->g, transition_step, in, 2, out, 3); /* x+, A, Gamma (eqs. 13, 4) */
+  gcall(&e->g, STEP, in, 2, out, 3); /* x+, A, Gamma (eqs. 13, 4) */
   if (!all_finite(e->x1, N) || !all_finite(e->A1, (long)N * N)) return AMSFE_ERR_NONFINITE;
   noise_cov(N, e->d.nw, e->G, e->qw, e->Q1);
   sandwich(N, e->A1, e->P, e->Q1, e->P1, e->T1); /* eq. (14) */
