@@ -22,11 +22,11 @@ from amsfe_sym.symbolic.spatial import (
     Placement,
     force_act,
     force_cross,
+    inertia_act,
     inertia_times,
     motion_act_inv,
     motion_cross,
     rodrigues,
-    inertia_act,
 )
 
 __all__ = ["RigidBodyTree"]

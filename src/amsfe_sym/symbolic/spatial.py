@@ -103,7 +103,6 @@ def inertia_times(pi: SXLike, m: SXLike) -> SXLike:
     return ca.vertcat(mass * v - cross(h, w), cross(h, v) + ca.mtimes(I_o, w))
 
 
-
 def inertia_act(X: Placement, pi: SXLike) -> SXLike:
     """A body's 10 dynamic parameters expressed in its parent's frame (Pinocchio
     ``Inertia::se3Action``): mass unchanged, ``h' = R h + m p``, and about the parent's
@@ -117,6 +116,11 @@ def inertia_act(X: Placement, pi: SXLike) -> SXLike:
     )
     Rh = ca.mtimes(X.R, h)
     px, Rhx = ca.skew(X.p), ca.skew(Rh)
-    rot2 = ca.mtimes([X.R, rot, X.R.T]) - ca.mtimes(Rhx, px) - ca.mtimes(px, Rhx) - m * ca.mtimes(px, px)
+    rot2 = (
+        ca.mtimes([X.R, rot, X.R.T])
+        - ca.mtimes(Rhx, px)
+        - ca.mtimes(px, Rhx)
+        - m * ca.mtimes(px, px)
+    )
     h2 = Rh + m * X.p
     return ca.vertcat(m, h2, rot2[0, 0], rot2[0, 1], rot2[1, 1], rot2[0, 2], rot2[1, 2], rot2[2, 2])

@@ -252,7 +252,9 @@ class Transition:
         # structural sparsity (RNEA does not depend on qm, qmd)
         rnea = self.tree.rnea(q, qd, a, th)
         d_rnea = ca.project(ca.jtimes(rnea, z, ca.SX.eye(n), True).T, ca.jacobian_sparsity(rnea, z))
-        dtau = ca.jacobian(self.stiffness(th) * (qm - q), z) - ca.substitute(d_rnea, a, f[n : 2 * n])
+        dtau = ca.jacobian(self.stiffness(th) * (qm - q), z) - ca.substitute(
+            d_rnea, a, f[n : 2 * n]
+        )
         dqdd = ldl_solve(self.tree.mass_matrix(q, th), ca.densify(dtau))
         rows = ca.vertcat(f[0:n], f[2 * n :])  # qd, qmd, qmdd: linear in z
         J_lin = ca.jacobian(rows, z)
