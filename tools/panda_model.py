@@ -46,37 +46,14 @@ FRANKA_DH = (
     (0.0, 0.107, 0.0),
 )
 
-#: Gaz et al. 2019, retrieved feasible parameters per link 1..7: mass [kg], centre of mass
-#: in the link (DH) frame [m], barycentric inertia (Ixx, Ixy, Ixz, Iyy, Iyz, Izz) [kg m^2].
-GAZ_MASS = (4.970684, 0.646926, 3.228604, 3.587895, 1.225946, 1.666555, 0.735522)
-GAZ_COM = (
-    (3.875e-03, 2.081e-03, 0.0),
-    (-3.141e-03, -2.872e-02, 3.495e-03),
-    (2.7518e-02, 3.9252e-02, -6.6502e-02),
-    (-5.317e-02, 1.04419e-01, 2.7454e-02),
-    (-1.1953e-02, 4.1065e-02, -3.8437e-02),
-    (6.0149e-02, -1.4117e-02, -1.0517e-02),
-    (1.0517e-02, -4.252e-03, 6.1597e-02),
-)
-GAZ_INERTIA = (
-    (7.0337e-01, -1.3900e-04, 6.7720e-03, 7.0661e-01, 1.9169e-02, 9.1170e-03),
-    (7.9620e-03, -3.9250e-03, 1.0254e-02, 2.8110e-02, 7.0400e-04, 2.5995e-02),
-    (3.7242e-02, -4.7610e-03, -1.1396e-02, 3.6155e-02, -1.2805e-02, 1.0830e-02),
-    (2.5853e-02, 7.7960e-03, -1.3320e-03, 1.9552e-02, 8.6410e-03, 2.8323e-02),
-    (3.5549e-02, -2.1170e-03, -4.0370e-03, 2.9474e-02, 2.2900e-04, 8.6270e-03),
-    (1.9640e-03, 1.0900e-04, -1.1580e-03, 4.3540e-03, 3.4100e-04, 5.4330e-03),
-    (1.2516e-02, -4.2800e-04, -1.1960e-03, 1.0027e-02, -7.4100e-04, 4.8150e-03),
-)
-#: Gaz et al.'s identified friction, tau_f = phi1 / (1 + exp(-phi2 (qd + phi3))) - const.
-GAZ_FRICTION = (
-    (0.54615, 5.1181, 0.039533),
-    (0.87224, 9.0657, 0.025882),
-    (0.64068, 10.136, -0.04607),
-    (1.2794, 5.5903, 0.036194),
-    (0.83904, 8.3469, 0.026226),
-    (0.30301, 17.133, -0.021047),
-    (0.56489, 10.336, 0.0035526),
-)
+
+
+def gaz2019() -> dict[str, list]:
+    """Gaz et al. 2019's identified parameters (robots/panda/gaz2019.toml, with its source)."""
+    import tomllib
+
+    with (PANDA / "gaz2019.toml").open("rb") as fh:
+        return tomllib.load(fh)
 
 
 def erd_panda_urdf() -> Path:
@@ -132,6 +109,8 @@ def check() -> dict[str, object]:
     from amsfe_sym.spec import load_spec
 
     out: dict[str, object] = {}
+    gz = gaz2019()
+    GAZ_MASS, GAZ_COM, GAZ_INERTIA = gz["mass"], gz["com"], gz["inertia"]
     spec = load_spec(PANDA / "robot.toml")
     full = pin.buildModelFromUrdf(str(PANDA / "panda.urdf"))
     data = full.createData()
@@ -190,7 +169,7 @@ def check() -> dict[str, object]:
 
     # friction: zero-velocity slope of the identified sigmoid [N m s/rad], torque at 1 rad/s
     slopes, at1 = [], []
-    for p1, p2, p3 in GAZ_FRICTION:
+    for p1, p2, p3 in gz["friction"]:
         e = np.exp(-p2 * p3)
         slopes.append(p1 * p2 * e / (1.0 + e) ** 2)
         at1.append(p1 / (1.0 + np.exp(-p2 * (1.0 + p3))) - p1 / (1.0 + e))
