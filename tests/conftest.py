@@ -15,8 +15,8 @@ from hypothesis import settings
 
 from amsfe_sym.codegen import ALL_PARTS, generate
 from amsfe_sym.load import Robot, load_robot
+from amsfe_sym.load.spec import robots_dir
 from amsfe_sym.runtime.library import ModelLibrary
-from amsfe_sym.spec import robots_dir
 
 # In CI (CI=true) property tests draw a fixed sequence of examples, so a red run can be
 # reproduced; locally they explore new examples each run.

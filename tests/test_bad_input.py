@@ -1,7 +1,7 @@
 """Bad input, as a new user would type it: one line (expected, found, fix), exit 2, no
 traceback, nothing written (issue 10, deliverables 1 and 6).
 
-Every case runs the CLI in-process (``amsfe_sym.cli.main``) from an empty working folder
+Every case runs the CLI in-process (``amsfe_sym.apps.cli.main``) from an empty working folder
 with ``$AMSFE_GENERATED_DIR`` pointing into it, and asserts the exit code, that stderr is
 exactly one ``error: ...`` line holding the expected words, and that the folder holds only
 the input files the case wrote.  A few run ``amsfe`` as a subprocess (exit codes, Ctrl-C).
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from amsfe_sym.cli import main
+from amsfe_sym.apps.cli import main
 from amsfe_sym.scenario import scenarios_dir
 
 BAD_URDFS = Path(__file__).parent / "data" / "bad_urdfs"
@@ -294,7 +294,7 @@ def test_duration_message_is_not_about_covariances(
 
 def _amsfe(*args: str, **kw: object) -> subprocess.Popen[str]:
     return subprocess.Popen(
-        [sys.executable, "-m", "amsfe_sym.cli", *args],
+        [sys.executable, "-m", "amsfe_sym.apps.cli", *args],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -386,12 +386,12 @@ def test_out_at_an_existing_run_folder_needs_force(tmp_path: Path, capsys) -> No
 def test_a_failure_while_writing_leaves_no_run_folder(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import amsfe_sym.plots
+    import amsfe_sym.apps.plots.run
 
     def boom(*args: object) -> None:
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(amsfe_sym.plots, "plot_run", boom)
+    monkeypatch.setattr(amsfe_sym.apps.plots.run, "plot_run", boom)
     out = tmp_path / "run"
     args = ["simulate", "--controller", "amsfe", "--duration", "0.05", "--no-progress"]
     assert main([*args, "--out", str(out)]) == 130

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from amsfe_sym.bench import (
+from amsfe_sym.apps.bench import (
     CALL_FUNCTIONS,
     ESTIMATOR_NAMES,
     CTimer,
@@ -22,12 +22,12 @@ from amsfe_sym.bench import (
     _state,
     time_calls,
 )
-from amsfe_sym.cli import main
+from amsfe_sym.apps.cli import main
+from amsfe_sym.apps.reference import PinocchioModel
 from amsfe_sym.codegen import generate
 from amsfe_sym.load import load_robot
-from amsfe_sym.reference import PinocchioModel
+from amsfe_sym.load.spec import load_spec
 from amsfe_sym.runtime.library import ModelLibrary
-from amsfe_sym.spec import load_spec
 
 
 def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path: Path) -> None:

@@ -12,13 +12,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from amsfe_sym.bench.scaling import bench_scaling, chain_urdf
-from amsfe_sym.bench.tick import BaselineEkf, bench_tick, fit_exponent
-from amsfe_sym.bench.ticks import timing_scenario
-from amsfe_sym.cli import main
+from amsfe_sym.apps.bench.scaling import bench_scaling, chain_urdf
+from amsfe_sym.apps.bench.tick import BaselineEkf, bench_tick, fit_exponent
+from amsfe_sym.apps.bench.ticks import timing_scenario
+from amsfe_sym.apps.cli import main
 from amsfe_sym.codegen import generate, library_for
 from amsfe_sym.estimation import make_estimator
 from amsfe_sym.load import load_robot
+from amsfe_sym.load.spec import load_spec
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.runtime.models import (
     CameraMeasurement,
@@ -26,7 +27,6 @@ from amsfe_sym.runtime.models import (
     EncoderMeasurement,
     noise_covariance,
 )
-from amsfe_sym.spec import load_spec
 
 
 def test_baseline_tick_equals_the_python_tick_on_the_semi_implicit_model() -> None:

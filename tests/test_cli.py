@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from amsfe_sym.cli import main
+from amsfe_sym.apps.cli import main
 
 
 def test_generate_without_arguments_is_cached(capsys, libraries) -> None:
@@ -30,3 +30,25 @@ def test_bad_robot_exits_2_with_one_clear_line(capsys, tmp_path) -> None:
 def test_lock_argument_parsing(tmp_path, capsys) -> None:
     assert main(["generate", "--lock", "j1=abc"]) == 2
     assert "JOINT=VALUE" in capsys.readouterr().err
+
+
+def test_version_answers(capsys) -> None:
+    """``amsfe --version`` prints the toolkit's version and exits 0, as every tool does."""
+    import amsfe_sym
+
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out.strip().startswith(f"amsfe {amsfe_sym.__version__}")
+
+
+def test_package_root_names_resolve_lazily() -> None:
+    """``amsfe_sym.generate`` and friends are the codegen functions, imported on first use."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, amsfe_sym; a = 'casadi' in sys.modules; "
+        "from amsfe_sym.codegen import generate; "
+        "print(a, amsfe_sym.generate is generate, amsfe_sym.load_library.__module__)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["False", "True", "amsfe_sym.codegen.libraries"]

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
+from amsfe_sym.codegen import library_for
 from amsfe_sym.errors import ConfigError, EstimatorError
 from amsfe_sym.estimation import CameraFrame, Estimator, StepReport, make_estimator
 from amsfe_sym.runtime.compiled_estimator import make_compiled_estimator
@@ -33,7 +34,7 @@ from amsfe_sym.runtime.models import (
 )
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.builders import filter_config, scenario_timing
-from amsfe_sym.simulate import library_for, run
+from amsfe_sym.sim.loop import run
 
 FloatArray = NDArray[np.float64]
 NAMES = ("encoders", "naive", "oosm", "replay", "cloning")
@@ -174,8 +175,8 @@ def test_non_converged_inverse_is_refused_identically(
     import shutil
 
     from amsfe_sym.codegen import generate
+    from amsfe_sym.load.spec import robots_dir
     from amsfe_sym.sim.loop import refusal_kind
-    from amsfe_sym.spec import robots_dir
 
     folder = tmp_path_factory.mktemp("inv1") / "paper_2link_inv1"
     folder.mkdir()

@@ -144,7 +144,7 @@ def test_a_runs_files_are_the_same_on_both_runtimes(tmp_path: Path) -> None:
     import csv
     import json
 
-    from amsfe_sym.cli import main
+    from amsfe_sym.apps.cli import main
 
     folders = {}
     for rt in ("compiled", "python"):

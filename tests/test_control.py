@@ -14,12 +14,13 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from amsfe_sym.check import random_states
+from amsfe_sym.apps.check import random_states
 from amsfe_sym.codegen import generate, library_for
 from amsfe_sym.control import make_controller
 from amsfe_sym.scenario import load_scenario
-from amsfe_sym.sim import trajectory_from_config
-from amsfe_sym.simulate import run, summarize
+from amsfe_sym.signals.trajectory import from_config as trajectory_from_config
+from amsfe_sym.sim.loop import run
+from amsfe_sym.sim.record import summarize
 from amsfe_sym.symbolic.control import fpow, sat
 
 # ----------------------------------------------------------------------------- reference
@@ -404,14 +405,14 @@ def test_amsfe_stays_bounded_within_the_torque_limit(paper_sim, seed: int) -> No
 
 
 def test_paper_law_divergence_is_detected_and_reported(paper_sim, tmp_path) -> None:
-    from amsfe_sym.simulate import write_run
+    from amsfe_sym.sim.record import write_run
 
     sc, lib = paper_sim
     res = run(sc.with_overrides(controller="amsfe-paper", duration=2.0), lib)
     assert res.diverged_at is not None and 0.0 < res.diverged_at < 2.0
     assert np.all(np.isfinite(res.u)) and np.all(np.isfinite(res.x_true))
     assert res.t[-1] == pytest.approx(res.diverged_at)
-    write_run(res, tmp_path / "run", plots=False)
+    write_run(res, tmp_path / "run")
     import json
 
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())

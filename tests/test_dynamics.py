@@ -7,7 +7,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from amsfe_sym.check import random_states, rel_err
+from amsfe_sym.apps.check import random_states, rel_err
 from amsfe_sym.load import load_robot
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
 from amsfe_sym.symbolic.model import build_functions

@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 import amsfe_sym.sim.loop as loop
-from amsfe_sym.camera_frame import CameraFrame
 from amsfe_sym.codegen import library_for
+from amsfe_sym.core.camera_frame import CameraFrame
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.record import summarize
 

@@ -10,7 +10,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from amsfe_sym.check import random_states, run_checks
+from amsfe_sym.apps.check import random_states, run_checks
 from amsfe_sym.codegen import generate
 from amsfe_sym.symbolic.model import build_functions
 

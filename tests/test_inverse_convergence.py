@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from amsfe_sym.check import run_checks
-from amsfe_sym.cli import main
+from amsfe_sym.apps.check import run_checks
+from amsfe_sym.apps.cli import main
 from amsfe_sym.codegen import generate
 from amsfe_sym.errors import ConvergenceError
 from amsfe_sym.load import load_robot

@@ -1,9 +1,15 @@
-"""The pipeline's layers: the runtime side never needs CasADi or Pinocchio."""
+"""The pipeline's layers (docs/architecture.md): each room imports only the rooms before it,
+no module imports itself back through others, and the runtime side never needs CasADi or
+Pinocchio."""
 
 from __future__ import annotations
 
+import ast
 import subprocess
 import sys
+from pathlib import Path
+
+import amsfe_sym
 
 #: Everything a simulation run needs once its library exists.
 RUNTIME_SIDE = (
@@ -14,6 +20,7 @@ RUNTIME_SIDE = (
     "amsfe_sym.runtime.compiled_estimator",
     "amsfe_sym.runtime.compiled_loop",
     "amsfe_sym.estimation",
+    "amsfe_sym.signals",
     "amsfe_sym.sim",
     "amsfe_sym.sim.builders",
     "amsfe_sym.sim.loop",
@@ -21,9 +28,10 @@ RUNTIME_SIDE = (
     "amsfe_sym.sim.record",
     "amsfe_sym.control",
     "amsfe_sym.scenario",
-    "amsfe_sym.provenance",
-    "amsfe_sym.plots",
-    "amsfe_sym.simulate",
+    "amsfe_sym.load.spec",
+    "amsfe_sym.core.provenance",
+    "amsfe_sym.apps.plots.run",
+    "amsfe_sym.apps.simulate",
 )
 
 
@@ -43,59 +51,78 @@ def test_runtime_side_imports_neither_casadi_nor_pinocchio() -> None:
 
 def test_the_check_can_fail() -> None:
     """The same probe sees CasADi once the code generator is imported."""
-    code = "import sys, amsfe_sym.codegen; print('casadi' in sys.modules)"
+    code = "import sys, amsfe_sym.codegen.build; print('casadi' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "True"
 
 
-#: What each stage may import from the package (docs/architecture.md, "Layers").  Keys and
+#: What each room may import from the package (docs/architecture.md, "Rooms").  Keys and
 #: values are module paths below ``amsfe_sym``; a key covers the module or package of that
-#: name, and the longest key wins.  Imports inside functions count too.
+#: name, and the longest key wins; a room may always import itself.  Imports inside
+#: functions count too.  ``from amsfe_sym import __version__`` (the package root) is allowed
+#: everywhere, nothing else of the root.
 ALLOWED: dict[str, set[str]] = {
     "errors": set(),
-    "_toml": {"errors"},
-    "camera_frame": set(),
-    "provenance": {""},
-    "spec": {"_toml", "errors"},
-    "scenario": {"_toml", "errors", "spec"},
-    "load": {"errors", "spec", "load"},
-    "symbolic": {"errors", "spec", "load", "symbolic"},
-    "codegen": {"", "errors", "spec", "scenario", "load", "symbolic", "runtime", "estimation"},
-    "runtime": {"errors", "runtime"},
+    "core": {"errors"},
+    "load": {"errors", "core"},
+    "scenario": {"errors", "core", "load.spec"},
+    "signals": {"errors", "core", "load.spec"},
+    "symbolic": {"errors", "core", "load"},
+    # codegen loads what it built (runtime) and checks a scenario's camera timing against the
+    # estimator's history (estimation.registry) and its vectors' lengths (signals) first
+    "codegen": {
+        "errors",
+        "core",
+        "load",
+        "scenario",
+        "signals",
+        "symbolic",
+        "runtime",
+        "estimation.registry",
+    },
+    "runtime": {"errors"},
     # the compiled estimators implement estimation's Estimator interface over the library
-    "runtime.compiled_estimator": {"errors", "runtime", "estimation", "camera_frame"},
-    "estimation": {"errors", "camera_frame", "estimation"},
-    "sim.sensors": {"errors", "camera_frame", "spec"},
-    "sim.trajectory": {"errors"},
-    "control": {"errors", "runtime", "sim.trajectory", "control"},
+    "runtime.compiled_estimator": {"errors", "runtime", "estimation", "core.camera_frame"},
+    "runtime.compiled_loop": {"errors", "runtime", "estimation", "core.camera_frame"},
+    "estimation": {"errors", "core.camera_frame"},
+    "control": {"errors", "runtime", "signals.trajectory"},
     "sim": {
         "errors",
-        "camera_frame",
+        "core",
+        "load.spec",
         "scenario",
+        "signals",
         "runtime",
         "estimation",
         "control",
-        "provenance",
-        "plots",
-        "sim",
     },
-    # apps: the sweep package runs simulations (codegen for its libraries), never the CLI,
-    # study or bench
-    "sweep": {
+    # the applications may import every room, never the command line
+    "apps": {
         "errors",
-        "_toml",
-        "spec",
+        "core",
+        "load",
         "scenario",
-        "preflight",
+        "signals",
+        "symbolic",
         "codegen",
-        "control",
-        "estimation",
-        "sim",
-        "provenance",
         "runtime",
-        "sweep",
+        "estimation",
+        "control",
+        "sim",
     },
+    "apps.cli": {""},  # the command line: everything
+    "__main__": {"apps.cli"},
 }
+
+ROOT = Path(amsfe_sym.__file__).parent
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for path in sorted(ROOT.rglob("*.py")):
+        parts = path.relative_to(ROOT).with_suffix("").parts
+        out[".".join(p for p in parts if p != "__init__")] = path
+    return out
 
 
 def _stage(module: str) -> str | None:
@@ -107,35 +134,128 @@ def _allowed(target: str, allowed: set[str]) -> bool:
     return any(a == "" or target == a or target.startswith(a + ".") for a in allowed)
 
 
-def test_each_stage_imports_only_earlier_ones() -> None:
-    import ast
-    from pathlib import Path
-
-    import amsfe_sym
-
-    root = Path(amsfe_sym.__file__).parent
-    bad = []
-    for path in sorted(root.rglob("*.py")):
-        parts = path.relative_to(root).with_suffix("").parts
-        module = ".".join(p for p in parts if p != "__init__")
-        stage = _stage(module)
-        if stage is None:  # the apps (cli, check, bench, study, plots, ...) may import all
+def _imports(module: str, path: Path) -> list[tuple[str, list[str]]]:
+    """(target module below amsfe_sym, names imported from it) for each import of a module;
+    the target ``""`` is the package root."""
+    found = []
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom):
+            name = node.module or ""
+            if node.level:  # relative: resolve against the package
+                base = package.split(".")[: len(package.split(".")) - (node.level - 1)]
+                name = ".".join([*(p for p in base if p), *([name] if name else [])])
+                name = f"amsfe_sym.{name}" if name else "amsfe_sym"
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name == "amsfe_sym" or a.name.startswith("amsfe_sym."):
+                    found.append((a.name[len("amsfe_sym.") :] if "." in a.name else "", []))
             continue
-        for node in ast.walk(ast.parse(path.read_text())):
-            names = (
-                [node.module or ""]
-                if isinstance(node, ast.ImportFrom)
-                else [a.name for a in node.names]
-                if isinstance(node, ast.Import)
-                else []
-            )
-            for name in names:
-                if name == "amsfe_sym":
-                    target = ""
-                elif name.startswith("amsfe_sym."):
-                    target = name[len("amsfe_sym.") :]
-                else:
-                    continue
-                if not _allowed(target, ALLOWED[stage] | {stage}):
-                    bad.append(f"{module} imports amsfe_sym.{target}")
+        else:
+            continue
+        if name == "amsfe_sym":
+            found.append(("", names))
+        elif name.startswith("amsfe_sym."):
+            found.append((name[len("amsfe_sym.") :], names))
+    return found
+
+
+def test_each_room_imports_only_earlier_ones() -> None:
+    bad = []
+    modules = _modules()
+    for module, path in modules.items():
+        if module == "":
+            continue
+        stage = _stage(module)
+        assert stage is not None, f"amsfe_sym.{module} is in no room of ALLOWED"
+        for target, names in _imports(module, path):
+            if target == "":
+                extra = sorted(set(names) - {"__version__", "AmsfeError"})
+                if extra and "" not in ALLOWED[stage]:
+                    bad.append(f"{module} imports {extra} from the package root")
+                continue
+            if not _allowed(target, ALLOWED[stage] | {stage}) or (
+                _allowed(target, {"apps.cli"}) and module not in ("__main__", "apps.cli")
+            ):
+                bad.append(f"{module} imports amsfe_sym.{target}")
     assert bad == [], "\n".join(bad)
+
+
+def test_no_import_cycles() -> None:
+    """No module reaches itself through the package's imports (top-level or inside
+    functions): a cycle means two modules are one concept, or one belongs elsewhere."""
+    modules = _modules()
+    graph: dict[str, set[str]] = {}
+    for module, path in modules.items():
+        edges = set()
+        for target, names in _imports(module, path):
+            # ``from pkg import sub`` imports the submodule pkg.sub
+            for t in [target, *(f"{target}.{n}" if target else n for n in names)]:
+                if t in modules and t != module:
+                    edges.add(t)
+        graph[module] = edges
+    # a package's __init__ re-exporting its own modules is not a cycle of concepts
+    for module in graph:
+        graph[module] = {t for t in graph[module] if not module.startswith(t + ".") or t == ""}
+    graph.pop("", None)
+    for edges in graph.values():
+        edges.discard("")
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    cycles: list[list[str]] = []
+    counter = [0]
+
+    def visit(v: str) -> None:  # Tarjan's strongly connected components
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                cycles.append(sorted(comp))
+
+    sys.setrecursionlimit(max(sys.getrecursionlimit(), 10000))
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    assert cycles == [], f"import cycles: {cycles}"
+
+
+def test_the_layer_checks_can_fail(tmp_path: Path) -> None:
+    """The parser sees an import inside a function and a relative import."""
+    src = tmp_path / "m.py"
+    src.write_text("def f():\n    from amsfe_sym.apps.cli import main\nfrom ..sim import loop\n")
+    found = _imports("estimation.m", src)
+    assert ("apps.cli", ["main"]) in found and ("sim", ["loop"]) in found
+    assert not _allowed("apps.cli", ALLOWED["estimation"])
+
+
+def test_no_module_over_500_lines() -> None:
+    long = {m: n for m, p in _modules().items() if (n := len(p.read_text().splitlines())) > 500}
+    assert long == {}, f"modules over 500 lines: {long}"
+
+
+def test_each_room_says_what_it_is_for() -> None:
+    """Every folder's __init__ has a docstring naming what it may import."""
+    missing = []
+    for init in ROOT.rglob("__init__.py"):
+        doc = ast.get_docstring(ast.parse(init.read_text())) or ""
+        if init.parent != ROOT and "may import" not in doc.lower():
+            missing.append(str(init.relative_to(ROOT)))
+    assert missing == [], f"rooms whose __init__ does not say what they may import: {missing}"

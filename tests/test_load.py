@@ -11,10 +11,10 @@ import pinocchio as pin
 import pytest
 
 from amsfe_sym import errors
-from amsfe_sym.check import random_states, rel_err
+from amsfe_sym.apps.check import random_states, rel_err
 from amsfe_sym.codegen import generate
 from amsfe_sym.load import load_robot
-from amsfe_sym.spec import default_spec
+from amsfe_sym.load.spec import default_spec
 from amsfe_sym.symbolic.model import build_functions
 
 from .conftest import DATA

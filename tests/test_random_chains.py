@@ -12,9 +12,9 @@ import pinocchio as pin
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from amsfe_sym.check import rel_err
+from amsfe_sym.apps.check import rel_err
 from amsfe_sym.load import load_robot
-from amsfe_sym.spec import default_spec
+from amsfe_sym.load.spec import default_spec
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
 
 

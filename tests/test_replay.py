@@ -24,7 +24,7 @@ def test_recorded_torques_replay_the_true_states(tmp_path: Path) -> None:
     sc = dataclasses.replace(sc, plant=plant)
     lib = library_for(sc)
     out = tmp_path / "run"
-    write_run(run(sc, lib), out, plots=False)
+    write_run(run(sc, lib), out)
     header = (out / "timeseries.csv").read_text().splitlines()[0].split(",")
     ts = np.loadtxt(out / "timeseries.csv", delimiter=",", skiprows=1)
     n = lib.n

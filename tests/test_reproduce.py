@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from amsfe_sym.cli import main
+from amsfe_sym.apps.cli import main
 
 SIM_FIGURES = (
     "fig04_estimation_errors.png",

@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from amsfe_sym.cli import main
+from amsfe_sym.apps.cli import main
 from amsfe_sym.codegen import library_for
 from amsfe_sym.errors import ConfigError
 from amsfe_sym.scenario import load_scenario
-from amsfe_sym.simulate import run, summarize
+from amsfe_sym.sim.loop import run
+from amsfe_sym.sim.record import summarize
 
 
 @pytest.fixture(scope="module")
@@ -217,7 +218,7 @@ def test_paper_exp_runs(tmp_path: Path) -> None:
 
 def test_controller_reference_grid_equals_direct_evaluation(paper_sim) -> None:
     from amsfe_sym.control import make_controller
-    from amsfe_sym.sim import trajectory_from_config
+    from amsfe_sym.signals.trajectory import from_config as trajectory_from_config
 
     sc, lib = paper_sim
     traj = trajectory_from_config(dict(sc.trajectory))
@@ -236,11 +237,11 @@ def test_controller_reference_grid_equals_direct_evaluation(paper_sim) -> None:
 def test_run_folder_values_match_the_run(paper_sim, tmp_path: Path) -> None:
     """timeseries.csv and frames.csv hold the run's values (full precision), and
     every frame is where the camera saw the true tracked point at its exposure step."""
-    from amsfe_sym.simulate import write_run
+    from amsfe_sym.sim.record import write_run
 
     sc, lib = paper_sim
     res = run(sc.with_overrides(duration=1.0, estimator="replay", seed=4), lib)
-    write_run(res, tmp_path / "run", plots=False)
+    write_run(res, tmp_path / "run")
     ts = np.loadtxt(tmp_path / "run" / "timeseries.csv", delimiter=",", skiprows=1)
     N, n = lib.N, lib.n
     cols = [res.t, res.x_true, res.x_hat, res.P_diag, res.nees, res.q_des, res.u, res.z_enc]

@@ -10,13 +10,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from amsfe_sym.cli import main
+from amsfe_sym.apps.cli import main
 from amsfe_sym.codegen import library_for
 from amsfe_sym.errors import CodegenError, ConfigError
 from amsfe_sym.runtime.manifest import Manifest
 from amsfe_sym.scenario import apply_sets, camera_timing, load_scenario
 from amsfe_sym.sim.builders import build_run
-from amsfe_sym.simulate import run
+from amsfe_sym.sim.loop import run
 
 
 @pytest.fixture(scope="module")

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from amsfe_sym.cli import main
+from amsfe_sym.apps.cli import main
+from amsfe_sym.apps.study import apply_sets, nees_band, parse_estimators, run_study, settle_time
 from amsfe_sym.errors import ConfigError
 from amsfe_sym.estimation import ESTIMATORS
 from amsfe_sym.scenario import load_scenario
-from amsfe_sym.study import apply_sets, nees_band, parse_estimators, run_study, settle_time
 
 
 # --------------------------------------------------------------------------- NEES band
@@ -193,7 +193,8 @@ def test_study_end_to_end(tmp_path, capsys) -> None:
 
 def test_study_in_process_matches_simulate_and_supports_variants(tmp_path) -> None:
     from amsfe_sym.codegen import library_for
-    from amsfe_sym.simulate import run, summarize
+    from amsfe_sym.sim.loop import run
+    from amsfe_sym.sim.record import summarize
 
     res = run_study(
         "paper-exp",

@@ -17,10 +17,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from amsfe_sym.cli import main
-from amsfe_sym.errors import ConfigError
-from amsfe_sym.spec import load_spec
-from amsfe_sym.sweep import (
+from amsfe_sym.apps.cli import main
+from amsfe_sym.apps.sweep import (
     SweepOptions,
     expand_jobs,
     flatten,
@@ -30,9 +28,11 @@ from amsfe_sym.sweep import (
     run_job,
     run_sweep,
 )
-from amsfe_sym.sweep.report import aggregate, format_report
-from amsfe_sym.sweep.robot_axes import derive_spec
-from amsfe_sym.sweep.table import PARTS, RESULTS
+from amsfe_sym.apps.sweep.report import aggregate, format_report
+from amsfe_sym.apps.sweep.robot_axes import derive_spec
+from amsfe_sym.apps.sweep.table import PARTS, RESULTS
+from amsfe_sym.errors import ConfigError
+from amsfe_sym.load.spec import load_spec
 
 #: Columns that are timings (differ between two runs of the same thing).
 TIMING = ["wall_time_s", "cost_per_tick_us"]
@@ -292,7 +292,7 @@ def test_an_interrupted_sweep_resumes_without_repeating_done_rows(tmp_path: Path
     cmd = [
         sys.executable,
         "-m",
-        "amsfe_sym.cli",
+        "amsfe_sym.apps.cli",
         "sweep",
         str(path),
         "--out",
@@ -399,7 +399,7 @@ def test_a_robot_axis_runs_on_its_own_library(tmp_path: Path) -> None:
     (job,) = expand_jobs(spec)
     row = run_job(job)
     assert row["status"] == "ok", row["error"]
-    from amsfe_sym.sweep.jobs import _library
+    from amsfe_sym.apps.sweep.jobs import _library
 
     lib = _library(job.scenario, job.robot)
     base = load_spec("paper_2link")

@@ -18,7 +18,8 @@ import pytest
 
 from amsfe_sym.codegen import library_for
 from amsfe_sym.scenario import load_scenario
-from amsfe_sym.simulate import run, summarize
+from amsfe_sym.sim.loop import run
+from amsfe_sym.sim.record import summarize
 
 ESTIMATORS = ("encoders", "naive", "oosm", "replay", "cloning")
 

@@ -18,10 +18,10 @@ import argparse
 from dataclasses import replace
 
 from amsfe_sym.codegen import load_library
+from amsfe_sym.load.spec import load_spec
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
 from amsfe_sym.sim.record import summarize
-from amsfe_sym.spec import load_spec
 
 
 def main() -> None:

@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.runtime.library import ModelLibrary
-from amsfe_sym.sim.trajectory import Trajectory
+from amsfe_sym.signals.trajectory import Trajectory
 
 __all__ = ["CONTROLLERS", "Controller", "make_controller", "register"]
 

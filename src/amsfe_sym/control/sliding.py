@@ -33,7 +33,7 @@ import numpy as np
 from amsfe_sym.control.base import Controller, FloatArray, register
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.runtime.library import ModelLibrary
-from amsfe_sym.sim.trajectory import Trajectory
+from amsfe_sym.signals.trajectory import Trajectory
 
 __all__ = ["Amsfe", "AmsfePaper", "Dtsmc", "DtsmcEstimate", "DtsmcPaper", "Truth"]
 

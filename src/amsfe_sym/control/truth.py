@@ -23,7 +23,7 @@ import numpy as np
 
 from amsfe_sym.control.base import Controller, FloatArray, register
 from amsfe_sym.runtime.library import ModelLibrary
-from amsfe_sym.sim.trajectory import Trajectory
+from amsfe_sym.signals.trajectory import Trajectory
 
 __all__ = ["TruthComputedTorque"]
 

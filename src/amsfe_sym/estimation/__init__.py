@@ -11,6 +11,9 @@ plug in alike. Five estimators share one interface (:class:`Estimator`):
 - ``cloning``: stochastic cloning of the state at each exposure (exact for linear-Gaussian).
 
 See ``docs/estimation-algorithms.md`` for the maths.
+
+May import: errors, core.camera_frame; numpy and scipy only (the robot is seen through
+the TransitionModel / MeasurementModel protocols).
 """
 
 from amsfe_sym.estimation.base import DEFAULT_CONFIG, Estimator, FilterConfig, StepReport

@@ -21,7 +21,7 @@ import numpy as np
 import scipy.linalg as sla
 from numpy.typing import ArrayLike, NDArray
 
-from amsfe_sym.camera_frame import CameraFrame
+from amsfe_sym.core.camera_frame import CameraFrame
 from amsfe_sym.errors import ModelError, ShapeError, describe
 
 __all__ = [

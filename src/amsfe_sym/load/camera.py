@@ -10,8 +10,8 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import SpecError, describe
+from amsfe_sym.load.spec import RobotSpec
 from amsfe_sym.load.types import CameraModel
-from amsfe_sym.spec import RobotSpec
 
 __all__ = ["resolve_camera", "workspace"]
 

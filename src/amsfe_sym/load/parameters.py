@@ -9,8 +9,8 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import SpecError, describe
+from amsfe_sym.load.spec import RobotSpec, ThetaSpec
 from amsfe_sym.load.types import JointInfo, ThetaBinding
-from amsfe_sym.spec import RobotSpec, ThetaSpec
 
 __all__ = ["DEFAULT_FM", "DEFAULT_KS", "DEFAULT_MM", "bind_theta", "default_stiffness", "per_joint"]
 

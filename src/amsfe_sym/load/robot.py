@@ -39,9 +39,9 @@ from amsfe_sym.load.parameters import (
     default_stiffness,
     per_joint,
 )
+from amsfe_sym.load.spec import RobotSpec, load_spec
 from amsfe_sym.load.types import CameraModel, JointInfo, Robot, ThetaBinding
 from amsfe_sym.load.urdf import link_inertias, validate_urdf
-from amsfe_sym.spec import RobotSpec, load_spec
 
 __all__ = ["CameraModel", "JointInfo", "Robot", "ThetaBinding", "load_robot"]
 

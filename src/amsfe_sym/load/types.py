@@ -12,7 +12,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from amsfe_sym.spec import RobotSpec, ThetaSpec
+from amsfe_sym.load.spec import RobotSpec, ThetaSpec
 
 __all__ = ["CameraModel", "JointInfo", "JointKind", "Robot", "ThetaBinding"]
 

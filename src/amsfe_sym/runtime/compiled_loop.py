@@ -30,6 +30,15 @@ from amsfe_sym.runtime.compiled_estimator import (
     estimator_log_lines,
     log_numbers,
 )
+from amsfe_sym.runtime.loop_abi import (
+    CONTROLLER_CODES,
+    CtrlOut,
+    CtrlParams,
+    SimParams,
+    SimRecords,
+    SimulationState,
+    bind_loop,
+)
 
 __all__ = [
     "CONTROLLER_CODES",
@@ -43,132 +52,6 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
-_P = ctypes.c_void_p
-
-#: ``enum amsfe_controller`` of amsfe_loop.h, by controller name.
-CONTROLLER_CODES = {
-    "amsfe": 0,
-    "dtsmc": 1,
-    "dtsmc-ekf": 2,
-    "truth": 3,
-    "amsfe-paper": 4,
-    "dtsmc-paper": 5,
-    "truth-ct": 6,
-}
-
-
-class _CtrlParams(ctypes.Structure):
-    _fields_ = [
-        ("controller", ctypes.c_int),
-        ("T", ctypes.c_double),
-        *((k, _P) for k in ("h", "lam", "Lt", "eps", "phi")),
-        ("p", ctypes.c_double),
-        *((k, _P) for k in ("wm", "tau_max", "wf", "vmax")),
-        ("qmd_next_hold", ctypes.c_int),
-        ("state_true", ctypes.c_int),
-        ("link_bandwidth", ctypes.c_double),
-        ("motor_bandwidth", ctypes.c_double),
-        *((k, _P) for k in ("u_max", "Mm", "Fm", "Ks", "ks_theta", "theta_initial")),
-    ]
-
-
-class _CtrlOut(ctypes.Structure):
-    _fields_ = [("s", _P), ("bound", _P), ("tau_d", _P), ("saturated", ctypes.c_int)]
-
-
-class _SimParams(ctypes.Structure):
-    _fields_ = [
-        ("K", ctypes.c_long),
-        *((k, _P) for k in ("x_plant0", "theta_true", "ref", "enc_noise")),
-        ("enc_resolution", ctypes.c_double),
-        ("tau_d", _P),
-        *((k, ctypes.c_int) for k in ("cam_period", "cam_phase", "cam_delay")),
-        *((k, ctypes.c_double) for k in ("cam_width", "cam_height", "pixel_std")),
-        ("round_to_pixel", ctypes.c_int),
-        ("drop_probability", ctypes.c_double),
-        ("n_exposures", ctypes.c_long),
-        *((k, _P) for k in ("cam_noise", "cam_uniform", "cam_jitter")),
-        ("max_in_flight", ctypes.c_int),
-        ("diverged_error", ctypes.c_double),
-    ]
-
-
-class _SimRecords(ctypes.Structure):
-    _fields_ = [
-        *((k, _P) for k in ("x_true", "x_hat", "P_diag", "nees", "u", "z_enc", "s", "bound")),
-        ("saturated", _P),
-        ("frames", _P),
-        ("frames_capacity", ctypes.c_long),
-    ]
-
-
-_COUNTERS = (
-    "frames_applied",
-    "frames_rejected",
-    "encoder_rejected",
-    "refused_nan",
-    "refused_too_late",
-    "refused_gated",
-    "refused_indefinite",
-    "refused_no_convergence",
-    "refused_unscheduled",
-    "refused_other",
-    "frames_exposed",
-    "frames_delivered",
-    "frames_dropped",
-    "frames_out_of_image",
-    "frames_out_of_image_true",
-    "frames_out_of_order",
-    "frames_recorded",
-)
-
-
-class SimulationState(ctypes.Structure):
-    """``amsfe_sim_state``: the next tick, whether the loop diverged, its counters."""
-
-    _fields_ = [
-        ("k", ctypes.c_long),
-        ("ticks_done", ctypes.c_long),
-        ("diverged", ctypes.c_int),
-        ("status", ctypes.c_int),
-        *((k, ctypes.c_long) for k in _COUNTERS),
-        ("plant_nonfinite", ctypes.c_int),
-    ]
-
-    def counters(self) -> dict[str, int]:
-        """The counters by name (those of ``summary.json``)."""
-        return {k: int(getattr(self, k)) for k in _COUNTERS}
-
-
-def _bind(cdll: ctypes.CDLL) -> dict[str, Any]:
-    spec: dict[str, tuple[Any, list[Any]]] = {
-        "amsfe_ctrl_memory_size": (ctypes.c_size_t, [_P]),
-        "amsfe_ctrl_init": (ctypes.c_int, [_P, _P, _P, ctypes.c_size_t]),
-        "amsfe_ctrl_reset": (None, [_P]),
-        "amsfe_ctrl_torque": (ctypes.c_int, [_P, ctypes.c_long, _P, _P, _P, _P, _P, _P]),
-        "amsfe_sim_memory_size": (ctypes.c_size_t, [_P]),
-        "amsfe_sim_init": (ctypes.c_int, [_P, _P, _P, _P, _P, ctypes.c_size_t]),
-        "amsfe_sim_run": (ctypes.c_int, [_P, ctypes.c_long, _P]),
-        "amsfe_sim_get_state": (None, [_P, _P]),
-        "amsfe_status_string": (ctypes.c_char_p, [ctypes.c_int]),
-    }
-    out = {}
-    for name, (restype, argtypes) in spec.items():
-        try:
-            fn = cdll[name]
-        except AttributeError as exc:
-            raise ConfigError(
-                describe(
-                    "the compiled closed loop",
-                    f"{name} in the library",
-                    "a library without amsfe_loop.c (a partial or older build)",
-                    "regenerate the full library: amsfe generate ROBOT --force",
-                )
-            ) from exc
-        fn.restype = restype
-        fn.argtypes = argtypes
-        out[name] = fn
-    return out
 
 
 def _f64(values: Any, size: int | None = None) -> FloatArray:
@@ -203,7 +86,7 @@ class ControllerParams:
     motor_bandwidth: float = 0.0
     _keep: list[Any] = field(default_factory=list, repr=False)
 
-    def struct(self) -> _CtrlParams:
+    def struct(self) -> CtrlParams:
         """The C struct (its arrays are kept alive by this object)."""
         if self.name not in CONTROLLER_CODES:
             raise ConfigError(
@@ -228,7 +111,7 @@ class ControllerParams:
             a = arrays[key]
             return None if a is None else int(a.ctypes.data)
 
-        return _CtrlParams(
+        return CtrlParams(
             CONTROLLER_CODES[self.name],
             self.T,
             *(ptr(k) for k in ("h", "lam", "Lt", "eps", "phi")),
@@ -252,7 +135,7 @@ class CompiledController:
     """
 
     def __init__(self, library_path: str, params: ControllerParams, n: int) -> None:
-        self._c = _bind(ctypes.CDLL(library_path))
+        self._c = bind_loop(ctypes.CDLL(library_path))
         self.params = params
         self.n = n
         self._struct = params.struct()
@@ -279,7 +162,7 @@ class CompiledController:
         self.bound = np.full(n, np.nan)
         self.tau_d = np.zeros(n)
         self.saturated = False
-        self._out = _CtrlOut(self.s.ctypes.data, self.bound.ctypes.data, self.tau_d.ctypes.data, 0)
+        self._out = CtrlOut(self.s.ctypes.data, self.bound.ctypes.data, self.tau_d.ctypes.data, 0)
 
     def reset(self) -> None:
         """Forget the memory between ticks (as a new controller)."""
@@ -383,7 +266,7 @@ class CompiledSimulation:
         inputs: SimulationInputs,
         N: int,
     ) -> None:
-        self._c = _bind(ctypes.CDLL(library_path))
+        self._c = bind_loop(ctypes.CDLL(library_path))
         n = controller.n
         K = inputs.ref.shape[0]
         self.K, self.n, self.N = K, n, N
@@ -402,7 +285,7 @@ class CompiledSimulation:
         ]
         a = [arr.ctypes.data for arr in self._arrays]
         max_jitter = int(jitter.max()) if E else 0
-        self._params = _SimParams(
+        self._params = SimParams(
             K,
             a[0],
             a[1],
@@ -458,7 +341,7 @@ class CompiledSimulation:
             state=SimulationState(),
         )
         r = self.rec
-        self._records = _SimRecords(
+        self._records = SimRecords(
             *(
                 arr.ctypes.data
                 for arr in (r.x_true, r.x_hat, r.P_diag, r.nees, r.u, r.z_enc, r.s, r.bound)

@@ -1,50 +1,13 @@
-"""Simulation: sensors (encoders, camera, torque noise), desired trajectories, and the
-closed loop.
+"""Stage 6 of the pipeline, sim: the closed loop on a simulated arm.
 
-- ``sensors``, ``trajectory``: the signals (pure numpy; all randomness comes from a
-  :class:`numpy.random.Generator` passed in); re-exported here;
 - ``builders``: a scenario + a library -> plant start, sensors, estimator, controller;
-- ``loop``: :func:`~amsfe_sym.sim.loop.run`, the closed-loop simulation;
-- ``record``: the run folder and the summary metrics.
+- ``loop``: :func:`~amsfe_sym.sim.loop.run`, the closed-loop simulation (the Python
+  reference loop, or the compiled one of ``compiled``);
+- ``compiled``: the same run on the library's C loop;
+- ``result``: :class:`~amsfe_sym.sim.result.RunResult` and the counters both runtimes fill;
+- ``record``: the run folder and the summary metrics (no figures: the apps draw them).
 
-Importing this package does not import the closed loop (``builders``, ``loop``,
-``record``); import those modules by name.
+The sensors and trajectories are :mod:`amsfe_sym.signals`.  May import: errors, core,
+scenario, signals, runtime, estimation, control.  Importing this package does not import
+the closed loop; import those modules by name.
 """
-
-from amsfe_sym.sim.sensors import (
-    Camera,
-    CameraConfig,
-    CameraFrame,
-    CameraStats,
-    Disturbance,
-    EncoderConfig,
-    Encoders,
-    TorqueNoise,
-)
-from amsfe_sym.sim.trajectory import (
-    Constant,
-    PaperExperiment,
-    Sinusoid,
-    Trajectory,
-    TrajectoryPoint,
-    tip_circle,
-)
-from amsfe_sym.sim.trajectory import from_config as trajectory_from_config
-
-__all__ = [
-    "Camera",
-    "CameraConfig",
-    "CameraFrame",
-    "CameraStats",
-    "Constant",
-    "Disturbance",
-    "EncoderConfig",
-    "Encoders",
-    "PaperExperiment",
-    "Sinusoid",
-    "TorqueNoise",
-    "Trajectory",
-    "TrajectoryPoint",
-    "tip_circle",
-    "trajectory_from_config",
-]

@@ -37,9 +37,9 @@ from amsfe_sym.runtime.models import (
     noise_covariance,
 )
 from amsfe_sym.scenario import CameraTiming, Scenario, camera_timing
-from amsfe_sym.sim.sensors import Camera, CameraConfig, Disturbance, EncoderConfig, Encoders
-from amsfe_sym.sim.trajectory import Trajectory
-from amsfe_sym.sim.trajectory import from_config as trajectory_from_config
+from amsfe_sym.signals import Camera, CameraConfig, Disturbance, EncoderConfig, Encoders
+from amsfe_sym.signals.trajectory import Trajectory
+from amsfe_sym.signals.trajectory import from_config as trajectory_from_config
 
 __all__ = [
     "RunParts",

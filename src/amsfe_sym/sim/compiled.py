@@ -28,7 +28,7 @@ from amsfe_sym.runtime.compiled_loop import (
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.sim.builders import RunParts, build_run, build_sensors
-from amsfe_sym.sim.loop import (
+from amsfe_sym.sim.result import (
     CAMERA_COUNTERS,
     DECISION_COUNTERS,
     DIVERGED_TRACKING_ERROR,

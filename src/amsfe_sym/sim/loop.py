@@ -3,7 +3,7 @@
 One tick k (t_k = k T):
 
 1. the sensors read the true plant state x_k: encoders every step, the camera exposes
-   every l steps and delivers frames d steps later (``amsfe_sym.sim.sensors``);
+   every l steps and delivers frames d steps later (``amsfe_sym.signals``);
 2. the estimator advances from k-1 to k with u_{k-1}, the encoder sample and the frames
    delivered at k (``amsfe_sym.estimation``);
 3. the controller computes u_k (``amsfe_sym.control``);
@@ -20,8 +20,6 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,6 +28,16 @@ from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.sim.builders import build_run
+from amsfe_sym.sim.result import (
+    CAMERA_COUNTERS,
+    DECISION_COUNTERS,
+    DIVERGED_TRACKING_ERROR,
+    REFUSAL_KINDS,
+    RUNTIMES,
+    RunResult,
+    refusal_kind,
+    tick_bar,
+)
 
 __all__ = [
     "CAMERA_COUNTERS",
@@ -46,105 +54,6 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
-
-
-@dataclass
-class RunResult:
-    """Everything a run produced.
-
-    Attributes:
-        scenario: The resolved scenario.
-        lib: The model library used.
-        t: Times [s], shape (K,).
-        x_true: True state [q, qd, qm, qmd, theta] at each tick, (K, N).
-        x_hat: Posterior estimate x(k|k), (K, N).
-        P_diag: Diagonal of P(k|k), (K, N).
-        nees: Normalised estimation error squared e^T P^-1 e, (K,).
-        q_des: Desired link angles, (K, n).
-        u: Motor torques [N m], (K, n).
-        z_enc: Encoder samples, (K, 2n).
-        tau_d: Disturbance torques [tau_l, tau_m] [N m] applied to the plant over
-            [t_k, t_k + T], (K, 2n) (the last row, after the run, is zero): with ``u`` and the
-            true theta, ``plant_step`` replays ``x_true`` exactly.
-        frames: Delivered camera frames: rows (exposure step, delivery step, u px, v px).
-        wall_time_s: Wall time of the loop [s].
-        counters: Sensor and estimator counts (frames applied, rejected, and
-            ``refused_<kind>``: why frames were refused, see :data:`REFUSAL_KINDS`).
-        s: Sliding variable s(k) of eq. (33) per joint, (K, n) (NaN for laws without one).
-        bound: The norm inside the gain condition (38) per joint, (K, n) (NaN if none).
-        saturated: Whether the actuator limit clipped u(k), (K,).
-        diverged_at: Time [s] the loop was stopped because it diverged (the arrays end
-            there), or None.
-        runtime: Which loop made the run: ``"python"`` (the reference) or ``"compiled"``.
-    """
-
-    scenario: Scenario
-    lib: ModelLibrary
-    t: FloatArray
-    x_true: FloatArray
-    x_hat: FloatArray
-    P_diag: FloatArray
-    nees: FloatArray
-    q_des: FloatArray
-    u: FloatArray
-    z_enc: FloatArray
-    frames: FloatArray
-    wall_time_s: float
-    counters: dict[str, int] = field(default_factory=dict)
-    s: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
-    bound: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
-    saturated: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
-    diverged_at: float | None = None
-    tau_d: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
-    runtime: str = "python"
-
-
-#: Why an estimator refused a camera frame, from its report's reason: (kind, words).
-REFUSAL_KINDS: tuple[tuple[str, tuple[str, ...]], ...] = (
-    ("nan", ("NaN or inf",)),
-    ("too_late", ("older than the history", "no clone left")),
-    ("gated", ("gated out",)),  # outliers, pixels far outside the predicted image point
-    ("indefinite", ("indefinite covariance",)),
-    ("no_convergence", ("did not converge",)),
-    ("unscheduled", ("not a scheduled exposure",)),
-)
-
-
-#: The counters of a run's ``summary.json``, in their order: the estimator's decisions, then
-#: what happened to the camera's frames (both runtimes fill the same names).
-DECISION_COUNTERS: tuple[str, ...] = (
-    "frames_applied",
-    "frames_rejected",
-    "encoder_rejected",
-    *(f"refused_{kind}" for kind, _ in REFUSAL_KINDS),
-    "refused_other",
-)
-CAMERA_COUNTERS = ("frames_exposed", "frames_delivered", "frames_dropped", "frames_out_of_image")
-
-
-def tick_bar(sc: Scenario, total: int, runtime: str) -> Any:
-    """The progress bar of a run of ``total`` ticks."""
-    from tqdm import tqdm
-
-    label = "" if runtime == "python" else f", {runtime}"
-    return tqdm(
-        total=total,
-        desc=f"{sc.name} [{sc.estimator}, {sc.controller}{label}]",
-        unit="tick",
-        mininterval=0.5,
-    )
-
-
-def refusal_kind(reason: str) -> str:
-    """The counter (``refused_<kind>`` in ``summary.json``) of one refusal reason."""
-    for kind, words in REFUSAL_KINDS:
-        if any(w in reason for w in words):
-            return kind
-    return "other"
-
-
-#: The runtimes of :func:`run`: the compiled C loop, or this module's Python reference.
-RUNTIMES = ("compiled", "python")
 
 
 def run(
@@ -176,7 +85,7 @@ def run(
             describe("runtime", f"one of {list(RUNTIMES)}", repr(runtime), "use 'compiled'")
         )
     if runtime == "compiled":
-        from amsfe_sym.sim.compiled import run_compiled  # it builds on this module
+        from amsfe_sym.sim.compiled import run_compiled  # the same run in C
 
         return run_compiled(scenario, lib, progress)
     sc = scenario
@@ -290,10 +199,6 @@ def run(
         diverged_at=diverged_at,
         tau_d=tau_rec[cut],
     )
-
-
-#: A tracking error beyond this [rad or m] means the closed loop has lost the arm.
-DIVERGED_TRACKING_ERROR = np.pi
 
 
 def _diverged(xp: FloatArray, q_des: FloatArray, u: FloatArray) -> bool:

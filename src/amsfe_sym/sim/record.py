@@ -7,6 +7,7 @@ import json
 import os
 import shutil
 import tempfile
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -14,11 +15,14 @@ from typing import Any
 import numpy as np
 
 from amsfe_sym.control.metrics import control_metrics, sliding_conditions
+from amsfe_sym.core.provenance import provenance
 from amsfe_sym.errors import ConfigError, RunFolderError, describe
-from amsfe_sym.provenance import provenance
 from amsfe_sym.scenario import Scenario, dump_toml
 from amsfe_sym.sim.builders import scenario_timing
-from amsfe_sym.sim.loop import RunResult
+from amsfe_sym.sim.result import RunResult
+
+#: Draws a finished run's figures into a folder: ``figures(result, folder)``.
+Figures = Callable[[RunResult, Path], object]
 
 __all__ = ["WINDOW_START", "nees_band", "summarize", "window", "write_run"]
 
@@ -138,13 +142,19 @@ def check_out(out: Path, force: bool = False) -> None:
         )
 
 
-def write_run(res: RunResult, out: Path, plots: bool = True, force: bool = False) -> Path:
+def write_run(
+    res: RunResult, out: Path, figures: Figures | None = None, force: bool = False
+) -> Path:
     """Write config.toml, timeseries.csv, frames.csv, summary.json (+ figures) to ``out``.
+
+    ``figures(res, folder)`` draws the run's figures into the folder before it is moved into
+    place (the apps pass :func:`amsfe_sym.apps.plots.run.plot_run`; the recorder draws
+    nothing itself).
 
     Complete or absent: everything is written to a hidden sibling folder, which is renamed to
     ``out`` at the end (an existing ``out`` is replaced only with ``force``); an error or
     Ctrl-C on the way removes it.  ``summary.json`` also records the
-    :func:`~amsfe_sym.provenance.provenance` of the run.
+    :func:`~amsfe_sym.core.provenance.provenance` of the run.
 
     Raises:
         RunFolderError: ``out`` is a file, or exists and ``force`` is off.
@@ -154,7 +164,9 @@ def write_run(res: RunResult, out: Path, plots: bool = True, force: bool = False
     out.parent.mkdir(parents=True, exist_ok=True)
     out = Path(tempfile.mkdtemp(prefix=f".{final.name}.tmp-{os.getpid()}-", dir=final.parent))
     try:
-        _write(res, out, final, plots)
+        _write(res, out, final)
+        if figures is not None:
+            figures(res, out)
         if final.exists():
             old = final.with_name(f".{final.name}.old-{os.getpid()}")
             final.rename(old)
@@ -168,7 +180,7 @@ def write_run(res: RunResult, out: Path, plots: bool = True, force: bool = False
     return final / "summary.json"
 
 
-def _write(res: RunResult, out: Path, final: Path, plots: bool) -> None:
+def _write(res: RunResult, out: Path, final: Path) -> None:
     """The files of :func:`write_run`, into ``out`` (named ``final`` in the config)."""
     lib = res.lib
     cfg = replace(res.scenario, compare=()).to_dict()  # re-runs this one run
@@ -220,7 +232,3 @@ def _write(res: RunResult, out: Path, final: Path, plots: bool) -> None:
     summary = summarize(res)
     summary["provenance"] = provenance()
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    if plots:
-        from amsfe_sym.plots import plot_run
-
-        plot_run(res, out)

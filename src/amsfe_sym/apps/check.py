@@ -1,0 +1,232 @@
+"""Check every generated function against an independent reference.
+
+References (none of them shares code with the symbolic layer):
+
+- ``mass_matrix``, ``bias``, ``gravity``: Pinocchio's ``crba``, ``nle``,
+  ``computeGeneralizedGravity``;
+- ``tracked_point``: Pinocchio's frame placement; ``camera``: a numpy pinhole of it;
+- ``transition``: eqs. (1a)-(1d) in numpy on Pinocchio numerics, with
+  ``f = C(q, qd)^T qd - g`` (Pinocchio's Coriolis matrix satisfies Mdot = C + C^T, so
+  ``d/dq (1/2 qd^T M qd) = C^T qd``);
+- ``noise_gain``: the closed form of eq. (4)'s Gamma from Pinocchio's M^-1;
+- ``*_jacobian``: central finite differences of the compiled function;
+- ``transition_inverse``: the round trip F^-1(F(x)) = x;
+- ``plant_step``: numpy RK4 on Pinocchio's ``aba``.
+
+Errors are norm-wise relative: ``max|a - b| / max(max|b|, floor)``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amsfe_sym.apps.reference import PinocchioOracle
+from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.load import Robot
+from amsfe_sym.runtime.library import ModelLibrary
+
+__all__ = ["CheckResult", "format_table", "random_states", "run_checks"]
+
+Array = NDArray[np.float64]
+#: Round-trip tolerance of ``transition_inverse`` (norm-wise relative, floor 1).
+INVERSE_TOL = 1e-9
+
+
+@dataclass(frozen=True)
+class CheckResult:
+    """One row of ``amsfe check``: a function, its reference, the worst error seen, and the
+    inputs where it failed (``transition_inverse``: each state whose round trip failed)."""
+
+    function: str
+    reference: str
+    max_error: float
+    tolerance: float
+    samples: int
+    failed_at: tuple[str, ...] = ()
+
+    @property
+    def passed(self) -> bool:
+        return bool(self.max_error <= self.tolerance)
+
+
+def rel_err(a: Array, b: Array, floor: float = 1e-9) -> float:
+    """Norm-wise relative error max|a - b| / max(max|b|, floor)."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    return float(
+        np.max(np.abs(a - b), initial=0.0) / max(float(np.max(np.abs(b), initial=0.0)), floor)
+    )
+
+
+def random_states(robot: Robot, count: int, rng: np.random.Generator) -> list[Array]:
+    """Random states x = [q, qd, qm, qmd, theta] (eq. 2) within the joints' limits."""
+    n = robot.n
+    lo = np.full(n, -math.pi)
+    hi = np.full(n, math.pi)
+    for i, j in enumerate(robot.joints):
+        if j.kind != "continuous":
+            a = robot.model.lowerPositionLimit[j.idx_q]
+            b = robot.model.upperPositionLimit[j.idx_q]
+            if np.isfinite(a) and np.isfinite(b) and b > a:
+                lo[i], hi[i] = max(a, -math.pi), min(b, math.pi)
+            elif j.kind == "prismatic":
+                lo[i], hi[i] = -0.5, 0.5
+    out = []
+    for _ in range(count):
+        q = rng.uniform(lo, hi)
+        qd = rng.uniform(-2.0, 2.0, n)
+        qm = q + rng.uniform(-0.1, 0.1, n)
+        qmd = qd + rng.uniform(-0.5, 0.5, n)
+        th = np.array(
+            [
+                rng.uniform(0.5, 1.5) * b.spec.true
+                if b.kind == "joint_stiffness"
+                else rng.uniform(0.0, 2.0 * max(b.spec.true, 0.1))
+                for b in robot.theta
+            ]
+        )
+        out.append(np.concatenate([q, qd, qm, qmd, th]))
+    return out
+
+
+def fd_jacobian(fun: Callable[[Array], Array], x: Array, h: float = 1e-6) -> Array:
+    """Central finite-difference jacobian of ``fun`` at ``x`` (step ``h`` per coordinate)."""
+    cols = []
+    for i in range(x.size):
+        e = np.zeros_like(x)
+        e[i] = h
+        cols.append((np.asarray(fun(x + e)) - np.asarray(fun(x - e))).ravel() / (2 * h))
+    return np.stack(cols, axis=1)
+
+
+def _bind(
+    fn: Callable[..., tuple[Array, ...]], other: Array, first: bool
+) -> Callable[[Array], Array]:
+    """``z -> fn(other, z)[0]`` (first=True) or ``z -> fn(z, other)[0]``."""
+
+    def call(z: Array) -> Array:
+        return fn(other, z)[0] if first else fn(z, other)[0]
+
+    return call
+
+
+def run_checks(
+    robot: Robot, lib: ModelLibrary, samples: int = 50, seed: int = 0
+) -> list[CheckResult]:
+    """Compare every generated function with its reference at ``samples`` random states.
+
+    Raises:
+        ConfigError: ``samples`` < 1 (a check over no state cannot fail).
+    """
+    if samples < 1:
+        raise ConfigError(
+            describe("check samples", "at least 1 random state", str(samples), "pass --samples 50")
+        )
+    rng = np.random.default_rng(seed)
+    oracle = PinocchioOracle(robot)
+    n = robot.n
+    states = random_states(robot, samples, rng)
+    inputs = [rng.uniform(-5.0, 5.0, n) for _ in states]
+    f = lib.function
+    cam = f("camera")
+    tr = f("transition")
+    errs: dict[str, list[float]] = {}
+    inverse_failures: list[str] = []
+
+    def add(name: str, e: float) -> None:
+        errs.setdefault(name, []).append(e)
+
+    for x, u in zip(states, inputs, strict=True):
+        q, qd, _qm, _qmd, th = oracle.split(x)
+        add("mass_matrix", rel_err(f("mass_matrix")(q, th)[0], oracle.M(q, th)))
+        add("bias", rel_err(f("bias")(q, qd, th)[0], oracle.nle(q, qd, th)))
+        add("gravity", rel_err(f("gravity")(q, th)[0], oracle.g(q, th), floor=1e-6))
+        r_ref = oracle.point(q, th)
+        add("tracked_point", rel_err(f("tracked_point")(q, th)[0], r_ref, floor=1e-3))
+        add("camera", rel_err(f("camera")(q, th)[0], robot.camera.project(r_ref)))
+        J = f("camera_jacobian")(q, th)[0]
+        add("camera_jacobian", rel_err(J, fd_jacobian(_bind(cam, th, first=False), q)))
+        add("transition", rel_err(f("transition")(x, u)[0], oracle.transition(x, u)))
+        A = f("transition_jacobian")(x, u)[0]
+        add("transition_jacobian", rel_err(A, fd_jacobian(_bind(tr, u, first=False), x)))
+        add("noise_gain", rel_err(f("noise_gain")(x, u)[0], oracle.noise_gain(x, u)))
+        xs, As, Gs = f("transition_step")(x, u)
+        add(
+            "transition_step",
+            max(rel_err(xs, tr(x, u)[0]), rel_err(As, A), rel_err(Gs, f("noise_gain")(x, u)[0])),
+        )
+        xn = tr(x, u)[0]
+        xb, residual = f("transition_inverse")(xn, u)
+        e_inv = rel_err(xb, x, floor=1.0)
+        add("transition_inverse", e_inv)
+        if not e_inv <= INVERSE_TOL:
+            inverse_failures.append(
+                f"x = {np.array2string(x, precision=3, max_line_width=10**6)}, "
+                f"u = {np.array2string(u, precision=3, max_line_width=10**6)}: "
+                f"round trip {e_inv:.2e}, residual output {residual[0]:.2e}"
+            )
+        tau_d = rng.normal(0.0, 0.1, 2 * n)
+        xp = x[: 4 * n]
+        add(
+            "plant_step",
+            rel_err(f("plant_step")(xp, u, th, tau_d)[0], oracle.plant_step(xp, u, th, tau_d)),
+        )
+    refs = {
+        "mass_matrix": ("pin.crba", 1e-10),
+        "bias": ("pin.nle", 1e-10),
+        "gravity": ("pin.computeGeneralizedGravity", 1e-10),
+        "tracked_point": ("pin frame placement", 1e-10),
+        "camera": ("numpy pinhole of pin placement", 1e-10),
+        "camera_jacobian": ("central finite differences", 1e-6),
+        "transition": (
+            "numpy RK4 on pin.aba"
+            if robot.spec.model.integrator == "rk4"
+            else "eqs. (1a)-(1d) on pin numerics",
+            1e-10,
+        ),
+        "transition_jacobian": ("central finite differences", 1e-6),
+        "noise_gain": (
+            "eq. (4) Gamma from pin M^-1"
+            if robot.spec.model.integrator != "rk4"
+            else "central differences of numpy RK4",
+            1e-10 if robot.spec.model.integrator != "rk4" else 1e-6,
+        ),
+        "transition_step": ("transition, _jacobian, noise_gain", 1e-14),
+        "transition_inverse": ("round trip F^-1(F(x)) = x", INVERSE_TOL),
+        "plant_step": ("numpy RK4 on pin.aba", 1e-10),
+    }
+    return [
+        CheckResult(
+            name,
+            refs[name][0],
+            max(v, key=lambda e: math.inf if math.isnan(e) else e),
+            refs[name][1],
+            len(v),
+            tuple(inverse_failures) if name == "transition_inverse" else (),
+        )
+        for name, v in errs.items()
+    ]
+
+
+def format_table(results: list[CheckResult]) -> str:
+    """A plain-text table: function, reference, max error, tolerance, pass/fail."""
+    rows = [("function", "reference", "max rel. error", "tolerance", "result")]
+    for r in results:
+        rows.append(
+            (
+                r.function,
+                r.reference,
+                f"{r.max_error:.2e}",
+                f"{r.tolerance:.0e}",
+                "pass" if r.passed else "FAIL",
+            )
+        )
+    widths = [max(len(row[i]) for row in rows) for i in range(5)]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) for row in rows]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)

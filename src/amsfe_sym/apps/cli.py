@@ -1,0 +1,465 @@
+"""The ``amsfe`` command line: generate, check, simulate, bench, study, sweep.
+
+Built as :func:`get_argument_parser` + :func:`main` (``main(argv)`` is what the tests call).
+Every command works with no arguments, on the paper's 2-link robot or its scenario.
+Errors of the toolkit print one ``error: ...`` line (expected, found, fix) and exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from collections.abc import Sequence
+
+from amsfe_sym import __version__
+from amsfe_sym.apps.arguments import (
+    COUNT,
+    DURATION,
+    JOINT_RANGE,
+    SAMPLES,
+    SEED,
+    Parser,
+    lock_arg,
+    number_type,
+)
+from amsfe_sym.errors import AmsfeError, ConfigError, SpecError, describe
+
+__all__ = ["get_argument_parser", "main"]
+
+
+def _add_set(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario field, e.g. integrator=paper, filter.link_torque_std=2, "
+        'camera.delay=0 (see docs/scenarios.md; "robot" restores the robot\'s camera timing)',
+    )
+
+
+def get_argument_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``amsfe``."""
+    parser = Parser(
+        prog="amsfe",
+        description="Code-generated elastic-joint robot models, multirate sensor fusion, DTSMC.",
+    )
+    parser.add_argument(
+        "--version",
+        action="version",
+        version=f"amsfe {__version__} (amsfe_sym, Python {sys.version.split()[0]})",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    g = sub.add_parser("generate", help="URDF/robot -> generated/<name>/ (C, library, manifest)")
+    g.add_argument("robot", nargs="?", default="paper_2link", help="robot name, folder or URDF")
+    g.add_argument("--out", default=None, help="parent output folder (default: generated/)")
+    g.add_argument(
+        "--lock",
+        nargs="+",
+        type=lock_arg,
+        default=[],
+        metavar="JOINT[=VALUE]",
+        help="hold joints fixed (value in rad or m, default 0)",
+    )
+    g.add_argument("--force", action="store_true", help="rebuild even if the cache matches")
+    g.add_argument("--cflags", default=None, help="extra compiler flags (quoted)")
+
+    c = sub.add_parser("check", help="every generated function vs Pinocchio / finite differences")
+    c.add_argument("robot", nargs="?", default="paper_2link")
+    c.add_argument("--out", default=None, help="parent folder of generated libraries")
+    c.add_argument("--lock", nargs="+", type=lock_arg, default=[], metavar="JOINT[=VALUE]")
+    c.add_argument("--samples", type=SAMPLES, default=50, help="random states (default 50)")
+    c.add_argument("--seed", type=SEED, default=0)
+    c.add_argument("--cflags", default=None, help="extra compiler flags (quoted)")
+
+    s = sub.add_parser("simulate", help="run a scenario: plant, sensors, estimator, controller")
+    s.add_argument("scenario", nargs="?", default="paper-sim", help="scenario name or .toml")
+    s.add_argument(
+        "--estimator", default=None, help="estimator name (an unknown name lists the known ones)"
+    )
+    s.add_argument(
+        "--controller",
+        default=None,
+        help="one controller (default: the scenario's compare list, else its controller)",
+    )
+    s.add_argument(
+        "--compare",
+        default=None,
+        metavar="A,B,...",
+        help="controllers to compare on one seed (default: the scenario's compare list)",
+    )
+    s.add_argument("--seed", type=SEED, default=None)
+    s.add_argument("--duration", type=DURATION, default=None, help="simulated time [s]")
+    s.add_argument("--out", default=None, help="run folder (default runs/<scenario>-<stamp>)")
+    s.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    s.add_argument("--no-plots", action="store_true", help="skip the figures")
+    s.add_argument("--force", action="store_true", help="replace an existing --out run folder")
+    s.add_argument(
+        "--runtime",
+        choices=("compiled", "python"),
+        default="compiled",
+        help="compiled: the loop in generated C (default); python: the readable reference",
+    )
+    _add_set(s)
+
+    b = sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
+    b.add_argument("robot", nargs="?", default="paper_2link")
+    b.add_argument("--out", default=None, help="parent folder of generated libraries")
+    b.add_argument("--repeat", type=COUNT, default=20000, help="calls per timing")
+    b.add_argument("--rounds", type=COUNT, default=5, help="timing rounds (median reported)")
+    b.add_argument("--json", default=None, metavar="FILE", help="also write the report as JSON")
+    b.add_argument(
+        "--skip",
+        nargs="+",
+        choices=["generation", "calls", "estimators", "tick", "loop", "scaling"],
+        default=[],
+        help="sections to leave out",
+    )
+    b.add_argument(
+        "--joints",
+        type=JOINT_RANGE,
+        default=None,
+        metavar="A-B",
+        help="chain lengths of the scaling table (default 1-12)",
+    )
+    b.add_argument(
+        "--duration", type=DURATION, default=2.0, help="simulated time per estimator [s]"
+    )
+    b.add_argument(
+        "--loop-scenarios",
+        default=None,
+        metavar="A,B",
+        help="scenarios of the closed-loop section (default: the robot's timing scenario, "
+        "and ur5-control for the 2-link arm)",
+    )
+    b.add_argument(
+        "--loop-duration",
+        type=DURATION,
+        default=10.0,
+        help="simulated time of the closed-loop section [s] (default 10)",
+    )
+    b.add_argument("--scenario", default=None, help="scenario of the estimator section")
+    b.add_argument(
+        "--estimators", nargs="+", default=None, help="estimators to time (default all five)"
+    )
+    b.add_argument(
+        "--compare-cflags",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="SETS",
+        help="recompile with comma-separated flag sets, e.g. --compare-cflags=-O0,-O1,'-O1 "
+        "-march=native' (no value: -O0..-O3, -Os, -O1 -march=native)",
+    )
+    b.add_argument("--compile-repeat", type=COUNT, default=1, help="builds per flag set (min)")
+
+    st = sub.add_parser("study", help="Monte Carlo over seeds x estimators: tables, NEES, figures")
+    st.add_argument("scenario", nargs="?", default="paper-sim", help="scenario name or .toml")
+    st.add_argument("--seeds", type=COUNT, default=20, help="number of seeds (default 20)")
+    st.add_argument("--first-seed", type=SEED, default=0, help="first seed (default 0)")
+    st.add_argument("--estimators", default="all", help="all | name,name (default all)")
+    st.add_argument("--duration", type=DURATION, default=None, help="simulated time [s]")
+    st.add_argument("--workers", type=COUNT, default=2, help="processes (default 2)")
+    st.add_argument("--out", default=None, help="folder (default runs/study-<scenario>-<stamp>)")
+    _add_set(st)
+    st.add_argument(
+        "--variant",
+        nargs="+",
+        action="append",
+        default=[],
+        metavar="LABEL KEY=VALUE",
+        help="a named scenario variant (repeatable): --variant paper integrator=paper",
+    )
+    st.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    st.add_argument(
+        "--runtime",
+        choices=("compiled", "python"),
+        default="compiled",
+        help="compiled: the loop in generated C (default); python: the reference",
+    )
+
+    sw = sub.add_parser(
+        "sweep", help="scenario grid x estimators x controllers x seeds on Dask (docs/sweeps.md)"
+    )
+    sw.add_argument("spec", help="sweep file (.toml), e.g. sweeps/camera-delay.toml")
+    sw.add_argument("--out", default=None, help="sweep folder (default runs/sweep-<name>)")
+    sw.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a local cluster)",
+    )
+    sw.add_argument(
+        "--workers",
+        type=number_type(int, 0, True, "pass --workers 2 (0: no Dask, runs in this process)"),
+        default=None,
+        help="local worker processes (default: the cores; 0: in this process, no Dask)",
+    )
+    sw.add_argument("--batch", type=COUNT, default=None, help="runs per task (default auto)")
+    sw.add_argument("--retry-errors", action="store_true", help="run the error rows again")
+    sw.add_argument(
+        "--force", action="store_true", help="start afresh in a folder of another sweep"
+    )
+    sw.add_argument(
+        "--report",
+        action="store_true",
+        help="run nothing: print the table of the folder's results (and write the figures)",
+    )
+    sw.add_argument("--metric", default=None, help="metric of the table and figures")
+    sw.add_argument("--x", default=None, help="axis of the line plots (default [report] x)")
+    sw.add_argument("--y", default=None, help="second axis: heatmaps (default [report] y)")
+    sw.add_argument("--no-plots", action="store_true", help="skip the figures")
+    sw.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``amsfe`` with ``argv`` (default: ``sys.argv[1:]``); returns the exit code."""
+    try:
+        args = get_argument_parser().parse_args(argv)
+    except SystemExit as exc:  # bad arguments (one line, exit 2) or -h (exit 0)
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    try:
+        if args.command == "generate":
+            return _generate(args)
+        if args.command == "check":
+            return _check(args)
+        if args.command == "simulate":
+            return _simulate(args)
+        if args.command == "bench":
+            return _bench(args)
+        if args.command == "study":
+            return _study(args)
+        if args.command == "sweep":
+            return _sweep(args)
+    except AmsfeError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(
+            f"interrupted: amsfe {args.command} stopped by Ctrl-C; nothing half-written was kept",
+            file=sys.stderr,
+        )
+        return 130
+    raise SpecError(
+        describe(
+            "command",
+            "generate|check|simulate|bench|study|sweep",
+            args.command,
+            "run amsfe -h for the commands",
+        )
+    )
+
+
+def _generate(args: argparse.Namespace) -> int:
+    from amsfe_sym.codegen import generate
+
+    extra = args.cflags.split() if args.cflags else None
+    res = generate(
+        args.robot,
+        out=args.out,
+        lock=dict(args.lock),
+        extra_cflags=extra,
+        force=args.force,
+        progress=True,
+    )
+    state = "up to date (cached)" if res.reused else "generated"
+    print(f"{res.out_dir}: {state} in {res.seconds:.2f} s")
+    if res.timings:
+        print("  " + ", ".join(f"{k} {v:.2f} s" for k, v in res.timings.items()))
+    return 0
+
+
+def _check(args: argparse.Namespace) -> int:
+    from amsfe_sym.apps.check import format_table, run_checks
+    from amsfe_sym.codegen import cached_library, generate
+    from amsfe_sym.load import load_robot
+    from amsfe_sym.runtime.library import ModelLibrary
+
+    lock = dict(args.lock)
+    extra = shlex.split(args.cflags) if args.cflags else None
+    # the checks cover the model functions: reuse the full library if it is built, else build
+    # the model part only (the control laws are checked against numpy in the test suite)
+    kw = {"out": args.out, "lock": lock, "extra_cflags": extra}
+    res = cached_library(args.robot, **kw) or generate(
+        args.robot, progress=True, parts=("model",), **kw
+    )
+    robot = load_robot(args.robot, lock=lock)
+    results = run_checks(robot, ModelLibrary(res.out_dir), samples=args.samples, seed=args.seed)
+    print(
+        f"{robot.name}: n = {robot.n}, p = {robot.p}, {args.samples} random states, "
+        f"seed {args.seed}, library {res.library_path}"
+    )
+    print(format_table(results))
+    failed = [r.function for r in results if not r.passed]
+    if failed:
+        for r in results:
+            for where in r.failed_at:
+                print(f"{r.function} failed at {where}")
+        print(f"FAILED: {', '.join(failed)}")
+        return 1
+    print(f"all {len(results)} functions pass")
+    return 0
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    """``amsfe simulate``: load the scenario, apply the overrides, generate its library, run,
+    write the run folder and print the headline numbers (:mod:`amsfe_sym.apps.simulate`)."""
+    from datetime import datetime, timezone
+    from pathlib import Path
+
+    from amsfe_sym.apps.simulate import simulate_comparison, simulate_one
+    from amsfe_sym.codegen import library_for
+    from amsfe_sym.scenario import apply_sets, load_scenario
+
+    sc = load_scenario(args.scenario).with_overrides(
+        estimator=args.estimator,
+        controller=args.controller,
+        seed=args.seed,
+        duration=args.duration,
+    )
+    if args.set:
+        sc = apply_sets(sc, args.set)
+    lib = library_for(sc)
+    stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
+    compare = tuple(args.compare.split(",")) if args.compare else sc.compare
+    options = {
+        "plots": not args.no_plots,
+        "force": args.force,
+        "progress": not args.no_progress,
+        "runtime": args.runtime,
+    }
+    if compare and args.controller is None:  # the paper's comparison on one seed
+        out = Path(args.out) if args.out else Path("runs") / f"{sc.name}-{stamp}"
+        simulate_comparison(sc, lib, compare, out, **options)
+    else:
+        out = Path(args.out) if args.out else Path("runs") / f"{sc.name}-{sc.estimator}-{stamp}"
+        simulate_one(sc, lib, out, **options)
+    return 0
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from amsfe_sym.apps.bench import BenchOptions, run_bench
+
+    sets = args.compare_cflags
+    return run_bench(
+        BenchOptions(
+            robot=str(args.robot),
+            out=args.out,
+            repeat=args.repeat,
+            rounds=args.rounds,
+            json=args.json,
+            skip=tuple(args.skip),
+            duration=args.duration,
+            scenario=args.scenario,
+            estimators=tuple(args.estimators) if args.estimators else None,
+            compare_cflags=None
+            if sets is None
+            else tuple(f.strip() for f in str(sets).split(",") if f.strip()),
+            compile_repeat=args.compile_repeat,
+            joints=args.joints or tuple(range(1, 13)),
+            loop_duration=args.loop_duration,
+            loop_scenarios=tuple(args.loop_scenarios.split(",")) if args.loop_scenarios else None,
+        )
+    )
+
+
+def _parse_variant(items: Sequence[str]) -> tuple[str, list[str]]:
+    label, *sets = items
+    if "=" in label or not label:
+        raise ConfigError(
+            describe(
+                "--variant",
+                "LABEL KEY=VALUE [KEY=VALUE ...]",
+                repr(" ".join(items)),
+                "start with a label, e.g. --variant paper integrator=paper",
+            )
+        )
+    return label, list(sets)
+
+
+def _study(args: argparse.Namespace) -> int:
+    from amsfe_sym.apps.study import run_study
+
+    variants = dict(_parse_variant(v) for v in (args.variant or [])) or None
+    res = run_study(
+        args.scenario,
+        seeds=args.seeds,
+        estimators=args.estimators,
+        duration=args.duration,
+        workers=args.workers,
+        out=args.out,
+        sets=list(args.set or []),
+        variants=variants,
+        first_seed=args.first_seed,
+        progress=not args.no_progress,
+        runtime=args.runtime,
+    )
+    print(res.table)
+    print(f"study folder: {res.out} (study.md, study.json, {len(res.figures)} figures)")
+    return 0
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    """``amsfe sweep``: run the sweep (or, with ``--report``, only read its folder), then
+    print the seed table of the chosen metric and write the figures."""
+    from pathlib import Path
+
+    from amsfe_sym.apps.sweep import SweepOptions, load_sweep, run_sweep
+    from amsfe_sym.apps.sweep.report import format_report, write_figures
+    from amsfe_sym.apps.sweep.table import read_rows
+
+    spec = load_sweep(args.spec)
+    out = Path(args.out) if args.out else Path("runs") / f"sweep-{spec.name}"
+    metric = args.metric or spec.report.metric
+    x = spec.report.x if args.x is None else args.x
+    y = spec.report.y if args.y is None else args.y
+    for flag, axis in (("--x", x), ("--y", y)):
+        if axis and axis not in spec.axes:
+            raise ConfigError(
+                describe(flag, f"an axis of the sweep {list(spec.axes)}", repr(axis), "name one")
+            )
+    if args.report:
+        table = read_rows(out) if out.is_dir() else None
+        if table is None or not len(table):
+            raise ConfigError(
+                describe(
+                    f"--report on {str(out)!r}",
+                    "a sweep folder with results",
+                    "no rows",
+                    f"run amsfe sweep {args.spec} first (or pass its --out)",
+                )
+            )
+    else:
+        res = run_sweep(
+            spec,
+            SweepOptions(
+                out=out,
+                scheduler=args.scheduler,
+                workers=args.workers,
+                batch=args.batch,
+                retry_errors=args.retry_errors,
+                force=args.force,
+                progress=not args.no_progress,
+            ),
+        )
+        table = res.table
+        rate = f", {res.runs_per_s:.2f} runs/s" if res.ran else ""
+        print(
+            f"sweep {spec.name}: {res.ran} runs in {res.wall_time_s:.1f} s{rate} "
+            f"({res.workers} workers, batches of {res.batch}); {res.skipped} already done; "
+            f"{res.errors} errors, {res.diverged} diverged"
+        )
+    axes = [a for a in (x, y) if a]
+    print(format_report(table, metric, axes))
+    if not args.no_plots and axes:
+        for path in write_figures(table, metric, x, y, out / "figures"):
+            print(f"figure: {path}")
+    print(f"sweep folder: {out} (results.parquet, sweep.json)")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,215 @@
+"""The paper's figures from a controller comparison (matplotlib, Agg, PNG).
+
+See :mod:`amsfe_sym.apps.reproduce` for what each file shows.  The first controller of the
+comparison is "the proposed" one (its run's estimator gives the estimation figures).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from amsfe_sym.apps.plots.run import estimation_error_axes
+
+if TYPE_CHECKING:
+    from amsfe_sym.apps.reproduce import Comparison
+    from amsfe_sym.sim.result import RunResult
+
+__all__ = ["plot_comparison"]
+
+_COLORS = ["tab:blue", "tab:orange", "tab:red", "tab:green", "tab:purple", "tab:brown"]
+
+
+def _plt() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _label(name: str, res: RunResult) -> str:
+    est = res.scenario.estimator if name in ("amsfe", "amsfe-paper", "dtsmc-ekf") else None
+    tag = f"{name} ({est})" if est else name
+    if res.diverged_at is not None:
+        tag += f", diverged at {res.diverged_at:.2f} s"
+    return tag
+
+
+def _save(fig: Any, path: Path, paths: list[Path]) -> None:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    _plt().close(fig)
+    paths.append(path)
+
+
+def plot_comparison(cmp: Comparison, out: Path) -> list[Path]:
+    """Write the comparison's figures to ``out``; returns their paths."""
+    first = next(iter(cmp.results.values()))
+    if cmp.scenario.trajectory.get("kind") == "paper_experiment":
+        paths = _experiment_figures(cmp, out)
+    else:
+        paths = _simulation_figures(cmp, out)
+    return paths + _control_figures(cmp, out, first.lib.n)
+
+
+def _simulation_figures(cmp: Comparison, out: Path) -> list[Path]:
+    plt = _plt()
+    paths: list[Path] = []
+    name0, res0 = next(iter(cmp.results.items()))
+    n, L = res0.lib.n, res0.lib.layout
+    est = res0.scenario.estimator
+    fig, axes = plt.subplots(2, n, figsize=(5 * n, 6), squeeze=False)
+    estimation_error_axes(res0, axes)
+    fig.suptitle(
+        f"Fig. 4: estimation errors of q and qd ({est} fusion estimate, {name0} in the loop, "
+        f"seed {res0.scenario.seed})"
+    )
+    _save(fig, out / "fig04_estimation_errors.png", paths)
+
+    if res0.lib.p:
+        fig, ax = plt.subplots(figsize=(7, 3.5))
+        for i, th in enumerate(res0.lib.manifest.theta):
+            c = L["theta"].start + i
+            ax.plot(res0.t, res0.x_true[:, c] - res0.x_hat[:, c], label=f"{th.name} error")
+            sd = np.sqrt(np.maximum(res0.P_diag[:, c], 0.0))
+            ax.fill_between(res0.t, -2 * sd, 2 * sd, color="0.85", label="±2σ (filter)")
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel(f"theta error (true − estimate) [{th.unit}]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+        ax.set_title(f"Fig. 5: estimation error of theta ({est})")
+        _save(fig, out / "fig05_theta_error.png", paths)
+
+    for j in range(n):
+        fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+        axes[0].plot(res0.t, res0.q_des[:, j], "k--", lw=1.2, label="desired")
+        for (name, res), color in zip(cmp.results.items(), _COLORS, strict=False):
+            q = res.x_true[:, L["q"].start + j]
+            axes[0].plot(res.t, q, color=color, lw=0.9, label=_label(name, res))
+            axes[1].plot(res.t, q - res.q_des[:, j], color=color, lw=0.9, label=_label(name, res))
+        axes[0].set_ylabel(f"q{j + 1} [rad]")
+        axes[1].set_ylabel(f"q{j + 1} − q{j + 1},d [rad]")
+        axes[1].set_xlabel("t [s]")
+        axes[1].set_yscale("symlog", linthresh=1e-3)
+        for ax in axes:
+            ax.grid(alpha=0.3)
+        axes[0].legend(fontsize=8)
+        axes[0].set_ylim(*_span(res0.q_des[:, j]))
+        if j < 2:  # the paper's Figs. 6-7 are its two joints
+            fig.suptitle(f"Fig. {6 + j}: tracking of joint {j + 1}, proposed vs DTSMC")
+            _save(fig, out / f"fig{6 + j:02d}_joint{j + 1}_tracking.png", paths)
+        else:
+            fig.suptitle(f"Tracking of joint {j + 1}, proposed vs DTSMC")
+            _save(fig, out / f"tracking_joint{j + 1}.png", paths)
+    return paths
+
+
+def _span(v: np.ndarray) -> tuple[float, float]:
+    lo, hi = float(np.min(v)), float(np.max(v))
+    pad = 0.5 * (hi - lo) + 0.2
+    return lo - pad, hi + pad
+
+
+def _vision_angle(res: RunResult) -> tuple[np.ndarray, np.ndarray]:
+    """Joint angle recovered from each delivered frame (the paper's arccos of eq. 55, done as
+    a back-projection of the pixel onto the motion plane z = 0), at its exposure time."""
+    cam = res.lib.manifest.camera
+    K, R = np.array(cam.K), np.array(cam.R_cw)
+    c = np.array(cam.position)
+    if res.frames.size == 0:
+        return np.zeros(0), np.zeros(0)
+    pix = np.column_stack([res.frames[:, 2], res.frames[:, 3], np.ones(len(res.frames))])
+    rays = (R.T @ np.linalg.solve(K, pix.T)).T
+    lam = -c[2] / rays[:, 2]
+    pts = c + lam[:, None] * rays
+    return res.frames[:, 0] * res.lib.T, np.arctan2(pts[:, 1], pts[:, 0])
+
+
+def _experiment_figures(cmp: Comparison, out: Path) -> list[Path]:
+    plt = _plt()
+    paths: list[Path] = []
+    name0, res0 = next(iter(cmp.results.items()))
+    L = res0.lib.layout
+    t = res0.t
+    q = res0.x_true[:, L["q"].start]
+    t_cam, q_cam = _vision_angle(res0)
+    enc = res0.z_enc[:, 0]  # the motor encoder (link side of the gear)
+    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    axes[0].plot(t, enc, lw=0.8, label="encoder (motor angle)")
+    axes[0].plot(t_cam, q_cam, "o", ms=2.5, label="vision (frame exposure time)")
+    axes[0].plot(t, res0.x_hat[:, L["q"].start], lw=1.0, label=f"fused ({res0.scenario.estimator})")
+    axes[0].plot(t, q, "k--", lw=0.8, label="true link angle")
+    axes[0].set_ylabel("q [rad]")
+    axes[1].plot(t, enc - q, lw=0.8, label="encoder − true")
+    axes[1].plot(t_cam, q_cam - np.interp(t_cam, t, q), "o", ms=2.5, label="vision − true")
+    axes[1].plot(t, res0.x_hat[:, L["q"].start] - q, lw=1.0, label="fused − true")
+    axes[1].set_ylabel("angle error [rad]")
+    axes[1].set_xlabel("t [s]")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(f"Fig. 12: encoder vs vision vs fused joint angle ({name0} in the loop)")
+    _save(fig, out / "fig12_encoder_vision_fused.png", paths)
+
+    fig, axes = plt.subplots(2, 1, figsize=(8, 5), squeeze=False)
+    estimation_error_axes(res0, axes)
+    fig.suptitle(f"Fig. 13: estimation error of the fused estimate ({res0.scenario.estimator})")
+    _save(fig, out / "fig13_estimation_error.png", paths)
+
+    l1 = float(cmp.scenario.trajectory.get("l1", 0.6))
+    fig, ax = plt.subplots(figsize=(8, 3.8))
+    for (name, res), color in zip(cmp.results.items(), _COLORS, strict=False):
+        dq = res.x_true[:, L["q"].start] - res.q_des[:, 0]
+        tip_err = 2.0 * l1 * np.abs(np.sin(dq / 2.0))  # chord between actual and desired tip
+        ax.plot(res.t, 1e3 * tip_err, color=color, lw=0.9, label=_label(name, res))
+    ax.set_yscale("log")
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("tip tracking error [mm]")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    ax.set_title(f"Fig. 14: tip tracking error on the circle of radius {l1} m, proposed vs DTSMC")
+    _save(fig, out / "fig14_tip_tracking_error.png", paths)
+    return paths
+
+
+def _control_figures(cmp: Comparison, out: Path, n: int) -> list[Path]:
+    plt = _plt()
+    paths: list[Path] = []
+    fig, axes = plt.subplots(n, 1, figsize=(8, 2.8 * n + 0.6), sharex=True, squeeze=False)
+    for (name, res), color in zip(cmp.results.items(), _COLORS, strict=False):
+        for j in range(n):
+            axes[j][0].plot(res.t, res.s[:, j], color=color, lw=0.8, label=_label(name, res))
+    for j in range(n):
+        axes[j][0].set_ylabel(f"s{j + 1} [rad/s]")
+        axes[j][0].set_yscale("symlog", linthresh=1e-2)
+        axes[j][0].grid(alpha=0.3)
+    axes[-1][0].set_xlabel("t [s]")
+    axes[0][0].legend(fontsize=8)
+    fig.suptitle("Sliding variable s(k) of eq. (33)")
+    _save(fig, out / "sliding_surface.png", paths)
+
+    fig, axes = plt.subplots(n, 2, figsize=(12, 2.8 * n + 0.6), squeeze=False)
+    # the zoom: the last 0.25 s of the longest run (a diverged run ends earlier: not shown)
+    t_end = max(float(res.t[-1]) for res in cmp.results.values())
+    for (name, res), color in zip(cmp.results.items(), _COLORS, strict=False):
+        t = res.t
+        zoom = t >= t_end - 0.25
+        for j in range(n):
+            axes[j][0].plot(t, res.u[:, j], color=color, lw=0.7, label=_label(name, res))
+            if np.any(zoom):
+                axes[j][1].plot(t[zoom], res.u[zoom, j], color=color, lw=0.8)
+    for j in range(n):
+        axes[j][0].set_ylabel(f"u{j + 1} [N m]")
+        axes[j][1].set_ylabel(f"u{j + 1} [N m] (last 0.25 s)")
+        axes[j][1].set_xlim(t_end - 0.25, t_end)
+        for ax in axes[j]:
+            ax.grid(alpha=0.3)
+            ax.set_xlabel("t [s]")
+    axes[0][0].legend(fontsize=8)
+    fig.suptitle("Motor torque u(k): whole run (left) and a zoom showing the chattering (right)")
+    _save(fig, out / "torque.png", paths)
+    return paths

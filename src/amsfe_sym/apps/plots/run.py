@@ -1,0 +1,248 @@
+"""Figures of a run and of a study (matplotlib, Agg backend; written as PNG next to the data).
+
+A run (:func:`plot_run`):
+
+- ``estimation_errors.png``: q and qd estimation errors of every joint (the paper's Fig. 4)
+  with the filter's +-2 sigma band;
+- ``theta.png``: theta estimate vs truth with +-2 sigma (Fig. 5);
+- ``tracking.png``: link angle vs desired for every joint (Figs. 6-7).
+
+A study variant (:func:`plot_study`): ``errors.png``, ``theta.png``, ``nees.png`` (see
+:mod:`amsfe_sym.apps.study`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from amsfe_sym.sim.record import nees_band, window
+
+if TYPE_CHECKING:
+    from amsfe_sym.runtime.library import ModelLibrary
+    from amsfe_sym.scenario import Scenario
+    from amsfe_sym.sim.result import RunResult
+
+__all__ = ["estimation_error_axes", "plot_run", "plot_study"]
+
+
+def estimation_error_axes(res: RunResult, axes: Any) -> None:
+    """Fill a 2 x n grid of axes with the q (top) and qd (bottom) estimation errors of every
+    joint and the filter's +-2 sigma band (the paper's Fig. 4 / 13)."""
+    t, L = res.t, res.lib.layout
+    e = res.x_true - res.x_hat
+    sd = np.sqrt(np.maximum(res.P_diag, 0.0))
+    for j in range(res.lib.n):
+        for row, (block, unit) in enumerate((("q", "rad"), ("qd", "rad/s"))):
+            c = L[block].start + j
+            ax = axes[row][j]
+            ax.fill_between(t, -2 * sd[:, c], 2 * sd[:, c], color="0.85", label="±2σ (filter)")
+            ax.plot(t, e[:, c], lw=0.8, label="true − estimate")
+            ax.set_ylabel(f"{block}{j + 1} error [{unit}]")
+            ax.grid(alpha=0.3)
+            lim = max(5 * float(np.percentile(np.abs(e[len(t) // 5 :, c]), 99)), 1e-6)
+            ax.set_ylim(-lim, lim)
+        axes[1][j].set_xlabel("t [s]")
+    axes[0][0].legend(loc="upper right", fontsize=8)
+
+
+def plot_run(res: RunResult, out: Path) -> list[Path]:
+    """Write the run's figures to ``out``; returns their paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    lib, t = res.lib, res.t
+    n, L = lib.n, lib.layout
+    sd = np.sqrt(np.maximum(res.P_diag, 0.0))
+    paths = []
+    title = f"{res.scenario.name}: estimator {res.scenario.estimator}, seed {res.scenario.seed}"
+
+    fig, axes = plt.subplots(2, n, figsize=(5 * n, 6), sharex=True, squeeze=False)
+    estimation_error_axes(res, axes)
+    fig.suptitle(f"Estimation errors (paper Fig. 4) — {title}")
+    fig.tight_layout()
+    paths.append(out / "estimation_errors.png")
+    fig.savefig(paths[-1], dpi=110)
+    plt.close(fig)
+
+    if lib.p:
+        fig, axes = plt.subplots(1, lib.p, figsize=(6 * lib.p, 3.5), squeeze=False)
+        for i, th in enumerate(lib.manifest.theta):
+            c = L["theta"].start + i
+            ax = axes[0][i]
+            ax.fill_between(
+                t,
+                res.x_hat[:, c] - 2 * sd[:, c],
+                res.x_hat[:, c] + 2 * sd[:, c],
+                color="0.85",
+                label="±2σ",
+            )
+            ax.plot(t, res.x_hat[:, c], label="estimate")
+            ax.plot(t, res.x_true[:, c], "k--", label="true")
+            ax.set_xlabel("t [s]")
+            ax.set_ylabel(f"{th.name} ({th.kind}) [{th.unit}]")
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=8)
+        fig.suptitle(f"theta (paper Fig. 5) — {title}")
+        fig.tight_layout()
+        paths.append(out / "theta.png")
+        fig.savefig(paths[-1], dpi=110)
+        plt.close(fig)
+
+    fig, axes = plt.subplots(n, 1, figsize=(8, 2.8 * n), sharex=True, squeeze=False)
+    for j in range(n):
+        ax = axes[j][0]
+        ax.plot(t, res.q_des[:, j], "k--", label="desired")
+        ax.plot(t, res.x_true[:, L["q"].start + j], label="true link angle")
+        ax.plot(t, res.x_hat[:, L["q"].start + j], lw=0.8, alpha=0.8, label="estimate")
+        ax.set_ylabel(f"q{j + 1} [rad]")
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=8)
+    axes[-1][0].set_xlabel("t [s]")
+    fig.suptitle(f"Tracking (paper Figs. 6-7), controller {res.scenario.controller}")
+    fig.tight_layout()
+    paths.append(out / "tracking.png")
+    fig.savefig(paths[-1], dpi=110)
+    plt.close(fig)
+    return paths
+
+
+def _decimate(n: int, max_points: int = 2500) -> slice:
+    return slice(None, None, max(1, n // max_points))
+
+
+def plot_study(
+    series: Mapping[str, Mapping[str, Any]],
+    lib: ModelLibrary,
+    sc: Scenario,
+    fig_seed: int,
+    out: Path,
+    suffix: str = "",
+    seeds: int = 1,
+) -> list[Path]:
+    """The study's three figures for one variant; returns their paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n, names = lib.n, list(series)
+    dpi = 90
+    paths: list[Path] = []
+    first = series[names[0]]
+    t = first["t"]
+    dec = _decimate(t.size)
+    w = window(t.size)
+    title = f"{sc.name}"
+
+    # (a) estimation errors, paper Fig. 4 analog
+    labels = [f"q{j + 1} [rad]" for j in range(n)] + [f"qd{j + 1} [rad/s]" for j in range(n)]
+    fig, axes = plt.subplots(
+        2 * n,
+        len(names),
+        figsize=(2.9 * len(names) + 0.6, 1.9 * 2 * n + 0.6),
+        sharex=True,
+        sharey="row",
+        squeeze=False,
+    )
+    have = [s for s in series.values() if np.isfinite(s["err"]).all()] or [
+        {"err": np.ones((t.size, 2 * n))}
+    ]  # the figure seed's runs that did not fail
+    for r in range(2 * n):
+        late = max(float(np.percentile(np.abs(s["err"][w, r]), 99)) for s in have)
+        top = 1.15 * max(float(np.max(np.abs(s["err"][:, r]))) for s in have)
+        lin = max(2 * late, 1e-9)
+        for c, name in enumerate(names):
+            s = series[name]
+            ax = axes[r][c]
+            ax.fill_between(t[dec], -2 * s["sd"][dec, r], 2 * s["sd"][dec, r], color="0.85", lw=0)
+            ax.plot(t[dec], s["err"][dec, r], lw=0.6)
+            if top > 10 * lin:  # a large start transient: symlog shows it and the late error
+                ax.set_yscale("symlog", linthresh=lin)
+            ax.set_ylim(-max(top, lin), max(top, lin))
+            ax.grid(alpha=0.3)
+            if r == 0:
+                ax.set_title(name, fontsize=10)
+            if c == 0:
+                ax.set_ylabel(labels[r], fontsize=9)
+            if r == 2 * n - 1:
+                ax.set_xlabel("t [s]")
+            ax.tick_params(labelsize=7)
+    fig.suptitle(
+        f"{title}: true − estimate (grey ±2σ of the filter), seed {fig_seed}; symlog axes "
+        "are linear within 2x the 99th percentile of the last 80 %",
+        fontsize=10,
+    )
+    fig.tight_layout()
+    paths.append(out / f"errors{suffix}.png")
+    fig.savefig(paths[-1], dpi=dpi)
+    plt.close(fig)
+
+    # (b) theta, paper Fig. 5 analog
+    if lib.p:
+        theta_true = lib.theta_true
+        fig, axes = plt.subplots(lib.p, 2, figsize=(11, 3.4 * lib.p), squeeze=False, sharey="row")
+        for i, th in enumerate(lib.manifest.theta):
+            a0, a1 = axes[i]
+            for name in names:
+                s = series[name]
+                (ln,) = a0.plot(t[dec], s["theta_hat"][dec, i], lw=0.9, label=name)
+                allm = s["theta_all"][:, :, i]
+                mu, sd = allm.mean(axis=0), allm.std(axis=0)
+                a1.plot(t[dec], mu[dec], lw=0.9, color=ln.get_color(), label=name)
+                a1.fill_between(
+                    t[dec], (mu - sd)[dec], (mu + sd)[dec], color=ln.get_color(), alpha=0.15, lw=0
+                )
+            for ax in (a0, a1):
+                ax.axhline(theta_true[i], color="k", ls="--", lw=0.8, label="true")
+                ax.grid(alpha=0.3, which="both")
+                ax.set_xscale("log")
+                ax.set_xlim(t[1], t[-1])
+                ax.set_xlabel("t [s] (log scale)")
+            a0.set_ylabel(f"{th.name} ({th.kind}) [{th.unit}]")
+            a0.set_title(f"seed {fig_seed}", fontsize=10)
+            a1.set_title(f"mean ± std over {seeds} seeds", fontsize=10)
+            a0.legend(fontsize=7)
+        fig.suptitle(f"{title}: theta estimate (paper Fig. 5 analog)", fontsize=10)
+        fig.tight_layout()
+        paths.append(out / f"theta{suffix}.png")
+        fig.savefig(paths[-1], dpi=dpi)
+        plt.close(fig)
+
+    # (c) average NEES with the 95 % band
+    dof = lib.N
+    fig, axes = plt.subplots(
+        len(names), 1, figsize=(8, 1.7 * len(names) + 0.8), sharex=True, squeeze=False
+    )
+    for c, name in enumerate(names):
+        ax = axes[c][0]
+        avg = series[name]["avg_nees"]
+        m = int(series[name].get("M", seeds))
+        lo, hi = nees_band(dof, m)
+        ax.plot(t[dec], avg[dec], lw=0.6, label=f"average NEES over {m} seeds")
+        ax.axhspan(lo, hi, color="tab:green", alpha=0.2, lw=0, label="95 % band")
+        ax.axhline(dof, color="k", lw=0.6, ls=":", label=f"N = {dof}")
+        ax.axvline(t[w.start], color="0.5", lw=0.6, ls="--")
+        inside = float(np.mean((avg[w] >= lo) & (avg[w] <= hi)))
+        ax.set_title(f"{name}: {100 * inside:.0f} % of the last 80 % inside", fontsize=9)
+        if np.nanmax(avg) > 10 * hi or np.nanmin(avg[w]) < 0.1 * lo:
+            ax.set_yscale("log")
+        ax.grid(alpha=0.3)
+        ax.tick_params(labelsize=7)
+    axes[0][0].legend(fontsize=7, loc="upper right")
+    axes[-1][0].set_xlabel("t [s]")
+    fig.suptitle(
+        f"{title}: NEES averaged over seeds with its 95 % chi-square band "
+        f"[{nees_band(dof, seeds)[0]:.2f}, {nees_band(dof, seeds)[1]:.2f}] (M = {seeds})",
+        fontsize=10,
+    )
+    fig.tight_layout()
+    paths.append(out / f"nees{suffix}.png")
+    fig.savefig(paths[-1], dpi=dpi)
+    plt.close(fig)
+    return paths

@@ -1,0 +1,99 @@
+"""``amsfe simulate``: one run or the paper's comparison, written to a run folder with its
+figures, and the headline numbers printed.
+
+The closed loop itself is :func:`amsfe_sym.sim.loop.run` (both runtimes); the run folder is
+:func:`amsfe_sym.sim.record.write_run`; this module is the application that puts them
+together and draws the figures (:mod:`amsfe_sym.apps.plots`) into the folder.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.scenario import Scenario
+from amsfe_sym.sim.loop import run
+from amsfe_sym.sim.record import check_out, summarize, write_run
+from amsfe_sym.sim.result import RunResult
+
+__all__ = ["RunResult", "print_run", "simulate_comparison", "simulate_one"]
+
+
+def simulate_one(
+    sc: Scenario,
+    lib: ModelLibrary,
+    out: Path,
+    plots: bool = True,
+    force: bool = False,
+    progress: bool = False,
+    runtime: str = "compiled",
+) -> RunResult:
+    """Run ``sc`` on ``lib``, write the run folder ``out`` (with figures if ``plots``) and
+    print its headline numbers.
+
+    Raises:
+        RunFolderError: ``out`` exists and ``force`` is off (checked before the run).
+    """
+    check_out(out, force)  # before the run: nothing is computed for nothing
+    res = run(sc, lib, progress=progress, runtime=runtime)
+    figures = None
+    if plots:
+        from amsfe_sym.apps.plots.run import plot_run
+
+        figures = plot_run
+    write_run(res, out, figures=figures, force=force)
+    print_run(res, out)
+    return res
+
+
+def simulate_comparison(
+    sc: Scenario,
+    lib: ModelLibrary,
+    controllers: tuple[str, ...],
+    out: Path,
+    plots: bool = True,
+    force: bool = False,
+    progress: bool = False,
+    runtime: str = "compiled",
+) -> None:
+    """Run ``sc`` once per controller (same seed and noise), write ``out/<controller>/``,
+    ``comparison.json`` and the paper's figures, and print the comparison."""
+    from amsfe_sym.apps.reproduce import print_comparison, run_comparison, write_comparison
+
+    check_out(out, force)  # before the runs
+    cmp = run_comparison(sc, controllers, lib, progress=progress, runtime=runtime)
+    figures = None
+    if plots:
+        from amsfe_sym.apps.plots.paper import plot_comparison
+
+        figures = plot_comparison
+    write_comparison(cmp, out, figures=figures, force=force)
+    print_comparison(cmp, out)
+
+
+def print_run(res: RunResult, out: Path) -> None:
+    """The headline numbers of one run: ticks and cost, estimation and tracking RMSE over
+    the last 80 %, theta, mean NEES."""
+    s = summarize(res)
+    print(f"run folder: {out}")
+    if res.diverged_at is not None:
+        print(f"  diverged at t = {res.diverged_at:.3f} s (the run stops there)")
+    print(
+        f"  {s['ticks']} ticks ({s['sim_time_s']:.2f} s simulated) in {s['wall_time_s']:.2f} s "
+        f"wall, {s['cost_per_tick_us']:.1f} us/tick"
+    )
+    er = s["estimation_rmse"]
+    print(
+        f"  estimation RMSE (last 80 %): q {np.round(er['q'], 5).tolist()} rad, "
+        f"qd {np.round(er['qd'], 4).tolist()} rad/s, theta {np.round(er['theta'], 4).tolist()}"
+    )
+    print(
+        f"  theta: true {s['theta_final']['true']}, final estimate "
+        f"{np.round(s['theta_final']['estimate'], 4).tolist()}"
+    )
+    print(
+        f"  tracking RMSE: {np.round(s['tracking_rmse']['q'], 4).tolist()} rad; "
+        f"mean NEES {s['nees_mean']:.2f} (N = {s['nees_dof']})"
+    )

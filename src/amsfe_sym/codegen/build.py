@@ -1,0 +1,265 @@
+"""Building a library: symbols -> C source + header -> shared library -> manifest, moved
+into ``generated/<name>/`` only when it compiled and loaded.
+
+Output is written to a temporary folder and moved into place only when the library has
+compiled and loaded, so bad input, a failed build or Ctrl-C leaves ``generated/`` as it was.
+The manifest records the library's own sha256: the cache reuses, and the runtime loads, only
+a library whose bytes still match it (a truncated or damaged ``.so`` is rebuilt here and
+refused by :class:`~amsfe_sym.runtime.library.ModelLibrary`).  Hidden temporary folders left
+by a killed run (its pid gone, or older than an hour) are removed by the next build.
+
+Compiler flags: ``-O1`` by default (see docs/codegen.md for the measurements behind it);
+override with ``$AMSFE_CFLAGS`` or ``--cflags``.  ``-march=native`` ties the library to
+the CPU; it is allowed, and since the flags are hashed, a changed flag rebuilds.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import os
+import shutil
+import subprocess
+import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+
+from amsfe_sym.codegen.cache import (
+    ALL_PARTS,
+    MANIFEST,
+    build_lock,
+    cached_dir,
+    cflags,
+    check_parts,
+    clean_stale_tmp,
+    compiler,
+    content_hash,
+    default_out_dir,
+    replace_dir,
+)
+from amsfe_sym.codegen.manifest import manifest_document
+from amsfe_sym.errors import CodegenError, describe
+from amsfe_sym.load.spec import RobotSpec, load_spec
+from amsfe_sym.runtime.library import file_sha256
+
+__all__ = ["GenerateResult", "cached_library", "generate"]
+
+#: The hand-written C glue of the compiled estimators, built into every library.
+_RUNTIME_C = Path(__file__).resolve().parent.parent / "runtime" / "c"
+
+
+@dataclass(frozen=True)
+class GenerateResult:
+    """What :func:`generate` did.
+
+    Attributes:
+        out_dir: ``generated/<name>/``.
+        manifest_path: Its ``manifest.json``.
+        library_path: The shared library.
+        reused: True when the cache matched and nothing was rebuilt.
+        seconds: Wall time of the call [s].
+        timings: Per-stage wall times [s] (load, symbolic, codegen, compile) when built.
+    """
+
+    out_dir: Path
+    manifest_path: Path
+    library_path: Path
+    reused: bool
+    seconds: float
+    timings: dict[str, float]
+
+
+def cached_library(
+    robot: str | os.PathLike[str] | RobotSpec = "paper_2link",
+    out: str | os.PathLike[str] | None = None,
+    lock: dict[str, float] | None = None,
+    extra_cflags: Sequence[str] | None = None,
+    parts: Sequence[str] = ALL_PARTS,
+) -> GenerateResult | None:
+    """The verified cached library :func:`generate` would reuse, or None (builds nothing)."""
+    t_start = time.perf_counter()
+    spec = robot if isinstance(robot, RobotSpec) else load_spec(robot)
+    if lock:
+        spec = spec.with_locked(lock)
+    parts = check_parts(parts)
+    key, _ = content_hash(spec, cflags(extra_cflags), parts)
+    parent = Path(out) if out is not None else default_out_dir()
+    out_dir = parent / (spec.name if parts == ALL_PARTS else f"{spec.name}-{'-'.join(parts)}")
+    lib = cached_dir(out_dir, key)
+    if lib is None:
+        return None
+    return GenerateResult(out_dir, out_dir / MANIFEST, lib, True, time.perf_counter() - t_start, {})
+
+
+def generate(
+    robot: str | os.PathLike[str] | RobotSpec = "paper_2link",
+    out: str | os.PathLike[str] | None = None,
+    lock: dict[str, float] | None = None,
+    extra_cflags: Sequence[str] | None = None,
+    force: bool = False,
+    progress: bool = False,
+    parts: Sequence[str] = ALL_PARTS,
+) -> GenerateResult:
+    """Generate (or reuse) the compiled model library of a robot.
+
+    Args:
+        robot: Robot name, folder, ``robot.toml``, URDF path, or a spec.
+        out: Parent folder; output goes to ``<out>/<name>/`` (default :func:`default_out_dir`).
+        lock: Extra joints to lock, name -> value [rad or m].
+        extra_cflags: Extra compiler flags (hashed into the cache key).
+        force: Rebuild even if the cache matches.
+        progress: Print stage timings to stderr.
+        parts: Function groups to build, among ``model`` (always), ``control`` and
+            ``estimator``.  A partial library goes to ``<out>/<name>-<parts>/`` so it never
+            evicts the full one from the cache (checks of third-party arms need the model
+            only, and skip most of the compile time).
+
+    Returns:
+        A :class:`GenerateResult`.
+
+    Raises:
+        UrdfError, SpecError, ModelError: bad input (nothing is written).
+        CodegenError: the compiler failed (nothing is replaced).
+    """
+    t_start = time.perf_counter()
+    spec = robot if isinstance(robot, RobotSpec) else load_spec(robot)
+    if lock:
+        spec = spec.with_locked(lock)
+    flags = cflags(extra_cflags)
+    parts = check_parts(parts)
+    key, hash_inputs = content_hash(spec, flags, parts)
+    parent = Path(out) if out is not None else default_out_dir()
+    out_dir = parent / (spec.name if parts == ALL_PARTS else f"{spec.name}-{'-'.join(parts)}")
+    if not force:
+        lib = cached_dir(out_dir, key)
+        if lib is not None:
+            return GenerateResult(
+                out_dir, out_dir / MANIFEST, lib, True, time.perf_counter() - t_start, {}
+            )
+
+    # one build per library at a time, across processes (pytest-xdist workers, study
+    # workers, two shells): the others wait and then find it in the cache
+    with build_lock(parent / f".{out_dir.name}.lock"):
+        if not force:
+            lib = cached_dir(out_dir, key)
+            if lib is not None:
+                return GenerateResult(
+                    out_dir, out_dir / MANIFEST, lib, True, time.perf_counter() - t_start, {}
+                )
+        return _build(spec, parts, flags, key, hash_inputs, parent, out_dir, progress, t_start)
+
+
+def _build(
+    spec: RobotSpec,
+    parts: tuple[str, ...],
+    flags: list[str],
+    key: str,
+    hash_inputs: dict[str, Any],
+    parent: Path,
+    out_dir: Path,
+    progress: bool,
+    t_start: float,
+) -> GenerateResult:
+    """Load, build the symbols, generate C, compile and move into ``out_dir`` (see
+    :func:`generate`)."""
+    # heavy imports only when building
+    from amsfe_sym.load import load_robot
+    from amsfe_sym.symbolic.model import build_functions
+
+    timings: dict[str, float] = {}
+    t = time.perf_counter()
+    robot_obj = load_robot(spec)
+    timings["load"] = time.perf_counter() - t
+    t = time.perf_counter()
+    model = build_functions(robot_obj, parts)
+    timings["symbolic"] = time.perf_counter() - t
+    _say(progress, f"[amsfe] {spec.name}: symbolic model built in {timings['symbolic']:.2f} s")
+
+    parent.mkdir(parents=True, exist_ok=True)
+    clean_stale_tmp(parent, spec.name)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{spec.name}-{os.getpid()}-", dir=parent))
+    tmp.chmod(0o755)
+    try:
+        t = time.perf_counter()
+        cname = f"{spec.name}.c"
+        gen = ca.CodeGenerator(cname, {"with_header": True, "with_mem": False})
+        for f in model.functions.values():
+            for i in range(f.n_out()):  # the binding and the C contract need dense outputs
+                if not f.sparsity_out(i).is_dense():
+                    raise CodegenError(
+                        describe(
+                            f"{f.name()} output {f.name_out(i)}",
+                            "a dense output",
+                            "a sparse one",
+                            "wrap the expression in ca.densify",
+                        )
+                    )
+            gen.add(f)
+        cwd = os.getcwd()
+        try:
+            os.chdir(tmp)
+            gen.generate()
+        finally:
+            os.chdir(cwd)
+        timings["codegen"] = time.perf_counter() - t
+        t = time.perf_counter()
+        libname = f"lib{spec.name}.so"
+        glue = []
+        if "estimator" in parts:  # the C glue calls the est_* functions
+            shutil.copy(_RUNTIME_C / "amsfe_runtime.h", tmp)
+            glue = [str(_RUNTIME_C / "amsfe_runtime.c")]
+        if set(parts) == set(ALL_PARTS):  # the loop calls the laws, the plant, the estimators
+            shutil.copy(_RUNTIME_C / "amsfe_loop.h", tmp)
+            glue.append(str(_RUNTIME_C / "amsfe_loop.c"))
+        cmd = [compiler(), *flags, "-I.", "-o", libname, cname, *glue, "-lm"]
+        _say(progress, f"[amsfe] {spec.name}: compiling ({' '.join(cmd)})")
+        proc = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise CodegenError(
+                describe(
+                    f"compiling {cname}",
+                    "a successful build",
+                    f"exit code {proc.returncode}: {proc.stderr[-2000:]}",
+                    "check the compiler and $AMSFE_CFLAGS",
+                )
+            )
+        timings["compile"] = time.perf_counter() - t
+        try:
+            ctypes.CDLL(str(tmp / libname))
+        except OSError as exc:
+            raise CodegenError(
+                describe(
+                    f"loading {libname}",
+                    "a loadable library",
+                    str(exc),
+                    "check the compiler and $AMSFE_CFLAGS (the build produced an unusable .so)",
+                )
+            ) from exc
+        manifest = manifest_document(model, key, hash_inputs, libname, cname, timings)
+        manifest["library_sha256"] = file_sha256(tmp / libname)
+        (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
+        replace_dir(tmp, out_dir)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    _say(progress, f"[amsfe] {spec.name}: compiled in {timings['compile']:.2f} s -> {out_dir}")
+    return GenerateResult(
+        out_dir,
+        out_dir / MANIFEST,
+        out_dir / f"lib{spec.name}.so",
+        False,
+        time.perf_counter() - t_start,
+        timings,
+    )
+
+
+def _say(on: bool, msg: str) -> None:
+    if on:
+        import sys
+
+        print(msg, file=sys.stderr, flush=True)

@@ -1,0 +1,236 @@
+"""The build cache: where libraries go, the compiler and its flags, the content hash that
+decides whether a library is reused, the build lock, and the cleaning of temporary folders
+left by killed builds.
+
+The hash covers the URDF and spec bytes, the locked joints, the source of the modules that
+build the symbols and the hand-written C compiled into every library (so a change in how we
+generate invalidates old output), the CasADi and Pinocchio versions, and the compiler with its
+flags.  It guards against accidents (an edited spec, a new toolkit, another compiler), not
+against tampering: a file changed on purpose together with its manifest is not detected.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import hashlib
+import json
+import os
+import platform
+import shlex
+import shutil
+import subprocess
+import time
+from collections.abc import Iterator, Sequence
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from amsfe_sym import __version__
+from amsfe_sym.errors import CodegenError, describe
+from amsfe_sym.load.spec import RobotSpec
+from amsfe_sym.runtime.library import file_sha256
+
+__all__ = [
+    "ALL_PARTS",
+    "DEFAULT_CFLAGS",
+    "MANIFEST",
+    "STALE_TMP_SECONDS",
+    "build_lock",
+    "cached_dir",
+    "cflags",
+    "check_parts",
+    "clean_stale_tmp",
+    "compiler",
+    "content_hash",
+    "default_out_dir",
+    "replace_dir",
+]
+
+DEFAULT_CFLAGS: tuple[str, ...] = ("-O1", "-fPIC", "-shared")
+MANIFEST = "manifest.json"
+#: Modules whose source decides what is generated (hashed into the cache key; globs are
+#: relative to the package folder, so a new module of a stage is hashed without a change here).
+_GENERATOR_MODULES = (
+    "load/*.py",
+    "codegen/*.py",
+    "symbolic/*.py",
+    "runtime/c/*.c",
+    "runtime/c/*.h",
+)
+#: Every function group (see :data:`amsfe_sym.symbolic.model.PARTS`, kept equal).
+ALL_PARTS: tuple[str, ...] = ("model", "control", "estimator")
+
+#: The package folder (``src/amsfe_sym``): the globs above are relative to it.
+_PACKAGE = Path(__file__).resolve().parent.parent
+
+
+def check_parts(parts: Sequence[str]) -> tuple[str, ...]:
+    """``parts`` in canonical order, with ``model`` always in."""
+    bad = sorted(set(parts) - set(ALL_PARTS))
+    if bad:
+        raise CodegenError(
+            describe("generate parts", f"names among {list(ALL_PARTS)}", f"{bad}", "fix them")
+        )
+    return tuple(k for k in ALL_PARTS if k == "model" or k in parts)
+
+
+def default_out_dir() -> Path:
+    """``$AMSFE_GENERATED_DIR``, else the repository's ``generated/``, else ``./generated``."""
+    env = os.environ.get("AMSFE_GENERATED_DIR")
+    if env:
+        return Path(env)
+    repo = _PACKAGE.parent.parent
+    if (repo / "pyproject.toml").is_file() and (repo / "generated").is_dir():
+        return repo / "generated"
+    return Path.cwd() / "generated"
+
+
+def compiler() -> str:
+    """The C compiler: ``$CC`` or ``cc``."""
+    return os.environ.get("CC", "cc")
+
+
+def cflags(extra: Sequence[str] | None = None) -> list[str]:
+    """Compiler flags: ``$AMSFE_CFLAGS`` (shell-split) or the defaults, plus ``extra``."""
+    env = os.environ.get("AMSFE_CFLAGS")
+    flags = shlex.split(env) if env else list(DEFAULT_CFLAGS)
+    for required in ("-fPIC", "-shared"):
+        if required not in flags:
+            flags.append(required)
+    return flags + list(extra or ())
+
+
+def _compiler_version(cc: str) -> str:
+    try:
+        out = subprocess.run([cc, "--version"], capture_output=True, text=True, check=True)
+    except (OSError, subprocess.CalledProcessError) as exc:
+        raise CodegenError(
+            describe("C compiler", f"a working {cc!r}", f"error {exc}", "install gcc or set $CC")
+        ) from exc
+    return out.stdout.splitlines()[0] if out.stdout else cc
+
+
+def content_hash(
+    spec: RobotSpec, flags: Sequence[str], parts: Sequence[str] = ALL_PARTS
+) -> tuple[str, dict[str, Any]]:
+    """The cache key of ``spec`` built with ``flags`` (and ``parts``), and what went into it."""
+    src = _PACKAGE
+    gen = hashlib.sha256()
+    for pattern in _GENERATOR_MODULES:
+        for path in sorted(src.glob(pattern)):
+            gen.update(path.read_bytes())
+    cc = compiler()
+    inputs: dict[str, Any] = {
+        "robot": spec.fingerprint(),
+        "generator_source": gen.hexdigest(),
+        "amsfe_sym": __version__,
+        "casadi": metadata.version("casadi"),
+        "pinocchio": metadata.version("pin") if _has_dist("pin") else "unknown",
+        "compiler": _compiler_version(cc),
+        "cflags": list(flags),
+        "machine": platform.machine(),
+    }
+    if tuple(parts) != ALL_PARTS:  # (absent for a full library: its key is unchanged)
+        inputs["parts"] = list(parts)
+    key = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()
+    return key, inputs
+
+
+def _has_dist(name: str) -> bool:
+    try:
+        metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return False
+    return True
+
+
+def cached_dir(out_dir: Path, key: str) -> Path | None:
+    """The library path if ``out_dir`` holds a complete build with hash ``key`` whose
+    library still has the sha256 recorded in the manifest (a truncated or damaged ``.so``
+    is not reused: it is rebuilt)."""
+    mpath = out_dir / MANIFEST
+    try:
+        manifest = json.loads(mpath.read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(manifest, dict) or manifest.get("content_hash") != key:
+        return None
+    lib = out_dir / str(manifest.get("library", ""))
+    try:
+        if not lib.is_file() or file_sha256(lib) != manifest.get("library_sha256"):
+            return None
+    except OSError:
+        return None
+    return lib
+
+
+#: A hidden temporary build folder older than this is left over from a killed run [s].
+STALE_TMP_SECONDS = 3600.0
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, owned by someone else
+        return True
+    return True
+
+
+def clean_stale_tmp(parent: Path, name: str, max_age: float = STALE_TMP_SECONDS) -> list[Path]:
+    """Remove ``parent/.<name>-<pid>-*`` and ``parent/.<name>.old-<pid>-*`` folders left by a
+    killed :func:`generate`: those whose process is gone, or older than ``max_age`` [s].
+
+    Returns:
+        The folders removed.
+    """
+    removed = []
+    now = time.time()
+    for prefix in (f".{name}-", f".{name}.old-"):
+        for d in parent.glob(prefix + "*"):
+            pid_text = d.name[len(prefix) :].partition("-")[0]
+            if not d.is_dir() or not pid_text.isdigit():  # not ours (another robot's name)
+                continue
+            try:
+                age = now - d.stat().st_mtime
+            except OSError:
+                continue
+            dead = not _pid_alive(int(pid_text))
+            if dead or age > max_age:
+                shutil.rmtree(d, ignore_errors=True)
+                removed.append(d)
+    return removed
+
+
+@contextlib.contextmanager
+def build_lock(path: Path) -> Iterator[None]:
+    """An exclusive advisory lock on ``path`` (released when the process dies).
+
+    The file is removed afterwards, so a failed or interrupted build leaves nothing behind;
+    a process that opened it just before the removal may then build the same library once
+    more, which the atomic move into place keeps harmless.
+    """
+    created = not path.parent.exists()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            path.unlink(missing_ok=True)
+            fcntl.flock(fh, fcntl.LOCK_UN)
+            if created and not any(path.parent.iterdir()):  # bad input: leave no folder
+                path.parent.rmdir()
+
+
+def replace_dir(new: Path, target: Path) -> None:
+    """Move ``new`` to ``target`` replacing any old content, as atomically as rename allows."""
+    old = None
+    if target.exists():
+        old = target.with_name(f".{target.name}.old-{os.getpid()}-{time.time_ns()}")
+        target.rename(old)
+    new.rename(target)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)

@@ -1,0 +1,56 @@
+"""Libraries by robot or by scenario: generate (or reuse from the cache) and load."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import replace
+from typing import Any
+
+from amsfe_sym.codegen.build import generate
+from amsfe_sym.load.spec import RobotSpec, load_spec
+from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.scenario import Scenario, camera_timing
+
+__all__ = ["library_for", "load_library"]
+
+
+def load_library(
+    robot: str | os.PathLike[str] | RobotSpec = "paper_2link", **generate_kwargs: Any
+) -> ModelLibrary:
+    """Generate (or reuse from the cache) and load the library of ``robot``
+    (``generate_kwargs`` as :func:`generate`)."""
+    return ModelLibrary(generate(robot, **generate_kwargs).out_dir)
+
+
+def library_for(
+    sc: Scenario, out: str | os.PathLike[str] | None = None, robot: RobotSpec | None = None
+) -> ModelLibrary:
+    """Generate (or reuse) and load the library a scenario runs on.
+
+    The scenario's ``integrator`` (when set and different from the robot's) gives a library
+    of its own, ``<robot>_<integrator>``.  The camera timing and the filter's buffer are
+    checked against the robot spec first (:func:`~amsfe_sym.scenario.camera_timing`), so a
+    bad scenario fails before anything is generated.  ``robot`` replaces the spec of
+    ``sc.robot`` (a derived spec, e.g. a sweep's other true payload; give it its own name).
+
+    Raises:
+        ConfigError: the scenario's camera timing does not fit the robot or the filter.
+    """
+    from amsfe_sym.codegen.preflight import check_scenario_shapes
+    from amsfe_sym.estimation.registry import estimator_class
+
+    spec = robot if robot is not None else load_spec(sc.robot)
+    check_scenario_shapes(sc, spec)  # every wrong-length vector, before generating
+    camera_timing(
+        sc,
+        spec.camera.period,
+        spec.camera.delay,
+        needs_history=estimator_class(sc.estimator).needs_history,
+    )
+    if sc.integrator and sc.integrator != spec.model.integrator:
+        spec = replace(
+            spec,
+            name=f"{spec.name}_{sc.integrator}",
+            model=replace(spec.model, integrator=sc.integrator),  # type: ignore[arg-type]
+        )
+    return load_library(spec, out=out)

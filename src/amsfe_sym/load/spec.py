@@ -1,0 +1,487 @@
+"""Robot spec: what the URDF does not say (actuators, camera, unknown parameters, T).
+
+A robot is a folder ``robots/<name>/`` holding a URDF and ``robot.toml``; every key is
+documented in ``docs/robot-spec.md``.  A bare URDF path works too: :func:`default_spec`
+fills in documented defaults (every non-fixed joint modelled, the tip of the chain
+tracked, a camera that sees the whole workspace, no unknown parameters).
+
+The spec is parsed into frozen dataclasses; nothing here touches Pinocchio or CasADi, so
+names (joints, frames) are checked later, in :mod:`amsfe_sym.load`, against the model.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Literal
+
+from amsfe_sym.core.toml import tomllib
+from amsfe_sym.errors import SpecError, describe
+
+__all__ = [
+    "ActuatorSpec",
+    "CameraSpec",
+    "ModelSpec",
+    "RobotSpec",
+    "ThetaSpec",
+    "TrackedSpec",
+    "data_dir",
+    "default_spec",
+    "find_robot",
+    "load_spec",
+    "robots_dir",
+]
+
+ThetaKind = Literal["payload_mass", "link_mass", "joint_stiffness"]
+THETA_KINDS: tuple[str, ...] = ("payload_mass", "link_mass", "joint_stiffness")
+Integrator = Literal["paper", "semi_implicit", "rk4"]
+INTEGRATORS: tuple[str, ...] = ("paper", "semi_implicit", "rk4")
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """Which joints are modelled and how time is discretised.
+
+    Attributes:
+        joints: Modelled joint names in q order; ``None`` means every non-fixed joint.
+        locked: Joint name -> value [rad or m] for joints held fixed.
+        T: Sampling interval [s] of the discrete model, eqs. (1a)-(1d).
+        gravity: Gravity vector in the world frame [m/s^2].
+        integrator: ``"paper"`` (eqs. 1a-1d as printed: q advances with the old velocity),
+            ``"semi_implicit"`` (q advances with the new velocity; stable for stiff joints) or
+            ``"rk4"`` (one RK4 step of the continuous model; no systematic position error).
+        inverse_iterations: Unrolled fixed-point steps of the inverse transition (eq. 22).
+        plant_substeps: RK4 substeps per T of the continuous-time plant.
+    """
+
+    joints: tuple[str, ...] | None = None
+    locked: Mapping[str, float] = field(default_factory=dict)
+    T: float = 0.001
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    integrator: Integrator = "semi_implicit"
+    inverse_iterations: int = 6
+    plant_substeps: int = 10
+
+
+@dataclass(frozen=True)
+class ActuatorSpec:
+    """Per-joint elastic actuator constants, in q order (eqs. 1c-1d).
+
+    Attributes:
+        Ks: Joint stiffness [N m/rad] (or [N/m] for a prismatic joint).
+        Mm: Motor inertia reflected to the link side [kg m^2] (or [kg]).
+        Fm: Motor viscous friction [N m s/rad] (or [N s/m]).
+        u_max: Motor torque limit [N m] (or [N]); default the URDF's ``effort`` limit where
+            it gives one (> 0), else none.
+    """
+
+    Ks: tuple[float, ...] | None = None
+    Mm: tuple[float, ...] | None = None
+    Fm: tuple[float, ...] | None = None
+    u_max: tuple[float, ...] | None = None
+
+
+@dataclass(frozen=True)
+class TrackedSpec:
+    """The point the camera sees: ``offset`` [m] expressed in ``frame``."""
+
+    frame: str | None = None
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    """Pinhole camera, OpenCV convention (x right, y down, z along the optical axis).
+
+    Attributes:
+        width, height: Image size [px].
+        fx, fy: Focal lengths [px]; cx, cy: principal point [px].
+        position: Camera centre in the world frame [m].
+        look_at: A world point on the optical axis [m].
+        up: World direction that appears up in the image (must not be parallel to the axis).
+        period: l, steps between two exposures (eq. 11).
+        delay: d, steps from exposure to delivery.
+    """
+
+    width: int = 640
+    height: int = 512
+    fx: float | None = None
+    fy: float | None = None
+    cx: float | None = None
+    cy: float | None = None
+    position: tuple[float, float, float] | None = None
+    look_at: tuple[float, float, float] | None = None
+    up: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    period: int = 125
+    delay: int = 125
+
+
+@dataclass(frozen=True)
+class ThetaSpec:
+    """One unknown parameter, a random-walk state (eq. 2, after eq. 1d).
+
+    Attributes:
+        name: Identifier used in the manifest and run outputs.
+        kind: ``payload_mass`` (a point mass [kg] at ``offset`` in frame ``target``),
+            ``link_mass`` (the mass [kg] of link ``target``; its rotational inertia scales
+            with it, centre of mass kept) or ``joint_stiffness`` (Ks [N m/rad] of joint
+            ``target``, replacing the actuator value).
+        target: Frame, link or joint name, as the kind requires.
+        offset: Payload position in ``target`` [m] (``payload_mass`` only).
+        true: Value used by the simulated plant.
+        initial: The estimator's initial guess.
+    """
+
+    name: str
+    kind: ThetaKind
+    target: str
+    true: float
+    initial: float
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """Everything about a robot beyond its URDF.  See ``docs/robot-spec.md``.
+
+    Attributes:
+        name: Robot name; output goes to ``generated/<name>/``.
+        urdf: Path of the URDF file.
+        spec_path: The TOML file this came from, or ``None`` for a bare URDF.
+        model, actuators, tracked, camera: Sub-specs (see their classes).
+        theta: Unknown parameters, in state order.
+    """
+
+    name: str
+    urdf: Path
+    spec_path: Path | None = None
+    model: ModelSpec = field(default_factory=ModelSpec)
+    actuators: ActuatorSpec = field(default_factory=ActuatorSpec)
+    tracked: TrackedSpec = field(default_factory=TrackedSpec)
+    camera: CameraSpec = field(default_factory=CameraSpec)
+    theta: tuple[ThetaSpec, ...] = ()
+
+    def with_locked(self, extra: Mapping[str, float]) -> RobotSpec:
+        """Return a copy with more joints locked (values in rad or m)."""
+        if not extra:
+            return self
+        locked = dict(self.model.locked)
+        locked.update(extra)
+        joints = self.model.joints
+        if joints is not None:
+            joints = tuple(j for j in joints if j not in extra)
+        return replace(self, model=replace(self.model, locked=locked, joints=joints))
+
+    def fingerprint(self) -> str:
+        """SHA-256 of the URDF and spec file contents plus the resolved fields."""
+        h = hashlib.sha256()
+        h.update(self.urdf.read_bytes())
+        if self.spec_path is not None:
+            h.update(self.spec_path.read_bytes())
+        h.update(repr((self.model, self.actuators, self.tracked, self.camera, self.theta)).encode())
+        return h.hexdigest()
+
+
+# --------------------------------------------------------------------------------------
+# locating robots
+
+
+def data_dir(kind: str, env_var: str) -> Path:
+    """A folder of shipped data (``robots``, ``scenarios``): ``$<env_var>``, the repository's
+    ``<kind>/`` (editable install), else the copy packaged as ``amsfe_sym/_data/<kind>``."""
+    env = os.environ.get(env_var)
+    if env:
+        return Path(env)
+    package = Path(__file__).resolve().parent.parent
+    repo = package.parent.parent / kind
+    return repo if repo.is_dir() else package / "_data" / kind
+
+
+def robots_dir() -> Path:
+    """Folder of shipped robots (``$AMSFE_ROBOTS_DIR`` overrides)."""
+    return data_dir("robots", "AMSFE_ROBOTS_DIR")
+
+
+def find_robot(name_or_path: str | os.PathLike[str]) -> Path:
+    """Resolve a robot name, a robot folder, a ``robot.toml`` or a URDF path to a file path.
+
+    Raises:
+        SpecError: nothing matches; the message lists the shipped robots.
+    """
+    p = Path(name_or_path)
+    if p.is_file():
+        return p
+    if p.is_dir() and (p / "robot.toml").is_file():
+        return p / "robot.toml"
+    shipped = robots_dir() / str(name_or_path) / "robot.toml"
+    if shipped.is_file():
+        return shipped
+    known = sorted(d.name for d in robots_dir().glob("*") if (d / "robot.toml").is_file())
+    raise SpecError(
+        describe(
+            f"robot {str(name_or_path)!r}",
+            "a shipped robot name, a robot folder with robot.toml, a robot.toml or a .urdf file",
+            "no such file or robot",
+            f"use one of {known} or give a path to an existing URDF",
+        )
+    )
+
+
+def load_spec(name_or_path: str | os.PathLike[str]) -> RobotSpec:
+    """Load a robot spec from a name, folder, ``robot.toml`` or bare URDF path."""
+    path = find_robot(name_or_path)
+    if path.suffix.lower() == ".urdf":
+        return default_spec(path)
+    if path.suffix.lower() != ".toml":
+        raise SpecError(
+            describe(
+                str(path),
+                "a .toml robot spec or a .urdf file",
+                f"a file ending in {path.suffix!r}",
+                "pass the robot folder, its robot.toml or a URDF",
+            )
+        )
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"{path}: not valid TOML ({exc}). Fix: correct the syntax.") from exc
+    return parse_spec(data, path)
+
+
+def default_spec(urdf: Path) -> RobotSpec:
+    """Spec for a bare URDF: all non-fixed joints, tip of the chain tracked, defaults below.
+
+    Defaults (documented in docs/robot-spec.md): T = 1 ms, semi-implicit integrator,
+    Ks = 1000 N m/rad, Mm = 0.1 kg m^2, Fm = 1 N m s/rad per joint, camera placed by
+    :func:`amsfe_sym.load.load_robot` so that it sees the whole workspace, p = 0.
+    """
+    return RobotSpec(name=_sanitize(urdf.stem), urdf=urdf.resolve(), spec_path=None)
+
+
+# --------------------------------------------------------------------------------------
+# parsing
+
+
+_TOP_KEYS = {"name", "urdf", "model", "actuators", "tracked", "camera", "theta"}
+
+
+def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
+    """Build a :class:`RobotSpec` from parsed TOML ``data`` read from ``path``."""
+    where = str(path)
+    _no_unknown(data, _TOP_KEYS, where)
+    if "urdf" not in data:
+        raise SpecError(
+            describe(where, "a top-level key 'urdf'", "none", 'add urdf = "<file>.urdf"')
+        )
+    urdf = (path.parent / str(data["urdf"])).resolve()
+    if not urdf.is_file():
+        raise SpecError(
+            describe(
+                f"{where}: urdf",
+                "an existing file",
+                str(urdf),
+                "fix the path (relative to the spec)",
+            )
+        )
+    name = _sanitize(str(data.get("name", path.parent.name)))
+
+    m = _table(data, "model", where)
+    _no_unknown(
+        m,
+        {"joints", "locked", "T", "gravity", "integrator", "inverse_iterations", "plant_substeps"},
+        f"{where} [model]",
+    )
+    integrator = str(m.get("integrator", "semi_implicit"))
+    if integrator not in INTEGRATORS:
+        raise SpecError(
+            describe(
+                f"{where} [model] integrator",
+                f"one of {INTEGRATORS}",
+                repr(integrator),
+                "pick one of those",
+            )
+        )
+    T = _positive(m.get("T", 0.001), f"{where} [model] T")
+    joints = m.get("joints")
+    model = ModelSpec(
+        joints=None if joints is None else tuple(str(j) for j in joints),
+        locked={str(k): float(v) for k, v in dict(m.get("locked", {})).items()},
+        T=T,
+        gravity=_vec3(m.get("gravity", (0.0, 0.0, -9.81)), f"{where} [model] gravity"),
+        integrator=integrator,  # type: ignore[arg-type]
+        inverse_iterations=int(
+            _positive(m.get("inverse_iterations", 6), f"{where} inverse_iterations")
+        ),
+        plant_substeps=int(_positive(m.get("plant_substeps", 10), f"{where} plant_substeps")),
+    )
+
+    a = _table(data, "actuators", where)
+    _no_unknown(a, {"Ks", "Mm", "Fm", "u_max"}, f"{where} [actuators]")
+    actuators = ActuatorSpec(
+        Ks=_opt_positive_vec(a.get("Ks"), f"{where} [actuators] Ks"),
+        Mm=_opt_positive_vec(a.get("Mm"), f"{where} [actuators] Mm"),
+        Fm=_opt_nonneg_vec(a.get("Fm"), f"{where} [actuators] Fm"),
+        u_max=_opt_positive_vec(a.get("u_max"), f"{where} [actuators] u_max"),
+    )
+
+    t = _table(data, "tracked", where)
+    _no_unknown(t, {"frame", "offset"}, f"{where} [tracked]")
+    tracked = TrackedSpec(
+        frame=None if t.get("frame") is None else str(t["frame"]),
+        offset=_vec3(t.get("offset", (0.0, 0.0, 0.0)), f"{where} [tracked] offset"),
+    )
+
+    c = _table(data, "camera", where)
+    _no_unknown(
+        c,
+        {"width", "height", "fx", "fy", "cx", "cy", "position", "look_at", "up", "period", "delay"},
+        f"{where} [camera]",
+    )
+    camera = CameraSpec(
+        width=int(_positive(c.get("width", 640), f"{where} [camera] width")),
+        height=int(_positive(c.get("height", 512), f"{where} [camera] height")),
+        fx=_opt_pos(c.get("fx"), f"{where} [camera] fx"),
+        fy=_opt_pos(c.get("fy"), f"{where} [camera] fy"),
+        cx=None if c.get("cx") is None else float(c["cx"]),
+        cy=None if c.get("cy") is None else float(c["cy"]),
+        position=None if c.get("position") is None else _vec3(c["position"], f"{where} position"),
+        look_at=None if c.get("look_at") is None else _vec3(c["look_at"], f"{where} look_at"),
+        up=_vec3(c.get("up", (0.0, 0.0, 1.0)), f"{where} [camera] up"),
+        period=int(_positive(c.get("period", 125), f"{where} [camera] period")),
+        delay=int(_nonneg(c.get("delay", 125), f"{where} [camera] delay")),
+    )
+
+    thetas: list[ThetaSpec] = []
+    raw_theta = data.get("theta", [])
+    if not isinstance(raw_theta, list):
+        raise SpecError(
+            describe(
+                f"{where} theta",
+                "an array of tables [[theta]]",
+                type(raw_theta).__name__,
+                "write each parameter as a [[theta]] table",
+            )
+        )
+    for i, th in enumerate(raw_theta):
+        w = f"{where} [[theta]] #{i + 1}"
+        _no_unknown(th, {"name", "kind", "target", "offset", "true", "initial"}, w)
+        for key in ("name", "kind", "target", "true", "initial"):
+            if key not in th:
+                raise SpecError(describe(w, f"key {key!r}", "it missing", f"add {key} = ..."))
+        kind = str(th["kind"])
+        if kind not in THETA_KINDS:
+            raise SpecError(
+                describe(
+                    f"{w} kind", f"one of {THETA_KINDS}", repr(kind), "use one of the kinds listed"
+                )
+            )
+        thetas.append(
+            ThetaSpec(
+                name=str(th["name"]),
+                kind=kind,  # type: ignore[arg-type]
+                target=str(th["target"]),
+                true=_finite(th["true"], f"{w} true"),
+                initial=_finite(th["initial"], f"{w} initial"),
+                offset=_vec3(th.get("offset", (0.0, 0.0, 0.0)), f"{w} offset"),
+            )
+        )
+    names = [t.name for t in thetas]
+    if len(set(names)) != len(names):
+        raise SpecError(describe(f"{where} theta names", "unique names", str(names), "rename"))
+    return RobotSpec(
+        name=name,
+        urdf=urdf,
+        spec_path=path.resolve(),
+        model=model,
+        actuators=actuators,
+        tracked=tracked,
+        camera=camera,
+        theta=tuple(thetas),
+    )
+
+
+def _sanitize(name: str) -> str:
+    """A C-identifier-safe robot name (letters, digits, underscore)."""
+    out = "".join(ch if ch.isalnum() or ch == "_" else "_" for ch in name)
+    if not out or out[0].isdigit():
+        out = "r_" + out
+    return out
+
+
+def _table(data: Mapping[str, Any], key: str, where: str) -> Mapping[str, Any]:
+    val = data.get(key, {})
+    if not isinstance(val, Mapping):
+        raise SpecError(describe(f"{where} {key}", "a table", type(val).__name__, f"write [{key}]"))
+    return val
+
+
+def _no_unknown(data: Mapping[str, Any], allowed: set[str], where: str) -> None:
+    unknown = sorted(set(data) - allowed)
+    if unknown:
+        raise SpecError(
+            describe(
+                where,
+                f"keys among {sorted(allowed)}",
+                f"unknown {unknown}",
+                "remove or rename them (see docs/robot-spec.md)",
+            )
+        )
+
+
+def _finite(x: Any, where: str) -> float:
+    try:
+        v = float(x)
+    except (TypeError, ValueError) as exc:
+        raise SpecError(describe(where, "a number", repr(x), "write a number")) from exc
+    if not math.isfinite(v):
+        raise SpecError(describe(where, "a finite number", repr(x), "write a finite number"))
+    return v
+
+
+def _positive(x: Any, where: str) -> float:
+    v = _finite(x, where)
+    if v <= 0:
+        raise SpecError(describe(where, "a positive number", repr(x), "use a value > 0"))
+    return v
+
+
+def _nonneg(x: Any, where: str) -> float:
+    v = _finite(x, where)
+    if v < 0:
+        raise SpecError(describe(where, "a number >= 0", repr(x), "use a value >= 0"))
+    return v
+
+
+def _opt_pos(x: Any, where: str) -> float | None:
+    return None if x is None else _positive(x, where)
+
+
+def _vec3(x: Any, where: str) -> tuple[float, float, float]:
+    if not isinstance(x, Sequence) or isinstance(x, str) or len(x) != 3:
+        raise SpecError(describe(where, "3 numbers [x, y, z]", repr(x), "write [x, y, z]"))
+    a, b, c = (_finite(v, where) for v in x)
+    return (a, b, c)
+
+
+def _opt_positive_vec(x: Any, where: str) -> tuple[float, ...] | None:
+    if x is None:
+        return None
+    if not isinstance(x, Sequence) or isinstance(x, str):
+        raise SpecError(
+            describe(where, "an array of numbers, one per joint", repr(x), "write [..]")
+        )
+    return tuple(_positive(v, where) for v in x)
+
+
+def _opt_nonneg_vec(x: Any, where: str) -> tuple[float, ...] | None:
+    if x is None:
+        return None
+    if not isinstance(x, Sequence) or isinstance(x, str):
+        raise SpecError(
+            describe(where, "an array of numbers, one per joint", repr(x), "write [..]")
+        )
+    return tuple(_nonneg(v, where) for v in x)
