@@ -106,7 +106,7 @@ def check() -> dict[str, object]:
     import pinocchio as pin
 
     from amsfe_sym.load import load_robot
-    from amsfe_sym.spec import load_spec
+    from amsfe_sym.load.spec import load_spec
 
     out: dict[str, object] = {}
     gz = gaz2019()
@@ -196,7 +196,7 @@ def check() -> dict[str, object]:
     out["wT_max_per_joint"] = wT.round(3).tolist()
     out["mode_hz_max_per_joint"] = (wT / T / (2 * np.pi)).round(1).tolist()
     cam = robot.camera
-    from amsfe_sym.reference import PinocchioModel
+    from amsfe_sym.apps.reference import PinocchioModel
 
     pm = PinocchioModel(robot, np.eye(2 * robot.n + robot.p))
     uv, depths = [], []
