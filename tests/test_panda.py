@@ -10,18 +10,18 @@
 
 from __future__ import annotations
 
-import tomllib
 import xml.etree.ElementTree as ET
 
 import numpy as np
 import pinocchio as pin
+import tomllib
 
 from amsfe_sym.apps.check import random_states, rel_err
-from amsfe_sym.load import load_robot
-from amsfe_sym.codegen.preflight import check_scenario_shapes
 from amsfe_sym.apps.reference import PinocchioOracle
-from amsfe_sym.scenario import camera_timing, load_scenario
+from amsfe_sym.codegen.preflight import check_scenario_shapes
+from amsfe_sym.load import load_robot
 from amsfe_sym.load.spec import load_spec, robots_dir
+from amsfe_sym.scenario import camera_timing, load_scenario
 from amsfe_sym.symbolic.model import build_functions
 
 PANDA = robots_dir() / "panda"

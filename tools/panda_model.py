@@ -47,7 +47,6 @@ FRANKA_DH = (
 )
 
 
-
 def gaz2019() -> dict[str, list]:
     """Gaz et al. 2019's identified parameters (robots/panda/gaz2019.toml, with its source)."""
     import tomllib
@@ -143,7 +142,9 @@ def check() -> dict[str, object]:
         assert t is not None
         inertia = [float(t.get(k)) for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")]
         diffs["mass"] = max(diffs["mass"], abs(m - GAZ_MASS[i]))
-        diffs["inertia"] = max(diffs["inertia"], float(np.max(np.abs(np.subtract(inertia, GAZ_INERTIA[i])))))
+        diffs["inertia"] = max(
+            diffs["inertia"], float(np.max(np.abs(np.subtract(inertia, GAZ_INERTIA[i]))))
+        )
         dc = np.abs(c - np.array(GAZ_COM[i]))
         if np.max(dc) > 0:
             com_differs.append({"link": i + 1, "urdf": c.tolist(), "gaz": list(GAZ_COM[i])})
