@@ -286,6 +286,8 @@ def _choice(results: list[dict[str, Any]]) -> dict[str, Any]:
             if r["max_q_error_rad"] <= TOLERANCE:
                 ok[key] = ok.get(key, 0) + 1
     every = [k for k, v in ok.items() if v == len(results)]
+    if not every:
+        return {"integrator": None, "substeps": None, "evaluations": None}
     best = min(every, key=lambda k: (METHODS[k[0]][1] * k[1], -METHODS[k[0]][1]))
     return {
         "integrator": best[0],
@@ -339,8 +341,12 @@ def write_page(results: list[dict[str, Any]], choice: dict[str, Any], machine: s
         "## Choice",
         "",
         f"The cheapest candidate within {TOLERANCE:g} rad on every scenario above: "
-        f"**{choice['integrator']} with {choice['substeps']} substeps** "
-        f"({choice['evaluations']} dynamics evaluations a tick, against 40 for rk4 x 10).",
+        + (
+            f"**{choice['integrator']} with {choice['substeps']} substeps** "
+            f"({choice['evaluations']} dynamics evaluations a tick, against 40 for rk4 x 10)."
+            if choice["integrator"]
+            else "**none** of the candidates."
+        ),
         "",
     ]
     return "\n".join(lines)
@@ -355,7 +361,11 @@ def main() -> None:
     logging.getLogger("amsfe_sym").setLevel(logging.ERROR)
     from amsfe_sym.core.provenance import provenance
 
-    results = [study(s, args.duration) for s in args.scenarios]
+    results = []
+    for name in args.scenarios:
+        results.append(study(name, args.duration))
+        for r in results[-1]["rows"]:
+            print(f"  {name}: {r}", flush=True)
     choice = _choice(results)
     prov = provenance()
     machine = f"{prov['cpu']}, {prov['cores']} cores, load {prov['load_average'][0]}"
