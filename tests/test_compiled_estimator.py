@@ -176,7 +176,7 @@ def test_non_converged_inverse_is_refused_identically(
 
     from amsfe_sym.codegen import generate
     from amsfe_sym.load.spec import robots_dir
-    from amsfe_sym.sim.loop import refusal_kind
+    from amsfe_sym.sim.result import refusal_kind
 
     folder = tmp_path_factory.mktemp("inv1") / "paper_2link_inv1"
     folder.mkdir()

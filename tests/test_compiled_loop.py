@@ -23,9 +23,11 @@ import numpy as np
 import pytest
 
 from amsfe_sym.codegen import library_for
+from amsfe_sym.control import LawInputs
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario, load_scenario
-from amsfe_sym.sim.loop import RunResult, run
+from amsfe_sym.sim.loop import run
+from amsfe_sym.sim.result import RunResult
 
 ESTIMATORS = ("encoders", "naive", "oosm", "replay", "cloning")
 CONTROLLERS = ("amsfe", "dtsmc", "dtsmc-ekf", "truth", "amsfe-paper", "dtsmc-paper", "truth-ct")
@@ -118,7 +120,7 @@ def test_compiled_controller_tick_by_tick(paper_sim: tuple[Scenario, ModelLibrar
             x_hat = x + 1e-3 * rng.standard_normal(lib.N)
             z = x[2 * lib.n : 4 * lib.n] + 1e-4 * rng.standard_normal(2 * lib.n)
             u_py, sat = ctrl.saturate(
-                ctrl.torque(k, float(t[k]), x[: 4 * lib.n], x[4 * lib.n :], x_hat, z)
+                ctrl.torque(LawInputs(k, float(t[k]), x[: 4 * lib.n], x[4 * lib.n :], x_hat, z))
             )
             u_c = cc.torque(k, ref, x_hat, z, x)
             np.testing.assert_allclose(u_c, u_py, rtol=1e-12, atol=1e-12, err_msg=f"{name} k={k}")

@@ -16,7 +16,7 @@ import pytest
 
 from amsfe_sym.apps.check import random_states
 from amsfe_sym.codegen import generate, library_for
-from amsfe_sym.control import make_controller
+from amsfe_sym.control import LawInputs, make_controller
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.signals.trajectory import from_config as trajectory_from_config
 from amsfe_sym.sim.loop import run
@@ -365,10 +365,10 @@ def test_gain_changed_at_run_time_changes_u_without_regenerating(libraries) -> N
     x = np.concatenate([rq + 0.01, rqd, qm_r + 0.005, qmd_r, lib.theta_initial])
     z = x[4:8]
     ctrl = make_controller("amsfe", lib, traj, {})
-    u1 = ctrl.torque(0, 0.0, x[:8], x[8:], x, z)
+    u1 = ctrl.torque(LawInputs(0, 0.0, x[:8], x[8:], x, z))
     ctrl2 = make_controller("amsfe", lib, traj, {})
     ctrl2.set_gains(h=20.0)
-    u2 = ctrl2.torque(0, 0.0, x[:8], x[8:], x, z)
+    u2 = ctrl2.torque(LawInputs(0, 0.0, x[:8], x[8:], x, z))
     assert np.max(np.abs(u1 - u2)) > 1e-2
     assert generate("paper_2link").reused  # nothing was rebuilt
 

@@ -7,6 +7,8 @@ expected, what was found, and how to fix it; :func:`describe` builds them unifor
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 __all__ = [
     "AmsfeError",
     "CodegenError",
@@ -20,7 +22,9 @@ __all__ = [
     "SpecError",
     "UnsupportedJointError",
     "UrdfError",
+    "check_known_keys",
     "describe",
+    "unknown_name",
 ]
 
 
@@ -78,3 +82,27 @@ class ConvergenceError(EstimatorError):
 class RunFolderError(AmsfeError, FileExistsError):
     """A run's output folder cannot be written as asked (it exists and ``--force`` is off,
     or it is a file)."""
+
+
+def unknown_name(what: str, name: object, known: Iterable[str]) -> ConfigError:
+    """The error for a name that is not in a registry (``raise unknown_name(...)``): the
+    message lists the known names."""
+    return ConfigError(
+        describe(
+            what,
+            "one of " + ", ".join(repr(n) for n in known),
+            repr(name),
+            "pick a name from that list",
+        )
+    )
+
+
+def check_known_keys(what: str, given: Iterable[str], known: Iterable[str]) -> None:
+    """Raise :class:`ConfigError` listing the keys of ``given`` that are not ``known``."""
+    unknown = sorted(set(given) - set(known))
+    if unknown:
+        raise ConfigError(
+            describe(
+                what, f"keys among {sorted(known)}", f"unknown {unknown}", "remove or rename them"
+            )
+        )

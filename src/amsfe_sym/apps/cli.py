@@ -321,7 +321,7 @@ def _simulate(args: argparse.Namespace) -> int:
     from datetime import datetime, timezone
     from pathlib import Path
 
-    from amsfe_sym.apps.simulate import simulate_comparison, simulate_one
+    from amsfe_sym.apps.simulate import SimulateOptions, simulate_comparison, simulate_one
     from amsfe_sym.codegen import library_for
     from amsfe_sym.scenario import apply_sets, load_scenario
 
@@ -336,18 +336,18 @@ def _simulate(args: argparse.Namespace) -> int:
     lib = library_for(sc)
     stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
     compare = tuple(args.compare.split(",")) if args.compare else sc.compare
-    options = {
-        "plots": not args.no_plots,
-        "force": args.force,
-        "progress": not args.no_progress,
-        "runtime": args.runtime,
-    }
+    options = SimulateOptions(
+        plots=not args.no_plots,
+        force=args.force,
+        progress=not args.no_progress,
+        runtime=args.runtime,
+    )
     if compare and args.controller is None:  # the paper's comparison on one seed
         out = Path(args.out) if args.out else Path("runs") / f"{sc.name}-{stamp}"
-        simulate_comparison(sc, lib, compare, out, **options)
+        simulate_comparison(sc, lib, compare, out, options)
     else:
         out = Path(args.out) if args.out else Path("runs") / f"{sc.name}-{sc.estimator}-{stamp}"
-        simulate_one(sc, lib, out, **options)
+        simulate_one(sc, lib, out, options)
     return 0
 
 

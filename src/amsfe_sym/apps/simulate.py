@@ -8,6 +8,7 @@ together and draws the figures (:mod:`amsfe_sym.apps.plots`) into the folder.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -18,32 +19,43 @@ from amsfe_sym.sim.loop import run
 from amsfe_sym.sim.record import check_out, summarize, write_run
 from amsfe_sym.sim.result import RunResult
 
-__all__ = ["RunResult", "print_run", "simulate_comparison", "simulate_one"]
+__all__ = ["RunResult", "SimulateOptions", "print_run", "simulate_comparison", "simulate_one"]
+
+
+@dataclass(frozen=True)
+class SimulateOptions:
+    """How ``amsfe simulate`` runs and writes.
+
+    Attributes:
+        plots: Draw the figures into the run folder.
+        force: Replace an existing run folder.
+        progress: Show a progress bar.
+        runtime: ``"compiled"`` (the C loop) or ``"python"`` (the reference loop).
+    """
+
+    plots: bool = True
+    force: bool = False
+    progress: bool = False
+    runtime: str = "compiled"
 
 
 def simulate_one(
-    sc: Scenario,
-    lib: ModelLibrary,
-    out: Path,
-    plots: bool = True,
-    force: bool = False,
-    progress: bool = False,
-    runtime: str = "compiled",
+    sc: Scenario, lib: ModelLibrary, out: Path, options: SimulateOptions = SimulateOptions()
 ) -> RunResult:
-    """Run ``sc`` on ``lib``, write the run folder ``out`` (with figures if ``plots``) and
-    print its headline numbers.
+    """Run ``sc`` on ``lib``, write the run folder ``out`` (with figures if
+    ``options.plots``) and print its headline numbers.
 
     Raises:
-        RunFolderError: ``out`` exists and ``force`` is off (checked before the run).
+        RunFolderError: ``out`` exists and ``options.force`` is off (checked before the run).
     """
-    check_out(out, force)  # before the run: nothing is computed for nothing
-    res = run(sc, lib, progress=progress, runtime=runtime)
+    check_out(out, options.force)  # before the run: nothing is computed for nothing
+    res = run(sc, lib, progress=options.progress, runtime=options.runtime)
     figures = None
-    if plots:
+    if options.plots:
         from amsfe_sym.apps.plots.run import plot_run
 
         figures = plot_run
-    write_run(res, out, figures=figures, force=force)
+    write_run(res, out, figures=figures, force=options.force)
     print_run(res, out)
     return res
 
@@ -53,23 +65,20 @@ def simulate_comparison(
     lib: ModelLibrary,
     controllers: tuple[str, ...],
     out: Path,
-    plots: bool = True,
-    force: bool = False,
-    progress: bool = False,
-    runtime: str = "compiled",
+    options: SimulateOptions = SimulateOptions(),
 ) -> None:
     """Run ``sc`` once per controller (same seed and noise), write ``out/<controller>/``,
     ``comparison.json`` and the paper's figures, and print the comparison."""
     from amsfe_sym.apps.reproduce import print_comparison, run_comparison, write_comparison
 
-    check_out(out, force)  # before the runs
-    cmp = run_comparison(sc, controllers, lib, progress=progress, runtime=runtime)
+    check_out(out, options.force)  # before the runs
+    cmp = run_comparison(sc, controllers, lib, progress=options.progress, runtime=options.runtime)
     figures = None
-    if plots:
+    if options.plots:
         from amsfe_sym.apps.plots.paper import plot_comparison
 
         figures = plot_comparison
-    write_comparison(cmp, out, figures=figures, force=force)
+    write_comparison(cmp, out, figures=figures, force=options.force)
     print_comparison(cmp, out)
 
 

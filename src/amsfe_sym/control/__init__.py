@@ -7,7 +7,7 @@ docs/control.md); ``truth-ct`` is a cascaded computed-torque law on the true sta
 May import: errors, runtime (the library's laws and manifest), signals.trajectory.
 """
 
-from amsfe_sym.control.base import CONTROLLERS, Controller, make_controller
+from amsfe_sym.control.base import CONTROLLERS, Controller, LawInputs, make_controller
 from amsfe_sym.control.sliding import Amsfe, AmsfePaper, Dtsmc, DtsmcPaper, Truth
 from amsfe_sym.control.truth import TruthComputedTorque
 
@@ -18,6 +18,7 @@ __all__ = [
     "Controller",
     "Dtsmc",
     "DtsmcPaper",
+    "LawInputs",
     "Truth",
     "TruthComputedTorque",
     "make_controller",

@@ -4,18 +4,38 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.errors import ConfigError, check_known_keys, describe
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.signals.trajectory import Trajectory
 
-__all__ = ["CONTROLLERS", "Controller", "make_controller", "register"]
+__all__ = ["CONTROLLERS", "Controller", "LawInputs", "make_controller", "register"]
 
 FloatArray = NDArray[np.float64]
+
+
+class LawInputs(NamedTuple):
+    """What a control law may read at tick k.
+
+    Attributes:
+        k: Tick index.
+        t: Time t_k = k T [s].
+        x_true: The true plant state [q, qd, qm, qmd] (oracles only), shape (4n,).
+        theta_true: The true parameters theta (oracles only), shape (p,).
+        x_hat: The estimate x(k|k) (eq. 2), shape (N,).
+        z_enc: The encoder sample [qm, qmd] + noise (eq. 5) taken at t_k, shape (2n,).
+    """
+
+    k: int
+    t: float
+    x_true: FloatArray
+    theta_true: FloatArray
+    x_hat: FloatArray
+    z_enc: FloatArray
 
 
 class Controller(ABC):
@@ -36,16 +56,7 @@ class Controller(ABC):
         self.lib = lib
         self.trajectory = trajectory
         given = dict(gains or {})
-        unknown = sorted(set(given) - set(self.gain_defaults))
-        if unknown:
-            raise ConfigError(
-                describe(
-                    f"controller {self.name!r} gains",
-                    f"keys among {sorted(self.gain_defaults)}",
-                    f"unknown {unknown}",
-                    "remove or rename them",
-                )
-            )
+        check_known_keys(f"controller {self.name!r} gains", given, self.gain_defaults)
         self.gains = {**self.gain_defaults, **given}
 
         limits = lib.manifest.actuators.u_max or (np.inf,) * lib.n
@@ -89,18 +100,9 @@ class Controller(ABC):
         return ref.q, ref.qd, ref.qdd
 
     @abstractmethod
-    def torque(
-        self,
-        k: int,
-        t: float,
-        x_true: FloatArray,
-        theta_true: FloatArray,
-        x_hat: FloatArray,
-        z_enc: FloatArray,
-    ) -> FloatArray:
-        """u(k) [N m], before saturation, from what the law may read: the true plant state
-        [q, qd, qm, qmd] and theta (oracles only), the estimate x_hat (eq. 2), and the encoder
-        sample z_enc = [qm, qmd] + noise (eq. 5) taken at t_k."""
+    def torque(self, tick: LawInputs) -> FloatArray:
+        """u(k) [N m], before saturation, from what the law may read at tick k
+        (:class:`LawInputs`)."""
 
 
 CONTROLLERS: dict[str, type[Controller]] = {}

@@ -30,8 +30,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from amsfe_sym.control.base import Controller, FloatArray, register
-from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.control.base import Controller, FloatArray, LawInputs, register
+from amsfe_sym.errors import ConfigError, check_known_keys, describe
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.signals.trajectory import Trajectory
 
@@ -109,16 +109,7 @@ class _SlidingBase(Controller):
 
     def set_gains(self, **gains: Any) -> None:
         """Change gains at run time (no regeneration: gains are inputs of the compiled law)."""
-        unknown = sorted(set(gains) - set(self._g))
-        if unknown:
-            raise ConfigError(
-                describe(
-                    f"controller {self.name!r} gains",
-                    f"keys among {sorted(self._g)}",
-                    f"unknown {unknown}",
-                    "remove or rename them",
-                )
-            )
+        check_known_keys(f"controller {self.name!r} gains", gains, self._g)
         self.gains.update(gains)
         for key in gains:
             self._g[key] = self._gain(key, 1 if key == "p" else self.n)
@@ -180,15 +171,8 @@ class _Printed(_SlidingBase):
     def _pick(self, x_true: FloatArray, theta_true: FloatArray, x_hat: FloatArray) -> FloatArray:
         return x_hat
 
-    def torque(
-        self,
-        k: int,
-        t: float,
-        x_true: FloatArray,
-        theta_true: FloatArray,
-        x_hat: FloatArray,
-        z_enc: FloatArray,
-    ) -> FloatArray:
+    def torque(self, tick: LawInputs) -> FloatArray:
+        k, t, x_true, theta_true, x_hat, z_enc = tick
         n = self.n
         lead, x = self._law_inputs(self._pick(x_true, theta_true, x_hat), z_enc)
         q, qm, qmd = x[:n], x[2 * n : 3 * n], x[3 * n : 4 * n]
@@ -306,15 +290,8 @@ class _Cascade(_SlidingBase):
         """The law's leading inputs (the state it acts on)."""
         return [x_hat]
 
-    def torque(
-        self,
-        k: int,
-        t: float,
-        x_true: FloatArray,
-        theta_true: FloatArray,
-        x_hat: FloatArray,
-        z_enc: FloatArray,
-    ) -> FloatArray:
+    def torque(self, tick: LawInputs) -> FloatArray:
+        k, t, x_true, theta_true, x_hat, z_enc = tick
         lead = self._law_inputs(x_true, theta_true, x_hat, z_enc)
         ref = self._ref_at(k, t)
         out = self._law.call_into(*lead, ref, self._cf, *self._gain_args())

@@ -21,7 +21,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from amsfe_sym.control.base import Controller, FloatArray, register
+from amsfe_sym.control.base import Controller, FloatArray, LawInputs, register
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.signals.trajectory import Trajectory
 
@@ -64,15 +64,8 @@ class TruthComputedTorque(Controller):
             "motor_bandwidth": float(self.gains["motor_bandwidth"]),
         }
 
-    def torque(
-        self,
-        k: int,
-        t: float,
-        x_true: FloatArray,
-        theta_true: FloatArray,
-        x_hat: FloatArray,
-        z_enc: FloatArray,
-    ) -> FloatArray:
+    def torque(self, tick: LawInputs) -> FloatArray:
+        k, t, x_true, theta_true = tick.k, tick.t, tick.x_true, tick.theta_true
         n = self.n
         q, qd, qm, qmd = x_true[:n], x_true[n : 2 * n], x_true[2 * n : 3 * n], x_true[3 * n :]
         q_d, qd_d, qdd_d = self.reference(k, t)

@@ -30,9 +30,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import ConfigError, describe
-from amsfe_sym.estimation.base import Estimator, StepReport
+from amsfe_sym.estimation.base import Estimator, StepInputs, StepReport
 from amsfe_sym.estimation.ekf import joseph_update, measure, predict, require_positive_definite
-from amsfe_sym.estimation.models import CameraFrame
 
 __all__ = ["CloningEstimator"]
 
@@ -134,13 +133,8 @@ class CloningEstimator(Estimator):
             self._xa, self._Pa = result.x, result.P
         return result.accepted, result.nis
 
-    def _step(
-        self,
-        u: FloatArray,
-        z_encoder: FloatArray | None,
-        frames: list[CameraFrame],
-        report: StepReport,
-    ) -> None:
+    def _step(self, step: StepInputs, report: StepReport) -> None:
+        u, z_encoder, frames = step.u, step.z_encoder, step.frames
         k_new = self.k + 1
         n = self.nx
         self._predict_augmented(u)

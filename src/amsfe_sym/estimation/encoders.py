@@ -8,10 +8,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-import numpy as np
-from numpy.typing import NDArray
-
-from amsfe_sym.estimation.base import Estimator, StepReport
+from amsfe_sym.estimation.base import Estimator, StepInputs, StepReport
 from amsfe_sym.estimation.models import CameraFrame
 
 __all__ = ["EncodersEstimator"]
@@ -23,13 +20,8 @@ class EncodersEstimator(Estimator):
     name: ClassVar[str] = "encoders"
     uses_frames: ClassVar[bool] = False
 
-    def _step(
-        self,
-        u: NDArray[np.float64],
-        z_encoder: NDArray[np.float64] | None,
-        frames: list[CameraFrame],
-        report: StepReport,
-    ) -> None:
+    def _step(self, step: StepInputs, report: StepReport) -> None:
+        u, z_encoder, frames = step.u, step.z_encoder, step.frames
         self._predict(u)
         self._encoder_update(z_encoder, report)
         self._frames_now(frames, report)

@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import ConvergenceError, EstimatorError, describe
-from amsfe_sym.estimation.base import Estimator, StepReport
+from amsfe_sym.estimation.base import Estimator, StepInputs, StepReport
 from amsfe_sym.estimation.ekf import (
     UpdateResult,
     cholesky_lower,
@@ -239,13 +239,8 @@ class OosmEstimator(Estimator):
         self._u: list[FloatArray | None] = [None] * B
         self._last: UpdateResult | None = None  # accepted encoder update at self.k, if any
 
-    def _step(
-        self,
-        u: FloatArray,
-        z_encoder: FloatArray | None,
-        frames: list[CameraFrame],
-        report: StepReport,
-    ) -> None:
+    def _step(self, step: StepInputs, report: StepReport) -> None:
+        u, z_encoder, frames = step.u, step.z_encoder, step.frames
         k_new = self.k + 1
         slot = self.k % self.config.buffer_steps
         pred = self._predict(u)
@@ -355,14 +350,8 @@ class OosmAl1Estimator(OosmEstimator):
         self._post_x[s] = self.x
         self._post_P[s] = self.P
 
-    def _step(
-        self,
-        u: FloatArray,
-        z_encoder: FloatArray | None,
-        frames: list[CameraFrame],
-        report: StepReport,
-    ) -> None:
-        super()._step(u, z_encoder, frames, report)
+    def _step(self, step: StepInputs, report: StepReport) -> None:
+        super()._step(step, report)
         self._store_posterior(self.k + 1)
 
     def _retrodict(self, kappa: int, k: int, Phi: FloatArray, Q: FloatArray) -> A1Retrodiction:

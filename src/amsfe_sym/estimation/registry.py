@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.errors import unknown_name
 from amsfe_sym.estimation.base import Estimator
 from amsfe_sym.estimation.cloning import CloningEstimator
 from amsfe_sym.estimation.encoders import EncodersEstimator
@@ -35,14 +35,7 @@ def estimator_class(name: str) -> type[Estimator]:
     try:
         return ESTIMATORS[name]
     except (KeyError, TypeError):
-        raise ConfigError(
-            describe(
-                "estimator name",
-                "one of " + ", ".join(repr(n) for n in ESTIMATORS),
-                repr(name),
-                "pick a name from that list",
-            )
-        ) from None
+        raise unknown_name("estimator name", name, ESTIMATORS) from None
 
 
 def make_estimator(name: str, **kwargs: Any) -> Estimator:

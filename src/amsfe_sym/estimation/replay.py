@@ -23,8 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import EstimatorError
-from amsfe_sym.estimation.base import Estimator, StepReport
-from amsfe_sym.estimation.models import CameraFrame
+from amsfe_sym.estimation.base import Estimator, StepInputs, StepReport
 
 __all__ = ["ReplayEstimator"]
 
@@ -58,13 +57,8 @@ class ReplayEstimator(Estimator):
             if report is not None:
                 report.frame_result(kappa, result.accepted, result.nis, self._gate_camera)
 
-    def _step(
-        self,
-        u: FloatArray,
-        z_encoder: FloatArray | None,
-        frames: list[CameraFrame],
-        report: StepReport,
-    ) -> None:
+    def _step(self, step: StepInputs, report: StepReport) -> None:
+        u, z_encoder, frames = step.u, step.z_encoder, step.frames
         k, k_new, size = self.k, self.k + 1, self._size
         self._us[k % size] = u
         self._zs[k_new % size] = z_encoder

@@ -24,9 +24,10 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.errors import ConfigError, EstimatorError, describe
-from amsfe_sym.estimation.base import Estimator, StepReport
+from amsfe_sym.errors import ConfigError, EstimatorError, describe, unknown_name
+from amsfe_sym.estimation.base import Estimator, StepInputs, StepReport
 from amsfe_sym.estimation.models import CameraFrame
+from amsfe_sym.runtime.cheader import c_struct, header_fields
 from amsfe_sym.runtime.models import (
     CameraMeasurement,
     CompiledTransition,
@@ -63,50 +64,16 @@ STATUS = {
 }
 
 
-class _Params(ctypes.Structure):
-    _fields_ = [
-        ("estimator", ctypes.c_int),
-        ("buffer_steps", ctypes.c_int),
-        ("camera_iterations", ctypes.c_int),
-        ("camera_period", ctypes.c_int),
-        ("camera_phase", ctypes.c_int),
-        ("camera_max_delay", ctypes.c_int),
-        ("max_frames_per_step", ctypes.c_int),
-        ("gate_camera", ctypes.c_double),
-        ("gate_encoder", ctypes.c_double),
-        ("qw", ctypes.c_void_p),
-        ("r_encoder", ctypes.c_void_p),
-        ("r_camera", ctypes.c_void_p),
-        ("x0", ctypes.c_void_p),
-        ("P0", ctypes.c_void_p),
-        ("k0", ctypes.c_long),
-    ]
+_Params = c_struct("_Params", "amsfe_runtime.h", "amsfe_params")
 
 
 class RuntimeDiagnostics(ctypes.Structure):
     """``amsfe_diag`` of amsfe_runtime.h: counters and the outcome of the last calls."""
 
-    _fields_ = [
-        ("k", ctypes.c_long),
-        ("failed", ctypes.c_int),
-        ("last_error", ctypes.c_int),
-        ("encoder_accepted", ctypes.c_int),
-        ("encoder_nis", ctypes.c_double),
-        ("replayed_steps", ctypes.c_int),
-        ("clones", ctypes.c_int),
-        ("ticks", ctypes.c_long),
-        ("encoder_updates", ctypes.c_long),
-        ("encoder_gated", ctypes.c_long),
-        ("encoder_missing", ctypes.c_long),
-        ("frames_applied", ctypes.c_long),
-        ("frames_gated", ctypes.c_long),
-        ("frames_refused", ctypes.c_long),
-        ("frames_ignored", ctypes.c_long),
-    ]
+    _fields_ = header_fields("amsfe_runtime.h", "amsfe_diag")
 
 
-class _Dims(ctypes.Structure):
-    _fields_ = [(k, ctypes.c_int) for k in ("n", "N", "nw", "ne", "nc", "clone_slots")]
+_Dims = c_struct("_Dims", "amsfe_runtime.h", "amsfe_dims")
 
 
 _P = ctypes.c_void_p
@@ -286,13 +253,8 @@ class CompiledEstimator(Estimator):
             )
         )
 
-    def _step(
-        self,
-        u: FloatArray,
-        z_encoder: FloatArray | None,
-        frames: list[CameraFrame],
-        report: StepReport,
-    ) -> None:
+    def _step(self, step: StepInputs, report: StepReport) -> None:
+        u, z_encoder, frames = step.u, step.z_encoder, step.frames
         self._ubuf[:] = u
         zp = None
         if z_encoder is not None:
@@ -381,14 +343,7 @@ COMPILED_ESTIMATORS: dict[str, type[CompiledEstimator]] = {
 def make_compiled_estimator(name: str, **kwargs: Any) -> CompiledEstimator:
     """Build the compiled estimator ``name`` with the arguments of ``make_estimator``."""
     if name not in COMPILED_ESTIMATORS:
-        raise ConfigError(
-            describe(
-                "compiled estimator name",
-                "one of " + ", ".join(repr(n) for n in COMPILED_ESTIMATORS),
-                repr(name),
-                "pick a name from that list",
-            )
-        )
+        raise unknown_name("compiled estimator name", name, COMPILED_ESTIMATORS)
     return COMPILED_ESTIMATORS[name](**kwargs)
 
 

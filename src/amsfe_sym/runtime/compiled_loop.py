@@ -86,7 +86,7 @@ class ControllerParams:
     motor_bandwidth: float = 0.0
     _keep: list[Any] = field(default_factory=list, repr=False)
 
-    def struct(self) -> CtrlParams:
+    def struct(self) -> ctypes.Structure:
         """The C struct (its arrays are kept alive by this object)."""
         if self.name not in CONTROLLER_CODES:
             raise ConfigError(
@@ -232,7 +232,7 @@ class SimulationInputs:
 
 @dataclass
 class SimulationRecords:
-    """What a compiled run recorded (rows ``0 .. ticks``; see ``sim.loop.RunResult``)."""
+    """What a compiled run recorded (rows ``0 .. ticks``; see ``sim.result.RunResult``)."""
 
     x_true: FloatArray
     x_hat: FloatArray

@@ -11,6 +11,7 @@ import ctypes
 from typing import Any
 
 from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.runtime.cheader import c_struct, header_fields
 
 __all__ = [
     "CONTROLLER_CODES",
@@ -37,50 +38,11 @@ CONTROLLER_CODES = {
 }
 
 
-class CtrlParams(ctypes.Structure):
-    _fields_ = [
-        ("controller", ctypes.c_int),
-        ("T", ctypes.c_double),
-        *((k, _P) for k in ("h", "lam", "Lt", "eps", "phi")),
-        ("p", ctypes.c_double),
-        *((k, _P) for k in ("wm", "tau_max", "wf", "vmax")),
-        ("qmd_next_hold", ctypes.c_int),
-        ("state_true", ctypes.c_int),
-        ("link_bandwidth", ctypes.c_double),
-        ("motor_bandwidth", ctypes.c_double),
-        *((k, _P) for k in ("u_max", "Mm", "Fm", "Ks", "ks_theta", "theta_initial")),
-    ]
-
-
-class CtrlOut(ctypes.Structure):
-    _fields_ = [("s", _P), ("bound", _P), ("tau_d", _P), ("saturated", ctypes.c_int)]
-
-
-class SimParams(ctypes.Structure):
-    _fields_ = [
-        ("K", ctypes.c_long),
-        *((k, _P) for k in ("x_plant0", "theta_true", "ref", "enc_noise")),
-        ("enc_resolution", ctypes.c_double),
-        ("tau_d", _P),
-        *((k, ctypes.c_int) for k in ("cam_period", "cam_phase", "cam_delay")),
-        *((k, ctypes.c_double) for k in ("cam_width", "cam_height", "pixel_std")),
-        ("round_to_pixel", ctypes.c_int),
-        ("drop_probability", ctypes.c_double),
-        ("n_exposures", ctypes.c_long),
-        *((k, _P) for k in ("cam_noise", "cam_uniform", "cam_jitter")),
-        ("max_in_flight", ctypes.c_int),
-        ("diverged_error", ctypes.c_double),
-    ]
-
-
-class SimRecords(ctypes.Structure):
-    _fields_ = [
-        *((k, _P) for k in ("x_true", "x_hat", "P_diag", "nees", "u", "z_enc", "s", "bound")),
-        ("saturated", _P),
-        ("frames", _P),
-        ("frames_capacity", ctypes.c_long),
-    ]
-
+#: The parameter block, outputs and records of ``amsfe_loop.h`` (its own fields).
+CtrlParams = c_struct("CtrlParams", "amsfe_loop.h", "amsfe_ctrl_params")
+CtrlOut = c_struct("CtrlOut", "amsfe_loop.h", "amsfe_ctrl_out")
+SimParams = c_struct("SimParams", "amsfe_loop.h", "amsfe_sim_params")
+SimRecords = c_struct("SimRecords", "amsfe_loop.h", "amsfe_sim_records")
 
 COUNTERS = (
     "frames_applied",
@@ -106,14 +68,7 @@ COUNTERS = (
 class SimulationState(ctypes.Structure):
     """``amsfe_sim_state``: the next tick, whether the loop diverged, its counters."""
 
-    _fields_ = [
-        ("k", ctypes.c_long),
-        ("ticks_done", ctypes.c_long),
-        ("diverged", ctypes.c_int),
-        ("status", ctypes.c_int),
-        *((k, ctypes.c_long) for k in COUNTERS),
-        ("plant_nonfinite", ctypes.c_int),
-    ]
+    _fields_ = header_fields("amsfe_loop.h", "amsfe_sim_state")
 
     def counters(self) -> dict[str, int]:
         """The counters by name (those of ``summary.json``)."""

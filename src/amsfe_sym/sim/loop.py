@@ -24,6 +24,7 @@ import time
 import numpy as np
 from numpy.typing import NDArray
 
+from amsfe_sym.control import LawInputs
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
@@ -32,24 +33,13 @@ from amsfe_sym.sim.result import (
     CAMERA_COUNTERS,
     DECISION_COUNTERS,
     DIVERGED_TRACKING_ERROR,
-    REFUSAL_KINDS,
     RUNTIMES,
     RunResult,
     refusal_kind,
     tick_bar,
 )
 
-__all__ = [
-    "CAMERA_COUNTERS",
-    "DECISION_COUNTERS",
-    "DIVERGED_TRACKING_ERROR",
-    "REFUSAL_KINDS",
-    "RUNTIMES",
-    "RunResult",
-    "refusal_kind",
-    "run",
-    "tick_bar",
-]
+__all__ = ["run"]
 
 log = logging.getLogger(__name__)
 
@@ -147,7 +137,9 @@ def run(
             counters["encoder_rejected"] += int(not rep.encoder_accepted)
         xh, P = est.x, est.P
         # 3. controller, then the actuator limit
-        u, saturated[k] = ctrl.saturate(ctrl.torque(k, float(t[k]), xp, theta_true, xh, z))
+        u, saturated[k] = ctrl.saturate(
+            ctrl.torque(LawInputs(k, float(t[k]), xp, theta_true, xh, z))
+        )
         # record
         x_true[k] = x_t
         x_hat[k] = xh

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
 import tempfile
 import time
 from collections.abc import Sequence
@@ -17,8 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.apps.bench.timing import CTimer, Timing, round4, time_calls
-from amsfe_sym.errors import CodegenError, describe
+from amsfe_sym.apps.bench.timing import CTimer, Timing, round4, run_checked, time_calls
 
 __all__ = [
     "CALL_FUNCTIONS",
@@ -300,17 +298,14 @@ def bench_cflags(
             times = []
             for _ in range(compile_repeat):
                 t0 = time.perf_counter()
-                proc = subprocess.run(cmd, cwd=d, capture_output=True, text=True)
+                run_checked(
+                    cmd,
+                    f"compiling with {flags!r}",
+                    "success",
+                    "drop or correct the flag set the compiler refused",
+                    cwd=d,
+                )
                 times.append(time.perf_counter() - t0)
-                if proc.returncode != 0:
-                    raise CodegenError(
-                        describe(
-                            f"compiling with {flags!r}",
-                            "success",
-                            proc.stderr[-1000:],
-                            "drop or correct the flag set the compiler refused",
-                        )
-                    )
             # this build is ours: record its own hash, as generate does
             manifest = json.loads((lib.dir / "manifest.json").read_text())
             manifest["library_sha256"] = file_sha256(d / lib.manifest.library)

@@ -23,7 +23,6 @@ from __future__ import annotations
 import math
 import statistics
 import struct
-import subprocess
 import tempfile
 import time
 from collections.abc import Callable
@@ -34,7 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.errors import CodegenError, describe
+from amsfe_sym.apps.bench.timing import run_checked
 
 __all__ = [
     "BaselineEkf",
@@ -170,18 +169,12 @@ def compiled_tick(
 ) -> tuple[TickStats, FloatArray]:
     """Per-tick cost of ``amsfe_est_tick`` in pure C; and the final x it printed."""
     data = write_tick_input(workdir / f"tick-{name}.bin", name, inp)
-    proc = subprocess.run(
-        [str(exe), str(inp.lib.library_path), str(data)], capture_output=True, text=True
+    proc = run_checked(
+        [str(exe), str(inp.lib.library_path), str(data)],
+        f"the C tick timer on {name}",
+        "exit code 0",
+        "regenerate the library (amsfe generate --force) and retry",
     )
-    if proc.returncode != 0:
-        raise CodegenError(
-            describe(
-                f"the C tick timer on {name}",
-                "exit code 0",
-                proc.stderr.strip(),
-                "regenerate the library (amsfe generate --force) and retry",
-            )
-        )
     first, second = proc.stdout.split("\n")[:2]
     med, p99 = (float(v) / 1e3 for v in first.split())
     x = np.array([float(v) for v in second.split()])

@@ -15,7 +15,18 @@ from numpy.typing import NDArray
 
 from amsfe_sym.errors import CodegenError, describe
 
-__all__ = ["ROUND_BUDGET_S", "CTimer", "Timing", "round4", "time_calls"]
+__all__ = [
+    "ROUND_BUDGET_S",
+    "CTimer",
+    "Timing",
+    "compile_program",
+    "round4",
+    "run_checked",
+    "time_calls",
+]
+
+#: The fix when a timing program fails on a library.
+_REGENERATE = "regenerate the library (amsfe generate --force) and retry"
 
 FloatArray = NDArray[np.float64]
 
@@ -159,6 +170,17 @@ int main(int argc, char **argv) {
 """
 
 
+def run_checked(
+    cmd: Sequence[str], what: str, expected: str, fix: str, cwd: Path | None = None
+) -> subprocess.CompletedProcess[str]:
+    """Run ``cmd`` (text output captured); a non-zero exit raises :class:`CodegenError`
+    naming ``what``, the ``expected`` outcome, the tail of stderr and the ``fix``."""
+    proc = subprocess.run(list(cmd), cwd=cwd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise CodegenError(describe(what, expected, proc.stderr.strip()[-2000:], fix))
+    return proc
+
+
 def compile_program(source: Path, exe: Path, libs: Sequence[str], what: str) -> Path:
     """Compile the C program ``source`` (``-O1``) into ``exe`` with ``libs`` (e.g. ``-ldl``).
 
@@ -168,16 +190,7 @@ def compile_program(source: Path, exe: Path, libs: Sequence[str], what: str) -> 
     from amsfe_sym.codegen import compiler
 
     cmd = [compiler(), "-O1", "-o", str(exe), str(source), *libs]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode != 0:
-        raise CodegenError(
-            describe(
-                f"compiling {what}",
-                "a successful build",
-                proc.stderr[-1000:],
-                "install a C compiler or set $CC",
-            )
-        )
+    run_checked(cmd, f"compiling {what}", "a successful build", "install a C compiler or set $CC")
     return exe
 
 
@@ -210,16 +223,7 @@ class CTimer:
         self, library: Path, function: str, calls: int, rounds: int, values: list[str]
     ) -> tuple[list[float], float]:
         cmd = [str(self.exe), str(library), function, str(calls), str(rounds), *values]
-        proc = subprocess.run(cmd, capture_output=True, text=True)
-        if proc.returncode != 0:
-            raise CodegenError(
-                describe(
-                    f"C timing of {function}",
-                    "exit code 0",
-                    proc.stderr.strip(),
-                    "regenerate the library (amsfe generate --force) and retry",
-                )
-            )
+        proc = run_checked(cmd, f"C timing of {function}", "exit code 0", _REGENERATE)
         lines = proc.stdout.split("\n")
         return [float(v) / 1000.0 for v in lines[0].split()], float(lines[1])
 
