@@ -205,6 +205,7 @@ def closed_loop(
     sc: Any, lib: Any, plant: Plant, tau: np.ndarray, method: str, substeps: int
 ) -> dict[str, Any]:
     """The scenario's loop closed by its truth law on ``plant`` integrated by (method, S)."""
+    from amsfe_sym.control.base import LawInputs
     from amsfe_sym.sim.builders import build_run
 
     parts = build_run(sc, lib)
@@ -222,7 +223,7 @@ def closed_loop(
     for k in range(K):
         x_t = np.concatenate([xp, theta])
         z = np.concatenate([xp[2 * n : 3 * n], xp[3 * n : 4 * n]])
-        u, _ = ctrl.saturate(ctrl.torque(k, float(t[k]), xp, theta, x_t, z))
+        u, _ = ctrl.saturate(ctrl.torque(LawInputs(k, float(t[k]), xp, theta, x_t, z)))
         q[k], qm[k] = xp[:n], xp[2 * n : 3 * n]
         if k + 1 < K:
             t0 = time.perf_counter_ns()
@@ -290,26 +291,33 @@ def study(name: str, duration: float) -> dict[str, Any]:
     }
 
 
-def _choice(results: list[dict[str, Any]]) -> dict[str, Any]:
-    """The cheapest (integrator, substeps) within the tolerance on every scenario."""
-    ok: dict[tuple[str, int], int] = {}
-    for res in results:
-        for r in res["rows"]:
-            key = (r["integrator"], r["substeps"])
-            if r["max_q_error_rad"] <= TOLERANCE:
-                ok[key] = ok.get(key, 0) + 1
-    every = [k for k, v in ok.items() if v == len(results)]
-    if not every:
+#: The rule: the error must be this many times below :data:`TOLERANCE` (other seeds and
+#: trajectories excite the fast modes differently) ...
+MARGIN = 10.0
+#: ... with at least this many substeps, so that the plant is never the estimator's own
+#: one-step rk4 map (the simulation would then hide the model error a real arm has).
+MIN_SUBSTEPS = 2
+
+
+def _choice(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """The cheapest (integrator, substeps) of ``rows`` that satisfies the rule."""
+    ok = [
+        r
+        for r in rows
+        if r["max_q_error_rad"] <= TOLERANCE / MARGIN and r["substeps"] >= MIN_SUBSTEPS
+    ]
+    if not ok:
         return {"integrator": None, "substeps": None, "evaluations": None}
-    best = min(every, key=lambda k: (METHODS[k[0]][1] * k[1], -METHODS[k[0]][1]))
+    best = min(ok, key=lambda r: (r["evaluations_per_tick"], -METHODS[r["integrator"]][1]))
     return {
-        "integrator": best[0],
-        "substeps": best[1],
-        "evaluations": METHODS[best[0]][1] * best[1],
+        "integrator": best["integrator"],
+        "substeps": best["substeps"],
+        "evaluations": best["evaluations_per_tick"],
+        "max_q_error_rad": best["max_q_error_rad"],
     }
 
 
-def write_page(results: list[dict[str, Any]], choice: dict[str, Any], machine: str) -> str:
+def write_page(results: list[dict[str, Any]], machine: str) -> str:
     lines = [
         "# The truth plant: integrator and substeps",
         "",
@@ -353,17 +361,27 @@ def write_page(results: list[dict[str, Any]], choice: dict[str, Any], machine: s
                 f"| {r['integrator']} | {r['substeps']} | {r['max_q_error_rad']:.1e} | "
                 f"{r['max_qm_error_rad']:.1e} | {r['evaluations_per_tick']} | {r['us_per_step']:.1f} | {ok} |"
             )
-        lines.append("")
+        c = res["choice"]
+        lines += [
+            "",
+            f"Rule's choice for {res['robot']}: "
+            + (
+                f"**{c['integrator']} x {c['substeps']}** ({c['evaluations']} evaluations a "
+                f"tick, error {c['max_q_error_rad']:.1e} rad)."
+                if c["integrator"]
+                else "**none** of the candidates."
+            ),
+            "",
+        ]
     lines += [
         "## Choice",
         "",
-        f"The cheapest candidate within {TOLERANCE:g} rad on every scenario above: "
-        + (
-            f"**{choice['integrator']} with {choice['substeps']} substeps** "
-            f"({choice['evaluations']} dynamics evaluations a tick, against 40 for rk4 x 10)."
-            if choice["integrator"]
-            else "**none** of the candidates."
-        ),
+        f"The rule: the cheapest candidate whose error is {MARGIN:g}x below {TOLERANCE:g} rad "
+        "(other seeds and trajectories excite the fast joint modes differently), with at least "
+        f"{MIN_SUBSTEPS} substeps (one rk4 substep would make the plant the rk4 estimator's own "
+        "one-step map, hiding the model error a real arm has).  The robot specs' "
+        "`plant_substeps` follow it; the plant stays `rk4` (no other integrator is cheaper at "
+        "the same error: rk3 and rk2 need more evaluations, semi-implicit Euler is first order).",
         "",
     ]
     return "\n".join(lines)
@@ -371,7 +389,9 @@ def write_page(results: list[dict[str, Any]], choice: dict[str, Any], machine: s
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenarios", nargs="+", default=["paper-sim", "paper-exp", "panda-control", "ur5-control"])
+    ap.add_argument(
+        "--scenarios", nargs="+", default=["paper-sim", "paper-exp", "panda-control", "ur5-control"]
+    )
     ap.add_argument("--duration", type=float, default=10.0)
     ap.add_argument("--no-write", action="store_true", help="print only")
     ap.add_argument("--controller", default=CONTROLLER, help="the law closing the loop")
@@ -383,18 +403,16 @@ def main() -> None:
     results = []
     for name in args.scenarios:
         results.append(study(name, args.duration))
+        results[-1]["choice"] = _choice(results[-1]["rows"])
         for r in results[-1]["rows"]:
             print(f"  {name}: {r}", flush=True)
-    choice = _choice(results)
     prov = provenance()
     machine = f"{prov['cpu']}, {prov['cores']} cores, load {prov['load_average'][0]}"
-    page = write_page(results, choice, machine)
+    page = write_page(results, machine)
     print(page)
     if not args.no_write:
         data = ROOT / "docs" / "data" / "plant-accuracy.json"
-        data.write_text(
-            json.dumps({"machine": machine, "results": results, "choice": choice}, indent=2) + "\n"
-        )
+        data.write_text(json.dumps({"machine": machine, "results": results}, indent=2) + "\n")
         (ROOT / "docs" / "plant-accuracy.md").write_text(page)
         print(f"wrote {data} and docs/plant-accuracy.md")
 
