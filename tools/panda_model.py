@@ -184,16 +184,19 @@ def check() -> dict[str, object]:
     T = spec.model.T
     lo7, hi7 = model.lowerPositionLimit, model.upperPositionLimit
     min_eig, wT, Jmin = np.inf, np.zeros(7), np.full(7, np.inf)
+    Jfree = np.full(7, np.inf)
     for _ in range(200):
         q = rng.uniform(lo7, hi7)
         M = pin.crba(model, rdata, q)
         M = np.triu(M) + np.triu(M, 1).T
         min_eig = min(min_eig, float(np.linalg.eigvalsh(M)[0]))
-        J = 1.0 / np.diag(np.linalg.inv(M))  # the joint's inertia with the others held
+        J = 1.0 / np.diag(np.linalg.inv(M))  # the joint's inertia with the others free
         Jmin = np.minimum(Jmin, np.diag(M))
+        Jfree = np.minimum(Jfree, J)
         wT = np.maximum(wT, np.sqrt(Ks * (1.0 / J + 1.0 / Mm)) * T)
     out["min_eig_M"] = min_eig
     out["smallest_diag_M"] = Jmin.round(5).tolist()
+    out["smallest_J_others_free"] = Jfree.round(5).tolist()
     out["wT_max_per_joint"] = wT.round(3).tolist()
     out["mode_hz_max_per_joint"] = (wT / T / (2 * np.pi)).round(1).tolist()
     cam = robot.camera
