@@ -139,6 +139,17 @@ def get_argument_parser() -> argparse.ArgumentParser:
         help="chain lengths of the scaling table (default 1-12)",
     )
     b.add_argument(
+        "--no-panda",
+        action="store_true",
+        help="leave the Panda (7 DOF, ~30 s of compile) out of the scaling table",
+    )
+    b.add_argument(
+        "--scaling-loop-duration",
+        type=DURATION,
+        default=2.0,
+        help="simulated time of each scaling row's closed loop [s]",
+    )
+    b.add_argument(
         "--duration", type=DURATION, default=2.0, help="simulated time per estimator [s]"
     )
     b.add_argument(
@@ -379,6 +390,8 @@ def _bench(args: argparse.Namespace) -> int:
             joints=args.joints or tuple(range(1, 13)),
             loop_duration=args.loop_duration,
             loop_scenarios=tuple(args.loop_scenarios.split(",")) if args.loop_scenarios else None,
+            scaling_panda=not args.no_panda,
+            scaling_loop_duration=args.scaling_loop_duration,
         )
     )
 

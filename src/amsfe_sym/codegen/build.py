@@ -223,7 +223,7 @@ def _build(
             glue.append(str(_RUNTIME_C / "amsfe_loop.c"))
         cmd = [compiler(), *flags, "-I.", "-o", libname, cname, *glue, "-lm"]
         _say(progress, f"[amsfe] {spec.name}: compiling ({' '.join(cmd)})")
-        proc = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True)
+        proc = _compile(cmd, tmp, progress, spec.name)
         if proc.returncode != 0:
             raise CodegenError(
                 describe(
@@ -279,6 +279,37 @@ def model_config_header(model: Any) -> str:
         f"#define AMSFE_MODEL_CHAIN {1 if model.chained else 0}\n"
         "#endif\n"
     )
+
+
+#: Seconds between the progress lines of a compile (``progress=True``).
+COMPILE_PROGRESS_S = 5.0
+
+
+def _compile(
+    cmd: list[str], cwd: Path, progress: bool, name: str
+) -> subprocess.CompletedProcess[str]:
+    """Run the compiler; with ``progress``, a line on stderr every :data:`COMPILE_PROGRESS_S`
+    seconds while it runs (a large arm compiles for tens of seconds).  Ctrl-C stops it."""
+    if not progress:
+        return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True)
+    with tempfile.TemporaryFile("w+") as err:
+        proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.DEVNULL, stderr=err, text=True)
+        t0 = time.perf_counter()
+        try:
+            while True:
+                try:
+                    proc.wait(timeout=COMPILE_PROGRESS_S)
+                    break
+                except subprocess.TimeoutExpired:
+                    _say(
+                        True, f"[amsfe] {name}: compiling, {time.perf_counter() - t0:.0f} s so far"
+                    )
+        except BaseException:
+            proc.kill()
+            proc.wait()
+            raise
+        err.seek(0)
+        return subprocess.CompletedProcess(cmd, proc.returncode, "", err.read())
 
 
 def _say(on: bool, msg: str) -> None:
