@@ -216,6 +216,8 @@ def _build(
         if set(parts) == set(ALL_PARTS):  # the loop calls the laws, the plant, the estimators
             shutil.copy(_RUNTIME_C / "amsfe_loop.h", tmp)
             glue.append(str(_RUNTIME_C / "amsfe_loop.c"))
+        if glue:  # the dense kernels both use (compiled at O3 by their own pragma)
+            glue.append(str(_RUNTIME_C / "amsfe_kernels.c"))
         cmd = [compiler(), *flags, "-I.", "-o", libname, cname, *glue, "-lm"]
         _say(progress, f"[amsfe] {spec.name}: compiling ({' '.join(cmd)})")
         proc = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True)

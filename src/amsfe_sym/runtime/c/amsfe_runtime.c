@@ -55,12 +55,14 @@ struct amsfe_est {
   amsfe_diag diag;
   /* state */
   double *x, *P, *x0, *P0, *qw, *re, *rc;
-  double *x1, *P1, *A1, *Q1, *x2, *P2; /* scratch */
+  double *x1, *P1, *A1, *x2, *P2; /* scratch */
   double nis, s_ok, chk, ok2;
-  double *G, *T1, *L1, *S1, *K1, *W1; /* dense-kernel scratch */
+  double *G, *T1, *L1, *JW; /* dense-kernel scratch */
+  double *LP;                /* Cholesky factor of P (valid when lp_ok: eq. 14 uses it) */
+  int lp_ok;
   int enc_rows[AMSFE_MAX_ENCODERS];     /* state row of each encoder value (H, eq. 5) */
   /* oosm */
-  double *A_buf, *Q_buf, *u_buf, *Phi, *Q, *Phi2, *Qb, *M, *C, *xs, *xr, *xr2;
+  double *A_buf, *G_buf, *u_buf, *Phi, *Q, *Phi2, *Qb, *M, *C, *xs, *xr, *xr2;
   double *last_nu, *last_Pprior, has_last;
   /* replay */
   double *r_x, *r_P, *r_u, *r_z, *r_fz;
@@ -87,146 +89,16 @@ static int fail(amsfe_est *e, int status) {
   return status;
 }
 
-/* ------------------------------------------------------------------ dense kernels */
-/* Column-major N x N unless said.  Symmetric results are computed on the lower triangle and
- * mirrored, so they are exactly symmetric (the reference symmetrizes). */
-
-/* out = A X A^T + add (X and add symmetric; add may be NULL); T: N x N scratch. */
-static void sandwich(int N, const double *A, const double *X, const double *add, double *out,
-                     double *T) {
-  memset(T, 0, sizeof(double) * (size_t)N * N);
-  for (int j = 0; j < N; ++j) /* T = A X */
-    for (int k = 0; k < N; ++k) {
-      double xkj = X[k + (long)j * N];
-      if (xkj == 0.0) continue;
-      const double *a = A + (long)k * N;
-      double *t = T + (long)j * N;
-      for (int i = 0; i < N; ++i) t[i] += a[i] * xkj;
-    }
-  for (int j = 0; j < N; ++j) { /* lower triangle of T A^T */
-    double *o = out + (long)j * N;
-    for (int i = j; i < N; ++i) o[i] = add ? add[i + (long)j * N] : 0.0;
-    for (int k = 0; k < N; ++k) {
-      double ajk = A[j + (long)k * N];
-      if (ajk == 0.0) continue;
-      const double *t = T + (long)k * N;
-      for (int i = j; i < N; ++i) o[i] += t[i] * ajk;
-    }
-  }
-  for (int j = 0; j < N; ++j)
-    for (int i = j + 1; i < N; ++i) out[j + (long)i * N] = out[i + (long)j * N];
-}
-
-/* Qd = G diag(qw) G^T (G: N x nw), exactly symmetric (eq. 14's process noise). */
-static void noise_cov(int N, int nw, const double *G, const double *qw, double *Qd) {
-  for (int j = 0; j < N; ++j)
-    for (int i = j; i < N; ++i) {
-      double q = 0.0;
-      for (int m = 0; m < nw; ++m) q += G[i + (long)m * N] * qw[m] * G[j + (long)m * N];
-      Qd[i + (long)j * N] = Qd[j + (long)i * N] = q;
-    }
-}
-
-/* C = A B (N x N) */
-static void matmul(int N, const double *A, const double *B, double *C) {
-  memset(C, 0, sizeof(double) * (size_t)N * N);
-  for (int j = 0; j < N; ++j)
-    for (int k = 0; k < N; ++k) {
-      double bkj = B[k + (long)j * N];
-      if (bkj == 0.0) continue;
-      const double *a = A + (long)k * N;
-      double *c = C + (long)j * N;
-      for (int i = 0; i < N; ++i) c[i] += a[i] * bkj;
-    }
-}
-
-/* amsfe_internal.h (shared with the loop's NEES). */
-int amsfe_cholesky(int m, const double *S, double *L) {
-  for (int j = 0; j < m; ++j) {
-    double d = S[j + (long)j * m];
-    for (int k = 0; k < j; ++k) d -= L[j + (long)k * m] * L[j + (long)k * m];
-    if (!(d > 0)) return 0;
-    double ljj = sqrt(d);
-    L[j + (long)j * m] = ljj;
-    for (int i = j + 1; i < m; ++i) {
-      double v = S[i + (long)j * m];
-      for (int k = 0; k < j; ++k) v -= L[i + (long)k * m] * L[j + (long)k * m];
-      L[i + (long)j * m] = v / ljj;
-    }
-  }
-  return 1;
-}
-
-void amsfe_chol_solve(int m, const double *L, double *b) {
-  for (int i = 0; i < m; ++i) {
-    double v = b[i];
-    for (int k = 0; k < i; ++k) v -= L[i + (long)k * m] * b[k];
-    b[i] = v / L[i + (long)i * m];
-  }
-  for (int i = m - 1; i >= 0; --i) {
-    double v = b[i];
-    for (int k = i + 1; k < m; ++k) v -= L[k + (long)i * m] * b[k];
-    b[i] = v / L[i + (long)i * m];
-  }
-}
-
-/* Row of the state the encoder value r measures (eq. 5: H selects qm, then qmd). */
-#define enc_row(e, r) ((e)->enc_rows[r])
-
-/* ekf.joseph_update with the encoders' H (a selection of qm, qmd): S = P_hh + R,
- * K = P H^T S^-1, x+ = x + K nu, P+ = (I - K H) P (I - K H)^T + K R K^T.  Returns 1, or 0
- * when S is not positive definite.  Writes x2, P2, nis, last_nu. */
+/* ekf.joseph_update with the encoders' H, a selection of qm and qmd (eq. 5; enc_rows). */
 static int encoder_kernel(amsfe_est *e, const double *z) {
-  int N = e->d.N, ne = e->d.ne;
-  const double *P = e->P, *x = e->x;
-  double *S = e->S1, *L = e->L1, *K = e->K1, *W = e->W1;
-  for (int r = 0; r < ne; ++r) e->last_nu[r] = z[r] - x[enc_row(e, r)];
-  for (int c2 = 0; c2 < ne; ++c2)
-    for (int r = 0; r < ne; ++r)
-      S[r + c2 * ne] = P[enc_row(e, r) + (long)enc_row(e, c2) * N] + (r == c2 ? e->re[r] : 0.0);
-  for (int c2 = 0; c2 < ne; ++c2) /* symmetrize(H P H^T + R) */
-    for (int r = c2 + 1; r < ne; ++r)
-      S[r + c2 * ne] = S[c2 + r * ne] = 0.5 * (S[r + c2 * ne] + S[c2 + r * ne]);
-  if (!amsfe_cholesky(ne, S, L)) return 0;
-  double sn[ne]; /* S^-1 nu */
-  for (int r = 0; r < ne; ++r) sn[r] = e->last_nu[r];
-  amsfe_chol_solve(ne, L, sn);
-  double nis = 0.0;
-  for (int r = 0; r < ne; ++r) nis += e->last_nu[r] * sn[r];
-  e->nis = nis;
-  for (int i = 0; i < N; ++i) { /* x+ = x + P H^T S^-1 nu */
-    double s = 0.0;
-    for (int r = 0; r < ne; ++r) s += P[i + (long)enc_row(e, r) * N] * sn[r];
-    e->x2[i] = x[i] + s;
-  }
-  /* K^T = S^-1 H P (ne x N), stored as K (N x ne) */
-  for (int i = 0; i < N; ++i) {
-    double col[ne];
-    for (int r = 0; r < ne; ++r) col[r] = P[enc_row(e, r) + (long)i * N];
-    amsfe_chol_solve(ne, L, col);
-    for (int r = 0; r < ne; ++r) K[i + (long)r * N] = col[r];
-  }
-  /* W = (I - K H) P = P - K P[rows, :] */
-  for (int j = 0; j < N; ++j)
-    for (int i = 0; i < N; ++i) {
-      double s = P[i + (long)j * N];
-      for (int r = 0; r < ne; ++r) s -= K[i + (long)r * N] * P[enc_row(e, r) + (long)j * N];
-      W[i + (long)j * N] = s;
-    }
-  /* P+ = W (I - K H)^T + K R K^T = W - W[:, rows] K^T + K R K^T, lower triangle */
-  double *P2 = e->P2;
-  for (int j = 0; j < N; ++j)
-    for (int i = j; i < N; ++i) {
-      double s = W[i + (long)j * N];
-      for (int r = 0; r < ne; ++r) {
-        double kj = K[j + (long)r * N];
-        s += (e->re[r] * K[i + (long)r * N] - W[i + (long)enc_row(e, r) * N]) * kj;
-      }
-      P2[i + (long)j * N] = s;
-    }
-  for (int j = 0; j < N; ++j)
-    for (int i = j + 1; i < N; ++i) P2[j + (long)i * N] = P2[i + (long)j * N];
-  return 1;
+  return amsfe_joseph_select(e->d.N, e->d.ne, e->enc_rows, e->re, e->x, e->P, z, e->x2, e->P2,
+                             &e->nis, e->last_nu, e->JW);
+}
+
+/* P <- src; the Cholesky factor LP of P is stale until the next pd_state. */
+static void set_P(amsfe_est *e, const double *src) {
+  copy(e->P, src, (long)e->d.N * e->d.N);
+  e->lp_ok = 0;
 }
 
 static void model_dims(amsfe_dims *d) {
@@ -254,16 +126,16 @@ static size_t layout(amsfe_est *e, const amsfe_params *p, char *base) {
   carve(&c, sizeof(amsfe_est));
   e->x = DBL(&c, N), e->P = DBL(&c, NN), e->x0 = DBL(&c, N), e->P0 = DBL(&c, NN);
   e->qw = DBL(&c, d.nw), e->re = DBL(&c, d.ne), e->rc = DBL(&c, d.nc);
-  e->x1 = DBL(&c, N), e->P1 = DBL(&c, NN), e->A1 = DBL(&c, NN), e->Q1 = DBL(&c, NN);
+  e->x1 = DBL(&c, N), e->P1 = DBL(&c, NN), e->A1 = DBL(&c, NN);
   e->x2 = DBL(&c, N), e->P2 = DBL(&c, NN);
   e->last_nu = DBL(&c, d.ne), e->last_Pprior = DBL(&c, NN);
-  e->G = DBL(&c, N * d.nw), e->T1 = DBL(&c, NN), e->L1 = DBL(&c, NN);
-  e->S1 = DBL(&c, (long)d.ne * d.ne), e->K1 = DBL(&c, N * d.ne), e->W1 = DBL(&c, NN);
-  e->A_buf = e->Q_buf = e->u_buf = NULL;
+  e->G = DBL(&c, N * d.nw), e->T1 = DBL(&c, AMSFE_PREDICT_WORK(N, d.nw)), e->L1 = DBL(&c, NN), e->LP = DBL(&c, NN);
+  e->JW = DBL(&c, AMSFE_JOSEPH_WORK(N, d.ne));
+  e->A_buf = e->G_buf = e->u_buf = NULL;
   e->r_x = e->r_P = e->r_u = e->r_z = e->r_fz = NULL;
   e->xa = e->Pa = e->xa2 = e->Pa2 = e->sel = e->cl = NULL;
   if (est == AMSFE_OOSM) {
-    e->A_buf = DBL(&c, B * NN), e->Q_buf = DBL(&c, B * NN), e->u_buf = DBL(&c, B * n);
+    e->A_buf = DBL(&c, B * NN), e->G_buf = DBL(&c, B * N * d.nw), e->u_buf = DBL(&c, B * n);
     e->Phi = DBL(&c, NN), e->Q = DBL(&c, NN), e->Phi2 = DBL(&c, NN), e->Qb = DBL(&c, NN);
     e->M = DBL(&c, NN), e->C = DBL(&c, NN);
     e->xs = DBL(&c, N), e->xr = DBL(&c, N), e->xr2 = DBL(&c, N);
@@ -353,10 +225,14 @@ static void sync_clone(amsfe_est *e) {
   int N = e->d.N, Na = (1 + e->S) * N;
   copy(e->x, e->xa, N);
   for (int j = 0; j < N; ++j) copy(e->P + (long)j * N, e->Pa + (long)j * Na, N);
+  e->lp_ok = 0;
 }
 
 /* require_positive_definite: Cholesky succeeds (est_chol_check's decision) */
 static int pd(amsfe_est *e, const double *P) { return amsfe_cholesky(e->d.N, P, e->L1); }
+
+/* the same check on P itself, keeping its factor for the next prediction (eq. 14) */
+static int pd_state(amsfe_est *e) { return e->lp_ok = amsfe_cholesky(e->d.N, e->P, e->LP); }
 
 /* block (o, o) of the augmented covariance into P1, then the PD check */
 static int clone_block_pd(amsfe_est *e, int s) {
@@ -368,7 +244,7 @@ static int clone_block_pd(amsfe_est *e, int s) {
 void amsfe_est_reset(amsfe_est *e) {
   int N = e->d.N;
   copy(e->x, e->x0, N);
-  copy(e->P, e->P0, (long)N * N);
+  set_P(e, e->P0);
   e->k = e->par.k0;
   e->failed = 0, e->last_error = 0, e->has_last = 0.0;
   memset(&e->diag, 0, sizeof(e->diag));
@@ -448,17 +324,17 @@ amsfe_est *amsfe_est_create(const amsfe_params *p, int *status) {
 void amsfe_est_destroy(amsfe_est *e) { free(e); }
 
 /* ------------------------------------------------------------------ EKF steps */
-/* ekf.predict on (x, P) with u; stores A, Qd in A1, Q1 */
+/* ekf.predict on (x, P) with u; leaves A, Gamma in A1, G */
 static int predict(amsfe_est *e, const double *u) {
   int N = e->d.N;
   const double *in[2] = {e->x, u};
   double *out[3] = {e->x1, e->A1, e->G};
   gcall(&e->g, transition_step, in, 2, out, 3); /* x+, A, Gamma (eqs. 13, 4) */
   if (!all_finite(e->x1, N) || !all_finite(e->A1, (long)N * N)) return AMSFE_ERR_NONFINITE;
-  noise_cov(N, e->d.nw, e->G, e->qw, e->Q1);
-  sandwich(N, e->A1, e->P, e->Q1, e->P1, e->T1); /* eq. (14) */
+  if (!e->lp_ok && !pd_state(e)) return AMSFE_ERR_NOT_PD; /* P = LP LP^T */
+  amsfe_predict_cov(N, e->d.nw, e->A1, e->LP, e->G, e->qw, e->P1, e->T1); /* eq. (14) */
   copy(e->x, e->x1, N);
-  copy(e->P, e->P1, (long)N * N);
+  set_P(e, e->P1);
   return AMSFE_OK;
 }
 
@@ -479,7 +355,7 @@ static int encoder_update(amsfe_est *e, const double *z, int report) {
   if (accepted) {
     copy(e->last_Pprior, e->P, (long)N * N);
     copy(e->x, e->x2, N);
-    copy(e->P, e->P2, (long)N * N);
+    set_P(e, e->P2);
     e->has_last = 1.0;
   }
   return AMSFE_OK;
@@ -504,7 +380,7 @@ static int frame_now(amsfe_est *e, const double *z, double *nis) {
     if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
   }
   copy(e->x, e->x1, N);
-  copy(e->P, e->P1, (long)N * N);
+  set_P(e, e->P1);
   return AMSFE_OK;
 }
 
@@ -593,7 +469,7 @@ int amsfe_est_tick(amsfe_est *e, const double *z_encoder, const double *u) {
         st = predict(e, u);
         if (st) break;
         copy(e->A_buf + s * NN, e->A1, NN);
-        copy(e->Q_buf + s * NN, e->Q1, NN);
+        copy(e->G_buf + s * N * e->d.nw, e->G, (long)N * e->d.nw);
         copy(e->u_buf + s * n, u, n);
       } else {
         st = predict(e, u);
@@ -604,7 +480,7 @@ int amsfe_est_tick(amsfe_est *e, const double *z_encoder, const double *u) {
   if (st) return fail(e, st);
   e->k = k1;
   ++e->diag.ticks;
-  if (!pd(e, e->P)) return fail(e, AMSFE_ERR_NOT_PD);
+  if (!pd_state(e)) return fail(e, AMSFE_ERR_NOT_PD);
   if (e->par.estimator == AMSFE_CLONING) {
     int alive = 0;
     for (int s = 0; s < e->S; ++s) {
@@ -627,8 +503,8 @@ static int oosm_late(amsfe_est *e, const double *z, long kappa, double *nis) {
   for (long j = kappa; j < k; ++j) { /* eq. (23) */
     long s = pmod(j, e->B);
     const double *Aj = e->A_buf + s * NN;
-    matmul((int)N, Aj, e->Phi, e->Phi2);
-    sandwich((int)N, Aj, e->Q, e->Q_buf + s * NN, e->Qb, e->T1);
+    amsfe_matmul((int)N, Aj, e->Phi, e->Phi2);
+    amsfe_sandwich((int)N, e->d.nw, Aj, e->Q, e->G_buf + s * N * e->d.nw, e->qw, e->Qb, e->T1);
     copy(e->Phi, e->Phi2, NN);
     copy(e->Q, e->Qb, NN);
   }
@@ -664,7 +540,7 @@ static int oosm_late(amsfe_est *e, const double *z, long kappa, double *nis) {
   if (!(e->nis <= e->par.gate_camera)) return AMSFE_GATED;
   if (!(p_ok > 0.5)) return AMSFE_REFUSED_INDEFINITE;
   copy(e->x, e->x1, N);
-  copy(e->P, e->P1, NN);
+  set_P(e, e->P1);
   return AMSFE_OK;
 }
 
@@ -674,7 +550,7 @@ static int replay_frame(amsfe_est *e, const double *z, long kappa, double *nis) 
   if (e->r_nf[s] >= e->F) return AMSFE_REFUSED_FULL;
   if (kappa < k) {
     copy(e->x, e->r_x + s * N, N);
-    copy(e->P, e->r_P + s * N * N, N * N);
+    set_P(e, e->r_P + s * N * N);
   }
   int st = frame_now(e, z, nis);
   if (st < 0) return st;
@@ -739,7 +615,7 @@ int amsfe_est_camera_frame(amsfe_est *e, const double *z, long kappa, double *ni
       default: st = cloning_frame(e, z, kappa, nis);
     }
     if (st < 0) return fail(e, st);
-    if (!pd(e, e->P)) return fail(e, AMSFE_ERR_NOT_PD);
+    if (!pd_state(e)) return fail(e, AMSFE_ERR_NOT_PD);
   }
   if (st == AMSFE_OK) ++e->diag.frames_applied;
   else if (st == AMSFE_GATED) ++e->diag.frames_gated;
