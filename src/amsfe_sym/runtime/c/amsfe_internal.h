@@ -93,11 +93,19 @@ AMSFE_HIDDEN void amsfe_predict_cov(int N, int nw, const double *A, const double
  * scratch (eq. 23). */
 AMSFE_HIDDEN void amsfe_sandwich(int N, int nw, const double *A, const double *X, const double *G,
                                  const double *qw, double *out, double *T);
+/* b <- A^-1 b (LU with partial pivoting, A overwritten); 0 when A is singular. */
+AMSFE_HIDDEN int amsfe_lu_solve(int N, double *A, double *b);
 /* Joseph-form update of (x, P) (M states) by a measurement of the states rows[0..m) with
  * variances r (eqs. 15-17); 0 when S is not PD.  w: AMSFE_JOSEPH_WORK(M, m) doubles. */
 AMSFE_HIDDEN int amsfe_joseph_select(int M, int m, const int *rows, const double *r,
                                      const double *x, const double *P, const double *z,
                                      double *x2, double *P2, double *nis, double *nu, double *w);
+/* oosm.a1_retrodict with the encoders' H = I[rows, :] (x_shift, M, C); 0 when S is not PD. */
+AMSFE_HIDDEN int amsfe_a1_retrodict(int M, int m, const int *rows, const double *r,
+                                    const double *x, const double *P, const double *Q,
+                                    const double *nu, const double *Pp, double *xs, double *Mo,
+                                    double *C, double *w);
+#define AMSFE_RETRO_WORK(M, m) (4L * (M) * (m) + (long)(M) * (M) + 2L * (m) * (m))
 #define AMSFE_PREDICT_WORK(N, nw) (2L * (N) * (N) + (long)(N) * (nw))
 #define AMSFE_JOSEPH_WORK(M, m) (4L * (M) * (m) + 3L * (m) * (m) + (m))
 

@@ -189,6 +189,41 @@ void amsfe_matmul(int N, const double *restrict A, const double *restrict B, dou
   tiles(N, N, 0, 0, 0, 0, N, A, B, 1, N, NULL, C);
 }
 
+/* b <- A^-1 b by Gaussian elimination with partial pivoting (LAPACK gesv's algorithm; A is
+ * overwritten by its factors).  Returns 0 when a pivot is 0 or not finite (A singular). */
+int amsfe_lu_solve(int N, double *restrict A, double *restrict b) {
+  for (int k = 0; k < N; ++k) {
+    int p = k;
+    double best = fabs(AT(A, k, k, N));
+    for (int i = k + 1; i < N; ++i)
+      if (fabs(AT(A, i, k, N)) > best) best = fabs(AT(A, i, k, N)), p = i;
+    if (!(best > 0) || !isfinite(best)) return 0;
+    if (p != k) {
+      for (int j = 0; j < N; ++j) {
+        double t = AT(A, k, j, N);
+        AT(A, k, j, N) = AT(A, p, j, N), AT(A, p, j, N) = t;
+      }
+      double t = b[k];
+      b[k] = b[p], b[p] = t;
+    }
+    double *restrict ak = A + (long)k * N;
+    double d = ak[k];
+    for (int i = k + 1; i < N; ++i) ak[i] /= d;
+    for (int j = k + 1; j < N; ++j) {
+      double *restrict aj = A + (long)j * N;
+      double c = aj[k];
+      for (int i = k + 1; i < N; ++i) aj[i] -= ak[i] * c;
+    }
+    for (int i = k + 1; i < N; ++i) b[i] -= ak[i] * b[k];
+  }
+  for (int k = N - 1; k >= 0; --k) {
+    b[k] /= AT(A, k, k, N);
+    const double *restrict ak = A + (long)k * N;
+    for (int i = 0; i < k; ++i) b[i] -= ak[i] * b[k];
+  }
+  return 1;
+}
+
 /* The Joseph-form update (eqs. 15-17) of (x, P), M x M, with a measurement that selects the
  * states rows[0..m) with noise variances r[m] (ekf.joseph_update with H = I[rows, :]).
  * nu = z - x[rows]; S = P[rows, rows] + diag(r); K = P[:, rows] S^-1;
@@ -252,5 +287,67 @@ int amsfe_joseph_select(int M, int m, const int *restrict rows, const double *re
   memcpy(V2, V, sizeof(double) * (size_t)M * (size_t)m);
   tiles(M, M, 0, 1, 0, 0, 2 * m, V, K, M, 1, P, P2); /* lower of P + [V K] [K V]^T */
   amsfe_mirror_lower(M, P2);
+  return 1;
+}
+
+/* oosm.a1_retrodict with the encoders' selection H (eqs. 24-27 corrected), M states:
+ * W = S^-1 H Q with S = P_prior[rows, rows] + diag(r) (the last encoder update's),
+ * x_shift = x - Q H^T S^-1 nu, Pvv = Q - Q H^T W, Pxv = Q - P_prior H^T W,
+ * Mo = sym(P + Pvv - Pxv - Pxv^T) = P - Q + U Wt^T + Wt U^T with Wt = W^T, U = P_prior H^T -
+ * Q H^T / 2, and C = P - Pxv = P - Q + P_prior H^T Wt^T.  Q must be exactly symmetric.  Returns
+ * 0 when S is not positive definite.  w: AMSFE_RETRO_WORK(M, m) doubles. */
+int amsfe_a1_retrodict(int M, int m, const int *restrict rows, const double *restrict r,
+                       const double *restrict x, const double *restrict P,
+                       const double *restrict Q, const double *restrict nu,
+                       const double *restrict Pp, double *restrict xs, double *restrict Mo,
+                       double *restrict C, double *restrict w) {
+  /* [U | Wt | U] (M x 3m), Pr = P_prior H^T, D = P - Q, S, its factor */
+  double *U = w, *Wt = w + (long)M * m, *U2 = Wt + (long)M * m;
+  double *restrict Pr = U2 + (long)M * m, *restrict D = Pr + (long)M * m;
+  double *restrict S = D + (long)M * M, *restrict Ls = S + m * m;
+  for (int b = 0; b < m; ++b)
+    for (int a = 0; a < m; ++a)
+      AT(S, a, b, m) = 0.5 * (AT(Pp, rows[a], rows[b], M) + AT(Pp, rows[b], rows[a], M)) +
+                       (a == b ? r[a] : 0.0);
+  if (!amsfe_cholesky(m, S, Ls)) return 0;
+  for (long c = 0; c < m; ++c) { /* Wt = Q H^T S^-1: Q[:, rows] Ls^-T Ls^-1 */
+    double *wc = Wt + c * M;
+    const double *restrict qc = Q + (long)rows[c] * M;
+    for (int i = 0; i < M; ++i) wc[i] = qc[i];
+    for (long a = 0; a < c; ++a) {
+      const double *wa = Wt + a * M;
+      double f = AT(Ls, c, a, m);
+      for (int i = 0; i < M; ++i) wc[i] -= wa[i] * f;
+    }
+    double d = AT(Ls, c, c, m);
+    for (int i = 0; i < M; ++i) wc[i] /= d;
+  }
+  for (long c = m - 1; c >= 0; --c) {
+    double *wc = Wt + c * M;
+    for (long a = c + 1; a < m; ++a) {
+      const double *wa = Wt + a * M;
+      double f = AT(Ls, a, c, m);
+      for (int i = 0; i < M; ++i) wc[i] -= wa[i] * f;
+    }
+    double d = AT(Ls, c, c, m);
+    for (int i = 0; i < M; ++i) wc[i] /= d;
+  }
+  for (int i = 0; i < M; ++i) xs[i] = x[i]; /* x_shift = x - Wt nu */
+  for (int a = 0; a < m; ++a) {
+    const double *restrict wa = Wt + (long)a * M;
+    const double *restrict pa = Pp + (long)rows[a] * M, *restrict qa = Q + (long)rows[a] * M;
+    double *restrict ua = U + (long)a * M, *restrict ra = Pr + (long)a * M;
+    double f = nu[a];
+    for (int i = 0; i < M; ++i) {
+      xs[i] -= wa[i] * f;
+      ra[i] = pa[i];
+      ua[i] = pa[i] - 0.5 * qa[i];
+    }
+  }
+  memcpy(U2, U, sizeof(double) * (size_t)M * (size_t)m);
+  for (long i = 0; i < (long)M * M; ++i) D[i] = P[i] - Q[i];
+  tiles(M, M, 0, 1, 0, 0, 2 * m, U, Wt, M, 1, D, Mo); /* lower of D + [U Wt] [Wt U]^T */
+  amsfe_mirror_lower(M, Mo);
+  tiles(M, M, 0, 0, 0, 0, m, Pr, Wt, M, 1, D, C); /* C = D + P_prior H^T Wt^T */
   return 1;
 }

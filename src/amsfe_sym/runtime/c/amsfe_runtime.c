@@ -27,24 +27,14 @@
 
 #define AMSFE_MAX_ENCODERS 256 /* 2n: up to 128 joints */
 DECLARE(est_predict)
-DECLARE(est_encoder_update)
 DECLARE(est_camera_update)
-DECLARE(est_chol_check)
-DECLARE(est_oosm_accumulate)
-DECLARE(est_oosm_retrodict)
 DECLARE(est_oosm_correct)
 DECLARE(est_clone_predict)
-DECLARE(est_clone_encoder)
 DECLARE(est_clone_camera)
-DECLARE(transition_inverse)
 DECLARE(transition_step)
 
-static const cwork WORKS[] = {est_predict_work,        est_encoder_update_work,
-                              est_camera_update_work,  est_chol_check_work,
-                              est_oosm_accumulate_work, est_oosm_retrodict_work,
-                              est_oosm_correct_work,   est_clone_predict_work,
-                              est_clone_encoder_work,  est_clone_camera_work,
-                              transition_inverse_work, transition_step_work};
+static const cwork WORKS[] = {est_predict_work,      est_camera_update_work, est_oosm_correct_work,
+                              est_clone_predict_work, est_clone_camera_work,  transition_step_work};
 
 struct amsfe_est {
   amsfe_params par; /* pointers in it point into this block */
@@ -62,7 +52,9 @@ struct amsfe_est {
   int lp_ok;
   int enc_rows[AMSFE_MAX_ENCODERS];     /* state row of each encoder value (H, eq. 5) */
   /* oosm */
-  double *A_buf, *G_buf, *u_buf, *Phi, *Q, *Phi2, *Qb, *M, *C, *xs, *xr, *xr2;
+  double *A_buf, *G_buf, *u_buf, *Phi, *Q, *Phi2, *Qb, *M, *C, *xs, *xr, *sv;
+  double *xpost_buf, *xprior_buf; /* x(j|j) and x(j+1|j) of each prediction (eq. 24) */
+  double *RW;                     /* amsfe_a1_retrodict's work */
   double *last_nu, *last_Pprior, has_last;
   /* replay */
   double *r_x, *r_P, *r_u, *r_z, *r_fz;
@@ -72,7 +64,6 @@ struct amsfe_est {
   long *clone_k;
   int *clone_on;
   gwork g; /* work of the generated functions */
-  cint inv_n_out;
   double inv_tol, inv_residual, inv_limit; /* the inverse's convergence check */
 };
 
@@ -105,7 +96,7 @@ static void model_dims(amsfe_dims *d) {
   d->N = (int)est_predict_sparsity_in(0)[0];
   d->n = (int)est_predict_sparsity_in(2)[0];
   d->nw = (int)est_predict_sparsity_in(3)[0];
-  d->ne = (int)est_encoder_update_sparsity_in(2)[0];
+  d->ne = 2 * d->n; /* qm and qmd (eq. 5) */
   d->nc = (int)est_camera_update_sparsity_in(3)[0];
   d->clone_slots = (int)est_clone_camera_sparsity_in(3)[0];
 }
@@ -130,7 +121,7 @@ static size_t layout(amsfe_est *e, const amsfe_params *p, char *base) {
   e->x2 = DBL(&c, N), e->P2 = DBL(&c, NN);
   e->last_nu = DBL(&c, d.ne), e->last_Pprior = DBL(&c, NN);
   e->G = DBL(&c, N * d.nw), e->T1 = DBL(&c, AMSFE_PREDICT_WORK(N, d.nw)), e->L1 = DBL(&c, NN), e->LP = DBL(&c, NN);
-  e->JW = DBL(&c, AMSFE_JOSEPH_WORK(N, d.ne));
+  e->JW = DBL(&c, AMSFE_JOSEPH_WORK(est == AMSFE_CLONING ? Na : N, d.ne));
   e->A_buf = e->G_buf = e->u_buf = NULL;
   e->r_x = e->r_P = e->r_u = e->r_z = e->r_fz = NULL;
   e->xa = e->Pa = e->xa2 = e->Pa2 = e->sel = e->cl = NULL;
@@ -138,7 +129,9 @@ static size_t layout(amsfe_est *e, const amsfe_params *p, char *base) {
     e->A_buf = DBL(&c, B * NN), e->G_buf = DBL(&c, B * N * d.nw), e->u_buf = DBL(&c, B * n);
     e->Phi = DBL(&c, NN), e->Q = DBL(&c, NN), e->Phi2 = DBL(&c, NN), e->Qb = DBL(&c, NN);
     e->M = DBL(&c, NN), e->C = DBL(&c, NN);
-    e->xs = DBL(&c, N), e->xr = DBL(&c, N), e->xr2 = DBL(&c, N);
+    e->xs = DBL(&c, N), e->xr = DBL(&c, N), e->sv = DBL(&c, N);
+    e->xpost_buf = DBL(&c, B * N), e->xprior_buf = DBL(&c, B * N);
+    e->RW = DBL(&c, AMSFE_RETRO_WORK(N, d.ne));
   }
   if (est == AMSFE_REPLAY) {
     e->r_x = DBL(&c, R * N), e->r_P = DBL(&c, R * NN), e->r_u = DBL(&c, R * n);
@@ -228,7 +221,7 @@ static void sync_clone(amsfe_est *e) {
   e->lp_ok = 0;
 }
 
-/* require_positive_definite: Cholesky succeeds (est_chol_check's decision) */
+/* require_positive_definite: Cholesky succeeds */
 static int pd(amsfe_est *e, const double *P) { return amsfe_cholesky(e->d.N, P, e->L1); }
 
 /* the same check on P itself, keeping its factor for the next prediction (eq. 14) */
@@ -282,7 +275,6 @@ int amsfe_est_init(amsfe_est **out, const amsfe_params *p, void *memory, size_t 
   e->max_delay = p->camera_max_delay < 0 || p->camera_max_delay > p->buffer_steps
                        ? p->buffer_steps
                        : p->camera_max_delay;
-  e->inv_n_out = transition_inverse_n_out();
   e->inv_tol = AMSFE_INVERSE_TOL;
   for (int r = 0; r < d.ne; ++r) e->enc_rows[r] = r < d.n ? 2 * d.n + r : 3 * d.n + (r - d.n);
   e->inv_residual = NAN, e->inv_limit = NAN;
@@ -442,10 +434,9 @@ int amsfe_est_tick(amsfe_est *e, const double *z_encoder, const double *u) {
       e->diag.encoder_accepted = 0, e->diag.encoder_nis = NAN;
       st = AMSFE_OK;
       if (z) {
-        const double *ie[4] = {e->xa, e->Pa, z, e->re};
-        double *oe[4] = {e->xa2, e->Pa2, &e->nis, &e->s_ok};
-        gcall(&e->g, est_clone_encoder, ie, 4, oe, 4);
-        if (!(e->s_ok > 0.5)) {
+        /* the encoder update on the augmented state (H selects qm, qmd of the state block) */
+        if (!amsfe_joseph_select(Na, e->d.ne, e->enc_rows, e->re, e->xa, e->Pa, z, e->xa2, e->Pa2,
+                                 &e->nis, e->last_nu, e->JW)) {
           st = AMSFE_ERR_S_NOT_PD;
           break;
         }
@@ -466,8 +457,10 @@ int amsfe_est_tick(amsfe_est *e, const double *z_encoder, const double *u) {
     default: /* encoders, naive, oosm */
       if (e->par.estimator == AMSFE_OOSM) {
         long s = pmod(k, e->B), NN = (long)N * N;
+        copy(e->xpost_buf + s * N, e->x, N);
         st = predict(e, u);
         if (st) break;
+        copy(e->xprior_buf + s * N, e->x, N);
         copy(e->A_buf + s * NN, e->A1, NN);
         copy(e->G_buf + s * N * e->d.nw, e->G, (long)N * e->d.nw);
         copy(e->u_buf + s * n, u, n);
@@ -499,6 +492,7 @@ static int oosm_late(amsfe_est *e, const double *z, long kappa, double *nis) {
   long N = e->d.N, NN = N * N, k = e->k;
   memset(e->Phi, 0, sizeof(double) * (size_t)NN);
   memset(e->Q, 0, sizeof(double) * (size_t)NN);
+  memset(e->sv, 0, sizeof(double) * (size_t)N);
   for (long i = 0; i < N; ++i) e->Phi[i * (N + 1)] = 1.0;
   for (long j = kappa; j < k; ++j) { /* eq. (23) */
     long s = pmod(j, e->B);
@@ -507,38 +501,45 @@ static int oosm_late(amsfe_est *e, const double *z, long kappa, double *nis) {
     amsfe_sandwich((int)N, e->d.nw, Aj, e->Q, e->G_buf + s * N * e->d.nw, e->qw, e->Qb, e->T1);
     copy(e->Phi, e->Phi2, NN);
     copy(e->Q, e->Qb, NN);
-  }
-  {
-    const double *in[7] = {e->x, e->P, e->Q, &e->has_last, e->last_nu, e->last_Pprior, e->re};
-    double *out[4] = {e->xs, e->M, e->C, &e->s_ok};
-    gcall(&e->g, est_oosm_retrodict, in, 7, out, 4);
-    if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
-  }
-  copy(e->xr, e->xs, N);
-  for (long j = k - 1; j >= kappa; --j) { /* eq. (24): the backward map, step by step */
-    double residual = NAN, scale = 1.0;
-    for (long i = 0; i < N; ++i) scale = fmax(scale, fabs(e->xr[i])); /* max(1, |x_next|) */
-    for (cint i = 2; i < e->inv_n_out; ++i) e->g.res[i] = NULL;
-    e->g.arg[0] = e->xr, e->g.arg[1] = e->u_buf + pmod(j, e->B) * e->d.n;
-    e->g.res[0] = e->xr2, e->g.res[1] = &residual;
-    transition_inverse(e->g.arg, e->g.res, e->g.iw, e->g.w, 0);
-    /* CompiledTransition.inverse: refused unless residual <= tol max(1, |x_next|) (NaN too) */
-    if (!(residual <= e->inv_tol * scale)) {
-      e->inv_residual = residual, e->inv_limit = e->inv_tol * scale;
-      return AMSFE_REFUSED_NO_CONVERGENCE;
+    /* the updates' corrections carried to k (oosm.backward_map): s <- A_j s + c_{j+1} */
+    for (long i = 0; i < N; ++i) e->xr[i] = 0.0;
+    for (long m = 0; m < N; ++m) {
+      double c = e->sv[m];
+      for (long i = 0; i < N; ++i) e->xr[i] += Aj[i + m * N] * c;
     }
-    copy(e->xr, e->xr2, N);
+    if (j + 1 < k) {
+      const double *post = e->xpost_buf + pmod(j + 1, e->B) * N, *prior = e->xprior_buf + s * N;
+      for (long i = 0; i < N; ++i) e->xr[i] += post[i] - prior[i];
+    }
+    copy(e->sv, e->xr, N);
+  }
+  if (e->has_last > 0.5) { /* oosm.a1_retrodict (eqs. 24-27 corrected) */
+    if (!amsfe_a1_retrodict((int)N, e->d.ne, e->enc_rows, e->re, e->x, e->P, e->Q, e->last_nu,
+                            e->last_Pprior, e->xs, e->M, e->C, e->RW))
+      return AMSFE_ERR_S_NOT_PD;
+  } else { /* no encoder update at k: x_shift = x, M = C = P - Q */
+    copy(e->xs, e->x, N);
+    for (long i = 0; i < NN; ++i) e->M[i] = e->C[i] = e->P[i] - e->Q[i];
+  }
+  /* eq. (24): x(kappa|k) = F_{kappa,k}(x_shift) linearised about the stored trajectory:
+   * x(kappa|kappa) + Phi^-1 (s + x_shift - x(k|k-1)) (oosm.backward_map) */
+  {
+    const double *prior_k = e->xprior_buf + pmod(k - 1, e->B) * N;
+    for (long i = 0; i < N; ++i) e->xr[i] = e->sv[i] + (e->xs[i] - prior_k[i]);
+    copy(e->Phi2, e->Phi, NN);
+    if (!amsfe_lu_solve((int)N, e->Phi2, e->xr)) return AMSFE_ERR_NONFINITE;
+    const double *post_kappa = e->xpost_buf + pmod(kappa, e->B) * N;
+    for (long i = 0; i < N; ++i) e->xr[i] += post_kappa[i];
   }
   if (!all_finite(e->xr, N)) return AMSFE_ERR_NONFINITE;
-  double p_ok = 0.0;
   const double *in[8] = {e->x, e->P, e->xr, e->M, e->C, e->Phi, z, e->rc};
-  double *out[6] = {e->x1, e->P1, &e->nis, &e->s_ok, &p_ok, &e->chk};
-  gcall(&e->g, est_oosm_correct, in, 8, out, 6);
+  double *out[5] = {e->x1, e->P1, &e->nis, &e->s_ok, &e->chk};
+  gcall(&e->g, est_oosm_correct, in, 8, out, 5);
   if (!isfinite(e->chk)) return AMSFE_ERR_NONFINITE;
   if (!(e->s_ok > 0.5)) return AMSFE_REFUSED_INDEFINITE;
   if (nis) *nis = e->nis;
   if (!(e->nis <= e->par.gate_camera)) return AMSFE_GATED;
-  if (!(p_ok > 0.5)) return AMSFE_REFUSED_INDEFINITE;
+  if (!amsfe_cholesky((int)N, e->P1, e->L1)) return AMSFE_REFUSED_INDEFINITE; /* P(k|kappa+) */
   copy(e->x, e->x1, N);
   set_P(e, e->P1);
   return AMSFE_OK;
