@@ -34,7 +34,7 @@
  * shared entry gets the same value (init is read, never the output: overlap-safe).  With an
  * AVX2 + FMA CPU the 4-wide version runs (chosen once at run time, so the library stays
  * portable x86-64); otherwise 2-wide vectors (SSE2, NEON). */
-#define TILE_BODY(V, W)                                                                     \
+#define TILE_BODY(V, W, OP)                                                                   \
   for (int j0 = 0;; j0 += 4) {                                                              \
     if (j0 > ncols - 4) j0 = ncols - 4;                                                     \
     int first = lower && j0 > lo ? j0 : lo, ms = tri && j0 > m0 ? j0 : m0;                  \
@@ -55,8 +55,8 @@
         const double *ym = Y + m * sm + j0 * sj;                                            \
         for (int b = 0; b < 4; ++b) {                                                       \
           double y = ym[b * sj];                                                            \
-          c[b][0] += x0 * y;                                                                \
-          c[b][1] += x1 * y;                                                                \
+          c[b][0] OP x0 * y;                                                                \
+          c[b][1] OP x1 * y;                                                                \
         }                                                                                   \
       }                                                                                     \
       for (int b = 0; b < 4; ++b)                                                           \
@@ -73,11 +73,15 @@
       double *restrict C
 
 typedef double v2d __attribute__((vector_size(16)));
-static void tiles_v2(TILE_ARGS) { TILE_BODY(v2d, 2) }
+static void tiles_v2(TILE_ARGS) { TILE_BODY(v2d, 2, +=) }
+static void tiles_v2_sub(TILE_ARGS) { TILE_BODY(v2d, 2, -=) }
 
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 typedef double v4d __attribute__((vector_size(32)));
-__attribute__((target("avx2,fma"))) static void tiles_v4(TILE_ARGS) { TILE_BODY(v4d, 4) }
+__attribute__((target("avx2,fma"))) static void tiles_v4(TILE_ARGS) { TILE_BODY(v4d, 4, +=) }
+__attribute__((target("avx2,fma"))) static void tiles_v4_sub(TILE_ARGS) {
+  TILE_BODY(v4d, 4, -=)
+}
 static int have_avx2(void) {
   static int known = -1;
   if (known < 0) {
@@ -86,9 +90,6 @@ static int have_avx2(void) {
   }
   return known;
 }
-#define ROWS_MIN (have_avx2() ? 8 : 4)
-#else
-#define ROWS_MIN 4
 #endif
 
 /* Tiled when the shapes allow it, else the plain loops (same formula, other rounding order). */
@@ -112,29 +113,57 @@ static void tiles(TILE_ARGS) {
     }
 }
 
+/* C = init - X Y, as tiles. */
+static void tiles_sub(TILE_ARGS) {
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+  if (have_avx2() && N >= 8 && ncols >= 4) {
+    tiles_v4_sub(N, ncols, lo, lower, tri, m0, m1, X, Y, sm, sj, init, C);
+    return;
+  }
+#endif
+  if (N >= 4 && ncols >= 4) {
+    tiles_v2_sub(N, ncols, lo, lower, tri, m0, m1, X, Y, sm, sj, init, C);
+    return;
+  }
+  for (int j = 0; j < ncols; ++j)
+    for (int i = lower && j > lo ? j : lo; i < N; ++i) {
+      double v = init ? init[i + (long)j * N] : 0.0;
+      for (int m = tri && j > m0 ? j : m0; m < m1; ++m)
+        v -= X[i + (long)m * N] * Y[m * sm + j * sj];
+      C[i + (long)j * N] = v;
+    }
+}
+
 void amsfe_mirror_lower(int m, double *restrict X) {
   for (int j = 0; j < m; ++j)
     for (int i = j + 1; i < m; ++i) AT(X, j, i, m) = AT(X, i, j, m);
 }
 
-/* Left-looking, column by column: L[j:, j] = S[j:, j] - sum_k L[j:, k] L[j, k]. */
+/* Left-looking in panels of 4 columns: L[j0:, panel] = S[j0:, panel] - L[j0:, :j0] L[panel, :j0]^T
+ * (one register-tiled product), then the panel column by column. */
 int amsfe_cholesky(int m, const double *restrict S, double *restrict L) {
-  for (int j = 0; j < m; ++j) {
-    double *restrict lj = L + (long)j * m;
-    const double *restrict sj = S + (long)j * m;
-    for (int i = 0; i < j; ++i) lj[i] = 0.0; /* the strict upper part is zero */
-    for (int i = j; i < m; ++i) lj[i] = sj[i];
-    for (int k = 0; k < j; ++k) {
-      const double *restrict lk = L + (long)k * m;
-      double c = lk[j];
-      for (int i = j; i < m; ++i) lj[i] -= lk[i] * c;
+  for (int j0 = 0; j0 < m; j0 += 4) {
+    int w = m - j0 < 4 ? m - j0 : 4;
+    if (j0 == 0)
+      for (long i = 0; i < (long)m * w; ++i) L[i] = S[i];
+    else /* rows above j0 of the panel are recomputed too; zeroed below */
+      tiles_sub(m, w, j0, 0, 0, 0, j0, L, L + j0, m, 1, S + (long)j0 * m, L + (long)j0 * m);
+    for (int j = j0; j < j0 + w; ++j) {
+      double *lj = L + (long)j * m;
+      for (int k = j0; k < j; ++k) {
+        const double *lk = L + (long)k * m;
+        double c = lk[j];
+        for (int i = j; i < m; ++i) lj[i] -= lk[i] * c;
+      }
+      double d = lj[j];
+      if (!(d > 0)) return 0; /* also a NaN pivot */
+      d = sqrt(d);
+      lj[j] = d;
+      for (int i = j + 1; i < m; ++i) lj[i] /= d;
     }
-    double d = lj[j];
-    if (!(d > 0)) return 0; /* also a NaN pivot */
-    d = sqrt(d);
-    lj[j] = d;
-    for (int i = j + 1; i < m; ++i) lj[i] /= d;
   }
+  for (int j = 1; j < m; ++j) /* the strict upper part is zero */
+    for (int i = 0; i < j; ++i) L[i + (long)j * m] = 0.0;
   return 1;
 }
 
