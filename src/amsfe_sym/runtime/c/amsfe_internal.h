@@ -85,6 +85,9 @@ AMSFE_HIDDEN void amsfe_chol_solve(int m, const double *L, double *b);
 AMSFE_HIDDEN void amsfe_mirror_lower(int m, double *X);
 /* C = A B (N x N). */
 AMSFE_HIDDEN void amsfe_matmul(int N, const double *A, const double *B, double *C);
+/* C (N x ncols, leading dimension N) = A (N x N) B (N x ncols, leading dimension ldb). */
+AMSFE_HIDDEN void amsfe_matmul_cols(int N, int ncols, const double *A, const double *B, long ldb,
+                                    double *C);
 /* out = A L L^T A^T + G diag(qw) G^T (eq. 14 with P = L L^T; G: N x nw); B: scratch of
  * AMSFE_PREDICT_WORK(N, nw) doubles. */
 AMSFE_HIDDEN void amsfe_predict_cov(int N, int nw, const double *A, const double *L,

@@ -218,6 +218,11 @@ void amsfe_matmul(int N, const double *restrict A, const double *restrict B, dou
   tiles(N, N, 0, 0, 0, 0, N, A, B, 1, N, NULL, C);
 }
 
+void amsfe_matmul_cols(int N, int ncols, const double *restrict A, const double *restrict B,
+                       long ldb, double *restrict C) {
+  if (ncols > 0) tiles(N, ncols, 0, 0, 0, 0, N, A, B, 1, ldb, NULL, C);
+}
+
 /* b <- A^-1 b by Gaussian elimination with partial pivoting (LAPACK gesv's algorithm; A is
  * overwritten by its factors).  Returns 0 when a pivot is 0 or not finite (A singular). */
 int amsfe_lu_solve(int N, double *restrict A, double *restrict b) {

@@ -29,12 +29,11 @@
 DECLARE(est_predict)
 DECLARE(est_camera_update)
 DECLARE(est_oosm_correct)
-DECLARE(est_clone_predict)
 DECLARE(est_clone_camera)
 DECLARE(transition_step)
 
-static const cwork WORKS[] = {est_predict_work,      est_camera_update_work, est_oosm_correct_work,
-                              est_clone_predict_work, est_clone_camera_work,  transition_step_work};
+static const cwork WORKS[] = {est_camera_update_work, est_oosm_correct_work, est_clone_camera_work,
+                              transition_step_work};
 
 struct amsfe_est {
   amsfe_params par; /* pointers in it point into this block */
@@ -422,15 +421,17 @@ int amsfe_est_tick(amsfe_est *e, const double *z_encoder, const double *u) {
       int Na = (1 + e->S) * N;
       for (int s = 0; s < e->S; ++s) /* clones expired at the end of step k */
         if (e->clone_on[s] && k - e->clone_k[s] >= e->max_delay) drop_clone(e, s);
-      const double *in[4] = {e->xa, e->Pa, u, e->qw};
-      double *out[3] = {e->xa2, e->Pa2, NULL};
-      gcall(&e->g, est_clone_predict, in, 4, out, 3);
-      if (!all_finite(e->xa2, Na) || !all_finite(e->Pa2, (long)Na * Na)) {
-        st = AMSFE_ERR_NONFINITE;
-        break;
-      }
-      copy(e->xa, e->xa2, Na);
-      copy(e->Pa, e->Pa2, (long)Na * Na);
+      /* CloningEstimator._predict_augmented: the state block by the tick's kernels (x, P
+       * mirror it), the state-clone blocks P_xc <- A P_xc, the clones unchanged */
+      st = predict(e, u);
+      if (st) break;
+      double *cross = e->Pa2; /* N x (Na - N), leading dimension N */
+      amsfe_matmul_cols(N, Na - N, e->A1, e->Pa + (long)N * Na, Na, cross);
+      copy(e->xa, e->x, N);
+      for (int j = 0; j < N; ++j) copy(e->Pa + (long)j * Na, e->P + (long)j * N, N);
+      for (int j = 0; j < Na - N; ++j)
+        for (int i = 0; i < N; ++i)
+          e->Pa[i + (long)(N + j) * Na] = e->Pa[(N + j) + (long)i * Na] = cross[i + (long)j * N];
       e->diag.encoder_accepted = 0, e->diag.encoder_nis = NAN;
       st = AMSFE_OK;
       if (z) {
