@@ -315,9 +315,16 @@ def summarize(
         "paper-sim >= 300x real time": loop["after"]["paper-sim"]["rtf"] >= 300.0,
         "ur5-control >= 80x real time": loop["after"]["ur5-control"]["rtf"] >= 80.0,
     }
+    head = subprocess.run(
+        ["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+    ).stdout.strip()
+    dirty = subprocess.run(
+        ["git", "-C", str(REPO), "status", "--porcelain", "src"], capture_output=True, text=True
+    ).stdout.strip()
     return {
         "command": " ".join(["tools/kernels_before_after.py", *sys.argv[1:]]),
         "base": args.base,
+        "after": head + (" + uncommitted changes in src/" if dirty else ""),
         "seven": str(seven.relative_to(REPO)) if seven.is_relative_to(REPO) else seven.name,
         "machine": {
             "cpu": cpu,
@@ -336,7 +343,8 @@ def summarize(
 
 def markdown(r: dict[str, Any]) -> str:
     rows = [
-        f"Measured by `{r['command']}` ({r['rounds']} interleaved rounds, medians; "
+        f"Measured by `{r['command']}`: before = commit {r['base']}, after = {r['after']} "
+        f"({r['rounds']} interleaved rounds, medians; "
         f"machine: {r['machine']['cpu']}, load average {r['machine']['loadavg_start']} at the "
         f"start, {r['machine']['loadavg_end']} at the end).",
         "",
