@@ -211,13 +211,20 @@ def approximation(rec: dict[str, Any]) -> dict[str, float]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--base", required=True, help="commit before the change")
+    ap.add_argument("--base", help="commit before the change (required unless --render)")
+    ap.add_argument("--render", action="store_true", help="only rewrite kernels.md from the json")
     ap.add_argument("--seven", help="robot spec of the 7-DOF arm")
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--duration", type=float, default=5.0, help="recorded run [s]")
     ap.add_argument("--loop-duration", type=float, default=10.0, help="closed loop [s]")
     ap.add_argument("--out", default=str(REPO / "docs" / "data"))
     args = ap.parse_args()
+    if args.render:
+        report = json.loads((Path(args.out) / "kernels.json").read_text())
+        (Path(args.out) / "kernels.md").write_text(markdown(report))
+        return
+    if not args.base:
+        ap.error("--base is required")
     t0 = time.time()
     load0 = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix="amsfe-kernels-") as tmpname:
@@ -325,7 +332,9 @@ def summarize(
         "command": " ".join(["tools/kernels_before_after.py", *sys.argv[1:]]),
         "base": args.base,
         "after": head + (" + uncommitted changes in src/" if dirty else ""),
-        "seven": str(seven.relative_to(REPO)) if seven.is_relative_to(REPO) else seven.name,
+        "seven": str(seven.relative_to(REPO))
+        if seven.is_relative_to(REPO)
+        else f"{seven.parent.name}/{seven.name}",
         "machine": {
             "cpu": cpu,
             "platform": platform.platform(),
