@@ -91,6 +91,13 @@ static void set_P(amsfe_est *e, const double *src) {
   e->lp_ok = 0;
 }
 
+/* P <- *scratch by exchanging the two N x N buffers (*scratch then holds the old P). */
+static void swap_P(amsfe_est *e, double **scratch) {
+  double *t = e->P;
+  e->P = *scratch, *scratch = t;
+  e->lp_ok = 0;
+}
+
 static void model_dims(amsfe_dims *d) {
   d->N = (int)est_predict_sparsity_in(0)[0];
   d->n = (int)est_predict_sparsity_in(2)[0];
@@ -315,17 +322,17 @@ amsfe_est *amsfe_est_create(const amsfe_params *p, int *status) {
 void amsfe_est_destroy(amsfe_est *e) { free(e); }
 
 /* ------------------------------------------------------------------ EKF steps */
-/* ekf.predict on (x, P) with u; leaves A, Gamma in A1, G */
-static int predict(amsfe_est *e, const double *u) {
+/* ekf.predict on (x, P) with u; A and Gamma written to A, G (N x N, N x nw) */
+static int predict(amsfe_est *e, const double *u, double *A, double *G) {
   int N = e->d.N;
   const double *in[2] = {e->x, u};
-  double *out[3] = {e->x1, e->A1, e->G};
+  double *out[3] = {e->x1, A, G};
   gcall(&e->g, transition_step, in, 2, out, 3); /* x+, A, Gamma (eqs. 13, 4) */
-  if (!all_finite(e->x1, N) || !all_finite(e->A1, (long)N * N)) return AMSFE_ERR_NONFINITE;
+  if (!all_finite(e->x1, N) || !all_finite(A, (long)N * N)) return AMSFE_ERR_NONFINITE;
   if (!e->lp_ok && !pd_state(e)) return AMSFE_ERR_NOT_PD; /* P = LP LP^T */
-  amsfe_predict_cov(N, e->d.nw, e->A1, e->LP, e->G, e->qw, e->P1, e->T1); /* eq. (14) */
+  amsfe_predict_cov(N, e->d.nw, A, e->LP, G, e->qw, e->P1, e->T1); /* eq. (14) */
   copy(e->x, e->x1, N);
-  set_P(e, e->P1);
+  swap_P(e, &e->P1);
   return AMSFE_OK;
 }
 
@@ -344,9 +351,10 @@ static int encoder_update(amsfe_est *e, const double *z, int report) {
     else ++e->diag.encoder_gated;
   }
   if (accepted) {
-    copy(e->last_Pprior, e->P, (long)N * N);
+    double *prior = e->P; /* last_Pprior <- P(k|k-1), P <- P2 (a rotation, no copy) */
+    e->P = e->P2, e->P2 = e->last_Pprior, e->last_Pprior = prior;
+    e->lp_ok = 0;
     copy(e->x, e->x2, N);
-    set_P(e, e->P2);
     e->has_last = 1.0;
   }
   return AMSFE_OK;
@@ -371,7 +379,7 @@ static int frame_now(amsfe_est *e, const double *z, double *nis) {
     if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
   }
   copy(e->x, e->x1, N);
-  set_P(e, e->P1);
+  swap_P(e, &e->P1);
   return AMSFE_OK;
 }
 
@@ -385,7 +393,7 @@ static void replay_store(amsfe_est *e, long j) {
 /* ReplayEstimator._step's loop body for j -> j + 1 (report: j + 1 is the current step) */
 static int replay_step(amsfe_est *e, long j, int report) {
   long s = pmod(j, e->R), s1 = pmod(j + 1, e->R);
-  int st = predict(e, e->r_u + s * e->d.n);
+  int st = predict(e, e->r_u + s * e->d.n, e->A1, e->G);
   if (st) return st;
   st = encoder_update(e, e->r_hasz[s1] ? e->r_z + s1 * e->d.ne : NULL, report);
   if (st) return st;
@@ -423,7 +431,7 @@ int amsfe_est_tick(amsfe_est *e, const double *z_encoder, const double *u) {
         if (e->clone_on[s] && k - e->clone_k[s] >= e->max_delay) drop_clone(e, s);
       /* CloningEstimator._predict_augmented: the state block by the tick's kernels (x, P
        * mirror it), the state-clone blocks P_xc <- A P_xc, the clones unchanged */
-      st = predict(e, u);
+      st = predict(e, u, e->A1, e->G);
       if (st) break;
       double *cross = e->Pa2; /* N x (Na - N), leading dimension N */
       amsfe_matmul_cols(N, Na - N, e->A1, e->Pa + (long)N * Na, Na, cross);
@@ -459,14 +467,12 @@ int amsfe_est_tick(amsfe_est *e, const double *z_encoder, const double *u) {
       if (e->par.estimator == AMSFE_OOSM) {
         long s = pmod(k, e->B), NN = (long)N * N;
         copy(e->xpost_buf + s * N, e->x, N);
-        st = predict(e, u);
+        st = predict(e, u, e->A_buf + s * NN, e->G_buf + s * N * e->d.nw); /* kept for eq. 23 */
         if (st) break;
         copy(e->xprior_buf + s * N, e->x, N);
-        copy(e->A_buf + s * NN, e->A1, NN);
-        copy(e->G_buf + s * N * e->d.nw, e->G, (long)N * e->d.nw);
         copy(e->u_buf + s * n, u, n);
       } else {
-        st = predict(e, u);
+        st = predict(e, u, e->A1, e->G);
         if (st) break;
       }
       st = encoder_update(e, z, 1);
@@ -542,7 +548,7 @@ static int oosm_late(amsfe_est *e, const double *z, long kappa, double *nis) {
   if (!(e->nis <= e->par.gate_camera)) return AMSFE_GATED;
   if (!amsfe_cholesky((int)N, e->P1, e->L1)) return AMSFE_REFUSED_INDEFINITE; /* P(k|kappa+) */
   copy(e->x, e->x1, N);
-  set_P(e, e->P1);
+  swap_P(e, &e->P1);
   return AMSFE_OK;
 }
 
