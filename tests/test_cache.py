@@ -96,3 +96,17 @@ def test_stale_temporary_folders_are_cleaned(tmp_path: Path) -> None:
     assert live.is_dir() and other.is_dir()
     generate(ROBOT, out=tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([ROBOT, live.name, other.name])
+
+
+def test_native_flags_put_the_cpu_kind_in_the_cache_key() -> None:
+    """-march=native ties a library to the CPU: the key then holds the CPU kind, so a cache
+    built on another CPU is not reused; without it the key is unchanged (no "cpu" entry)."""
+    from amsfe_sym.codegen.cache import compiler, content_hash, cpu_kind
+    from amsfe_sym.load.spec import find_robot, load_spec
+
+    spec = load_spec(find_robot("paper_2link"))
+    plain_key, plain = content_hash(spec, ["-O1", "-fPIC", "-shared"])
+    native_key, native = content_hash(spec, ["-O1", "-march=native", "-fPIC", "-shared"])
+    assert "cpu" not in plain and cpu_kind(compiler(), ["-O1"]) is None
+    assert native["cpu"] == cpu_kind(compiler(), ["-march=native"]) and native["cpu"]
+    assert native_key != plain_key

@@ -163,15 +163,16 @@ def test_compiled_equals_python_on_the_6dof_ur5(name: str) -> None:
 
 
 @pytest.mark.slow
-def test_non_converged_inverse_is_refused_identically(
+def test_a_non_converged_inverse_does_not_refuse_frames(
     paper_sim: Recording, tmp_path_factory: pytest.TempPathFactory
 ) -> None:
-    """Issue 10 on the C path: a backward step of eq. (24) whose generated residual is above
-    the tolerance refuses the frame, with the decision and the reason of the Python path.
+    """An inverse transition that does not converge no longer matters to oosm (issue 18): the
+    backward map of eq. (24) is linearised about the stored forward pass on both paths.
 
     The paper_2link arm with its ``paper`` integrator and one chord step in the inverse
-    (``inverse_iterations = 1``): residuals ~1e-6..1e-4 against the default tolerance 1e-10,
-    so every late frame of oosm is refused on both paths, far from the threshold."""
+    (``inverse_iterations = 1``: residuals ~1e-6..1e-4, which refused every late frame of
+    oosm on both paths under issue 10's check): the frames are applied, with the same
+    decisions and estimates on both paths."""
     import shutil
 
     from amsfe_sym.codegen import generate
@@ -209,7 +210,7 @@ def test_non_converged_inverse_is_refused_identically(
             assert a.split(", found ")[0] == b.split(", found ")[0]  # same kappa, lag, limit
         refused += kinds.count("no_convergence")
         assert np.max(np.abs(py.x - c.x)) <= TOL and np.max(np.abs(py.P - c.P)) <= TOL
-    assert refused >= 10 and c.diagnostics().frames_applied == 0
+    assert refused == 0 and c.diagnostics().frames_applied >= 10
     assert c.status_string(10).startswith("refused: the inverse transition")
 
 

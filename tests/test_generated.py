@@ -78,7 +78,7 @@ def estimator_args(
 ) -> dict[str, tuple[object, ...]]:
     """Valid inputs of the estimator functions (symbolic/estimator.py) at state x."""
     N, n = x.shape[0], u.shape[0]
-    ne, nw, S = 2 * n, N - 2 * n, fns["est_clone_camera"].size_in(3)[0]
+    nw, S = N - 2 * n, fns["est_clone_camera"].size_in(3)[0]
     Na = (1 + S) * N
 
     def spd(k: int) -> np.ndarray:
@@ -87,18 +87,14 @@ def estimator_args(
 
     P, Q, Phi = spd(N), spd(N), np.eye(N) + 0.01 * rng.normal(size=(N, N))
     xa = np.tile(x, 1 + S)
-    z, r, zc, rc = rng.normal(size=ne), np.full(ne, 1e-3), rng.normal(size=2), np.ones(2)
+    zc, rc = rng.normal(size=2), np.ones(2)
     sel = np.eye(S)[0]
     return {
         "est_predict": (x, P, u, np.full(nw, 1e-4)),
-        "est_encoder_update": (x, P, z, r),
         "est_camera_update": (x, P, x + 0.01, zc, rc),
-        "est_chol_check": (P,),
         "est_oosm_accumulate": (Phi, Q, Phi.T, P),
-        "est_oosm_retrodict": (x, P, 0.01 * Q, np.ones(1), z, spd(N), r),
         "est_oosm_correct": (x, P, x, P, 0.5 * P, Phi, zc, rc),
         "est_clone_predict": (xa, spd(Na), u, np.full(nw, 1e-4)),
-        "est_clone_encoder": (xa, spd(Na), z, r),
         "est_clone_camera": (xa, spd(Na), x, sel, zc, rc),
     }
 

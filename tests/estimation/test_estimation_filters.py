@@ -303,31 +303,55 @@ def test_oosm_multistep_lag_is_an_approximation(capsys: pytest.CaptureFixture[st
         print("\n".join(lines))
 
 
-class _NoConvergence(LinearModel):
-    """A linear model whose inverse reports non-convergence (as the compiled one does)."""
+class _NoInverse(LinearModel):
+    """A linear model without a usable inverse (as a compiled one that did not converge)."""
 
     def inverse(self, x_next: FloatArray, u: FloatArray) -> FloatArray:
         raise ConvergenceError("transition_inverse (eq. 22): did not converge")
 
 
-def test_oosm_refuses_a_frame_whose_inverse_did_not_converge() -> None:
-    """A non-converged inverse is a refused frame: counted, the estimate untouched."""
+def test_oosm_backward_map_needs_no_inverse() -> None:
+    """The backward map of eq. (24) comes from the forward pass's stored states and jacobians
+    (oosm.backward_map): a model whose inverse fails gives the same estimates, frames applied."""
     system = make_system()
-    sc = Scenario(l=3, d=2)
+    sc = Scenario(l=3, d=3, enc_every=3)  # lag 3 (lag 2 with encoders every step: indefinite)
     run = simulate(system, sc, seed=5)
     m = system.model
-    bad = System(_NoConvergence(m.A, m.B, m.Q), system.encoder, system.camera, system.x0, system.P0)
+    bad = System(_NoInverse(m.A, m.B, m.Q), system.encoder, system.camera, system.x0, system.P0)
     a, b = build("oosm", bad, sc), build("oosm", system, sc)
-    for k in range(4):
-        a.step(run.u[k], run.z_enc[k + 1], [])
-        b.step(run.u[k], run.z_enc[k + 1], [])
-    late = CameraFrame(3, system.camera.H @ run.truth[3])  # exposure 3, delivered at 5: lag 2
-    report = a.step(run.u[4], run.z_enc[5], [late])
-    b.step(run.u[4], run.z_enc[5], [])
-    assert report.frames_rejected == 1 and report.frames_applied == 0
-    assert "did not converge" in report.rejections[0]
-    np.testing.assert_array_equal(a.x, b.x)
-    np.testing.assert_array_equal(a.P, b.P)
+    applied = 0
+    for k in range(sc.n_steps):
+        frames = run.frames.get(k + 1, [])
+        ra = a.step(run.u[k], run.z_enc[k + 1], frames)
+        rb = b.step(run.u[k], run.z_enc[k + 1], frames)
+        assert (ra.frames_applied, ra.frames_rejected) == (rb.frames_applied, rb.frames_rejected)
+        applied += ra.frames_applied
+        np.testing.assert_array_equal(a.x, b.x)
+        np.testing.assert_array_equal(a.P, b.P)
+    assert applied >= 15
+
+
+def test_backward_map_equals_the_inverse_on_a_linear_model() -> None:
+    """oosm.backward_map (linearised about the stored trajectory) against the model's inverse
+    applied step by step, on a linear model with corrections at every step of a 6-step lag."""
+    from amsfe_sym.estimation.oosm import backward_map
+
+    system = make_system(seed=3)
+    model, rng = system.model, np.random.default_rng(4)
+    x_post = rng.standard_normal(5)
+    x0, Phi, s = x_post.copy(), np.eye(5), np.zeros(5)
+    us = [rng.standard_normal(2) for _ in range(6)]
+    for j, u in enumerate(us):  # the forward pass: predict, then a correction (an update)
+        x_prior, A = model.step(x_post, u)
+        Phi, s = A @ Phi, A @ s
+        if j < len(us) - 1:
+            x_post = x_prior + 0.1 * rng.standard_normal(5)
+            s += x_post - x_prior
+    target = x_prior + 0.1 * rng.standard_normal(5)  # x(k|k) - v_hat
+    x_back = target
+    for u in reversed(us):
+        x_back = model.inverse(x_back, u)
+    np.testing.assert_allclose(backward_map(Phi, x0, s, target - x_prior), x_back, atol=1e-12)
 
 
 # --------------------------------------------------------------------------- robustness

@@ -221,6 +221,8 @@ def _build(
         if set(parts) == set(ALL_PARTS):  # the loop calls the laws, the plant, the estimators
             shutil.copy(_RUNTIME_C / "amsfe_loop.h", tmp)
             glue.append(str(_RUNTIME_C / "amsfe_loop.c"))
+        if "estimator" in parts:  # the dense kernels of the estimators and the loop (O3 pragma)
+            glue.append(str(_RUNTIME_C / "amsfe_kernels.c"))
         cmd = [compiler(), *flags, "-I.", "-o", libname, cname, *glue, "-lm"]
         _say(progress, f"[amsfe] {spec.name}: compiling ({' '.join(cmd)})")
         proc = _compile(cmd, tmp, progress, spec.name)

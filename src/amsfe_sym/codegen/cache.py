@@ -111,6 +111,42 @@ def _compiler_version(cc: str) -> str:
     return out.stdout.splitlines()[0] if out.stdout else cc
 
 
+#: Flags that tie the code to the build machine's CPU: with one of them the cache key holds
+#: the CPU kind (:func:`cpu_kind`), so a library built on another CPU is rebuilt, not reused.
+NATIVE_FLAGS = ("-march=native", "-mcpu=native", "-mtune=native")
+
+
+def cpu_kind(cc: str, flags: Sequence[str]) -> str | None:
+    """The CPU kind ``flags`` compile for, or None when they name no ``native`` target.
+
+    The compiler's own resolution of ``-march=native`` (``cc -march=native -Q --help=target``:
+    its ``-march=`` / ``-mcpu=`` line, e.g. ``znver3``) and the CPU's model name from
+    ``/proc/cpuinfo`` (when it exists): two CPUs that gcc resolves alike still get separate
+    cache entries when their names differ.
+    """
+    native = [f for f in flags if f in NATIVE_FLAGS]
+    if not native:
+        return None
+    kind = []
+    try:
+        out = subprocess.run(
+            [cc, *native, "-Q", "--help=target"], capture_output=True, text=True, check=True
+        ).stdout
+        lines = [ln.split() for ln in out.splitlines()]
+        kind += [ln[1] for ln in lines if len(ln) == 2 and ln[0] in ("-march=", "-mcpu=")]
+    except (OSError, subprocess.CalledProcessError):
+        pass
+    cpuinfo = Path("/proc/cpuinfo")
+    if cpuinfo.is_file():
+        names = [
+            ln.split(":", 1)[1].strip()
+            for ln in cpuinfo.read_text().splitlines()
+            if ln.startswith(("model name", "Model"))
+        ]
+        kind += names[:1]
+    return " / ".join(kind) or platform.processor() or platform.machine()
+
+
 def content_hash(
     spec: RobotSpec, flags: Sequence[str], parts: Sequence[str] = ALL_PARTS
 ) -> tuple[str, dict[str, Any]]:
@@ -133,6 +169,9 @@ def content_hash(
     }
     if tuple(parts) != ALL_PARTS:  # (absent for a full library: its key is unchanged)
         inputs["parts"] = list(parts)
+    cpu = cpu_kind(cc, flags)
+    if cpu is not None:  # (absent without -march=native: those keys are unchanged)
+        inputs["cpu"] = cpu
     key = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()
     return key, inputs
 

@@ -322,7 +322,10 @@ def joseph_update(
         return UpdateResult(False, nis, x, P, nu, S_chol, H, P)
     K = cholesky_solve(S_chol, PHt.T).T
     x_post = x + PHt @ S_inv_nu
-    IKH = -K @ H
-    IKH.flat[:: IKH.shape[0] + 1] += 1.0  # I - K H
-    P_post = symmetrize(IKH @ P @ IKH.T + K @ R @ K.T)
+    # The Joseph form, expanded: (I - K H) P (I - K H)^T + K R K^T
+    # = P - K H P - P H^T K^T + K S K^T = P + V K^T + K V^T with V = K S / 2 - P H^T, for any
+    # K (so it keeps the Joseph form's first-order insensitivity to an error in K); no N x N x N
+    # product (N^2 m instead of 2 N^3 for an m-dimensional measurement).
+    VKt = (K @ (0.5 * S) - PHt) @ K.T
+    P_post = symmetrize(P + VKt + VKt.T)
     return UpdateResult(True, nis, x_post, P_post, nu, S_chol, H, P)

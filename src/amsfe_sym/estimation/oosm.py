@@ -10,8 +10,12 @@ covariance ``S``, jacobian ``H``, prior ``P(k|k-1)``):
   backward map ``F_{kappa,k}``, eq. (22));
 - ``Q = Q(k, kappa) = sum_j Phi(k, j+1) Qd_j Phi(k, j+1)^T`` (eq. (23));
 - ``v_hat = Q H^T S^-1 nu`` (eq. (25), corrected: the innovation, not ``z(k) - z(k-1)``);
-- ``x(kappa|k) = F_{kappa,k}(x(k|k) - v_hat)`` (eq. (24)), the inverse model applied step by
-  step with the stored inputs;
+- ``x(kappa|k) = F_{kappa,k}(x(k|k) - v_hat)`` (eq. (24)), the backward map linearised about
+  the filter's own trajectory (:func:`backward_map`): from the stored posteriors
+  ``x(j|j)``, priors ``x(j+1|j) = F(x(j|j))`` and jacobians ``A_j``, one linear solve with
+  ``Phi`` per frame instead of ``L`` Newton inverses of the transition (exact for a linear
+  model; for a nonlinear one the error is second order in the corrections the updates made
+  over the lag, see ``docs/estimation-algorithms.md``);
 - ``Pvv = Q - Q H^T S^-1 H Q``, ``Pxv = Q - P(k|k-1) H^T S^-1 H Q``,
   ``P(kappa|k) = Fb (P(k|k) + Pvv - Pxv - Pxv^T) Fb^T`` (eq. (27), corrected);
 - ``Pxz = (P(k|k) - Pxv) Fb^T Hc^T``, ``Szz = Hc P(kappa|k) Hc^T + Rc`` (eq. (26));
@@ -34,7 +38,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.errors import ConvergenceError, EstimatorError, describe
+from amsfe_sym.errors import EstimatorError, describe
 from amsfe_sym.estimation.base import Estimator, StepInputs, StepReport
 from amsfe_sym.estimation.ekf import (
     UpdateResult,
@@ -53,6 +57,7 @@ __all__ = [
     "a1_correct",
     "a1_retrodict",
     "al1_retrodict",
+    "backward_map",
 ]
 
 logger = logging.getLogger(__name__)
@@ -219,11 +224,53 @@ def a1_correct(
     return A1Correction(True, "ok", nis, x_post + W @ nu_c, P_new, W, Szz)
 
 
+def backward_map(
+    Phi: FloatArray, x_post_kappa: FloatArray, corrections: FloatArray, target: FloatArray
+) -> FloatArray:
+    """``x(kappa|k) = F_{kappa,k}(target)`` (eq. (24)) to first order about the filter's
+    trajectory: ``x(kappa|kappa) + Phi^-1 r``.
+
+    One backward step linearised at the stored posterior ``x(j|j)``, whose image
+    ``F(x(j|j)) = x(j+1|j)`` and jacobian ``A_j`` the forward pass computed, is
+    ``F^-1(y) = x(j|j) + A_j^-1 (y - x(j+1|j))``; chained over the lag it gives
+    ``r = sum_{i=kappa+1}^{k-1} Phi(k, i) c_i + target - x(k|k-1)`` with the updates'
+    corrections ``c_i = x(i|i) - x(i|i-1)``.  Exact for a linear model; otherwise the error
+    is ``O(|F''| |x(j) - x(j|j)|^2)`` per step.
+
+    Args:
+        Phi: ``A_{k-1} ... A_kappa``.
+        x_post_kappa: ``x(kappa|kappa)``, the posterior the prediction from kappa started at.
+        corrections: ``sum_{i=kappa+1}^{k-1} Phi(k, i) c_i``, accumulated with the stored
+            jacobians (``s <- A_j s + c_{j+1}`` for ``j = kappa .. k-2``, then
+            ``s <- A_{k-1} s``).
+        target: The state at ``k`` to map back (``x(k|k) - v_hat``) minus ``x(k|k-1)``.
+
+    Returns:
+        ``x(kappa|k)``.
+
+    Raises:
+        EstimatorError: If ``Phi`` is singular.
+    """
+    try:
+        step = np.linalg.solve(Phi, corrections + target)
+    except (np.linalg.LinAlgError, ValueError):
+        raise EstimatorError(
+            describe(
+                "product of transition jacobians over the lag",
+                "an invertible matrix",
+                "a singular one",
+                "the backward map of eq. (22) needs an invertible transition",
+            )
+        ) from None
+    return np.asarray(x_post_kappa + step, dtype=np.float64)
+
+
 class OosmEstimator(Estimator):
     """EKF + the paper's out-of-sequence camera update (A1 over the whole lag).
 
-    Keeps, for the last ``buffer_steps`` steps, the inputs, the forward jacobians and the
-    process noise of each prediction, and the last encoder update. A frame with lag 0 gets a
+    Keeps, for the last ``buffer_steps`` steps, the inputs, the forward jacobians, the process
+    noise and the start and end states of each prediction, and the last encoder update (a late
+    frame costs ``L`` N^3 products and no model evaluation). A frame with lag 0 gets a
     standard update; an older one the A1 update above. When A1 yields an indefinite
     covariance (a long lag with many encoder updates in between), the frame is rejected with
     a warning rather than corrupting ``P``.
@@ -236,6 +283,8 @@ class OosmEstimator(Estimator):
         n, B = self.nx, self.config.buffer_steps
         self._A = np.empty((B, n, n))
         self._Q = np.empty((B, n, n))
+        self._x_post = np.empty((B, n))  # x(j|j) the prediction from j started at
+        self._x_prior = np.empty((B, n))  # x(j+1|j) = F(x(j|j), u_j)
         self._u: list[FloatArray | None] = [None] * B
         self._last: UpdateResult | None = None  # accepted encoder update at self.k, if any
 
@@ -243,9 +292,11 @@ class OosmEstimator(Estimator):
         u, z_encoder, frames = step.u, step.z_encoder, step.frames
         k_new = self.k + 1
         slot = self.k % self.config.buffer_steps
+        self._x_post[slot] = self.x
         pred = self._predict(u)
         self._A[slot] = pred.A
         self._Q[slot] = pred.Q
+        self._x_prior[slot] = pred.x
         self._u[slot] = u
         result = self._encoder_update(z_encoder, report)
         self._last = result if result is not None and result.accepted else None
@@ -266,29 +317,26 @@ class OosmEstimator(Estimator):
         n = self.nx
         Phi = np.eye(n)
         Q = np.zeros((n, n))
+        s = np.zeros(n)
         for j in range(kappa, k):  # eq. (23): Q(k, kappa) = sum_j Phi(k, j+1) Qd_j Phi(k, j+1)^T
             A_j = self._A[j % B]
             Phi = A_j @ Phi
             Q = A_j @ Q @ A_j.T + self._Q[j % B]
+            s = A_j @ s  # the updates' corrections, carried to k (backward_map)
+            if j + 1 < k:
+                s += self._x_post[(j + 1) % B] - self._x_prior[j % B]
         Q = symmetrize(Q)
         retro = self._retrodict(kappa, k, Phi, Q)
-        x_r = retro.x_shift
-        for j in range(k - 1, kappa - 1, -1):  # eq. (24): x(kappa|k) = F_{kappa,k}(x_shift)
-            u_j = self._u[j % B]
-            if u_j is None:  # cannot happen: the base class refuses frames older than the buffer
-                raise EstimatorError(f"oosm: no stored input for step {j}")
-            try:
-                x_r = self.model.inverse(x_r, u_j)
-            except ConvergenceError as exc:
-                report.reject(f"camera frame kappa={kappa} (lag {k - kappa}): {exc}")
-                return
-        if x_r.shape != (n,) or not np.isfinite(x_r).all():
+        # eq. (24): x(kappa|k) = F_{kappa,k}(x_shift), linearised about the stored trajectory
+        target = retro.x_shift - self._x_prior[(k - 1) % B]
+        x_r = backward_map(Phi, self._x_post[kappa % B], s, target)
+        if not np.isfinite(x_r).all():
             raise EstimatorError(
                 describe(
-                    "transition model inverse",
-                    f"a finite state of shape ({n},)",
-                    f"shape {x_r.shape}" if x_r.shape != (n,) else "NaN or inf",
-                    "check model.inverse (eq. (22)) on the current trajectory",
+                    "retrodicted state x(kappa|k)",
+                    "finite",
+                    "NaN or inf",
+                    "check the transition's jacobians on the current trajectory",
                 )
             )
         z_hat, Hc = measure(self.camera, x_r)

@@ -11,26 +11,24 @@ the hand-written C glue (``runtime/c/amsfe_runtime.c``) compares NIS with the ga
 reference (``estimation/ekf.py``, ``estimation/oosm.py``) line by line, so both paths agree to
 rounding.  Tuning enters as inputs: ``qw`` (diagonal of Qw), ``r`` (diagonal of R).
 
-Names and signatures (``N`` states, ``n`` joints, ``m = 2n + p`` noise inputs, ``ne = 2n``):
+Names and signatures (``N`` states, ``n`` joints, ``m = 2n + p`` noise inputs):
 
 - ``est_predict(x[N], P[N,N], u[n], qw[m]) -> x_pred, P_pred, A, Qd`` (eqs. 13-14);
-- ``est_encoder_update(x, P, z[ne], r[ne]) -> x_post, P_post, nis, nu[ne], s_ok`` (15-17,
-  Joseph form);
 - ``est_camera_update(x_prior, P, x_lin, z[2], r[2]) -> x_post, P_post, nis, s_ok, chk``: one
   Gauss-Newton step of the iterated EKF linearised at ``x_lin`` (``x_lin = x_prior``: the plain
   EKF update);
-- ``est_chol_check(P) -> ok``: 1 when Cholesky succeeds (every pivot > 0, no NaN);
 - ``est_oosm_accumulate(Phi, Q, A, Qd) -> A Phi, A Q A^T + Qd`` (eq. 23, one step);
-- ``est_oosm_retrodict(x, P, Q, has_last, nu, P_prior, r) -> x_shift, M, C, s_ok``
-  (eqs. 24-27 corrected, before the backward map);
-- ``est_oosm_correct(x, P, x_r, M, C, Phi, z[2], r[2]) -> x_new, P_new, nis, szz_ok, p_ok,
-  chk`` (eqs. 19-20, 26);
-- ``est_clone_predict(xa[Na], Pa[Na,Na], u, qw) -> xa_pred, Pa_pred, P_state``,
-  ``est_clone_encoder(xa, Pa, z[ne], r[ne]) -> xa_post, Pa_post, nis, s_ok`` and
+- ``est_oosm_correct(x, P, x_r, M, C, Phi, z[2], r[2]) -> x_new, P_new, nis, szz_ok, chk``
+  (eqs. 19-20, 26);
+- ``est_clone_predict(xa[Na], Pa[Na,Na], u, qw) -> xa_pred, Pa_pred, P_state`` and
   ``est_clone_camera(xa, Pa, c[N], sel[S], z[2], r[2]) -> xa_post, Pa_post, nis, s_ok, chk``:
   stochastic cloning on the augmented state ``xa = [x; c_1; ..; c_S]`` with ``S`` clone slots
   (``Na = (1 + S) N``); a free slot holds zeros (its rows and columns stay exactly zero), the
   one-hot ``sel`` picks the slot the frame's clone is in, ``c`` is that clone.
+
+The encoder updates (their H selects states), the A1 retrodiction and every
+positive-definiteness check are hand-written C kernels (``runtime/c/amsfe_kernels.c``): as
+generated SX they were fully unrolled Cholesky solves, 74k of the Panda's 228k lines.
 
 ``chk`` is the sum of the absolute values of the model outputs the update used (``h``,
 ``dh/dx``, ``Hc Fb``): non-finite exactly when one of them is, which the Python reference
@@ -45,13 +43,13 @@ __all__ = ["EXPANDED", "EXPAND_MAX_STATES", "estimator_functions"]
 
 #: Up to this many states the per-frame functions of :data:`EXPANDED` are expanded into SX
 #: (straight-line C without MX call and loop overhead; paper_2link, pure C at -O1:
-#: est_camera_update 5.1 -> 1.0 us, est_oosm_retrodict 7.6 -> 1.7 us, at 3-4x the lines).
-#: The tick's algebra (predict, encoder update, Cholesky check, eq. 23) runs in the C glue's
-#: dense kernels instead (docs/runtime-c.md); ``est_predict`` etc. stay for cloning and tests.
+#: est_camera_update 5.1 -> 1.0 us, at 3-4x the lines).  The tick's algebra (predict, encoder
+#: update, Cholesky check, eq. 23) and the A1 retrodiction run in the C kernels instead
+#: (docs/runtime-c.md); ``est_predict`` and ``est_oosm_accumulate`` stay for cloning and tests.
 EXPAND_MAX_STATES = 10
 #: The functions expanded (``est_oosm_correct`` holds a QR solve, which has no SX form; the
 #: cloning updates on the augmented state grow as ``Na^3``: 22k lines for the 2-link arm).
-EXPANDED = frozenset({"est_camera_update", "est_oosm_retrodict"})
+EXPANDED = frozenset({"est_camera_update"})
 
 
 def _chol_factor(S: ca.SX) -> tuple[list[list[ca.SX]], ca.SX]:
@@ -100,12 +98,6 @@ def _chol_solve_function(m: int, cols: int, name: str) -> ca.Function:
     return ca.Function(name, [S, B], [ca.horzcat(*X), ok], ["S", "B"], ["X", "ok"])
 
 
-def _chol_check_function(N: int) -> ca.Function:
-    P = ca.SX.sym("P", N, N)
-    _, ok = _chol_factor(P)
-    return ca.Function("est_chol_check", [P], [ok], ["P"], ["ok"])
-
-
 def _sym(X: ca.MX) -> ca.MX:
     return 0.5 * (X + X.T)
 
@@ -150,17 +142,10 @@ def estimator_functions(
     Returns:
         The functions listed in the module docstring.
     """
-    N, m, ne = 4 * n + p, 2 * n + p, 2 * n
+    N, m = 4 * n + p, 2 * n + p
     step, cam = functions["transition_step"], functions["camera_measure"]
-    sq, sqm, sqmd, sth = layout["q"], layout["qm"], layout["qmd"], layout["theta"]
-    H_enc = ca.DM.zeros(ne, N)
-    for i in range(n):
-        H_enc[i, sqm.start + i] = 1.0
-        H_enc[n + i, sqmd.start + i] = 1.0
-    solve_enc = _chol_solve_function(ne, 1 + N, "est_solve_encoder")
+    sq, sth = layout["q"], layout["theta"]
     solve_cam = _chol_solve_function(2, 1 + N, "est_solve_camera")
-    solve_retro = _chol_solve_function(ne, N, "est_solve_retro")
-    chol_check = _chol_check_function(N)
 
     def sym(name: str, rows: int, cols: int = 1) -> ca.MX:
         return ca.MX.sym(name, rows, cols)
@@ -182,18 +167,6 @@ def estimator_functions(
         [x1, _sym(ca.mtimes(ca.mtimes(A, P), A.T) + Qd), A, Qd],
         ["x", "P", "u", "qw"],
         ["x_pred", "P_pred", "A", "Qd"],
-    )
-
-    # eqs. (15)-(17), encoders (linear)
-    z_e, r_e = sym("z", ne), sym("r", ne)
-    nu_e = z_e - ca.mtimes(H_enc, x)
-    xe, Pe, nis_e, ok_e = _joseph(x, P, nu_e, H_enc, r_e, solve_enc)
-    encoder = ca.Function(
-        "est_encoder_update",
-        [x, P, z_e, r_e],
-        [xe, Pe, nis_e, nu_e, ok_e],
-        ["x", "P", "z", "r"],
-        ["x_post", "P_post", "nis", "nu", "s_ok"],
     )
 
     # camera, one iterated-EKF step at x_lin
@@ -219,30 +192,6 @@ def estimator_functions(
         ["Phi_next", "Q_next"],
     )
 
-    # oosm retrodiction, eqs. (24)-(27) corrected (oosm.a1_retrodict)
-    has_last, nu_l, P_prior = sym("has_last", 1), sym("nu", ne), sym("P_prior", N, N)
-    Qs = _sym(Q)
-    S_l = _sym(ca.mtimes(H_enc, ca.mtimes(P_prior, H_enc.T)) + ca.diag(r_e))
-    HQ = ca.mtimes(H_enc, Qs)
-    S_inv_HQ, ok_l = solve_retro(S_l, HQ)
-    v_hat = ca.mtimes(S_inv_HQ.T, nu_l)
-    Pvv = Qs - ca.mtimes(HQ.T, S_inv_HQ)
-    Pxv = Qs - ca.mtimes(ca.mtimes(P_prior, H_enc.T), S_inv_HQ)
-    D = P - Qs
-    last = has_last > 0
-    retrodict = ca.Function(
-        "est_oosm_retrodict",
-        [x, P, Q, has_last, nu_l, P_prior, r_e],
-        [
-            ca.if_else(last, x - v_hat, x),
-            ca.if_else(last, _sym(P + Pvv - Pxv - Pxv.T), D),
-            ca.if_else(last, P - Pxv, D),
-            ca.if_else(last, ok_l, 1.0),
-        ],
-        ["x", "P", "Q", "has_last", "nu", "P_prior", "r"],
-        ["x_shift", "M", "C", "s_ok"],
-    )
-
     # oosm correction, eqs. (19)-(20), (26) (oosm.a1_correct)
     x_r, M, C = sym("x_r", N), sym("M", N, N), sym("C", N, N)
     y_r, Hr = camera_h(x_r)
@@ -257,9 +206,9 @@ def estimator_functions(
     correct = ca.Function(
         "est_oosm_correct",
         [x, P, x_r, M, C, Phi, z_c, r_c],
-        [x + ca.mtimes(W, nu_r), P_new, nis_r, ok_z, chol_check(P_new), _abs_sum(y_r, Hr, G_r)],
+        [x + ca.mtimes(W, nu_r), P_new, nis_r, ok_z, _abs_sum(y_r, Hr, G_r)],
         ["x", "P", "x_r", "M", "C", "Phi", "z", "r"],
-        ["x_new", "P_new", "nis", "szz_ok", "p_ok", "chk"],
+        ["x_new", "P_new", "nis", "szz_ok", "chk"],
     )
 
     # cloning (estimation/cloning.py) on the augmented state with S slots
@@ -275,17 +224,6 @@ def estimator_functions(
         ["xa", "Pa", "u", "qw"],
         ["xa_pred", "Pa_pred", "P_state"],
     )
-    H_aug = ca.horzcat(H_enc, ca.DM.zeros(ne, Na - N))
-    nu_a = z_e - ca.mtimes(H_aug, xa)
-    solve_enc_a = _chol_solve_function(ne, 1 + Na, "est_solve_clone_encoder")
-    xea, Pea, nis_ea, ok_ea = _joseph(xa, Pa, nu_a, H_aug, r_e, solve_enc_a)
-    clone_encoder = ca.Function(
-        "est_clone_encoder",
-        [xa, Pa, z_e, r_e],
-        [xea, Pea, nis_ea, ok_ea],
-        ["xa", "Pa", "z", "r"],
-        ["xa_post", "Pa_post", "nis", "s_ok"],
-    )
     c, sel = sym("c", N), sym("sel", S_)
     y_c, Hcc = camera_h(c)
     Hca = ca.horzcat(ca.MX.zeros(2, N), *[sel[i] * Hcc for i in range(S_)])
@@ -298,18 +236,7 @@ def estimator_functions(
         ["xa", "Pa", "c", "sel", "z", "r"],
         ["xa_post", "Pa_post", "nis", "s_ok", "chk"],
     )
-    out = [
-        predict,
-        encoder,
-        camera,
-        chol_check,
-        accumulate,
-        retrodict,
-        correct,
-        clone_predict,
-        clone_encoder,
-        clone_camera,
-    ]
+    out = [predict, camera, accumulate, correct, clone_predict, clone_camera]
     if N <= EXPAND_MAX_STATES:
         out = [f.expand() if f.name() in EXPANDED else f for f in out]
     return out

@@ -158,6 +158,13 @@ def _tick_lines(report: dict[str, Any]) -> list[str]:
                 f"{_fmt(b and b['median_us'], 10, 1)}{_fmt(b and b['p99_us'], 9, 1)}"
                 f"{_fmt(r.get('speedup_python'), 10, 1)}{_fmt(r.get('speedup_baseline'), 12, 1)}"
             )
+            if "late_frame" in r:
+                f = r["late_frame"]
+                lines.append(
+                    f"   {r['estimator']} late frame (pure C, {f['frames']} frames, "
+                    f"{f['applied']} applied): {f['median_us']:.1f} us median, "
+                    f"{f['p99_us']:.1f} us p99"
+                )
             if "compiled_with_law_us" in r:
                 lines.append(
                     f"   {r['estimator']} tick + control_amsfe (pure C, {tick['law_us']:.2f} us): "

@@ -13,7 +13,10 @@ The same recorded inputs (u and encoder samples of a closed-loop run of the scen
   update.
 
 A tick is predict (eqs. 13-14) + encoder update (15-17) with no camera frame (frames arrive
-every ``l`` ticks; their cost is in the closed-loop figures).  The control law
+every ``l`` ticks).  The frames' own cost (**late frame**: ``amsfe_est_camera_frame`` of each
+recorded frame, delivered after its tick in a second pure-C run) is timed apart, per frame;
+for oosm a frame ``d`` steps late is the eq. 23 accumulation over its lag, the A1 update and
+the linearised backward map (one LU solve, no model call).  The control law
 (``control_amsfe``, the cascade the AMSFE controller runs) is timed alone in pure C and added
 to the compiled tick.  Medians and 99th percentiles over the ticks [us]; no figure is asserted.
 """
@@ -26,7 +29,7 @@ import struct
 import tempfile
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -84,12 +87,15 @@ class TickInputs:
         kwargs: ``make_estimator`` arguments (model, encoder, camera, x0, P0, config).
         u: Inputs u[k] over [k, k+1], shape ``(K, n)``.
         z: Encoder samples taken at k + 1, shape ``(K, 2n)`` (NaN rows: none).
+        frames: Camera frames delivered at steps 1..K, rows (exposure step, delivery step,
+            u px, v px), in delivery order (none: shape ``(0, 4)``).
     """
 
     lib: Any
     kwargs: dict[str, Any]
     u: FloatArray
     z: FloatArray
+    frames: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
 
 
 def record_tick_inputs(sc: Any, lib: Any) -> TickInputs:
@@ -108,7 +114,11 @@ def record_tick_inputs(sc: Any, lib: Any) -> TickInputs:
     }
     res = run(sc, lib)
     K = res.u.shape[0] - 1
-    return TickInputs(lib, kwargs, np.asarray(res.u[:K], float), np.asarray(res.z_enc[1 : K + 1]))
+    frames = np.asarray(res.frames, float).reshape(-1, 4)
+    frames = frames[(frames[:, 1] >= 1) & (frames[:, 1] <= K)]
+    return TickInputs(
+        lib, kwargs, np.asarray(res.u[:K], float), np.asarray(res.z_enc[1 : K + 1]), frames
+    )
 
 
 def python_tick(name: str, inp: TickInputs) -> tuple[TickStats, FloatArray]:
@@ -132,8 +142,9 @@ def _time_ticks(
     return TickStats.from_ns(ns)
 
 
-def write_tick_input(path: Path, name: str, inp: TickInputs) -> Path:
-    """The input file of ``tick_timer.c`` (format in its header) for estimator ``name``."""
+def write_tick_input(path: Path, name: str, inp: TickInputs, frames: bool = False) -> Path:
+    """The input file of ``tick_timer.c`` (format in its header) for estimator ``name``; with
+    ``frames``, the recorded camera frames too."""
     from amsfe_sym.runtime.compiled_estimator import make_compiled_estimator
 
     est = make_compiled_estimator(name, **inp.kwargs)  # its parameter block, as validated
@@ -152,7 +163,10 @@ def write_tick_input(path: Path, name: str, inp: TickInputs) -> Path:
     qw, re, rc, x0, P0 = est._arrays
     body = [np.array([p.gate_camera, p.gate_encoder]), qw, re, rc, x0, np.ravel(P0, order="F")]
     body.append(np.hstack([inp.u, inp.z]).ravel())
-    path.write_bytes(hdr + b"".join(np.asarray(a, dtype=np.float64).tobytes() for a in body))
+    data = hdr + b"".join(np.asarray(a, dtype=np.float64).tobytes() for a in body)
+    if frames:
+        data += struct.pack("i", len(inp.frames)) + np.asarray(inp.frames, np.float64).tobytes()
+    path.write_bytes(data)
     return path
 
 
@@ -179,6 +193,40 @@ def compiled_tick(
     med, p99 = (float(v) / 1e3 for v in first.split())
     x = np.array([float(v) for v in second.split()])
     return TickStats(round(med, 4), round(p99, 4), len(inp.u)), x
+
+
+@dataclass(frozen=True)
+class FrameStats:
+    """Cost of the camera frames of a run in pure C (``amsfe_est_camera_frame``).
+
+    Attributes:
+        median_us: Median over the frames [us].
+        p99_us: 99th percentile [us].
+        frames: Frames delivered.
+        applied: Frames the estimator applied (the others were gated or refused).
+    """
+
+    median_us: float
+    p99_us: float
+    frames: int
+    applied: int
+
+
+def compiled_frames(exe: Path, name: str, inp: TickInputs, workdir: Path) -> FrameStats | None:
+    """Per-frame cost of ``amsfe_est_camera_frame`` in pure C over the run's frames, each
+    delivered after its tick (None when the run has none)."""
+    if len(inp.frames) == 0:
+        return None
+    data = write_tick_input(workdir / f"frames-{name}.bin", name, inp, frames=True)
+    proc = run_checked(
+        [str(exe), str(inp.lib.library_path), str(data)],
+        f"the C tick timer on {name} with frames",
+        "exit code 0",
+        "regenerate the library (amsfe generate --force) and retry",
+    )
+    med, p99, count, applied = proc.stdout.split("\n")[2].split()
+    us = round(float(med) / 1e3, 2), round(float(p99) / 1e3, 2)
+    return FrameStats(us[0], us[1], int(count), int(applied))
 
 
 class BaselineEkf:
@@ -272,6 +320,9 @@ def bench_tick(
                 "python": py.__dict__,
                 "max_dx_compiled_python": float(np.max(np.abs(xc - xp))),
             }
+            frames = compiled_frames(exe, name, inp, work) if name != "encoders" else None
+            if frames is not None:
+                row["late_frame"] = frames.__dict__
             if "law_us" in out:
                 row["compiled_with_law_us"] = round(c.median_us + out["law_us"], 4)
             if base is not None:

@@ -1,7 +1,7 @@
 /* amsfe_internal.h: what amsfe_runtime.c and amsfe_loop.c share inside a generated library.
  * Not part of the public API (not copied next to the library): the calling convention of
  * CasADi's generated functions, the carving of caller-owned memory blocks, and the dense
- * Cholesky kernels (defined in amsfe_runtime.c, hidden from the library's exports). */
+ * kernels (defined in amsfe_kernels.c, hidden from the library's exports). */
 #ifndef AMSFE_INTERNAL_H
 #define AMSFE_INTERNAL_H
 
@@ -75,10 +75,41 @@ static inline int all_finite(const double *v, long count) {
 #define AMSFE_HIDDEN
 #endif
 
-/* Lower Cholesky factor of the m x m S into L; 1 when every pivot is > 0 (a NaN pivot gives
- * 0), as est_chol_check and LAPACK potrf. */
+/* The dense kernels of amsfe_kernels.c (column-major; symmetric results exactly symmetric). */
+/* Lower Cholesky factor of the m x m S into L (its strict upper part set to 0); 1 when
+ * every pivot is > 0 (a NaN pivot gives 0), as LAPACK potrf. */
 AMSFE_HIDDEN int amsfe_cholesky(int m, const double *S, double *L);
 /* b <- S^-1 b with S = L L^T (m x m, leading dimension m). */
 AMSFE_HIDDEN void amsfe_chol_solve(int m, const double *L, double *b);
+/* Upper triangle of the m x m X <- its lower triangle. */
+AMSFE_HIDDEN void amsfe_mirror_lower(int m, double *X);
+/* C = A B (N x N). */
+AMSFE_HIDDEN void amsfe_matmul(int N, const double *A, const double *B, double *C);
+/* C (N x ncols, leading dimension N) = A (N x N) B (N x ncols, leading dimension ldb). */
+AMSFE_HIDDEN void amsfe_matmul_cols(int N, int ncols, const double *A, const double *B, long ldb,
+                                    double *C);
+/* out = A L L^T A^T + G diag(qw) G^T (eq. 14 with P = L L^T; G: N x nw); B: scratch of
+ * AMSFE_PREDICT_WORK(N, nw) doubles. */
+AMSFE_HIDDEN void amsfe_predict_cov(int N, int nw, const double *A, const double *L,
+                                    const double *G, const double *qw, double *out, double *B);
+/* out = A X A^T + G diag(qw) G^T (G may be NULL); T: AMSFE_PREDICT_WORK(N, nw) doubles of
+ * scratch (eq. 23). */
+AMSFE_HIDDEN void amsfe_sandwich(int N, int nw, const double *A, const double *X, const double *G,
+                                 const double *qw, double *out, double *T);
+/* b <- A^-1 b (LU with partial pivoting, A overwritten); 0 when A is singular. */
+AMSFE_HIDDEN int amsfe_lu_solve(int N, double *A, double *b);
+/* Joseph-form update of (x, P) (M states) by a measurement of the states rows[0..m) with
+ * variances r (eqs. 15-17); 0 when S is not PD.  w: AMSFE_JOSEPH_WORK(M, m) doubles. */
+AMSFE_HIDDEN int amsfe_joseph_select(int M, int m, const int *rows, const double *r,
+                                     const double *x, const double *P, const double *z,
+                                     double *x2, double *P2, double *nis, double *nu, double *w);
+/* oosm.a1_retrodict with the encoders' H = I[rows, :] (x_shift, M, C); 0 when S is not PD. */
+AMSFE_HIDDEN int amsfe_a1_retrodict(int M, int m, const int *rows, const double *r,
+                                    const double *x, const double *P, const double *Q,
+                                    const double *nu, const double *Pp, double *xs, double *Mo,
+                                    double *C, double *w);
+#define AMSFE_RETRO_WORK(M, m) (4L * (M) * (m) + (long)(M) * (M) + 2L * (m) * (m))
+#define AMSFE_PREDICT_WORK(N, nw) (2L * (N) * (N) + (long)(N) * (nw))
+#define AMSFE_JOSEPH_WORK(M, m) (4L * (M) * (m) + 3L * (m) * (m) + (m))
 
 #endif /* AMSFE_INTERNAL_H */

@@ -27,16 +27,9 @@
 
 #define AMSFE_MAX_ENCODERS 256 /* 2n: up to 128 joints */
 DECLARE(est_predict)
-DECLARE(est_encoder_update)
 DECLARE(est_camera_update)
-DECLARE(est_chol_check)
-DECLARE(est_oosm_accumulate)
-DECLARE(est_oosm_retrodict)
 DECLARE(est_oosm_correct)
-DECLARE(est_clone_predict)
-DECLARE(est_clone_encoder)
 DECLARE(est_clone_camera)
-DECLARE(transition_inverse)
 DECLARE(transition_step)
 
 #include "amsfe_model_config.h"
@@ -51,12 +44,8 @@ DECLARE(transition_step_chain)
 #define STEP_WORK transition_step_work
 #endif
 
-static const cwork WORKS[] = {est_predict_work,        est_encoder_update_work,
-                              est_camera_update_work,  est_chol_check_work,
-                              est_oosm_accumulate_work, est_oosm_retrodict_work,
-                              est_oosm_correct_work,   est_clone_predict_work,
-                              est_clone_encoder_work,  est_clone_camera_work,
-                              transition_inverse_work, STEP_WORK};
+static const cwork WORKS[] = {est_camera_update_work, est_oosm_correct_work, est_clone_camera_work,
+                              STEP_WORK};
 
 struct amsfe_est {
   amsfe_params par; /* pointers in it point into this block */
@@ -67,12 +56,16 @@ struct amsfe_est {
   amsfe_diag diag;
   /* state */
   double *x, *P, *x0, *P0, *qw, *re, *rc;
-  double *x1, *P1, *A1, *Q1, *x2, *P2; /* scratch */
+  double *x1, *P1, *A1, *x2, *P2; /* scratch */
   double nis, s_ok, chk, ok2;
-  double *G, *T1, *L1, *S1, *K1, *W1; /* dense-kernel scratch */
+  double *G, *T1, *L1, *JW; /* dense-kernel scratch */
+  double *LP;                /* Cholesky factor of P (valid when lp_ok: eq. 14 uses it) */
+  int lp_ok;
   int enc_rows[AMSFE_MAX_ENCODERS];     /* state row of each encoder value (H, eq. 5) */
   /* oosm */
-  double *A_buf, *Q_buf, *u_buf, *Phi, *Q, *Phi2, *Qb, *M, *C, *xs, *xr, *xr2;
+  double *A_buf, *G_buf, *u_buf, *Phi, *Q, *Phi2, *Qb, *M, *C, *xs, *xr, *sv;
+  double *xpost_buf, *xprior_buf; /* x(j|j) and x(j+1|j) of each prediction (eq. 24) */
+  double *RW;                     /* amsfe_a1_retrodict's work */
   double *last_nu, *last_Pprior, has_last;
   /* replay */
   double *r_x, *r_P, *r_u, *r_z, *r_fz;
@@ -82,7 +75,6 @@ struct amsfe_est {
   long *clone_k;
   int *clone_on;
   gwork g; /* work of the generated functions */
-  cint inv_n_out;
   double inv_tol, inv_residual, inv_limit; /* the inverse's convergence check */
 };
 
@@ -99,153 +91,30 @@ static int fail(amsfe_est *e, int status) {
   return status;
 }
 
-/* ------------------------------------------------------------------ dense kernels */
-/* Column-major N x N unless said.  Symmetric results are computed on the lower triangle and
- * mirrored, so they are exactly symmetric (the reference symmetrizes). */
-
-/* out = A X A^T + add (X and add symmetric; add may be NULL); T: N x N scratch. */
-static void sandwich(int N, const double *A, const double *X, const double *add, double *out,
-                     double *T) {
-  memset(T, 0, sizeof(double) * (size_t)N * N);
-  for (int j = 0; j < N; ++j) /* T = A X */
-    for (int k = 0; k < N; ++k) {
-      double xkj = X[k + (long)j * N];
-      if (xkj == 0.0) continue;
-      const double *a = A + (long)k * N;
-      double *t = T + (long)j * N;
-      for (int i = 0; i < N; ++i) t[i] += a[i] * xkj;
-    }
-  for (int j = 0; j < N; ++j) { /* lower triangle of T A^T */
-    double *o = out + (long)j * N;
-    for (int i = j; i < N; ++i) o[i] = add ? add[i + (long)j * N] : 0.0;
-    for (int k = 0; k < N; ++k) {
-      double ajk = A[j + (long)k * N];
-      if (ajk == 0.0) continue;
-      const double *t = T + (long)k * N;
-      for (int i = j; i < N; ++i) o[i] += t[i] * ajk;
-    }
-  }
-  for (int j = 0; j < N; ++j)
-    for (int i = j + 1; i < N; ++i) out[j + (long)i * N] = out[i + (long)j * N];
-}
-
-/* Qd = G diag(qw) G^T (G: N x nw), exactly symmetric (eq. 14's process noise). */
-static void noise_cov(int N, int nw, const double *G, const double *qw, double *Qd) {
-  for (int j = 0; j < N; ++j)
-    for (int i = j; i < N; ++i) {
-      double q = 0.0;
-      for (int m = 0; m < nw; ++m) q += G[i + (long)m * N] * qw[m] * G[j + (long)m * N];
-      Qd[i + (long)j * N] = Qd[j + (long)i * N] = q;
-    }
-}
-
-/* C = A B (N x N) */
-static void matmul(int N, const double *A, const double *B, double *C) {
-  memset(C, 0, sizeof(double) * (size_t)N * N);
-  for (int j = 0; j < N; ++j)
-    for (int k = 0; k < N; ++k) {
-      double bkj = B[k + (long)j * N];
-      if (bkj == 0.0) continue;
-      const double *a = A + (long)k * N;
-      double *c = C + (long)j * N;
-      for (int i = 0; i < N; ++i) c[i] += a[i] * bkj;
-    }
-}
-
-/* amsfe_internal.h (shared with the loop's NEES). */
-int amsfe_cholesky(int m, const double *S, double *L) {
-  for (int j = 0; j < m; ++j) {
-    double d = S[j + (long)j * m];
-    for (int k = 0; k < j; ++k) d -= L[j + (long)k * m] * L[j + (long)k * m];
-    if (!(d > 0)) return 0;
-    double ljj = sqrt(d);
-    L[j + (long)j * m] = ljj;
-    for (int i = j + 1; i < m; ++i) {
-      double v = S[i + (long)j * m];
-      for (int k = 0; k < j; ++k) v -= L[i + (long)k * m] * L[j + (long)k * m];
-      L[i + (long)j * m] = v / ljj;
-    }
-  }
-  return 1;
-}
-
-void amsfe_chol_solve(int m, const double *L, double *b) {
-  for (int i = 0; i < m; ++i) {
-    double v = b[i];
-    for (int k = 0; k < i; ++k) v -= L[i + (long)k * m] * b[k];
-    b[i] = v / L[i + (long)i * m];
-  }
-  for (int i = m - 1; i >= 0; --i) {
-    double v = b[i];
-    for (int k = i + 1; k < m; ++k) v -= L[k + (long)i * m] * b[k];
-    b[i] = v / L[i + (long)i * m];
-  }
-}
-
-/* Row of the state the encoder value r measures (eq. 5: H selects qm, then qmd). */
-#define enc_row(e, r) ((e)->enc_rows[r])
-
-/* ekf.joseph_update with the encoders' H (a selection of qm, qmd): S = P_hh + R,
- * K = P H^T S^-1, x+ = x + K nu, P+ = (I - K H) P (I - K H)^T + K R K^T.  Returns 1, or 0
- * when S is not positive definite.  Writes x2, P2, nis, last_nu. */
+/* ekf.joseph_update with the encoders' H, a selection of qm and qmd (eq. 5; enc_rows). */
 static int encoder_kernel(amsfe_est *e, const double *z) {
-  int N = e->d.N, ne = e->d.ne;
-  const double *P = e->P, *x = e->x;
-  double *S = e->S1, *L = e->L1, *K = e->K1, *W = e->W1;
-  for (int r = 0; r < ne; ++r) e->last_nu[r] = z[r] - x[enc_row(e, r)];
-  for (int c2 = 0; c2 < ne; ++c2)
-    for (int r = 0; r < ne; ++r)
-      S[r + c2 * ne] = P[enc_row(e, r) + (long)enc_row(e, c2) * N] + (r == c2 ? e->re[r] : 0.0);
-  for (int c2 = 0; c2 < ne; ++c2) /* symmetrize(H P H^T + R) */
-    for (int r = c2 + 1; r < ne; ++r)
-      S[r + c2 * ne] = S[c2 + r * ne] = 0.5 * (S[r + c2 * ne] + S[c2 + r * ne]);
-  if (!amsfe_cholesky(ne, S, L)) return 0;
-  double sn[ne]; /* S^-1 nu */
-  for (int r = 0; r < ne; ++r) sn[r] = e->last_nu[r];
-  amsfe_chol_solve(ne, L, sn);
-  double nis = 0.0;
-  for (int r = 0; r < ne; ++r) nis += e->last_nu[r] * sn[r];
-  e->nis = nis;
-  for (int i = 0; i < N; ++i) { /* x+ = x + P H^T S^-1 nu */
-    double s = 0.0;
-    for (int r = 0; r < ne; ++r) s += P[i + (long)enc_row(e, r) * N] * sn[r];
-    e->x2[i] = x[i] + s;
-  }
-  /* K^T = S^-1 H P (ne x N), stored as K (N x ne) */
-  for (int i = 0; i < N; ++i) {
-    double col[ne];
-    for (int r = 0; r < ne; ++r) col[r] = P[enc_row(e, r) + (long)i * N];
-    amsfe_chol_solve(ne, L, col);
-    for (int r = 0; r < ne; ++r) K[i + (long)r * N] = col[r];
-  }
-  /* W = (I - K H) P = P - K P[rows, :] */
-  for (int j = 0; j < N; ++j)
-    for (int i = 0; i < N; ++i) {
-      double s = P[i + (long)j * N];
-      for (int r = 0; r < ne; ++r) s -= K[i + (long)r * N] * P[enc_row(e, r) + (long)j * N];
-      W[i + (long)j * N] = s;
-    }
-  /* P+ = W (I - K H)^T + K R K^T = W - W[:, rows] K^T + K R K^T, lower triangle */
-  double *P2 = e->P2;
-  for (int j = 0; j < N; ++j)
-    for (int i = j; i < N; ++i) {
-      double s = W[i + (long)j * N];
-      for (int r = 0; r < ne; ++r) {
-        double kj = K[j + (long)r * N];
-        s += (e->re[r] * K[i + (long)r * N] - W[i + (long)enc_row(e, r) * N]) * kj;
-      }
-      P2[i + (long)j * N] = s;
-    }
-  for (int j = 0; j < N; ++j)
-    for (int i = j + 1; i < N; ++i) P2[j + (long)i * N] = P2[i + (long)j * N];
-  return 1;
+  return amsfe_joseph_select(e->d.N, e->d.ne, e->enc_rows, e->re, e->x, e->P, z, e->x2, e->P2,
+                             &e->nis, e->last_nu, e->JW);
+}
+
+/* P <- src; the Cholesky factor LP of P is stale until the next pd_state. */
+static void set_P(amsfe_est *e, const double *src) {
+  copy(e->P, src, (long)e->d.N * e->d.N);
+  e->lp_ok = 0;
+}
+
+/* P <- *scratch by exchanging the two N x N buffers (*scratch then holds the old P). */
+static void swap_P(amsfe_est *e, double **scratch) {
+  double *t = e->P;
+  e->P = *scratch, *scratch = t;
+  e->lp_ok = 0;
 }
 
 static void model_dims(amsfe_dims *d) {
   d->N = (int)est_predict_sparsity_in(0)[0];
   d->n = (int)est_predict_sparsity_in(2)[0];
   d->nw = (int)est_predict_sparsity_in(3)[0];
-  d->ne = (int)est_encoder_update_sparsity_in(2)[0];
+  d->ne = 2 * d->n; /* qm and qmd (eq. 5) */
   d->nc = (int)est_camera_update_sparsity_in(3)[0];
   d->clone_slots = (int)est_clone_camera_sparsity_in(3)[0];
 }
@@ -266,19 +135,21 @@ static size_t layout(amsfe_est *e, const amsfe_params *p, char *base) {
   carve(&c, sizeof(amsfe_est));
   e->x = DBL(&c, N), e->P = DBL(&c, NN), e->x0 = DBL(&c, N), e->P0 = DBL(&c, NN);
   e->qw = DBL(&c, d.nw), e->re = DBL(&c, d.ne), e->rc = DBL(&c, d.nc);
-  e->x1 = DBL(&c, N), e->P1 = DBL(&c, NN), e->A1 = DBL(&c, NN), e->Q1 = DBL(&c, NN);
+  e->x1 = DBL(&c, N), e->P1 = DBL(&c, NN), e->A1 = DBL(&c, NN);
   e->x2 = DBL(&c, N), e->P2 = DBL(&c, NN);
   e->last_nu = DBL(&c, d.ne), e->last_Pprior = DBL(&c, NN);
-  e->G = DBL(&c, N * d.nw), e->T1 = DBL(&c, NN), e->L1 = DBL(&c, NN);
-  e->S1 = DBL(&c, (long)d.ne * d.ne), e->K1 = DBL(&c, N * d.ne), e->W1 = DBL(&c, NN);
-  e->A_buf = e->Q_buf = e->u_buf = NULL;
+  e->G = DBL(&c, N * d.nw), e->T1 = DBL(&c, AMSFE_PREDICT_WORK(N, d.nw)), e->L1 = DBL(&c, NN), e->LP = DBL(&c, NN);
+  e->JW = DBL(&c, AMSFE_JOSEPH_WORK(est == AMSFE_CLONING ? Na : N, d.ne));
+  e->A_buf = e->G_buf = e->u_buf = NULL;
   e->r_x = e->r_P = e->r_u = e->r_z = e->r_fz = NULL;
   e->xa = e->Pa = e->xa2 = e->Pa2 = e->sel = e->cl = NULL;
   if (est == AMSFE_OOSM) {
-    e->A_buf = DBL(&c, B * NN), e->Q_buf = DBL(&c, B * NN), e->u_buf = DBL(&c, B * n);
+    e->A_buf = DBL(&c, B * NN), e->G_buf = DBL(&c, B * N * d.nw), e->u_buf = DBL(&c, B * n);
     e->Phi = DBL(&c, NN), e->Q = DBL(&c, NN), e->Phi2 = DBL(&c, NN), e->Qb = DBL(&c, NN);
     e->M = DBL(&c, NN), e->C = DBL(&c, NN);
-    e->xs = DBL(&c, N), e->xr = DBL(&c, N), e->xr2 = DBL(&c, N);
+    e->xs = DBL(&c, N), e->xr = DBL(&c, N), e->sv = DBL(&c, N);
+    e->xpost_buf = DBL(&c, B * N), e->xprior_buf = DBL(&c, B * N);
+    e->RW = DBL(&c, AMSFE_RETRO_WORK(N, d.ne));
   }
   if (est == AMSFE_REPLAY) {
     e->r_x = DBL(&c, R * N), e->r_P = DBL(&c, R * NN), e->r_u = DBL(&c, R * n);
@@ -365,10 +236,14 @@ static void sync_clone(amsfe_est *e) {
   int N = e->d.N, Na = (1 + e->S) * N;
   copy(e->x, e->xa, N);
   for (int j = 0; j < N; ++j) copy(e->P + (long)j * N, e->Pa + (long)j * Na, N);
+  e->lp_ok = 0;
 }
 
-/* require_positive_definite: Cholesky succeeds (est_chol_check's decision) */
+/* require_positive_definite: Cholesky succeeds */
 static int pd(amsfe_est *e, const double *P) { return amsfe_cholesky(e->d.N, P, e->L1); }
+
+/* the same check on P itself, keeping its factor for the next prediction (eq. 14) */
+static int pd_state(amsfe_est *e) { return e->lp_ok = amsfe_cholesky(e->d.N, e->P, e->LP); }
 
 /* block (o, o) of the augmented covariance into P1, then the PD check */
 static int clone_block_pd(amsfe_est *e, int s) {
@@ -380,7 +255,7 @@ static int clone_block_pd(amsfe_est *e, int s) {
 void amsfe_est_reset(amsfe_est *e) {
   int N = e->d.N;
   copy(e->x, e->x0, N);
-  copy(e->P, e->P0, (long)N * N);
+  set_P(e, e->P0);
   e->k = e->par.k0;
   e->failed = 0, e->last_error = 0, e->has_last = 0.0;
   memset(&e->diag, 0, sizeof(e->diag));
@@ -418,7 +293,6 @@ int amsfe_est_init(amsfe_est **out, const amsfe_params *p, void *memory, size_t 
   e->max_delay = p->camera_max_delay < 0 || p->camera_max_delay > p->buffer_steps
                        ? p->buffer_steps
                        : p->camera_max_delay;
-  e->inv_n_out = transition_inverse_n_out();
   e->inv_tol = AMSFE_INVERSE_TOL;
   for (int r = 0; r < d.ne; ++r) e->enc_rows[r] = r < d.n ? 2 * d.n + r : 3 * d.n + (r - d.n);
   e->inv_residual = NAN, e->inv_limit = NAN;
@@ -460,17 +334,17 @@ amsfe_est *amsfe_est_create(const amsfe_params *p, int *status) {
 void amsfe_est_destroy(amsfe_est *e) { free(e); }
 
 /* ------------------------------------------------------------------ EKF steps */
-/* ekf.predict on (x, P) with u; stores A, Qd in A1, Q1 */
-static int predict(amsfe_est *e, const double *u) {
+/* ekf.predict on (x, P) with u; A and Gamma written to A, G (N x N, N x nw) */
+static int predict(amsfe_est *e, const double *u, double *A, double *G) {
   int N = e->d.N;
   const double *in[2] = {e->x, u};
-  double *out[3] = {e->x1, e->A1, e->G};
+  double *out[3] = {e->x1, A, G};
   gcall(&e->g, STEP, in, 2, out, 3); /* x+, A, Gamma (eqs. 13, 4) */
-  if (!all_finite(e->x1, N) || !all_finite(e->A1, (long)N * N)) return AMSFE_ERR_NONFINITE;
-  noise_cov(N, e->d.nw, e->G, e->qw, e->Q1);
-  sandwich(N, e->A1, e->P, e->Q1, e->P1, e->T1); /* eq. (14) */
+  if (!all_finite(e->x1, N) || !all_finite(A, (long)N * N)) return AMSFE_ERR_NONFINITE;
+  if (!e->lp_ok && !pd_state(e)) return AMSFE_ERR_NOT_PD; /* P = LP LP^T */
+  amsfe_predict_cov(N, e->d.nw, A, e->LP, G, e->qw, e->P1, e->T1); /* eq. (14) */
   copy(e->x, e->x1, N);
-  copy(e->P, e->P1, (long)N * N);
+  swap_P(e, &e->P1);
   return AMSFE_OK;
 }
 
@@ -489,9 +363,10 @@ static int encoder_update(amsfe_est *e, const double *z, int report) {
     else ++e->diag.encoder_gated;
   }
   if (accepted) {
-    copy(e->last_Pprior, e->P, (long)N * N);
+    double *prior = e->P; /* last_Pprior <- P(k|k-1), P <- P2 (a rotation, no copy) */
+    e->P = e->P2, e->P2 = e->last_Pprior, e->last_Pprior = prior;
+    e->lp_ok = 0;
     copy(e->x, e->x2, N);
-    copy(e->P, e->P2, (long)N * N);
     e->has_last = 1.0;
   }
   return AMSFE_OK;
@@ -516,7 +391,7 @@ static int frame_now(amsfe_est *e, const double *z, double *nis) {
     if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
   }
   copy(e->x, e->x1, N);
-  copy(e->P, e->P1, (long)N * N);
+  swap_P(e, &e->P1);
   return AMSFE_OK;
 }
 
@@ -530,7 +405,7 @@ static void replay_store(amsfe_est *e, long j) {
 /* ReplayEstimator._step's loop body for j -> j + 1 (report: j + 1 is the current step) */
 static int replay_step(amsfe_est *e, long j, int report) {
   long s = pmod(j, e->R), s1 = pmod(j + 1, e->R);
-  int st = predict(e, e->r_u + s * e->d.n);
+  int st = predict(e, e->r_u + s * e->d.n, e->A1, e->G);
   if (st) return st;
   st = encoder_update(e, e->r_hasz[s1] ? e->r_z + s1 * e->d.ne : NULL, report);
   if (st) return st;
@@ -566,22 +441,23 @@ int amsfe_est_tick(amsfe_est *e, const double *z_encoder, const double *u) {
       int Na = (1 + e->S) * N;
       for (int s = 0; s < e->S; ++s) /* clones expired at the end of step k */
         if (e->clone_on[s] && k - e->clone_k[s] >= e->max_delay) drop_clone(e, s);
-      const double *in[4] = {e->xa, e->Pa, u, e->qw};
-      double *out[3] = {e->xa2, e->Pa2, NULL};
-      gcall(&e->g, est_clone_predict, in, 4, out, 3);
-      if (!all_finite(e->xa2, Na) || !all_finite(e->Pa2, (long)Na * Na)) {
-        st = AMSFE_ERR_NONFINITE;
-        break;
-      }
-      copy(e->xa, e->xa2, Na);
-      copy(e->Pa, e->Pa2, (long)Na * Na);
+      /* CloningEstimator._predict_augmented: the state block by the tick's kernels (x, P
+       * mirror it), the state-clone blocks P_xc <- A P_xc, the clones unchanged */
+      st = predict(e, u, e->A1, e->G);
+      if (st) break;
+      double *cross = e->Pa2; /* N x (Na - N), leading dimension N */
+      amsfe_matmul_cols(N, Na - N, e->A1, e->Pa + (long)N * Na, Na, cross);
+      copy(e->xa, e->x, N);
+      for (int j = 0; j < N; ++j) copy(e->Pa + (long)j * Na, e->P + (long)j * N, N);
+      for (int j = 0; j < Na - N; ++j)
+        for (int i = 0; i < N; ++i)
+          e->Pa[i + (long)(N + j) * Na] = e->Pa[(N + j) + (long)i * Na] = cross[i + (long)j * N];
       e->diag.encoder_accepted = 0, e->diag.encoder_nis = NAN;
       st = AMSFE_OK;
       if (z) {
-        const double *ie[4] = {e->xa, e->Pa, z, e->re};
-        double *oe[4] = {e->xa2, e->Pa2, &e->nis, &e->s_ok};
-        gcall(&e->g, est_clone_encoder, ie, 4, oe, 4);
-        if (!(e->s_ok > 0.5)) {
+        /* the encoder update on the augmented state (H selects qm, qmd of the state block) */
+        if (!amsfe_joseph_select(Na, e->d.ne, e->enc_rows, e->re, e->xa, e->Pa, z, e->xa2, e->Pa2,
+                                 &e->nis, e->last_nu, e->JW)) {
           st = AMSFE_ERR_S_NOT_PD;
           break;
         }
@@ -602,13 +478,13 @@ int amsfe_est_tick(amsfe_est *e, const double *z_encoder, const double *u) {
     default: /* encoders, naive, oosm */
       if (e->par.estimator == AMSFE_OOSM) {
         long s = pmod(k, e->B), NN = (long)N * N;
-        st = predict(e, u);
+        copy(e->xpost_buf + s * N, e->x, N);
+        st = predict(e, u, e->A_buf + s * NN, e->G_buf + s * N * e->d.nw); /* kept for eq. 23 */
         if (st) break;
-        copy(e->A_buf + s * NN, e->A1, NN);
-        copy(e->Q_buf + s * NN, e->Q1, NN);
+        copy(e->xprior_buf + s * N, e->x, N);
         copy(e->u_buf + s * n, u, n);
       } else {
-        st = predict(e, u);
+        st = predict(e, u, e->A1, e->G);
         if (st) break;
       }
       st = encoder_update(e, z, 1);
@@ -616,7 +492,7 @@ int amsfe_est_tick(amsfe_est *e, const double *z_encoder, const double *u) {
   if (st) return fail(e, st);
   e->k = k1;
   ++e->diag.ticks;
-  if (!pd(e, e->P)) return fail(e, AMSFE_ERR_NOT_PD);
+  if (!pd_state(e)) return fail(e, AMSFE_ERR_NOT_PD);
   if (e->par.estimator == AMSFE_CLONING) {
     int alive = 0;
     for (int s = 0; s < e->S; ++s) {
@@ -635,48 +511,56 @@ static int oosm_late(amsfe_est *e, const double *z, long kappa, double *nis) {
   long N = e->d.N, NN = N * N, k = e->k;
   memset(e->Phi, 0, sizeof(double) * (size_t)NN);
   memset(e->Q, 0, sizeof(double) * (size_t)NN);
+  memset(e->sv, 0, sizeof(double) * (size_t)N);
   for (long i = 0; i < N; ++i) e->Phi[i * (N + 1)] = 1.0;
   for (long j = kappa; j < k; ++j) { /* eq. (23) */
     long s = pmod(j, e->B);
     const double *Aj = e->A_buf + s * NN;
-    matmul((int)N, Aj, e->Phi, e->Phi2);
-    sandwich((int)N, Aj, e->Q, e->Q_buf + s * NN, e->Qb, e->T1);
+    amsfe_matmul((int)N, Aj, e->Phi, e->Phi2);
+    amsfe_sandwich((int)N, e->d.nw, Aj, e->Q, e->G_buf + s * N * e->d.nw, e->qw, e->Qb, e->T1);
     copy(e->Phi, e->Phi2, NN);
     copy(e->Q, e->Qb, NN);
-  }
-  {
-    const double *in[7] = {e->x, e->P, e->Q, &e->has_last, e->last_nu, e->last_Pprior, e->re};
-    double *out[4] = {e->xs, e->M, e->C, &e->s_ok};
-    gcall(&e->g, est_oosm_retrodict, in, 7, out, 4);
-    if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
-  }
-  copy(e->xr, e->xs, N);
-  for (long j = k - 1; j >= kappa; --j) { /* eq. (24): the backward map, step by step */
-    double residual = NAN, scale = 1.0;
-    for (long i = 0; i < N; ++i) scale = fmax(scale, fabs(e->xr[i])); /* max(1, |x_next|) */
-    for (cint i = 2; i < e->inv_n_out; ++i) e->g.res[i] = NULL;
-    e->g.arg[0] = e->xr, e->g.arg[1] = e->u_buf + pmod(j, e->B) * e->d.n;
-    e->g.res[0] = e->xr2, e->g.res[1] = &residual;
-    transition_inverse(e->g.arg, e->g.res, e->g.iw, e->g.w, 0);
-    /* CompiledTransition.inverse: refused unless residual <= tol max(1, |x_next|) (NaN too) */
-    if (!(residual <= e->inv_tol * scale)) {
-      e->inv_residual = residual, e->inv_limit = e->inv_tol * scale;
-      return AMSFE_REFUSED_NO_CONVERGENCE;
+    /* the updates' corrections carried to k (oosm.backward_map): s <- A_j s + c_{j+1} */
+    for (long i = 0; i < N; ++i) e->xr[i] = 0.0;
+    for (long m = 0; m < N; ++m) {
+      double c = e->sv[m];
+      for (long i = 0; i < N; ++i) e->xr[i] += Aj[i + m * N] * c;
     }
-    copy(e->xr, e->xr2, N);
+    if (j + 1 < k) {
+      const double *post = e->xpost_buf + pmod(j + 1, e->B) * N, *prior = e->xprior_buf + s * N;
+      for (long i = 0; i < N; ++i) e->xr[i] += post[i] - prior[i];
+    }
+    copy(e->sv, e->xr, N);
+  }
+  if (e->has_last > 0.5) { /* oosm.a1_retrodict (eqs. 24-27 corrected) */
+    if (!amsfe_a1_retrodict((int)N, e->d.ne, e->enc_rows, e->re, e->x, e->P, e->Q, e->last_nu,
+                            e->last_Pprior, e->xs, e->M, e->C, e->RW))
+      return AMSFE_ERR_S_NOT_PD;
+  } else { /* no encoder update at k: x_shift = x, M = C = P - Q */
+    copy(e->xs, e->x, N);
+    for (long i = 0; i < NN; ++i) e->M[i] = e->C[i] = e->P[i] - e->Q[i];
+  }
+  /* eq. (24): x(kappa|k) = F_{kappa,k}(x_shift) linearised about the stored trajectory:
+   * x(kappa|kappa) + Phi^-1 (s + x_shift - x(k|k-1)) (oosm.backward_map) */
+  {
+    const double *prior_k = e->xprior_buf + pmod(k - 1, e->B) * N;
+    for (long i = 0; i < N; ++i) e->xr[i] = e->sv[i] + (e->xs[i] - prior_k[i]);
+    copy(e->Phi2, e->Phi, NN);
+    if (!amsfe_lu_solve((int)N, e->Phi2, e->xr)) return AMSFE_ERR_NONFINITE;
+    const double *post_kappa = e->xpost_buf + pmod(kappa, e->B) * N;
+    for (long i = 0; i < N; ++i) e->xr[i] += post_kappa[i];
   }
   if (!all_finite(e->xr, N)) return AMSFE_ERR_NONFINITE;
-  double p_ok = 0.0;
   const double *in[8] = {e->x, e->P, e->xr, e->M, e->C, e->Phi, z, e->rc};
-  double *out[6] = {e->x1, e->P1, &e->nis, &e->s_ok, &p_ok, &e->chk};
-  gcall(&e->g, est_oosm_correct, in, 8, out, 6);
+  double *out[5] = {e->x1, e->P1, &e->nis, &e->s_ok, &e->chk};
+  gcall(&e->g, est_oosm_correct, in, 8, out, 5);
   if (!isfinite(e->chk)) return AMSFE_ERR_NONFINITE;
   if (!(e->s_ok > 0.5)) return AMSFE_REFUSED_INDEFINITE;
   if (nis) *nis = e->nis;
   if (!(e->nis <= e->par.gate_camera)) return AMSFE_GATED;
-  if (!(p_ok > 0.5)) return AMSFE_REFUSED_INDEFINITE;
+  if (!amsfe_cholesky((int)N, e->P1, e->L1)) return AMSFE_REFUSED_INDEFINITE; /* P(k|kappa+) */
   copy(e->x, e->x1, N);
-  copy(e->P, e->P1, NN);
+  swap_P(e, &e->P1);
   return AMSFE_OK;
 }
 
@@ -686,7 +570,7 @@ static int replay_frame(amsfe_est *e, const double *z, long kappa, double *nis) 
   if (e->r_nf[s] >= e->F) return AMSFE_REFUSED_FULL;
   if (kappa < k) {
     copy(e->x, e->r_x + s * N, N);
-    copy(e->P, e->r_P + s * N * N, N * N);
+    set_P(e, e->r_P + s * N * N);
   }
   int st = frame_now(e, z, nis);
   if (st < 0) return st;
@@ -751,7 +635,7 @@ int amsfe_est_camera_frame(amsfe_est *e, const double *z, long kappa, double *ni
       default: st = cloning_frame(e, z, kappa, nis);
     }
     if (st < 0) return fail(e, st);
-    if (!pd(e, e->P)) return fail(e, AMSFE_ERR_NOT_PD);
+    if (!pd_state(e)) return fail(e, AMSFE_ERR_NOT_PD);
   }
   if (st == AMSFE_OK) ++e->diag.frames_applied;
   else if (st == AMSFE_GATED) ++e->diag.frames_gated;

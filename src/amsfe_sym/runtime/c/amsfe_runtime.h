@@ -1,7 +1,7 @@
 /* amsfe_runtime.h: the estimators of amsfe_sym as plain C (docs/runtime-c.md).
  *
  * Compiled into every generated robot library together with the robot's generated
- * functions (est_predict, est_encoder_update, ...); a program links only that library and
+ * functions (transition_step, est_camera_update, ...); a program links only that library and
  * includes this header.  One estimator object holds the posterior x(k|k), P(k|k) and the
  * history its late-frame update needs, all inside one memory block the caller owns; no call
  * after amsfe_est_init allocates.
@@ -43,9 +43,9 @@ enum amsfe_status {
   AMSFE_ERR_FAILED = -5,         /* an earlier call failed: call amsfe_est_reset */
   AMSFE_ERR_CONFIG = -6,         /* bad parameter block (see amsfe_est_init) */
   AMSFE_ERR_MEMORY = -7,         /* the memory block is too small or misaligned */
-  AMSFE_REFUSED_NO_CONVERGENCE = 10 /* oosm: the inverse transition (eq. 22) of a step of the
-                                       lag did not converge (its residual output above the
-                                       tolerance, or NaN): the frame is not used */
+  AMSFE_REFUSED_NO_CONVERGENCE = 10 /* the inverse transition (eq. 22) did not converge.  Not
+                                       returned since issue 18: oosm's backward map of eq. 24
+                                       comes from the stored forward pass, with no inverse */
 };
 
 /* Default tolerance of the inverse transition's residual (relative to max(1, |x_next|_inf)),
@@ -133,14 +133,14 @@ int amsfe_est_camera_frame(amsfe_est *est, const double *z, long exposure_step, 
 void amsfe_est_state(const amsfe_est *est, double *x, double *P);
 void amsfe_est_diagnostics(const amsfe_est *est, amsfe_diag *diag);
 
-/* Tolerance of the inverse's convergence check: a backward step of eq. (24) whose generated
- * residual max|F(x, u) - x_next| exceeds tol * max(1, max|x_next|) (or is NaN) refuses the
- * frame with AMSFE_REFUSED_NO_CONVERGENCE.  Set by amsfe_est_init to AMSFE_INVERSE_TOL and
- * kept by reset.  Returns AMSFE_OK, or AMSFE_ERR_INPUT (NULL, or tol not > 0). */
+/* Tolerance of the inverse transition's convergence check (AMSFE_REFUSED_NO_CONVERGENCE).
+ * Kept for compatibility: since issue 18 no estimator calls the inverse (oosm's backward map
+ * of eq. 24 is linearised about the stored forward pass), so the tolerance decides nothing.
+ * Returns AMSFE_OK, or AMSFE_ERR_INPUT (NULL, or tol not > 0). */
 int amsfe_est_set_inverse_tolerance(amsfe_est *est, double tol);
 
-/* The residual of the inverse step that made the last AMSFE_REFUSED_NO_CONVERGENCE (NaN
- * before any), and the limit it was compared with (either may be NULL). */
+/* The residual and limit of the last AMSFE_REFUSED_NO_CONVERGENCE: NaN (none is returned
+ * since issue 18; either pointer may be NULL). */
 void amsfe_est_inverse_residual(const amsfe_est *est, double *residual, double *limit);
 
 /* A short English name of a status. */

@@ -8,8 +8,12 @@
  *             camera_max_delay, max_frames_per_step, K (ticks)
  *   float64   gate_camera, gate_encoder, qw[nw], r_encoder[ne], r_camera[2], x0[N],
  *             P0[N*N] (column-major), then K records u[n], z[ne] (NaN: no sample)
- * and runs K amsfe_est_tick calls, each timed with clock_gettime (no camera frames).
- * Prints "median_ns p99_ns" on the first line and the final x(k|k) on the second.
+ *   optional: int32 F, then F frames (float64 exposure step, delivery step, u px, v px) in
+ *             delivery order
+ * and runs K amsfe_est_tick calls, each timed with clock_gettime; with frames, after tick k
+ * the frames delivered at k + 1 (amsfe_est_camera_frame, each timed on its own).
+ * Prints "median_ns p99_ns" of the ticks on the first line, the final x(k|k) on the second,
+ * and with frames "median_ns p99_ns frames applied" of the frames on a third.
  */
 #define _POSIX_C_SOURCE 199309L
 #include <dlfcn.h>
@@ -93,6 +97,9 @@ int main(int argc, char **argv) {
   p.x0 = doubles(f, d.N), p.P0 = doubles(f, (long)d.N * d.N);
   p.k0 = 0;
   double *rec = doubles(f, K * (d.n + d.ne));
+  int F = 0;
+  if (fread(&F, sizeof(int), 1, f) != 1) F = 0;
+  double *fr = doubles(f, 4L * F);
   fclose(f);
   int status;
   void *est = create(&p, &status);
@@ -100,7 +107,11 @@ int main(int argc, char **argv) {
     fprintf(stderr, "amsfe_est_create failed: status %d\n", status);
     return 1;
   }
+  int (*frame)(void *, const double *, long, double *) =
+      (int (*)(void *, const double *, long, double *))sym(h, "amsfe_est_camera_frame");
   double *t = malloc(sizeof(double) * (size_t)(K > 0 ? K : 1));
+  double *tf = malloc(sizeof(double) * (size_t)(F > 0 ? F : 1));
+  int fi = 0, applied = 0;
   for (long k = 0; k < K; ++k) {
     const double *u = rec + k * (d.n + d.ne), *z = u + d.n;
     struct timespec a, b;
@@ -112,6 +123,18 @@ int main(int argc, char **argv) {
       return 1;
     }
     t[k] = 1e9 * (double)(b.tv_sec - a.tv_sec) + (double)(b.tv_nsec - a.tv_nsec);
+    for (; fi < F && (long)fr[4 * fi + 1] == k + 1; ++fi) {
+      double zc[2] = {fr[4 * fi + 2], fr[4 * fi + 3]}, nis;
+      clock_gettime(CLOCK_MONOTONIC, &a);
+      st = frame(est, zc, (long)fr[4 * fi], &nis);
+      clock_gettime(CLOCK_MONOTONIC, &b);
+      if (st < 0) {
+        fprintf(stderr, "frame %d at tick %ld: status %d\n", fi, k + 1, st);
+        return 1;
+      }
+      applied += st == 0;
+      tf[fi] = 1e9 * (double)(b.tv_sec - a.tv_sec) + (double)(b.tv_nsec - a.tv_nsec);
+    }
   }
   qsort(t, (size_t)K, sizeof(double), cmp);
   long i99 = (long)ceil(0.99 * (double)K) - 1;
@@ -120,5 +143,10 @@ int main(int argc, char **argv) {
   state(est, x, NULL);
   for (int i = 0; i < d.N; ++i) printf("%.17g ", x[i]);
   printf("\n");
+  if (fi > 0) {
+    qsort(tf, (size_t)fi, sizeof(double), cmp);
+    long f99 = (long)ceil(0.99 * (double)fi) - 1;
+    printf("%.1f %.1f %d %d\n", tf[fi / 2], tf[f99 < 0 ? 0 : f99], fi, applied);
+  }
   return 0;
 }
