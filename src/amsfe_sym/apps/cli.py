@@ -25,6 +25,7 @@ from amsfe_sym.apps.arguments import (
 )
 from amsfe_sym.apps.estimate import add_arguments as add_estimate_arguments
 from amsfe_sym.apps.estimate import from_args as estimate_from_args
+from amsfe_sym.apps.sweep.command import from_args as sweep_from_args
 from amsfe_sym.errors import AmsfeError, ConfigError, SpecError, describe
 
 __all__ = ["get_argument_parser", "main"]
@@ -198,6 +199,7 @@ def get_argument_parser() -> argparse.ArgumentParser:
         help="a named scenario variant (repeatable): --variant paper integrator=paper",
     )
     st.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    st.add_argument("--claims", action="store_true", help="the claim table of docs/reproduction.md")
     st.add_argument(
         "--runtime",
         choices=("compiled", "python"),
@@ -258,7 +260,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "study":
             return _study(args)
         if args.command == "sweep":
-            return _sweep(args)
+            return sweep_from_args(args)
         if args.command == "estimate":
             return estimate_from_args(args)
     except AmsfeError as exc:
@@ -413,6 +415,18 @@ def _parse_variant(items: Sequence[str]) -> tuple[str, list[str]]:
 def _study(args: argparse.Namespace) -> int:
     from amsfe_sym.apps.study import run_study
 
+    if args.claims:  # the claim table of docs/reproduction.md on these seeds
+        from pathlib import Path
+
+        from amsfe_sym.apps.study.claims import format_claims, run_claims, write_claims
+
+        t = run_claims(
+            args.scenario, args.first_seed, args.seeds, args.duration, args.workers, args.set
+        )
+        print(format_claims(t))
+        if args.out:
+            write_claims(t, Path(args.out))
+        return 0
     variants = dict(_parse_variant(v) for v in (args.variant or [])) or None
     res = run_study(
         args.scenario,
@@ -429,65 +443,6 @@ def _study(args: argparse.Namespace) -> int:
     )
     print(res.table)
     print(f"study folder: {res.out} (study.md, study.json, {len(res.figures)} figures)")
-    return 0
-
-
-def _sweep(args: argparse.Namespace) -> int:
-    """``amsfe sweep``: run the sweep (or, with ``--report``, only read its folder), then
-    print the seed table of the chosen metric and write the figures."""
-    from pathlib import Path
-
-    from amsfe_sym.apps.sweep import SweepOptions, load_sweep, run_sweep
-    from amsfe_sym.apps.sweep.report import format_report, write_figures
-    from amsfe_sym.apps.sweep.table import read_rows
-
-    spec = load_sweep(args.spec)
-    out = Path(args.out) if args.out else Path("runs") / f"sweep-{spec.name}"
-    metric = args.metric or spec.report.metric
-    x = spec.report.x if args.x is None else args.x
-    y = spec.report.y if args.y is None else args.y
-    for flag, axis in (("--x", x), ("--y", y)):
-        if axis and axis not in spec.axes:
-            raise ConfigError(
-                describe(flag, f"an axis of the sweep {list(spec.axes)}", repr(axis), "name one")
-            )
-    if args.report:
-        table = read_rows(out) if out.is_dir() else None
-        if table is None or not len(table):
-            raise ConfigError(
-                describe(
-                    f"--report on {str(out)!r}",
-                    "a sweep folder with results",
-                    "no rows",
-                    f"run amsfe sweep {args.spec} first (or pass its --out)",
-                )
-            )
-    else:
-        res = run_sweep(
-            spec,
-            SweepOptions(
-                out=out,
-                scheduler=args.scheduler,
-                workers=args.workers,
-                batch=args.batch,
-                retry_errors=args.retry_errors,
-                force=args.force,
-                progress=not args.no_progress,
-            ),
-        )
-        table = res.table
-        rate = f", {res.runs_per_s:.2f} runs/s" if res.ran else ""
-        print(
-            f"sweep {spec.name}: {res.ran} runs in {res.wall_time_s:.1f} s{rate} "
-            f"({res.workers} workers, batches of {res.batch}); {res.skipped} already done; "
-            f"{res.errors} errors, {res.diverged} diverged"
-        )
-    axes = [a for a in (x, y) if a]
-    print(format_report(table, metric, axes))
-    if not args.no_plots and axes:
-        for path in write_figures(table, metric, x, y, out / "figures"):
-            print(f"figure: {path}")
-    print(f"sweep folder: {out} (results.parquet, sweep.json)")
     return 0
 
 
