@@ -96,12 +96,14 @@ def run_claims(
     duration: float | None = None,
     workers: int = 2,
     sets: Sequence[str] = (),
+    rows: Sequence[tuple[str, str]] = CLAIM_ROWS,
 ) -> ClaimTable:
-    """Run every row of :data:`CLAIM_ROWS` on seeds ``first_seed ..`` (compiled loop)."""
+    """Run ``rows`` (default every row of :data:`CLAIM_ROWS`) on seeds ``first_seed ..``
+    (compiled loop); the pairs of :data:`CLAIM_PAIRS` whose rows both ran are compared."""
     from scipy.stats import wilcoxon
 
     seed_list = list(range(first_seed, first_seed + seeds))
-    jobs = [(scenario, s, c, e, duration, tuple(sets)) for (c, e) in CLAIM_ROWS for s in seed_list]
+    jobs = [(scenario, s, c, e, duration, tuple(sets)) for (c, e) in rows for s in seed_list]
     if workers > 1:
         with ProcessPoolExecutor(workers) as ex:
             out = list(ex.map(_one, jobs, chunksize=4))
@@ -109,7 +111,7 @@ def run_claims(
         out = [_one(j) for j in jobs]
     table = ClaimTable(scenario, seed_list, duration)
     rng = np.random.default_rng(0)
-    for i, row in enumerate(CLAIM_ROWS):
+    for i, row in enumerate(rows):
         r = np.array(out[i * seeds : (i + 1) * seeds])
         table.rmse[_key(row)] = r.tolist()
         table.rows[_key(row)] = {
@@ -117,6 +119,8 @@ def run_claims(
             "joints": [_spread(r[:, j], rng) for j in range(r.shape[1])],
         }
     for label, a, b in CLAIM_PAIRS:
+        if _key(a) not in table.rmse or _key(b) not in table.rmse:
+            continue
         ra, rb = np.array(table.rmse[_key(a)]), np.array(table.rmse[_key(b)])
         joints = []
         for j in range(ra.shape[1]):
