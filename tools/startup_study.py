@@ -44,7 +44,13 @@ def one(job: tuple[int, str, str, str, float]) -> dict[str, Any]:
     sc = load_scenario("paper-sim").with_overrides(
         controller=controller, estimator=estimator, duration=duration, seed=seed
     )
-    sc = apply_sets(sc, [s.replace("controller_gains.", f"controller_gains.{controller}.") for s in VARIANTS[variant]])
+    sc = apply_sets(
+        sc,
+        [
+            s.replace("controller_gains.", f"controller_gains.{controller}.")
+            for s in VARIANTS[variant]
+        ],
+    )
     res = run(sc, library_for(sc), runtime="compiled")
     n, T = res.lib.n, res.lib.T
     e = np.abs(res.x_true[:, :n] - res.q_des)
@@ -99,7 +105,7 @@ def summarize(rows: list[dict[str, Any]], seeds: list[int]) -> dict[str, Any]:
             "rmse_j2_rad": _stats(j[:, 1], rng),
             "seeds_peak_over_0_1": int((peak > 0.1).sum()),
             "seeds_late_over_0_1": int((late > 0.1).sum()),
-            "worst_seeds_j2": [s for _, s in sorted(((x["rmse"][1], x["seed"]) for x in r))[-5:]],
+            "worst_seeds_j2": [s for _, s in sorted((x["rmse"][1], x["seed"]) for x in r)[-5:]],
         }
     a = np.array([by["first"][s]["rmse"][1] for s in seeds])
     b = np.array([by["converged"][s]["rmse"][1] for s in seeds])
@@ -128,7 +134,8 @@ def main(argv: list[str] | None = None) -> int:
         rows = list(ex.map(one, jobs, chunksize=4))
     summary = summarize(rows, seeds)
     doc = {
-        "command": "python tools/startup_study.py " + " ".join(sys.argv[1:] if argv is None else argv),
+        "command": "python tools/startup_study.py "
+        + " ".join(sys.argv[1:] if argv is None else argv),
         "scenario": "paper-sim",
         "controller": args.controller,
         "estimator": args.estimator,
