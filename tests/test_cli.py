@@ -52,3 +52,10 @@ def test_package_root_names_resolve_lazily() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["False", "True", "amsfe_sym.codegen.libraries"]
+
+
+def test_lock_refuses_a_non_finite_value(capsys) -> None:
+    """``--lock joint2=nan`` used to build and cache a library that returns NaN everywhere."""
+    assert main(["generate", "--lock", "joint2=nan"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error:") and "finite" in err and "\n" not in err

@@ -122,6 +122,15 @@ def _spec(tmp_path: Path, body: str) -> Path:
         ("[[theta]]\nname='a'\nkind='payload_mass'\ntarget='tip'\ntrue=1\n", "initial"),
         ("[camera]\nposition = [0, 0, 1]\nlook_at = [0, 0, 0]\nup = [0, 0, 1]\n", "parallel"),
         ("[model\n", "TOML"),
+        # typed values (issue 20): no float() of a boolean or a string, finiteness, integers
+        ("[actuators]\nKs = [true, 10.0]\n", "(bool)"),
+        ('[actuators]\nKs = ["10", 10]\n', "(a string)"),
+        ("[camera]\ncx = nan\n", "finite"),
+        ("[model]\ninverse_iterations = 0.4\n", "an integer"),
+        ("[model]\nplant_substeps = 0.5\n", "an integer"),
+        ("[camera]\nperiod = 0.5\n", "an integer"),
+        ("[camera]\nperiod = 4294967346\n", "2147483647"),
+        ("[model]\nlocked = {joint2 = nan}\n", "finite"),
     ],
 )
 def test_spec_errors(tmp_path: Path, body: str, needle: str) -> None:

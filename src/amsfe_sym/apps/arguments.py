@@ -22,11 +22,18 @@ __all__ = [
 
 
 def lock_arg(text: str) -> tuple[str, float]:
+    """``--lock JOINT`` or ``JOINT=VALUE`` (a finite angle [rad] or position [m])."""
     name, _, value = text.partition("=")
     try:
-        return name, float(value) if value else 0.0
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"--lock {text!r}: expected JOINT or JOINT=VALUE") from exc
+        v = float(value) if value else 0.0
+    except ValueError:
+        v = math.nan
+    if not name or not math.isfinite(v):
+        raise argparse.ArgumentTypeError(
+            f"--lock {text!r}: expected JOINT or JOINT=VALUE with a finite value, "
+            f"e.g. --lock {name or 'joint2'}=0.1"
+        )
+    return name, v
 
 
 def number_type(kind: type, low: float, inclusive: bool, fix: str) -> Any:

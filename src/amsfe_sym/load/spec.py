@@ -12,7 +12,6 @@ names (joints, frames) are checked later, in :mod:`amsfe_sym.load`, against the 
 from __future__ import annotations
 
 import hashlib
-import math
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -20,6 +19,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from amsfe_sym.core.toml import tomllib
+from amsfe_sym.core.values import read_int, read_number
 from amsfe_sym.errors import SpecError, describe
 
 __all__ = [
@@ -309,23 +309,24 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
     joints = m.get("joints")
     model = ModelSpec(
         joints=None if joints is None else tuple(str(j) for j in joints),
-        locked={str(k): float(v) for k, v in dict(m.get("locked", {})).items()},
+        locked={
+            str(k): _finite(v, f"{where} [model] locked {k}")
+            for k, v in dict(m.get("locked", {})).items()
+        },
         T=T,
         gravity=_vec3(m.get("gravity", (0.0, 0.0, -9.81)), f"{where} [model] gravity"),
         integrator=integrator,  # type: ignore[arg-type]
-        inverse_iterations=int(
-            _positive(m.get("inverse_iterations", 6), f"{where} inverse_iterations")
-        ),
-        plant_substeps=int(_positive(m.get("plant_substeps", 10), f"{where} plant_substeps")),
+        inverse_iterations=_count(m.get("inverse_iterations", 6), f"{where} inverse_iterations", 1),
+        plant_substeps=_count(m.get("plant_substeps", 10), f"{where} plant_substeps", 1),
     )
 
     a = _table(data, "actuators", where)
     _no_unknown(a, {"Ks", "Mm", "Fm", "u_max"}, f"{where} [actuators]")
     actuators = ActuatorSpec(
-        Ks=_opt_positive_vec(a.get("Ks"), f"{where} [actuators] Ks"),
-        Mm=_opt_positive_vec(a.get("Mm"), f"{where} [actuators] Mm"),
-        Fm=_opt_nonneg_vec(a.get("Fm"), f"{where} [actuators] Fm"),
-        u_max=_opt_positive_vec(a.get("u_max"), f"{where} [actuators] u_max"),
+        Ks=_opt_vec(a.get("Ks"), f"{where} [actuators] Ks"),
+        Mm=_opt_vec(a.get("Mm"), f"{where} [actuators] Mm"),
+        Fm=_opt_vec(a.get("Fm"), f"{where} [actuators] Fm", strict=False),
+        u_max=_opt_vec(a.get("u_max"), f"{where} [actuators] u_max"),
     )
 
     t = _table(data, "tracked", where)
@@ -342,17 +343,17 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
         f"{where} [camera]",
     )
     camera = CameraSpec(
-        width=int(_positive(c.get("width", 640), f"{where} [camera] width")),
-        height=int(_positive(c.get("height", 512), f"{where} [camera] height")),
+        width=_count(c.get("width", 640), f"{where} [camera] width", 1),
+        height=_count(c.get("height", 512), f"{where} [camera] height", 1),
         fx=_opt_pos(c.get("fx"), f"{where} [camera] fx"),
         fy=_opt_pos(c.get("fy"), f"{where} [camera] fy"),
-        cx=None if c.get("cx") is None else float(c["cx"]),
-        cy=None if c.get("cy") is None else float(c["cy"]),
+        cx=None if c.get("cx") is None else _finite(c["cx"], f"{where} [camera] cx"),
+        cy=None if c.get("cy") is None else _finite(c["cy"], f"{where} [camera] cy"),
         position=None if c.get("position") is None else _vec3(c["position"], f"{where} position"),
         look_at=None if c.get("look_at") is None else _vec3(c["look_at"], f"{where} look_at"),
         up=_vec3(c.get("up", (0.0, 0.0, 1.0)), f"{where} [camera] up"),
-        period=int(_positive(c.get("period", 125), f"{where} [camera] period")),
-        delay=int(_nonneg(c.get("delay", 125), f"{where} [camera] delay")),
+        period=_count(c.get("period", 125), f"{where} [camera] period", 1),
+        delay=_count(c.get("delay", 125), f"{where} [camera] delay", 0),
     )
 
     thetas: list[ThetaSpec] = []
@@ -433,27 +434,19 @@ def _no_unknown(data: Mapping[str, Any], allowed: set[str], where: str) -> None:
 
 
 def _finite(x: Any, where: str) -> float:
-    try:
-        v = float(x)
-    except (TypeError, ValueError) as exc:
-        raise SpecError(describe(where, "a number", repr(x), "write a number")) from exc
-    if not math.isfinite(v):
-        raise SpecError(describe(where, "a finite number", repr(x), "write a finite number"))
-    return v
+    return read_number(x, where, SpecError)
 
 
 def _positive(x: Any, where: str) -> float:
-    v = _finite(x, where)
-    if v <= 0:
-        raise SpecError(describe(where, "a positive number", repr(x), "use a value > 0"))
-    return v
+    return read_number(x, where, SpecError, low=0.0, strict=True)
 
 
 def _nonneg(x: Any, where: str) -> float:
-    v = _finite(x, where)
-    if v < 0:
-        raise SpecError(describe(where, "a number >= 0", repr(x), "use a value >= 0"))
-    return v
+    return read_number(x, where, SpecError, low=0.0)
+
+
+def _count(x: Any, where: str, low: int) -> int:
+    return read_int(x, where, SpecError, low)
 
 
 def _opt_pos(x: Any, where: str) -> float | None:
@@ -467,21 +460,12 @@ def _vec3(x: Any, where: str) -> tuple[float, float, float]:
     return (a, b, c)
 
 
-def _opt_positive_vec(x: Any, where: str) -> tuple[float, ...] | None:
+def _opt_vec(x: Any, where: str, strict: bool = True) -> tuple[float, ...] | None:
+    """An optional per-joint array of numbers > 0 (``strict``) or >= 0."""
     if x is None:
         return None
     if not isinstance(x, Sequence) or isinstance(x, str):
         raise SpecError(
             describe(where, "an array of numbers, one per joint", repr(x), "write [..]")
         )
-    return tuple(_positive(v, where) for v in x)
-
-
-def _opt_nonneg_vec(x: Any, where: str) -> tuple[float, ...] | None:
-    if x is None:
-        return None
-    if not isinstance(x, Sequence) or isinstance(x, str):
-        raise SpecError(
-            describe(where, "an array of numbers, one per joint", repr(x), "write [..]")
-        )
-    return tuple(_nonneg(v, where) for v in x)
+    return tuple(read_number(v, where, SpecError, low=0.0, strict=strict) for v in x)

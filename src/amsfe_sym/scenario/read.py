@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from amsfe_sym.core.toml import tomllib
+from amsfe_sym.core.values import C_INT_MAX, read_int, read_number
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.load.spec import INTEGRATORS, data_dir
 from amsfe_sym.scenario.model import (
@@ -173,16 +174,10 @@ def _typed(v: Any, ann: str, what: str) -> Any:
         return ConfigError(describe(what, expected, f"{v!r} ({kind})", fix))
 
     key = what.rsplit(" ", 1)[-1]
-    if ann == "float":
-        if not number(v):
-            raise bad("a number", f"write a number without quotes, e.g. {key} = 1.0")
-        return float(v)
-    if ann == "int":
-        if isinstance(v, float) and v.is_integer():
-            raise bad("an integer", f"write {key} = {int(v)}")
-        if not isinstance(v, int) or isinstance(v, bool):
-            raise bad("an integer", f"write a whole number without quotes, e.g. {key} = 0")
-        return v
+    if ann == "float":  # the same reader as robot.toml's (amsfe_sym.core.values)
+        return read_number(v, what, ConfigError)
+    if ann == "int":  # (ranges are checked by validate(); here: a whole number a C int holds)
+        return read_int(v, what, ConfigError, -C_INT_MAX)
     if ann == "bool":
         if not isinstance(v, bool):
             raise bad("true or false", f"write {key} = true or {key} = false")

@@ -1,0 +1,71 @@
+"""Typed values of the configuration files: one reader for robot.toml and the scenario files,
+so both refuse the same things (issue 20): no ``float()`` of a string or a boolean, finite
+numbers everywhere, integers that must be integers, and counts bounded by what a C ``int``
+of the runtime's parameter blocks holds (no silent narrowing).
+
+Each function raises the error class it is given (``SpecError`` for robot.toml,
+``ConfigError`` for scenarios) with one line: where, expected, found (with its type), fix.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from amsfe_sym.errors import AmsfeError, describe
+
+__all__ = ["C_INT_MAX", "is_number", "read_int", "read_number"]
+
+#: The largest C ``int`` (the runtime's parameter blocks hold counts as ``int``).
+C_INT_MAX = 2**31 - 1
+
+
+def is_number(x: object) -> bool:
+    """A TOML number (int or float), not a boolean."""
+    return isinstance(x, int | float) and not isinstance(x, bool)
+
+
+def _found(x: object) -> str:
+    kind = "a string" if isinstance(x, str) else type(x).__name__
+    return f"{x!r} ({kind})"
+
+
+def read_number(
+    x: Any,
+    where: str,
+    error: type[AmsfeError],
+    low: float | None = None,
+    strict: bool = False,
+) -> float:
+    """``x`` as a finite float (``>= low``, or ``> low`` when ``strict``).
+
+    Raises:
+        error: not a number (strings and booleans are not numbers), not finite, or too low.
+    """
+    if not is_number(x):
+        raise error(describe(where, "a number", _found(x), "write a number without quotes"))
+    v = float(x)
+    if not math.isfinite(v):
+        raise error(describe(where, "a finite number", repr(x), "write a finite number"))
+    if low is not None and (v <= low if strict else v < low):
+        bound = f"{'>' if strict else '>='} {low:g}"
+        expected = "a positive number" if strict and low == 0 else f"a number {bound}"
+        raise error(describe(where, expected, repr(x), f"use a value {bound}"))
+    return v
+
+
+def read_int(x: Any, where: str, error: type[AmsfeError], low: int, high: int = C_INT_MAX) -> int:
+    """``x`` as an integer in ``[low, high]`` (a float is refused, even 2.0: counts are
+    written as whole numbers; ``high`` defaults to the largest C ``int``).
+
+    Raises:
+        error: not an integer, or out of range.
+    """
+    if isinstance(x, bool) or not isinstance(x, int):
+        key = where.rsplit(" ", 1)[-1]
+        whole = isinstance(x, float) and x.is_integer()
+        fix = f"write {key} = {int(x)}" if whole else f"write a whole number, e.g. {key} = 1"
+        raise error(describe(where, "an integer", _found(x), fix))
+    if not low <= x <= high:
+        raise error(describe(where, f"an integer in [{low}, {high}]", repr(x), "change it"))
+    return x
