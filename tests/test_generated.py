@@ -258,3 +258,38 @@ def test_a_model_only_library_has_no_laws_and_keeps_the_full_one(tmp_path) -> No
     assert not any(n.startswith(("control_", "est_")) for n in names)
     assert generate("paper_2link", out=tmp_path).reused  # the full library was not evicted
     assert full.out_dir.name == "paper_2link"
+
+
+def test_chained_rk4_step_equals_the_generated_one(tmp_path) -> None:
+    """The rk4 step chained in C over the generated stage (runtime/c/amsfe_model.c) against
+    the generated transition_step (CasADi VM) at random states, and ``amsfe check``'s row,
+    on a 4-joint arm-like chain (the chain is used beyond EXPAND_MAX_JOINTS joints)."""
+    from amsfe_sym.apps.bench.scaling import chain_urdf
+    from amsfe_sym.apps.check import run_checks
+    from amsfe_sym.codegen import generate
+    from amsfe_sym.load import load_robot
+    from amsfe_sym.load.spec import load_spec
+    from amsfe_sym.runtime.library import ModelLibrary
+    from amsfe_sym.symbolic.transition import EXPAND_MAX_JOINTS
+
+    n = EXPAND_MAX_JOINTS + 2
+    (tmp_path / "chain.urdf").write_text(chain_urdf(n))
+    (tmp_path / "robot.toml").write_text(
+        'urdf = "chain.urdf"\n[model]\nintegrator = "rk4"\n'
+        "[[theta]]\nname = 'payload'\nkind = 'payload_mass'\ntarget = 'l4'\ntrue = 0.5\n"
+        "initial = 0.3\n"
+    )
+    spec = load_spec(tmp_path / "robot.toml")
+    lib = ModelLibrary(generate(spec, out=tmp_path / "gen", parts=("model",)).out_dir)
+    assert "transition_step_chain" in lib.manifest.functions
+    robot = load_robot(spec)
+    vm = build_functions(robot, ("model",)).functions["transition_step"]
+    chain = lib.function("transition_step_chain")
+    rng = np.random.default_rng(3)
+    for x in random_states(robot, 10, rng):
+        u = rng.uniform(-3, 3, robot.n)
+        for c, v in zip(chain(x, u), vm(x, u), strict=True):
+            v = np.array(v).reshape(c.shape, order="F")
+            assert np.max(np.abs(c - v)) <= 1e-12 * max(1.0, float(np.max(np.abs(v))))
+    rows = {r.function: r for r in run_checks(robot, lib, samples=5, seed=1)}
+    assert rows["transition_step_chain"].passed

@@ -16,7 +16,12 @@ from amsfe_sym.symbolic.camera import depth, pinhole
 from amsfe_sym.symbolic.control import build_control_functions
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
 from amsfe_sym.symbolic.estimator import estimator_functions
-from amsfe_sym.symbolic.transition import StateLayout, Transition, with_residual
+from amsfe_sym.symbolic.transition import (
+    EXPAND_MAX_JOINTS,
+    StateLayout,
+    Transition,
+    with_residual,
+)
 
 __all__ = ["MATRIX_OUTPUTS", "PARTS", "SymbolicModel", "build_functions"]
 
@@ -124,7 +129,10 @@ def build_functions(robot: Robot, parts: tuple[str, ...] = PARTS) -> SymbolicMod
         ]
     )
     model = SymbolicModel(robot=robot, layout=L)
-    if spec.integrator == "rk4":
+    if spec.integrator == "rk4" and n > EXPAND_MAX_JOINTS:
+        # the C chain over the generated stage (runtime/c/amsfe_model.c); up to
+        # EXPAND_MAX_JOINTS the expanded step is faster (2-link: 0.78 against 1.55 us a call,
+        # docs/codegen.md) and small, and the C estimators call it directly
         model.internal = {"rk4_stage": tr.rk4_stage_function(), "rk4_minv": tr.rk4_minv_function()}
         model.chained = {"transition_step_chain": "transition_step"}
     model.functions = {f.name(): f for f in fns}
