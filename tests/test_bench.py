@@ -34,6 +34,7 @@ def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path
     libraries.get("paper_2link")
     out_json = tmp_path / "bench.json"
     argv = ["bench", "--repeat", "200", "--rounds", "2", "--duration", "0.2", "--joints", "1"]
+    argv += ["--no-panda", "--scaling-loop-duration", "0.2"]
     argv += ["--loop-duration", "0.3", "--loop-scenarios", "paper-sim"]
     assert main([*argv, "--json", str(out_json)]) == 0
     out = capsys.readouterr().out
@@ -82,7 +83,13 @@ def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path
         assert r["ticks"] == 201 and r["cost_per_tick_us"] > 0 and r["real_time_factor"] > 0
     (row,) = report["tick"]["rows"]  # section 4: oosm by default
     assert row["estimator"] == "oosm" and row["max_dx_compiled_python"] <= 1e-10
-    assert [r["joints"] for r in report["scaling"]["rows"]] == [1]  # section 5
+    (chain,) = report["scaling"]["rows"]  # section 5: one chain, no Panda
+    assert (chain["robot"], chain["joints"], chain["N"]) == ("chain1", 1, 4)
+    assert chain["scenario"] == "bench-chain1" and chain["diverged_at_s"] is None
+    assert chain["real_time_factor"] > 0 and chain["loop_us_per_tick"] > 0
+    assert 0 < chain["baseline_us"] <= chain["baseline_p99_us"]
+    assert chain["aba_derivatives_us"] > 0 and chain["peak_mb"] > 0
+    assert report["scaling"]["exponents"] == {}  # nothing to fit with one chain
     tick = report["tick_compiled_us"]
     assert set(tick) == {"plant_step", "transition_step", "mass_matrix", "bias", "total"}
     assert tick["total"] == pytest.approx(sum(v for k, v in tick.items() if k != "total"))

@@ -80,12 +80,15 @@ def test_bench_tick_routes_agree_on_paper_sim(libraries) -> None:
 
 @pytest.mark.slow
 def test_scaling_table_has_a_row_per_chain() -> None:
-    out = bench_scaling((1, 2), ticks=50)
+    out = bench_scaling((1, 2), ticks=50, panda=False, loop_duration=0.1, rounds=1)
     assert [r["joints"] for r in out["rows"]] == [1, 2]
     assert [r["N"] for r in out["rows"]] == [4, 8]  # 4n: a bare URDF has no theta
     for r in out["rows"]:
         assert r["c_lines"] > 0 and r["generate_s"] > 0 and r["tick_us"] > 0
-    assert "exponent_tick" not in out  # one row with n >= 2: nothing to fit
+        assert r["peak_mb"] > 0 and r["baseline_us"] > 0 and r["aba_derivatives_us"] > 0
+        assert r["speedup_baseline"] == pytest.approx(r["baseline_us"] / r["tick_us"], rel=0.01)
+        assert r["real_time_factor"] == pytest.approx(1e3 / r["loop_us_per_tick"], rel=0.01)
+    assert out["exponents"] == {}  # one row with n >= 2: nothing to fit
     assert chain_urdf(3) == chain_urdf(3) != chain_urdf(3, seed=1)  # deterministic
 
 
@@ -99,3 +102,30 @@ def test_bench_joints_option_refuses_a_bad_range(capsys: pytest.CaptureFixture[s
     assert main(["bench", "--joints", "0-3"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--joints" in err and "1 <= A <= B" in err
+
+
+def test_compile_prints_progress_while_it_runs(monkeypatch, capsys, tmp_path) -> None:
+    """generate(progress=True)'s compile says it is alive every COMPILE_PROGRESS_S seconds,
+    and still returns the compiler's exit code and messages."""
+    import sys
+
+    from amsfe_sym.codegen import build
+
+    monkeypatch.setattr(build, "COMPILE_PROGRESS_S", 0.05)
+    cmd = [sys.executable, "-c", "import sys, time; time.sleep(0.3); sys.exit('boom')"]
+    proc = build._compile(cmd, tmp_path, True, "slow")
+    assert proc.returncode == 1 and "boom" in proc.stderr
+    err = capsys.readouterr().err
+    assert err.count("[amsfe] slow: compiling, ") >= 2
+    quiet = build._compile(cmd, tmp_path, False, "slow")
+    assert quiet.returncode == 1 and "boom" in quiet.stderr
+    assert capsys.readouterr().err == ""
+
+
+def test_aba_derivatives_timing_on_the_panda() -> None:
+    """The scaling table's computeABADerivatives column runs on the Panda's locked model."""
+    from amsfe_sym.apps.bench.scaling import aba_derivatives_us
+
+    robot = load_robot("panda")
+    assert robot.pin_model_at(robot.theta_true).nv == 7
+    assert aba_derivatives_us(robot, rounds=1) > 0

@@ -96,7 +96,7 @@ class Reference:
         u = Mb @ (F + dv + lt - T * (h * s + eps * np_sat(s, phi))) / T
         return u, s, vt, en, np.abs(dv + lt)
 
-    def cascade(self, x, ref, cf, h, lam, Lt, eps, p, phi, wm, tau_max, wf, vmax, mref):
+    def cascade(self, x, ref, cf, h, lam, Lt, eps, p, phi, wm, tau_max, wf, vmax, hold, mref):
         n, T = self.n, self.T
         q, qd, qm, qmd, th = x[:n], x[n : 2 * n], x[2 * n : 3 * n], x[3 * n : 4 * n], x[4 * n :]
         rq, rqd, rqdd = ref[:n], ref[n : 2 * n], ref[2 * n : 3 * n]
@@ -113,7 +113,7 @@ class Reference:
         qm_d = q + tau / Ks
         dq = qm_d - qm_r
         c, cd = cf[:n], cf[n:]
-        cdd = wf * wf * (dq - c) - 2 * wf * cd
+        cdd = (1.0 - hold) * (wf * wf * (dq - c) - 2 * wf * cd)
         cdn = cd + T * cdd
         v_cmd = qmd_r + cd + np.clip(0.5 * wm * (qm_r + c - qm), -vmax, vmax)
         u = Ks * (qm - q) + self.Fm * qmd + self.Mm * (qmdd_r + cdd + 2 * wm * (v_cmd - qmd))
@@ -135,6 +135,7 @@ def random_gains(rng, n, cascade=False):
             "tau_max": rng.uniform(5, 100, n),
             "wf": rng.uniform(10, 80, n),
             "vmax": rng.uniform(0.5, 10, n),
+            "hold": rng.integers(0, 2, n).astype(float),  # the start-up's held filter
         }
     return g
 

@@ -96,6 +96,17 @@ ALLOWED: dict[str, set[str]] = {
         "estimation",
         "control",
     },
+    # robot logs sit beside the loop: they read a run's result, build its estimator and draw
+    # /tf with the robot's kinematics (Pinocchio, only when writing a bag)
+    "logs": {
+        "errors",
+        "core",
+        "load",
+        "scenario",
+        "runtime",
+        "estimation",
+        "sim",
+    },
     # the applications may import every room, never the command line
     "apps": {
         "errors",
@@ -109,6 +120,7 @@ ALLOWED: dict[str, set[str]] = {
         "estimation",
         "control",
         "sim",
+        "logs",
     },
     "apps.cli": {""},  # the command line: everything
     "__main__": {"apps.cli"},

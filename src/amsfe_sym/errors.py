@@ -15,6 +15,7 @@ __all__ = [
     "ConfigError",
     "ConvergenceError",
     "EstimatorError",
+    "LogError",
     "MeasurementError",
     "ModelError",
     "RunFolderError",
@@ -77,6 +78,11 @@ class ConvergenceError(EstimatorError):
     """An iterative generated function (the inverse transition, eq. 22) did not converge:
     its ``residual`` output is above the tolerance, so its result is not used.  Estimators
     treat it like a refused frame (counted, estimate untouched)."""
+
+
+class LogError(AmsfeError, ValueError):
+    """A recorded log cannot be used as asked: unreadable or truncated, a topic missing or of
+    the wrong message type, samples off the tick grid (docs/logs.md)."""
 
 
 class RunFolderError(AmsfeError, FileExistsError):

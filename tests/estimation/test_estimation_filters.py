@@ -618,3 +618,18 @@ def test_non_finite_input_raises() -> None:
     with pytest.raises(EstimatorError, match="finite input"):
         est.step(np.array([np.nan, 0.0]), None)
     assert est.k == 0
+
+
+@pytest.mark.parametrize(
+    "key, value",
+    [
+        ("buffer_steps", 2**32 + 50),  # would wrap to 50 in the C parameter block's int
+        ("buffer_steps", True),  # a bool is not a count
+        ("camera_iterations", 0),
+        ("camera_max_delay", -1),
+        ("camera_max_delay", 2**31),
+    ],
+)
+def test_filter_config_refuses_what_a_c_int_cannot_hold(key: str, value: object) -> None:
+    with pytest.raises(ConfigError, match=key):
+        FilterConfig(**{key: value})  # type: ignore[arg-type]

@@ -160,6 +160,9 @@ def run_checks(
             "transition_step",
             max(rel_err(xs, tr(x, u)[0]), rel_err(As, A), rel_err(Gs, f("noise_gain")(x, u)[0])),
         )
+        if "transition_step_chain" in lib.manifest.functions:  # rk4: the C chain (amsfe_model.c)
+            xc, Ac, Gc = f("transition_step_chain")(x, u)
+            add("transition_step_chain", max(rel_err(xc, xs), rel_err(Ac, As), rel_err(Gc, Gs)))
         xn = tr(x, u)[0]
         xb, residual = f("transition_inverse")(xn, u)
         e_inv = rel_err(xb, x, floor=1.0)
@@ -197,6 +200,7 @@ def run_checks(
             1e-10 if robot.spec.model.integrator != "rk4" else 1e-6,
         ),
         "transition_step": ("transition, _jacobian, noise_gain", 1e-14),
+        "transition_step_chain": ("the generated transition_step", 1e-13),
         "transition_inverse": ("round trip F^-1(F(x)) = x", INVERSE_TOL),
         "plant_step": ("numpy RK4 on pin.aba", 1e-10),
     }

@@ -23,6 +23,8 @@ from amsfe_sym.apps.arguments import (
     lock_arg,
     number_type,
 )
+from amsfe_sym.apps.estimate import add_arguments as add_estimate_arguments
+from amsfe_sym.apps.estimate import from_args as estimate_from_args
 from amsfe_sym.errors import AmsfeError, ConfigError, SpecError, describe
 
 __all__ = ["get_argument_parser", "main"]
@@ -102,7 +104,19 @@ def get_argument_parser() -> argparse.ArgumentParser:
         default="compiled",
         help="compiled: the loop in generated C (default); python: the readable reference",
     )
+    s.add_argument(
+        "--bag",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="DIR",
+        help="also write the run as a rosbag2 in MCAP (default <run folder>/bag; docs/logs.md)",
+    )
     _add_set(s)
+
+    add_estimate_arguments(
+        sub.add_parser("estimate", help="an estimator over a recorded rosbag2 / MCAP log")
+    )
 
     b = sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
     b.add_argument("robot", nargs="?", default="paper_2link")
@@ -123,6 +137,17 @@ def get_argument_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="A-B",
         help="chain lengths of the scaling table (default 1-12)",
+    )
+    b.add_argument(
+        "--no-panda",
+        action="store_true",
+        help="leave the Panda (7 DOF, ~30 s of compile) out of the scaling table",
+    )
+    b.add_argument(
+        "--scaling-loop-duration",
+        type=DURATION,
+        default=2.0,
+        help="simulated time of each scaling row's closed loop [s]",
     )
     b.add_argument(
         "--duration", type=DURATION, default=2.0, help="simulated time per estimator [s]"
@@ -234,6 +259,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _study(args)
         if args.command == "sweep":
             return _sweep(args)
+        if args.command == "estimate":
+            return estimate_from_args(args)
     except AmsfeError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -246,7 +273,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     raise SpecError(
         describe(
             "command",
-            "generate|check|simulate|bench|study|sweep",
+            "generate|check|simulate|estimate|bench|study|sweep",
             args.command,
             "run amsfe -h for the commands",
         )
@@ -330,6 +357,7 @@ def _simulate(args: argparse.Namespace) -> int:
         force=args.force,
         progress=not args.no_progress,
         runtime=args.runtime,
+        bag=None if args.bag is None else Path(args.bag) if args.bag else Path(),
     )
     if compare and args.controller is None:  # the paper's comparison on one seed
         out = Path(args.out) if args.out else Path("runs") / f"{sc.name}-{stamp}"
@@ -362,6 +390,8 @@ def _bench(args: argparse.Namespace) -> int:
             joints=args.joints or tuple(range(1, 13)),
             loop_duration=args.loop_duration,
             loop_scenarios=tuple(args.loop_scenarios.split(",")) if args.loop_scenarios else None,
+            scaling_panda=not args.no_panda,
+            scaling_loop_duration=args.scaling_loop_duration,
         )
     )
 

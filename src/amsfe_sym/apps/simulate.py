@@ -31,12 +31,15 @@ class SimulateOptions:
         force: Replace an existing run folder.
         progress: Show a progress bar.
         runtime: ``"compiled"`` (the C loop) or ``"python"`` (the reference loop).
+        bag: Also write the run as a rosbag2 in MCAP (:mod:`amsfe_sym.logs.write`) at this
+            folder; ``Path()`` (empty): ``<run folder>/bag``; None: no bag.
     """
 
     plots: bool = True
     force: bool = False
     progress: bool = False
     runtime: str = "compiled"
+    bag: Path | None = None
 
 
 def simulate_one(
@@ -56,8 +59,20 @@ def simulate_one(
 
         figures = plot_run
     write_run(res, out, figures=figures, force=options.force)
+    if options.bag is not None:
+        bag = write_bag(res, out / "bag" if options.bag == Path() else options.bag)
+        print(f"bag: {bag} (open its .mcap in Foxglove; amsfe estimate {bag})")
     print_run(res, out)
     return res
+
+
+def write_bag(res: RunResult, path: Path) -> Path:
+    """The run as a rosbag2 in MCAP with its URDF, ``/tf`` of the true and estimated arms,
+    sensors, torque, truth and config (``amsfe estimate`` reads it back)."""
+    from amsfe_sym.logs.write import write_run_bag
+
+    urdf = Path(res.lib.manifest.urdf)
+    return write_run_bag(res, path, urdf.read_text() if urdf.is_file() else None)
 
 
 def simulate_comparison(
@@ -79,6 +94,10 @@ def simulate_comparison(
 
         figures = plot_comparison
     write_comparison(cmp, out, figures=figures, force=options.force)
+    if options.bag is not None:
+        for name, res in cmp.results.items():
+            where = out / name / "bag" if options.bag == Path() else options.bag / name
+            print(f"bag: {write_bag(res, where)}")
     print_comparison(cmp, out)
 
 

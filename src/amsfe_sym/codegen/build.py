@@ -188,6 +188,8 @@ def _build(
         t = time.perf_counter()
         cname = f"{spec.name}.c"
         gen = ca.CodeGenerator(cname, {"with_header": True, "with_mem": False})
+        for f in model.internal.values():  # first: the contract's MX graphs call them
+            gen.add(f)
         for f in model.functions.values():
             for i in range(f.n_out()):  # the binding and the C contract need dense outputs
                 if not f.sparsity_out(i).is_dense():
@@ -210,17 +212,20 @@ def _build(
         t = time.perf_counter()
         libname = f"lib{spec.name}.so"
         glue = []
+        (tmp / "amsfe_model_config.h").write_text(model_config_header(model))
+        if model.chained:  # the contract functions written in C over the generated stage
+            glue.append(str(_RUNTIME_C / "amsfe_model.c"))
         if "estimator" in parts:  # the C glue calls the est_* functions
             shutil.copy(_RUNTIME_C / "amsfe_runtime.h", tmp)
-            glue = [str(_RUNTIME_C / "amsfe_runtime.c")]
+            glue.append(str(_RUNTIME_C / "amsfe_runtime.c"))
         if set(parts) == set(ALL_PARTS):  # the loop calls the laws, the plant, the estimators
             shutil.copy(_RUNTIME_C / "amsfe_loop.h", tmp)
             glue.append(str(_RUNTIME_C / "amsfe_loop.c"))
-        if glue:  # the dense kernels both use (compiled at O3 by their own pragma)
+        if "estimator" in parts:  # the dense kernels of the estimators and the loop (O3 pragma)
             glue.append(str(_RUNTIME_C / "amsfe_kernels.c"))
         cmd = [compiler(), *flags, "-I.", "-o", libname, cname, *glue, "-lm"]
         _say(progress, f"[amsfe] {spec.name}: compiling ({' '.join(cmd)})")
-        proc = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True)
+        proc = _compile(cmd, tmp, progress, spec.name)
         if proc.returncode != 0:
             raise CodegenError(
                 describe(
@@ -258,6 +263,55 @@ def _build(
         time.perf_counter() - t_start,
         timings,
     )
+
+
+def model_config_header(model: Any) -> str:
+    """``amsfe_model_config.h``: the constants the hand-written C of ``runtime/c`` needs from
+    the model (n, p, T [s], the motor inertias Mm [kg m^2]) and whether the library has the
+    chained rk4 step (``AMSFE_MODEL_CHAIN``)."""
+    robot = model.robot
+    mm = ", ".join(repr(float(v)) for v in robot.Mm)
+    return (
+        "/* written by amsfe_sym.codegen for this library: do not edit */\n"
+        "#ifndef AMSFE_MODEL_CONFIG_H\n#define AMSFE_MODEL_CONFIG_H\n"
+        f"#define AMSFE_MODEL_N {robot.n}\n"
+        f"#define AMSFE_MODEL_P {robot.p}\n"
+        f"#define AMSFE_MODEL_T {float(robot.spec.model.T)!r}\n"
+        f"#define AMSFE_MODEL_MM {{{mm}}}\n"
+        f"#define AMSFE_MODEL_CHAIN {1 if model.chained else 0}\n"
+        "#endif\n"
+    )
+
+
+#: Seconds between the progress lines of a compile (``progress=True``).
+COMPILE_PROGRESS_S = 5.0
+
+
+def _compile(
+    cmd: list[str], cwd: Path, progress: bool, name: str
+) -> subprocess.CompletedProcess[str]:
+    """Run the compiler; with ``progress``, a line on stderr every :data:`COMPILE_PROGRESS_S`
+    seconds while it runs (a large arm compiles for tens of seconds).  Ctrl-C stops it."""
+    if not progress:
+        return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True)
+    with tempfile.TemporaryFile("w+") as err:
+        proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.DEVNULL, stderr=err, text=True)
+        t0 = time.perf_counter()
+        try:
+            while True:
+                try:
+                    proc.wait(timeout=COMPILE_PROGRESS_S)
+                    break
+                except subprocess.TimeoutExpired:
+                    _say(
+                        True, f"[amsfe] {name}: compiling, {time.perf_counter() - t0:.0f} s so far"
+                    )
+        except BaseException:
+            proc.kill()
+            proc.wait()
+            raise
+        err.seek(0)
+        return subprocess.CompletedProcess(cmd, proc.returncode, "", err.read())
 
 
 def _say(on: bool, msg: str) -> None:

@@ -30,7 +30,8 @@ def manifest_document(
     robot = model.robot
     cam = robot.camera
     fns = {}
-    for name, f in model.functions.items():
+    chained = {name: model.functions[target] for name, target in model.chained.items()}
+    for name, f in [*model.functions.items(), *chained.items()]:
         fns[name] = {
             "inputs": [_io(f.name_in(i), f.size_in(i)) for i in range(f.n_in())],
             "outputs": [_io(f.name_out(i), f.size_out(i)) for i in range(f.n_out())],

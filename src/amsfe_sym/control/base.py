@@ -28,6 +28,8 @@ class LawInputs(NamedTuple):
         theta_true: The true parameters theta (oracles only), shape (p,).
         x_hat: The estimate x(k|k) (eq. 2), shape (N,).
         z_enc: The encoder sample [qm, qmd] + noise (eq. 5) taken at t_k, shape (2n,).
+        P_diag: The diagonal of the estimate's covariance P(k|k), shape (N,), or None (an
+            estimate taken as converged): the cascades' start-up waits for it.
     """
 
     k: int
@@ -36,6 +38,7 @@ class LawInputs(NamedTuple):
     theta_true: FloatArray
     x_hat: FloatArray
     z_enc: FloatArray
+    P_diag: FloatArray | None = None
 
 
 class Controller(ABC):

@@ -172,7 +172,7 @@ class _Printed(_SlidingBase):
         return x_hat
 
     def torque(self, tick: LawInputs) -> FloatArray:
-        k, t, x_true, theta_true, x_hat, z_enc = tick
+        k, t, x_true, theta_true, x_hat, z_enc = tick[:6]
         n = self.n
         lead, x = self._law_inputs(self._pick(x_true, theta_true, x_hat), z_enc)
         q, qm, qmd = x[:n], x[2 * n : 3 * n], x[3 * n : 4 * n]
@@ -251,7 +251,18 @@ class _Cascade(_SlidingBase):
         "tau_max": None,
         "wf": 50.0,
         "vmax": 3.0,
+        "startup": "converged",
+        "ready_q_std": 0.03,
+        "ready_qd_std": float("inf"),
     }
+    #: The start-ups (docs/control.md, "Start-up"): ``"first"`` starts the command filter at
+    #: rest on the first command, whatever the estimate (the form the paper's laws imply);
+    #: ``"converged"`` waits until every link angle's and rate's posterior standard deviation
+    #: is below ``ready_q_std`` [rad] and ``ready_qd_std`` [rad/s]: meanwhile the motor tracks
+    #: the reference's motor trajectory offset to where the motor was at the first tick (the
+    #: filter held, no rate or acceleration feedforward from an unconverged command), then the
+    #: filter starts at rest on the first trusted command, as it would with the true state.
+    STARTUPS: ClassVar[tuple[str, ...]] = ("first", "converged")
 
     def _extra_gains(self) -> tuple[str, ...]:
         return ("wm", "tau_max", "wf", "vmax")
@@ -262,6 +273,48 @@ class _Cascade(_SlidingBase):
         super().__init__(lib, trajectory, gains)
         self._cf = np.zeros(2 * lib.n)
         self._started = False
+        self._ready = False
+        self._c_hold: FloatArray | None = None
+        self._hold, self._run = np.ones(lib.n), np.zeros(lib.n)  # the law's ``hold`` input
+        if self.gains["startup"] not in self.STARTUPS:
+            raise ConfigError(
+                describe(
+                    f"controller {self.name!r} gain startup",
+                    f"one of {list(self.STARTUPS)}",
+                    repr(self.gains["startup"]),
+                    "see docs/control.md, Start-up",
+                )
+            )
+        self._ready_std = (
+            self._scalar("ready_q_std"),
+            self._scalar("ready_qd_std"),
+        )
+
+    def _scalar(self, key: str) -> float:
+        v = self.gains[key]
+        if isinstance(v, bool) or not isinstance(v, int | float) or not v > 0 or v != v:
+            raise ConfigError(
+                describe(f"controller {self.name!r} gain {key}", "a number > 0", repr(v), "")
+            )
+        return float(v)
+
+    def c_parameters(self) -> dict[str, Any] | None:
+        own = super().c_parameters()
+        assert own is not None
+        own["startup_converged"] = self.gains["startup"] == "converged"
+        own["ready_q_std"], own["ready_qd_std"] = self._ready_std
+        return own
+
+    def _converged(self, P_diag: FloatArray | None) -> bool:
+        """The start-up's test: every link angle's and rate's posterior std below its bound
+        (latched: once trusted, the estimate stays trusted)."""
+        if not self._ready:
+            n = self.n
+            self._ready = P_diag is None or bool(
+                np.all(np.sqrt(P_diag[:n]) <= self._ready_std[0])
+                and np.all(np.sqrt(P_diag[n : 2 * n]) <= self._ready_std[1])
+            )
+        return self._ready
 
     def _gain(self, key: str, size: int) -> FloatArray:
         if key == "tau_max" and self.gains.get("tau_max") is None:
@@ -291,14 +344,25 @@ class _Cascade(_SlidingBase):
         return [x_hat]
 
     def torque(self, tick: LawInputs) -> FloatArray:
-        k, t, x_true, theta_true, x_hat, z_enc = tick
+        k, t, x_true, theta_true, x_hat, z_enc = tick[:6]
+        n = self.n
         lead = self._law_inputs(x_true, theta_true, x_hat, z_enc)
         ref = self._ref_at(k, t)
-        out = self._law.call_into(*lead, ref, self._cf, *self._gain_args())
-        if not self._started:  # start the command filter at rest on the first command
-            self._cf[: self.n] = out[7]
-            self._started = True
-            out = self._law.call_into(*lead, ref, self._cf, *self._gain_args())
+        gains = self._gain_args()
+        if self.gains["startup"] == "converged" and not self._converged(tick.P_diag):
+            # wait: the filter held where the motor is (as an offset from the reference's
+            # motor trajectory, fixed at the first tick), no rate or acceleration command
+            if self._c_hold is None:
+                probe = self._law.call_into(*lead, ref, self._cf, *gains, self._hold)
+                self._c_hold = z_enc[:n] - (probe[3] - probe[7])  # qm - qm_r
+            self._cf[:n], self._cf[n:] = self._c_hold, 0.0
+            out = self._law.call_into(*lead, ref, self._cf, *gains, self._hold)
+        else:
+            out = self._law.call_into(*lead, ref, self._cf, *gains, self._run)
+            if not self._started:  # start at rest on the first trusted command
+                self._cf[:n], self._cf[n:] = out[7], 0.0
+                self._started = True
+                out = self._law.call_into(*lead, ref, self._cf, *gains, self._run)
         u, s, tau_d, _qm_d, _e_next, bound, cf_next = out[:7]
         self._cf = cf_next.copy()
         self.s, self.bound = s.copy(), bound.copy()
@@ -328,6 +392,9 @@ class Truth(_Cascade):
     ) -> list[FloatArray]:
         return [np.concatenate([x_true[: 4 * self.n], theta_true])]
 
+    def _converged(self, P_diag: FloatArray | None) -> bool:
+        return True  # the true state needs no convergence
+
 
 @register
 class Dtsmc(_Cascade):
@@ -346,6 +413,9 @@ class Dtsmc(_Cascade):
         self, x_true: FloatArray, theta_true: FloatArray, x_hat: FloatArray, z_enc: FloatArray
     ) -> list[FloatArray]:
         return [z_enc, self.lib.theta_initial]
+
+    def _converged(self, P_diag: FloatArray | None) -> bool:
+        return True  # it acts on the encoders, not on an estimate
 
 
 @register

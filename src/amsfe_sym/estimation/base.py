@@ -86,54 +86,30 @@ class FilterConfig:
                 raise ConfigError(
                     describe(name, "a probability in (0, 1) or None", repr(p), "e.g. 0.9999")
                 )
-        if not isinstance(self.camera_iterations, int) or self.camera_iterations < 1:
-            raise ConfigError(
-                describe(
-                    "camera_iterations",
-                    "an integer >= 1",
-                    repr(self.camera_iterations),
-                    "1 = plain EKF update, 2-5 = iterated EKF",
-                )
-            )
-        if not isinstance(self.buffer_steps, int) or self.buffer_steps < 1:
-            raise ConfigError(
-                describe(
-                    "buffer_steps",
-                    "an integer >= 1",
-                    repr(self.buffer_steps),
-                    "keep at least camera delay + jitter steps",
-                )
-            )
+        _check_int("camera_iterations", self.camera_iterations, 1, "1 = plain EKF, 2-5 = IEKF")
+        _check_int("buffer_steps", self.buffer_steps, 1, "keep at least delay + jitter steps")
         if self.camera_period is not None:
-            if not isinstance(self.camera_period, int) or self.camera_period < 1:
-                raise ConfigError(
-                    describe(
-                        "camera_period",
-                        "an integer >= 1 or None",
-                        repr(self.camera_period),
-                        "give l in steps",
-                    )
-                )
-            if not (0 <= self.camera_phase < self.camera_period):
-                raise ConfigError(
-                    describe(
-                        "camera_phase",
-                        f"an integer in [0, {self.camera_period})",
-                        repr(self.camera_phase),
-                        "use exposure_step % camera_period",
-                    )
-                )
-        if self.camera_max_delay is not None and (
-            not isinstance(self.camera_max_delay, int) or self.camera_max_delay < 0
-        ):
-            raise ConfigError(
-                describe(
-                    "camera_max_delay",
-                    "an integer >= 0 or None",
-                    repr(self.camera_max_delay),
-                    "give d + max jitter in steps",
-                )
+            _check_int("camera_period", self.camera_period, 1, "give l in steps, or None")
+            _check_int(
+                "camera_phase",
+                self.camera_phase,
+                0,
+                "use exposure_step % camera_period",
+                high=self.camera_period - 1,
             )
+        if self.camera_max_delay is not None:
+            _check_int("camera_max_delay", self.camera_max_delay, 0, "give d + max jitter")
+
+
+#: The largest value of a C ``int`` (the C runtime's parameter blocks hold these settings).
+C_INT_MAX = 2**31 - 1
+
+
+def _check_int(name: str, value: object, low: int, fix: str, high: int = C_INT_MAX) -> None:
+    """Refuse anything but an integer (not a bool) in ``[low, high]``: the C parameter
+    blocks are C ``int``, so a larger value would wrap silently there."""
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise ConfigError(describe(name, f"an integer in [{low}, {high}]", repr(value), fix))
 
 
 DEFAULT_CONFIG = FilterConfig()

@@ -84,6 +84,9 @@ class ControllerParams:
     state_true: bool = False
     link_bandwidth: float = 0.0
     motor_bandwidth: float = 0.0
+    startup_converged: bool = False
+    ready_q_std: float = float("inf")
+    ready_qd_std: float = float("inf")
     _keep: list[Any] = field(default_factory=list, repr=False)
 
     def struct(self) -> ctypes.Structure:
@@ -122,6 +125,9 @@ class ControllerParams:
             self.link_bandwidth,
             self.motor_bandwidth,
             *(ptr(k) for k in ("u_max", "Mm", "Fm", "Ks", "ks_theta", "theta_initial")),
+            int(self.startup_converged),
+            float(self.ready_q_std),
+            float(self.ready_qd_std),
         )
 
 
@@ -175,8 +181,13 @@ class CompiledController:
         x_hat: FloatArray | None,
         z: FloatArray | None,
         x_true: FloatArray | None = None,
+        P: FloatArray | None = None,
     ) -> FloatArray:
-        """u(k) [N m] after the actuator limit (``s``, ``bound``, ``saturated`` updated)."""
+        """u(k) [N m] after the actuator limit (``s``, ``bound``, ``saturated`` updated);
+        ``P`` (N x N, the estimate's covariance) for the start-up's test (None: converged)."""
+        if P is not None:
+            Pc = np.ascontiguousarray(P, dtype=np.float64)
+            self._c["amsfe_ctrl_observe"](self.handle, Pc.ctypes.data)
         keep = [None if a is None else _f64(a) for a in (ref, x_hat, z, x_true)]
         ptrs = [None if a is None else a.ctypes.data for a in keep]
         status = self._c["amsfe_ctrl_torque"](
@@ -386,7 +397,8 @@ def write_loop_log(
     lines.append(
         f"ctrl {CONTROLLER_CODES[params.name]} {params.T!r} {params.p!r} "
         f"{int(params.qmd_next_hold)} {int(params.state_true)} "
-        f"{params.link_bandwidth!r} {params.motor_bandwidth!r}"
+        f"{params.link_bandwidth!r} {params.motor_bandwidth!r} "
+        f"{int(params.startup_converged)} {params.ready_q_std!r} {params.ready_qd_std!r}"
     )
     n = params.u_max.size
     for key in ("h", "lam", "Lt", "eps", "phi", "wm", "tau_max", "wf", "vmax"):

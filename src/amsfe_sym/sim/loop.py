@@ -138,7 +138,7 @@ def run(
         xh, P = est.x, est.P
         # 3. controller, then the actuator limit
         u, saturated[k] = ctrl.saturate(
-            ctrl.torque(LawInputs(k, float(t[k]), xp, theta_true, xh, z))
+            ctrl.torque(LawInputs(k, float(t[k]), xp, theta_true, xh, z, np.diag(P)))
         )
         # record
         x_true[k] = x_t

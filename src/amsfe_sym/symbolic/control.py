@@ -70,8 +70,10 @@ __all__ = ["CONTROL_GAINS", "build_control_functions", "fpow", "sat"]
 
 #: Gain inputs of every law, in order (each an n-vector except ``p``, a scalar).
 CONTROL_GAINS = ("h", "lam", "Lt", "eps", "p", "phi")
-#: Extra inputs of the cascaded laws: motor-loop bandwidth [rad/s], spring-torque limit [N m].
-CASCADE_GAINS = ("wm", "tau_max", "wf", "vmax")
+#: Extra inputs of the cascaded laws: motor-loop bandwidth [rad/s], spring-torque limit [N m],
+#: command-filter bandwidth [rad/s], motor rate bound [rad/s]; then ``hold`` (per joint, 0 or
+#: 1): 1 holds the command filter (no rate, no acceleration feedforward: the start-up).
+CASCADE_GAINS = ("wm", "tau_max", "wf", "vmax", "hold")
 
 
 def fpow(x: ca.SX, p: ca.SX) -> ca.SX:
@@ -176,11 +178,12 @@ def build_control_functions(tree: RigidBodyTree, tr: Transition) -> list[ca.Func
     tau = ca.fmin(ca.fmax(tau, -g["tau_max"]), g["tau_max"])
     qm_d = q + tau / Ks
     # command filter on the feedback part dq = qm_d - qm_r (critically damped, bandwidth wf):
-    # its states give the smooth angle, rate and acceleration the motor loop tracks
+    # its states give the smooth angle, rate and acceleration the motor loop tracks; held
+    # (hold = 1: its state is the caller's, no acceleration) while the start-up waits
     dq = qm_d - qm_r
     wf = g["wf"]
     c, cd = cf[:n], cf[n:]
-    cdd = wf * wf * (dq - c) - 2.0 * wf * cd
+    cdd = (1.0 - g["hold"]) * (wf * wf * (dq - c) - 2.0 * wf * cd)
     cd_next = cd + T * cdd
     cf_next = ca.vertcat(c + T * cd_next, cd_next)
     wm, vmax = g["wm"], g["vmax"]
@@ -197,6 +200,7 @@ def build_control_functions(tree: RigidBodyTree, tr: Transition) -> list[ca.Func
             ca.densify(e)
             for e in (u, sf.s, tau, qm_d, sf.e_next, ca.fabs(dv + sf.lam_terms), cf_next, dq)
         ],
+        {"cse": True},
     )
     mref = _motor_reference(tree, tr, n, p_)
 
@@ -271,6 +275,7 @@ def _motor_reference(tree: RigidBodyTree, tr: Transition, n: int, p: int) -> ca.
         [ca.densify(qm_r), ca.densify(qmd_r), ca.densify(qmdd_r)],
         ["ref", "theta"],
         ["qm_r", "qmd_r", "qmdd_r"],
+        {"cse": True},
     )
 
 
@@ -281,4 +286,5 @@ def _fn(name: str, ins: list[tuple[str, ca.SX]], outs: list[tuple[str, ca.SX]]) 
         [ca.densify(e) for _, e in outs],
         [k for k, _ in ins],
         [k for k, _ in outs],
+        {"cse": True},
     )

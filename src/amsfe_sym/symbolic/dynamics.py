@@ -22,6 +22,7 @@ from amsfe_sym.symbolic.spatial import (
     Placement,
     force_act,
     force_cross,
+    inertia_act,
     inertia_times,
     motion_act_inv,
     motion_cross,
@@ -156,15 +157,27 @@ class RigidBodyTree:
         return ca.vertcat(*tau)
 
     def mass_matrix(self, q: ca.SX, theta: ca.SX) -> ca.SX:
-        """M(q, theta), n x n, column j = RNEA(q, 0, e_j) without gravity."""
-        zero = ca.SX.zeros(self.n, 1)
-        cols = []
-        for j in range(self.n):
-            e = ca.SX.zeros(self.n, 1)
-            e[j] = 1
-            cols.append(self.rnea(q, zero, e, theta, with_gravity=False))
-        M = ca.horzcat(*cols)
-        return 0.5 * (M + M.T)
+        """M(q, theta), n x n, by the composite rigid body algorithm (Featherstone, RBDA
+        sec. 6.2; Pinocchio's ``crba``): one pass of the joint transforms shared by every
+        column, the bodies' spatial inertias accumulated towards the root, then each joint's
+        ``Ic_i S_i`` carried up its chain of ancestors.  On the Panda this is about a
+        quarter of the expression of n RNEA columns (each recomputing the kinematics)."""
+        X = self.joint_transforms(q)
+        Ic = self.inertia_params(theta)  # composite inertias, as 10 parameters each
+        for k in reversed(range(self.n)):
+            parent = self.bodies[k].parent
+            if parent >= 0:
+                Ic[parent] = Ic[parent] + inertia_act(X[k], Ic[k])
+        M = ca.SX.zeros(self.n, self.n)
+        for i in range(self.n):
+            F = inertia_times(Ic[i], self._subspace(i))  # Ic_i S_i, a force in frame i
+            M[i, i] = ca.dot(self._subspace(i), F)
+            j = i
+            while self.bodies[j].parent >= 0:
+                F = force_act(X[j], F)
+                j = self.bodies[j].parent
+                M[i, j] = M[j, i] = ca.dot(self._subspace(j), F)
+        return M
 
     def bias(self, q: ca.SX, qd: ca.SX, theta: ca.SX) -> ca.SX:
         """b(q, qd, theta) = C(q, qd) qd + g(q), so that M qdd + b = tau (Pinocchio's nle)."""

@@ -32,6 +32,12 @@ class SymbolicModel:
     layout: StateLayout
     functions: dict[str, ca.Function] = field(default_factory=dict)
     camera_depends_on_theta: bool = False
+    #: Functions compiled into the library for its hand-written C (``runtime/c``), not part
+    #: of the contract: the rk4 stage and M^-1 that ``amsfe_model.c`` chains.
+    internal: dict[str, ca.Function] = field(default_factory=dict)
+    #: Functions of the contract implemented in hand-written C, by the generated function
+    #: whose names and shapes they share: ``transition_step_chain`` (``amsfe_model.c``).
+    chained: dict[str, str] = field(default_factory=dict)
 
 
 def _fn(name: str, ins: list[tuple[str, ca.SX]], outs: list[tuple[str, ca.SX]]) -> ca.Function:
@@ -41,6 +47,7 @@ def _fn(name: str, ins: list[tuple[str, ca.SX]], outs: list[tuple[str, ca.SX]]) 
         [ca.densify(e) for _, e in outs],
         [n for n, _ in ins],
         [n for n, _ in outs],
+        {"cse": True},
     )
 
 
@@ -117,6 +124,9 @@ def build_functions(robot: Robot, parts: tuple[str, ...] = PARTS) -> SymbolicMod
         ]
     )
     model = SymbolicModel(robot=robot, layout=L)
+    if spec.integrator == "rk4":
+        model.internal = {"rk4_stage": tr.rk4_stage_function(), "rk4_minv": tr.rk4_minv_function()}
+        model.chained = {"transition_step_chain": "transition_step"}
     model.functions = {f.name(): f for f in fns}
     model.functions["plant_step"] = tr.plant_step(spec.plant_substeps)
     if "control" in parts:

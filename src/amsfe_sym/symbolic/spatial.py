@@ -101,3 +101,26 @@ def inertia_times(pi: SXLike, m: SXLike) -> SXLike:
     )
     v, w = m[0:3], m[3:6]
     return ca.vertcat(mass * v - cross(h, w), cross(h, v) + ca.mtimes(I_o, w))
+
+
+def inertia_act(X: Placement, pi: SXLike) -> SXLike:
+    """A body's 10 dynamic parameters expressed in its parent's frame (Pinocchio
+    ``Inertia::se3Action``): mass unchanged, ``h' = R h + m p``, and about the parent's
+    origin ``I' = R I R^T - [R h]x [p]x - [p]x [R h]x - m [p]x [p]x`` (no division by the
+    mass, so a massless or theta-weighted body is fine)."""
+    m, h = pi[0], pi[1:4]
+    rot = ca.vertcat(
+        ca.horzcat(pi[4], pi[5], pi[7]),
+        ca.horzcat(pi[5], pi[6], pi[8]),
+        ca.horzcat(pi[7], pi[8], pi[9]),
+    )
+    Rh = ca.mtimes(X.R, h)
+    px, Rhx = ca.skew(X.p), ca.skew(Rh)
+    rot2 = (
+        ca.mtimes([X.R, rot, X.R.T])
+        - ca.mtimes(Rhx, px)
+        - ca.mtimes(px, Rhx)
+        - m * ca.mtimes(px, px)
+    )
+    h2 = Rh + m * X.p
+    return ca.vertcat(m, h2, rot2[0, 0], rot2[0, 1], rot2[1, 1], rot2[0, 2], rot2[1, 2], rot2[2, 2])

@@ -50,7 +50,7 @@ __all__ = ["EXPAND_MAX_JOINTS", "StateLayout", "Transition", "with_residual"]
 #: Up to this many joints the rk4 ``transition_step`` is expanded into SX (straight-line C).
 #: UR5 (6 joints): 16 us and 60k lines (5 s at -O1) expanded, 41 us and 14k lines as MX
 #: calls; code grows about as n^3, so longer chains keep the MX form (docs/performance.md).
-EXPAND_MAX_JOINTS = 7
+EXPAND_MAX_JOINTS = 2
 
 
 def with_residual(inverse: ca.Function, forward: ca.Function) -> ca.Function:
@@ -123,6 +123,7 @@ class Transition:
         self.integrator = integrator
         self.iterations = inverse_iterations
         self.T = float(self.robot.spec.model.T)
+        self._cache: dict[str, ca.Function] = {}
 
     # ------------------------------------------------------------------ pieces
     def stiffness(self, theta: ca.SX) -> ca.SX:
@@ -227,7 +228,9 @@ class Transition:
         return ca.vertcat(q, qd, qm, qmd, th)
 
     def rk4_stage_function(self) -> ca.Function:
-        """One RK4 stage and its jacobian: ``(xp[4n], u[n], theta[p]) -> (k, J)``, SX.
+        """One RK4 stage and its jacobian: ``(xp[4n], u[n], theta[p]) -> (k, J)``, SX with
+        common subexpressions eliminated, built once per robot (the MX graphs and the C
+        chain of ``runtime/c/amsfe_model.c`` call the same function).
 
         ``k = f(xp, u, theta)`` is the plant's right-hand side without disturbance and
         ``J = dk/d[xp; theta]`` (4n x N, sparse: the qd, qmd and qmdd rows are structurally
@@ -236,19 +239,43 @@ class Transition:
         differentiated at fixed ``qdd`` gives ``dqdd/dz = M^-1 (d(Ks (qm - q))/dz -
         dRNEA(q, qd, a)/dz |_{a = qdd})`` (DESIGN: half the code of the direct jacobian).
         """
+        if "rk4_stage" in self._cache:
+            return self._cache["rk4_stage"]
         n, p = self.tree.n, self.tree.p
         xp, u, th = ca.SX.sym("xp", 4 * n), ca.SX.sym("u", n), ca.SX.sym("theta", p)
         f = self.plant_rhs(xp, u, th, ca.SX.zeros(2 * n, 1))
         z = ca.vertcat(xp, th)
         q, qd, qm = xp[0:n], xp[n : 2 * n], xp[2 * n : 3 * n]
         a = ca.SX.sym("a", n)
+        # dRNEA/dz by reverse mode (n adjoint sweeps: fewer operations than forward mode's
+        # one sweep per column of z, measured 10.1k vs 12.1k on the Panda), projected on the
+        # structural sparsity (RNEA does not depend on qm, qmd)
+        rnea = self.tree.rnea(q, qd, a, th)
+        d_rnea = ca.project(ca.jtimes(rnea, z, ca.SX.eye(n), True).T, ca.jacobian_sparsity(rnea, z))
         dtau = ca.jacobian(self.stiffness(th) * (qm - q), z) - ca.substitute(
-            ca.jacobian(self.tree.rnea(q, qd, a, th), z), a, f[n : 2 * n]
+            d_rnea, a, f[n : 2 * n]
         )
         dqdd = ldl_solve(self.tree.mass_matrix(q, th), ca.densify(dtau))
-        J = ca.jacobian(f, z)  # the other rows (linear in z)
-        J = ca.vertcat(J[0:n, :], dqdd, J[2 * n :, :])
-        return ca.Function("rk4_stage", [xp, u, th], [f, J], ["xp", "u", "theta"], ["k", "J"])
+        rows = ca.vertcat(f[0:n], f[2 * n :])  # qd, qmd, qmdd: linear in z
+        J_lin = ca.jacobian(rows, z)
+        J = ca.vertcat(J_lin[0:n, :], dqdd, J_lin[n:, :])
+        fn = ca.Function(
+            "rk4_stage", [xp, u, th], [f, J], ["xp", "u", "theta"], ["k", "J"], {"cse": True}
+        )
+        self._cache["rk4_stage"] = fn
+        return fn
+
+    def rk4_minv_function(self) -> ca.Function:
+        """``(q[n], theta[p]) -> M(q, theta)^-1`` (SX, LDL^T of the CRBA mass matrix), the
+        noise gain's link block (eq. 4); built once per robot."""
+        if "rk4_minv" not in self._cache:
+            n, p = self.tree.n, self.tree.p
+            qs, ths = ca.SX.sym("q", n), ca.SX.sym("theta", p)
+            minv = ldl_solve(self.tree.mass_matrix(qs, ths), ca.SX.eye(n))
+            self._cache["rk4_minv"] = ca.Function(
+                "rk4_minv", [qs, ths], [minv], ["q", "theta"], ["Minv"], {"cse": True}
+            )
+        return self._cache["rk4_minv"]
 
     def rk4_step_function(self, expand: bool = True) -> ca.Function:
         """x+ = F(x, u), A = dF/dx and Gamma = dF/dw of the ``rk4`` model in one function.
@@ -267,10 +294,7 @@ class Transition:
         n, p, T = self.tree.n, self.tree.p, self.T
         N = 4 * n + p
         stage = self.rk4_stage_function()
-        qs, ths = ca.SX.sym("q", n), ca.SX.sym("theta", p)
-        minv = ca.Function(
-            "rk4_minv", [qs, ths], [ldl_solve(self.tree.mass_matrix(qs, ths), ca.SX.eye(n))]
-        )
+        minv = self.rk4_minv_function()
         x, u = ca.MX.sym("x", N), ca.MX.sym("u", n)
         xp, th = x[: 4 * n], x[4 * n :]
         eye = ca.DM.eye(N)
@@ -382,11 +406,17 @@ class Transition:
         return ca.vertcat(qd, qdd, qmd, qmdd)
 
     def plant_rhs_function(self) -> ca.Function:
-        """The plant's right-hand side as an SX Function (xp, u, theta, tau_d) -> d/dt xp."""
-        n, p = self.tree.n, self.tree.p
-        xp, u = ca.SX.sym("xp", 4 * n), ca.SX.sym("u", n)
-        th, td = ca.SX.sym("theta", p), ca.SX.sym("tau_d", 2 * n)
-        return ca.Function("plant_rhs", [xp, u, th, td], [self.plant_rhs(xp, u, th, td)])
+        """The plant's right-hand side as an SX Function (xp, u, theta, tau_d) -> d/dt xp,
+        built once per robot (the transition and the plant call the same one, so it is
+        emitted once in the C file)."""
+        if "plant_rhs" not in self._cache:
+            n, p = self.tree.n, self.tree.p
+            xp, u = ca.SX.sym("xp", 4 * n), ca.SX.sym("u", n)
+            th, td = ca.SX.sym("theta", p), ca.SX.sym("tau_d", 2 * n)
+            self._cache["plant_rhs"] = ca.Function(
+                "plant_rhs", [xp, u, th, td], [self.plant_rhs(xp, u, th, td)], {"cse": True}
+            )
+        return self._cache["plant_rhs"]
 
     def plant_step(self, substeps: int) -> ca.Function:
         """One sampling interval T of the plant: ``substeps`` RK4 steps, u held (zero-order hold).

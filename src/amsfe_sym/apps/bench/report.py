@@ -195,26 +195,50 @@ def _tick_lines(report: dict[str, Any]) -> list[str]:
         if "speedup" in loop:
             lines.append(
                 f"   compiled / python: {loop['speedup']}x per tick "
-                "(targets: >= 300x real time paper-sim, >= 30x 6-DOF arm)"
+                "(targets, issue 18: >= 300x real time paper-sim, >= 80x ur5-control, "
+                ">= 50x panda-control)"
             )
     sc = report.get("scaling")
     if sc:
-        lines += [
-            "",
-            f"5. scaling with joints: serial chains, {sc['integrator']} model, oosm tick in pure C",
-            f"   {'joints':>6}{'N':>5}{'lines of C':>12}{'generate [s]':>14}{'tick [us]':>11}"
-            f"{'p99':>9}",
-        ]
-        for r in sc["rows"]:
+        lines += _scaling_lines(sc)
+    return lines
+
+
+def _scaling_lines(sc: dict[str, Any]) -> list[str]:
+    """Section 5: one row per chain and the Panda, then the fitted growth exponents."""
+    lines = [
+        "",
+        f"5. scaling with joints: serial chains and the Panda, {sc['integrator']} model; "
+        "generate = cold, new process; tick = oosm in pure C; numpy+pin = the numpy + "
+        "Pinocchio EKF tick, x = numpy+pin / tick, ABA d = computeABADerivatives alone [us], "
+        "same run",
+        f"   {'robot':<8}{'n':>3}{'N':>4}{'lines of C':>11}{'gen [s]':>8}{'peak MB':>8}"
+        f"{'tick':>8}{'p99':>8}{'numpy+pin':>10}{'x':>6}{'ABA d':>7}{'loop us':>9}"
+        f"{'x real':>8}  loop scenario",
+    ]
+    for r in sc["rows"]:
+        rtf = r.get("real_time_factor")
+        div = f" (diverged at {r['diverged_at_s']:g} s)" if r.get("diverged_at_s") else ""
+        loop = r.get("error", "")[:60] if "error" in r else r["scenario"] + div
+        lines.append(
+            f"   {r['robot']:<8}{r['joints']:>3}{r['N']:>4}{r['c_lines']:>11}"
+            f"{r['generate_s']:>8.2f}{r['peak_mb']:>8.0f}{r['tick_us']:>8.2f}"
+            f"{r['tick_p99_us']:>8.2f}{r['baseline_us']:>10.1f}{r['speedup_baseline']:>6.1f}"
+            f"{r['aba_derivatives_us']:>7.2f}{_fmt(r.get('loop_us_per_tick'), 9, 1)}"
+            f"{_fmt(rtf, 8, 1)}  {loop}"
+        )
+        dj = r.get("dynamics_jacobian")
+        if dj:
             lines.append(
-                f"   {r['joints']:>6}{r['N']:>5}{r['c_lines']:>12}{r['generate_s']:>14.2f}"
-                f"{r['tick_us']:>11.2f}{r['tick_p99_us']:>9.2f}"
+                f"   {'':<8}generated {dj['function']}: {dj['median_us']:.2f} us, "
+                f"{dj['median_us'] / r['aba_derivatives_us']:.2f}x computeABADerivatives"
             )
-        if "exponent_tick" in sc:
-            lines.append(
-                f"   growth exponent (log-log fit, n >= 2): tick {sc['exponent_tick']:.2f}, "
-                f"generate {sc['exponent_generate']:.2f} (covariance update: O(N^3), 3)"
-            )
+    ex = sc.get("exponents")
+    if ex:
+        lines.append(
+            "   growth exponents over the chains (log-log fit, n >= 2): "
+            + ", ".join(f"{k} {v:.2f}" for k, v in ex.items())
+        )
     return lines
 
 
@@ -241,6 +265,11 @@ class BenchOptions:
             defaults :data:`DEFAULT_CFLAG_SETS`).
         compile_repeat: Builds per flag set (the fastest is reported).
         joints: Chain lengths of the scaling table (section 5).
+        loop_duration: Simulated time of the closed-loop section [s].
+        loop_scenarios: Scenarios of the closed-loop section (None: the robot's timing
+            scenario, and ur5-control and panda-control for the 2-link arm).
+        scaling_panda: Add the shipped Panda to the scaling table.
+        scaling_loop_duration: Simulated time of each scaling row's closed loop [s].
     """
 
     robot: str = "paper_2link"
@@ -257,6 +286,8 @@ class BenchOptions:
     joints: tuple[int, ...] = tuple(range(1, 13))
     loop_duration: float = 10.0
     loop_scenarios: tuple[str, ...] | None = None
+    scaling_panda: bool = True
+    scaling_loop_duration: float = 2.0
 
 
 def run_bench(opts: BenchOptions) -> int:
@@ -321,7 +352,8 @@ def run_bench(opts: BenchOptions) -> int:
         else:  # the robot's, and for the paper's arm also a 6-DOF arm
             scs = [timing_scenario(lib, opts.loop_duration, opts.scenario)]
             if lib.n <= 2 and opts.scenario is None:
-                scs.append(timing_scenario(lib, opts.loop_duration, "ur5-control"))
+                for name in ("ur5-control", "panda-control"):
+                    scs.append(timing_scenario(lib, opts.loop_duration, name))
         report["closed_loop"] = []
         for sc in scs:
             sc_lib = library_for(sc)
@@ -335,7 +367,13 @@ def run_bench(opts: BenchOptions) -> int:
                 )
             )
     if "scaling" not in opts.skip:
-        report["scaling"] = bench_scaling(opts.joints, progress=True)
+        report["scaling"] = bench_scaling(
+            opts.joints,
+            progress=True,
+            panda=opts.scaling_panda,
+            loop_duration=opts.scaling_loop_duration,
+            rounds=rounds,
+        )
     if opts.compare_cflags is not None:
         report["cflags"] = bench_cflags(
             lib,

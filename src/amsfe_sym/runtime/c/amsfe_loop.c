@@ -43,14 +43,19 @@ struct amsfe_ctrl {
   long ticks;
   double *u_prev;  /* the last applied (limited) torque */
   double *cf;      /* cascade: command-filter state [2n] */
-  int started;     /* cascade: the filter was started on the first command */
+  int started;     /* cascade: the filter was started on the first (trusted) command */
+  int ready;       /* cascade: the start-up's test passed (latched) */
+  int observed;    /* amsfe_ctrl_observe ran since the last torque (else: converged) */
+  int have_hold;   /* cascade: c_hold was taken */
+  double *c_hold;  /* cascade: the motor's offset from qm_r at the first tick [n] */
+  double *hold1, *hold0; /* the law's hold input: ones, zeros [n] */
   double *vt_prev; /* printed laws: v_t(k-1) */
   int have_vt;
   double *prev_qm_d, *prev_qmd_d; /* truth-ct: the previous motor set point and rate */
   long prev_k;
   int have_prev;
   /* scratch */
-  double *x, *qmd_next, *Ksv, *o[8], *M, *b, *acc;
+  double *x, *qmd_next, *Ksv, *o[8], *M, *b, *acc, *P;
 };
 
 static int ctrl_layout(amsfe_ctrl *c, char *base) {
@@ -64,7 +69,8 @@ static int ctrl_layout(amsfe_ctrl *c, char *base) {
   double **vecs[] = {&c->h,  &c->lam,     &c->Lt, &c->eps, &c->phi, &c->wm,
                      &c->tau_max, &c->wf, &c->vmax, &c->u_max, &c->Mm, &c->Fm,
                      &c->Ks, &c->zeros, &c->u_prev, &c->vt_prev, &c->prev_qm_d,
-                     &c->prev_qmd_d, &c->qmd_next, &c->Ksv, &c->b, &c->acc};
+                     &c->prev_qmd_d, &c->qmd_next, &c->Ksv, &c->b, &c->acc,
+                     &c->c_hold, &c->hold1, &c->hold0};
   for (size_t i = 0; i < sizeof(vecs) / sizeof(vecs[0]); ++i) *vecs[i] = DBL(&cv, n);
   c->theta0 = DBL(&cv, d.N - 4 * n + 1);
   c->ks_theta = (int *)carve(&cv, sizeof(int) * (size_t)n);
@@ -72,6 +78,7 @@ static int ctrl_layout(amsfe_ctrl *c, char *base) {
   c->x = DBL(&cv, N);
   for (int i = 0; i < 8; ++i) c->o[i] = DBL(&cv, 2 * n);
   c->M = DBL(&cv, n * n);
+  c->P = DBL(&cv, N * N);
   carve_work(&cv, WORKS, sizeof(WORKS) / sizeof(WORKS[0]), &c->g);
   return (int)(cv.off + 16);
 }
@@ -108,6 +115,8 @@ void amsfe_ctrl_reset(amsfe_ctrl *c) {
   memset(c->u_prev, 0, sizeof(double) * (size_t)n);
   memset(c->cf, 0, sizeof(double) * (size_t)(2 * n));
   c->started = 0;
+  c->ready = 0;
+  c->have_hold = 0;
   c->have_vt = 0;
   c->have_prev = 0;
   c->prev_k = 0;
@@ -142,6 +151,7 @@ int amsfe_ctrl_init(amsfe_ctrl **out, const amsfe_ctrl_params *p, void *memory, 
   c->par.phi = c->phi, c->par.wm = c->wm, c->par.tau_max = c->tau_max, c->par.wf = c->wf;
   c->par.vmax = c->vmax, c->par.u_max = c->u_max, c->par.Mm = c->Mm, c->par.Fm = c->Fm;
   c->par.Ks = c->Ks, c->par.ks_theta = c->ks_theta, c->par.theta_initial = c->theta0;
+  for (long j = 0; j < n; ++j) c->hold1[j] = 1.0, c->hold0[j] = 0.0;
   amsfe_ctrl_reset(c);
   *out = c;
   return AMSFE_OK;
@@ -152,9 +162,27 @@ static void stiffness(const amsfe_ctrl *c, const double *theta, double *Ks) {
   for (int j = 0; j < c->d.n; ++j) Ks[j] = c->ks_theta[j] >= 0 ? theta[c->ks_theta[j]] : c->Ks[j];
 }
 
-/* _Cascade.torque: control_amsfe / control_dtsmc, the command filter started at rest. */
+void amsfe_ctrl_observe(amsfe_ctrl *c, const double *P) {
+  /* _Cascade._converged: latched; the oracles and the encoder-only law need no estimate */
+  int ctl = c->par.controller;
+  c->observed = 1;
+  if (c->ready) return;
+  if (!P || ctl == AMSFE_CTRL_TRUTH || ctl == AMSFE_CTRL_DTSMC) {
+    c->ready = 1;
+    return;
+  }
+  long n = c->d.n, N = c->d.N;
+  int ok = 1;
+  for (long j = 0; j < n; ++j) {
+    ok &= sqrt(P[j * N + j]) <= c->par.ready_q_std;
+    ok &= sqrt(P[(n + j) * N + n + j]) <= c->par.ready_qd_std;
+  }
+  c->ready = ok;
+}
+
+/* _Cascade.torque: control_amsfe / control_dtsmc, with the start-up. */
 static int cascade(amsfe_ctrl *c, const double *lead0, const double *lead1, const double *ref,
-                   double *u, amsfe_ctrl_out *out) {
+                   const double *z, double *u, amsfe_ctrl_out *out) {
   long n = c->d.n;
   int dtsmc = c->par.controller == AMSFE_CTRL_DTSMC;
   const double *lt = c->par.controller == AMSFE_CTRL_DTSMC_EKF ? c->zeros : c->Lt;
@@ -167,11 +195,29 @@ static int cascade(amsfe_ctrl *c, const double *lead0, const double *lead1, cons
   in[m++] = c->eps, in[m++] = &c->pp, in[m++] = c->phi, in[m++] = c->wm;
   in[m++] = c->tau_max, in[m++] = c->wf, in[m++] = c->vmax;
   cfun f = dtsmc ? control_dtsmc : control_amsfe;
-  if (gcall(&c->g, f, in, m, c->o, 8)) return AMSFE_ERR_NONFINITE;
-  if (!c->started) { /* start the command filter at rest on the first command */
-    memcpy(c->cf, c->o[7], sizeof(double) * (size_t)n);
-    c->started = 1;
+  const double **hold = &in[m++];
+  if (!c->observed) c->ready = 1; /* no covariance given: the estimate is taken as converged */
+  c->observed = 0;
+  if (c->par.startup_converged && !c->ready) {
+    /* wait: the filter held where the motor is (an offset from qm_r fixed at the first tick) */
+    *hold = c->hold1;
+    if (!c->have_hold) {
+      if (gcall(&c->g, f, in, m, c->o, 8)) return AMSFE_ERR_NONFINITE;
+      for (long j = 0; j < n; ++j) c->c_hold[j] = z[j] - (c->o[3][j] - c->o[7][j]);
+      c->have_hold = 1;
+    }
+    memcpy(c->cf, c->c_hold, sizeof(double) * (size_t)n);
+    memset(c->cf + n, 0, sizeof(double) * (size_t)n);
     if (gcall(&c->g, f, in, m, c->o, 8)) return AMSFE_ERR_NONFINITE;
+  } else {
+    *hold = c->hold0;
+    if (gcall(&c->g, f, in, m, c->o, 8)) return AMSFE_ERR_NONFINITE;
+    if (!c->started) { /* start at rest on the first trusted command */
+      memcpy(c->cf, c->o[7], sizeof(double) * (size_t)n);
+      memset(c->cf + n, 0, sizeof(double) * (size_t)n);
+      c->started = 1;
+      if (gcall(&c->g, f, in, m, c->o, 8)) return AMSFE_ERR_NONFINITE;
+    }
   }
   memcpy(c->cf, c->o[6], sizeof(double) * (size_t)(2 * n));
   memcpy(u, c->o[0], sizeof(double) * (size_t)n);
@@ -279,13 +325,13 @@ int amsfe_ctrl_torque(amsfe_ctrl *c, long k, const double *ref, const double *x_
   switch (ctl) {
     case AMSFE_CTRL_AMSFE:
     case AMSFE_CTRL_DTSMC_EKF:
-      st = cascade(c, x_hat, NULL, ref, u, out);
+      st = cascade(c, x_hat, NULL, ref, z, u, out);
       break;
     case AMSFE_CTRL_TRUTH:
-      st = cascade(c, x_true, NULL, ref, u, out);
+      st = cascade(c, x_true, NULL, ref, z, u, out);
       break;
     case AMSFE_CTRL_DTSMC:
-      st = cascade(c, z, c->theta0, ref, u, out);
+      st = cascade(c, z, c->theta0, ref, z, u, out);
       break;
     case AMSFE_CTRL_AMSFE_PAPER:
       st = printed(c, oracle ? x_true : x_hat, z, ref, u, out);
@@ -340,7 +386,8 @@ int amsfe_loop_tick(amsfe_est *est, amsfe_ctrl *ctrl, const double *z, amsfe_fra
       if (frame_status) frame_status[i] = st;
     }
   }
-  amsfe_est_state(est, ctrl->x, NULL);
+  amsfe_est_state(est, ctrl->x, ctrl->P);
+  amsfe_ctrl_observe(ctrl, ctrl->P);
   return amsfe_ctrl_torque(ctrl, ctrl->ticks, ref, ctrl->x, z, x_true, u, out);
 }
 

@@ -57,6 +57,12 @@ typedef struct {
   const double *Ks;          /* nominal stiffness [N m/rad] */
   const int *ks_theta;       /* [n]: index of theta holding joint j's stiffness, or -1 */
   const double *theta_initial; /* [p] (the encoder-only laws use it) */
+  /* the cascades' start-up (docs/control.md, "Start-up"): 0 = the filter starts at rest on
+   * the first command; 1 = wait until every link angle's and rate's posterior standard
+   * deviation (amsfe_ctrl_observe) is below these, the motor held on the reference's motor
+   * trajectory where it was at the first tick, then start at rest on the first trusted command */
+  int startup_converged;
+  double ready_q_std, ready_qd_std; /* [rad], [rad/s] */
 } amsfe_ctrl_params;
 
 /* What a tick computed besides the torque. */
@@ -73,6 +79,9 @@ size_t amsfe_ctrl_memory_size(const amsfe_ctrl_params *params); /* 0: bad parame
 int amsfe_ctrl_init(amsfe_ctrl **out, const amsfe_ctrl_params *params, void *memory,
                     size_t size);
 void amsfe_ctrl_reset(amsfe_ctrl *ctrl);
+/* The estimate's covariance P(k|k) [N x N] for the start-up's test (before amsfe_ctrl_torque
+ * of the same tick; amsfe_loop_tick calls it).  NULL: the estimate is taken as converged. */
+void amsfe_ctrl_observe(amsfe_ctrl *ctrl, const double *P);
 
 /* u(k) [n] (limited), from the reference ref [5n] = [q_d, qd_d, qdd_d, jerk_d, snap_d] at t_k,
  * the estimate x_hat [N], the encoder sample z [2n] at t_k and, for the oracles only, the true

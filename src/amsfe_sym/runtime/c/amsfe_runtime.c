@@ -32,8 +32,20 @@ DECLARE(est_oosm_correct)
 DECLARE(est_clone_camera)
 DECLARE(transition_step)
 
+#include "amsfe_model_config.h"
+#if AMSFE_MODEL_CHAIN
+/* rk4 libraries: the step chained from the generated stage (amsfe_model.c), the same numbers
+ * as the generated transition_step in a fraction of its code */
+DECLARE(transition_step_chain)
+#define STEP transition_step_chain
+#define STEP_WORK transition_step_chain_work
+#else
+#define STEP transition_step
+#define STEP_WORK transition_step_work
+#endif
+
 static const cwork WORKS[] = {est_camera_update_work, est_oosm_correct_work, est_clone_camera_work,
-                              transition_step_work};
+                              STEP_WORK};
 
 struct amsfe_est {
   amsfe_params par; /* pointers in it point into this block */
@@ -327,7 +339,7 @@ static int predict(amsfe_est *e, const double *u, double *A, double *G) {
   int N = e->d.N;
   const double *in[2] = {e->x, u};
   double *out[3] = {e->x1, A, G};
-  gcall(&e->g, transition_step, in, 2, out, 3); /* x+, A, Gamma (eqs. 13, 4) */
+  gcall(&e->g, STEP, in, 2, out, 3); /* x+, A, Gamma (eqs. 13, 4) */
   if (!all_finite(e->x1, N) || !all_finite(A, (long)N * N)) return AMSFE_ERR_NONFINITE;
   if (!e->lp_ok && !pd_state(e)) return AMSFE_ERR_NOT_PD; /* P = LP LP^T */
   amsfe_predict_cov(N, e->d.nw, A, e->LP, G, e->qw, e->P1, e->T1); /* eq. (14) */

@@ -1,0 +1,2 @@
+export PYTHONPATH=/work/wt-lead/src
+PY=/work/main/.venv/bin/python

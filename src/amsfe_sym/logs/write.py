@@ -1,0 +1,241 @@
+"""A simulated run -> a rosbag2 in MCAP storage that opens in Foxglove (docs/logs.md).
+
+Topics (stamps in seconds from the run's start; log time = when the loop had the data; the
+table with the message fields is in docs/logs.md): ``/motor_encoders`` (JointState: qm, qmd
+as the loop read them), ``/motor_torque`` (JointState effort: the applied torque),
+``/camera/marker`` (PointStamped: pixel u, v; stamp = exposure, logged at arrival),
+``/joint_states`` (true q, qd), ``/amsfe/estimate`` (estimated q, qd), ``/amsfe/truth``
+(Float64MultiArray: the true state, for the NEES), ``/amsfe/config`` (String: JSON of the
+robot, resolved scenario and runtime), ``/robot_description`` (String: the URDF) and ``/tf``
+(world -> every link, true and ``est/``-prefixed, at :data:`TF_RATE_HZ`).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amsfe_sym.core.toml import dump_toml
+from amsfe_sym.logs.source import typestore
+from amsfe_sym.logs.spec import LogSpec
+from amsfe_sym.sim.result import RunResult
+
+__all__ = ["TF_RATE_HZ", "joint_state", "write_estimate_bag", "write_run_bag"]
+
+FloatArray = NDArray[np.float64]
+
+#: Rate of the ``/tf`` messages [Hz] (enough to watch; the state topics carry every tick).
+TF_RATE_HZ = 100.0
+
+
+def _ns(seconds: float) -> int:
+    return round(seconds * 1e9)
+
+
+def _header(t: float, frame: str = "") -> Any:
+    ts = typestore().types
+    ns = _ns(t)
+    stamp = ts["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    return ts["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
+
+
+def joint_state(
+    t: float,
+    names: Sequence[str],
+    position: FloatArray | None = None,
+    velocity: FloatArray | None = None,
+    effort: FloatArray | None = None,
+) -> Any:
+    """A ``sensor_msgs/msg/JointState`` stamped ``t`` [s]."""
+    empty = np.zeros(0)
+    return typestore().types["sensor_msgs/msg/JointState"](
+        header=_header(t),
+        name=list(names),
+        position=np.asarray(position if position is not None else empty, dtype=np.float64),
+        velocity=np.asarray(velocity if velocity is not None else empty, dtype=np.float64),
+        effort=np.asarray(effort if effort is not None else empty, dtype=np.float64),
+    )
+
+
+class _Bag:
+    """A rosbag2 (MCAP storage) being written: typed connections by topic."""
+
+    def __init__(self, path: Path) -> None:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        self.writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+        self.writer.open()
+        self.conns: dict[str, Any] = {}
+
+    def write(self, topic: str, msgtype: str, t: float, msg: Any) -> None:
+        ts = typestore()
+        if topic not in self.conns:
+            self.conns[topic] = self.writer.add_connection(topic, msgtype, typestore=ts)
+        self.writer.write(self.conns[topic], _ns(t), ts.serialize_cdr(msg, msgtype))
+
+    def close(self) -> None:
+        self.writer.close()
+
+
+def _atomic(out: Path, fill: Callable[[Path], None]) -> Path:
+    """Write the bag folder ``out`` complete or not at all (a temporary sibling, renamed)."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+    try:
+        bag = tmp / out.name
+        fill(bag)
+        bag.rename(out)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return out
+
+
+def write_run_bag(res: RunResult, out: Path, urdf_text: str | None = None) -> Path:
+    """Write ``res`` as the rosbag2 folder ``out`` (must not exist)."""
+    lib, sc = res.lib, res.scenario
+    n, N = lib.n, lib.N
+    joints = list(lib.manifest.joints)
+    spec = LogSpec()
+    ts = typestore().types
+    F64 = ts["std_msgs/msg/Float64MultiArray"]
+    layout = ts["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0)
+    String = ts["std_msgs/msg/String"]
+    config = {
+        "tool": "amsfe_sym",
+        "robot": lib.manifest.spec or lib.manifest.urdf,
+        "library": lib.manifest.name,
+        "scenario_toml": dump_toml(sc.to_dict()),
+        "runtime": res.runtime,
+        "estimator": sc.estimator,
+        "T": lib.T,
+    }
+    frames = sorted(res.frames.tolist(), key=lambda f: (f[1], f[0]))
+    tf = _tf_frames(res, urdf_text)
+
+    def fill(path: Path) -> None:
+        bag = _Bag(path)
+        try:
+            bag.write(spec.config, "std_msgs/msg/String", 0.0, String(data=json.dumps(config)))
+            if urdf_text is not None:
+                bag.write("/robot_description", "std_msgs/msg/String", 0.0, String(data=urdf_text))
+            fi = 0
+            for k, t in enumerate(res.t):
+                z, x, xh = res.z_enc[k], res.x_true[k], res.x_hat[k]
+                enc = joint_state(t, joints, z[:n], z[n:])
+                bag.write(spec.encoders, "sensor_msgs/msg/JointState", t, enc)
+                while fi < len(frames) and frames[fi][1] <= k:
+                    kappa, _, pu, pv = frames[fi]
+                    pt = ts["geometry_msgs/msg/PointStamped"](
+                        header=_header(kappa * lib.T, "camera"),
+                        point=ts["geometry_msgs/msg/Point"](x=pu, y=pv, z=0.0),
+                    )
+                    bag.write(spec.camera, "geometry_msgs/msg/PointStamped", t, pt)
+                    fi += 1
+                bag.write(
+                    spec.torque,
+                    "sensor_msgs/msg/JointState",
+                    t,
+                    joint_state(t, joints, effort=res.u[k]),
+                )
+                bag.write(
+                    "/joint_states",
+                    "sensor_msgs/msg/JointState",
+                    t,
+                    joint_state(t, joints, x[:n], x[n : 2 * n]),
+                )
+                bag.write(
+                    "/amsfe/estimate",
+                    "sensor_msgs/msg/JointState",
+                    t,
+                    joint_state(t, joints, xh[:n], xh[n : 2 * n]),
+                )
+                truth = F64(layout=layout, data=np.asarray(x[:N], dtype=np.float64))
+                bag.write(spec.truth, "std_msgs/msg/Float64MultiArray", t, truth)
+                if tf is not None and k in tf:
+                    bag.write("/tf", "tf2_msgs/msg/TFMessage", t, tf[k])
+        finally:
+            bag.close()
+
+    return _atomic(out, fill)
+
+
+def _tf_frames(res: RunResult, urdf_text: str | None) -> dict[int, Any] | None:
+    """``/tf`` messages by tick (every 1 / TF_RATE_HZ s): world -> each link of the true arm
+    and of the estimated one (``est/``), by Pinocchio's forward kinematics."""
+    if urdf_text is None:
+        return None
+    import pinocchio as pin
+
+    from amsfe_sym.load import load_robot
+    from amsfe_sym.load.spec import load_spec
+
+    lib = res.lib
+    spec = load_spec(lib.manifest.spec or lib.manifest.urdf)
+    robot = load_robot(spec.with_locked(dict(lib.manifest.raw.get("locked", {}))))
+    model = robot.model
+    data = model.createData()
+    ts = typestore().types
+    every = max(1, round(1.0 / (TF_RATE_HZ * lib.T)))
+    n = lib.n
+    out = {}
+    for k in range(0, len(res.t), every):
+        transforms = []
+        for prefix, x in (("", res.x_true[k]), ("est/", res.x_hat[k])):
+            pin.framesForwardKinematics(model, data, robot.to_pin_q(x[:n]))
+            for f, frame in enumerate(model.frames):
+                if frame.type != pin.FrameType.BODY:
+                    continue
+                M = data.oMf[f]
+                qx, qy, qz, qw = pin.Quaternion(M.rotation).coeffs()
+                p = M.translation
+                transforms.append(
+                    ts["geometry_msgs/msg/TransformStamped"](
+                        header=_header(float(res.t[k]), "world"),
+                        child_frame_id=prefix + frame.name,
+                        transform=ts["geometry_msgs/msg/Transform"](
+                            translation=ts["geometry_msgs/msg/Vector3"](x=p[0], y=p[1], z=p[2]),
+                            rotation=ts["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw),
+                        ),
+                    )
+                )
+        out[k] = ts["tf2_msgs/msg/TFMessage"](transforms=transforms)
+    return out
+
+
+def write_estimate_bag(
+    out: Path, t0: float, t: FloatArray, names: Sequence[str], x_hat: FloatArray, P_diag: FloatArray
+) -> Path:
+    """The estimates of ``amsfe estimate`` as a rosbag2 (MCAP): ``/amsfe/estimate``
+    (JointState q, qd of x(k|k)) and ``/amsfe/estimate_std`` (JointState position/velocity =
+    the standard deviations of q, qd)."""
+    n = len(names)
+
+    def fill(path: Path) -> None:
+        bag = _Bag(path)
+        try:
+            for k, tk in enumerate(t):
+                tt = t0 + float(tk)
+                x, s = x_hat[k], np.sqrt(np.maximum(P_diag[k], 0.0))
+                bag.write(
+                    "/amsfe/estimate",
+                    "sensor_msgs/msg/JointState",
+                    tt,
+                    joint_state(tt, names, x[:n], x[n : 2 * n]),
+                )
+                bag.write(
+                    "/amsfe/estimate_std",
+                    "sensor_msgs/msg/JointState",
+                    tt,
+                    joint_state(tt, names, s[:n], s[n : 2 * n]),
+                )
+        finally:
+            bag.close()
+
+    return _atomic(out, fill)

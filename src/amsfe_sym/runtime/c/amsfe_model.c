@@ -1,0 +1,169 @@
+/* amsfe_model.c: the rk4 transition step chained from one generated stage (part of every
+ * rk4 library; see docs/codegen.md, "Structure kept through generation").
+ *
+ * transition_step_chain(x, u) -> (x_next, A, Gamma) computes exactly what the generated
+ * `transition_step` of the rk4 model computes (one classical Runge-Kutta step of the
+ * continuous flexible-joint model over T with u held; A = dF/dx by forward sensitivities;
+ * Gamma = dF/dw, eq. 4), but instead of one straight-line expression of the whole step
+ * (four inlined stages, their jacobians and the dense products of the sensitivities) it
+ * calls the generated stage `rk4_stage` (xp, u, theta) -> (k, J = dk/d[xp; theta], sparse)
+ * four times and chains the sensitivities in the loops below:
+ *
+ *   xp_i = xp + c_i T k_{i-1},  S_i = I0 + c_i T D_{i-1}            (c = 0, 1/2, 1/2, 1)
+ *   (k_i, J_i) = rk4_stage(xp_i, u, theta),  D_i = J_i [S_i; E]       (4n x N)
+ *   xp+ = xp + T/6 (k_1 + 2 k_2 + 2 k_3 + k_4),  A = [I0 + T/6 (D_1 + 2 D_2 + 2 D_3 + D_4); E]
+ *   Gamma = [A[:, qd] M(q)^-1,  A[:, qmd] / Mm,  [0; T I_p]]
+ *
+ * with I0 = [I_4n 0] and E = [0 I_p] (theta is constant).  J_i is kept in CasADi's compressed
+ * column storage, so D_i costs nnz(J_i) N multiply-adds.  The code grows with the stage
+ * (~n^1.3 with CRBA and reverse-mode RNEA derivatives), not with four copies of it.
+ *
+ * It follows CasADi's calling convention and exports the symbols `casadi.external` needs
+ * (the names and sparsity of the generated `transition_step`), so Python and C callers use
+ * it like any generated function. */
+/* small loops over n and N: optimise them fully whatever the library's flags (as the glue) */
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC optimize("O3")
+#endif
+#include <string.h>
+
+#include "amsfe_internal.h"
+#include "amsfe_model_config.h" /* written by the code generator: AMSFE_MODEL_N, _P, _T, _MM */
+
+DECLARE(rk4_stage)
+DECLARE(rk4_minv)
+DECLARE(transition_step)
+const cint *rk4_stage_sparsity_out(cint i);
+const char *transition_step_name_in(cint i);
+const char *transition_step_name_out(cint i);
+const cint *transition_step_sparsity_out(cint i);
+
+#define NN AMSFE_MODEL_N
+#define NP AMSFE_MODEL_P
+#define NX (4 * NN)      /* plant states [q, qd, qm, qmd] */
+#define NS (4 * NN + NP) /* estimator states, N */
+
+static const double MM[NN] = AMSFE_MODEL_MM;
+
+/* Nonzeros of J in CasADi's compressed sparsity [nrow, ncol, colind[ncol + 1], row[nnz]]
+ * (a dense pattern is compressed to [nrow, ncol, 1]). */
+static cint stage_nnz(const cint *sp) {
+  return (sp[2] == 1 && sp[1] > 0) ? sp[0] * sp[1] : sp[2 + sp[1]];
+}
+
+/* Scratch doubles beyond the stage's own work: xi, k, kacc (NX each), S, D, Dacc (NX x NS
+ * each), the stage's J (nnz), M^-1 (n x n). */
+static cint scratch_doubles(void) {
+  return 3 * NX + 3 * (cint)NX * NS + stage_nnz(rk4_stage_sparsity_out(1)) + NN * NN;
+}
+
+int transition_step_chain_work(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w) {
+  cint a = 0, r = 0, iw = 0, w = 0, a2 = 0, r2 = 0, iw2 = 0, w2 = 0;
+  rk4_stage_work(&a, &r, &iw, &w);
+  rk4_minv_work(&a2, &r2, &iw2, &w2);
+  if (sz_arg) *sz_arg = (a > a2 ? a : a2) + 3;
+  if (sz_res) *sz_res = (r > r2 ? r : r2) + 3;
+  if (sz_iw) *sz_iw = iw > iw2 ? iw : iw2;
+  if (sz_w) *sz_w = (w > w2 ? w : w2) + scratch_doubles();
+  return 0;
+}
+
+/* D (NX x NS, column-major) = J (NX x NS, CCS) * B with B = [S; E] (NS x NS): B[j, c] is
+ * S[j, c] for a plant row j < NX and (c == j) for a theta row. */
+static void sparse_times(const cint *sp, const double *J, const double *S, double *D) {
+  cint nrow = sp[0], ncol = sp[1];
+  int dense = sp[2] == 1 && ncol > 0;
+  const cint *colind = sp + 2, *row = sp + 2 + ncol + 1;
+  memset(D, 0, sizeof(double) * (size_t)NX * NS);
+  for (cint c = 0; c < NS; ++c) {
+    double *Dc = D + c * NX;
+    for (cint j = 0; j < ncol; ++j) {
+      double b = j < NX ? S[c * NX + j] : (c == j ? 1.0 : 0.0);
+      if (b == 0.0) continue;
+      if (dense) {
+        for (cint r = 0; r < nrow; ++r) Dc[r] += J[j * nrow + r] * b;
+      } else {
+        for (cint e = colind[j]; e < colind[j + 1]; ++e) Dc[row[e]] += J[e] * b;
+      }
+    }
+  }
+}
+
+int transition_step_chain(const double **arg, double **res, cint *iw, double *w, int mem) {
+  (void)mem;
+  static const double c[4] = {0.0, 0.5, 0.5, 1.0}, wt[4] = {1.0, 2.0, 2.0, 1.0};
+  const double T = AMSFE_MODEL_T;
+  const double *x = arg[0], *u = arg[1], *th = x + NX;
+  double *xn = res[0], *A = res[1], *G = res[2];
+  const cint *sp = rk4_stage_sparsity_out(1);
+  cint nnz = stage_nnz(sp);
+  /* the tail of the argument/result pointer arrays and of w is ours; the stage gets the rest */
+  const double **sarg = arg + 3;
+  double **sres = res + 3;
+  double *xi = w, *k = xi + NX, *kacc = k + NX, *S = kacc + NX, *D = S + (cint)NX * NS;
+  double *Dacc = D + (cint)NX * NS, *J = Dacc + (cint)NX * NS, *Minv = J + nnz;
+  double *sw_ = Minv + NN * NN;
+
+  memset(kacc, 0, sizeof(double) * NX);
+  memset(Dacc, 0, sizeof(double) * (size_t)NX * NS);
+  for (int i = 0; i < 4; ++i) {
+    /* the stage's point and its sensitivity S_i = I0 + c_i T D_{i-1} */
+    for (cint r = 0; r < NX; ++r) xi[r] = x[r] + (i ? c[i] * T * k[r] : 0.0);
+    for (cint col = 0; col < NS; ++col)
+      for (cint r = 0; r < NX; ++r)
+        S[col * NX + r] = (r == col ? 1.0 : 0.0) + (i ? c[i] * T * D[col * NX + r] : 0.0);
+    sarg[0] = xi, sarg[1] = u, sarg[2] = th;
+    sres[0] = k, sres[1] = J;
+    int status = rk4_stage(sarg, sres, iw, sw_, 0);
+    if (status) return status;
+    sparse_times(sp, J, S, D);
+    for (cint r = 0; r < NX; ++r) kacc[r] += wt[i] * k[r];
+    for (cint e = 0; e < (cint)NX * NS; ++e) Dacc[e] += wt[i] * D[e];
+  }
+  if (xn) {
+    for (cint r = 0; r < NX; ++r) xn[r] = x[r] + (T / 6.0) * kacc[r];
+    for (cint r = NX; r < NS; ++r) xn[r] = x[r];
+  }
+  /* A (NS x NS, column-major): the plant rows from the sensitivities, the theta rows E.
+   * Without an A output its plant rows go to S (no longer needed): Gamma needs only them. */
+  double *Ap = A ? A : S;
+  cint ld = A ? NS : NX;
+  for (cint col = 0; col < NS; ++col) {
+    for (cint r = 0; r < NX; ++r)
+      Ap[col * ld + r] = (r == col ? 1.0 : 0.0) + (T / 6.0) * Dacc[col * NX + r];
+    if (A)
+      for (cint r = NX; r < NS; ++r) A[col * NS + r] = (r == col ? 1.0 : 0.0);
+  }
+  if (G) {
+    /* Gamma (NS x (2n + p)), eq. (4): A[:, qd] M(q)^-1, A[:, qmd] / Mm, [0; T I_p] */
+    sarg[0] = x, sarg[1] = th;
+    sres[0] = Minv;
+    int status = rk4_minv(sarg, sres, iw, sw_, 0);
+    if (status) return status;
+    memset(G, 0, sizeof(double) * (size_t)NS * (2 * NN + NP));
+    for (cint j = 0; j < NN; ++j) {
+      double *Gl = G + j * NS, *Gm = G + (NN + j) * NS;
+      for (cint l = 0; l < NN; ++l) {
+        double m = Minv[j * NN + l]; /* M^-1[l, j] */
+        const double *Aqd = Ap + (NN + l) * ld;
+        for (cint r = 0; r < NX; ++r) Gl[r] += Aqd[r] * m;
+      }
+      const double *Aqmd = Ap + (3 * NN + j) * ld;
+      for (cint r = 0; r < NX; ++r) Gm[r] = Aqmd[r] / MM[j];
+    }
+    for (cint t = 0; t < NP; ++t) G[(2 * NN + t) * NS + NX + t] = T;
+  }
+  return 0;
+}
+
+/* The rest of CasADi's external-function API, as the generated transition_step's. */
+cint transition_step_chain_n_in(void) { return 2; }
+cint transition_step_chain_n_out(void) { return 3; }
+const char *transition_step_chain_name_in(cint i) { return transition_step_name_in(i); }
+const char *transition_step_chain_name_out(cint i) { return transition_step_name_out(i); }
+const cint *transition_step_chain_sparsity_in(cint i) { return transition_step_sparsity_in(i); }
+const cint *transition_step_chain_sparsity_out(cint i) { return transition_step_sparsity_out(i); }
+int transition_step_chain_checkout(void) { return 0; }
+void transition_step_chain_release(int mem) { (void)mem; }
+void transition_step_chain_incref(void) {}
+void transition_step_chain_decref(void) {}
