@@ -224,6 +224,17 @@ def a1_correct(
     return A1Correction(True, "ok", nis, x_post + W @ nu_c, P_new, W, Szz)
 
 
+def _singular_phi() -> EstimatorError:
+    return EstimatorError(
+        describe(
+            "product of transition jacobians over the lag",
+            "an invertible matrix",
+            "a singular one",
+            "the backward map of eq. (22) needs an invertible transition",
+        )
+    )
+
+
 def backward_map(
     Phi: FloatArray, x_post_kappa: FloatArray, corrections: FloatArray, target: FloatArray
 ) -> FloatArray:
@@ -254,14 +265,7 @@ def backward_map(
     try:
         step = np.linalg.solve(Phi, corrections + target)
     except (np.linalg.LinAlgError, ValueError):
-        raise EstimatorError(
-            describe(
-                "product of transition jacobians over the lag",
-                "an invertible matrix",
-                "a singular one",
-                "the backward map of eq. (22) needs an invertible transition",
-            )
-        ) from None
+        raise _singular_phi() from None
     return np.asarray(x_post_kappa + step, dtype=np.float64)
 
 
@@ -346,14 +350,7 @@ class OosmEstimator(Estimator):
             # (measured in the study), numpy's ~5 us.
             G = np.asarray(np.linalg.solve(Phi.T, Hc.T).T, dtype=np.float64)
         except (np.linalg.LinAlgError, ValueError):
-            raise EstimatorError(
-                describe(
-                    "product of transition jacobians over the lag",
-                    "an invertible matrix",
-                    "a singular one",
-                    "the backward map of eq. (22) needs an invertible transition",
-                )
-            ) from None
+            raise _singular_phi() from None
         if not np.isfinite(G).all():
             raise EstimatorError(
                 describe("Hc Fb", "finite", "NaN or inf", "check the camera jacobian")

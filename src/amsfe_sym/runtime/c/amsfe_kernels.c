@@ -92,47 +92,31 @@ static int have_avx2(void) {
 }
 #endif
 
-/* Tiled when the shapes allow it, else the plain loops (same formula, other rounding order). */
-static void tiles(TILE_ARGS) {
+/* Tiled when the shapes allow it, else the plain loops (same formula, other rounding order);
+ * sub: C = init - X Y. */
+static void tiles_op(int sub, TILE_ARGS) {
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
   if (have_avx2() && N >= 8 && ncols >= 4) {
-    tiles_v4(N, ncols, lo, lower, tri, m0, m1, X, Y, sm, sj, init, C);
+    (sub ? tiles_v4_sub : tiles_v4)(N, ncols, lo, lower, tri, m0, m1, X, Y, sm, sj, init, C);
     return;
   }
 #endif
   if (N >= 4 && ncols >= 4) {
-    tiles_v2(N, ncols, lo, lower, tri, m0, m1, X, Y, sm, sj, init, C);
+    (sub ? tiles_v2_sub : tiles_v2)(N, ncols, lo, lower, tri, m0, m1, X, Y, sm, sj, init, C);
     return;
   }
   for (int j = 0; j < ncols; ++j)
     for (int i = lower && j > lo ? j : lo; i < N; ++i) {
       double v = init ? init[i + (long)j * N] : 0.0;
-      for (int m = tri && j > m0 ? j : m0; m < m1; ++m)
-        v += X[i + (long)m * N] * Y[m * sm + j * sj];
+      for (int m = tri && j > m0 ? j : m0; m < m1; ++m) {
+        double t = X[i + (long)m * N] * Y[m * sm + j * sj];
+        v = sub ? v - t : v + t;
+      }
       C[i + (long)j * N] = v;
     }
 }
-
-/* C = init - X Y, as tiles. */
-static void tiles_sub(TILE_ARGS) {
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
-  if (have_avx2() && N >= 8 && ncols >= 4) {
-    tiles_v4_sub(N, ncols, lo, lower, tri, m0, m1, X, Y, sm, sj, init, C);
-    return;
-  }
-#endif
-  if (N >= 4 && ncols >= 4) {
-    tiles_v2_sub(N, ncols, lo, lower, tri, m0, m1, X, Y, sm, sj, init, C);
-    return;
-  }
-  for (int j = 0; j < ncols; ++j)
-    for (int i = lower && j > lo ? j : lo; i < N; ++i) {
-      double v = init ? init[i + (long)j * N] : 0.0;
-      for (int m = tri && j > m0 ? j : m0; m < m1; ++m)
-        v -= X[i + (long)m * N] * Y[m * sm + j * sj];
-      C[i + (long)j * N] = v;
-    }
-}
+#define tiles(...) tiles_op(0, __VA_ARGS__)
+#define tiles_sub(...) tiles_op(1, __VA_ARGS__)
 
 void amsfe_mirror_lower(int m, double *restrict X) {
   for (int j = 0; j < m; ++j)
