@@ -103,12 +103,16 @@ def unknown_name(what: str, name: object, known: Iterable[str]) -> ConfigError:
     )
 
 
-def check_known_keys(what: str, given: Iterable[str], known: Iterable[str]) -> None:
-    """Raise :class:`ConfigError` listing the keys of ``given`` that are not ``known``."""
+def check_known_keys(
+    what: str,
+    given: Iterable[str],
+    known: Iterable[str],
+    fix: str = "remove or rename them",
+    error: type[AmsfeError] | None = None,
+) -> None:
+    """Raise ``error`` (default :class:`ConfigError`) listing the keys of ``given`` that
+    are not ``known``."""
     unknown = sorted(set(given) - set(known))
     if unknown:
-        raise ConfigError(
-            describe(
-                what, f"keys among {sorted(known)}", f"unknown {unknown}", "remove or rename them"
-            )
-        )
+        cls = error or ConfigError
+        raise cls(describe(what, f"keys among {sorted(known)}", f"unknown {unknown}", fix))

@@ -12,9 +12,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import shutil
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from amsfe_sym.core.folders import write_folder
 from amsfe_sym.core.provenance import provenance
 from amsfe_sym.core.toml import dump_toml, tomllib
 from amsfe_sym.errors import LogError, describe
@@ -190,11 +188,9 @@ def print_summary(s: dict[str, Any], out: Path) -> None:
 def _write(run: EstimateRun, joints: tuple[str, ...] | list[str], options: EstimateOptions) -> None:
     import pandas as pd
 
-    out = run.out
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-{os.getpid()}-", dir=out.parent))
-    try:
-        log, est = run.log, run.estimate
+    log, est = run.log, run.estimate
+
+    def fill(tmp: Path) -> None:
         N = est.x_hat.shape[1]
         cols: dict[str, Any] = {"t": log.t}
         for i in range(N):
@@ -214,12 +210,8 @@ def _write(run: EstimateRun, joints: tuple[str, ...] | list[str], options: Estim
         )
         if options.plots:
             _figures(run, tmp)
-        if out.exists():
-            shutil.rmtree(out)
-        tmp.rename(out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+
+    write_folder(run.out, fill)
 
 
 def _figures(run: EstimateRun, folder: Path) -> None:

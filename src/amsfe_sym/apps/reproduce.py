@@ -21,8 +21,6 @@ A diverged run is drawn up to the time it diverged, and the figures say so.
 from __future__ import annotations
 
 import json
-import shutil
-import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -30,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from amsfe_sym.core.folders import write_folder
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.sim.loop import run
@@ -97,21 +96,15 @@ def write_comparison(
     complete or absent; an existing ``out`` is refused unless ``force`` (see ``check_out``).
     """
     check_out(out, force)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}-", dir=out.parent))
-    try:
+
+    def fill(tmp: Path) -> None:
         for name, res in cmp.results.items():
             write_run(res, tmp / name)
         (tmp / "comparison.json").write_text(json.dumps(comparison_table(cmp), indent=2) + "\n")
         if figures is not None:
             figures(cmp, tmp)
-        if out.exists():
-            shutil.rmtree(out)
-        tmp.rename(out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return out / "comparison.json"
+
+    return write_folder(out, fill) / "comparison.json"
 
 
 def print_comparison(cmp: Comparison, out: Path) -> None:

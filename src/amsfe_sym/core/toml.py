@@ -3,16 +3,34 @@ and the small writer of ``config.toml``."""
 
 import sys
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
-from amsfe_sym.errors import ConfigError
+from amsfe_sym.errors import AmsfeError, ConfigError, describe
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
 
-__all__ = ["dump_toml", "tomllib"]
+__all__ = ["dump_toml", "read_toml", "tomllib"]
+
+
+def read_toml(path: Path, error: type[AmsfeError]) -> dict[str, Any]:
+    """Parse the TOML file ``path``; an unreadable, non-UTF-8 or malformed file raises
+    ``error`` with one line (the robot spec, scenario, sweep and log spec readers share it)."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise error(
+            describe(str(path), "a UTF-8 text file", f"byte {exc.start} not UTF-8", "save as UTF-8")
+        ) from exc
+    except OSError as exc:
+        raise error(describe(str(path), "a readable file", str(exc), "check the path")) from exc
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise error(f"{path}: not valid TOML ({exc}). Fix: correct the syntax.") from exc
 
 
 def dump_toml(data: Mapping[str, Any]) -> str:

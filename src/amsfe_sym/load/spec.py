@@ -18,9 +18,9 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
-from amsfe_sym.core.toml import tomllib
+from amsfe_sym.core.toml import read_toml
 from amsfe_sym.core.values import read_int, read_number
-from amsfe_sym.errors import SpecError, describe
+from amsfe_sym.errors import SpecError, check_known_keys, describe
 
 __all__ = [
     "ActuatorSpec",
@@ -245,11 +245,7 @@ def load_spec(name_or_path: str | os.PathLike[str]) -> RobotSpec:
                 "pass the robot folder, its robot.toml or a URDF",
             )
         )
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"{path}: not valid TOML ({exc}). Fix: correct the syntax.") from exc
-    return parse_spec(data, path)
+    return parse_spec(read_toml(path, SpecError), path)
 
 
 def default_spec(urdf: Path) -> RobotSpec:
@@ -421,16 +417,8 @@ def _table(data: Mapping[str, Any], key: str, where: str) -> Mapping[str, Any]:
 
 
 def _no_unknown(data: Mapping[str, Any], allowed: set[str], where: str) -> None:
-    unknown = sorted(set(data) - allowed)
-    if unknown:
-        raise SpecError(
-            describe(
-                where,
-                f"keys among {sorted(allowed)}",
-                f"unknown {unknown}",
-                "remove or rename them (see docs/robot-spec.md)",
-            )
-        )
+    fix = "remove or rename them (see docs/robot-spec.md)"
+    check_known_keys(where, data, allowed, fix, SpecError)
 
 
 def _finite(x: Any, where: str) -> float:

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 from amsfe_sym.core.camera_frame import CameraFrame
 from amsfe_sym.estimation.base import Estimator
 from amsfe_sym.logs.read import RobotLog
-from amsfe_sym.sim.result import DECISION_COUNTERS, refusal_kind
+from amsfe_sym.sim.result import DECISION_COUNTERS, count_decisions
 
 __all__ = ["LogEstimate", "estimate_log"]
 
@@ -50,12 +50,8 @@ def estimate_log(log: RobotLog, est: Estimator) -> LogEstimate:
     for k in range(K):
         if k > 0:
             z = log.z[k]
-            rep = est.step(log.u[k - 1], z if np.isfinite(z).all() else None, arrivals.get(k, []))
-            counters["frames_applied"] += rep.frames_applied
-            counters["frames_rejected"] += rep.frames_rejected
-            for reason in rep.rejections:
-                counters[f"refused_{refusal_kind(reason)}"] += 1
-            counters["encoder_rejected"] += int(not rep.encoder_accepted)
+            zk = z if np.isfinite(z).all() else None
+            count_decisions(counters, est.step(log.u[k - 1], zk, arrivals.get(k, [])))
         x, P = est.x, est.P
         x_hat[k], P_diag[k] = x, np.diag(P)
         if nees is not None and log.truth is not None and np.isfinite(log.truth[k]).all():

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from amsfe_sym.core.toml import tomllib
+from amsfe_sym.core.toml import read_toml
 from amsfe_sym.errors import ConfigError, describe
 
 __all__ = ["TORQUE_TYPES", "LogSpec", "read_log_spec"]
@@ -82,12 +82,7 @@ def read_log_spec(path: str | os.PathLike[str] | None) -> LogSpec:
     if path is None:
         return LogSpec()
     p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise ConfigError(
-            describe(f"log spec {p}", "a readable TOML file", str(exc), "fix the file or the path")
-        ) from exc
+    data = read_toml(p, ConfigError)
     spec = LogSpec(source=p)
     unknown = sorted(set(data) - set(_KEYS))
     if unknown:

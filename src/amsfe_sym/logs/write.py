@@ -13,8 +13,6 @@ robot, resolved scenario and runtime), ``/robot_description`` (String: the URDF)
 from __future__ import annotations
 
 import json
-import shutil
-import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -22,6 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from amsfe_sym.core.folders import write_folder
 from amsfe_sym.core.toml import dump_toml
 from amsfe_sym.logs.source import typestore
 from amsfe_sym.logs.spec import LogSpec
@@ -85,16 +84,17 @@ class _Bag:
 
 
 def _atomic(out: Path, fill: Callable[[Path], None]) -> Path:
-    """Write the bag folder ``out`` complete or not at all (a temporary sibling, renamed)."""
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
-    try:
-        bag = tmp / out.name
+    """Write the bag folder ``out`` complete or not at all (rosbags' writer creates the
+    folder itself, so it writes into a child of the temporary one)."""
+
+    def inner(tmp: Path) -> None:
+        bag = tmp / out.name  # (the .mcap inside is named after the folder)
         fill(bag)
-        bag.rename(out)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    return out
+        for p in bag.iterdir():
+            p.rename(tmp / p.name)
+        bag.rmdir()
+
+    return write_folder(out, inner)
 
 
 def write_run_bag(res: RunResult, out: Path, urdf_text: str | None = None) -> Path:

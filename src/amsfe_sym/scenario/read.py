@@ -9,9 +9,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from amsfe_sym.core.toml import tomllib
+from amsfe_sym.core.toml import read_toml
 from amsfe_sym.core.values import C_INT_MAX, read_int, read_number
-from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.errors import ConfigError, check_known_keys, describe
 from amsfe_sym.load.spec import INTEGRATORS, data_dir
 from amsfe_sym.scenario.model import (
     CameraSettings,
@@ -82,26 +82,13 @@ def load_scenario(name_or_path: str | os.PathLike[str]) -> Scenario:
             positive definite, a camera delay longer than the filter's buffer, ...
     """
     path = find_scenario(name_or_path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML ({exc}). Fix: correct the syntax.") from exc
-    return parse_scenario(data, path)
+    return parse_scenario(read_toml(path, ConfigError), path)
 
 
 def parse_scenario(data: Mapping[str, Any], path: Path) -> Scenario:
     """Build a :class:`Scenario` from parsed TOML."""
     where = str(path)
-    unknown = sorted(set(data) - _TOP)
-    if unknown:
-        raise ConfigError(
-            describe(
-                where,
-                f"keys among {sorted(_TOP)}",
-                f"unknown {unknown}",
-                "remove or rename them (docs/scenarios.md)",
-            )
-        )
+    check_known_keys(where, data, _TOP, "remove or rename them (docs/scenarios.md)")
     for key in ("robot", "plant", "estimate0", "trajectory"):
         if key not in data:
             raise ConfigError(describe(where, f"a {key!r} entry", "none", f"add {key}"))

@@ -35,7 +35,7 @@ from amsfe_sym.sim.result import (
     DIVERGED_TRACKING_ERROR,
     RUNTIMES,
     RunResult,
-    refusal_kind,
+    count_decisions,
     tick_bar,
 )
 
@@ -129,12 +129,7 @@ def run(
             frames_rec.append((fr.exposure_step, k, float(fr.z[0]), float(fr.z[1])))
         # 2. estimator k-1 -> k
         if k > 0:
-            rep = est.step(u, z, delivered)
-            counters["frames_applied"] += rep.frames_applied
-            counters["frames_rejected"] += rep.frames_rejected
-            for reason in rep.rejections:
-                counters[f"refused_{refusal_kind(reason)}"] += 1
-            counters["encoder_rejected"] += int(not rep.encoder_accepted)
+            count_decisions(counters, est.step(u, z, delivered))
         xh, P = est.x, est.P
         # 3. controller, then the actuator limit
         u, saturated[k] = ctrl.saturate(

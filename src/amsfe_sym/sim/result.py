@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from amsfe_sym.estimation.base import StepReport
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 
@@ -23,6 +24,7 @@ __all__ = [
     "REFUSAL_KINDS",
     "RUNTIMES",
     "RunResult",
+    "count_decisions",
     "refusal_kind",
     "tick_bar",
 ]
@@ -119,6 +121,15 @@ def tick_bar(sc: Scenario, total: int, runtime: str) -> Any:
         unit="tick",
         mininterval=0.5,
     )
+
+
+def count_decisions(counters: dict[str, int], rep: StepReport) -> None:
+    """Add one estimator step's decisions to a run's :data:`DECISION_COUNTERS`."""
+    counters["frames_applied"] += rep.frames_applied
+    counters["frames_rejected"] += rep.frames_rejected
+    for reason in rep.rejections:
+        counters[f"refused_{refusal_kind(reason)}"] += 1
+    counters["encoder_rejected"] += int(not rep.encoder_accepted)
 
 
 def refusal_kind(reason: str) -> str:

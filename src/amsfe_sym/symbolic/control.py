@@ -64,6 +64,7 @@ import casadi as ca
 
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
 from amsfe_sym.symbolic.estimator import EXPAND_MAX_STATES
+from amsfe_sym.symbolic.functions import sx_function
 from amsfe_sym.symbolic.transition import Transition
 
 __all__ = ["CONTROL_GAINS", "build_control_functions", "fpow", "sat"]
@@ -145,7 +146,7 @@ def build_control_functions(tree: RigidBodyTree, tr: Transition) -> list[ca.Func
     # + T Fm qmd written out, so no solve is needed (F of (29b) at the estimates)
     Mbar_F = m_times(qbar, qd) - m_times(q, qd) - T * f_link + Mm * (qmd_next - qmd) + T * Fm * qmd
     u = (Mbar_F + m_times(qbar, dv + sf.lam_terms - reach)) / T
-    law37 = _fn(
+    law37 = sx_function(
         "control_amsfe_paper",
         [
             ("x", x),
@@ -275,16 +276,5 @@ def _motor_reference(tree: RigidBodyTree, tr: Transition, n: int, p: int) -> ca.
         [ca.densify(qm_r), ca.densify(qmd_r), ca.densify(qmdd_r)],
         ["ref", "theta"],
         ["qm_r", "qmd_r", "qmdd_r"],
-        {"cse": True},
-    )
-
-
-def _fn(name: str, ins: list[tuple[str, ca.SX]], outs: list[tuple[str, ca.SX]]) -> ca.Function:
-    return ca.Function(
-        name,
-        [s for _, s in ins],
-        [ca.densify(e) for _, e in outs],
-        [k for k, _ in ins],
-        [k for k, _ in outs],
         {"cse": True},
     )

@@ -16,6 +16,7 @@ from amsfe_sym.symbolic.camera import depth, pinhole
 from amsfe_sym.symbolic.control import build_control_functions
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
 from amsfe_sym.symbolic.estimator import estimator_functions
+from amsfe_sym.symbolic.functions import sx_function
 from amsfe_sym.symbolic.transition import (
     EXPAND_MAX_JOINTS,
     StateLayout,
@@ -45,17 +46,6 @@ class SymbolicModel:
     chained: dict[str, str] = field(default_factory=dict)
 
 
-def _fn(name: str, ins: list[tuple[str, ca.SX]], outs: list[tuple[str, ca.SX]]) -> ca.Function:
-    return ca.Function(
-        name,
-        [s for _, s in ins],
-        [ca.densify(e) for _, e in outs],
-        [n for n, _ in ins],
-        [n for n, _ in outs],
-        {"cse": True},
-    )
-
-
 def _transition_functions(
     tr: Transition, x: ca.SX, u: ca.SX, xn: ca.SX, w: ca.SX
 ) -> list[ca.Function]:
@@ -68,11 +58,15 @@ def _transition_functions(
     Fw = tr.forward(x, u, w)
     A = ca.jacobian(F, x)
     G = ca.substitute(ca.jacobian(Fw, w), w, ca.SX.zeros(w.shape[0], 1))
-    step = _fn("transition_step", [("x", x), ("u", u)], [("x_next", F), ("A", A), ("Gamma", G)])
+    step = sx_function(
+        "transition_step", [("x", x), ("u", u)], [("x_next", F), ("A", A), ("Gamma", G)]
+    )
     xm, um = ca.MX.sym("x", N), ca.MX.sym("u", n)
     _, A_m, G_m = step(xm, um)
-    fwd = _fn("transition", [("x", x), ("u", u)], [("x_next", F)])
-    inv = _fn("transition_inverse_x", [("x_next", xn), ("u", u)], [("x", tr.inverse(xn, u))])
+    fwd = sx_function("transition", [("x", x), ("u", u)], [("x_next", F)])
+    inv = sx_function(
+        "transition_inverse_x", [("x_next", xn), ("u", u)], [("x", tr.inverse(xn, u))]
+    )
     return [
         fwd,
         with_residual(inv, fwd),
@@ -108,13 +102,13 @@ def build_functions(robot: Robot, parts: tuple[str, ...] = PARTS) -> SymbolicMod
     dy = ca.jacobian(y, q)
 
     fns = [
-        _fn("mass_matrix", [("q", q), ("theta", th)], [("M", M)]),
-        _fn("bias", [("q", q), ("qd", qd), ("theta", th)], [("b", tree.bias(q, qd, th))]),
-        _fn("gravity", [("q", q), ("theta", th)], [("g", tree.gravity_torque(q, th))]),
-        _fn("tracked_point", [("q", q), ("theta", th)], [("r", r)]),
-        _fn("camera", [("q", q), ("theta", th)], [("y", y)]),
-        _fn("camera_jacobian", [("q", q), ("theta", th)], [("dy_dq", dy)]),
-        _fn(
+        sx_function("mass_matrix", [("q", q), ("theta", th)], [("M", M)]),
+        sx_function("bias", [("q", q), ("qd", qd), ("theta", th)], [("b", tree.bias(q, qd, th))]),
+        sx_function("gravity", [("q", q), ("theta", th)], [("g", tree.gravity_torque(q, th))]),
+        sx_function("tracked_point", [("q", q), ("theta", th)], [("r", r)]),
+        sx_function("camera", [("q", q), ("theta", th)], [("y", y)]),
+        sx_function("camera_jacobian", [("q", q), ("theta", th)], [("dy_dq", dy)]),
+        sx_function(
             "camera_measure",
             [("q", q), ("theta", th)],
             [("y", y), ("dy_dq", dy), ("depth", depth(robot.camera, r))],

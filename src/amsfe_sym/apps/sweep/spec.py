@@ -42,8 +42,8 @@ from pathlib import Path
 from typing import Any
 
 from amsfe_sym.apps.sweep.robot_axes import ROBOT_PREFIX, check_robot_key
-from amsfe_sym.core.toml import tomllib
-from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.core.toml import read_toml
+from amsfe_sym.errors import ConfigError, check_known_keys, describe
 from amsfe_sym.scenario import Scenario, apply_sets, load_scenario
 
 __all__ = [
@@ -283,11 +283,7 @@ def load_sweep(path: str | os.PathLike[str]) -> SweepSpec:
                 "pass a path such as sweeps/camera-delay.toml",
             )
         )
-    try:
-        data = tomllib.loads(p.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: not valid TOML ({exc}). Fix: correct the syntax.") from exc
-    return parse_sweep(data, p)
+    return parse_sweep(read_toml(p, ConfigError), p)
 
 
 def parse_sweep(data: Mapping[str, Any], path: Path | None = None) -> SweepSpec:
@@ -300,16 +296,7 @@ def parse_sweep(data: Mapping[str, Any], path: Path | None = None) -> SweepSpec:
     ):
         if not isinstance(table, Mapping):
             raise _bad(where, "tables [sweep], [axes], [report]", table, "see docs/sweeps.md")
-        unknown = sorted(set(table) - allowed)
-        if unknown:
-            raise ConfigError(
-                describe(
-                    where,
-                    f"keys among {sorted(allowed)}",
-                    f"unknown {unknown}",
-                    "remove or rename them (docs/sweeps.md)",
-                )
-            )
+        check_known_keys(where, table, allowed, "remove or rename them (docs/sweeps.md)")
     sw = dict(data.get("sweep", {}))
     scenario_ref = sw.get("scenario", "paper-sim")
     if not isinstance(scenario_ref, str):
