@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import shlex
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from amsfe_sym import __version__
 from amsfe_sym.apps.arguments import (
@@ -248,21 +248,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = get_argument_parser().parse_args(argv)
     except SystemExit as exc:  # bad arguments (one line, exit 2) or -h (exit 0)
         return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    commands: dict[str, Callable[[argparse.Namespace], int]] = {
+        "generate": _generate,
+        "check": _check,
+        "simulate": _simulate,
+        "estimate": estimate_from_args,
+        "bench": _bench,
+        "study": _study,
+        "sweep": sweep_from_args,
+    }
     try:
-        if args.command == "generate":
-            return _generate(args)
-        if args.command == "check":
-            return _check(args)
-        if args.command == "simulate":
-            return _simulate(args)
-        if args.command == "bench":
-            return _bench(args)
-        if args.command == "study":
-            return _study(args)
-        if args.command == "sweep":
-            return sweep_from_args(args)
-        if args.command == "estimate":
-            return estimate_from_args(args)
+        if args.command in commands:
+            return commands[args.command](args)
     except AmsfeError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from amsfe_sym import __version__
+from amsfe_sym.core.folders import replace_dir
 from amsfe_sym.errors import CodegenError, describe
 from amsfe_sym.load.spec import RobotSpec
 from amsfe_sym.runtime.library import file_sha256
@@ -262,14 +263,3 @@ def build_lock(path: Path) -> Iterator[None]:
             fcntl.flock(fh, fcntl.LOCK_UN)
             if created and not any(path.parent.iterdir()):  # bad input: leave no folder
                 path.parent.rmdir()
-
-
-def replace_dir(new: Path, target: Path) -> None:
-    """Move ``new`` to ``target`` replacing any old content, as atomically as rename allows."""
-    old = None
-    if target.exists():
-        old = target.with_name(f".{target.name}.old-{os.getpid()}-{time.time_ns()}")
-        target.rename(old)
-    new.rename(target)
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
