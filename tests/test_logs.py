@@ -60,7 +60,14 @@ def test_a_plain_mcap_file_reads_as_its_folder(sim, tmp_path) -> None:
 
 # ---------------------------------------------------------------------- bags made by hand
 def _write(
-    path: Path, res, frames, drop_encoder=(), encoder_type=None, camera_type=None, with_torque=True
+    path: Path,
+    res,
+    frames,
+    drop_encoder=(),
+    encoder_type=None,
+    camera_type=None,
+    with_torque=True,
+    storage="mcap",
 ) -> Path:
     """A bag from ``res``'s encoder and torque records with the camera ``frames`` given as
     (exposure step, arrival time [s], u, v), written with rosbags' own writer."""
@@ -93,7 +100,8 @@ def _write(
         "/motor_torque": "sensor_msgs/msg/JointState",
         "/camera/marker": camera_type or "geometry_msgs/msg/PointStamped",
     }
-    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    with Writer(path, version=9, storage_plugin=plugin) as w:
         conns = {}
         for t, topic, msg in events:
             if topic not in conns:
@@ -175,3 +183,32 @@ def test_refusals_are_one_line_and_leave_nothing(sim, tmp_path, capsys) -> None:
         assert code == 2, what
         assert err.startswith("error:") and "\n" not in err, (what, err)
         assert not out.exists(), what
+
+
+def test_sqlite3_storage_and_a_frame_older_than_the_history(sim, tmp_path) -> None:
+    """A rosbag2 in sqlite3 storage (the default before ROS 2 Iron) reads like MCAP; a frame
+    that arrives later than the estimator's history is refused by the estimator and counted,
+    the others fused as by the estimator fed directly."""
+    from amsfe_sym.core.toml import dump_toml
+
+    res, _ = sim["oosm"]
+    sc = res.scenario
+    scen = tmp_path / "scenario.toml"
+    scen.write_text(dump_toml(sc.to_dict()))
+    T, buffer = res.lib.T, sc.filter.buffer_steps
+    pix = {int(f[0]): (f[2], f[3]) for f in res.frames}
+    exposures = sorted(pix)
+    late = exposures[0]  # delivered after buffer_steps + 5 steps: older than the history
+    frames, expected = [], defaultdict(list)
+    for kappa in exposures:
+        arrive_k = kappa + (buffer + 5 if kappa == late else 125)
+        if arrive_k >= len(res.t):
+            continue
+        frames.append((kappa, arrive_k * T, *pix[kappa]))
+        expected[arrive_k].append(CameraFrame(kappa, np.array(pix[kappa]), arrive_k))
+    bag = _write(tmp_path / "bag", res, frames, storage="sqlite3")
+    assert any(p.suffix == ".db3" for p in bag.iterdir())
+    got = estimate_command(bag, tmp_path / "est", EstimateOptions(scenario=str(scen), plots=False))
+    assert np.max(np.abs(got.estimate.x_hat - _direct(res, expected))) <= 1e-12
+    c = got.estimate.counters
+    assert c["refused_too_late"] == 1 and c["frames_applied"] == len(frames) - 1
