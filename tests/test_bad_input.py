@@ -396,3 +396,24 @@ def test_a_failure_while_writing_leaves_no_run_folder(
     args = ["simulate", "--controller", "amsfe", "--duration", "0.05", "--no-progress"]
     assert main([*args, "--out", str(out)]) == 130
     assert list(tmp_path.iterdir()) == []
+
+
+def test_force_never_replaces_a_folder_the_tool_did_not_write(
+    tmp_path: Path, capsys, monkeypatch
+) -> None:
+    """``--out DIR --force`` deleted DIR whatever it held (a thesis folder was replaced by a
+    run); ``--out . --force`` simulated, then failed.  Both are refused before the run."""
+    mine = tmp_path / "thesis"
+    (mine / "robots").mkdir(parents=True)
+    (mine / "thesis.tex").write_text("months of work")
+    assert main([*RUN, "--out", str(mine), "--force"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "did not write" in err[0], err
+    assert (mine / "thesis.tex").read_text() == "months of work"
+    monkeypatch.chdir(mine)
+    assert main([*RUN, "--out", ".", "--force"]) == 2
+    assert (mine / "thesis.tex").read_text() == "months of work"
+    assert sorted(p.name for p in mine.iterdir()) == ["robots", "thesis.tex"]
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main([*RUN, "--out", str(empty), "--force"]) == 0  # an empty folder is fine

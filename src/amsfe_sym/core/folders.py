@@ -11,7 +11,15 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-__all__ = ["replace_dir", "write_folder"]
+__all__ = ["MARKER", "is_run_folder", "replace_dir", "write_folder"]
+
+#: The file every output folder of this tool holds: what ``--force`` may replace.
+MARKER = ".amsfe-output"
+
+
+def is_run_folder(path: Path) -> bool:
+    """Whether ``path`` is an output folder this tool wrote (it holds :data:`MARKER`)."""
+    return (path / MARKER).is_file()
 
 
 def replace_dir(new: Path, target: Path) -> None:
@@ -38,6 +46,7 @@ def write_folder(out: Path, fill: Callable[[Path], None]) -> Path:
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-{os.getpid()}-", dir=out.parent))
     try:
         fill(tmp)
+        (tmp / MARKER).write_text("written by amsfe_sym; `--force` may replace this folder\n")
         replace_dir(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -4,9 +4,6 @@
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import tempfile
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -15,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from amsfe_sym.control.metrics import control_metrics, sliding_conditions
+from amsfe_sym.core.folders import MARKER, is_run_folder, write_folder
 from amsfe_sym.core.provenance import provenance
 from amsfe_sym.errors import ConfigError, RunFolderError, describe
 from amsfe_sym.scenario import Scenario, dump_toml
@@ -140,6 +138,17 @@ def check_out(out: Path, force: bool = False) -> None:
                 "choose another --out, or pass --force to replace it",
             )
         )
+    if out.is_dir() and not is_run_folder(out) and any(out.iterdir()):
+        # --force replaces only what this tool wrote (a folder of a user's own files, or
+        # `--out .`, is never deleted)
+        raise RunFolderError(
+            describe(
+                f"--force on {out}",
+                f"a run folder amsfe wrote (it holds {MARKER}) or an empty folder",
+                "a folder of other files",
+                "choose another --out; --force never replaces a folder it did not write",
+            )
+        )
 
 
 def write_run(
@@ -160,24 +169,13 @@ def write_run(
         RunFolderError: ``out`` is a file, or exists and ``force`` is off.
     """
     check_out(out, force)
-    final = out
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out = Path(tempfile.mkdtemp(prefix=f".{final.name}.tmp-{os.getpid()}-", dir=final.parent))
-    try:
-        _write(res, out, final)
+
+    def fill(tmp: Path) -> None:
+        _write(res, tmp, out)
         if figures is not None:
-            figures(res, out)
-        if final.exists():
-            old = final.with_name(f".{final.name}.old-{os.getpid()}")
-            final.rename(old)
-            out.rename(final)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            out.rename(final)
-    except BaseException:
-        shutil.rmtree(out, ignore_errors=True)
-        raise
-    return final / "summary.json"
+            figures(res, tmp)
+
+    return write_folder(out, fill) / "summary.json"
 
 
 def _write(res: RunResult, out: Path, final: Path) -> None:
