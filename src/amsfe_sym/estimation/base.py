@@ -159,6 +159,7 @@ class StepReport:
     rejections: list[str] = field(default_factory=list)
     replayed_steps: int = 0
     clones: int = 0
+    used: list[int] = field(default_factory=list)
 
     def reject(self, reason: str, *, warn: bool = True) -> None:
         """Count one rejected frame and record why (a logged warning unless ``warn``)."""
@@ -172,6 +173,7 @@ class StepReport:
     def frame_result(self, kappa: int, accepted: bool, nis: float, gate: float) -> None:
         """Record the outcome of a frame update (applied, or rejected by the gate)."""
         self.frame_nis.append(nis)
+        self.used.append(kappa)  # fused or gated: a repeat of it is a duplicate
         if accepted:
             self.frames_applied += 1
         else:
@@ -240,6 +242,7 @@ class Estimator(ABC):
                 describe("x0", "finite values", "NaN or inf", "fix the initial state")
             )
         self.x: FloatArray = x
+        self._seen: set[int] = set()  # exposure steps of the frames used
         self.P: FloatArray = validate_spd("P0", P0, self.nx)
         self.R_encoder = validate_spd("encoder R", encoder.R, int(encoder.dim))
         self.R_camera = validate_spd("camera R", camera.R, int(camera.dim))
@@ -293,6 +296,7 @@ class Estimator(ABC):
             z_enc = None
         usable = self._screen_frames(checked, k_new, report)
         self._step(StepInputs(u_arr, z_enc, usable), report)
+        self._seen.update(report.used)
         self.k = k_new
         self._check_covariance()
         return report
@@ -383,10 +387,16 @@ class Estimator(ABC):
             return []
         usable: list[CameraFrame] = []
         oldest = max(k_new - self.config.buffer_steps, self.k0)
+        self._seen = {s for s in self._seen if s >= oldest}
         for frame in frames:
             kappa = frame.exposure_step
             if not np.isfinite(frame.z).all():
                 report.reject(f"camera frame kappa={kappa} holds NaN or inf")
+            elif kappa in self._seen or any(f.exposure_step == kappa for f in usable):
+                report.reject(
+                    f"camera frame kappa={kappa} is a duplicate: a frame of this exposure was "
+                    "used already (measurements are idempotent)"
+                )
             elif kappa < oldest:
                 report.reject(
                     f"camera frame kappa={kappa} is older than the history kept "

@@ -61,6 +61,7 @@ STATUS = {
     "refused_full": 8,
     "ignored": 9,
     "refused_no_convergence": 10,
+    "refused_duplicate": 11,
 }
 
 
@@ -318,6 +319,7 @@ class CompiledEstimator(Estimator):
     def reset(self) -> None:
         """Back to ``x0, P0, k0`` with empty history."""
         self._c["amsfe_est_reset"](self._h)
+        self._seen.clear()
         self.k = self.k0
         self._fetch()
 

@@ -19,6 +19,7 @@
 #endif
 #include "amsfe_runtime.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -70,6 +71,7 @@ struct amsfe_est {
   /* replay */
   double *r_x, *r_P, *r_u, *r_z, *r_fz;
   int *r_hasz, *r_nf;
+  long *seen; /* [B + 1] exposure steps of the frames used, by kappa mod (B + 1) */
   /* cloning */
   double *xa, *Pa, *xa2, *Pa2, *sel, *cl;
   long *clone_k;
@@ -133,6 +135,7 @@ static size_t layout(amsfe_est *e, const amsfe_params *p, char *base) {
   amsfe_est tmp;
   if (!e) e = &tmp;
   carve(&c, sizeof(amsfe_est));
+  e->seen = (long *)carve(&c, sizeof(long) * (size_t)R);
   e->x = DBL(&c, N), e->P = DBL(&c, NN), e->x0 = DBL(&c, N), e->P0 = DBL(&c, NN);
   e->qw = DBL(&c, d.nw), e->re = DBL(&c, d.ne), e->rc = DBL(&c, d.nc);
   e->x1 = DBL(&c, N), e->P1 = DBL(&c, NN), e->A1 = DBL(&c, NN);
@@ -260,6 +263,7 @@ void amsfe_est_reset(amsfe_est *e) {
   e->failed = 0, e->last_error = 0, e->has_last = 0.0;
   memset(&e->diag, 0, sizeof(e->diag));
   e->diag.encoder_nis = NAN;
+  for (int j = 0; j <= e->B; ++j) e->seen[j] = LONG_MIN;
   if (e->r_hasz) {
     for (int j = 0; j < e->R; ++j) e->r_hasz[j] = 0, e->r_nf[j] = 0;
     long s = pmod(e->k, e->R);
@@ -623,6 +627,7 @@ int amsfe_est_camera_frame(amsfe_est *e, const double *z, long kappa, double *ni
   if (e->par.estimator == AMSFE_ENCODERS) st = AMSFE_IGNORED;
   else if (!all_finite(z, e->d.nc)) st = AMSFE_REFUSED_NONFINITE;
   else if (kappa < oldest) st = AMSFE_REFUSED_TOO_OLD;
+  else if (e->seen[pmod(kappa, e->B + 1)] == kappa) st = AMSFE_REFUSED_DUPLICATE;
   else {
     switch (e->par.estimator) {
       case AMSFE_NAIVE: st = frame_now(e, z, nis); break;
@@ -637,6 +642,7 @@ int amsfe_est_camera_frame(amsfe_est *e, const double *z, long kappa, double *ni
     if (st < 0) return fail(e, st);
     if (!pd_state(e)) return fail(e, AMSFE_ERR_NOT_PD);
   }
+  if (st == AMSFE_OK || st == AMSFE_GATED) e->seen[pmod(kappa, e->B + 1)] = kappa;
   if (st == AMSFE_OK) ++e->diag.frames_applied;
   else if (st == AMSFE_GATED) ++e->diag.frames_gated;
   else if (st == AMSFE_IGNORED) ++e->diag.frames_ignored;
@@ -682,6 +688,8 @@ const char *amsfe_status_string(int status) {
       return "refused: its clone was used already or is older than camera_max_delay";
     case AMSFE_REFUSED_FULL: return "refused: max_frames_per_step frames stored for that step";
     case AMSFE_IGNORED: return "ignored (the encoders estimator uses no frames)";
+    case AMSFE_REFUSED_DUPLICATE:
+      return "refused: a frame of this exposure step was used already (a duplicate)";
     case AMSFE_REFUSED_NO_CONVERGENCE:
       return "refused: the inverse transition (eq. 22) did not converge over the lag";
     case AMSFE_ERR_INPUT: return "error: NULL pointer or non-finite input u";

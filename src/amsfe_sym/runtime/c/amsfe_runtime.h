@@ -43,9 +43,11 @@ enum amsfe_status {
   AMSFE_ERR_FAILED = -5,         /* an earlier call failed: call amsfe_est_reset */
   AMSFE_ERR_CONFIG = -6,         /* bad parameter block (see amsfe_est_init) */
   AMSFE_ERR_MEMORY = -7,         /* the memory block is too small or misaligned */
-  AMSFE_REFUSED_NO_CONVERGENCE = 10 /* the inverse transition (eq. 22) did not converge.  Not
-                                       returned since issue 18: oosm's backward map of eq. 24
-                                       comes from the stored forward pass, with no inverse */
+  AMSFE_REFUSED_NO_CONVERGENCE = 10, /* the inverse transition (eq. 22) did not converge.  Not
+                                        returned since issue 18: oosm's backward map of eq. 24
+                                        comes from the stored forward pass, with no inverse */
+  AMSFE_REFUSED_DUPLICATE = 11 /* a frame of an exposure step already used (fused or gated):
+                                  measurements are idempotent, a repeated one is not fused twice */
 };
 
 /* Default tolerance of the inverse transition's residual (relative to max(1, |x_next|_inf)),
