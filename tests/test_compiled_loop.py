@@ -190,3 +190,31 @@ def _same_leaves(a: object, b: object, where: str) -> None:
         np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-9, err_msg=where)
     else:
         assert a == b, where
+
+
+def test_the_c_api_refuses_bad_parameter_blocks(paper_sim: tuple[Scenario, ModelLibrary]) -> None:
+    """amsfe_ctrl_init validates every parameter it accepts (issue 20 item 5): NaN gains, a
+    negative actuator limit, a zero motor inertia, a theta index out of range are refused
+    (memory size 0 / AMSFE_ERR_CONFIG -> ConfigError), not run for tens of ticks."""
+    from dataclasses import replace
+
+    from amsfe_sym.errors import ConfigError
+    from amsfe_sym.runtime.compiled_loop import CompiledController
+    from amsfe_sym.sim.builders import build_controller
+    from amsfe_sym.sim.compiled import controller_params
+
+    sc, lib = paper_sim
+    ctrl, _ = build_controller(sc.with_overrides(controller="amsfe"), lib)
+    good = controller_params(ctrl, lib)
+    CompiledController(str(lib.library_path), good, lib.n)  # accepted
+    n = lib.n
+    bad = [
+        replace(good, gains={**good.gains, "h": np.full(n, np.nan)}),
+        replace(good, u_max=-np.ones(n)),
+        replace(good, Mm=np.zeros(n)),
+        replace(good, ks_theta=np.full(n, 7, dtype=np.int32)),
+        replace(good, ready_q_std=float("nan")),
+    ]
+    for params in bad:
+        with pytest.raises(ConfigError):
+            CompiledController(str(lib.library_path), params, n)

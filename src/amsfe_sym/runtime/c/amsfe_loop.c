@@ -83,20 +83,48 @@ static int ctrl_layout(amsfe_ctrl *c, char *base) {
   return (int)(cv.off + 16);
 }
 
+/* Every value of a per-joint array finite (or +inf where allowed) and >= low (> low if
+ * strict). */
+static int vec_ok(const double *v, int n, double low, int strict, int inf_ok) {
+  if (!v) return 0;
+  for (int j = 0; j < n; ++j) {
+    double x = v[j];
+    if (isnan(x) || (!inf_ok && !isfinite(x)) || (strict ? !(x > low) : !(x >= low))) return 0;
+  }
+  return 1;
+}
+
+/* The parameter block is usable: every gain finite and in range, limits positive, sizes
+ * within the library's (issue 20: NaN gains or a negative u_max used to run for tens of
+ * ticks before failing elsewhere). */
 static int ctrl_params_ok(const amsfe_ctrl_params *p) {
   amsfe_dims d;
   amsfe_dims_get(&d);
+  int n = d.n;
   if (!p || p->controller < AMSFE_CTRL_AMSFE || p->controller > AMSFE_CTRL_TRUTH_CT) return 0;
-  if (!(p->T > 0) || !p->u_max || !p->Mm || !p->Fm || !p->Ks || !p->ks_theta ||
-      !p->theta_initial)
+  if (!(p->T > 0) || !isfinite(p->T) || !p->ks_theta || !p->theta_initial) return 0;
+  if (!vec_ok(p->u_max, n, 0.0, 1, 1) || !vec_ok(p->Mm, n, 0.0, 1, 0) ||
+      !vec_ok(p->Fm, n, 0.0, 0, 0) || !vec_ok(p->Ks, n, 0.0, 1, 0))
     return 0;
-  if (p->controller == AMSFE_CTRL_TRUTH_CT) return isfinite(p->link_bandwidth) &&
-                                                  isfinite(p->motor_bandwidth);
-  if (!p->h || !p->lam || !p->Lt || !p->eps || !p->phi || !(p->p > 0 && p->p <= 1)) return 0;
-  if (p->controller <= AMSFE_CTRL_TRUTH && (!p->wm || !p->tau_max || !p->wf || !p->vmax))
+  for (int j = 0; j < d.N - 4 * d.n; ++j)
+    if (!isfinite(p->theta_initial[j])) return 0;
+  for (int j = 0; j < n; ++j)
+    if (p->ks_theta[j] < -1 || p->ks_theta[j] >= d.N - 4 * d.n) return 0;
+  if (p->startup_converged && (isnan(p->ready_q_std) || !(p->ready_q_std > 0) ||
+                               isnan(p->ready_qd_std) || !(p->ready_qd_std > 0)))
     return 0;
-  for (int j = 0; j < d.n; ++j)
-    if (p->ks_theta[j] >= d.N - 4 * d.n) return 0;
+  if (p->controller == AMSFE_CTRL_TRUTH_CT)
+    return isfinite(p->link_bandwidth) && p->link_bandwidth > 0 &&
+           isfinite(p->motor_bandwidth) && p->motor_bandwidth > 0;
+  if (!(p->p > 0 && p->p <= 1)) return 0;
+  if (!vec_ok(p->h, n, 0.0, 0, 0) || !vec_ok(p->lam, n, 0.0, 0, 0) ||
+      !vec_ok(p->Lt, n, 0.0, 0, 0) || !vec_ok(p->eps, n, 0.0, 0, 0) ||
+      !vec_ok(p->phi, n, 0.0, 0, 0))
+    return 0;
+  if (p->controller <= AMSFE_CTRL_TRUTH &&
+      (!vec_ok(p->wm, n, 0.0, 1, 0) || !vec_ok(p->tau_max, n, 0.0, 1, 1) ||
+       !vec_ok(p->wf, n, 0.0, 0, 0) || !vec_ok(p->vmax, n, 0.0, 0, 0)))
+    return 0;
   return 1;
 }
 
