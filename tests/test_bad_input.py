@@ -417,3 +417,53 @@ def test_force_never_replaces_a_folder_the_tool_did_not_write(
     empty = tmp_path / "empty"
     empty.mkdir()
     assert main([*RUN, "--out", str(empty), "--force"]) == 0  # an empty folder is fine
+
+
+def test_sigterm_is_handled_like_ctrl_c(tmp_path: Path) -> None:
+    """SIGTERM mid-run: exit 143, one line, no run folder and no hidden temporary left."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "run"
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "amsfe_sym",
+            *RUN[:-2],
+            "--duration",
+            "60",
+            "--runtime",
+            "python",
+            "--no-plots",
+            "--out",
+            str(out),
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    time.sleep(6.0)  # past the imports, inside the run
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert "SIGTERM" in err.strip().splitlines()[-1]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_output_folders_follow_the_umask_and_clean_a_killed_runs_leftovers(
+    tmp_path: Path,
+) -> None:
+    import os
+
+    stale = tmp_path / ".run.tmp-999999999-abc"  # a SIGKILLed run's folder (its pid is gone)
+    stale.mkdir()
+    (stale / "timeseries.csv").write_text("half")
+    old = os.umask(0o022)
+    try:
+        assert main([*RUN, "--out", str(tmp_path / "run")]) == 0
+    finally:
+        os.umask(old)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+    assert (tmp_path / "run").stat().st_mode & 0o777 == 0o755

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import shlex
+import signal
 import sys
 from collections.abc import Callable, Sequence
 
@@ -242,8 +243,29 @@ def get_argument_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the process is, so every ``finally`` and temporary-folder
+    cleanup runs as for Ctrl-C."""
+
+
+def _terminated(signum: int, frame: object) -> None:
+    raise Terminated
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``amsfe`` with ``argv`` (default: ``sys.argv[1:]``); returns the exit code."""
+    """Run ``amsfe`` with ``argv`` (default: ``sys.argv[1:]``); returns the exit code.
+    SIGTERM is handled like Ctrl-C while it runs (exit 143, nothing half-written kept)."""
+    try:
+        previous = signal.signal(signal.SIGTERM, _terminated)
+    except ValueError:  # not the main thread: leave signals alone
+        return _main(argv)
+    try:
+        return _main(argv)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _main(argv: Sequence[str] | None) -> int:
     try:
         args = get_argument_parser().parse_args(argv)
     except SystemExit as exc:  # bad arguments (one line, exit 2) or -h (exit 0)
@@ -263,12 +285,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except AmsfeError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
+        how = "SIGTERM" if isinstance(exc, Terminated) else "Ctrl-C"
         print(
-            f"interrupted: amsfe {args.command} stopped by Ctrl-C; nothing half-written was kept",
+            f"interrupted: amsfe {args.command} stopped by {how}; nothing half-written was kept",
             file=sys.stderr,
         )
-        return 130
+        return 143 if isinstance(exc, Terminated) else 130
     raise SpecError(
         describe(
             "command",

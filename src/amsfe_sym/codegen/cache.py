@@ -18,16 +18,14 @@ import json
 import os
 import platform
 import shlex
-import shutil
 import subprocess
-import time
 from collections.abc import Iterator, Sequence
 from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 from amsfe_sym import __version__
-from amsfe_sym.core.folders import replace_dir
+from amsfe_sym.core.folders import STALE_TMP_SECONDS, clean_stale_tmp, replace_dir
 from amsfe_sym.errors import CodegenError, describe
 from amsfe_sym.load.spec import RobotSpec
 from amsfe_sym.runtime.library import file_sha256
@@ -203,45 +201,6 @@ def cached_dir(out_dir: Path, key: str) -> Path | None:
     except OSError:
         return None
     return lib
-
-
-#: A hidden temporary build folder older than this is left over from a killed run [s].
-STALE_TMP_SECONDS = 3600.0
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # exists, owned by someone else
-        return True
-    return True
-
-
-def clean_stale_tmp(parent: Path, name: str, max_age: float = STALE_TMP_SECONDS) -> list[Path]:
-    """Remove ``parent/.<name>-<pid>-*`` and ``parent/.<name>.old-<pid>-*`` folders left by a
-    killed :func:`generate`: those whose process is gone, or older than ``max_age`` [s].
-
-    Returns:
-        The folders removed.
-    """
-    removed = []
-    now = time.time()
-    for prefix in (f".{name}-", f".{name}.old-"):
-        for d in parent.glob(prefix + "*"):
-            pid_text = d.name[len(prefix) :].partition("-")[0]
-            if not d.is_dir() or not pid_text.isdigit():  # not ours (another robot's name)
-                continue
-            try:
-                age = now - d.stat().st_mtime
-            except OSError:
-                continue
-            dead = not _pid_alive(int(pid_text))
-            if dead or age > max_age:
-                shutil.rmtree(d, ignore_errors=True)
-                removed.append(d)
-    return removed
 
 
 @contextlib.contextmanager

@@ -11,7 +11,17 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-__all__ = ["MARKER", "is_run_folder", "replace_dir", "write_folder"]
+__all__ = [
+    "MARKER",
+    "STALE_TMP_SECONDS",
+    "clean_stale_tmp",
+    "is_run_folder",
+    "replace_dir",
+    "write_folder",
+]
+
+#: A hidden temporary folder older than this is left over from a killed run [s].
+STALE_TMP_SECONDS = 3600.0
 
 #: The file every output folder of this tool holds: what ``--force`` may replace.
 MARKER = ".amsfe-output"
@@ -20,6 +30,48 @@ MARKER = ".amsfe-output"
 def is_run_folder(path: Path) -> bool:
     """Whether ``path`` is an output folder this tool wrote (it holds :data:`MARKER`)."""
     return (path / MARKER).is_file()
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, owned by someone else
+        return True
+    return True
+
+
+def clean_stale_tmp(parent: Path, name: str, max_age: float = STALE_TMP_SECONDS) -> list[Path]:
+    """Remove the hidden temporary folders a killed process left beside ``parent/<name>``
+    (``.<name>-<pid>-*`` of a build, ``.<name>.tmp-<pid>-*`` of an output folder,
+    ``.<name>.old-<pid>-*`` of a replacement): those whose process is gone, or older than
+    ``max_age`` [s].
+
+    Returns:
+        The folders removed.
+    """
+    removed = []
+    now = time.time()
+    for prefix in (f".{name}-", f".{name}.tmp-", f".{name}.old-"):
+        for d in parent.glob(prefix + "*"):
+            pid_text = d.name[len(prefix) :].partition("-")[0]
+            if not d.is_dir() or not pid_text.isdigit():  # not ours (another name)
+                continue
+            try:
+                age = now - d.stat().st_mtime
+            except OSError:
+                continue
+            if not _pid_alive(int(pid_text)) or age > max_age:
+                shutil.rmtree(d, ignore_errors=True)
+                removed.append(d)
+    return removed
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def replace_dir(new: Path, target: Path) -> None:
@@ -43,7 +95,9 @@ def write_folder(out: Path, fill: Callable[[Path], None]) -> Path:
         ``out``.
     """
     out.parent.mkdir(parents=True, exist_ok=True)
+    clean_stale_tmp(out.parent, out.name)  # what a killed run (SIGKILL) left here
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-{os.getpid()}-", dir=out.parent))
+    tmp.chmod(0o777 & ~_umask())  # mkdtemp's 0700 would ignore the user's umask
     try:
         fill(tmp)
         (tmp / MARKER).write_text("written by amsfe_sym; `--force` may replace this folder\n")
