@@ -438,6 +438,7 @@ def test_sigterm_is_handled_like_ctrl_c(tmp_path: Path) -> None:
             "--runtime",
             "python",
             "--no-plots",
+            "--no-progress",
             "--out",
             str(out),
         ],
@@ -448,7 +449,8 @@ def test_sigterm_is_handled_like_ctrl_c(tmp_path: Path) -> None:
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 143, err
-    assert "SIGTERM" in err.strip().splitlines()[-1]
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "stopped by SIGTERM" in lines[0], err
     assert list(tmp_path.iterdir()) == []
 
 
