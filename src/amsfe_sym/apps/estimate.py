@@ -211,7 +211,7 @@ def _write(run: EstimateRun, joints: tuple[str, ...] | list[str], options: Estim
         if options.plots:
             _figures(run, tmp)
 
-    write_folder(run.out, fill)
+    write_folder(run.out, fill, replace=options.force)
 
 
 def _figures(run: EstimateRun, folder: Path) -> None:

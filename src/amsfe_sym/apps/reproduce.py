@@ -104,7 +104,7 @@ def write_comparison(
         if figures is not None:
             figures(cmp, tmp)
 
-    return write_folder(out, fill) / "comparison.json"
+    return write_folder(out, fill, replace=force) / "comparison.json"
 
 
 def print_comparison(cmp: Comparison, out: Path) -> None:

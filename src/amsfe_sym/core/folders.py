@@ -11,6 +11,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from amsfe_sym.errors import RunFolderError, describe
+
 __all__ = [
     "MARKER",
     "STALE_TMP_SECONDS",
@@ -86,10 +88,13 @@ def replace_dir(new: Path, target: Path) -> None:
         shutil.rmtree(old, ignore_errors=True)
 
 
-def write_folder(out: Path, fill: Callable[[Path], None]) -> Path:
+def write_folder(out: Path, fill: Callable[[Path], None], replace: bool = True) -> Path:
     """``fill(tmp)`` writes the folder's content into a hidden sibling ``tmp`` of ``out``,
     which then replaces ``out`` (an existing ``out`` is moved aside first and removed after;
     the caller decides beforehand whether it may be replaced).
+
+    With ``replace`` off, an ``out`` that appeared meanwhile (another writer) is not
+    replaced: :class:`~amsfe_sym.errors.RunFolderError`.
 
     Returns:
         ``out``.
@@ -101,7 +106,20 @@ def write_folder(out: Path, fill: Callable[[Path], None]) -> Path:
     try:
         fill(tmp)
         (tmp / MARKER).write_text("written by amsfe_sym; `--force` may replace this folder\n")
-        replace_dir(tmp, out)
+        if replace:
+            replace_dir(tmp, out)
+        else:  # rename(2) refuses a non-empty target: two writers cannot both win
+            try:
+                tmp.rename(out)
+            except OSError as exc:
+                raise RunFolderError(
+                    describe(
+                        f"run folder {out}",
+                        "a new folder",
+                        "one another process wrote meanwhile",
+                        "choose another --out (nothing of this run was kept)",
+                    )
+                ) from exc
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

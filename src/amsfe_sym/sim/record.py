@@ -175,7 +175,7 @@ def write_run(
         if figures is not None:
             figures(res, tmp)
 
-    return write_folder(out, fill) / "summary.json"
+    return write_folder(out, fill, replace=force) / "summary.json"
 
 
 def _write(res: RunResult, out: Path, final: Path) -> None:
