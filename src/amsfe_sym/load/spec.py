@@ -304,10 +304,10 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
     T = _positive(m.get("T", 0.001), f"{where} [model] T")
     joints = m.get("joints")
     model = ModelSpec(
-        joints=None if joints is None else tuple(str(j) for j in joints),
+        joints=None if joints is None else _names(joints, f"{where} [model] joints"),
         locked={
             str(k): _finite(v, f"{where} [model] locked {k}")
-            for k, v in dict(m.get("locked", {})).items()
+            for k, v in _table(m, "locked", f"{where} [model]").items()
         },
         T=T,
         gravity=_vec3(m.get("gravity", (0.0, 0.0, -9.81)), f"{where} [model] gravity"),
@@ -419,6 +419,12 @@ def _table(data: Mapping[str, Any], key: str, where: str) -> Mapping[str, Any]:
 def _no_unknown(data: Mapping[str, Any], allowed: set[str], where: str) -> None:
     fix = "remove or rename them (see docs/robot-spec.md)"
     check_known_keys(where, data, allowed, fix, SpecError)
+
+
+def _names(x: Any, where: str) -> tuple[str, ...]:
+    if not isinstance(x, list) or not all(isinstance(v, str) for v in x):
+        raise SpecError(describe(where, "a list of names", repr(x), 'write ["joint1", ...]'))
+    return tuple(x)
 
 
 def _finite(x: Any, where: str) -> float:
