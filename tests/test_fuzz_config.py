@@ -79,6 +79,7 @@ def test_robot_toml_values(path: tuple[Any, ...], value: Any) -> None:
     m = spec.model
     assert math.isfinite(m.T) and m.T > 0
     assert isinstance(m.plant_substeps, int) and isinstance(m.inverse_iterations, int)
+    assert isinstance(m.model_substeps, int) and m.model_substeps >= 1
     assert _finite_numbers(tuple(spec.camera.__dict__.values()))
 
 

@@ -260,10 +260,13 @@ def test_a_model_only_library_has_no_laws_and_keeps_the_full_one(tmp_path) -> No
     assert full.out_dir.name == "paper_2link"
 
 
-def test_chained_rk4_step_equals_the_generated_one(tmp_path) -> None:
+@pytest.mark.parametrize("substeps", [1, 3])
+def test_chained_rk4_step_equals_the_generated_one(tmp_path, substeps: int) -> None:
     """The rk4 step chained in C over the generated stage (runtime/c/amsfe_model.c) against
-    the generated transition_step (CasADi VM) at random states, and ``amsfe check``'s row,
-    on a 4-joint arm-like chain (the chain is used beyond EXPAND_MAX_JOINTS joints)."""
+    the generated transition_step (CasADi VM) at random states, and ``amsfe check``'s rows
+    (the transition against numpy RK4 on pin.aba with the same steps, A and Gamma against
+    central differences), on a 4-joint arm-like chain (the chain is used beyond
+    EXPAND_MAX_JOINTS joints), with one RK4 step per T and with ``model_substeps = 3``."""
     from amsfe_sym.apps.bench.scaling import chain_urdf
     from amsfe_sym.apps.check import run_checks
     from amsfe_sym.codegen import generate
@@ -275,7 +278,7 @@ def test_chained_rk4_step_equals_the_generated_one(tmp_path) -> None:
     n = EXPAND_MAX_JOINTS + 2
     (tmp_path / "chain.urdf").write_text(chain_urdf(n))
     (tmp_path / "robot.toml").write_text(
-        'urdf = "chain.urdf"\n[model]\nintegrator = "rk4"\n'
+        f'urdf = "chain.urdf"\n[model]\nintegrator = "rk4"\nmodel_substeps = {substeps}\n'
         "[[theta]]\nname = 'payload'\nkind = 'payload_mass'\ntarget = 'l4'\ntrue = 0.5\n"
         "initial = 0.3\n"
     )
@@ -291,5 +294,7 @@ def test_chained_rk4_step_equals_the_generated_one(tmp_path) -> None:
         for c, v in zip(chain(x, u), vm(x, u), strict=True):
             v = np.array(v).reshape(c.shape, order="F")
             assert np.max(np.abs(c - v)) <= 1e-12 * max(1.0, float(np.max(np.abs(v))))
+    assert lib.manifest.model_substeps == substeps
     rows = {r.function: r for r in run_checks(robot, lib, samples=5, seed=1)}
-    assert rows["transition_step_chain"].passed
+    for name in ("transition_step_chain", "transition", "transition_jacobian", "noise_gain"):
+        assert rows[name].passed, rows[name]

@@ -128,6 +128,8 @@ def _spec(tmp_path: Path, body: str) -> Path:
         ("[camera]\ncx = nan\n", "finite"),
         ("[model]\ninverse_iterations = 0.4\n", "an integer"),
         ("[model]\nplant_substeps = 0.5\n", "an integer"),
+        ("[model]\nmodel_substeps = 0\n", "in [1, "),
+        ("[model]\nmodel_substeps = 2.5\n", "an integer"),
         ("[camera]\nperiod = 0.5\n", "an integer"),
         ("[camera]\nperiod = 4294967346\n", "2147483647"),
         ("[model]\nlocked = {joint2 = nan}\n", "finite"),

@@ -1,8 +1,11 @@
-"""The start-up's threshold on the tuning seeds (docs/control.md, "Start-up"): paper-sim, 3 s
-runs, Python loop, ``amsfe`` with the paper's start against waiting until the link angles'
-posterior std is below 0.10 / 0.05 / 0.03 / 0.02 rad (rates not waited for)::
+"""The start-up's settings on the tuning seeds (docs/control.md, "Start-up"): paper-sim, 3 s
+runs, ``amsfe``.  Group ``threshold`` (Python loop): the paper's start against waiting until
+the link angles' posterior std is below 0.10 / 0.05 / 0.03 / 0.02 rad (rates not waited for);
+group ``blend`` (compiled loop): the wait with the blended reference at offset accelerations
+``blend_accel`` of 5 .. 80 rad/s^2 and without it (``inf``)::
 
-    .venv/bin/python tools/startup_variants.py 700 740
+    .venv/bin/python tools/startup_variants.py 700 740            # threshold
+    .venv/bin/python tools/startup_variants.py 700 740 oosm blend
 
 Prints per variant: divergences, the peak tracking error past the initial one (max, median,
 seeds above 0.1 rad), the largest error after 1.5 s and the joint-2 RMSE over the last 80 %.
@@ -24,15 +27,24 @@ VARIANTS = {
     "q03": ["controller_gains.amsfe.ready_q_std=0.03", "controller_gains.amsfe.ready_qd_std=1e9"],
     "q02": ["controller_gains.amsfe.ready_q_std=0.02", "controller_gains.amsfe.ready_qd_std=1e9"],
 }
+BLEND = {
+    f"blend{a}-qd{v}": [
+        f"controller_gains.amsfe.blend_accel={a}",
+        f"controller_gains.amsfe.ready_qd_std={v}",
+    ]
+    for v in ("inf", "0.2", "0.1")
+    for a in ("inf", "10", "20", "40", "80")
+}
 
 
 def one(args):
     seed, startup, est = args
+    blend = startup in BLEND
     sc = load_scenario("paper-sim").with_overrides(
         controller="amsfe", estimator=est, duration=3.0, seed=seed
     )
-    sc = apply_sets(sc, VARIANTS[startup])
-    res = run(sc, library_for(sc), runtime="python")
+    sc = apply_sets(sc, BLEND[startup] if blend else VARIANTS[startup])
+    res = run(sc, library_for(sc), runtime="compiled" if blend else "python")
     n = res.lib.n
     e = res.x_true[:, :n] - res.q_des
     k25 = int(2.5 / res.lib.T)
@@ -46,10 +58,11 @@ def one(args):
 if __name__ == "__main__":
     seeds = range(int(sys.argv[1]), int(sys.argv[2]))
     est = sys.argv[3] if len(sys.argv) > 3 else "oosm"
-    jobs = [(s, st, est) for s in seeds for st in VARIANTS]
+    group = BLEND if len(sys.argv) > 4 and sys.argv[4] == "blend" else VARIANTS
+    jobs = [(s, st, est) for s in seeds for st in group]
     with ProcessPoolExecutor(2) as ex:
         rows = list(ex.map(one, jobs))
-    for st in VARIANTS:
+    for st in group:
         r = [x for x in rows if x[1] == st]
         peak_over = np.array([x[4] - x[3] for x in r])
         late = np.array([x[5] for x in r])

@@ -119,7 +119,7 @@ class PinocchioOracle:
         Ks = r.stiffness_at(th)
         delta = qm - q
         if r.spec.model.integrator == "rk4":
-            xp = self.rk4(x[: 4 * n], u, th, np.zeros(2 * n), T, 1)
+            xp = self.rk4(x[: 4 * n], u, th, np.zeros(2 * n), T, r.spec.model.model_substeps)
             return np.concatenate([xp, th])
         if r.spec.model.integrator == "paper":
             q1 = q + T * qd
@@ -139,7 +139,8 @@ class PinocchioOracle:
         q, qd, _, _, th = self.split(x)
         G = np.zeros((4 * n + p, 2 * n + p))
         if self.r.spec.model.integrator == "rk4":
-            # impulses at the start of the step, then one RK4 step: central differences
+            # impulses at the start of the step, then the model's RK4 steps: central differences
+            m = self.r.spec.model.model_substeps
             Minv = np.linalg.inv(self.M(q, th))
             h = 1e-6
             for i in range(2 * n):
@@ -151,7 +152,7 @@ class PinocchioOracle:
                 xp = x[: 4 * n]
                 zero = np.zeros(2 * n)
                 G[: 4 * n, i] = (
-                    self.rk4(xp + dx, u, th, zero, T, 1) - self.rk4(xp - dx, u, th, zero, T, 1)
+                    self.rk4(xp + dx, u, th, zero, T, m) - self.rk4(xp - dx, u, th, zero, T, m)
                 ) / (2 * h)
             G[4 * n :, 2 * n :] = T * np.eye(p)
             return G

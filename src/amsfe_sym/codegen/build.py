@@ -267,8 +267,8 @@ def _build(
 
 def model_config_header(model: Any) -> str:
     """``amsfe_model_config.h``: the constants the hand-written C of ``runtime/c`` needs from
-    the model (n, p, T [s], the motor inertias Mm [kg m^2]) and whether the library has the
-    chained rk4 step (``AMSFE_MODEL_CHAIN``)."""
+    the model (n, p, T [s], the rk4 model's steps per T, the motor inertias Mm [kg m^2]) and
+    whether the library has the chained rk4 step (``AMSFE_MODEL_CHAIN``)."""
     robot = model.robot
     mm = ", ".join(repr(float(v)) for v in robot.Mm)
     return (
@@ -277,6 +277,7 @@ def model_config_header(model: Any) -> str:
         f"#define AMSFE_MODEL_N {robot.n}\n"
         f"#define AMSFE_MODEL_P {robot.p}\n"
         f"#define AMSFE_MODEL_T {float(robot.spec.model.T)!r}\n"
+        f"#define AMSFE_MODEL_SUBSTEPS {int(robot.spec.model.model_substeps)}\n"
         f"#define AMSFE_MODEL_MM {{{mm}}}\n"
         f"#define AMSFE_MODEL_CHAIN {1 if model.chained else 0}\n"
         "#endif\n"

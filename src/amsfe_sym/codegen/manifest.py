@@ -72,6 +72,7 @@ def manifest_document(
         "integrator": robot.spec.model.integrator,
         "inverse_iterations": robot.spec.model.inverse_iterations,
         "plant_substeps": robot.spec.model.plant_substeps,
+        "model_substeps": robot.spec.model.model_substeps,
         "gravity": robot.gravity.tolist(),
         "state_layout": model.layout.as_dict(),
         "noise_layout": {"w_l": [0, n], "w_m": [n, 2 * n], "w_theta": [2 * n, 2 * n + p]},

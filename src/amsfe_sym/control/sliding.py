@@ -31,6 +31,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from amsfe_sym.control.base import Controller, FloatArray, LawInputs, register
+from amsfe_sym.control.blend import blend_offsets, blend_time
 from amsfe_sym.errors import ConfigError, check_known_keys, describe
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.signals.trajectory import Trajectory
@@ -254,6 +255,7 @@ class _Cascade(_SlidingBase):
         "startup": "converged",
         "ready_q_std": 0.03,
         "ready_qd_std": float("inf"),
+        "blend_accel": float("inf"),
     }
     #: The start-ups (docs/control.md, "Start-up"): ``"first"`` starts the command filter at
     #: rest on the first command, whatever the estimate (the form the paper's laws imply);
@@ -262,6 +264,8 @@ class _Cascade(_SlidingBase):
     #: the reference's motor trajectory offset to where the motor was at the first tick (the
     #: filter held, no rate or acceleration feedforward from an unconverged command), then the
     #: filter starts at rest on the first trusted command, as it would with the true state.
+    #: With ``blend_accel`` [rad/s^2] finite, the reference then starts from the state the law
+    #: acts on and joins q_d within that offset acceleration (:mod:`amsfe_sym.control.blend`).
     STARTUPS: ClassVar[tuple[str, ...]] = ("first", "converged")
 
     def _extra_gains(self) -> tuple[str, ...]:
@@ -289,6 +293,8 @@ class _Cascade(_SlidingBase):
             self._scalar("ready_q_std"),
             self._scalar("ready_qd_std"),
         )
+        self._blend_accel = self._scalar("blend_accel")
+        self._blend: tuple[int, float, FloatArray, FloatArray] | None = None  # k0, Tb, d0, d1
 
     def _scalar(self, key: str) -> float:
         v = self.gains[key]
@@ -303,6 +309,7 @@ class _Cascade(_SlidingBase):
         assert own is not None
         own["startup_converged"] = self.gains["startup"] == "converged"
         own["ready_q_std"], own["ready_qd_std"] = self._ready_std
+        own["blend_accel"] = self._blend_accel
         return own
 
     def _converged(self, P_diag: FloatArray | None) -> bool:
@@ -358,6 +365,13 @@ class _Cascade(_SlidingBase):
             self._cf[:n], self._cf[n:] = self._c_hold, 0.0
             out = self._law.call_into(*lead, ref, self._cf, *gains, self._hold)
         else:
+            if not self._started and self.gains["startup"] == "converged":
+                # the blended reference starts from the state the law acts on
+                d0, d1 = lead[0][:n] - ref[:n], lead[0][n : 2 * n] - ref[n : 2 * n]
+                self._blend = (k, blend_time(d0, d1, self._blend_accel), d0.copy(), d1.copy())
+            if self._blend is not None:
+                k0, tb, d0, d1 = self._blend
+                ref = ref + blend_offsets((k - k0) * self.lib.T, tb, d0, d1)
             out = self._law.call_into(*lead, ref, self._cf, *gains, self._run)
             if not self._started:  # start at rest on the first trusted command
                 self._cf[:n], self._cf[n:] = out[7], 0.0

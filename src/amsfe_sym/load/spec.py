@@ -56,6 +56,9 @@ class ModelSpec:
             ``"rk4"`` (one RK4 step of the continuous model; no systematic position error).
         inverse_iterations: Unrolled fixed-point steps of the inverse transition (eq. 22).
         plant_substeps: RK4 substeps per T of the continuous-time plant.
+        model_substeps: RK4 steps per T of the estimator's ``rk4`` model F (used whenever the
+            model is ``rk4``, the spec's integrator or a scenario's): more resolve a joint
+            mode near w T ~ 1 that one step mis-integrates (robots/ur5, docs/ur5-estimation.md).
     """
 
     joints: tuple[str, ...] | None = None
@@ -65,6 +68,7 @@ class ModelSpec:
     integrator: Integrator = "semi_implicit"
     inverse_iterations: int = 6
     plant_substeps: int = 10
+    model_substeps: int = 1
 
 
 @dataclass(frozen=True)
@@ -288,7 +292,16 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
     m = _table(data, "model", where)
     _no_unknown(
         m,
-        {"joints", "locked", "T", "gravity", "integrator", "inverse_iterations", "plant_substeps"},
+        {
+            "joints",
+            "locked",
+            "T",
+            "gravity",
+            "integrator",
+            "inverse_iterations",
+            "plant_substeps",
+            "model_substeps",
+        },
         f"{where} [model]",
     )
     integrator = str(m.get("integrator", "semi_implicit"))
@@ -314,6 +327,7 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
         integrator=integrator,  # type: ignore[arg-type]
         inverse_iterations=_count(m.get("inverse_iterations", 6), f"{where} inverse_iterations", 1),
         plant_substeps=_count(m.get("plant_substeps", 10), f"{where} plant_substeps", 1),
+        model_substeps=_count(m.get("model_substeps", 1), f"{where} model_substeps", 1),
     )
 
     a = _table(data, "actuators", where)

@@ -87,6 +87,7 @@ class ControllerParams:
     startup_converged: bool = False
     ready_q_std: float = float("inf")
     ready_qd_std: float = float("inf")
+    blend_accel: float = float("inf")
     _keep: list[Any] = field(default_factory=list, repr=False)
 
     def struct(self) -> ctypes.Structure:
@@ -128,6 +129,7 @@ class ControllerParams:
             int(self.startup_converged),
             float(self.ready_q_std),
             float(self.ready_qd_std),
+            float(self.blend_accel),
         )
 
 
@@ -398,7 +400,8 @@ def write_loop_log(
         f"ctrl {CONTROLLER_CODES[params.name]} {params.T!r} {params.p!r} "
         f"{int(params.qmd_next_hold)} {int(params.state_true)} "
         f"{params.link_bandwidth!r} {params.motor_bandwidth!r} "
-        f"{int(params.startup_converged)} {params.ready_q_std!r} {params.ready_qd_std!r}"
+        f"{int(params.startup_converged)} {params.ready_q_std!r} {params.ready_qd_std!r} "
+        f"{params.blend_accel!r}"
     )
     n = params.u_max.size
     for key in ("h", "lam", "Lt", "eps", "phi", "wm", "tau_max", "wf", "vmax"):

@@ -104,6 +104,7 @@ class Manifest:
         T: Sample time [s].
         integrator: The estimator's discrete model (``paper``, ``semi_implicit``, ``rk4``).
         plant_substeps: RK4 substeps of ``plant_step`` per T.
+        model_substeps: RK4 steps per T of the ``rk4`` model F (1 for the other models).
         state_layout: Blocks q, qd, qm, qmd, theta as (start, stop) of x.
         actuators: Ks, Mm, Fm.
         camera: The resolved camera with the robot's timing.
@@ -128,6 +129,7 @@ class Manifest:
     T: float
     integrator: str
     plant_substeps: int
+    model_substeps: int
     state_layout: Mapping[str, tuple[int, int]]
     actuators: Actuators
     camera: CameraInfo
@@ -194,6 +196,7 @@ def _parse(d: Mapping[str, Any]) -> Manifest:
         T=float(d["T"]),
         integrator=str(d["integrator"]),
         plant_substeps=int(d["plant_substeps"]),
+        model_substeps=int(d.get("model_substeps", 1)),
         state_layout={str(k): (int(a), int(b)) for k, (a, b) in d["state_layout"].items()},
         actuators=Actuators(
             _floats(act["Ks"]),

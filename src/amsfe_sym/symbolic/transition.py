@@ -126,6 +126,7 @@ class Transition:
         self.integrator = integrator
         self.iterations = inverse_iterations
         self.T = float(self.robot.spec.model.T)
+        self.substeps = int(self.robot.spec.model.model_substeps)  # rk4 steps per T
         self._cache: dict[str, ca.Function] = {}
 
     # ------------------------------------------------------------------ pieces
@@ -283,12 +284,13 @@ class Transition:
     def rk4_step_function(self, expand: bool = True) -> ca.Function:
         """x+ = F(x, u), A = dF/dx and Gamma = dF/dw of the ``rk4`` model in one function.
 
-        A is propagated through the four stages (forward sensitivities: ``dk_i/dx = J_i
-        [dxp_i/dx; E_theta]`` with the sparse stage jacobians of :meth:`rk4_stage_function`),
-        not by differentiating the MX graph (that took ~390 us on a 7-DOF arm).  Gamma
-        follows from A: the impulses enter as ``qd += M(q)^-1 w_l``, ``qmd += w_m / Mm`` at
-        the start of the step and ``theta += T w_theta``.  With ``expand`` the whole graph is
-        SX, straight-line C (UR5: 16 us; as MX calls 41 us).
+        F is ``model_substeps`` classical RK4 steps of h = T / m over T, u held.  A is
+        propagated through the stages (forward sensitivities: ``dk_i/dx = J_i [dxp_i/dx;
+        E_theta]`` with the sparse stage jacobians of :meth:`rk4_stage_function`), not by
+        differentiating the MX graph (that took ~390 us on a 7-DOF arm).  Gamma follows from
+        A: the impulses enter as ``qd += M(q)^-1 w_l``, ``qmd += w_m / Mm`` at the start of
+        the step and ``theta += T w_theta``.  With ``expand`` the whole graph is SX,
+        straight-line C (UR5: 16 us; as MX calls 41 us).
 
         Returns:
             ``transition_step (x, u) -> (x_next, A, Gamma)`` (the inverse's Newton steps use
@@ -296,23 +298,27 @@ class Transition:
         """
         n, p, T = self.tree.n, self.tree.p, self.T
         N = 4 * n + p
+        h = T / self.substeps
         stage = self.rk4_stage_function()
         minv = self.rk4_minv_function()
         x, u = ca.MX.sym("x", N), ca.MX.sym("u", n)
         xp, th = x[: 4 * n], x[4 * n :]
         eye = ca.DM.eye(N)
-        I0, E = eye[: 4 * n, :], eye[4 * n :, :]
-        k1, d1 = stage(xp, u, th)
-        ks, ds = [k1], [d1]
-        for c in (0.5, 0.5, 1.0):
-            xi = xp + c * T * ks[-1]
-            Si = I0 + c * T * ds[-1]
-            ki, Ji = stage(xi, u, th)
-            ks.append(ki)
-            ds.append(ca.mtimes(Ji, ca.vertcat(Si, E)))
-        xp_next = xp + (T / 6.0) * (ks[0] + 2 * ks[1] + 2 * ks[2] + ks[3])
-        A_top = I0 + (T / 6.0) * (ds[0] + 2 * ds[1] + 2 * ds[2] + ds[3])
-        A = ca.densify(ca.vertcat(A_top, E))
+        E = eye[4 * n :, :]
+        Sx: ca.MX | ca.DM = eye[: 4 * n, :]  # d xp / d x along the substeps
+        for _ in range(self.substeps):
+            k1, d1 = stage(xp, u, th)
+            d1 = ca.mtimes(d1, ca.vertcat(Sx, E)) if self.substeps > 1 else d1
+            ks, ds = [k1], [d1]
+            for c in (0.5, 0.5, 1.0):
+                xi = xp + c * h * ks[-1]
+                Si = Sx + c * h * ds[-1]
+                ki, Ji = stage(xi, u, th)
+                ks.append(ki)
+                ds.append(ca.mtimes(Ji, ca.vertcat(Si, E)))
+            xp = xp + (h / 6.0) * (ks[0] + 2 * ks[1] + 2 * ks[2] + ks[3])
+            Sx = Sx + (h / 6.0) * (ds[0] + 2 * ds[1] + 2 * ds[2] + ds[3])
+        A = ca.densify(ca.vertcat(Sx, E))
         Mm = ca.DM(self.robot.Mm)
         G = ca.densify(
             ca.horzcat(
@@ -324,7 +330,7 @@ class Transition:
         step = ca.Function(
             "transition_step",
             [x, u],
-            [ca.vertcat(xp_next, th), A, G],
+            [ca.vertcat(xp, th), A, G],
             ["x", "u"],
             ["x_next", "A", "Gamma"],
         )
@@ -349,12 +355,15 @@ class Transition:
         th = x[4 * n :]
         zero = ca.MX.zeros(2 * n, 1)
 
-        def step(xp: ca.MX, h: float) -> ca.MX:
-            k1 = rhs(xp, u, th, zero)
-            k2 = rhs(xp + 0.5 * h * k1, u, th, zero)
-            k3 = rhs(xp + 0.5 * h * k2, u, th, zero)
-            k4 = rhs(xp + h * k3, u, th, zero)
-            return xp + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+        def step(xp: ca.MX, duration: float) -> ca.MX:
+            h = duration / self.substeps
+            for _ in range(self.substeps):
+                k1 = rhs(xp, u, th, zero)
+                k2 = rhs(xp + 0.5 * h * k1, u, th, zero)
+                k3 = rhs(xp + 0.5 * h * k2, u, th, zero)
+                k4 = rhs(xp + h * k3, u, th, zero)
+                xp = xp + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+            return xp
 
         F = ca.vertcat(step(x[: 4 * n], T), th)
         step_fn = self.rk4_step_function(expand=n <= EXPAND_MAX_JOINTS)

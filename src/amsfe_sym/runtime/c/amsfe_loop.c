@@ -49,6 +49,10 @@ struct amsfe_ctrl {
   int have_hold;   /* cascade: c_hold was taken */
   double *c_hold;  /* cascade: the motor's offset from qm_r at the first tick [n] */
   double *hold1, *hold0; /* the law's hold input: ones, zeros [n] */
+  int blending;    /* cascade: the blended start (control/blend.py) is on */
+  long blend_k0;   /* its start tick */
+  double blend_tb; /* its duration [s] */
+  double *blend_d0, *blend_d1, *refb; /* its offsets [n], [n]; the blended reference [5n] */
   double *vt_prev; /* printed laws: v_t(k-1) */
   int have_vt;
   double *prev_qm_d, *prev_qmd_d; /* truth-ct: the previous motor set point and rate */
@@ -70,8 +74,9 @@ static int ctrl_layout(amsfe_ctrl *c, char *base) {
                      &c->tau_max, &c->wf, &c->vmax, &c->u_max, &c->Mm, &c->Fm,
                      &c->Ks, &c->zeros, &c->u_prev, &c->vt_prev, &c->prev_qm_d,
                      &c->prev_qmd_d, &c->qmd_next, &c->Ksv, &c->b, &c->acc,
-                     &c->c_hold, &c->hold1, &c->hold0};
+                     &c->c_hold, &c->hold1, &c->hold0, &c->blend_d0, &c->blend_d1};
   for (size_t i = 0; i < sizeof(vecs) / sizeof(vecs[0]); ++i) *vecs[i] = DBL(&cv, n);
+  c->refb = DBL(&cv, 5 * n);
   c->theta0 = DBL(&cv, d.N - 4 * n + 1);
   c->ks_theta = (int *)carve(&cv, sizeof(int) * (size_t)n);
   c->cf = DBL(&cv, 2 * n);
@@ -111,7 +116,8 @@ static int ctrl_params_ok(const amsfe_ctrl_params *p) {
   for (int j = 0; j < n; ++j)
     if (p->ks_theta[j] < -1 || p->ks_theta[j] >= d.N - 4 * d.n) return 0;
   if (p->startup_converged && (isnan(p->ready_q_std) || !(p->ready_q_std > 0) ||
-                               isnan(p->ready_qd_std) || !(p->ready_qd_std > 0)))
+                               isnan(p->ready_qd_std) || !(p->ready_qd_std > 0) ||
+                               !(p->blend_accel > 0)))
     return 0;
   if (p->controller == AMSFE_CTRL_TRUTH_CT)
     return isfinite(p->link_bandwidth) && p->link_bandwidth > 0 &&
@@ -145,6 +151,7 @@ void amsfe_ctrl_reset(amsfe_ctrl *c) {
   c->started = 0;
   c->ready = 0;
   c->have_hold = 0;
+  c->blending = 0;
   c->have_vt = 0;
   c->have_prev = 0;
   c->prev_k = 0;
@@ -208,9 +215,52 @@ void amsfe_ctrl_observe(amsfe_ctrl *c, const double *P) {
   c->ready = ok;
 }
 
+/* control/blend.py: the r-th derivative of sum b_i s^i at s, Horner from the top. */
+static const double BLEND_B0[10] = {1, 0, 0, 0, 0, -126, 420, -540, 315, -70};
+static const double BLEND_B1[10] = {0, 1, 0, 0, 0, -70, 224, -280, 160, -35};
+static const double BLEND_A0 = 9.3720, BLEND_A1 = 6.1455;
+
+static double blend_poly(const double *b, int r, double s) {
+  double acc = 0.0;
+  for (int i = 9; i >= r; --i) {
+    double f = 1.0;
+    for (int m = i - r + 1; m <= i; ++m) f *= m;
+    acc = acc * s + b[i] * f;
+  }
+  return acc;
+}
+
+/* blend_time: the least Tb with |d0| A0 / Tb^2 + |d1| A1 / Tb <= accel on every joint */
+static double blend_time(const double *d0, const double *d1, long n, double accel) {
+  if (isinf(accel)) return 0.0;
+  double tb = 0.0;
+  for (long j = 0; j < n; ++j) {
+    double a = fabs(d0[j]), lin = fabs(d1[j]) * BLEND_A1;
+    double t = (lin + sqrt(lin * lin + 4.0 * accel * a * BLEND_A0)) / (2.0 * accel);
+    if (t > tb) tb = t;
+  }
+  return tb;
+}
+
+/* ref + blend_offsets(s, Tb, d0, d1) into c->refb */
+static const double *blended(amsfe_ctrl *c, long k, const double *ref) {
+  long n = c->d.n;
+  double s = (double)(k - c->blend_k0) * c->par.T, tb = c->blend_tb;
+  if (!(s < tb)) return ref;
+  double tau = s / tb, scale = 1.0;
+  for (int r = 0; r < 5; ++r) {
+    double p0 = blend_poly(BLEND_B0, r, tau), p1 = blend_poly(BLEND_B1, r, tau);
+    for (long j = 0; j < n; ++j)
+      c->refb[r * n + j] =
+          ref[r * n + j] + (c->blend_d0[j] * p0 + c->blend_d1[j] * tb * p1) / scale;
+    scale *= tb;
+  }
+  return c->refb;
+}
+
 /* _Cascade.torque: control_amsfe / control_dtsmc, with the start-up. */
-static int cascade(amsfe_ctrl *c, const double *lead0, const double *lead1, const double *ref,
-                   const double *z, double *u, amsfe_ctrl_out *out) {
+static int cascade(amsfe_ctrl *c, long k, const double *lead0, const double *lead1,
+                   const double *ref, const double *z, double *u, amsfe_ctrl_out *out) {
   long n = c->d.n;
   int dtsmc = c->par.controller == AMSFE_CTRL_DTSMC;
   const double *lt = c->par.controller == AMSFE_CTRL_DTSMC_EKF ? c->zeros : c->Lt;
@@ -239,6 +289,17 @@ static int cascade(amsfe_ctrl *c, const double *lead0, const double *lead1, cons
     if (gcall(&c->g, f, in, m, c->o, 8)) return AMSFE_ERR_NONFINITE;
   } else {
     *hold = c->hold0;
+    if (!c->started && c->par.startup_converged) {
+      /* the blended reference starts from the state the law acts on */
+      for (long j = 0; j < n; ++j) {
+        c->blend_d0[j] = lead0[j] - ref[j];
+        c->blend_d1[j] = lead0[n + j] - ref[n + j];
+      }
+      c->blend_k0 = k;
+      c->blend_tb = blend_time(c->blend_d0, c->blend_d1, n, c->par.blend_accel);
+      c->blending = 1;
+    }
+    if (c->blending) in[dtsmc ? 2 : 1] = blended(c, k, ref);
     if (gcall(&c->g, f, in, m, c->o, 8)) return AMSFE_ERR_NONFINITE;
     if (!c->started) { /* start at rest on the first trusted command */
       memcpy(c->cf, c->o[7], sizeof(double) * (size_t)n);
@@ -353,13 +414,13 @@ int amsfe_ctrl_torque(amsfe_ctrl *c, long k, const double *ref, const double *x_
   switch (ctl) {
     case AMSFE_CTRL_AMSFE:
     case AMSFE_CTRL_DTSMC_EKF:
-      st = cascade(c, x_hat, NULL, ref, z, u, out);
+      st = cascade(c, k, x_hat, NULL, ref, z, u, out);
       break;
     case AMSFE_CTRL_TRUTH:
-      st = cascade(c, x_true, NULL, ref, z, u, out);
+      st = cascade(c, k, x_true, NULL, ref, z, u, out);
       break;
     case AMSFE_CTRL_DTSMC:
-      st = cascade(c, z, c->theta0, ref, z, u, out);
+      st = cascade(c, k, z, c->theta0, ref, z, u, out);
       break;
     case AMSFE_CTRL_AMSFE_PAPER:
       st = printed(c, oracle ? x_true : x_hat, z, ref, u, out);

@@ -63,6 +63,10 @@ typedef struct {
    * trajectory where it was at the first tick, then start at rest on the first trusted command */
   int startup_converged;
   double ready_q_std, ready_qd_std; /* [rad], [rad/s] */
+  /* with startup_converged: the reference starts from the state the law acts on and joins
+   * the desired one within this offset acceleration [rad/s^2] (control/blend.py); INFINITY =
+   * no blend */
+  double blend_accel;
 } amsfe_ctrl_params;
 
 /* What a tick computed besides the torque. */

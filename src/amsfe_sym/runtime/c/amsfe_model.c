@@ -2,17 +2,18 @@
  * rk4 library; see docs/codegen.md, "Structure kept through generation").
  *
  * transition_step_chain(x, u) -> (x_next, A, Gamma) computes exactly what the generated
- * `transition_step` of the rk4 model computes (one classical Runge-Kutta step of the
- * continuous flexible-joint model over T with u held; A = dF/dx by forward sensitivities;
- * Gamma = dF/dw, eq. 4), but instead of one straight-line expression of the whole step
- * (four inlined stages, their jacobians and the dense products of the sensitivities) it
- * calls the generated stage `rk4_stage` (xp, u, theta) -> (k, J = dk/d[xp; theta], sparse)
- * four times and chains the sensitivities in the loops below:
+ * `transition_step` of the rk4 model computes (m = AMSFE_MODEL_SUBSTEPS classical
+ * Runge-Kutta steps of h = T / m of the continuous flexible-joint model over T with u held;
+ * A = dF/dx by forward sensitivities; Gamma = dF/dw, eq. 4), but instead of one
+ * straight-line expression of the whole step (four inlined stages per substep, their
+ * jacobians and the dense products of the sensitivities) it calls the generated stage
+ * `rk4_stage` (xp, u, theta) -> (k, J = dk/d[xp; theta], sparse) four times a substep and
+ * chains the sensitivities in the loops below, from xp_0 = xp, B_0 = I0:
  *
- *   xp_i = xp + c_i T k_{i-1},  S_i = I0 + c_i T D_{i-1}            (c = 0, 1/2, 1/2, 1)
+ *   xp_i = xp_s + c_i h k_{i-1},  S_i = B_s + c_i h D_{i-1}          (c = 0, 1/2, 1/2, 1)
  *   (k_i, J_i) = rk4_stage(xp_i, u, theta),  D_i = J_i [S_i; E]       (4n x N)
- *   xp+ = xp + T/6 (k_1 + 2 k_2 + 2 k_3 + k_4),  A = [I0 + T/6 (D_1 + 2 D_2 + 2 D_3 + D_4); E]
- *   Gamma = [A[:, qd] M(q)^-1,  A[:, qmd] / Mm,  [0; T I_p]]
+ *   xp_{s+1} = xp_s + h/6 (k_1 + 2 k_2 + 2 k_3 + k_4),  B_{s+1} = B_s + h/6 (D_1 + 2 D_2 + ...)
+ *   xp+ = xp_m,  A = [B_m; E],  Gamma = [A[:, qd] M(q)^-1,  A[:, qmd] / Mm,  [0; T I_p]]
  *
  * with I0 = [I_4n 0] and E = [0 I_p] (theta is constant).  J_i is kept in CasADi's compressed
  * column storage, so D_i costs nnz(J_i) N multiply-adds.  The code grows with the stage
@@ -51,10 +52,10 @@ static cint stage_nnz(const cint *sp) {
   return (sp[2] == 1 && sp[1] > 0) ? sp[0] * sp[1] : sp[2 + sp[1]];
 }
 
-/* Scratch doubles beyond the stage's own work: xi, k, kacc (NX each), S, D, Dacc (NX x NS
- * each), the stage's J (nnz), M^-1 (n x n). */
+/* Scratch doubles beyond the stage's own work: xs, xi, k, kacc (NX each), B, S, D, Dacc
+ * (NX x NS each), the stage's J (nnz), M^-1 (n x n). */
 static cint scratch_doubles(void) {
-  return 3 * NX + 3 * (cint)NX * NS + stage_nnz(rk4_stage_sparsity_out(1)) + NN * NN;
+  return 4 * NX + 4 * (cint)NX * NS + stage_nnz(rk4_stage_sparsity_out(1)) + NN * NN;
 }
 
 int transition_step_chain_work(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w) {
@@ -92,7 +93,7 @@ static void sparse_times(const cint *sp, const double *J, const double *S, doubl
 int transition_step_chain(const double **arg, double **res, cint *iw, double *w, int mem) {
   (void)mem;
   static const double c[4] = {0.0, 0.5, 0.5, 1.0}, wt[4] = {1.0, 2.0, 2.0, 1.0};
-  const double T = AMSFE_MODEL_T;
+  const double T = AMSFE_MODEL_T, h = AMSFE_MODEL_T / AMSFE_MODEL_SUBSTEPS;
   const double *x = arg[0], *u = arg[1], *th = x + NX;
   double *xn = res[0], *A = res[1], *G = res[2];
   const cint *sp = rk4_stage_sparsity_out(1);
@@ -100,39 +101,44 @@ int transition_step_chain(const double **arg, double **res, cint *iw, double *w,
   /* the tail of the argument/result pointer arrays and of w is ours; the stage gets the rest */
   const double **sarg = arg + 3;
   double **sres = res + 3;
-  double *xi = w, *k = xi + NX, *kacc = k + NX, *S = kacc + NX, *D = S + (cint)NX * NS;
-  double *Dacc = D + (cint)NX * NS, *J = Dacc + (cint)NX * NS, *Minv = J + nnz;
+  double *xs = w, *xi = xs + NX, *k = xi + NX, *kacc = k + NX, *B = kacc + NX;
+  double *S = B + (cint)NX * NS, *D = S + (cint)NX * NS, *Dacc = D + (cint)NX * NS;
+  double *J = Dacc + (cint)NX * NS, *Minv = J + nnz;
   double *sw_ = Minv + NN * NN;
 
-  memset(kacc, 0, sizeof(double) * NX);
-  memset(Dacc, 0, sizeof(double) * (size_t)NX * NS);
-  for (int i = 0; i < 4; ++i) {
-    /* the stage's point and its sensitivity S_i = I0 + c_i T D_{i-1} */
-    for (cint r = 0; r < NX; ++r) xi[r] = x[r] + (i ? c[i] * T * k[r] : 0.0);
-    for (cint col = 0; col < NS; ++col)
-      for (cint r = 0; r < NX; ++r)
-        S[col * NX + r] = (r == col ? 1.0 : 0.0) + (i ? c[i] * T * D[col * NX + r] : 0.0);
-    sarg[0] = xi, sarg[1] = u, sarg[2] = th;
-    sres[0] = k, sres[1] = J;
-    int status = rk4_stage(sarg, sres, iw, sw_, 0);
-    if (status) return status;
-    sparse_times(sp, J, S, D);
-    for (cint r = 0; r < NX; ++r) kacc[r] += wt[i] * k[r];
-    for (cint e = 0; e < (cint)NX * NS; ++e) Dacc[e] += wt[i] * D[e];
+  /* xs, B: the state and its sensitivity d xs / d x at the start of each substep */
+  for (cint r = 0; r < NX; ++r) xs[r] = x[r];
+  for (cint col = 0; col < NS; ++col)
+    for (cint r = 0; r < NX; ++r) B[col * NX + r] = (r == col ? 1.0 : 0.0);
+  for (int s = 0; s < AMSFE_MODEL_SUBSTEPS; ++s) {
+    memset(kacc, 0, sizeof(double) * NX);
+    memset(Dacc, 0, sizeof(double) * (size_t)NX * NS);
+    for (int i = 0; i < 4; ++i) {
+      /* the stage's point and its sensitivity S_i = B + c_i h D_{i-1} */
+      for (cint r = 0; r < NX; ++r) xi[r] = xs[r] + (i ? c[i] * h * k[r] : 0.0);
+      for (cint e = 0; e < (cint)NX * NS; ++e) S[e] = B[e] + (i ? c[i] * h * D[e] : 0.0);
+      sarg[0] = xi, sarg[1] = u, sarg[2] = th;
+      sres[0] = k, sres[1] = J;
+      int status = rk4_stage(sarg, sres, iw, sw_, 0);
+      if (status) return status;
+      sparse_times(sp, J, S, D);
+      for (cint r = 0; r < NX; ++r) kacc[r] += wt[i] * k[r];
+      for (cint e = 0; e < (cint)NX * NS; ++e) Dacc[e] += wt[i] * D[e];
+    }
+    for (cint r = 0; r < NX; ++r) xs[r] += (h / 6.0) * kacc[r];
+    for (cint e = 0; e < (cint)NX * NS; ++e) B[e] += (h / 6.0) * Dacc[e];
   }
   if (xn) {
-    for (cint r = 0; r < NX; ++r) xn[r] = x[r] + (T / 6.0) * kacc[r];
+    for (cint r = 0; r < NX; ++r) xn[r] = xs[r];
     for (cint r = NX; r < NS; ++r) xn[r] = x[r];
   }
-  /* A (NS x NS, column-major): the plant rows from the sensitivities, the theta rows E.
-   * Without an A output its plant rows go to S (no longer needed): Gamma needs only them. */
-  double *Ap = A ? A : S;
-  cint ld = A ? NS : NX;
-  for (cint col = 0; col < NS; ++col) {
-    for (cint r = 0; r < NX; ++r)
-      Ap[col * ld + r] = (r == col ? 1.0 : 0.0) + (T / 6.0) * Dacc[col * NX + r];
-    if (A)
+  /* A (NS x NS, column-major): the plant rows from the sensitivities B, the theta rows E.
+   * Without an A output Gamma reads the plant rows from B. */
+  if (A) {
+    for (cint col = 0; col < NS; ++col) {
+      for (cint r = 0; r < NX; ++r) A[col * NS + r] = B[col * NX + r];
       for (cint r = NX; r < NS; ++r) A[col * NS + r] = (r == col ? 1.0 : 0.0);
+    }
   }
   if (G) {
     /* Gamma (NS x (2n + p)), eq. (4): A[:, qd] M(q)^-1, A[:, qmd] / Mm, [0; T I_p] */
@@ -145,11 +151,11 @@ int transition_step_chain(const double **arg, double **res, cint *iw, double *w,
       double *Gl = G + j * NS, *Gm = G + (NN + j) * NS;
       for (cint l = 0; l < NN; ++l) {
         double m = Minv[j * NN + l]; /* M^-1[l, j] */
-        const double *Aqd = Ap + (NN + l) * ld;
-        for (cint r = 0; r < NX; ++r) Gl[r] += Aqd[r] * m;
+        const double *Bqd = B + (NN + l) * NX;
+        for (cint r = 0; r < NX; ++r) Gl[r] += Bqd[r] * m;
       }
-      const double *Aqmd = Ap + (3 * NN + j) * ld;
-      for (cint r = 0; r < NX; ++r) Gm[r] = Aqmd[r] / MM[j];
+      const double *Bqmd = B + (3 * NN + j) * NX;
+      for (cint r = 0; r < NX; ++r) Gm[r] = Bqmd[r] / MM[j];
     }
     for (cint t = 0; t < NP; ++t) G[(2 * NN + t) * NS + NX + t] = T;
   }

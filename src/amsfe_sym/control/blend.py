@@ -1,0 +1,78 @@
+"""A reference that starts from the arm's state: the cascades' blended start (issue 17).
+
+When a cascade starts (``startup = "converged"``: at the first tick its estimate is trusted),
+the desired trajectory q_d(t) is in general somewhere else than the arm, and moving at another
+rate.  Asking the sliding law to close that gap at once is what swings the joints at start-up
+(docs/control.md, "Start-up").  Instead, as an industrial controller ramps onto a path, the
+law tracks
+
+    q_r(t) = q_d(t) + delta(t - t0),   delta(s) = d0 b0(s / Tb) + d1 Tb b1(s / Tb)   (s < Tb)
+
+with d0 = q(t0) - q_d(t0), d1 = qd(t0) - qd_d(t0) from the state the law acts on, and
+b0, b1 the degree-9 polynomials on [0, 1] with b0(0) = 1, b1'(0) = 1, every other value and
+derivative up to the 4th zero at both ends: q_r starts at the arm's angle and rate with the
+reference's acceleration, jerk and snap, and joins q_d after Tb with every derivative the
+cascade feeds forward (up to the snap) continuous.  Tb is the shortest time whose offset
+acceleration stays below ``blend_accel`` [rad/s^2] on every joint:
+|delta''| <= |d0| A0 / Tb^2 + |d1| A1 / Tb with A0 = max|b0''|, A1 = max|b1''|.
+
+The C controller (``runtime/c/amsfe_loop.c``) evaluates the same polynomials in the same
+order; tests/test_compiled_loop.py holds the two equal tick by tick.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["B0", "B1", "blend_offsets", "blend_time"]
+
+FloatArray = NDArray[np.float64]
+
+#: Coefficients (power basis, t^0 .. t^9) of b0 and b1 (exact rationals).
+B0 = (1.0, 0.0, 0.0, 0.0, 0.0, -126.0, 420.0, -540.0, 315.0, -70.0)
+B1 = (0.0, 1.0, 0.0, 0.0, 0.0, -70.0, 224.0, -280.0, 160.0, -35.0)
+#: max over [0, 1] of |b0''| and |b1''| (at the roots of b''', rounded up).
+A0, A1 = 9.3720, 6.1455
+#: Derivatives of the offset fed to the law: q, qd, qdd, jerk, snap.
+ORDERS = 5
+
+
+def blend_time(d0: FloatArray, d1: FloatArray, accel: float) -> float:
+    """The blend's duration Tb [s]: the least with ``|d0| A0 / Tb^2 + |d1| A1 / Tb <=
+    accel`` on every joint (0 when there is no offset or ``accel`` is infinite)."""
+    if math.isinf(accel):
+        return 0.0
+    tb = 0.0
+    for a, b in zip(np.abs(d0), np.abs(d1), strict=True):
+        lin = b * A1
+        tb = max(tb, (lin + math.sqrt(lin * lin + 4.0 * accel * a * A0)) / (2.0 * accel))
+    return tb
+
+
+def _poly(c: tuple[float, ...], r: int, s: float) -> float:
+    """The r-th derivative of sum c_i s^i at s, by Horner from the top (the C does the same)."""
+    acc = 0.0
+    for i in range(len(c) - 1, r - 1, -1):
+        f = 1.0
+        for m in range(i - r + 1, i + 1):
+            f *= m
+        acc = acc * s + c[i] * f
+    return acc
+
+
+def blend_offsets(s: float, tb: float, d0: FloatArray, d1: FloatArray) -> FloatArray:
+    """delta and its first four time derivatives at s [s] after the start, stacked like the
+    law's reference input ``[q, qd, qdd, jerk, snap]`` (5n); zero once ``s >= tb``."""
+    n = d0.size
+    out = np.zeros(ORDERS * n)
+    if not s < tb:
+        return out
+    tau = s / tb
+    scale = 1.0
+    for r in range(ORDERS):
+        out[r * n : (r + 1) * n] = (d0 * _poly(B0, r, tau) + d1 * tb * _poly(B1, r, tau)) / scale
+        scale *= tb
+    return out
