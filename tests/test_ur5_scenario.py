@@ -54,9 +54,11 @@ def test_ur5_demo_converges_and_is_consistent(ur5_demo, estimator: str) -> None:
     assert th[0] == pytest.approx(2.5)
     assert abs(th[-1] - 2.0) < 1e-3, th[-1]
     assert np.sqrt(res.P_diag[-1, L["theta"]][0]) < 1e-3
-    # link angles: < 2 mrad RMSE on every joint over the last 80 % (measured 1.02 mrad)
-    assert max(s["estimation_rmse"]["q"]) < 2e-3, s["estimation_rmse"]["q"]
-    # consistency: mean NEES 31.7-31.8 at seed 0, 1 s (N = 25)
+    # link angles: < 3 mrad RMSE on every joint over the last 80 % (measured 2.32 mrad on
+    # wrist 3, 0.03-0.13 on the others; 1.02 before the model took 4 RK4 steps per T, when
+    # the filter was inconsistent under the sliding-mode laws: docs/ur5-estimation.md, 7)
+    assert max(s["estimation_rmse"]["q"]) < 3e-3, s["estimation_rmse"]["q"]
+    # consistency: mean NEES 31.8 (33.4 with the 4-step model) at seed 0, 1 s (N = 25)
     assert 20.0 < s["nees_mean"] < 45.0, s["nees_mean"]
     # the camera frames are delivered and (for the late-frame estimators) all applied
     assert s["counters"]["frames_delivered"] >= 29

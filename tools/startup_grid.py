@@ -1,5 +1,7 @@
 """The start-up on a grid of starts (docs/control.md, "Start-up"; issue 17 item 2): paper-sim,
-``amsfe``, 3 s, compiled loop, seed 0, both start-ups.
+``amsfe``, 3 s, compiled loop, seed 0, the start-ups: the paper's (``first``), the wait
+(``converged``), the wait with the blended reference (``blend``, ``blend_accel`` given by
+``--blend-accel``), and the oracles without and with the blend.
 
 Starts: the plant at 4 places (the paper's q0 = (0.5, 0.5), on the trajectory, and two
 others), at rest or moving with the trajectory's velocity (pi, 0) rad/s; the estimate off by
@@ -27,21 +29,23 @@ PLACES = {"paper": (0.5, 0.5), "on-path": (0.0, 1.0), "far": (-0.5, 1.5), "near"
 MOTION = {"rest": (0.0, 0.0), "moving": (float(np.pi), 0.0)}
 OFFSETS = {"++": (0.4, 0.4), "--": (-0.4, -0.4), "+-": (0.4, -0.4), "-+": (-0.4, 0.4)}
 ESTIMATORS = ("oosm", "encoders")
-STARTUPS = ("first", "converged", "oracle")  # oracle: the same law on the true state
+STARTUPS = ("first", "converged", "blend", "oracle", "oracle-blend")  # oracle: true state
 
 
-def one(job: tuple[str, str, str, str, str]) -> dict[str, Any]:
-    place, motion, offset, estimator, startup = job
+def one(job: tuple[str, str, str, str, str, float]) -> dict[str, Any]:
+    place, motion, offset, estimator, startup, accel = job
     from amsfe_sym.codegen import library_for
     from amsfe_sym.scenario import apply_sets, load_scenario
     from amsfe_sym.sim.loop import run
 
-    controller = "truth" if startup == "oracle" else "amsfe"
+    controller = "truth" if startup.startswith("oracle") else "amsfe"
     sc = load_scenario("paper-sim").with_overrides(
         controller=controller, estimator=estimator, duration=3.0, seed=0
     )
-    if startup != "oracle":
+    if startup in ("first", "converged"):
         sc = apply_sets(sc, [f"controller_gains.amsfe.startup={startup}"])
+    if startup.endswith("blend"):
+        sc = apply_sets(sc, [f"controller_gains.{controller}.blend_accel={accel}"])
     q0, qd0, dq = PLACES[place], MOTION[motion], OFFSETS[offset]
     sc = replace(
         sc,
@@ -72,11 +76,12 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--blend-accel", type=float, default=20.0)
     args = ap.parse_args(argv)
     jobs = [
-        j
+        (*j, args.blend_accel)
         for j in itertools.product(PLACES, MOTION, OFFSETS, ESTIMATORS, STARTUPS)
-        if j[4] != "oracle" or (j[2] == "++" and j[3] == "oosm")  # the oracle sees no estimate
+        if not j[4].startswith("oracle") or (j[2] == "++" and j[3] == "oosm")  # no estimate
     ]
     with ProcessPoolExecutor(args.workers) as ex:
         rows = list(ex.map(one, jobs, chunksize=4))
@@ -93,7 +98,8 @@ def main(argv: list[str] | None = None) -> int:
         }
     print(json.dumps(summary, indent=1))
     if args.out:
-        args.out.write_text(json.dumps({"summary": summary, "runs": rows}, indent=1) + "\n")
+        doc = {"blend_accel": args.blend_accel, "summary": summary, "runs": rows}
+        args.out.write_text(json.dumps(doc, indent=1) + "\n")
     return 0
 
 

@@ -31,6 +31,7 @@ import numpy as np
 VARIANTS = {
     "first": ["controller_gains.startup=first"],
     "converged": ["controller_gains.startup=converged"],
+    "blend": ["controller_gains.startup=converged", "controller_gains.blend_accel=20.0"],
 }
 
 
@@ -107,14 +108,18 @@ def summarize(rows: list[dict[str, Any]], seeds: list[int]) -> dict[str, Any]:
             "seeds_late_over_0_1": int((late > 0.1).sum()),
             "worst_seeds_j2": [s for _, s in sorted((x["rmse"][1], x["seed"]) for x in r)[-5:]],
         }
-    a = np.array([by["first"][s]["rmse"][1] for s in seeds])
-    b = np.array([by["converged"][s]["rmse"][1] for s in seeds])
-    fin = np.isfinite(a) & np.isfinite(b)
-    out["paired_j2"] = {
-        "converged_better_seeds": int((b < a).sum()),
-        "wilcoxon_p": float(wilcoxon(a[fin], b[fin]).pvalue) if fin.sum() > 10 else None,
-        "note": "diverged runs (inf) are excluded from the test only, counted above",
-    }
+    for name, (x, y) in {
+        "paired_j2": ("first", "converged"),
+        "paired_j2_blend": ("converged", "blend"),
+    }.items():
+        a = np.array([by[x][s]["rmse"][1] for s in seeds])
+        b = np.array([by[y][s]["rmse"][1] for s in seeds])
+        fin = np.isfinite(a) & np.isfinite(b)
+        out[name] = {
+            f"{y}_better_seeds": int((b < a).sum()),
+            "wilcoxon_p": float(wilcoxon(a[fin], b[fin]).pvalue) if fin.sum() > 10 else None,
+            "note": "diverged runs (inf) are excluded from the test only, counted above",
+        }
     return out
 
 
