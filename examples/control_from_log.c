@@ -16,7 +16,7 @@
  *   the estimator block of examples/estimate_from_log.c (params, qw, r_encoder, r_camera,
  *   x0, P0), then
  *   ctrl <controller> <T> <p> <qmd_next_hold> <state_true> <link_bandwidth> <motor_bandwidth>
- *        <startup_converged> <ready_q_std> <ready_qd_std> <blend_accel>
+ *        <startup_converged> <ready_q_std> <ready_qd_std> <blend_accel> <blend_rate>
  *   <name> <n numbers>   for h lam Lt eps phi wm tau_max wf vmax u_max Mm Fm Ks ks_theta
  *   theta_initial <p numbers>
  *   frame <exposure step> <u> <v>     (delivered at the next `step`; any number per step)
@@ -82,10 +82,10 @@ int main(int argc, char **argv) {
       if (strcmp(key, vec_names[i]) == 0) vi = i;
     if (est_block_line(&blk, &d, key, rest, &ok, &est)) {
     } else if (strcmp(key, "ctrl") == 0) {
-      ok = sscanf(rest, "%d %lf %lf %d %d %lf %lf %d %lf %lf %lf", &cp.controller, &cp.T, &cp.p,
-                  &cp.qmd_next_hold, &cp.state_true, &cp.link_bandwidth, &cp.motor_bandwidth,
-                  &cp.startup_converged, &cp.ready_q_std, &cp.ready_qd_std,
-                  &cp.blend_accel) == 11;
+      ok = sscanf(rest, "%d %lf %lf %d %d %lf %lf %d %lf %lf %lf %lf", &cp.controller, &cp.T,
+                  &cp.p, &cp.qmd_next_hold, &cp.state_true, &cp.link_bandwidth,
+                  &cp.motor_bandwidth, &cp.startup_converged, &cp.ready_q_std, &cp.ready_qd_std,
+                  &cp.blend_accel, &cp.blend_rate) == 12;
     } else if (vi >= 0) {
       ok = read_numbers(rest, vec[vi], n);
     } else if (strcmp(key, "ks_theta") == 0) {

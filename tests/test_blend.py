@@ -27,16 +27,17 @@ def test_the_basis_starts_as_asked_and_ends_flat(c: tuple[float, ...], start: li
 
 def test_the_second_derivative_bounds_hold() -> None:
     s = np.linspace(0, 1, 20001)
-    assert max(abs(_deriv(B0, 2, x)) for x in s) <= A0
-    assert max(abs(_deriv(B1, 2, x)) for x in s) <= A1
-    assert max(abs(_deriv(B0, 2, x)) for x in s) > A0 - 1e-3  # and are tight
+    for r in (2, 3, 4):
+        for c, bound in ((B0, A0[r - 2]), (B1, A1[r - 2])):
+            worst = max(abs(_deriv(c, r, x)) for x in s)
+            assert bound - 1e-2 < worst <= bound  # a bound, and tight
 
 
 def test_offsets_start_at_the_state_and_respect_the_acceleration_budget() -> None:
     d0, d1, accel = np.array([0.4, -0.5]), np.array([-3.0, 0.2]), 20.0
     tb = blend_time(d0, d1, accel)
     # the bound is tight on the worst joint
-    assert max(abs(d0) * A0 / tb**2 + abs(d1) * A1 / tb) == pytest.approx(accel)
+    assert max(abs(d0) * A0[0] / tb**2 + abs(d1) * A1[0] / tb) == pytest.approx(accel)
     o = blend_offsets(0.0, tb, d0, d1)
     np.testing.assert_allclose(o[:2], d0)
     np.testing.assert_allclose(o[2:4], d1)
@@ -52,6 +53,23 @@ def test_offsets_start_at_the_state_and_respect_the_acceleration_budget() -> Non
     s = 0.3 * tb
     fd = (blend_offsets(s + h, tb, d0, d1)[:2] - blend_offsets(s - h, tb, d0, d1)[:2]) / (2 * h)
     np.testing.assert_allclose(fd, blend_offsets(s, tb, d0, d1)[2:4], rtol=1e-6)
+
+
+def test_the_rate_bounds_jerk_and_snap() -> None:
+    d0, d1, accel, rate = np.array([0.05, 0.0]), np.array([0.5, -0.2]), 20.0, 10.0
+    short = blend_time(d0, d1, accel)
+    tb = blend_time(d0, d1, accel, rate)
+    assert tb > short  # a rate offset over a short blend would have a large snap
+    s = np.linspace(0, tb, 2000)
+    o = np.array([blend_offsets(x, tb, d0, d1) for x in s])
+    for r, lim in ((2, accel), (3, accel * rate), (4, accel * rate**2)):
+        assert np.abs(o[:, 2 * r : 2 * r + 2]).max() <= lim * (1 + 1e-9)
+    # and one of them is active
+    bounds = [
+        max(abs(d0) * A0[r - 2] / tb**r + abs(d1) * A1[r - 2] / tb ** (r - 1)) for r in (2, 3, 4)
+    ]
+    limits = [accel, accel * rate, accel * rate**2]
+    assert min(lim / b for b, lim in zip(bounds, limits, strict=True)) == pytest.approx(1.0)
 
 
 def test_no_budget_or_no_offset_is_no_blend() -> None:

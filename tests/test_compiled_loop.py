@@ -115,7 +115,13 @@ def test_compiled_controller_tick_by_tick(
     for name in CONTROLLERS:
         one = sc.with_overrides(controller=name)
         if name in ("amsfe", "dtsmc", "dtsmc-ekf", "truth"):
-            one = apply_sets(one, [f"controller_gains.{name}.blend_accel={blend}"])
+            one = apply_sets(
+                one,
+                [
+                    f"controller_gains.{name}.blend_accel={blend}",
+                    f"controller_gains.{name}.blend_rate=10.0",
+                ],
+            )
         ctrl, traj = build_controller(one, lib)
         cc = CompiledController(str(lib.library_path), controller_params(ctrl, lib), lib.n)
         waited: list[bool] = []
@@ -154,7 +160,13 @@ def test_blended_start_c_loop_equals_python_loop(
 
     sc, lib = paper_sim
     sc = sc.with_overrides(estimator="oosm", controller=controller, duration=1.0, seed=3)
-    sc = apply_sets(sc, [f"controller_gains.{controller}.blend_accel=20.0"])
+    sc = apply_sets(
+        sc,
+        [
+            f"controller_gains.{controller}.blend_accel=20.0",
+            f"controller_gains.{controller}.blend_rate=10.0",
+        ],
+    )
     c = run(sc, lib, runtime="compiled")
     assert_same_run(run(sc, lib, runtime="python", compiled_estimator=True), c)
     plain = run(
@@ -246,6 +258,7 @@ def test_the_c_api_refuses_bad_parameter_blocks(paper_sim: tuple[Scenario, Model
         replace(good, ready_q_std=float("nan")),
         replace(good, blend_accel=float("nan")),
         replace(good, blend_accel=-1.0),
+        replace(good, blend_rate=float("nan")),
     ]
     for params in bad:
         with pytest.raises(ConfigError):

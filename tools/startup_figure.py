@@ -1,7 +1,7 @@
 """Per-seed traces of the start-up (docs/control.md, "Start-up"): one paper-sim seed with the
-paper's start and with the start-up that waits for the estimate, compiled loop: the joints'
-tracking error, the link angles' posterior std against the threshold, and the torque with
-the actuator limit::
+paper's start, with the start-up that waits for the estimate, and with the wait and the
+blended reference (paper-sim's default), compiled loop: the joints' tracking error, the link
+angles' posterior std against the threshold, and the torque with the actuator limit::
 
     .venv/bin/python tools/startup_figure.py 1103 docs/figures/startup-seed-1103.png
 """
@@ -23,12 +23,17 @@ from amsfe_sym.sim.loop import run
 
 def main() -> int:
     seed, out = int(sys.argv[1]), sys.argv[2]
-    fig, axes = plt.subplots(3, 2, figsize=(12, 8), sharex=True)
-    for col, startup in enumerate(("first", "converged")):
+    fig, axes = plt.subplots(3, 3, figsize=(16, 8), sharex=True)
+    variants = {
+        "first": ["startup=first", "blend_accel=inf"],
+        "converged": ["startup=converged", "blend_accel=inf"],
+        "converged + blend": ["startup=converged", "blend_accel=20.0"],
+    }
+    for col, (startup, sets) in enumerate(variants.items()):
         sc = load_scenario("paper-sim").with_overrides(
             controller="amsfe", estimator="oosm", duration=3.0, seed=seed
         )
-        sc = apply_sets(sc, [f"controller_gains.amsfe.startup={startup}"])
+        sc = apply_sets(sc, [f"controller_gains.amsfe.{k}" for k in sets])
         res = run(sc, library_for(sc), runtime="compiled")
         n, t = res.lib.n, res.t
         e = res.x_true[:, :n] - res.q_des

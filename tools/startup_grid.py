@@ -32,20 +32,26 @@ ESTIMATORS = ("oosm", "encoders")
 STARTUPS = ("first", "converged", "blend", "oracle", "oracle-blend")  # oracle: true state
 
 
-def one(job: tuple[str, str, str, str, str, float]) -> dict[str, Any]:
-    place, motion, offset, estimator, startup, accel = job
+def one(job: tuple[str, str, str, str, str, float, float, int]) -> dict[str, Any]:
+    place, motion, offset, estimator, startup, accel, rate, seed = job
     from amsfe_sym.codegen import library_for
     from amsfe_sym.scenario import apply_sets, load_scenario
     from amsfe_sym.sim.loop import run
 
     controller = "truth" if startup.startswith("oracle") else "amsfe"
     sc = load_scenario("paper-sim").with_overrides(
-        controller=controller, estimator=estimator, duration=3.0, seed=0
+        controller=controller, estimator=estimator, duration=3.0, seed=seed
     )
     if startup in ("first", "converged"):
         sc = apply_sets(sc, [f"controller_gains.amsfe.startup={startup}"])
-    if startup.endswith("blend"):
-        sc = apply_sets(sc, [f"controller_gains.{controller}.blend_accel={accel}"])
+    blend = accel if startup.endswith("blend") else float("inf")
+    sc = apply_sets(
+        sc,
+        [
+            f"controller_gains.{controller}.blend_accel={blend}",
+            f"controller_gains.{controller}.blend_rate={rate}",
+        ],
+    )
     q0, qd0, dq = PLACES[place], MOTION[motion], OFFSETS[offset]
     sc = replace(
         sc,
@@ -77,16 +83,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--blend-accel", type=float, default=20.0)
+    ap.add_argument("--blend-rate", type=float, default=10.0)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--startups", nargs="+", default=list(STARTUPS))
     args = ap.parse_args(argv)
     jobs = [
-        (*j, args.blend_accel)
-        for j in itertools.product(PLACES, MOTION, OFFSETS, ESTIMATORS, STARTUPS)
+        (*j, args.blend_accel, args.blend_rate, args.seed)
+        for j in itertools.product(PLACES, MOTION, OFFSETS, ESTIMATORS, args.startups)
         if not j[4].startswith("oracle") or (j[2] == "++" and j[3] == "oosm")  # no estimate
     ]
     with ProcessPoolExecutor(args.workers) as ex:
         rows = list(ex.map(one, jobs, chunksize=4))
     summary = {}
-    for st in STARTUPS:
+    for st in args.startups:
         r = [x for x in rows if x["startup"] == st]
         summary[st] = {
             "starts": len(r),
@@ -98,7 +107,14 @@ def main(argv: list[str] | None = None) -> int:
         }
     print(json.dumps(summary, indent=1))
     if args.out:
-        doc = {"blend_accel": args.blend_accel, "summary": summary, "runs": rows}
+        doc = {
+            "command": "python tools/startup_grid.py " + " ".join(argv or sys.argv[1:]),
+            "seed": args.seed,
+            "blend_accel": args.blend_accel,
+            "blend_rate": args.blend_rate,
+            "summary": summary,
+            "runs": rows,
+        }
         args.out.write_text(json.dumps(doc, indent=1) + "\n")
     return 0
 

@@ -30,7 +30,7 @@ import numpy as np
 
 VARIANTS = {
     "first": ["controller_gains.startup=first"],
-    "converged": ["controller_gains.startup=converged"],
+    "converged": ["controller_gains.startup=converged", "controller_gains.blend_accel=inf"],
     "blend": ["controller_gains.startup=converged", "controller_gains.blend_accel=20.0"],
 }
 

@@ -2,7 +2,7 @@
 runs, ``amsfe``.  Group ``threshold`` (Python loop): the paper's start against waiting until
 the link angles' posterior std is below 0.10 / 0.05 / 0.03 / 0.02 rad (rates not waited for);
 group ``blend`` (compiled loop): the wait with the blended reference at offset accelerations
-``blend_accel`` of 5 .. 80 rad/s^2 and without it (``inf``)::
+``blend_accel`` [rad/s^2] and jerk/snap bandwidths ``blend_rate`` [rad/s], and without it::
 
     .venv/bin/python tools/startup_variants.py 700 740            # threshold
     .venv/bin/python tools/startup_variants.py 700 740 oosm blend
@@ -22,18 +22,42 @@ from amsfe_sym.sim.loop import run
 
 VARIANTS = {
     "old": ["controller_gains.amsfe.startup=first"],
-    "q10": ["controller_gains.amsfe.ready_q_std=0.10", "controller_gains.amsfe.ready_qd_std=1e9"],
-    "q05": ["controller_gains.amsfe.ready_q_std=0.05", "controller_gains.amsfe.ready_qd_std=1e9"],
-    "q03": ["controller_gains.amsfe.ready_q_std=0.03", "controller_gains.amsfe.ready_qd_std=1e9"],
-    "q02": ["controller_gains.amsfe.ready_q_std=0.02", "controller_gains.amsfe.ready_qd_std=1e9"],
+    "q10": [
+        "controller_gains.amsfe.ready_q_std=0.10",
+        "controller_gains.amsfe.ready_qd_std=1e9",
+        "controller_gains.amsfe.blend_accel=inf",
+    ],
+    "q05": [
+        "controller_gains.amsfe.ready_q_std=0.05",
+        "controller_gains.amsfe.ready_qd_std=1e9",
+        "controller_gains.amsfe.blend_accel=inf",
+    ],
+    "q03": [
+        "controller_gains.amsfe.ready_q_std=0.03",
+        "controller_gains.amsfe.ready_qd_std=1e9",
+        "controller_gains.amsfe.blend_accel=inf",
+    ],
+    "q02": [
+        "controller_gains.amsfe.ready_q_std=0.02",
+        "controller_gains.amsfe.ready_qd_std=1e9",
+        "controller_gains.amsfe.blend_accel=inf",
+    ],
 }
 BLEND = {
-    f"blend{a}-qd{v}": [
+    f"blend{a}-rate{r}": [
         f"controller_gains.amsfe.blend_accel={a}",
-        f"controller_gains.amsfe.ready_qd_std={v}",
+        f"controller_gains.amsfe.blend_rate={r}",
     ]
-    for v in ("inf", "0.2", "0.1")
-    for a in ("inf", "10", "20", "40", "80")
+    for a, r in [
+        ("inf", "inf"),
+        ("20.0", "inf"),
+        ("20.0", "20.0"),
+        ("20.0", "10.0"),
+        ("20.0", "5.0"),
+        ("40.0", "10.0"),
+        ("40.0", "5.0"),
+        ("10.0", "10.0"),
+    ]
 }
 
 

@@ -13,8 +13,10 @@ b0, b1 the degree-9 polynomials on [0, 1] with b0(0) = 1, b1'(0) = 1, every othe
 derivative up to the 4th zero at both ends: q_r starts at the arm's angle and rate with the
 reference's acceleration, jerk and snap, and joins q_d after Tb with every derivative the
 cascade feeds forward (up to the snap) continuous.  Tb is the shortest time whose offset
-acceleration stays below ``blend_accel`` [rad/s^2] on every joint:
-|delta''| <= |d0| A0 / Tb^2 + |d1| A1 / Tb with A0 = max|b0''|, A1 = max|b1''|.
+acceleration stays below ``blend_accel`` [rad/s^2] on every joint, and its jerk and snap
+below ``blend_accel * blend_rate`` and ``blend_accel * blend_rate^2`` (a short blend of a
+rate offset has a large snap, which the cascade feeds forward to the motor):
+|delta^(r)| <= |d0| A0_r / Tb^r + |d1| A1_r / Tb^(r-1), A0_r = max|b0^(r)|, A1_r = max|b1^(r)|.
 
 The C controller (``runtime/c/amsfe_loop.c``) evaluates the same polynomials in the same
 order; tests/test_compiled_loop.py holds the two equal tick by tick.
@@ -27,28 +29,66 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["B0", "B1", "blend_offsets", "blend_time"]
+__all__ = ["A0", "A1", "B0", "B1", "blend_offsets", "blend_time"]
 
 FloatArray = NDArray[np.float64]
 
 #: Coefficients (power basis, t^0 .. t^9) of b0 and b1 (exact rationals).
 B0 = (1.0, 0.0, 0.0, 0.0, 0.0, -126.0, 420.0, -540.0, 315.0, -70.0)
 B1 = (0.0, 1.0, 0.0, 0.0, 0.0, -70.0, 224.0, -280.0, 160.0, -35.0)
-#: max over [0, 1] of |b0''| and |b1''| (at the roots of b''', rounded up).
-A0, A1 = 9.3720, 6.1455
+#: max over [0, 1] of |b0^(r)| and |b1^(r)| for r = 2, 3, 4 (at the roots of b^(r+1),
+#: rounded up).
+A0 = (9.3720, 78.751, 622.54)
+A1 = (6.1455, 39.860, 332.92)
 #: Derivatives of the offset fed to the law: q, qd, qdd, jerk, snap.
 ORDERS = 5
 
 
-def blend_time(d0: FloatArray, d1: FloatArray, accel: float) -> float:
-    """The blend's duration Tb [s]: the least with ``|d0| A0 / Tb^2 + |d1| A1 / Tb <=
-    accel`` on every joint (0 when there is no offset or ``accel`` is infinite)."""
+def _bound(a: float, b: float, tb: float, r: int) -> float:
+    """|d0| A0_r / Tb^r + |d1| A1_r / Tb^(r-1), the bound on |delta^(r)| (the C computes the
+    same products in the same order)."""
+    p = 1.0
+    for _ in range(r - 1):
+        p *= tb
+    return a * A0[r - 2] / (p * tb) + b * A1[r - 2] / p
+
+
+def blend_time(d0: FloatArray, d1: FloatArray, accel: float, rate: float = math.inf) -> float:
+    """The blend's duration Tb [s]: the least (by bisection, to ~1e-15 s) with
+    |delta^(2)| <= accel, |delta^(3)| <= accel rate and |delta^(4)| <= accel rate^2 on every
+    joint; 0 when there is no offset or ``accel`` is infinite.
+
+    Args:
+        d0: The angle offsets at the start [rad], per joint.
+        d1: The rate offsets at the start [rad/s], per joint.
+        accel: The offset's acceleration budget [rad/s^2].
+        rate: The bandwidth [rad/s] that bounds its jerk and snap (inf: no bound).
+    """
     if math.isinf(accel):
         return 0.0
+    orders = (2,) if math.isinf(rate) else (2, 3, 4)
     tb = 0.0
     for a, b in zip(np.abs(d0), np.abs(d1), strict=True):
-        lin = b * A1
-        tb = max(tb, (lin + math.sqrt(lin * lin + 4.0 * accel * a * A0)) / (2.0 * accel))
+        if a == 0.0 and b == 0.0:
+            continue
+        for r in orders:
+            lim = accel
+            for _ in range(r - 2):
+                lim *= rate
+            if tb > 0.0 and not _bound(a, b, tb, r) > lim:
+                continue  # already long enough
+            lo, hi = tb, max(tb, 1e-3)
+            for _ in range(64):  # bracket
+                if not _bound(a, b, hi, r) > lim:
+                    break
+                lo, hi = hi, 2.0 * hi
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                if _bound(a, b, mid, r) > lim:
+                    lo = mid
+                else:
+                    hi = mid
+            tb = hi
     return tb
 
 

@@ -256,6 +256,7 @@ class _Cascade(_SlidingBase):
         "ready_q_std": 0.03,
         "ready_qd_std": float("inf"),
         "blend_accel": float("inf"),
+        "blend_rate": float("inf"),
     }
     #: The start-ups (docs/control.md, "Start-up"): ``"first"`` starts the command filter at
     #: rest on the first command, whatever the estimate (the form the paper's laws imply);
@@ -265,7 +266,8 @@ class _Cascade(_SlidingBase):
     #: filter held, no rate or acceleration feedforward from an unconverged command), then the
     #: filter starts at rest on the first trusted command, as it would with the true state.
     #: With ``blend_accel`` [rad/s^2] finite, the reference then starts from the state the law
-    #: acts on and joins q_d within that offset acceleration (:mod:`amsfe_sym.control.blend`).
+    #: acts on and joins q_d within that offset acceleration, and within ``blend_accel *
+    #: blend_rate`` of jerk and ``* blend_rate^2`` of snap (:mod:`amsfe_sym.control.blend`).
     STARTUPS: ClassVar[tuple[str, ...]] = ("first", "converged")
 
     def _extra_gains(self) -> tuple[str, ...]:
@@ -294,6 +296,7 @@ class _Cascade(_SlidingBase):
             self._scalar("ready_qd_std"),
         )
         self._blend_accel = self._scalar("blend_accel")
+        self._blend_rate = self._scalar("blend_rate")
         self._blend: tuple[int, float, FloatArray, FloatArray] | None = None  # k0, Tb, d0, d1
 
     def _scalar(self, key: str) -> float:
@@ -310,6 +313,7 @@ class _Cascade(_SlidingBase):
         own["startup_converged"] = self.gains["startup"] == "converged"
         own["ready_q_std"], own["ready_qd_std"] = self._ready_std
         own["blend_accel"] = self._blend_accel
+        own["blend_rate"] = self._blend_rate
         return own
 
     def _converged(self, P_diag: FloatArray | None) -> bool:
@@ -368,7 +372,8 @@ class _Cascade(_SlidingBase):
             if not self._started and self.gains["startup"] == "converged":
                 # the blended reference starts from the state the law acts on
                 d0, d1 = lead[0][:n] - ref[:n], lead[0][n : 2 * n] - ref[n : 2 * n]
-                self._blend = (k, blend_time(d0, d1, self._blend_accel), d0.copy(), d1.copy())
+                tb = blend_time(d0, d1, self._blend_accel, self._blend_rate)
+                self._blend = (k, tb, d0.copy(), d1.copy())
             if self._blend is not None:
                 k0, tb, d0, d1 = self._blend
                 ref = ref + blend_offsets((k - k0) * self.lib.T, tb, d0, d1)

@@ -88,6 +88,7 @@ class ControllerParams:
     ready_q_std: float = float("inf")
     ready_qd_std: float = float("inf")
     blend_accel: float = float("inf")
+    blend_rate: float = float("inf")
     _keep: list[Any] = field(default_factory=list, repr=False)
 
     def struct(self) -> ctypes.Structure:
@@ -130,6 +131,7 @@ class ControllerParams:
             float(self.ready_q_std),
             float(self.ready_qd_std),
             float(self.blend_accel),
+            float(self.blend_rate),
         )
 
 
@@ -401,7 +403,7 @@ def write_loop_log(
         f"{int(params.qmd_next_hold)} {int(params.state_true)} "
         f"{params.link_bandwidth!r} {params.motor_bandwidth!r} "
         f"{int(params.startup_converged)} {params.ready_q_std!r} {params.ready_qd_std!r} "
-        f"{params.blend_accel!r}"
+        f"{params.blend_accel!r} {params.blend_rate!r}"
     )
     n = params.u_max.size
     for key in ("h", "lam", "Lt", "eps", "phi", "wm", "tau_max", "wf", "vmax"):

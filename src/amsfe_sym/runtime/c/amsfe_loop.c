@@ -117,7 +117,7 @@ static int ctrl_params_ok(const amsfe_ctrl_params *p) {
     if (p->ks_theta[j] < -1 || p->ks_theta[j] >= d.N - 4 * d.n) return 0;
   if (p->startup_converged && (isnan(p->ready_q_std) || !(p->ready_q_std > 0) ||
                                isnan(p->ready_qd_std) || !(p->ready_qd_std > 0) ||
-                               !(p->blend_accel > 0)))
+                               !(p->blend_accel > 0) || !(p->blend_rate > 0)))
     return 0;
   if (p->controller == AMSFE_CTRL_TRUTH_CT)
     return isfinite(p->link_bandwidth) && p->link_bandwidth > 0 &&
@@ -218,7 +218,8 @@ void amsfe_ctrl_observe(amsfe_ctrl *c, const double *P) {
 /* control/blend.py: the r-th derivative of sum b_i s^i at s, Horner from the top. */
 static const double BLEND_B0[10] = {1, 0, 0, 0, 0, -126, 420, -540, 315, -70};
 static const double BLEND_B1[10] = {0, 1, 0, 0, 0, -70, 224, -280, 160, -35};
-static const double BLEND_A0 = 9.3720, BLEND_A1 = 6.1455;
+static const double BLEND_A0[3] = {9.3720, 78.751, 622.54};
+static const double BLEND_A1[3] = {6.1455, 39.860, 332.92};
 
 static double blend_poly(const double *b, int r, double s) {
   double acc = 0.0;
@@ -230,14 +231,41 @@ static double blend_poly(const double *b, int r, double s) {
   return acc;
 }
 
-/* blend_time: the least Tb with |d0| A0 / Tb^2 + |d1| A1 / Tb <= accel on every joint */
-static double blend_time(const double *d0, const double *d1, long n, double accel) {
+/* the bound on |delta^(r)|: |d0| A0_r / Tb^r + |d1| A1_r / Tb^(r-1) */
+static double blend_bound(double a, double b, double tb, int r) {
+  double p = 1.0;
+  for (int i = 0; i < r - 1; ++i) p *= tb;
+  return a * BLEND_A0[r - 2] / (p * tb) + b * BLEND_A1[r - 2] / p;
+}
+
+/* blend_time: the least Tb (bisection) with |delta^(2)| <= accel, |delta^(3)| <= accel rate,
+ * |delta^(4)| <= accel rate^2 on every joint */
+static double blend_time(const double *d0, const double *d1, long n, double accel,
+                         double rate) {
   if (isinf(accel)) return 0.0;
+  int rmax = isinf(rate) ? 2 : 4;
   double tb = 0.0;
   for (long j = 0; j < n; ++j) {
-    double a = fabs(d0[j]), lin = fabs(d1[j]) * BLEND_A1;
-    double t = (lin + sqrt(lin * lin + 4.0 * accel * a * BLEND_A0)) / (2.0 * accel);
-    if (t > tb) tb = t;
+    double a = fabs(d0[j]), b = fabs(d1[j]);
+    if (a == 0.0 && b == 0.0) continue;
+    for (int r = 2; r <= rmax; ++r) {
+      double lim = accel;
+      for (int i = 0; i < r - 2; ++i) lim *= rate;
+      if (tb > 0.0 && !(blend_bound(a, b, tb, r) > lim)) continue;
+      double lo = tb, hi = tb > 1e-3 ? tb : 1e-3;
+      for (int i = 0; i < 64; ++i) {
+        if (!(blend_bound(a, b, hi, r) > lim)) break;
+        lo = hi, hi = 2.0 * hi;
+      }
+      for (int i = 0; i < 60; ++i) {
+        double mid = 0.5 * (lo + hi);
+        if (blend_bound(a, b, mid, r) > lim)
+          lo = mid;
+        else
+          hi = mid;
+      }
+      tb = hi;
+    }
   }
   return tb;
 }
@@ -296,7 +324,8 @@ static int cascade(amsfe_ctrl *c, long k, const double *lead0, const double *lea
         c->blend_d1[j] = lead0[n + j] - ref[n + j];
       }
       c->blend_k0 = k;
-      c->blend_tb = blend_time(c->blend_d0, c->blend_d1, n, c->par.blend_accel);
+      c->blend_tb =
+          blend_time(c->blend_d0, c->blend_d1, n, c->par.blend_accel, c->par.blend_rate);
       c->blending = 1;
     }
     if (c->blending) in[dtsmc ? 2 : 1] = blended(c, k, ref);

@@ -65,8 +65,9 @@ typedef struct {
   double ready_q_std, ready_qd_std; /* [rad], [rad/s] */
   /* with startup_converged: the reference starts from the state the law acts on and joins
    * the desired one within this offset acceleration [rad/s^2] (control/blend.py); INFINITY =
-   * no blend */
-  double blend_accel;
+   * no blend; its jerk and snap stay below blend_accel * blend_rate and * blend_rate^2
+   * [rad/s]; INFINITY = no bound */
+  double blend_accel, blend_rate;
 } amsfe_ctrl_params;
 
 /* What a tick computed besides the torque. */
