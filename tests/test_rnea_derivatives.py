@@ -18,6 +18,7 @@ from amsfe_sym.load import Robot, load_robot
 from amsfe_sym.load.spec import default_spec
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
 from amsfe_sym.symbolic.rnea_derivatives import rnea_derivatives
+from amsfe_sym.symbolic.rnea_taylor import rnea_jet
 from amsfe_sym.symbolic.transition import Transition
 
 from .conftest import SHIPPED, erd_urdf
@@ -184,3 +185,29 @@ def test_stage_analytic_equals_reverse_ad(name: str) -> None:
         assert rel_err(np.array(J1), np.array(J2)) <= 1e-12
     with pytest.raises(ValueError, match="stage_derivative"):
         Transition(tree, "rk4", 3, stage_derivative="forward")
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_rnea_jet_equals_ad_time_derivatives(name: str) -> None:
+    """RNEA on Taylor polynomials (the motor reference's derivatives) equals nested
+    forward-mode AD of RNEA along the trajectory (the former implementation)."""
+    robot = load_robot(name)
+    tree = RigidBodyTree(robot)
+    n, p = robot.n, robot.p
+    ref, th = ca.SX.sym("ref", 5 * n), ca.SX.sym("theta", p)
+    rq, rqd, rqdd, rj, rs = (ref[i * n : (i + 1) * n] for i in range(5))
+    jet = ca.Function(
+        "jet", [ref, th], rnea_jet(tree, [rq, rqd, rqdd], [rqd, rqdd, rj], [rqdd, rj, rs], th)
+    )
+    y, yd = ca.SX.sym("y", 3 * n), ca.SX.sym("yd", 3 * n)
+    tau = tree.rnea(y[:n], y[n : 2 * n], y[2 * n :], th)
+    d1 = ca.jtimes(tau, y, yd)
+    d2 = ca.jtimes(d1, y, yd) + ca.jtimes(d1, yd, ca.vertcat(rqdd, rj, rs))
+    at = [ca.vertcat(rq, rqd, rqdd), ca.vertcat(rqd, rqdd, rj)]
+    ad = ca.Function("ad", [ref, th], ca.substitute([tau, d1, d2], [y, yd], at))
+    rng = np.random.default_rng(17)
+    for _ in range(10):
+        r = rng.uniform(-2.0, 2.0, 5 * n)
+        t = (robot.theta_true + 1.0) * rng.uniform(0.5, 1.5, p)
+        for a, b in zip(jet(r, t), ad(r, t), strict=True):
+            assert rel_err(np.array(a), np.array(b), floor=1.0) <= 1e-12
