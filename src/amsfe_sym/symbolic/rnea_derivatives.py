@@ -72,7 +72,11 @@ def _sym_variation(pi: ca.SX, v: ca.SX) -> ca.SX:
     W, L, C = ca.skew(v[3:6]), ca.skew(v[0:3]), ca.skew(c)
     CW = ca.mtimes(C, W)
     P = ca.blockcat([[m * W, m * L - CW], [CW, ca.mtimes(C, L) + ca.mtimes(rot, W)]])
-    return P + P.T
+    out = ca.SX.zeros(6, 6)  # the same node above and below the diagonal: 21 sums, not 36
+    for r in range(6):
+        for c in range(r + 1):
+            out[r, c] = out[c, r] = P[r, c] + P[c, r]
+    return out
 
 
 def _force_cross_matrix(h: ca.SX, d: ca.SX) -> ca.SX:
