@@ -4,8 +4,9 @@ Carpentier and Mansard, "Analytical Derivatives of Rigid Body Dynamics Algorithm
 2018); Pinocchio's ``computeRNEADerivatives`` (``rnea-derivatives.hxx``).  One forward pass
 and one backward pass over the tree, in the world frame, share the kinematics: every
 quantity of body k is a 6-vector or a 6x6 matrix, and each entry of the n x n outputs is a
-couple of 6-vector dot products, so the expression grows ~n^2 (the size of the outputs)
-instead of the ~n^3 of n reverse-mode sweeps of the whole RNEA expression.
+couple of 6-vector dot products, instead of n reverse-mode sweeps of the whole RNEA
+expression (the bench chains of ``amsfe bench``, SX instructions with CSE: 6.0k against
+7.2k at 7 joints, 13.3k against 23.0k at 12; the Panda 6.4k against 10.1k).
 
 Notation (world frame, motions ``[v; w]``, forces ``[f; tau]``, :mod:`.spatial`): ``S_k``
 the joint's motion axis, ``v_k``, ``a_k`` the body's velocity and acceleration (``a_0 = -g``:
@@ -14,7 +15,8 @@ gravity as a fictitious acceleration), ``Y_k`` its spatial inertia, ``h_k = Y_k 
 ``f_k`` over the subtree of i (world-frame quantities add without transforms) and
 ``tau_i = S_i . F_i``.  Moving ``q_j`` moves the subtree of j rigidly by the twist ``S_j``,
 which changes every world quantity ``X`` of it by ``S_j x X`` and cancels in ``tau``; what is
-left (derived in docs/codegen.md) are, per joint j,
+left (Carpentier and Mansard sec. IV; the Leibniz and Jacobi identities of the cross
+products) are, per joint j,
 
 - ``dV_j = v_p(j) x S_j``, the non-rigid change of the subtree's velocities per ``q_j``;
 - ``dA_j = a_p(j) x S_j + v_p(j) x dV_j``, of their accelerations;
