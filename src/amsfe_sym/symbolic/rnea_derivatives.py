@@ -75,9 +75,9 @@ def _sym_variation(pi: ca.SX, v: ca.SX) -> ca.SX:
     CW = ca.mtimes(C, W)
     P = ca.blockcat([[m * W, m * L - CW], [CW, ca.mtimes(C, L) + ca.mtimes(rot, W)]])
     out = ca.SX.zeros(6, 6)  # the same node above and below the diagonal: 21 sums, not 36
-    for r in range(6):
-        for c in range(r + 1):
-            out[r, c] = out[c, r] = P[r, c] + P[c, r]
+    for row in range(6):
+        for col in range(row + 1):
+            out[row, col] = out[col, row] = P[row, col] + P[col, row]
     return out
 
 
