@@ -44,8 +44,14 @@ import casadi as ca
 
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
 from amsfe_sym.symbolic.linalg import ldl_solve
+from amsfe_sym.symbolic.rnea_derivatives import rnea_derivatives
 
-__all__ = ["EXPAND_MAX_JOINTS", "StateLayout", "Transition", "with_residual"]
+__all__ = ["EXPAND_MAX_JOINTS", "STAGE_DERIVATIVES", "StateLayout", "Transition", "with_residual"]
+
+#: How :meth:`Transition.rk4_stage_function` builds the stage's dynamics derivative
+#: dRNEA/dz: ``"analytic"`` (one recursive pass, :mod:`.rnea_derivatives`; the default) or
+#: ``"reverse_ad"`` (n reverse-mode sweeps of the RNEA expression, kept for comparison).
+STAGE_DERIVATIVES = ("analytic", "reverse_ad")
 
 #: Up to this many joints the rk4 ``transition_step`` is expanded into SX (straight-line C)
 #: and the C estimators call it; beyond, it is an MX graph over the generated stage (the
@@ -117,9 +123,19 @@ class Transition:
         tree: The SX rigid-body tree.
         integrator: ``"paper"`` or ``"semi_implicit"``.
         inverse_iterations: Unrolled chord steps in the inverse.
+        stage_derivative: One of :data:`STAGE_DERIVATIVES`.
     """
 
-    def __init__(self, tree: RigidBodyTree, integrator: str, inverse_iterations: int) -> None:
+    def __init__(
+        self,
+        tree: RigidBodyTree,
+        integrator: str,
+        inverse_iterations: int,
+        stage_derivative: str = "analytic",
+    ) -> None:
+        if stage_derivative not in STAGE_DERIVATIVES:
+            raise ValueError(f"stage_derivative must be one of {STAGE_DERIVATIVES}")
+        self.stage_derivative = stage_derivative
         self.tree = tree
         self.robot = tree.robot
         self.layout = StateLayout(tree.n, tree.p)
@@ -241,7 +257,9 @@ class Transition:
         linear).  The acceleration rows use the inverse-dynamics derivative instead of
         differentiating through the LDL^T solve: ``M(q) qdd + b(q, qd) = Ks (qm - q)``
         differentiated at fixed ``qdd`` gives ``dqdd/dz = M^-1 (d(Ks (qm - q))/dz -
-        dRNEA(q, qd, a)/dz |_{a = qdd})`` (DESIGN: half the code of the direct jacobian).
+        dRNEA(q, qd, a)/dz |_{a = qdd})`` (DESIGN: half the code of the direct jacobian),
+        with dRNEA/dz from :mod:`.rnea_derivatives` (``stage_derivative="analytic"``) or by
+        reverse-mode AD (``"reverse_ad"``).
         """
         if "rk4_stage" in self._cache:
             return self._cache["rk4_stage"]
@@ -250,15 +268,8 @@ class Transition:
         f = self.plant_rhs(xp, u, th, ca.SX.zeros(2 * n, 1))
         z = ca.vertcat(xp, th)
         q, qd, qm = xp[0:n], xp[n : 2 * n], xp[2 * n : 3 * n]
-        a = ca.SX.sym("a", n)
-        # dRNEA/dz by reverse mode (n adjoint sweeps: fewer operations than forward mode's
-        # one sweep per column of z, measured 10.1k vs 12.1k on the Panda), projected on the
-        # structural sparsity (RNEA does not depend on qm, qmd)
-        rnea = self.tree.rnea(q, qd, a, th)
-        d_rnea = ca.project(ca.jtimes(rnea, z, ca.SX.eye(n), True).T, ca.jacobian_sparsity(rnea, z))
-        dtau = ca.jacobian(self.stiffness(th) * (qm - q), z) - ca.substitute(
-            d_rnea, a, f[n : 2 * n]
-        )
+        d_rnea = self._rnea_derivative(q, qd, f[n : 2 * n], th, z)
+        dtau = ca.jacobian(self.stiffness(th) * (qm - q), z) - d_rnea
         dqdd = ldl_solve(self.tree.mass_matrix(q, th), ca.densify(dtau))
         rows = ca.vertcat(f[0:n], f[2 * n :])  # qd, qmd, qmdd: linear in z
         J_lin = ca.jacobian(rows, z)
@@ -268,6 +279,25 @@ class Transition:
         )
         self._cache["rk4_stage"] = fn
         return fn
+
+    def _rnea_derivative(self, q: ca.SX, qd: ca.SX, qdd: ca.SX, th: ca.SX, z: ca.SX) -> ca.SX:
+        """dRNEA(q, qd, qdd, theta)/dz (n x (4n + p)) at the given qdd, projected on the
+        structural sparsity of RNEA (it depends on neither qm nor qmd)."""
+        n = self.tree.n
+        a = ca.SX.sym("a", n)
+        rnea = self.tree.rnea(q, qd, a, th)
+        pattern = ca.jacobian_sparsity(rnea, z)
+        if self.stage_derivative == "reverse_ad":
+            # n adjoint sweeps of the whole RNEA expression (fewer operations than forward
+            # mode's one sweep per column of z: 10.1k vs 12.1k on the Panda)
+            d = ca.jtimes(rnea, z, ca.SX.eye(n), True).T
+            return ca.project(ca.substitute(d, a, qdd), pattern)
+        # one recursive pass (Carpentier and Mansard, RSS 2018): chain of 12 joints 13.3k
+        # instructions against 23.0k, Panda 6.4k against 10.1k (the stage 27.1k against 35.7k
+        # and 10.8k against 13.8k)
+        dq, dv, dth = rnea_derivatives(self.tree, q, qd, qdd, th)
+        d = ca.horzcat(dq, dv, ca.SX(n, 2 * n), dth)
+        return ca.project(d, pattern)
 
     def rk4_minv_function(self) -> ca.Function:
         """``(q[n], theta[p]) -> M(q, theta)^-1`` (SX, LDL^T of the CRBA mass matrix), the
