@@ -16,6 +16,7 @@ older than the history kept, is rejected with a logged warning and counted in th
 from __future__ import annotations
 
 import logging
+import math
 import operator
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
@@ -250,6 +251,9 @@ class Estimator(ABC):
         self.k0: int = self.k
         self._gate_encoder = gate_threshold(config.encoder_gate_probability, int(encoder.dim))
         self._gate_camera = gate_threshold(config.gate_probability, int(camera.dim))
+        # with the gate off: the frame fused with the largest NIS beyond the default gate's
+        self._ungated_outlier: tuple[int, float] | None = None  # (kappa, NIS)
+        self._outlier_nis = gate_threshold(DEFAULT_CONFIG.gate_probability, int(camera.dim))
         nu = getattr(model, "nu", None)
         self._nu: int | None = nu if isinstance(nu, int) else None
         self._setup()
@@ -295,11 +299,46 @@ class Estimator(ABC):
             report.rejections.append("encoder measurement holds NaN or inf")
             z_enc = None
         usable = self._screen_frames(checked, k_new, report)
-        self._step(StepInputs(u_arr, z_enc, usable), report)
-        self._seen.update(report.used)
-        self.k = k_new
-        self._check_covariance()
+        try:
+            self._step(StepInputs(u_arr, z_enc, usable), report)
+            self._seen.update(report.used)
+            self._note_ungated_outliers(report)
+            self.k = k_new
+            self._check_covariance()
+        except EstimatorError as exc:
+            raise self._with_cause(exc, k_new) from exc
         return report
+
+    def _note_ungated_outliers(self, report: StepReport) -> None:
+        """With the camera gate off, remember the frame fused with the largest NIS beyond
+        what the default gate accepts: an EKF cannot fuse a thousand-sigma innovation (the
+        linearised update moves the state far outside where it holds, the parameters to
+        unphysical values), and a later breakdown is then reported with it as the cause."""
+        if self._gate_camera != math.inf:
+            return
+        for kappa, nis in zip(report.used, report.frame_nis, strict=False):
+            worst = self._ungated_outlier[1] if self._ungated_outlier else self._outlier_nis
+            if nis > worst:
+                self._ungated_outlier = (kappa, float(nis))
+
+    def _with_cause(self, exc: EstimatorError, k: int) -> EstimatorError:
+        """``exc`` itself, or, after an outlier fused with the gate off, one line that names
+        that frame as the cause and the fix."""
+        if self._ungated_outlier is None:
+            return exc
+        kappa, nis = self._ungated_outlier
+        found = str(exc).split(". Fix:")[0]
+        return EstimatorError(
+            describe(
+                f"{self.name} at step {k}",
+                "a usable estimate",
+                f"it broke down ({found}) after camera frame kappa={kappa} was fused with "
+                f"NIS {nis:.3g} ({math.sqrt(nis):.3g} standard deviations) because the camera "
+                "gate is off (gate_probability = 0 fuses every outlier)",
+                "turn the gate on (filter.gate_probability = 0.9999, the default) or remove "
+                "the outlier from the data",
+            )
+        )
 
     def estimate(self) -> tuple[FloatArray, FloatArray]:
         """Return copies of the current posterior ``(x(k|k), P(k|k))``."""

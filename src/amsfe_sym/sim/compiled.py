@@ -163,12 +163,18 @@ def run_compiled(scenario: Scenario, lib: ModelLibrary, progress: bool = False) 
     if state.status < 0:
         what = sim.status_string(state.status)
         cls = MeasurementError if state.plant_nonfinite else EstimatorError
+        fix = "run with --runtime python to see where the reference fails"
+        if cls is EstimatorError and not sc.filter.gate_probability:
+            fix += (
+                " (the camera gate is off, gate_probability = 0: an outlier fused unchecked is "
+                "a likely cause; turn the gate on)"
+            )
         raise cls(
             describe(
                 f"compiled run of {sc.name} at step {state.k}",
                 "a usable numerical result",
                 f"status {state.status}: {what}",
-                "run with --runtime python to see where the reference fails",
+                fix,
             )
         )
     last = int(state.ticks_done)
