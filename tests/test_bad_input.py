@@ -49,6 +49,10 @@ CASES: list[tuple[str, dict[str, str], list[str], list[str]]] = [
     ("duration_inf", {}, ["simulate", "--duration", "inf"], ["--duration", "'inf'"]),
     ("duration_zero", {}, ["simulate", "--duration", "0"], ["--duration", "> 0", "'0'"]),
     ("duration_negative", {}, ["simulate", "--duration", "-2"], ["--duration", "'-2'"]),
+    # shorter than one period (summary.json held NaN), or records beyond memory (a 74 GiB
+    # allocation traceback): refused before anything is built, with the bytes
+    ("duration_tiny", {}, ["simulate", "--duration", "1e-9"], ["duration", "T = 0.001", "1e-09"]),
+    ("duration_huge", {}, ["simulate", "--duration", "1e7"], ["duration", "GiB", "bytes"]),
     ("check_samples_zero", {}, ["check", "--samples", "0"], ["--samples", ">= 1", "cannot fail"]),
     ("check_samples_negative", {}, ["check", "--samples", "-3"], ["--samples", "'-3'"]),
     ("check_seed_text", {}, ["check", "--seed", "x"], ["--seed", "'x'"]),
