@@ -138,8 +138,7 @@ def run_ticks(sc: Scenario, T: float, n: int, N: int) -> int:
                 f"{where}: duration",
                 f"records of at most {MAX_RECORD_BYTES / 2**30:.0f} GiB "
                 f"(at most {longest:.6g} s at T = {T:g} s)",
-                f"{sc.duration!r} s = {K} ticks, {need / 2**30:.3g} GiB of records "
-                f"({need} bytes)",
+                f"{sc.duration!r} s = {K} ticks, {need / 2**30:.3g} GiB of records ({need} bytes)",
                 "simulate a shorter time, or split the run",
             )
         )

@@ -68,8 +68,9 @@ def run(
 
     Raises:
         ConfigError: a setting the builders refuse, a duration shorter than one period or
-            whose records would not fit :data:`~amsfe_sym.scenario.MAX_RECORD_BYTES`.  A diverging closed loop is not an
-            error: the run stops there and ``RunResult.diverged_at`` says when.
+            whose records would not fit :data:`~amsfe_sym.scenario.MAX_RECORD_BYTES`.  A
+            diverging closed loop is not an error: the run stops there and
+            ``RunResult.diverged_at`` says when.
     """
     if runtime not in RUNTIMES:
         raise ConfigError(
