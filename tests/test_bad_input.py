@@ -49,6 +49,25 @@ CASES: list[tuple[str, dict[str, str], list[str], list[str]]] = [
     ("duration_inf", {}, ["simulate", "--duration", "inf"], ["--duration", "'inf'"]),
     ("duration_zero", {}, ["simulate", "--duration", "0"], ["--duration", "> 0", "'0'"]),
     ("duration_negative", {}, ["simulate", "--duration", "-2"], ["--duration", "'-2'"]),
+    # a NaN or inf initial state (was run, and reported as "the true state diverged")
+    (
+        "toml_q0_nan",
+        {"s.toml": _scenario(q0="[nan, 0.5]")},
+        ["simulate", "s.toml"],
+        ["[plant] q0", "finite", "nan"],
+    ),
+    (
+        "toml_estimate_qd_inf",
+        {"s.toml": _scenario(qd="[inf, 0.0]")},
+        ["simulate", "s.toml"],
+        ["[estimate0] qd", "finite", "inf"],
+    ),
+    (
+        "set_q0_nan",
+        {},
+        ["simulate", "--set", "plant.q0=[nan, 0.5]"],
+        ["[plant] q0", "finite", "nan"],
+    ),
     # shorter than one period (summary.json held NaN), or records beyond memory (a 74 GiB
     # allocation traceback): refused before anything is built, with the bytes
     ("duration_tiny", {}, ["simulate", "--duration", "1e-9"], ["duration", "T = 0.001", "1e-09"]),
