@@ -251,8 +251,7 @@ class Estimator(ABC):
         self.k0: int = self.k
         self._gate_encoder = gate_threshold(config.encoder_gate_probability, int(encoder.dim))
         self._gate_camera = gate_threshold(config.gate_probability, int(camera.dim))
-        # with the gate off: the frame fused with the largest NIS beyond the default gate's
-        self._ungated_outlier: tuple[int, float] | None = None  # (kappa, NIS)
+        self._ungated_outlier: tuple[int, float] | None = None  # (kappa, NIS), gate off
         self._outlier_nis = gate_threshold(DEFAULT_CONFIG.gate_probability, int(camera.dim))
         nu = getattr(model, "nu", None)
         self._nu: int | None = nu if isinstance(nu, int) else None
@@ -310,23 +309,18 @@ class Estimator(ABC):
         return report
 
     def _note_ungated_outliers(self, report: StepReport) -> None:
-        """With the camera gate off, remember the frame fused with the largest NIS beyond
-        what the default gate accepts: an EKF cannot fuse a thousand-sigma innovation (the
-        linearised update moves the state far outside where it holds, the parameters to
-        unphysical values), and a later breakdown is then reported with it as the cause."""
-        if self._gate_camera != math.inf:
-            return
+        """Gate off: note the frame fused with the largest NIS beyond the default gate's, the
+        cause to name if the filter breaks down (docs/estimation-algorithms.md)."""
         for kappa, nis in zip(report.used, report.frame_nis, strict=False):
             worst = self._ungated_outlier[1] if self._ungated_outlier else self._outlier_nis
-            if nis > worst:
+            if self._gate_camera == math.inf and nis > worst:
                 self._ungated_outlier = (kappa, float(nis))
 
     def _with_cause(self, exc: EstimatorError, k: int) -> EstimatorError:
-        """``exc`` itself, or, after an outlier fused with the gate off, one line that names
-        that frame as the cause and the fix."""
-        if self._ungated_outlier is None:
+        """``exc``, or one line naming the outlier fused with the gate off and the fix."""
+        if (outlier := self._ungated_outlier) is None:
             return exc
-        kappa, nis = self._ungated_outlier
+        kappa, nis = outlier
         found = str(exc).split(". Fix:")[0]
         return EstimatorError(
             describe(
