@@ -439,3 +439,11 @@ def test_a_damaged_table_or_part_is_named_and_repair_rebuilds(
     again = pd.read_parquet(out / RESULTS)
     assert len(again) == 4 and set(again.status) == {"ok"} and not (out / PARTS).exists()
     _same_rows(again, table)
+    # a sweep.json cut short: named (not "another base scenario"); --repair keeps the rows
+    meta = out / "sweep.json"
+    meta.write_text(meta.read_text()[:100])
+    assert main([*args, "--no-plots"]) == 2
+    err = capsys.readouterr().err
+    assert "sweep.json" in err and "--repair" in err and err.count("\n") == 1, err
+    assert main([*args, "--no-plots", "--repair"]) == 0
+    assert "0 runs" in capsys.readouterr().out and meta.is_file()

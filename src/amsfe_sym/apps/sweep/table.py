@@ -15,6 +15,7 @@ whose rows were lost are run again by the next sweep.
 
 from __future__ import annotations
 
+import json
 import os
 import time
 from collections.abc import Mapping, Sequence
@@ -26,11 +27,22 @@ from pyarrow import ArrowException
 
 from amsfe_sym.errors import RunFolderError, describe
 
-__all__ = ["DAMAGED", "PARTS", "RESULTS", "merge_table", "read_rows", "repair", "write_part"]
+__all__ = [
+    "DAMAGED",
+    "META",
+    "PARTS",
+    "RESULTS",
+    "merge_table",
+    "meta_damaged",
+    "read_rows",
+    "repair",
+    "write_part",
+]
 
 RESULTS = "results.parquet"
 PARTS = "parts"
 DAMAGED = "damaged"
+META = "sweep.json"
 
 
 def _files(out: Path) -> list[Path]:
@@ -71,15 +83,28 @@ def _frames(out: Path) -> list[pd.DataFrame]:
     return [f for f in frames if len(f)]
 
 
+def meta_damaged(out: Path) -> bool:
+    """``sweep.json`` exists but is not a JSON object (cut short by a kill or a full disk)."""
+    try:
+        return not isinstance(json.loads((out / META).read_text()), dict)
+    except FileNotFoundError:
+        return False
+    except (OSError, ValueError):
+        return True
+
+
 def repair(out: str | os.PathLike[str]) -> list[Path]:
-    """Move every unreadable table or part of the sweep folder ``out`` to ``out/damaged/``
-    (nothing is deleted) and return where they went.  The readable rows stay; a damaged
-    ``results.parquet`` is rebuilt from the readable parts when the sweep next merges, and
-    the runs whose rows were lost are no longer "done", so the next sweep runs them again."""
+    """Move every unreadable table or part of the sweep folder ``out``, and an unreadable
+    ``sweep.json``, to ``out/damaged/`` (nothing is deleted) and return where they went.
+    The readable rows stay (as rows of the sweep being run: without its ``sweep.json`` the
+    folder's base scenario cannot be checked); a damaged ``results.parquet`` is rebuilt
+    from the readable parts when the sweep next merges, and the runs whose rows were lost
+    are no longer "done", so the next sweep runs them again."""
     out = Path(out)
     moved = []
-    for path in _files(out):
-        if isinstance(_read(path), str):
+    meta = [out / META] if meta_damaged(out) else []
+    for path in meta + _files(out):
+        if path in meta or isinstance(_read(path), str):
             dest = out / DAMAGED / f"{path.name}.{time.time_ns()}"
             dest.parent.mkdir(exist_ok=True)
             path.rename(dest)
