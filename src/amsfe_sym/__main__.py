@@ -1,13 +1,29 @@
-"""``python -m amsfe_sym``: the ``amsfe`` command line."""
+"""``python -m amsfe_sym``: the ``amsfe`` command line.
 
+Loading the command line's modules takes seconds on a busy machine; a Ctrl-C or SIGTERM in
+that time is one line and exit 130 / 143 too, as in the command (whose handler replaces the
+one installed here)."""
+
+import signal
 import sys
 
+
+class _Stopped(KeyboardInterrupt):
+    """SIGTERM before the command line has installed its own handler."""
+
+
+def _stopped(signum: int, frame: object) -> None:
+    raise _Stopped
+
+
+signal.signal(signal.SIGTERM, _stopped)
 try:
     from amsfe_sym.apps.cli import main
-except KeyboardInterrupt:  # Ctrl-C while the command line's modules load: one line
+except KeyboardInterrupt as exc:
+    how, code = ("SIGTERM", 143) if isinstance(exc, _Stopped) else ("Ctrl-C", 130)
     print(
-        "interrupted: amsfe stopped by Ctrl-C while starting; nothing was written", file=sys.stderr
+        f"interrupted: amsfe stopped by {how} while starting; nothing was written", file=sys.stderr
     )
-    sys.exit(130)
+    sys.exit(code)
 
 sys.exit(main())

@@ -189,7 +189,6 @@ def _build_held(
     t_start: float,
 ) -> GenerateResult:
     # heavy imports only when building
-    _say(progress, f"[amsfe] {spec.name}: loading the robot")
     from amsfe_sym.load import load_robot
     from amsfe_sym.symbolic.model import build_functions
 
