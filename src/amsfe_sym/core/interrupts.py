@@ -33,6 +33,8 @@ class DeferredSignals:
 
     Only Python-level handlers are replaced (a signal that is ignored or has its default
     action is left alone), and only in the main thread (elsewhere the block does nothing).
+    The same signal a second time before a checkpoint is delivered at once (a second Ctrl-C
+    stops a stage that runs long between checkpoints).
     """
 
     def __init__(self, signums: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM)) -> None:
@@ -51,8 +53,11 @@ class DeferredSignals:
         return self
 
     def _hold(self, signum: int, frame: FrameType | None) -> None:
-        if signum not in self._pending:
-            self._pending.append(signum)
+        if signum in self._pending:  # asked twice: deliver it now, wherever the code is
+            self._pending.remove(signum)
+            self._previous[signum](signum, frame)
+            return
+        self._pending.append(signum)
 
     @property
     def pending(self) -> bool:
