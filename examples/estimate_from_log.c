@@ -17,8 +17,11 @@
  *   frame <exposure step> <z: 2 numbers>       (frames delivered at the step of the last tick)
  * Output: per frame "frame <k> <kappa> <status> <nis>", per step (after its frames)
  * "est <k> <x: N> <P: N*N>", all with 17 significant digits.
+ * A malformed log (unknown record, bad number, wrong length, a record out of order, a
+ * truncated last line) stops with "LOG:LINE: ..." on stderr and exit status 2; a runtime
+ * call that refuses the log's data (e.g. a NaN input u) with its line and status 1.
  */
-#include "amsfe_log.h" /* read_numbers, now_ns, the estimator block; amsfe_runtime.h */
+#include "amsfe_log.h" /* the strict line reader, now_ns, the estimator block */
 
 static void print_state(const amsfe_est *est, const amsfe_dims *d, double *x, double *P) {
   amsfe_diag diag;
@@ -36,67 +39,55 @@ int main(int argc, char **argv) {
     return 2;
   }
   int timing = argc > 2 && strcmp(argv[2], "--time") == 0;
-  FILE *f = fopen(argv[1], "r");
-  if (!f) {
-    perror(argv[1]);
-    return 2;
-  }
+  log_reader r;
+  log_open(&r, argv[1]);
   amsfe_dims d;
   amsfe_dims_get(&d);
   est_block blk;
   est_block_init(&blk, &d);
   double *x = malloc(sizeof(double) * d.N), *P = malloc(sizeof(double) * d.N * d.N);
-  double *u = malloc(sizeof(double) * d.n), *z = malloc(sizeof(double) * d.ne), zc[2];
+  double *uz = malloc(sizeof(double) * (d.n + d.ne)), zc[2];
   amsfe_est *est = NULL;
   size_t cap = 1 << 16, nt = 0;
   double *tick_ns = timing ? malloc(sizeof(double) * cap) : NULL, frame_ns = 0.0;
   long frames = 0;
   int have_step = 0;
-  char *line = NULL;
-  size_t len = 0;
-  while (getline(&line, &len, f) > 0) {
-    char key[16];
-    int used = 0;
-    if (sscanf(line, "%15s %n", key, &used) != 1) continue;
-    char *rest = line + used;
-    int ok = 1;
-    if (est_block_line(&blk, &d, key, rest, &ok, &est)) {
-    } else if (strcmp(key, "tick") == 0 && est) {
+  while (log_next(&r)) {
+    if (est_block_line(&blk, &d, &r, &est)) {
+      if (est && have_step) log_fail(&r, "%s: expected the estimator block first, found it "
+                                         "after the ticks", r.key);
+    } else if (strcmp(r.key, "tick") == 0) {
+      if (!est) log_fail(&r, "tick: expected the estimator block (params .. P0) before it");
       if (have_step) print_state(est, &d, x, P);
-      ok = read_numbers(rest, u, d.n);
-      char *zs = rest;
-      for (int i = 0; i < d.n; ++i) strtod(zs, &zs); /* skip u */
-      int has_z = read_numbers(zs, z, d.ne);
-      double t0 = timing ? now_ns() : 0.0;
-      int status = amsfe_est_tick(est, has_z ? z : NULL, u);
+      log_vector(&r, "tick (u, then z or nan)", uz, d.n + d.ne);
+      double t0 = timing ? now_ns() : 0.0; /* a NaN sample: the runtime counts it missing */
+      int status = amsfe_est_tick(est, uz + d.n, uz);
       if (timing) {
         if (nt == cap) tick_ns = realloc(tick_ns, sizeof(double) * (cap *= 2));
         tick_ns[nt++] = now_ns() - t0;
       }
-      if (status < 0) {
-        fprintf(stderr, "tick: %s\n", amsfe_status_string(status));
-        return 1;
-      }
+      if (status < 0) log_exit(&r, LOG_EXIT_RUNTIME, "tick: %s", amsfe_status_string(status));
       have_step = 1;
-    } else if (strcmp(key, "frame") == 0 && est) {
-      long kappa = strtol(rest, &rest, 10);
-      ok = read_numbers(rest, zc, 2);
+    } else if (strcmp(r.key, "frame") == 0) {
+      if (!est) log_fail(&r, "frame: expected the estimator block (params .. P0) before it");
+      char *t[3];
+      log_fixed(&r, "frame (exposure step, u, v)", t, 3);
+      long kappa = log_parse_long(&r, "frame", 0, t[0], LONG_MIN, LONG_MAX);
+      zc[0] = log_parse_double(&r, "frame", 1, t[1]);
+      zc[1] = log_parse_double(&r, "frame", 2, t[2]);
       double nis, t0 = timing ? now_ns() : 0.0;
       int status = amsfe_est_camera_frame(est, zc, kappa, &nis);
       if (timing) frame_ns += now_ns() - t0, ++frames;
-      if (status < 0) {
-        fprintf(stderr, "camera frame: %s\n", amsfe_status_string(status));
-        return 1;
-      }
+      if (status < 0) log_exit(&r, LOG_EXIT_RUNTIME, "camera frame: %s", amsfe_status_string(status));
       amsfe_diag diag;
       amsfe_est_diagnostics(est, &diag);
       printf("frame %ld %ld %d %.17g\n", diag.k, kappa, status, nis);
-    }
-    if (!ok) {
-      fprintf(stderr, "bad line: %s", line);
-      return 2;
+    } else {
+      log_fail(&r, "expected a record params, qw, r_encoder, r_camera, x0, P0, tick or frame, "
+                   "found '%s'", r.key);
     }
   }
+  if (!est) log_fail(&r, "expected the estimator block (params .. P0), found the end of the log");
   if (have_step) print_state(est, &d, x, P);
   if (timing && nt) {
     qsort(tick_ns, nt, sizeof(double), cmp_double);
@@ -105,7 +96,7 @@ int main(int argc, char **argv) {
             frames ? frame_ns / (double)frames : 0.0);
   }
   amsfe_est_destroy(est);
-  fclose(f);
-  free(line);
+  fclose(r.f);
+  free(r.buf);
   return 0;
 }

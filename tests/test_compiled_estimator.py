@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from amsfe_sym.codegen import library_for
 from amsfe_sym.errors import ConfigError, EstimatorError
 from amsfe_sym.estimation import CameraFrame, Estimator, StepReport, make_estimator
+from amsfe_sym.estimation.base import FilterConfig
 from amsfe_sym.runtime.compiled_estimator import make_compiled_estimator
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.runtime.models import (
@@ -276,3 +277,31 @@ def test_a_repeated_frame_is_not_fused_twice(paper_sim: Recording, name: str) ->
     fn = c._c["amsfe_est_camera_frame"]
     status = [fn(c._h, zbuf.ctypes.data, first.exposure_step, ctypes.byref(nis)) for _ in range(2)]
     assert status[0] in (0, 1) and status[1] == 11, status
+
+
+def test_an_outlier_fused_with_the_gate_off_is_named_on_both_paths(paper_sim: Recording) -> None:
+    """Gate off (gate_probability = 0) and one frame 1e6 px off: the linearised update moves
+    the state (and the payload) hundreds of standard deviations, outside where the EKF holds,
+    and the filter breaks down steps later.  Both paths stop at the same step with one line
+    naming that frame, its NIS and the fix (not a bare covariance or Cholesky error)."""
+    import dataclasses
+
+    kwargs = dict(paper_sim.kwargs)
+    config = kwargs["config"]
+    assert isinstance(config, FilterConfig)
+    kwargs["config"] = dataclasses.replace(config, gate_probability=None)
+    frames = [list(f) for f in paper_sim.frames]
+    delivered = [k for k, f in enumerate(frames) if f]
+    bad = delivered[3]
+    kappa = frames[bad][0].exposure_step
+    frames[bad][0] = CameraFrame(kappa, frames[bad][0].z + 1e6)
+    messages = []
+    for est in (make_estimator("oosm", **kwargs), make_compiled_estimator("oosm", **kwargs)):  # type: ignore[arg-type]
+        with pytest.raises(EstimatorError) as info:
+            for k in range(paper_sim.u.shape[0] - 1):
+                est.step(paper_sim.u[k], paper_sim.z[k + 1], frames[k + 1])
+        messages.append(str(info.value))
+        assert f"camera frame kappa={kappa} was fused with NIS" in str(info.value)
+        assert "gate is off" in str(info.value) and "\n" not in str(info.value)
+    # the same step on both paths
+    assert messages[0].split(":")[0] == messages[1].split(":")[0], messages

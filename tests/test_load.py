@@ -36,6 +36,7 @@ def test_bad_urdf_refused_and_nothing_written(case: dict, tmp_path: Path) -> Non
         load_robot(default_spec(path))
     msg = str(info.value)
     assert (case["element"] or case["file"]) in msg
+    assert case.get("value", "") in msg
     assert case["file"] in msg
     assert "expected" in msg and "Fix:" in msg
     # builtin compatibility: every loader error is also a ValueError

@@ -406,3 +406,44 @@ def test_a_robot_axis_runs_on_its_own_library(tmp_path: Path) -> None:
     assert lib.theta_true.tolist() == [0.4]
     assert lib.theta_initial.tolist() == [base.theta[0].initial]
     assert lib.name.startswith("paper_2link_r") and lib.name.endswith("_rk4")
+
+
+def test_a_damaged_table_or_part_is_named_and_repair_rebuilds(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """A truncated ``results.parquet`` or a part damaged by a kill: one line naming the file
+    and the fix; ``--repair`` sets them aside, keeps the readable rows and re-runs the rest."""
+    path = _spec_file(tmp_path)  # 4 runs
+    out = tmp_path / "out"
+    args = ["sweep", str(path), "--out", str(out), "--workers", "0", "--no-progress"]
+    assert main([*args, "--no-plots"]) == 0
+    capsys.readouterr()
+    table = pd.read_parquet(out / RESULTS)
+    (out / PARTS).mkdir()
+    table.iloc[:2].to_parquet(out / PARTS / "part-1.parquet", index=False)  # readable
+    (out / PARTS / "part-2.parquet").write_bytes(b"PAR1" + b"\0" * 50)  # killed mid-write
+    data = (out / RESULTS).read_bytes()
+    (out / RESULTS).write_bytes(data[: len(data) // 2])  # truncated
+    for extra in ([], ["--report"]):
+        assert main([*args, "--no-plots", *extra]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: sweep file") and err.count("\n") == 1, err
+        assert RESULTS in err and "--repair" in err
+    assert main([*args, "--no-plots", "--repair"]) == 0
+    text = capsys.readouterr().out
+    assert text.count("set aside") == 2 and "2 runs" in text and "2 already done" in text
+    assert sorted(p.name.split(".parquet")[0] for p in (out / "damaged").iterdir()) == [
+        "part-2",
+        "results",
+    ]
+    again = pd.read_parquet(out / RESULTS)
+    assert len(again) == 4 and set(again.status) == {"ok"} and not (out / PARTS).exists()
+    _same_rows(again, table)
+    # a sweep.json cut short: named (not "another base scenario"); --repair keeps the rows
+    meta = out / "sweep.json"
+    meta.write_text(meta.read_text()[:100])
+    assert main([*args, "--no-plots"]) == 2
+    err = capsys.readouterr().err
+    assert "sweep.json" in err and "--repair" in err and err.count("\n") == 1, err
+    assert main([*args, "--no-plots", "--repair"]) == 0
+    assert "0 runs" in capsys.readouterr().out and meta.is_file()

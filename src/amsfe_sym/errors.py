@@ -87,7 +87,7 @@ class LogError(AmsfeError, ValueError):
 
 class RunFolderError(AmsfeError, FileExistsError):
     """A run's output folder cannot be written as asked (it exists and ``--force`` is off,
-    or it is a file)."""
+    or it is a file), or a file in it that the toolkit wrote is damaged (a sweep's part)."""
 
 
 def unknown_name(what: str, name: object, known: Iterable[str]) -> ConfigError:

@@ -231,6 +231,11 @@ def get_argument_parser() -> argparse.ArgumentParser:
         "--force", action="store_true", help="start afresh in a folder of another sweep"
     )
     sw.add_argument(
+        "--repair",
+        action="store_true",
+        help="move unreadable parts or table to damaged/, keep the readable rows, go on",
+    )
+    sw.add_argument(
         "--report",
         action="store_true",
         help="run nothing: print the table of the folder's results (and write the figures)",

@@ -43,6 +43,7 @@ from amsfe_sym.codegen.cache import (
     replace_dir,
 )
 from amsfe_sym.codegen.manifest import manifest_document
+from amsfe_sym.core.interrupts import DeferredSignals, checkpoint
 from amsfe_sym.errors import CodegenError, describe
 from amsfe_sym.load.spec import RobotSpec, load_spec
 from amsfe_sym.runtime.library import file_sha256
@@ -166,7 +167,27 @@ def _build(
     t_start: float,
 ) -> GenerateResult:
     """Load, build the symbols, generate C, compile and move into ``out_dir`` (see
-    :func:`generate`)."""
+    :func:`generate`).
+
+    Ctrl-C and SIGTERM are held while it runs (:class:`~amsfe_sym.core.interrupts.
+    DeferredSignals`) and raised at its checkpoints between stages, in the symbolic build and
+    while the compiler runs: raised inside the yourdfpy/trimesh imports or CasADi they used
+    to be swallowed (the build went on to the end).  The temporary folder is removed."""
+    with DeferredSignals():
+        return _build_held(spec, parts, flags, key, hash_inputs, parent, out_dir, progress, t_start)
+
+
+def _build_held(
+    spec: RobotSpec,
+    parts: tuple[str, ...],
+    flags: list[str],
+    key: str,
+    hash_inputs: dict[str, Any],
+    parent: Path,
+    out_dir: Path,
+    progress: bool,
+    t_start: float,
+) -> GenerateResult:
     # heavy imports only when building
     from amsfe_sym.load import load_robot
     from amsfe_sym.symbolic.model import build_functions
@@ -175,9 +196,11 @@ def _build(
     t = time.perf_counter()
     robot_obj = load_robot(spec)
     timings["load"] = time.perf_counter() - t
+    checkpoint()
     t = time.perf_counter()
     model = build_functions(robot_obj, parts)
     timings["symbolic"] = time.perf_counter() - t
+    checkpoint()
     _say(progress, f"[amsfe] {spec.name}: symbolic model built in {timings['symbolic']:.2f} s")
 
     parent.mkdir(parents=True, exist_ok=True)
@@ -202,12 +225,14 @@ def _build(
                         )
                     )
             gen.add(f)
+            checkpoint()
         cwd = os.getcwd()
         try:
             os.chdir(tmp)
             gen.generate()
         finally:
             os.chdir(cwd)
+        checkpoint()
         timings["codegen"] = time.perf_counter() - t
         t = time.perf_counter()
         libname = f"lib{spec.name}.so"
@@ -226,6 +251,7 @@ def _build(
         cmd = [compiler(), *flags, "-I.", "-o", libname, cname, *glue, "-lm"]
         _say(progress, f"[amsfe] {spec.name}: compiling ({' '.join(cmd)})")
         proc = _compile(cmd, tmp, progress, spec.name)
+        checkpoint()  # a Ctrl-C in the terminal stops the compiler too: say that, not its exit
         if proc.returncode != 0:
             raise CodegenError(
                 describe(
@@ -250,6 +276,7 @@ def _build(
         manifest = manifest_document(model, key, hash_inputs, libname, cname, timings)
         manifest["library_sha256"] = file_sha256(tmp / libname)
         (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
+        checkpoint()
         replace_dir(tmp, out_dir)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -292,21 +319,22 @@ def _compile(
     cmd: list[str], cwd: Path, progress: bool, name: str
 ) -> subprocess.CompletedProcess[str]:
     """Run the compiler; with ``progress``, a line on stderr every :data:`COMPILE_PROGRESS_S`
-    seconds while it runs (a large arm compiles for tens of seconds).  Ctrl-C stops it."""
-    if not progress:
-        return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True)
+    seconds while it runs (a large arm compiles for tens of seconds).  A held Ctrl-C or
+    SIGTERM (:func:`~amsfe_sym.core.interrupts.checkpoint`, polled every 0.1 s) stops it."""
     with tempfile.TemporaryFile("w+") as err:
         proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.DEVNULL, stderr=err, text=True)
-        t0 = time.perf_counter()
+        t0 = last = time.perf_counter()
         try:
             while True:
                 try:
-                    proc.wait(timeout=COMPILE_PROGRESS_S)
+                    proc.wait(timeout=0.1)
                     break
                 except subprocess.TimeoutExpired:
-                    _say(
-                        True, f"[amsfe] {name}: compiling, {time.perf_counter() - t0:.0f} s so far"
-                    )
+                    checkpoint()
+                    now = time.perf_counter()
+                    if progress and now - last >= COMPILE_PROGRESS_S:
+                        last = now
+                        _say(True, f"[amsfe] {name}: compiling, {now - t0:.0f} s so far")
         except BaseException:
             proc.kill()
             proc.wait()

@@ -12,7 +12,7 @@ import xml.etree.ElementTree as ET
 
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.load.spec import RobotSpec
-from amsfe_sym.scenario import Scenario
+from amsfe_sym.scenario import Scenario, run_ticks
 from amsfe_sym.signals.trajectory import from_config as trajectory_from_config
 
 __all__ = ["check_scenario_shapes", "modelled_joints"]
@@ -35,10 +35,12 @@ def modelled_joints(spec: RobotSpec) -> list[str] | None:
 
 def check_scenario_shapes(sc: Scenario, spec: RobotSpec) -> None:
     """Refuse, in one message listing all of them, scenario vectors whose length is not the
-    robot's joint count n (or its parameter count p for ``[estimate0] theta``).
+    robot's joint count n (or its parameter count p for ``[estimate0] theta``); and a
+    duration of less than one step or whose records would not fit in memory
+    (:func:`~amsfe_sym.scenario.run_ticks`).
 
     Raises:
-        ConfigError: one or more vectors have the wrong length.
+        ConfigError: one or more vectors have the wrong length, or a bad duration.
     """
     joints = modelled_joints(spec)
     if joints is None:
@@ -55,6 +57,7 @@ def check_scenario_shapes(sc: Scenario, spec: RobotSpec) -> None:
         vectors["[plant] qmd0"] = (sc.plant.qmd0, n)
     if sc.estimate0.theta:
         vectors["[estimate0] theta"] = (sc.estimate0.theta, p)
+    run_ticks(sc, spec.model.T, n, 4 * n + p)  # a duration of < 1 step or too much memory
     wrong = [f"{k} has {len(v)}" for k, (v, m) in vectors.items() if len(v) != m]
     wrong_theta = "[estimate0] theta" in " ".join(wrong)
     traj_n = trajectory_from_config(dict(sc.trajectory)).n

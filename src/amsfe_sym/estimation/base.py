@@ -16,6 +16,7 @@ older than the history kept, is rejected with a logged warning and counted in th
 from __future__ import annotations
 
 import logging
+import math
 import operator
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
@@ -250,6 +251,8 @@ class Estimator(ABC):
         self.k0: int = self.k
         self._gate_encoder = gate_threshold(config.encoder_gate_probability, int(encoder.dim))
         self._gate_camera = gate_threshold(config.gate_probability, int(camera.dim))
+        self._ungated_outlier: tuple[int, float] | None = None  # (kappa, NIS), gate off
+        self._outlier_nis = gate_threshold(DEFAULT_CONFIG.gate_probability, int(camera.dim))
         nu = getattr(model, "nu", None)
         self._nu: int | None = nu if isinstance(nu, int) else None
         self._setup()
@@ -295,11 +298,41 @@ class Estimator(ABC):
             report.rejections.append("encoder measurement holds NaN or inf")
             z_enc = None
         usable = self._screen_frames(checked, k_new, report)
-        self._step(StepInputs(u_arr, z_enc, usable), report)
-        self._seen.update(report.used)
-        self.k = k_new
-        self._check_covariance()
+        try:
+            self._step(StepInputs(u_arr, z_enc, usable), report)
+            self._seen.update(report.used)
+            self._note_ungated_outliers(report)
+            self.k = k_new
+            self._check_covariance()
+        except EstimatorError as exc:
+            raise self._with_cause(exc, k_new) from exc
         return report
+
+    def _note_ungated_outliers(self, report: StepReport) -> None:
+        """Gate off: note the frame fused with the largest NIS beyond the default gate's, the
+        cause to name if the filter breaks down (docs/estimation-algorithms.md)."""
+        for kappa, nis in zip(report.used, report.frame_nis, strict=False):
+            worst = self._ungated_outlier[1] if self._ungated_outlier else self._outlier_nis
+            if self._gate_camera == math.inf and nis > worst:
+                self._ungated_outlier = (kappa, float(nis))
+
+    def _with_cause(self, exc: EstimatorError, k: int) -> EstimatorError:
+        """``exc``, or one line naming the outlier fused with the gate off and the fix."""
+        if (outlier := self._ungated_outlier) is None:
+            return exc
+        kappa, nis = outlier
+        found = str(exc).split(". Fix:")[0]
+        return EstimatorError(
+            describe(
+                f"{self.name} at step {k}",
+                "a usable estimate",
+                f"it broke down ({found}) after camera frame kappa={kappa} was fused with "
+                f"NIS {nis:.3g} ({math.sqrt(nis):.3g} standard deviations) because the camera "
+                "gate is off (gate_probability = 0 fuses every outlier)",
+                "turn the gate on (filter.gate_probability = 0.9999, the default) or remove "
+                "the outlier from the data",
+            )
+        )
 
     def estimate(self) -> tuple[FloatArray, FloatArray]:
         """Return copies of the current posterior ``(x(k|k), P(k|k))``."""

@@ -1,6 +1,7 @@
 """URDF validation before Pinocchio (which accepts several invalid things silently):
-strict XML, supported joint types, mimic tags, dangling links, zero axes, masses and
-inertia tensors; and each link's own inertia for the theta bindings."""
+strict XML, supported joint types, mimic tags, dangling links, finite joint origins, axes
+and limits (not swapped), zero axes, masses and inertia tensors; and each link's own
+inertia for the theta bindings."""
 
 from __future__ import annotations
 
@@ -60,6 +61,10 @@ def validate_urdf(path: Path, locked: set[str] | frozenset[str] = frozenset()) -
                     )
                 )
     check_topology(root, path)  # one tree: before urdfdom/yourdfpy's misleading messages
+    for j in root.findall("joint"):
+        _check_joint_numbers(j, path)
+    for ln in root.findall("link"):
+        _check_finite(ln, f"{path}: link {ln.get('name', '?')!r}", _LINK_NUMBERS)
     try:
         urdf = yourdfpy.URDF.load(
             str(path),
@@ -123,6 +128,70 @@ def validate_urdf(path: Path, locked: set[str] | frozenset[str] = frozenset()) -
         if ln.inertial.inertia is not None:
             check_inertia(np.asarray(ln.inertial.inertia, dtype=float), where)
     return urdf
+
+
+# the numbers of a <joint> that urdfdom and yourdfpy parse: element -> attributes
+_JOINT_NUMBERS = {
+    "origin": ("xyz", "rpy"),
+    "axis": ("xyz",),
+    "limit": ("lower", "upper", "effort", "velocity"),
+}
+
+
+# the same for a <link>'s inertial frame and its mass
+_LINK_NUMBERS = {"inertial/origin": ("xyz", "rpy"), "inertial/mass": ("value",)}
+
+
+def _numbers(text: str) -> list[float] | None:
+    try:
+        return [float(v) for v in text.split()]
+    except ValueError:
+        return None
+
+
+def _check_joint_numbers(joint: ET.Element, path: Path) -> None:
+    """Every number of a joint's origin, axis and limits is finite (urdfdom refuses NaN and
+    inf only with parser noise on stderr that names no value; yourdfpy accepts them), and a
+    movable joint's limits are not swapped: ``lower > upper`` is refused, because the default
+    camera placement (and any user of the limits) would take the empty range as the
+    workspace, and no reading of such a file is right (a warning would be lost in a build's
+    output while the generated library kept the wrong camera)."""
+    where = f"{path}: joint {joint.get('name', '?')!r}"
+    _check_finite(joint, where, _JOINT_NUMBERS)
+    limit = joint.find("limit")
+    if joint.get("type") in ("revolute", "prismatic") and limit is not None:
+        lower, upper = (_numbers(limit.get(a) or "0") or [0.0] for a in ("lower", "upper"))
+        if len(lower) == len(upper) == 1 and lower[0] > upper[0]:
+            raise UrdfError(
+                describe(
+                    f"{where} <limit>",
+                    "lower <= upper",
+                    f"lower {limit.get('lower')} > upper {limit.get('upper')}",
+                    "swap the two values (the default camera placement uses the limits)",
+                )
+            )
+
+
+def _check_finite(el: ET.Element, where: str, numbers: dict[str, tuple[str, ...]]) -> None:
+    """Raise :class:`UrdfError` naming the first attribute of ``numbers`` (sub-element ->
+    attributes) of ``el`` that is not a list of finite numbers."""
+    for tag, attrs in numbers.items():
+        sub = el.find(tag)
+        for attr in attrs if sub is not None else ():
+            text = sub.get(attr) if sub is not None else None
+            if text is None:
+                continue
+            values = _numbers(text)
+            if values is not None and all(math.isfinite(v) for v in values):
+                continue
+            raise UrdfError(
+                describe(
+                    f"{where} <{tag.split('/')[-1]} {attr}>",
+                    "finite numbers",
+                    repr(text),
+                    f"write the {tag.split('/')[-1]} {attr} as finite numbers",
+                )
+            )
 
 
 def check_inertia(inertia: NDArray[np.float64], where: str) -> None:

@@ -320,6 +320,7 @@ class CompiledEstimator(Estimator):
         """Back to ``x0, P0, k0`` with empty history."""
         self._c["amsfe_est_reset"](self._h)
         self._seen.clear()
+        self._ungated_outlier = None
         self.k = self.k0
         self._fetch()
 

@@ -27,9 +27,16 @@ from amsfe_sym.scenario.read import (
     scenarios_dir,
     validate,
 )
-from amsfe_sym.scenario.timing import CameraTiming, camera_timing
+from amsfe_sym.scenario.timing import (
+    MAX_RECORD_BYTES,
+    CameraTiming,
+    camera_timing,
+    record_bytes_per_tick,
+    run_ticks,
+)
 
 __all__ = [
+    "MAX_RECORD_BYTES",
     "CameraSettings",
     "CameraTiming",
     "EncoderSettings",
@@ -43,6 +50,8 @@ __all__ = [
     "find_scenario",
     "load_scenario",
     "parse_scenario",
+    "record_bytes_per_tick",
+    "run_ticks",
     "scenarios_dir",
     "validate",
 ]

@@ -141,6 +141,25 @@ def parse_scenario(data: Mapping[str, Any], path: Path) -> Scenario:
     return sc
 
 
+def _finite_vectors(sc: Scenario, where: str) -> None:
+    """The initial states (``[plant]``'s and ``[estimate0]``'s vectors) hold finite numbers:
+    a NaN start made the run's first check report "the true state diverged"."""
+    for section, value in (("plant", sc.plant), ("estimate0", sc.estimate0)):
+        for f in dataclasses.fields(value):
+            v = getattr(value, f.name)
+            if isinstance(v, tuple) and not all(
+                isinstance(x, int | float) and math.isfinite(x) for x in v
+            ):
+                raise ConfigError(
+                    describe(
+                        f"{where}: [{section}] {f.name}",
+                        "finite numbers (an initial state)",
+                        repr(list(v)),
+                        f"give every entry of {f.name} a finite value",
+                    )
+                )
+
+
 def _names(value: Any, what: str) -> tuple[str, ...]:
     if not isinstance(value, list | tuple) or not all(isinstance(v, str) for v in value):
         raise ConfigError(
@@ -227,6 +246,7 @@ def validate(sc: Scenario, where: str = "scenario") -> None:
             )
 
     positive(sc.duration, "duration", fix="set the simulated time in seconds, e.g. duration = 10.0")
+    _finite_vectors(sc, where)
     if sc.seed < 0:
         raise ConfigError(
             describe(f"{where}: seed", "an integer >= 0", repr(sc.seed), "write seed = 0")

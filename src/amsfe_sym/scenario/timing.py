@@ -92,3 +92,54 @@ def camera_timing(
             )
         )
     return timing
+
+
+#: Largest memory a run's records may take [bytes]: a longer run is refused before anything
+#: is built or allocated (split it, or record with a coarser robot period).
+MAX_RECORD_BYTES = 4 * 2**30
+
+
+def record_bytes_per_tick(n: int, N: int) -> int:
+    """Bytes the loop records per tick for ``n`` joints and ``N`` states: true and
+    estimated state and P's diagonal (3 N), the input, the encoder samples, the torques, the
+    sliding variables and bounds, the desired trajectory (10 n), time and NEES (float64)."""
+    return 8 * (3 * N + 10 * n + 2)
+
+
+def run_ticks(sc: Scenario, T: float, n: int, N: int) -> int:
+    """The number of ticks K of a run (``round(duration / T) + 1``), checked.
+
+    Args:
+        sc: The scenario (its ``duration`` [s]).
+        T: The robot's sampling period [s].
+        n, N: Joints and states of the robot (the size of the records).
+
+    Raises:
+        ConfigError: the duration is shorter than one period (no step to simulate: every
+            metric would be NaN) or its records would take more than
+            :data:`MAX_RECORD_BYTES` (the message gives the bytes).
+    """
+    where = str(sc.source) if sc.source is not None else sc.name
+    if not sc.duration >= T:
+        raise ConfigError(
+            describe(
+                f"{where}: duration",
+                f">= the robot's sample period T = {T:g} s (one step at least)",
+                f"{sc.duration!r} s",
+                f"simulate at least {T:g} s, e.g. --duration 2",
+            )
+        )
+    K = round(sc.duration / T) + 1
+    need = K * record_bytes_per_tick(n, N)
+    if need > MAX_RECORD_BYTES:
+        longest = (MAX_RECORD_BYTES // record_bytes_per_tick(n, N) - 1) * T
+        raise ConfigError(
+            describe(
+                f"{where}: duration",
+                f"records of at most {MAX_RECORD_BYTES / 2**30:.0f} GiB "
+                f"(at most {longest:.6g} s at T = {T:g} s)",
+                f"{sc.duration!r} s = {K} ticks, {need / 2**30:.3g} GiB of records ({need} bytes)",
+                "simulate a shorter time, or split the run",
+            )
+        )
+    return K

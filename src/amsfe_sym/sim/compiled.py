@@ -26,7 +26,7 @@ from amsfe_sym.runtime.compiled_loop import (
     SimulationInputs,
 )
 from amsfe_sym.runtime.library import ModelLibrary
-from amsfe_sym.scenario import Scenario
+from amsfe_sym.scenario import Scenario, run_ticks
 from amsfe_sym.sim.builders import RunParts, build_run, build_sensors
 from amsfe_sym.sim.result import (
     CAMERA_COUNTERS,
@@ -141,7 +141,7 @@ def run_compiled(scenario: Scenario, lib: ModelLibrary, progress: bool = False) 
     """
     sc = scenario
     n, N, T = lib.n, lib.N, lib.T
-    K = round(sc.duration / T) + 1
+    K = run_ticks(sc, T, n, N)
     parts = build_run(sc, lib, compiled=True)
     est = parts.estimator
     assert isinstance(est, CompiledEstimator)
@@ -163,12 +163,18 @@ def run_compiled(scenario: Scenario, lib: ModelLibrary, progress: bool = False) 
     if state.status < 0:
         what = sim.status_string(state.status)
         cls = MeasurementError if state.plant_nonfinite else EstimatorError
+        fix = "run with --runtime python to see where the reference fails"
+        if cls is EstimatorError and not sc.filter.gate_probability:
+            fix += (
+                " (the camera gate is off, gate_probability = 0: an outlier fused unchecked is "
+                "a likely cause; turn the gate on)"
+            )
         raise cls(
             describe(
                 f"compiled run of {sc.name} at step {state.k}",
                 "a usable numerical result",
                 f"status {state.status}: {what}",
-                "run with --runtime python to see where the reference fails",
+                fix,
             )
         )
     last = int(state.ticks_done)

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from amsfe_sym.control import LawInputs
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.runtime.library import ModelLibrary
-from amsfe_sym.scenario import Scenario
+from amsfe_sym.scenario import Scenario, run_ticks
 from amsfe_sym.sim.builders import build_run
 from amsfe_sym.sim.result import (
     CAMERA_COUNTERS,
@@ -67,13 +67,16 @@ def run(
             loop from the estimators' arithmetic when comparing the two runtimes).
 
     Raises:
-        ConfigError: a setting the builders refuse.  A diverging closed loop is not an
-            error: the run stops there and ``RunResult.diverged_at`` says when.
+        ConfigError: a setting the builders refuse, a duration shorter than one period or
+            whose records would not fit :data:`~amsfe_sym.scenario.MAX_RECORD_BYTES`.  A
+            diverging closed loop is not an error: the run stops there and
+            ``RunResult.diverged_at`` says when.
     """
     if runtime not in RUNTIMES:
         raise ConfigError(
             describe("runtime", f"one of {list(RUNTIMES)}", repr(runtime), "use 'compiled'")
         )
+    run_ticks(scenario, lib.T, lib.n, lib.N)  # a duration of < 1 step or too much memory
     if runtime == "compiled":
         from amsfe_sym.sim.compiled import run_compiled  # the same run in C
 
@@ -81,7 +84,7 @@ def run(
     sc = scenario
     n, N, T = lib.n, lib.N, lib.T
     L = lib.layout
-    K = round(sc.duration / T) + 1
+    K = run_ticks(sc, T, n, N)
     theta_true = lib.theta_true
 
     parts = build_run(sc, lib, compiled=True) if compiled_estimator else build_run(sc, lib)

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 
+from amsfe_sym.core.interrupts import checkpoint
 from amsfe_sym.load import Robot
 from amsfe_sym.symbolic.camera import depth, pinhole
 from amsfe_sym.symbolic.control import build_control_functions
@@ -130,10 +131,12 @@ def build_functions(robot: Robot, parts: tuple[str, ...] = PARTS) -> SymbolicMod
         model.internal = {"rk4_stage": tr.rk4_stage_function(), "rk4_minv": tr.rk4_minv_function()}
         model.chained = {"transition_step_chain": "transition_step"}
     model.functions = {f.name(): f for f in fns}
+    checkpoint()  # a held Ctrl-C is raised here, between the stages (core.interrupts)
     model.functions["plant_step"] = tr.plant_step(spec.plant_substeps)
     if "control" in parts:
         for f in build_control_functions(tree, tr):  # eqs. (29)-(37), (54) and the cascade
             model.functions[f.name()] = f
+    checkpoint()
     if "estimator" in parts:
         slots = robot.camera.delay // robot.camera.period + 1  # clones in flight (cloning)
         blocks = {k: getattr(L, k) for k in ("q", "qd", "qm", "qmd", "theta")}

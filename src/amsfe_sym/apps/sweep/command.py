@@ -17,7 +17,7 @@ def from_args(args: argparse.Namespace) -> int:
 
     from amsfe_sym.apps.sweep import SweepOptions, load_sweep, run_sweep
     from amsfe_sym.apps.sweep.report import format_report, write_figures
-    from amsfe_sym.apps.sweep.table import read_rows
+    from amsfe_sym.apps.sweep.table import read_rows, repair
 
     spec = load_sweep(args.spec)
     out = Path(args.out) if args.out else Path("runs") / f"sweep-{spec.name}"
@@ -29,6 +29,9 @@ def from_args(args: argparse.Namespace) -> int:
             raise ConfigError(
                 describe(flag, f"an axis of the sweep {list(spec.axes)}", repr(axis), "name one")
             )
+    if args.repair and out.is_dir():
+        for path in repair(out):
+            print(f"set aside (unreadable, its runs will be run again): {path}")
     if args.report:
         table = read_rows(out) if out.is_dir() else None
         if table is None or not len(table):

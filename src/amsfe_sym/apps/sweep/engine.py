@@ -29,13 +29,21 @@ import pandas as pd
 
 from amsfe_sym.apps.sweep.jobs import KEY_COLUMNS, library_key, run_batch
 from amsfe_sym.apps.sweep.spec import Job, SweepSpec, expand_jobs
-from amsfe_sym.apps.sweep.table import PARTS, RESULTS, merge_table, read_rows, write_part
+from amsfe_sym.apps.sweep.table import (
+    DAMAGED,
+    META,
+    PARTS,
+    RESULTS,
+    merge_table,
+    meta_damaged,
+    read_rows,
+    write_part,
+)
 from amsfe_sym.core.provenance import provenance
-from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.errors import ConfigError, RunFolderError, describe
 
 __all__ = ["META", "SweepOptions", "SweepResult", "make_batches", "run_sweep"]
 
-META = "sweep.json"
 #: Batches per worker the automatic batch size aims at (enough to balance the load).
 BATCHES_PER_WORKER = 4
 #: Largest automatic batch [runs].
@@ -119,6 +127,16 @@ def _check_folder(spec: SweepSpec, opts: SweepOptions) -> None:
             describe(f"--out {str(out)!r}", "a folder", "a file", "pass a folder path")
         )
     meta = out / META
+    if meta_damaged(out) and not opts.force:
+        raise RunFolderError(
+            describe(
+                f"sweep file {str(meta)!r}",
+                "the sweep's JSON record",
+                "a damaged file (not JSON)",
+                "run the same sweep again with --repair (it moves the file to "
+                f"{str(out / DAMAGED)!r} and keeps the rows), or --force to start afresh",
+            )
+        )
     if not meta.is_file():
         return
     try:

@@ -6,10 +6,16 @@ While a sweep runs, every finished batch is written at once as ``parts/part-*.pa
 and the previous table are merged into ``results.parquet`` (one row per run id, the newest
 row winning) and the parts removed.  An interrupted sweep leaves its parts: the next run of
 the same sweep reads them and skips those runs (resume).
+
+A file that cannot be read (a part or table damaged by a kill, a power cut or a full disk,
+a truncated copy) stops the sweep with one line naming it; :func:`repair` (``amsfe sweep
+--repair``) moves such files to ``damaged/`` and keeps every readable row, so the runs
+whose rows were lost are run again by the next sweep.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import time
 from collections.abc import Mapping, Sequence
@@ -17,24 +23,102 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
+from pyarrow import ArrowException
 
-__all__ = ["PARTS", "RESULTS", "merge_table", "read_rows", "write_part"]
+from amsfe_sym.errors import RunFolderError, describe
+
+__all__ = [
+    "DAMAGED",
+    "META",
+    "PARTS",
+    "RESULTS",
+    "merge_table",
+    "meta_damaged",
+    "read_rows",
+    "repair",
+    "write_part",
+]
 
 RESULTS = "results.parquet"
 PARTS = "parts"
+DAMAGED = "damaged"
+META = "sweep.json"
+
+
+def _files(out: Path) -> list[Path]:
+    """The table (if any) and the parts, oldest first."""
+    files = [out / RESULTS] if (out / RESULTS).is_file() else []
+    if (out / PARTS).is_dir():
+        files += sorted((out / PARTS).glob("part-*.parquet"))
+    return files
+
+
+def _read(path: Path) -> pd.DataFrame | str:
+    """The table in ``path``, or why it cannot be read (one line)."""
+    try:
+        df = pd.read_parquet(path)
+    except (OSError, ValueError, ArrowException) as exc:  # ArrowInvalid, truncated, ...
+        why = (str(exc).strip().splitlines() or [""])[0][:160]
+        return f"{type(exc).__name__}: {why}"
+    if "run_id" not in df.columns:
+        return f"no run_id column (columns {list(df.columns)[:5]})"
+    return df
 
 
 def _frames(out: Path) -> list[pd.DataFrame]:
     frames = []
-    if (out / RESULTS).is_file():
-        frames.append(pd.read_parquet(out / RESULTS))
-    parts = sorted((out / PARTS).glob("part-*.parquet")) if (out / PARTS).is_dir() else []
-    frames += [pd.read_parquet(p) for p in parts]
+    for path in _files(out):
+        df = _read(path)
+        if isinstance(df, str):
+            raise RunFolderError(
+                describe(
+                    f"sweep file {str(path)!r}",
+                    "a readable parquet table",
+                    f"a damaged file ({df})",
+                    "run the same sweep again with --repair (it moves the file to "
+                    f"{str(out / DAMAGED)!r} and re-runs the rows it held), or delete it",
+                )
+            )
+        frames.append(df)
     return [f for f in frames if len(f)]
 
 
+def meta_damaged(out: Path) -> bool:
+    """``sweep.json`` exists but is not a JSON object (cut short by a kill or a full disk)."""
+    try:
+        return not isinstance(json.loads((out / META).read_text()), dict)
+    except FileNotFoundError:
+        return False
+    except (OSError, ValueError):
+        return True
+
+
+def repair(out: str | os.PathLike[str]) -> list[Path]:
+    """Move every unreadable table or part of the sweep folder ``out``, and an unreadable
+    ``sweep.json``, to ``out/damaged/`` (nothing is deleted) and return where they went.
+    The readable rows stay (as rows of the sweep being run: without its ``sweep.json`` the
+    folder's base scenario cannot be checked); a damaged ``results.parquet`` is rebuilt
+    from the readable parts when the sweep next merges, and the runs whose rows were lost
+    are no longer "done", so the next sweep runs them again."""
+    out = Path(out)
+    moved = []
+    meta = [out / META] if meta_damaged(out) else []
+    for path in meta + _files(out):
+        if path in meta or isinstance(_read(path), str):
+            dest = out / DAMAGED / f"{path.name}.{time.time_ns()}"
+            dest.parent.mkdir(exist_ok=True)
+            path.rename(dest)
+            moved.append(dest)
+    return moved
+
+
 def read_rows(out: str | os.PathLike[str]) -> pd.DataFrame:
-    """Every row of the folder (table and parts), one per ``run_id`` (the newest wins)."""
+    """Every row of the folder (table and parts), one per ``run_id`` (the newest wins).
+
+    Raises:
+        RunFolderError: a file of the folder cannot be read (the message names it and the
+            fix, :func:`repair`).
+    """
     frames = _frames(Path(out))
     if not frames:
         return pd.DataFrame({"run_id": pd.Series(dtype=str)})

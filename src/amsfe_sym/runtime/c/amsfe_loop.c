@@ -435,6 +435,10 @@ int amsfe_ctrl_torque(amsfe_ctrl *c, long k, const double *ref, const double *x_
   int encoders = ctl == AMSFE_CTRL_DTSMC || ctl == AMSFE_CTRL_DTSMC_PAPER;
   if ((oracle && !x_true) || (encoders && !z) || (!oracle && !encoders && !x_hat))
     return AMSFE_ERR_INPUT;
+  /* a NaN or inf input the law uses would give a NaN torque (the limit keeps NaN) */
+  if (!all_finite(ref, 5 * n) || (oracle && !all_finite(x_true, c->d.N)) ||
+      (encoders && !all_finite(z, 2 * n)))
+    return AMSFE_ERR_INPUT;
   if (out && out->s)
     for (long j = 0; j < n; ++j) out->s[j] = NAN;
   if (out && out->bound)

@@ -91,7 +91,8 @@ void amsfe_ctrl_observe(amsfe_ctrl *ctrl, const double *P);
 /* u(k) [n] (limited), from the reference ref [5n] = [q_d, qd_d, qdd_d, jerk_d, snap_d] at t_k,
  * the estimate x_hat [N], the encoder sample z [2n] at t_k and, for the oracles only, the true
  * state x_true [N] = [q, qd, qm, qmd, theta] (may be NULL otherwise).  Returns AMSFE_OK or
- * AMSFE_ERR_INPUT (a pointer the law needs is NULL). */
+ * AMSFE_ERR_INPUT (a pointer the law needs is NULL, or ref, or the z or x_true the law uses,
+ * holds NaN or inf: nothing changed). */
 int amsfe_ctrl_torque(amsfe_ctrl *ctrl, long k, const double *ref, const double *x_hat,
                       const double *z, const double *x_true, double *u, amsfe_ctrl_out *out);
 

@@ -1,0 +1,92 @@
+"""Ctrl-C and SIGTERM held while third-party code runs, delivered at the toolkit's own
+checkpoints.
+
+A ``KeyboardInterrupt`` raised inside another library can be lost: trimesh (imported by
+yourdfpy) wraps every exception of its optional imports, ``BaseException`` included, and
+CasADi's C++ code runs Python callbacks where an exception may be swallowed or, once seen,
+crash the process.  So ``amsfe generate`` used to go on to the end after a Ctrl-C in its
+first seconds.  :class:`DeferredSignals` replaces the Python handlers of SIGINT and SIGTERM
+by one that only records the signal; :func:`checkpoint` (called by the build between its
+stages and while it waits for the compiler) and leaving the block call the handler that was
+there before (``KeyboardInterrupt``, or the command line's SIGTERM exception), so the
+interruption is raised in the toolkit's own code, where every ``finally`` cleans up.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Callable
+from types import FrameType, TracebackType
+from typing import Any
+
+__all__ = ["DeferredSignals", "checkpoint"]
+
+_Handler = Callable[[int, FrameType | None], Any]
+
+#: The blocks in force, innermost last (:func:`checkpoint` asks the innermost).
+_ACTIVE: list[DeferredSignals] = []
+
+
+class DeferredSignals:
+    """Hold ``signums`` inside a ``with`` block; raise them at :meth:`check` or on exit.
+
+    Only Python-level handlers are replaced (a signal that is ignored or has its default
+    action is left alone), and only in the main thread (elsewhere the block does nothing).
+    The same signal a second time before a checkpoint is delivered at once (a second Ctrl-C
+    stops a stage that runs long between checkpoints).
+    """
+
+    def __init__(self, signums: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM)) -> None:
+        self._signums = signums
+        self._previous: dict[int, _Handler] = {}
+        self._pending: list[int] = []
+
+    def __enter__(self) -> DeferredSignals:
+        if threading.current_thread() is threading.main_thread():
+            for s in self._signums:
+                prev = signal.getsignal(s)
+                if callable(prev):
+                    self._previous[s] = prev
+                    signal.signal(s, self._hold)
+        _ACTIVE.append(self)
+        return self
+
+    def _hold(self, signum: int, frame: FrameType | None) -> None:
+        if signum in self._pending:  # asked twice: deliver it now, wherever the code is
+            self._pending.remove(signum)
+            self._previous[signum](signum, frame)
+            return
+        self._pending.append(signum)
+
+    @property
+    def pending(self) -> bool:
+        """A held signal waits to be delivered."""
+        return bool(self._pending)
+
+    def check(self) -> None:
+        """Deliver the first held signal: call the handler that was in place before the
+        block (which raises ``KeyboardInterrupt`` for SIGINT)."""
+        if self._pending:
+            s = self._pending[0]
+            self._pending.clear()
+            self._previous[s](s, None)
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        _ACTIVE.remove(self)
+        for s, prev in self._previous.items():
+            signal.signal(s, prev)
+        if exc_type is None:
+            self.check()
+
+
+def checkpoint() -> None:
+    """Deliver a signal held by the innermost :class:`DeferredSignals` block (if any): the
+    place where a long computation of the toolkit may be interrupted."""
+    if _ACTIVE:
+        _ACTIVE[-1].check()

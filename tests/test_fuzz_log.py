@@ -1,0 +1,267 @@
+"""Fuzzing the C log format (issue 20 items 5 and 7): the example readers
+``examples/estimate_from_log.c`` and ``examples/control_from_log.c`` over damaged logs.
+
+A short valid log of each kind (the estimator's, the loop's) is damaged by hypothesis: lines
+deleted, repeated, swapped or invented, tokens replaced (``nan``, ``1.5x``, huge integers,
+text), removed or added, the file truncated at any byte, binary bytes inserted.  Every input
+either runs (exit 0, and then every estimate, covariance and torque written is finite) or
+stops with exit 1 (a runtime call refused the data) or 2 (a malformed log) and one line on
+stderr naming the file and the line (``LOG:LINE: ...``); never a signal, never a hang."""
+
+from __future__ import annotations
+
+import math
+import re
+import shutil
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from amsfe_sym.codegen import compiler, library_for
+from amsfe_sym.estimation import CameraFrame
+from amsfe_sym.runtime.compiled_estimator import make_compiled_estimator, write_log
+from amsfe_sym.runtime.compiled_loop import write_loop_log
+from amsfe_sym.scenario import load_scenario
+from amsfe_sym.sim.builders import build_run
+from amsfe_sym.sim.compiled import controller_params, simulation_inputs
+from amsfe_sym.sim.loop import run
+from tests.test_compiled_estimator import record
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))
+#: ``LOG:LINE: message``, one line.
+ERROR_LINE = re.compile(r"^(?P<path>.+?):(?P<line>\d+): \S.*\n$")
+
+
+@dataclass(frozen=True)
+class Reader:
+    """A compiled example and a valid log it reads."""
+
+    exe: Path
+    log: bytes
+    prefix: str  # the records whose numbers must be finite after a run that exits 0
+
+
+def _build(name: str, lib_dir: Path, libfile: str, out: Path) -> Path:
+    subprocess.run(
+        [
+            compiler(),
+            "-O1",
+            "-Wall",
+            "-Werror",
+            str(EXAMPLES / f"{name}.c"),
+            f"-I{lib_dir}",
+            f"-L{lib_dir}",
+            f"-l{libfile[3:-3]}",
+            f"-Wl,-rpath,{lib_dir}",
+            "-lm",
+            "-o",
+            str(out),
+        ],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
+    return out
+
+
+@pytest.fixture(scope="module")
+def readers(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Reader]:
+    if shutil.which(compiler()) is None:
+        pytest.skip("no C compiler")
+    tmp = tmp_path_factory.mktemp("fuzz-log")
+    # the estimator's log: 20 ticks of paper-sim, two frames (one fused, one late)
+    rec = record(duration=0.03)
+    K = 20
+    frames: list[list[CameraFrame]] = [[] for _ in range(K)]
+    z_px = np.array([320.0, 240.0])
+    frames[12] = [CameraFrame(10, z_px)]
+    frames[16] = [CameraFrame(14, z_px + 1.0), CameraFrame(15, z_px)]
+    est = make_compiled_estimator("oosm", **rec.kwargs)
+    est_log = write_log(tmp / "est.log", est, rec.u[:K], list(rec.z[1 : K + 1]), frames)
+    lib = rec.lib
+    est_exe = _build("estimate_from_log", lib.dir, lib.manifest.library, tmp / "estimate")
+    # the loop's log: 20 steps of a compiled paper-sim run, with two delivered frames
+    sc = load_scenario("paper-sim").with_overrides(duration=0.019, estimator="oosm")
+    lib = library_for(sc)
+    c = run(sc, lib, runtime="compiled")
+    parts = build_run(sc, lib, compiled=True)
+    inputs, _ = simulation_inputs(sc, lib, c.t.size, parts)
+    rows = np.array([[10, 12, 320.0, 240.0], [14, 16, 321.0, 241.0]])
+    loop_log = write_loop_log(
+        tmp / "loop.log",
+        parts.estimator,  # type: ignore[arg-type]
+        controller_params(parts.controller, lib),
+        c.z_enc,
+        inputs.ref,
+        rows,
+    )
+    loop_exe = _build("control_from_log", lib.dir, lib.manifest.library, tmp / "control")
+    return {
+        "estimate": Reader(est_exe, est_log.read_bytes(), "est "),
+        "control": Reader(loop_exe, loop_log.read_bytes(), "u "),
+    }
+
+
+def _run(reader: Reader, data: bytes, path: Path) -> subprocess.CompletedProcess[bytes]:
+    path.write_bytes(data)
+    return subprocess.run([str(reader.exe), str(path)], capture_output=True, timeout=60)
+
+
+def _check(reader: Reader, data: bytes, path: Path) -> int:
+    """Run the reader on ``data``; assert the property; return the exit status."""
+    proc = _run(reader, data, path)
+    err = proc.stderr.decode(errors="replace")
+    assert proc.returncode >= 0, f"killed by signal {-proc.returncode}: {err}"
+    assert proc.returncode in (0, 1, 2), (proc.returncode, err)
+    if proc.returncode == 0:
+        for line in proc.stdout.decode().splitlines():
+            if line.startswith(reader.prefix):
+                values = [float(v) for v in line.split()[1:]]
+                assert all(math.isfinite(v) for v in values), f"exit 0 with NaN/inf: {line}"
+    else:
+        m = ERROR_LINE.match(err)
+        assert m, f"expected one line 'LOG:LINE: message', found {err!r}"
+        assert m["path"] == str(path)
+        assert 0 <= int(m["line"]) <= data.count(b"\n") + 1
+        assert proc.stdout.count(b"\n") <= data.count(b"\n")
+    return proc.returncode
+
+
+# ---------------------------------------------------------------- damage
+TOKENS = st.one_of(
+    st.sampled_from(
+        [
+            "nan",
+            "-nan",
+            "inf",
+            "-inf",
+            "1e999",
+            "1e-999",
+            "abc",
+            "1.5x",
+            "0x10",
+            "-1",
+            "0",
+            "1",
+            "2",
+            "3.5",
+            "2147483648",
+            "-9223372036854775809",
+            "99999999999999999999",
+            "tick",
+            "frame",
+            "step",
+            "P0",
+        ]
+    ),
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.integers(min_value=-(2**70), max_value=2**70).map(str),
+    st.text(alphabet=st.characters(min_codepoint=33, max_codepoint=126), min_size=1, max_size=6),
+)
+
+
+@st.composite
+def damaged(draw: st.DrawFn, log: bytes) -> bytes:
+    lines = log.split(b"\n")[:-1]  # every line of a valid log ends with \n
+    for _ in range(draw(st.integers(1, 3))):
+        if not lines:
+            lines = [b""]
+        i = draw(st.integers(0, len(lines) - 1))
+        toks = lines[i].split(b" ")
+        kind = draw(  # value changes (the structure kept) most often: they reach the runtime
+            st.sampled_from(
+                ["delete", "repeat", "swap", "invent", "drop", "add", "blank"] + ["replace"] * 5
+            )
+        )
+        if kind == "replace" and len(toks) > 1 and draw(st.booleans()):
+            j = draw(st.integers(1, len(toks) - 1))  # a value, by a number of any size
+            toks[j] = repr(draw(st.floats(allow_nan=True, allow_infinity=True))).encode()
+            lines[i] = b" ".join(toks)
+        elif kind == "delete":
+            del lines[i]
+        elif kind == "repeat":
+            lines.insert(i, lines[i])
+        elif kind == "swap":
+            j = draw(st.integers(0, len(lines) - 1))
+            lines[i], lines[j] = lines[j], lines[i]
+        elif kind == "invent":
+            words = draw(st.lists(TOKENS, min_size=1, max_size=12))
+            lines.insert(i, " ".join(words).encode())
+        elif kind == "replace":
+            j = draw(st.integers(0, len(toks) - 1))
+            toks[j] = draw(TOKENS).encode()
+            lines[i] = b" ".join(toks)
+        elif kind == "drop" and len(toks) > 1:
+            del toks[draw(st.integers(1, len(toks) - 1))]
+            lines[i] = b" ".join(toks)
+        elif kind == "add":
+            toks.insert(draw(st.integers(1, len(toks))), draw(TOKENS).encode())
+            lines[i] = b" ".join(toks)
+        elif kind == "blank":
+            lines.insert(i, b"")
+    data = b"".join(ln + b"\n" for ln in lines)
+    tail = draw(st.sampled_from(["whole"] * 4 + ["truncated", "bytes"]))
+    if tail == "truncated":
+        data = data[: draw(st.integers(0, len(data)))]
+    elif tail == "bytes":
+        at = draw(st.integers(0, len(data)))
+        data = data[:at] + draw(st.binary(min_size=1, max_size=8)) + data[at:]
+    return data
+
+
+@pytest.mark.parametrize("name", ["estimate", "control"])
+def test_the_valid_log_runs(readers: dict[str, Reader], name: str, tmp_path: Path) -> None:
+    reader = readers[name]
+    assert _check(reader, reader.log, tmp_path / "ok.log") == 0
+    out = _run(reader, reader.log, tmp_path / "ok.log").stdout.decode()
+    assert out.count(reader.prefix) == 20
+
+
+@pytest.mark.parametrize(
+    ("damage", "words"),
+    [
+        (lambda log: log + b"bogus 1 2 3\n", "found 'bogus'"),
+        (lambda log: log[:-5], "truncated"),
+        (lambda log: log.replace(b"\ntick ", b"\ntick 1 ", 1), "found 7"),
+        (lambda log: log.replace(b"\nr_camera ", b"\nr_camera 1.5x ", 1), "'1.5x'"),
+        (lambda log: log.replace(b"\nframe 10 ", b"\nframe 10.5 ", 1), "integer"),
+        (lambda log: b"\n".join(ln for ln in log.split(b"\n") if not ln.startswith(b"qw ")), "qw"),
+        (lambda log: log.replace(b"\n", b"\n\0", 1), "NUL"),
+    ],
+    ids=["unknown", "truncated", "long-vector", "bad-number", "float-step", "missing", "nul"],
+)
+def test_a_defect_is_named_with_its_line(
+    readers: dict[str, Reader], damage: object, words: str, tmp_path: Path
+) -> None:
+    reader = readers["estimate"]
+    data = damage(reader.log)  # type: ignore[operator]
+    path = tmp_path / "bad.log"
+    proc = _run(reader, data, path)
+    err = proc.stderr.decode()
+    assert proc.returncode == 2 and words in err and ERROR_LINE.match(err), err
+
+
+@FUZZ
+@given(data=st.data())
+def test_fuzz_estimate_from_log(
+    readers: dict[str, Reader], data: st.DataObject, tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    reader = readers["estimate"]
+    log = data.draw(damaged(reader.log))
+    _check(reader, log, tmp_path_factory.mktemp("f") / "run.log")
+
+
+@FUZZ
+@given(data=st.data())
+def test_fuzz_control_from_log(
+    readers: dict[str, Reader], data: st.DataObject, tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    reader = readers["control"]
+    log = data.draw(damaged(reader.log))
+    _check(reader, log, tmp_path_factory.mktemp("f") / "run.log")
