@@ -1,8 +1,11 @@
 """The controller table of docs/reproduction.md: every (controller, estimator) pair on one
 scenario over many seeds, mean +- std of the closed-loop metrics, in parallel processes.
 
-    .venv/bin/python tools/control_table.py paper-sim --seeds 20 \
+    .venv/bin/python tools/control_table.py paper-sim --first-seed 1000 --seeds 200 \
         --out docs/data/control-paper-sim.json
+
+On the compiled loop (``--runtime python`` for the reference loop: the same statistics,
+docs/runtime-c.md).
 
 Metrics (after the transient: the last 80 % of each run): tracking RMSE and max error per
 joint [rad], RMS torque [N m], chattering as the total variation of u per second [N m/s],
@@ -38,6 +41,7 @@ def run_once(
     seed: int,
     duration: float | None,
     gains: dict[str, float] | None = None,
+    runtime: str = "python",
 ) -> dict[str, Any]:
     """``summary.json`` of one run: ``scenario`` with controller ``ctrl`` (its gains updated by
     ``gains``), estimator ``est`` and ``seed`` (also used by tools/tune_controllers.py)."""
@@ -53,12 +57,12 @@ def run_once(
     )
     if gains:
         sc = replace(sc, controller_gains={ctrl: {**sc.gains_for(ctrl), **gains}})
-    return summarize(run(sc, library_for(sc)))
+    return summarize(run(sc, library_for(sc), runtime=runtime))
 
 
-def _one(job: tuple[str, str, str, int, float | None]) -> dict[str, Any]:
-    scenario, ctrl, est, seed, duration = job
-    s = run_once(scenario, ctrl, est, seed, duration)
+def _one(job: tuple[str, str, str, int, float | None, str]) -> dict[str, Any]:
+    scenario, ctrl, est, seed, duration, runtime = job
+    s = run_once(scenario, ctrl, est, seed, duration, runtime=runtime)
     return {
         "controller": ctrl,
         "estimator": est,
@@ -132,6 +136,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenario")
     ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--runtime", default="compiled", choices=("compiled", "python"))
     ap.add_argument("--duration", type=float, default=None)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--pairs", default=None, help="ctrl/est,ctrl/est (default: all)")
@@ -144,7 +150,8 @@ def main() -> None:
         print_table(d["scenario"], d["seeds"], pairs, d["runs"])
         return
     pairs = tuple(tuple(p.split("/")) for p in args.pairs.split(",")) if args.pairs else PAIRS
-    jobs = [(args.scenario, c, e, s, args.duration) for c, e in pairs for s in range(args.seeds)]
+    seeds = range(args.first_seed, args.first_seed + args.seeds)
+    jobs = [(args.scenario, c, e, s, args.duration, args.runtime) for c, e in pairs for s in seeds]
     from amsfe_sym.codegen import library_for
     from amsfe_sym.scenario import load_scenario
 
@@ -156,7 +163,14 @@ def main() -> None:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(
             json.dumps(
-                {"scenario": args.scenario, "seeds": args.seeds, "table": table, "runs": rows},
+                {
+                    "scenario": args.scenario,
+                    "seeds": args.seeds,
+                    "first_seed": args.first_seed,
+                    "runtime": args.runtime,
+                    "table": table,
+                    "runs": rows,
+                },
                 indent=1,
             )
             + "\n"
