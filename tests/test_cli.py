@@ -59,3 +59,38 @@ def test_lock_refuses_a_non_finite_value(capsys) -> None:
     assert main(["generate", "--lock", "joint2=nan"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("error:") and "finite" in err and "\n" not in err
+
+
+def test_the_console_script_starts_through_the_guarded_entry(monkeypatch, capsys) -> None:
+    """``amsfe`` (the console script) and ``python -m amsfe_sym`` share one entry, which
+    handles Ctrl-C / SIGTERM while the command line's modules load (issue 20)."""
+    from pathlib import Path
+
+    import tomllib
+
+    import amsfe_sym.__main__ as entry
+
+    project = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())
+    assert project["project"]["scripts"]["amsfe"] == "amsfe_sym.__main__:run"
+    monkeypatch.setattr("sys.argv", ["amsfe", "--version"])
+    try:
+        code = entry.run()
+    except SystemExit as exc:  # argparse's --version exits
+        code = exc.code
+    assert code == 0
+    assert "amsfe" in capsys.readouterr().out
+
+
+def test_an_interrupt_while_the_command_line_loads_is_one_line(monkeypatch, capsys) -> None:
+    import types
+
+    import amsfe_sym.__main__ as entry
+
+    class Loading(types.ModuleType):
+        def __getattr__(self, name: str) -> object:
+            raise KeyboardInterrupt  # Ctrl-C while the module loads
+
+    monkeypatch.setitem(__import__("sys").modules, "amsfe_sym.apps.cli", Loading("cli"))
+    assert entry.run() == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Ctrl-C" in err[0] and "nothing was written" in err[0]
