@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 from amsfe_sym.apps.cli import main
 
 
@@ -61,7 +63,19 @@ def test_lock_refuses_a_non_finite_value(capsys) -> None:
     assert err.startswith("error:") and "finite" in err and "\n" not in err
 
 
-def test_the_console_script_starts_through_the_guarded_entry(monkeypatch, capsys) -> None:
+@pytest.fixture
+def keep_sigterm():
+    """The entry installs a SIGTERM handler: put the test process's back."""
+    import signal
+
+    old = signal.getsignal(signal.SIGTERM)
+    yield
+    signal.signal(signal.SIGTERM, old)
+
+
+def test_the_console_script_starts_through_the_guarded_entry(
+    monkeypatch, capsys, keep_sigterm
+) -> None:
     """``amsfe`` (the console script) and ``python -m amsfe_sym`` share one entry, which
     handles Ctrl-C / SIGTERM while the command line's modules load (issue 20)."""
     from pathlib import Path
@@ -81,7 +95,9 @@ def test_the_console_script_starts_through_the_guarded_entry(monkeypatch, capsys
     assert "amsfe" in capsys.readouterr().out
 
 
-def test_an_interrupt_while_the_command_line_loads_is_one_line(monkeypatch, capsys) -> None:
+def test_an_interrupt_while_the_command_line_loads_is_one_line(
+    monkeypatch, capsys, keep_sigterm
+) -> None:
     import types
 
     import amsfe_sym.__main__ as entry
