@@ -299,9 +299,60 @@ class Transition:
         d = ca.horzcat(dq, dv, ca.SX(n, 2 * n), dth)
         return ca.project(d, pattern)
 
+    def rk4_stage_split_functions(self) -> tuple[ca.Function, ca.Function]:
+        """The stage of :meth:`rk4_stage_function` without its dense solves, as two SX
+        functions (CSE), built once per robot; the caller solves with M (the C chain of
+        ``runtime/c/amsfe_model.c`` by one LDL^T of M in loops, the MX step by CasADi's
+        ``ldl`` linear solver):
+
+        ``rk4_stage_rhs (xp[4n], u[n], theta[p]) -> (kr, M)``: ``kr`` is k with its qdd rows
+        replaced by the unsolved ``rhs = Ks (qm - q) - b(q, qd)`` (so ``qdd = M^-1 rhs``),
+        ``M = M(q, theta)`` (CRBA, n x n, dense);
+
+        ``rk4_stage_jac (xp, u, theta, qdd[n]) -> Jr``: J = dk/d[xp; theta] (4n x N, sparse)
+        with its qdd rows replaced by the unsolved ``dtau = d(Ks (qm - q))/dz -
+        dRNEA(q, qd, a)/dz |_{a = qdd}`` (so ``dqdd/dz = M^-1 dtau``); ``qdd`` is an input
+        because dRNEA/dz is evaluated at the solved acceleration.  Since the solve acts on
+        the rows only, ``(M^-1 dtau) [S; E] = M^-1 (dtau [S; E])``: the chain multiplies Jr
+        by the sensitivities first and solves the n qdd rows of the product.
+        """
+        if "rk4_stage_rhs" in self._cache:
+            return self._cache["rk4_stage_rhs"], self._cache["rk4_stage_jac"]
+        n, p = self.tree.n, self.tree.p
+        xp, u, th = ca.SX.sym("xp", 4 * n), ca.SX.sym("u", n), ca.SX.sym("theta", p)
+        a = ca.SX.sym("qdd", n)
+        q, qd, qm, qmd = xp[0:n], xp[n : 2 * n], xp[2 * n : 3 * n], xp[3 * n : 4 * n]
+        Ks = self.stiffness(th)
+        delta = qm - q
+        rhs = Ks * delta - self.tree.bias(q, qd, th)
+        qmdd = (u - ca.DM(self.robot.Fm) * qmd - Ks * delta) / ca.DM(self.robot.Mm)
+        M = ca.densify(self.tree.mass_matrix(q, th))
+        fr = ca.Function(
+            "rk4_stage_rhs",
+            [xp, u, th],
+            [ca.vertcat(qd, rhs, qmd, qmdd), M],
+            ["xp", "u", "theta"],
+            ["kr", "M"],
+            {"cse": True},
+        )
+        z = ca.vertcat(xp, th)
+        dtau = ca.jacobian(Ks * delta, z) - self._rnea_derivative(q, qd, a, th, z)
+        J_lin = ca.jacobian(ca.vertcat(qd, qmd, qmdd), z)  # linear in z
+        Jr = ca.vertcat(J_lin[0:n, :], dtau, J_lin[n:, :])
+        fj = ca.Function(
+            "rk4_stage_jac",
+            [xp, u, th, a],
+            [Jr],
+            ["xp", "u", "theta", "qdd"],
+            ["Jr"],
+            {"cse": True},
+        )
+        self._cache["rk4_stage_rhs"], self._cache["rk4_stage_jac"] = fr, fj
+        return fr, fj
+
     def rk4_minv_function(self) -> ca.Function:
         """``(q[n], theta[p]) -> M(q, theta)^-1`` (SX, LDL^T of the CRBA mass matrix), the
-        noise gain's link block (eq. 4); built once per robot."""
+        noise gain's link block (eq. 4) of the expanded step; built once per robot."""
         if "rk4_minv" not in self._cache:
             n, p = self.tree.n, self.tree.p
             qs, ths = ca.SX.sym("q", n), ca.SX.sym("theta", p)
@@ -316,11 +367,17 @@ class Transition:
 
         F is ``model_substeps`` classical RK4 steps of h = T / m over T, u held.  A is
         propagated through the stages (forward sensitivities: ``dk_i/dx = J_i [dxp_i/dx;
-        E_theta]`` with the sparse stage jacobians of :meth:`rk4_stage_function`), not by
-        differentiating the MX graph (that took ~390 us on a 7-DOF arm).  Gamma follows from
-        A: the impulses enter as ``qd += M(q)^-1 w_l``, ``qmd += w_m / Mm`` at the start of
-        the step and ``theta += T w_theta``.  With ``expand`` the whole graph is SX,
-        straight-line C (UR5: 16 us; as MX calls 41 us).
+        E_theta]`` with the sparse stage jacobians), not by differentiating the MX graph
+        (that took ~390 us on a 7-DOF arm).  Gamma follows from A: the impulses enter as
+        ``qd += M(q)^-1 w_l``, ``qmd += w_m / Mm`` at the start of the step and ``theta +=
+        T w_theta``.
+
+        With ``expand`` the whole graph is SX, straight-line C (UR5: 16 us; as MX calls 41
+        us) over :meth:`rk4_stage_function` (the solves unrolled) and
+        :meth:`rk4_minv_function`.  Without, it is an MX graph over the two stage functions
+        of :meth:`rk4_stage_split_functions`, the solves with M by CasADi's ``ldl`` linear
+        solver (loops in the generated C; it does not expand to SX), Gamma's M(q)^-1 from the
+        first stage's M (its point is x): the same arrangement as the C chain.
 
         Returns:
             ``transition_step (x, u) -> (x_next, A, Gamma)`` (the inverse's Newton steps use
@@ -329,30 +386,56 @@ class Transition:
         n, p, T = self.tree.n, self.tree.p, self.T
         N = 4 * n + p
         h = T / self.substeps
-        stage = self.rk4_stage_function()
-        minv = self.rk4_minv_function()
         x, u = ca.MX.sym("x", N), ca.MX.sym("u", n)
         xp, th = x[: 4 * n], x[4 * n :]
         eye = ca.DM.eye(N)
         E = eye[4 * n :, :]
+        if expand:
+            full = self.rk4_stage_function()
+
+            def stage(xi: ca.MX) -> tuple[ca.MX, ca.MX, ca.MX | None]:
+                k, J = full(xi, u, th)
+                return k, J, None
+
+        else:
+            stage_r, stage_j = self.rk4_stage_split_functions()
+
+            def stage(xi: ca.MX) -> tuple[ca.MX, ca.MX, ca.MX | None]:
+                kr, M = stage_r(xi, u, th)
+                qdd = ca.solve(M, kr[n : 2 * n], "ldl")
+                Jr = stage_j(xi, u, th, qdd)
+                return ca.vertcat(kr[0:n], qdd, kr[2 * n :]), Jr, M
+
+        def solved(D: ca.MX, M: ca.MX | None) -> ca.MX:
+            """D with its qdd rows solved by M (the split stage's unsolved rows)."""
+            if M is None:
+                return D
+            return ca.vertcat(D[0:n, :], ca.solve(M, D[n : 2 * n, :], "ldl"), D[2 * n :, :])
+
+        M0: ca.MX | None = None  # M(q) at x: the first stage's
         Sx: ca.MX | ca.DM = eye[: 4 * n, :]  # d xp / d x along the substeps
-        for _ in range(self.substeps):
-            k1, d1 = stage(xp, u, th)
-            d1 = ca.mtimes(d1, ca.vertcat(Sx, E)) if self.substeps > 1 else d1
+        for s in range(self.substeps):
+            k1, d1, M1 = stage(xp)
+            M0 = M1 if s == 0 else M0
+            d1 = solved(ca.mtimes(d1, ca.vertcat(Sx, E)) if self.substeps > 1 else d1, M1)
             ks, ds = [k1], [d1]
             for c in (0.5, 0.5, 1.0):
                 xi = xp + c * h * ks[-1]
                 Si = Sx + c * h * ds[-1]
-                ki, Ji = stage(xi, u, th)
+                ki, Ji, Mi = stage(xi)
                 ks.append(ki)
-                ds.append(ca.mtimes(Ji, ca.vertcat(Si, E)))
+                ds.append(solved(ca.mtimes(Ji, ca.vertcat(Si, E)), Mi))
             xp = xp + (h / 6.0) * (ks[0] + 2 * ks[1] + 2 * ks[2] + ks[3])
             Sx = Sx + (h / 6.0) * (ds[0] + 2 * ds[1] + 2 * ds[2] + ds[3])
         A = ca.densify(ca.vertcat(Sx, E))
         Mm = ca.DM(self.robot.Mm)
+        if M0 is None:  # A[:, qd] M^-1
+            G_l = ca.mtimes(A[:, n : 2 * n], self.rk4_minv_function()(x[:n], th))
+        else:  # (M^-1 A[:, qd]^T)^T, M symmetric
+            G_l = ca.solve(M0, A[:, n : 2 * n].T, "ldl").T
         G = ca.densify(
             ca.horzcat(
-                ca.mtimes(A[:, n : 2 * n], minv(x[:n], th)),
+                G_l,
                 A[:, 3 * n : 4 * n] / ca.repmat(Mm.T, N, 1),
                 ca.vertcat(ca.DM.zeros(4 * n, p), T * ca.DM.eye(p)),
             )
