@@ -249,8 +249,10 @@ class Transition:
 
     def rk4_stage_function(self) -> ca.Function:
         """One RK4 stage and its jacobian: ``(xp[4n], u[n], theta[p]) -> (k, J)``, SX with
-        common subexpressions eliminated, built once per robot (the MX graphs and the C
-        chain of ``runtime/c/amsfe_model.c`` call the same function).
+        common subexpressions eliminated, built once per robot, its solves with M unrolled:
+        the expanded step (up to :data:`EXPAND_MAX_JOINTS` joints) inlines it; beyond, the MX
+        step and the C chain of ``runtime/c/amsfe_model.c`` call the two functions of
+        :meth:`rk4_stage_split_functions` and solve with M in loops.
 
         ``k = f(xp, u, theta)`` is the plant's right-hand side without disturbance and
         ``J = dk/d[xp; theta]`` (4n x N, sparse: the qd, qmd and qmdd rows are structurally
