@@ -187,6 +187,41 @@ def test_stage_analytic_equals_reverse_ad(name: str) -> None:
         Transition(tree, "rk4", 3, stage_derivative="forward")
 
 
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+@pytest.mark.parametrize("mode", ["analytic", "reverse_ad"])
+def test_split_stage_equals_the_stage(name: str, mode: str) -> None:
+    """The stage without its solves (``rk4_stage_rhs``: k with rhs rows, M;
+    ``rk4_stage_jac``: J with dtau rows at a = qdd), solved with M here, equals the stage
+    with its unrolled LDL^T to 1e-12; the MX step over it (CasADi's ldl linsol, Gamma from
+    the first stage's M) equals the expanded step over the unrolled stage."""
+    robot = load_robot(name)
+    tr = Transition(RigidBodyTree(robot), "rk4", 3, stage_derivative=mode)
+    stage = tr.rk4_stage_function()
+    stage_rhs, stage_jac = tr.rk4_stage_split_functions()
+    n, p = robot.n, robot.p
+    rng = np.random.default_rng(17)
+    for _ in range(5):
+        xp, u = rng.uniform(-1.0, 1.0, 4 * n), rng.uniform(-5.0, 5.0, n)
+        th = (robot.theta_true + 1.0) * rng.uniform(0.5, 1.5, p)
+        k, J = (np.array(v) for v in stage(xp, u, th))
+        kr, M = (np.array(v) for v in stage_rhs(xp, u, th))
+        assert rel_err(M, M.T) == 0.0
+        qdd = np.linalg.solve(M, kr[n : 2 * n])
+        kr[n : 2 * n] = qdd
+        Jr = np.array(ca.densify(stage_jac(xp, u, th, qdd)))
+        Jr[n : 2 * n] = np.linalg.solve(M, Jr[n : 2 * n])
+        assert rel_err(kr, k) <= 1e-12
+        assert rel_err(Jr, J) <= 1e-12
+    steps = [tr.rk4_step_function(expand=e) for e in (True, False)]
+    for _ in range(3):
+        x = np.r_[
+            rng.uniform(-1.0, 1.0, 4 * n), (robot.theta_true + 1.0) * rng.uniform(0.5, 1.5, p)
+        ]
+        u = rng.uniform(-5.0, 5.0, n)
+        for a, b in zip(*(f(x, u) for f in steps), strict=True):
+            assert rel_err(np.array(b), np.array(a)) <= 1e-12
+
+
 @pytest.mark.parametrize("name", SHIPPED)
 def test_rnea_jet_equals_ad_time_derivatives(name: str) -> None:
     """RNEA on Taylor polynomials (the motor reference's derivatives) equals nested

@@ -63,7 +63,9 @@ class CompiledTransition:
     """x+ = F(x, u), A = dF/dx, F^-1 and Gamma Qw Gamma^T from the compiled library.
 
     One call of the fused ``transition_step`` gives x+, A and Gamma; ``process_noise``
-    reuses that Gamma when called with the same (x, u), as the EKF predict does.
+    reuses that Gamma when called with the same (x, u), as the EKF predict does.  An rk4
+    library beyond 2 joints has it chained in C (``transition_step_chain``, the same values
+    to 1e-13, faster than the MX graph), which is called instead, as the C estimators do.
 
     Args:
         lib: The generated library.
@@ -75,7 +77,8 @@ class CompiledTransition:
     def __init__(self, lib: ModelLibrary, Qw: ArrayLike, inverse_tol: float = 1e-10) -> None:
         self.lib = lib
         self.inverse_tol = inverse_tol
-        self._step = lib.function("transition_step")
+        chained = "transition_step_chain" in lib.manifest.functions
+        self._step = lib.function("transition_step_chain" if chained else "transition_step")
         self._gain = lib.function("noise_gain")
         self._inv = lib.function("transition_inverse")
         m = 2 * lib.n + lib.p

@@ -128,7 +128,8 @@ def build_functions(robot: Robot, parts: tuple[str, ...] = PARTS) -> SymbolicMod
         # the C chain over the generated stage (runtime/c/amsfe_model.c); up to
         # EXPAND_MAX_JOINTS the expanded step is faster (2-link: 0.78 against 1.55 us a call,
         # docs/codegen.md) and small, and the C estimators call it directly
-        model.internal = {"rk4_stage": tr.rk4_stage_function(), "rk4_minv": tr.rk4_minv_function()}
+        stage_rhs, stage_jac = tr.rk4_stage_split_functions()
+        model.internal = {"rk4_stage_rhs": stage_rhs, "rk4_stage_jac": stage_jac}
         model.chained = {"transition_step_chain": "transition_step"}
     model.functions = {f.name(): f for f in fns}
     checkpoint()  # a held Ctrl-C is raised here, between the stages (core.interrupts)

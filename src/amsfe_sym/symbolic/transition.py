@@ -44,6 +44,7 @@ import casadi as ca
 
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
 from amsfe_sym.symbolic.linalg import ldl_solve
+from amsfe_sym.symbolic.rk4_step import stage_split_functions, step_function
 from amsfe_sym.symbolic.rnea_derivatives import rnea_derivatives
 
 __all__ = ["EXPAND_MAX_JOINTS", "STAGE_DERIVATIVES", "StateLayout", "Transition", "with_residual"]
@@ -249,8 +250,10 @@ class Transition:
 
     def rk4_stage_function(self) -> ca.Function:
         """One RK4 stage and its jacobian: ``(xp[4n], u[n], theta[p]) -> (k, J)``, SX with
-        common subexpressions eliminated, built once per robot (the MX graphs and the C
-        chain of ``runtime/c/amsfe_model.c`` call the same function).
+        common subexpressions eliminated, built once per robot, its solves with M unrolled:
+        the expanded step (up to :data:`EXPAND_MAX_JOINTS` joints) inlines it; beyond, the MX
+        step and the C chain of ``runtime/c/amsfe_model.c`` call the two functions of
+        :meth:`rk4_stage_split_functions` and solve with M in loops.
 
         ``k = f(xp, u, theta)`` is the plant's right-hand side without disturbance and
         ``J = dk/d[xp; theta]`` (4n x N, sparse: the qd, qmd and qmdd rows are structurally
@@ -299,9 +302,17 @@ class Transition:
         d = ca.horzcat(dq, dv, ca.SX(n, 2 * n), dth)
         return ca.project(d, pattern)
 
+    def rk4_stage_split_functions(self) -> tuple[ca.Function, ca.Function]:
+        """``rk4_stage_rhs`` and ``rk4_stage_jac``: the stage without its dense solves
+        (:func:`.rk4_step.stage_split_functions`), built once per robot."""
+        if "rk4_stage_rhs" not in self._cache:
+            fr, fj = stage_split_functions(self)
+            self._cache["rk4_stage_rhs"], self._cache["rk4_stage_jac"] = fr, fj
+        return self._cache["rk4_stage_rhs"], self._cache["rk4_stage_jac"]
+
     def rk4_minv_function(self) -> ca.Function:
         """``(q[n], theta[p]) -> M(q, theta)^-1`` (SX, LDL^T of the CRBA mass matrix), the
-        noise gain's link block (eq. 4); built once per robot."""
+        noise gain's link block (eq. 4) of the expanded step; built once per robot."""
         if "rk4_minv" not in self._cache:
             n, p = self.tree.n, self.tree.p
             qs, ths = ca.SX.sym("q", n), ca.SX.sym("theta", p)
@@ -312,59 +323,10 @@ class Transition:
         return self._cache["rk4_minv"]
 
     def rk4_step_function(self, expand: bool = True) -> ca.Function:
-        """x+ = F(x, u), A = dF/dx and Gamma = dF/dw of the ``rk4`` model in one function.
-
-        F is ``model_substeps`` classical RK4 steps of h = T / m over T, u held.  A is
-        propagated through the stages (forward sensitivities: ``dk_i/dx = J_i [dxp_i/dx;
-        E_theta]`` with the sparse stage jacobians of :meth:`rk4_stage_function`), not by
-        differentiating the MX graph (that took ~390 us on a 7-DOF arm).  Gamma follows from
-        A: the impulses enter as ``qd += M(q)^-1 w_l``, ``qmd += w_m / Mm`` at the start of
-        the step and ``theta += T w_theta``.  With ``expand`` the whole graph is SX,
-        straight-line C (UR5: 16 us; as MX calls 41 us).
-
-        Returns:
-            ``transition_step (x, u) -> (x_next, A, Gamma)`` (the inverse's Newton steps use
-            its A too).
-        """
-        n, p, T = self.tree.n, self.tree.p, self.T
-        N = 4 * n + p
-        h = T / self.substeps
-        stage = self.rk4_stage_function()
-        minv = self.rk4_minv_function()
-        x, u = ca.MX.sym("x", N), ca.MX.sym("u", n)
-        xp, th = x[: 4 * n], x[4 * n :]
-        eye = ca.DM.eye(N)
-        E = eye[4 * n :, :]
-        Sx: ca.MX | ca.DM = eye[: 4 * n, :]  # d xp / d x along the substeps
-        for _ in range(self.substeps):
-            k1, d1 = stage(xp, u, th)
-            d1 = ca.mtimes(d1, ca.vertcat(Sx, E)) if self.substeps > 1 else d1
-            ks, ds = [k1], [d1]
-            for c in (0.5, 0.5, 1.0):
-                xi = xp + c * h * ks[-1]
-                Si = Sx + c * h * ds[-1]
-                ki, Ji = stage(xi, u, th)
-                ks.append(ki)
-                ds.append(ca.mtimes(Ji, ca.vertcat(Si, E)))
-            xp = xp + (h / 6.0) * (ks[0] + 2 * ks[1] + 2 * ks[2] + ks[3])
-            Sx = Sx + (h / 6.0) * (ds[0] + 2 * ds[1] + 2 * ds[2] + ds[3])
-        A = ca.densify(ca.vertcat(Sx, E))
-        Mm = ca.DM(self.robot.Mm)
-        G = ca.densify(
-            ca.horzcat(
-                ca.mtimes(A[:, n : 2 * n], minv(x[:n], th)),
-                A[:, 3 * n : 4 * n] / ca.repmat(Mm.T, N, 1),
-                ca.vertcat(ca.DM.zeros(4 * n, p), T * ca.DM.eye(p)),
-            )
-        )
-        step = ca.Function(
-            "transition_step",
-            [x, u],
-            [ca.vertcat(xp, th), A, G],
-            ["x", "u"],
-            ["x_next", "A", "Gamma"],
-        )
-        return step.expand() if expand else step
+        """``transition_step (x, u) -> (x_next, A, Gamma)`` of the ``rk4`` model
+        (:func:`.rk4_step.step_function`; with ``expand`` straight-line SX over the unrolled
+        stage, else an MX graph over the split stage, its solves in loops)."""
+        return step_function(self, expand)
 
     def rk4_functions(self) -> dict[str, ca.Function]:
         """The ``rk4`` transition functions.

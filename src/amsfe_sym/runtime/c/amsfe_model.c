@@ -6,18 +6,24 @@
  * Runge-Kutta steps of h = T / m of the continuous flexible-joint model over T with u held;
  * A = dF/dx by forward sensitivities; Gamma = dF/dw, eq. 4), but instead of one
  * straight-line expression of the whole step (four inlined stages per substep, their
- * jacobians and the dense products of the sensitivities) it calls the generated stage
- * `rk4_stage` (xp, u, theta) -> (k, J = dk/d[xp; theta], sparse) four times a substep and
- * chains the sensitivities in the loops below, from xp_0 = xp, B_0 = I0:
+ * jacobians and the dense products of the sensitivities) it calls the generated stage four
+ * times a substep and chains the sensitivities in the loops below, from xp_0 = xp, B_0 = I0:
  *
  *   xp_i = xp_s + c_i h k_{i-1},  S_i = B_s + c_i h D_{i-1}          (c = 0, 1/2, 1/2, 1)
- *   (k_i, J_i) = rk4_stage(xp_i, u, theta),  D_i = J_i [S_i; E]       (4n x N)
+ *   (k_i, J_i) = stage(xp_i, u, theta),  D_i = J_i [S_i; E]           (4n x N)
  *   xp_{s+1} = xp_s + h/6 (k_1 + 2 k_2 + 2 k_3 + k_4),  B_{s+1} = B_s + h/6 (D_1 + 2 D_2 + ...)
  *   xp+ = xp_m,  A = [B_m; E],  Gamma = [A[:, qd] M(q)^-1,  A[:, qmd] / Mm,  [0; T I_p]]
  *
- * with I0 = [I_4n 0] and E = [0 I_p] (theta is constant).  J_i is kept in CasADi's compressed
- * column storage, so D_i costs nnz(J_i) N multiply-adds.  The code grows with the stage
- * (~n^1.3 with CRBA and reverse-mode RNEA derivatives), not with four copies of it.
+ * with I0 = [I_4n 0] and E = [0 I_p] (theta is constant).  The stage's dense solves with the
+ * mass matrix are done here, in loops, not in the generated code (issue 18): the generated
+ * `rk4_stage_rhs` (xp, u, theta) -> (kr, M) returns k with its qdd rows unsolved
+ * (rhs = Ks (qm - q) - b) and M(q, theta); one LDL^T of M gives qdd = M^-1 rhs; the generated
+ * `rk4_stage_jac` (xp, u, theta, qdd) -> Jr returns J with its qdd rows unsolved
+ * (dtau = d(Ks (qm - q))/dz - dRNEA/dz at a = qdd, which needs qdd first: hence two
+ * functions), and D_i = Jr_i [S_i; E] with its n qdd rows solved by the same factor
+ * ((M^-1 dtau) [S; E] = M^-1 (dtau [S; E])).  Gamma's M(q)^-1 is the first stage's factor
+ * (its point is x).  Jr is kept in CasADi's compressed column storage, so D_i costs nnz(Jr) N
+ * multiply-adds and the solve n^2 N.
  *
  * It follows CasADi's calling convention and exports the symbols `casadi.external` needs
  * (the names and sparsity of the generated `transition_step`), so Python and C callers use
@@ -31,10 +37,10 @@
 #include "amsfe_internal.h"
 #include "amsfe_model_config.h" /* written by the code generator: AMSFE_MODEL_N, _P, _T, _MM */
 
-DECLARE(rk4_stage)
-DECLARE(rk4_minv)
+DECLARE(rk4_stage_rhs)
+DECLARE(rk4_stage_jac)
 DECLARE(transition_step)
-const cint *rk4_stage_sparsity_out(cint i);
+const cint *rk4_stage_jac_sparsity_out(cint i);
 const char *transition_step_name_in(cint i);
 const char *transition_step_name_out(cint i);
 const cint *transition_step_sparsity_out(cint i);
@@ -46,22 +52,24 @@ const cint *transition_step_sparsity_out(cint i);
 
 static const double MM[NN] = AMSFE_MODEL_MM;
 
-/* Nonzeros of J in CasADi's compressed sparsity [nrow, ncol, colind[ncol + 1], row[nnz]]
+/* Nonzeros of Jr in CasADi's compressed sparsity [nrow, ncol, colind[ncol + 1], row[nnz]]
  * (a dense pattern is compressed to [nrow, ncol, 1]). */
 static cint stage_nnz(const cint *sp) {
   return (sp[2] == 1 && sp[1] > 0) ? sp[0] * sp[1] : sp[2 + sp[1]];
 }
 
 /* Scratch doubles beyond the stage's own work: xs, xi, k, kacc (NX each), B, S, D, Dacc
- * (NX x NS each), the stage's J (nnz), M^-1 (n x n). */
+ * (NX x NS each), the stage's Jr (nnz), M, its LDL^T factor L and the first stage's L0
+ * (n x n each), the pivots dl, dl0 and a column y (n each). */
 static cint scratch_doubles(void) {
-  return 4 * NX + 4 * (cint)NX * NS + stage_nnz(rk4_stage_sparsity_out(1)) + NN * NN;
+  return 4 * NX + 4 * (cint)NX * NS + stage_nnz(rk4_stage_jac_sparsity_out(0)) + 3 * NN * NN +
+         3 * NN;
 }
 
 int transition_step_chain_work(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w) {
   cint a = 0, r = 0, iw = 0, w = 0, a2 = 0, r2 = 0, iw2 = 0, w2 = 0;
-  rk4_stage_work(&a, &r, &iw, &w);
-  rk4_minv_work(&a2, &r2, &iw2, &w2);
+  rk4_stage_rhs_work(&a, &r, &iw, &w);
+  rk4_stage_jac_work(&a2, &r2, &iw2, &w2);
   if (sz_arg) *sz_arg = (a > a2 ? a : a2) + 3;
   if (sz_res) *sz_res = (r > r2 ? r : r2) + 3;
   if (sz_iw) *sz_iw = iw > iw2 ? iw : iw2;
@@ -90,21 +98,48 @@ static void sparse_times(const cint *sp, const double *J, const double *S, doubl
   }
 }
 
+/* M = L diag(dl) L^T, L unit lower triangular (L[i * NN + j], i > j), for the symmetric
+ * positive definite mass matrix M (n x n, column-major; its lower triangle is read): the
+ * LDL^T of symbolic/linalg.py in loops, no pivoting (a NaN state gives NaN, as the unrolled
+ * solve did, not an error status). */
+static void ldl_factor(const double *M, double *L, double *dl) {
+  for (cint j = 0; j < NN; ++j) {
+    double dj = M[j * NN + j];
+    for (cint k = 0; k < j; ++k) dj -= L[j * NN + k] * L[j * NN + k] * dl[k];
+    dl[j] = dj;
+    for (cint i = j + 1; i < NN; ++i) {
+      double lij = M[j * NN + i];
+      for (cint k = 0; k < j; ++k) lij -= L[i * NN + k] * L[j * NN + k] * dl[k];
+      L[i * NN + j] = lij / dj;
+    }
+  }
+}
+
+/* b <- M^-1 b (n) with the factor of ldl_factor. */
+static void ldl_solve(const double *L, const double *dl, double *b) {
+  for (cint i = 0; i < NN; ++i)
+    for (cint k = 0; k < i; ++k) b[i] -= L[i * NN + k] * b[k];
+  for (cint i = 0; i < NN; ++i) b[i] /= dl[i];
+  for (cint i = NN - 1; i >= 0; --i)
+    for (cint k = i + 1; k < NN; ++k) b[i] -= L[k * NN + i] * b[k];
+}
+
 int transition_step_chain(const double **arg, double **res, cint *iw, double *w, int mem) {
   (void)mem;
   static const double c[4] = {0.0, 0.5, 0.5, 1.0}, wt[4] = {1.0, 2.0, 2.0, 1.0};
   const double T = AMSFE_MODEL_T, h = AMSFE_MODEL_T / AMSFE_MODEL_SUBSTEPS;
   const double *x = arg[0], *u = arg[1], *th = x + NX;
   double *xn = res[0], *A = res[1], *G = res[2];
-  const cint *sp = rk4_stage_sparsity_out(1);
+  const cint *sp = rk4_stage_jac_sparsity_out(0);
   cint nnz = stage_nnz(sp);
-  /* the tail of the argument/result pointer arrays and of w is ours; the stage gets the rest */
+  /* the tail of the argument/result pointer arrays and of w is ours; the stages get the rest */
   const double **sarg = arg + 3;
   double **sres = res + 3;
   double *xs = w, *xi = xs + NX, *k = xi + NX, *kacc = k + NX, *B = kacc + NX;
   double *S = B + (cint)NX * NS, *D = S + (cint)NX * NS, *Dacc = D + (cint)NX * NS;
-  double *J = Dacc + (cint)NX * NS, *Minv = J + nnz;
-  double *sw_ = Minv + NN * NN;
+  double *J = Dacc + (cint)NX * NS, *M = J + nnz, *L = M + NN * NN, *L0 = L + NN * NN;
+  double *dl = L0 + NN * NN, *dl0 = dl + NN, *y = dl0 + NN;
+  double *sw_ = y + NN;
 
   /* xs, B: the state and its sensitivity d xs / d x at the start of each substep */
   for (cint r = 0; r < NX; ++r) xs[r] = x[r];
@@ -117,11 +152,24 @@ int transition_step_chain(const double **arg, double **res, cint *iw, double *w,
       /* the stage's point and its sensitivity S_i = B + c_i h D_{i-1} */
       for (cint r = 0; r < NX; ++r) xi[r] = xs[r] + (i ? c[i] * h * k[r] : 0.0);
       for (cint e = 0; e < (cint)NX * NS; ++e) S[e] = B[e] + (i ? c[i] * h * D[e] : 0.0);
+      /* k with its qdd rows unsolved (rhs) and M; qdd = M^-1 rhs */
       sarg[0] = xi, sarg[1] = u, sarg[2] = th;
-      sres[0] = k, sres[1] = J;
-      int status = rk4_stage(sarg, sres, iw, sw_, 0);
+      sres[0] = k, sres[1] = M;
+      int status = rk4_stage_rhs(sarg, sres, iw, sw_, 0);
+      if (status) return status;
+      ldl_factor(M, L, dl);
+      ldl_solve(L, dl, k + NN);
+      if (s == 0 && i == 0) { /* M(q) at x, for Gamma */
+        memcpy(L0, L, sizeof(double) * NN * NN);
+        memcpy(dl0, dl, sizeof(double) * NN);
+      }
+      /* Jr (dtau unsolved in the qdd rows) at a = qdd; D = M^-1 rows of Jr [S; E] */
+      sarg[0] = xi, sarg[1] = u, sarg[2] = th, sarg[3] = k + NN;
+      sres[0] = J;
+      status = rk4_stage_jac(sarg, sres, iw, sw_, 0);
       if (status) return status;
       sparse_times(sp, J, S, D);
+      for (cint col = 0; col < NS; ++col) ldl_solve(L, dl, D + col * NX + NN);
       for (cint r = 0; r < NX; ++r) kacc[r] += wt[i] * k[r];
       for (cint e = 0; e < (cint)NX * NS; ++e) Dacc[e] += wt[i] * D[e];
     }
@@ -141,19 +189,17 @@ int transition_step_chain(const double **arg, double **res, cint *iw, double *w,
     }
   }
   if (G) {
-    /* Gamma (NS x (2n + p)), eq. (4): A[:, qd] M(q)^-1, A[:, qmd] / Mm, [0; T I_p] */
-    sarg[0] = x, sarg[1] = th;
-    sres[0] = Minv;
-    int status = rk4_minv(sarg, sres, iw, sw_, 0);
-    if (status) return status;
+    /* Gamma (NS x (2n + p)), eq. (4): A[:, qd] M(q)^-1 (row by row: M^-1 of a row's qd
+     * entries, M symmetric, with the first stage's factor), A[:, qmd] / Mm, [0; T I_p];
+     * the theta rows of A[:, qd] are zero */
     memset(G, 0, sizeof(double) * (size_t)NS * (2 * NN + NP));
+    for (cint r = 0; r < NX; ++r) {
+      for (cint l = 0; l < NN; ++l) y[l] = B[(NN + l) * NX + r];
+      ldl_solve(L0, dl0, y);
+      for (cint j = 0; j < NN; ++j) G[j * NS + r] = y[j];
+    }
     for (cint j = 0; j < NN; ++j) {
-      double *Gl = G + j * NS, *Gm = G + (NN + j) * NS;
-      for (cint l = 0; l < NN; ++l) {
-        double m = Minv[j * NN + l]; /* M^-1[l, j] */
-        const double *Bqd = B + (NN + l) * NX;
-        for (cint r = 0; r < NX; ++r) Gl[r] += Bqd[r] * m;
-      }
+      double *Gm = G + (NN + j) * NS;
       const double *Bqmd = B + (3 * NN + j) * NX;
       for (cint r = 0; r < NX; ++r) Gm[r] = Bqmd[r] / MM[j];
     }

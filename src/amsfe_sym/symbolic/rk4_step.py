@@ -1,0 +1,151 @@
+"""The ``rk4`` model's fused step ``transition_step`` and the split stage it and the C chain
+(``runtime/c/amsfe_model.c``) are built on: the stage without its dense solves with the mass
+matrix, which are done in loops (CasADi's ``ldl`` linear solver in the MX graph, an LDL^T in
+C in the chain) instead of unrolled in the generated code (issue 18, docs/codegen.md).
+Called through :class:`.transition.Transition` (``tr`` below; not imported: it imports
+this module), which caches what they build."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import casadi as ca
+
+__all__ = ["stage_split_functions", "step_function"]
+
+
+def stage_split_functions(tr: Any) -> tuple[ca.Function, ca.Function]:
+    """The stage of :meth:`.Transition.rk4_stage_function` without its dense solves, as two SX
+    functions (CSE); the caller solves with M (the C chain of
+    ``runtime/c/amsfe_model.c`` by one LDL^T of M in loops, the MX step by CasADi's
+    ``ldl`` linear solver):
+
+    ``rk4_stage_rhs (xp[4n], u[n], theta[p]) -> (kr, M)``: ``kr`` is k with its qdd rows
+    replaced by the unsolved ``rhs = Ks (qm - q) - b(q, qd)`` (so ``qdd = M^-1 rhs``),
+    ``M = M(q, theta)`` (CRBA, n x n, dense);
+
+    ``rk4_stage_jac (xp, u, theta, qdd[n]) -> Jr``: J = dk/d[xp; theta] (4n x N, sparse)
+    with its qdd rows replaced by the unsolved ``dtau = d(Ks (qm - q))/dz -
+    dRNEA(q, qd, a)/dz |_{a = qdd}`` (so ``dqdd/dz = M^-1 dtau``); ``qdd`` is an input
+    because dRNEA/dz is evaluated at the solved acceleration.  Since the solve acts on
+    the rows only, ``(M^-1 dtau) [S; E] = M^-1 (dtau [S; E])``: the chain multiplies Jr
+    by the sensitivities first and solves the n qdd rows of the product.
+    """
+    n, p = tr.tree.n, tr.tree.p
+    xp, u, th = ca.SX.sym("xp", 4 * n), ca.SX.sym("u", n), ca.SX.sym("theta", p)
+    a = ca.SX.sym("qdd", n)
+    q, qd, qm, qmd = xp[0:n], xp[n : 2 * n], xp[2 * n : 3 * n], xp[3 * n : 4 * n]
+    Ks = tr.stiffness(th)
+    delta = qm - q
+    rhs = Ks * delta - tr.tree.bias(q, qd, th)
+    qmdd = (u - ca.DM(tr.robot.Fm) * qmd - Ks * delta) / ca.DM(tr.robot.Mm)
+    M = ca.densify(tr.tree.mass_matrix(q, th))
+    fr = ca.Function(
+        "rk4_stage_rhs",
+        [xp, u, th],
+        [ca.vertcat(qd, rhs, qmd, qmdd), M],
+        ["xp", "u", "theta"],
+        ["kr", "M"],
+        {"cse": True},
+    )
+    z = ca.vertcat(xp, th)
+    dtau = ca.jacobian(Ks * delta, z) - tr._rnea_derivative(q, qd, a, th, z)
+    J_lin = ca.jacobian(ca.vertcat(qd, qmd, qmdd), z)  # linear in z
+    Jr = ca.vertcat(J_lin[0:n, :], dtau, J_lin[n:, :])
+    fj = ca.Function(
+        "rk4_stage_jac",
+        [xp, u, th, a],
+        [Jr],
+        ["xp", "u", "theta", "qdd"],
+        ["Jr"],
+        {"cse": True},
+    )
+    return fr, fj
+
+
+def step_function(tr: Any, expand: bool = True) -> ca.Function:
+    """x+ = F(x, u), A = dF/dx and Gamma = dF/dw of the ``rk4`` model in one function.
+
+    F is ``model_substeps`` classical RK4 steps of h = T / m over T, u held.  A is
+    propagated through the stages (forward sensitivities: ``dk_i/dx = J_i [dxp_i/dx;
+    E_theta]`` with the sparse stage jacobians), not by differentiating the MX graph
+    (that took ~390 us on a 7-DOF arm).  Gamma follows from A: the impulses enter as
+    ``qd += M(q)^-1 w_l``, ``qmd += w_m / Mm`` at the start of the step and ``theta +=
+    T w_theta``.
+
+    With ``expand`` the whole graph is SX, straight-line C (UR5: 16 us; as MX calls 41
+    us) over :meth:`.Transition.rk4_stage_function` (the solves unrolled) and
+    :meth:`.Transition.rk4_minv_function`.  Without, it is an MX graph over the two stage functions
+    of :func:`stage_split_functions`, the solves with M by CasADi's ``ldl`` linear
+    solver (loops in the generated C; it does not expand to SX), Gamma's M(q)^-1 from the
+    first stage's M (its point is x): the same arrangement as the C chain.
+
+    Returns:
+        ``transition_step (x, u) -> (x_next, A, Gamma)`` (the inverse's Newton steps use
+        its A too).
+    """
+    n, p, T = tr.tree.n, tr.tree.p, tr.T
+    N = 4 * n + p
+    h = T / tr.substeps
+    x, u = ca.MX.sym("x", N), ca.MX.sym("u", n)
+    xp, th = x[: 4 * n], x[4 * n :]
+    eye = ca.DM.eye(N)
+    E = eye[4 * n :, :]
+    if expand:
+        full = tr.rk4_stage_function()
+
+        def stage(xi: ca.MX) -> tuple[ca.MX, ca.MX, ca.MX | None]:
+            k, J = full(xi, u, th)
+            return k, J, None
+
+    else:
+        stage_r, stage_j = tr.rk4_stage_split_functions()
+
+        def stage(xi: ca.MX) -> tuple[ca.MX, ca.MX, ca.MX | None]:
+            kr, M = stage_r(xi, u, th)
+            qdd = ca.solve(M, kr[n : 2 * n], "ldl")
+            Jr = stage_j(xi, u, th, qdd)
+            return ca.vertcat(kr[0:n], qdd, kr[2 * n :]), Jr, M
+
+    def solved(D: ca.MX, M: ca.MX | None) -> ca.MX:
+        """D with its qdd rows solved by M (the split stage's unsolved rows)."""
+        if M is None:
+            return D
+        return ca.vertcat(D[0:n, :], ca.solve(M, D[n : 2 * n, :], "ldl"), D[2 * n :, :])
+
+    M0: ca.MX | None = None  # M(q) at x: the first stage's
+    Sx: ca.MX | ca.DM = eye[: 4 * n, :]  # d xp / d x along the substeps
+    for s in range(tr.substeps):
+        k1, d1, M1 = stage(xp)
+        M0 = M1 if s == 0 else M0
+        d1 = solved(ca.mtimes(d1, ca.vertcat(Sx, E)) if tr.substeps > 1 else d1, M1)
+        ks, ds = [k1], [d1]
+        for c in (0.5, 0.5, 1.0):
+            xi = xp + c * h * ks[-1]
+            Si = Sx + c * h * ds[-1]
+            ki, Ji, Mi = stage(xi)
+            ks.append(ki)
+            ds.append(solved(ca.mtimes(Ji, ca.vertcat(Si, E)), Mi))
+        xp = xp + (h / 6.0) * (ks[0] + 2 * ks[1] + 2 * ks[2] + ks[3])
+        Sx = Sx + (h / 6.0) * (ds[0] + 2 * ds[1] + 2 * ds[2] + ds[3])
+    A = ca.densify(ca.vertcat(Sx, E))
+    Mm = ca.DM(tr.robot.Mm)
+    if M0 is None:  # A[:, qd] M^-1
+        G_l = ca.mtimes(A[:, n : 2 * n], tr.rk4_minv_function()(x[:n], th))
+    else:  # (M^-1 A[:, qd]^T)^T, M symmetric
+        G_l = ca.solve(M0, A[:, n : 2 * n].T, "ldl").T
+    G = ca.densify(
+        ca.horzcat(
+            G_l,
+            A[:, 3 * n : 4 * n] / ca.repmat(Mm.T, N, 1),
+            ca.vertcat(ca.DM.zeros(4 * n, p), T * ca.DM.eye(p)),
+        )
+    )
+    step = ca.Function(
+        "transition_step",
+        [x, u],
+        [ca.vertcat(xp, th), A, G],
+        ["x", "u"],
+        ["x_next", "A", "Gamma"],
+    )
+    return step.expand() if expand else step
