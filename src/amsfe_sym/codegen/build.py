@@ -16,13 +16,14 @@ the CPU; it is allowed, and since the flags are hashed, a changed flag rebuilds.
 from __future__ import annotations
 
 import ctypes
+import functools
 import json
 import os
 import shutil
 import subprocess
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -155,6 +156,18 @@ def generate(
         return _build(spec, parts, flags, key, hash_inputs, parent, out_dir, progress, t_start)
 
 
+def _signals_held(fn: Callable[..., GenerateResult]) -> Callable[..., GenerateResult]:
+    """``fn`` run with Ctrl-C and SIGTERM held (:class:`DeferredSignals`)."""
+
+    @functools.wraps(fn)
+    def held(*args: Any, **kwargs: Any) -> GenerateResult:
+        with DeferredSignals():
+            return fn(*args, **kwargs)
+
+    return held
+
+
+@_signals_held
 def _build(
     spec: RobotSpec,
     parts: tuple[str, ...],
@@ -173,21 +186,6 @@ def _build(
     DeferredSignals`) and raised at its checkpoints between stages, in the symbolic build and
     while the compiler runs: raised inside the yourdfpy/trimesh imports or CasADi they used
     to be swallowed (the build went on to the end).  The temporary folder is removed."""
-    with DeferredSignals():
-        return _build_held(spec, parts, flags, key, hash_inputs, parent, out_dir, progress, t_start)
-
-
-def _build_held(
-    spec: RobotSpec,
-    parts: tuple[str, ...],
-    flags: list[str],
-    key: str,
-    hash_inputs: dict[str, Any],
-    parent: Path,
-    out_dir: Path,
-    progress: bool,
-    t_start: float,
-) -> GenerateResult:
     # heavy imports only when building
     from amsfe_sym.load import load_robot
     from amsfe_sym.symbolic.model import build_functions
