@@ -8,12 +8,13 @@ the README's main command, reuse them instead of compiling again.
 from __future__ import annotations
 
 import os
+import subprocess
 from pathlib import Path
 
 import pytest
 from hypothesis import settings
 
-from amsfe_sym.codegen import ALL_PARTS, generate
+from amsfe_sym.codegen import ALL_PARTS, compiler, generate
 from amsfe_sym.load import Robot, load_robot
 from amsfe_sym.load.spec import robots_dir
 from amsfe_sym.runtime.library import ModelLibrary
@@ -30,6 +31,32 @@ SHIPPED = sorted(d.name for d in robots_dir().iterdir() if (d / "robot.toml").is
 #: are checked without compiling (tests/test_panda.py, and test_dynamics.py over SHIPPED).
 COMPILED = [name for name in SHIPPED if name != "panda"]
 DATA = Path(__file__).parent / "data"
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+
+
+def build_example(name: str, lib: ModelLibrary, out: Path) -> Path:
+    """Compile ``examples/<name>.c`` against a generated library as a user would (its
+    header and shared library only, no Python at run time; warnings are errors)."""
+    subprocess.run(
+        [
+            compiler(),
+            "-O1",
+            "-Wall",
+            "-Werror",
+            str(EXAMPLES / f"{name}.c"),
+            f"-I{lib.dir}",
+            f"-L{lib.dir}",
+            f"-l{lib.manifest.library[3:-3]}",
+            f"-Wl,-rpath,{lib.dir}",
+            "-lm",
+            "-o",
+            str(out),
+        ],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
+    return out
 
 
 def erd_urdf(rel: str) -> Path:

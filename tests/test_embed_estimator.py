@@ -15,31 +15,8 @@ import pytest
 from amsfe_sym.codegen import compiler
 from amsfe_sym.estimation import make_estimator
 from amsfe_sym.runtime.compiled_estimator import make_compiled_estimator, write_log
+from tests.conftest import build_example
 from tests.test_compiled_estimator import Recording, record
-
-EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "estimate_from_log.c"
-
-
-def build_example(lib_dir: Path, libfile: str, out: Path) -> Path:
-    """Compile the example against a generated library (no Python at run time)."""
-    subprocess.run(
-        [
-            compiler(),
-            "-O1",
-            str(EXAMPLE),
-            f"-I{lib_dir}",
-            f"-L{lib_dir}",
-            f"-l{libfile[3:-3]}",
-            f"-Wl,-rpath,{lib_dir}",
-            "-lm",
-            "-o",
-            str(out),
-        ],
-        check=True,
-        capture_output=True,
-        text=True,
-    )
-    return out
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +30,7 @@ def test_c_example_matches_python(name: str, short_run: Recording, tmp_path: Pat
         pytest.skip("no C compiler")
     rec = short_run
     K = rec.u.shape[0] - 1
-    exe = build_example(rec.lib.dir, rec.lib.manifest.library, tmp_path / "estimate")
+    exe = build_example("estimate_from_log", rec.lib, tmp_path / "estimate")
     ref = make_estimator(name, **rec.kwargs)  # type: ignore[arg-type]
     comp = make_compiled_estimator(name, **rec.kwargs)
     log = write_log(tmp_path / "run.log", comp, rec.u[:K], list(rec.z[1 : K + 1]), rec.frames[1:])

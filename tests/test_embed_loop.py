@@ -18,8 +18,7 @@ from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.builders import build_run
 from amsfe_sym.sim.compiled import controller_params, simulation_inputs
 from amsfe_sym.sim.loop import run
-
-EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "control_from_log.c"
+from tests.conftest import build_example
 
 
 @pytest.mark.parametrize(("estimator", "controller"), [("oosm", "amsfe"), ("cloning", "dtsmc")])
@@ -30,15 +29,7 @@ def test_c_example_runs_the_loop_of_a_run(estimator: str, controller: str, tmp_p
         estimator=estimator, controller=controller, duration=1.0, seed=3
     )
     lib = library_for(sc)
-    d = lib.dir
-    exe = tmp_path / "control_from_log"
-    link = [f"-L{d}", f"-l{lib.manifest.library[3:-3]}", f"-Wl,-rpath,{d}", "-lm"]
-    subprocess.run(
-        [compiler(), "-O1", str(EXAMPLE), f"-I{d}", *link, "-o", str(exe)],
-        check=True,
-        capture_output=True,
-        text=True,
-    )
+    exe = build_example("control_from_log", lib, tmp_path / "control_from_log")
     c = run(sc, lib, runtime="compiled")
     py = run(sc, lib, runtime="python", compiled_estimator=True)
     parts = build_run(sc, lib, compiled=True)

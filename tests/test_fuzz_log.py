@@ -30,9 +30,9 @@ from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.builders import build_run
 from amsfe_sym.sim.compiled import controller_params, simulation_inputs
 from amsfe_sym.sim.loop import run
+from tests.conftest import build_example
 from tests.test_compiled_estimator import record
 
-EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))
 #: ``LOG:LINE: message``, one line.
 ERROR_LINE = re.compile(r"^(?P<path>.+?):(?P<line>\d+): \S.*\n$")
@@ -45,29 +45,6 @@ class Reader:
     exe: Path
     log: bytes
     prefix: str  # the records whose numbers must be finite after a run that exits 0
-
-
-def _build(name: str, lib_dir: Path, libfile: str, out: Path) -> Path:
-    subprocess.run(
-        [
-            compiler(),
-            "-O1",
-            "-Wall",
-            "-Werror",
-            str(EXAMPLES / f"{name}.c"),
-            f"-I{lib_dir}",
-            f"-L{lib_dir}",
-            f"-l{libfile[3:-3]}",
-            f"-Wl,-rpath,{lib_dir}",
-            "-lm",
-            "-o",
-            str(out),
-        ],
-        check=True,
-        capture_output=True,
-        text=True,
-    )
-    return out
 
 
 @pytest.fixture(scope="module")
@@ -85,7 +62,7 @@ def readers(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Reader]:
     est = make_compiled_estimator("oosm", **rec.kwargs)
     est_log = write_log(tmp / "est.log", est, rec.u[:K], list(rec.z[1 : K + 1]), frames)
     lib = rec.lib
-    est_exe = _build("estimate_from_log", lib.dir, lib.manifest.library, tmp / "estimate")
+    est_exe = build_example("estimate_from_log", lib, tmp / "estimate")
     # the loop's log: 20 steps of a compiled paper-sim run, with two delivered frames
     sc = load_scenario("paper-sim").with_overrides(duration=0.019, estimator="oosm")
     lib = library_for(sc)
@@ -101,7 +78,7 @@ def readers(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Reader]:
         inputs.ref,
         rows,
     )
-    loop_exe = _build("control_from_log", lib.dir, lib.manifest.library, tmp / "control")
+    loop_exe = build_example("control_from_log", lib, tmp / "control")
     return {
         "estimate": Reader(est_exe, est_log.read_bytes(), "est "),
         "control": Reader(loop_exe, loop_log.read_bytes(), "u "),
