@@ -34,6 +34,23 @@ DATA = Path(__file__).parent / "data"
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
 
+def ur5_three_thetas(folder: Path) -> Path:
+    """``robot.toml`` in ``folder``: example-robot-data's UR5 with one parameter of each kind
+    (a 2 kg payload at tool0, the forearm's mass, the elbow's stiffness)."""
+    urdf = erd_urdf("ur_description/urdf/ur5_robot.urdf")
+    path = folder / "robot.toml"
+    path.write_text(
+        f'urdf = "{urdf}"\n'
+        "[[theta]]\nname = 'payload'\nkind = 'payload_mass'\ntarget = 'tool0'\n"
+        "offset = [0.0, 0.0, 0.1]\ntrue = 2.0\ninitial = 0.0\n"
+        "[[theta]]\nname = 'forearm'\nkind = 'link_mass'\ntarget = 'forearm_link'\n"
+        "true = 2.275\ninitial = 2.0\n"
+        "[[theta]]\nname = 'k3'\nkind = 'joint_stiffness'\ntarget = 'elbow_joint'\n"
+        "true = 500.0\ninitial = 400.0\n"
+    )
+    return path
+
+
 def build_example(name: str, lib: ModelLibrary, out: Path) -> Path:
     """Compile ``examples/<name>.c`` against a generated library as a user would (its
     header and shared library only, no Python at run time; warnings are errors)."""

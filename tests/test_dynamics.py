@@ -12,7 +12,7 @@ from amsfe_sym.load import load_robot
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
 from amsfe_sym.symbolic.model import build_functions
 
-from .conftest import SHIPPED, erd_urdf
+from .conftest import SHIPPED, erd_urdf, ur5_three_thetas
 
 
 def _pin_M(robot, q, th):
@@ -116,17 +116,8 @@ def test_camera_rotation_is_proper_and_looks_at_target() -> None:
 
 def test_theta_kinds_vs_pinocchio(tmp_path) -> None:
     """payload_mass, link_mass and joint_stiffness bindings on the UR5 from example-robot-data."""
+    robot = load_robot(ur5_three_thetas(tmp_path))
     urdf = erd_urdf("ur_description/urdf/ur5_robot.urdf")
-    (tmp_path / "robot.toml").write_text(
-        f'urdf = "{urdf}"\n'
-        "[[theta]]\nname = 'payload'\nkind = 'payload_mass'\ntarget = 'tool0'\n"
-        "offset = [0.0, 0.0, 0.1]\ntrue = 2.0\ninitial = 0.0\n"
-        "[[theta]]\nname = 'forearm'\nkind = 'link_mass'\ntarget = 'forearm_link'\n"
-        "true = 2.275\ninitial = 2.0\n"
-        "[[theta]]\nname = 'k3'\nkind = 'joint_stiffness'\ntarget = 'elbow_joint'\n"
-        "true = 500.0\ninitial = 400.0\n"
-    )
-    robot = load_robot(tmp_path / "robot.toml")
     fns = build_functions(robot).functions
     full = pin.buildModelFromUrdf(str(urdf))
     rng = np.random.default_rng(11)

@@ -226,19 +226,13 @@ def test_a_defect_is_named_with_its_line(
 
 @FUZZ
 @given(data=st.data())
-def test_fuzz_estimate_from_log(
-    readers: dict[str, Reader], data: st.DataObject, tmp_path_factory: pytest.TempPathFactory
+@pytest.mark.parametrize("name", ["estimate", "control"])
+def test_fuzz_reader(
+    readers: dict[str, Reader],
+    name: str,
+    data: st.DataObject,
+    tmp_path_factory: pytest.TempPathFactory,
 ) -> None:
-    reader = readers["estimate"]
-    log = data.draw(damaged(reader.log))
-    _check(reader, log, tmp_path_factory.mktemp("f") / "run.log")
-
-
-@FUZZ
-@given(data=st.data())
-def test_fuzz_control_from_log(
-    readers: dict[str, Reader], data: st.DataObject, tmp_path_factory: pytest.TempPathFactory
-) -> None:
-    reader = readers["control"]
+    reader = readers[name]
     log = data.draw(damaged(reader.log))
     _check(reader, log, tmp_path_factory.mktemp("f") / "run.log")

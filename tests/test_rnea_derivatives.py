@@ -21,7 +21,7 @@ from amsfe_sym.symbolic.rnea_derivatives import rnea_derivatives
 from amsfe_sym.symbolic.rnea_taylor import rnea_jet
 from amsfe_sym.symbolic.transition import Transition
 
-from .conftest import SHIPPED, erd_urdf
+from .conftest import SHIPPED, erd_urdf, ur5_three_thetas
 from .test_random_chains import _chain_urdf
 
 
@@ -80,17 +80,7 @@ def test_example_robot_data_arms(rel: str, lock: dict[str, float] | None) -> Non
 
 def test_theta_kinds_vs_ad(tmp_path: Path) -> None:
     """payload_mass and link_mass enter dtau/dtheta; joint_stiffness does not."""
-    urdf = erd_urdf("ur_description/urdf/ur5_robot.urdf")
-    (tmp_path / "robot.toml").write_text(
-        f'urdf = "{urdf}"\n'
-        "[[theta]]\nname = 'payload'\nkind = 'payload_mass'\ntarget = 'tool0'\n"
-        "offset = [0.0, 0.0, 0.1]\ntrue = 2.0\ninitial = 0.0\n"
-        "[[theta]]\nname = 'forearm'\nkind = 'link_mass'\ntarget = 'forearm_link'\n"
-        "true = 2.275\ninitial = 2.0\n"
-        "[[theta]]\nname = 'k3'\nkind = 'joint_stiffness'\ntarget = 'elbow_joint'\n"
-        "true = 500.0\ninitial = 400.0\n"
-    )
-    robot = load_robot(tmp_path / "robot.toml")
+    robot = load_robot(ur5_three_thetas(tmp_path))
     _check(robot, samples=10, seed=7)
     tree = RigidBodyTree(robot)
     q, qd, qdd, th = (ca.SX.sym(s, k) for s, k in (("q", 6), ("qd", 6), ("qdd", 6), ("th", 3)))
