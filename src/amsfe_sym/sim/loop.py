@@ -76,7 +76,6 @@ def run(
         raise ConfigError(
             describe("runtime", f"one of {list(RUNTIMES)}", repr(runtime), "use 'compiled'")
         )
-    run_ticks(scenario, lib.T, lib.n, lib.N)  # a duration of < 1 step or too much memory
     if runtime == "compiled":
         from amsfe_sym.sim.compiled import run_compiled  # the same run in C
 

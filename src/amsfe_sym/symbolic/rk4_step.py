@@ -118,7 +118,7 @@ def step_function(tr: Any, expand: bool = True) -> ca.Function:
     for s in range(tr.substeps):
         k1, d1, M1 = stage(xp)
         M0 = M1 if s == 0 else M0
-        d1 = solved(ca.mtimes(d1, ca.vertcat(Sx, E)) if tr.substeps > 1 else d1, M1)
+        d1 = solved(ca.mtimes(d1, ca.vertcat(Sx, E)) if s > 0 else d1, M1)  # Sx = I at s = 0
         ks, ds = [k1], [d1]
         for c in (0.5, 0.5, 1.0):
             xi = xp + c * h * ks[-1]

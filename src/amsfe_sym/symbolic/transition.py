@@ -47,7 +47,14 @@ from amsfe_sym.symbolic.linalg import ldl_solve
 from amsfe_sym.symbolic.rk4_step import stage_split_functions, step_function
 from amsfe_sym.symbolic.rnea_derivatives import rnea_derivatives
 
-__all__ = ["EXPAND_MAX_JOINTS", "STAGE_DERIVATIVES", "StateLayout", "Transition", "with_residual"]
+__all__ = [
+    "EXPAND_MAX_JOINTS",
+    "STAGE_DERIVATIVES",
+    "StateLayout",
+    "Transition",
+    "rk4_steps",
+    "with_residual",
+]
 
 #: How :meth:`Transition.rk4_stage_function` builds the stage's dynamics derivative
 #: dRNEA/dz: ``"analytic"`` (one recursive pass, :mod:`.rnea_derivatives`; the default) or
@@ -61,6 +68,22 @@ STAGE_DERIVATIVES = ("analytic", "reverse_ad")
 #: expanded 0.78 us against 1.55 us chained; UR5 chained 20.5 us against 67 us as MX (and
 #: 42 us expanded, in 60k lines).
 EXPAND_MAX_JOINTS = 2
+
+
+def rk4_steps(
+    rhs: ca.Function, x: ca.MX, u: ca.MX, th: ca.MX, td: ca.MX, duration: float, steps: int
+) -> ca.MX:
+    """``steps`` classical RK4 steps of h = duration / steps of ``rhs(x, u, th, td)``, u, th
+    and td held: the rk4 model F (td = 0, ``model_substeps``) and the plant
+    (``plant_substeps``)."""
+    h = duration / steps
+    for _ in range(steps):
+        k1 = rhs(x, u, th, td)
+        k2 = rhs(x + 0.5 * h * k1, u, th, td)
+        k3 = rhs(x + 0.5 * h * k2, u, th, td)
+        k4 = rhs(x + h * k3, u, th, td)
+        x = x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+    return x
 
 
 def with_residual(inverse: ca.Function, forward: ca.Function) -> ca.Function:
@@ -348,14 +371,7 @@ class Transition:
         zero = ca.MX.zeros(2 * n, 1)
 
         def step(xp: ca.MX, duration: float) -> ca.MX:
-            h = duration / self.substeps
-            for _ in range(self.substeps):
-                k1 = rhs(xp, u, th, zero)
-                k2 = rhs(xp + 0.5 * h * k1, u, th, zero)
-                k3 = rhs(xp + 0.5 * h * k2, u, th, zero)
-                k4 = rhs(xp + h * k3, u, th, zero)
-                xp = xp + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
-            return xp
+            return rk4_steps(rhs, xp, u, th, zero, duration, self.substeps)
 
         F = ca.vertcat(step(x[: 4 * n], T), th)
         step_fn = self.rk4_step_function(expand=n <= EXPAND_MAX_JOINTS)
@@ -432,14 +448,7 @@ class Transition:
         rhs = self.plant_rhs_function()
         xp, u = ca.MX.sym("xp", 4 * n), ca.MX.sym("u", n)
         th, td = ca.MX.sym("theta", p), ca.MX.sym("tau_d", 2 * n)
-        h = self.T / substeps
-        x = xp
-        for _ in range(substeps):
-            k1 = rhs(x, u, th, td)
-            k2 = rhs(x + 0.5 * h * k1, u, th, td)
-            k3 = rhs(x + 0.5 * h * k2, u, th, td)
-            k4 = rhs(x + h * k3, u, th, td)
-            x = x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+        x = rk4_steps(rhs, xp, u, th, td, self.T, substeps)
         return ca.Function(
             "plant_step", [xp, u, th, td], [x], ["xp", "u", "theta", "tau_d"], ["xp_next"]
         )

@@ -49,8 +49,7 @@ struct amsfe_ctrl {
   int have_hold;   /* cascade: c_hold was taken */
   double *c_hold;  /* cascade: the motor's offset from qm_r at the first tick [n] */
   double *hold1, *hold0; /* the law's hold input: ones, zeros [n] */
-  int blending;    /* cascade: the blended start (control/blend.py) is on */
-  long blend_k0;   /* its start tick */
+  long blend_k0;   /* cascade: the blended start's first tick (control/blend.py) */
   double blend_tb; /* its duration [s] */
   double *blend_d0, *blend_d1, *refb; /* its offsets [n], [n]; the blended reference [5n] */
   double *vt_prev; /* printed laws: v_t(k-1) */
@@ -151,7 +150,6 @@ void amsfe_ctrl_reset(amsfe_ctrl *c) {
   c->started = 0;
   c->ready = 0;
   c->have_hold = 0;
-  c->blending = 0;
   c->have_vt = 0;
   c->have_prev = 0;
   c->prev_k = 0;
@@ -326,9 +324,8 @@ static int cascade(amsfe_ctrl *c, long k, const double *lead0, const double *lea
       c->blend_k0 = k;
       c->blend_tb =
           blend_time(c->blend_d0, c->blend_d1, n, c->par.blend_accel, c->par.blend_rate);
-      c->blending = 1;
     }
-    if (c->blending) in[dtsmc ? 2 : 1] = blended(c, k, ref);
+    if (c->par.startup_converged) in[dtsmc ? 2 : 1] = blended(c, k, ref); /* once started */
     if (gcall(&c->g, f, in, m, c->o, 8)) return AMSFE_ERR_NONFINITE;
     if (!c->started) { /* start at rest on the first trusted command */
       memcpy(c->cf, c->o[7], sizeof(double) * (size_t)n);
