@@ -22,8 +22,10 @@
  * (dtau = d(Ks (qm - q))/dz - dRNEA/dz at a = qdd, which needs qdd first: hence two
  * functions), and D_i = Jr_i [S_i; E] with its n qdd rows solved by the same factor
  * ((M^-1 dtau) [S; E] = M^-1 (dtau [S; E])).  Gamma's M(q)^-1 is the first stage's factor
- * (its point is x).  Jr is kept in CasADi's compressed column storage, so D_i costs nnz(Jr) N
- * multiply-adds and the solve n^2 N.
+ * (its point is x).  The sensitivities are held row-major (row r of S, B and D contiguous over
+ * the N columns) and Jr's pattern is read by rows, so D_i is nnz(Jr) contiguous axpys of length
+ * N and the solve n^2 more (issue 18 item 2: the jacobian's identity and diagonal motor rows
+ * are single-nonzero rows, i.e. copies and scalings of rows of S; measured in docs/codegen.md).
  *
  * It follows CasADi's calling convention and exports the symbols `casadi.external` needs
  * (the names and sparsity of the generated `transition_step`), so Python and C callers use
@@ -36,6 +38,17 @@
 
 #include "amsfe_internal.h"
 #include "amsfe_model_config.h" /* written by the code generator: AMSFE_MODEL_N, _P, _T, _MM */
+
+/* The row loops below are contiguous axpys of N: with an AVX2 CPU they run 4-wide (one clone
+ * of the chain per target, chosen at load time by the dynamic linker, so the library stays
+ * portable x86-64).  No FMA in the clone: a vector lane computes what the scalar code
+ * computes, in the same order, so the result does not depend on the CPU. */
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__linux__)
+#define CHAIN_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define CHAIN_CLONES
+#endif
+#define INLINE static inline __attribute__((always_inline))
 
 DECLARE(rk4_stage_rhs)
 DECLARE(rk4_stage_jac)
@@ -58,12 +71,24 @@ static cint stage_nnz(const cint *sp) {
   return (sp[2] == 1 && sp[1] > 0) ? sp[0] * sp[1] : sp[2 + sp[1]];
 }
 
-/* Scratch doubles beyond the stage's own work: xs, xi, k, kacc (NX each), B, S, D, Dacc
- * (NX x NS each), the stage's Jr (nnz), M, its LDL^T factor L and the first stage's L0
- * (n x n each), the pivots dl, dl0 and a column y (n each). */
+/* Scratch beyond the stage's own work.  Doubles: xs, xi, k, kacc (NX each), B, S, D, Bn
+ * (NX x NS each, row-major: row r of the sensitivity is contiguous over the NS columns; Bn the next
+ * substep's B), the
+ * stage's Jr (nnz), M, its LDL^T factor L and the first stage's L0 (n x n each), the pivots
+ * dl and dl0 (n each).  Integers: Jr's pattern by rows (row pointers, column and
+ * value index of each nonzero). */
 static cint scratch_doubles(void) {
   return 4 * NX + 4 * (cint)NX * NS + stage_nnz(rk4_stage_jac_sparsity_out(0)) + 3 * NN * NN +
-         3 * NN;
+         2 * NN;
+}
+static cint scratch_ints(void) { return 2 * NX + 1 + 2 * stage_nnz(rk4_stage_jac_sparsity_out(0)); }
+
+/* The generated stages' own integer work (the chain's index arrays follow it in iw). */
+static cint stage_iw(void) {
+  cint a = 0, r = 0, iw = 0, w = 0, iw2 = 0;
+  rk4_stage_rhs_work(&a, &r, &iw, &w);
+  rk4_stage_jac_work(&a, &r, &iw2, &w);
+  return iw > iw2 ? iw : iw2;
 }
 
 int transition_step_chain_work(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w) {
@@ -72,27 +97,60 @@ int transition_step_chain_work(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz
   rk4_stage_jac_work(&a2, &r2, &iw2, &w2);
   if (sz_arg) *sz_arg = (a > a2 ? a : a2) + 3;
   if (sz_res) *sz_res = (r > r2 ? r : r2) + 3;
-  if (sz_iw) *sz_iw = iw > iw2 ? iw : iw2;
+  if (sz_iw) *sz_iw = (iw > iw2 ? iw : iw2) + scratch_ints();
   if (sz_w) *sz_w = (w > w2 ? w : w2) + scratch_doubles();
   return 0;
 }
 
-/* D (NX x NS, column-major) = J (NX x NS, CCS) * B with B = [S; E] (NS x NS): B[j, c] is
- * S[j, c] for a plant row j < NX and (c == j) for a theta row. */
-static void sparse_times(const cint *sp, const double *J, const double *S, double *D) {
+/* Jr's pattern by rows, from CasADi's compressed columns: the nonzeros of row r are
+ * e = rp[r] .. rp[r + 1] - 1, in column jc[e], with value Jr[jv[e]]; fill: NX ints. */
+static void rows_of(const cint *sp, cint *rp, cint *jc, cint *jv, cint *fill) {
   cint nrow = sp[0], ncol = sp[1];
   int dense = sp[2] == 1 && ncol > 0;
   const cint *colind = sp + 2, *row = sp + 2 + ncol + 1;
-  memset(D, 0, sizeof(double) * (size_t)NX * NS);
-  for (cint c = 0; c < NS; ++c) {
-    double *Dc = D + c * NX;
-    for (cint j = 0; j < ncol; ++j) {
-      double b = j < NX ? S[c * NX + j] : (c == j ? 1.0 : 0.0);
-      if (b == 0.0) continue;
-      if (dense) {
-        for (cint r = 0; r < nrow; ++r) Dc[r] += J[j * nrow + r] * b;
+  for (cint r = 0; r <= nrow; ++r) rp[r] = 0;
+  for (cint j = 0; j < ncol; ++j) {
+    if (dense) {
+      for (cint r = 0; r < nrow; ++r) rp[r + 1]++;
+    } else {
+      for (cint e = colind[j]; e < colind[j + 1]; ++e) rp[row[e] + 1]++;
+    }
+  }
+  for (cint r = 0; r < nrow; ++r) rp[r + 1] += rp[r];
+  for (cint r = 0; r < nrow; ++r) fill[r] = rp[r];
+  for (cint j = 0; j < ncol; ++j) {
+    if (dense) {
+      for (cint r = 0; r < nrow; ++r) jc[fill[r]] = j, jv[fill[r]++] = j * nrow + r;
+    } else {
+      for (cint e = colind[j]; e < colind[j + 1]; ++e) jc[fill[row[e]]] = j, jv[fill[row[e]]++] = e;
+    }
+  }
+}
+
+/* D (NX x NS, row-major) = Jr [S; E] with S (NX x NS, row-major) and E = [0 I_p] (theta is
+ * constant): row r of D is the sum over row r's nonzeros of Jr of J[r, j] times row j of S,
+ * one contiguous axpy of NS each (a theta column j = NX + t adds J[r, j] at column j). */
+INLINE void sparse_times(const cint *rp, const cint *jc, const cint *jv, const double *J,
+                         const double *restrict S, double *restrict D) {
+  for (cint r = 0; r < NX; ++r) {
+    double *restrict Dr = D + r * NS;
+    cint e = rp[r], end = rp[r + 1];
+    if (e < end && jc[e] < NX) { /* the first product initialises the row */
+      double v = J[jv[e]];
+      const double *restrict Sj = S + jc[e] * NS;
+      for (cint c = 0; c < NS; ++c) Dr[c] = v * Sj[c];
+      ++e;
+    } else {
+      for (cint c = 0; c < NS; ++c) Dr[c] = 0.0;
+    }
+    for (; e < end; ++e) {
+      cint j = jc[e];
+      double v = J[jv[e]];
+      if (j < NX) {
+        const double *restrict Sj = S + j * NS;
+        for (cint c = 0; c < NS; ++c) Dr[c] += v * Sj[c];
       } else {
-        for (cint e = colind[j]; e < colind[j + 1]; ++e) Dc[row[e]] += J[e] * b;
+        Dr[j] += v;
       }
     }
   }
@@ -102,7 +160,7 @@ static void sparse_times(const cint *sp, const double *J, const double *S, doubl
  * positive definite mass matrix M (n x n, column-major; its lower triangle is read): the
  * LDL^T of symbolic/linalg.py in loops, no pivoting (a NaN state gives NaN, as the unrolled
  * solve did, not an error status). */
-static void ldl_factor(const double *M, double *L, double *dl) {
+INLINE void ldl_factor(const double *M, double *L, double *dl) {
   for (cint j = 0; j < NN; ++j) {
     double dj = M[j * NN + j];
     for (cint k = 0; k < j; ++k) dj -= L[j * NN + k] * L[j * NN + k] * dl[k];
@@ -116,7 +174,7 @@ static void ldl_factor(const double *M, double *L, double *dl) {
 }
 
 /* b <- M^-1 b (n) with the factor of ldl_factor. */
-static void ldl_solve(const double *L, const double *dl, double *b) {
+INLINE void ldl_solve(const double *L, const double *dl, double *b) {
   for (cint i = 0; i < NN; ++i)
     for (cint k = 0; k < i; ++k) b[i] -= L[i * NN + k] * b[k];
   for (cint i = 0; i < NN; ++i) b[i] /= dl[i];
@@ -124,7 +182,30 @@ static void ldl_solve(const double *L, const double *dl, double *b) {
     for (cint k = i + 1; k < NN; ++k) b[i] -= L[k * NN + i] * b[k];
 }
 
-int transition_step_chain(const double **arg, double **res, cint *iw, double *w, int mem) {
+/* Y <- M^-1 Y for Y the n rows of m (row-major, row i at Y + i m): ldl_solve on every
+ * column at once, each step a contiguous row axpy. */
+INLINE void ldl_solve_rows(const double *L, const double *dl, cint m, double *restrict Y) {
+  for (cint i = 0; i < NN; ++i)
+    for (cint k = 0; k < i; ++k) {
+      double f = L[i * NN + k];
+      double *restrict yi = Y + i * m;
+      const double *restrict yk = Y + k * m;
+      for (cint c = 0; c < m; ++c) yi[c] -= f * yk[c];
+    }
+  for (cint i = 0; i < NN; ++i) {
+    double *restrict yi = Y + i * m;
+    for (cint c = 0; c < m; ++c) yi[c] /= dl[i];
+  }
+  for (cint i = NN - 1; i >= 0; --i)
+    for (cint k = i + 1; k < NN; ++k) {
+      double f = L[k * NN + i];
+      double *restrict yi = Y + i * m;
+      const double *restrict yk = Y + k * m;
+      for (cint c = 0; c < m; ++c) yi[c] -= f * yk[c];
+    }
+}
+
+CHAIN_CLONES int transition_step_chain(const double **arg, double **res, cint *iw, double *w, int mem) {
   (void)mem;
   static const double c[4] = {0.0, 0.5, 0.5, 1.0}, wt[4] = {1.0, 2.0, 2.0, 1.0};
   const double T = AMSFE_MODEL_T, h = AMSFE_MODEL_T / AMSFE_MODEL_SUBSTEPS;
@@ -132,26 +213,31 @@ int transition_step_chain(const double **arg, double **res, cint *iw, double *w,
   double *xn = res[0], *A = res[1], *G = res[2];
   const cint *sp = rk4_stage_jac_sparsity_out(0);
   cint nnz = stage_nnz(sp);
-  /* the tail of the argument/result pointer arrays and of w is ours; the stages get the rest */
+  const cint NXS = (cint)NX * NS;
+  /* the tail of the argument/result pointer arrays and of w and iw is ours; the stages get
+   * the rest */
   const double **sarg = arg + 3;
   double **sres = res + 3;
+  cint *rp = iw + stage_iw(), *jc = rp + NX + 1, *jv = jc + nnz, *fill = jv + nnz;
   double *xs = w, *xi = xs + NX, *k = xi + NX, *kacc = k + NX, *B = kacc + NX;
-  double *S = B + (cint)NX * NS, *D = S + (cint)NX * NS, *Dacc = D + (cint)NX * NS;
-  double *J = Dacc + (cint)NX * NS, *M = J + nnz, *L = M + NN * NN, *L0 = L + NN * NN;
-  double *dl = L0 + NN * NN, *dl0 = dl + NN, *y = dl0 + NN;
-  double *sw_ = y + NN;
+  double *S = B + NXS, *D = S + NXS, *Bn = D + NXS;
+  double *J = Bn + NXS, *M = J + nnz, *L = M + NN * NN, *L0 = L + NN * NN;
+  double *dl = L0 + NN * NN, *dl0 = dl + NN;
+  double *sw_ = dl0 + NN;
 
+  rows_of(sp, rp, jc, jv, fill);
   /* xs, B: the state and its sensitivity d xs / d x at the start of each substep */
   for (cint r = 0; r < NX; ++r) xs[r] = x[r];
-  for (cint col = 0; col < NS; ++col)
-    for (cint r = 0; r < NX; ++r) B[col * NX + r] = (r == col ? 1.0 : 0.0);
+  memset(B, 0, sizeof(double) * (size_t)NXS);
+  for (cint r = 0; r < NX; ++r) B[r * NS + r] = 1.0;
   for (int s = 0; s < AMSFE_MODEL_SUBSTEPS; ++s) {
+    /* Bn accumulates B_{s+1} = B + h/6 sum_i wt_i D_i; S_{i+1} = B + c_{i+1} h D_i is written
+     * in the same pass over D */
     memset(kacc, 0, sizeof(double) * NX);
-    memset(Dacc, 0, sizeof(double) * (size_t)NX * NS);
+    memcpy(Bn, B, sizeof(double) * (size_t)NXS);
+    const double *Si = B;
     for (int i = 0; i < 4; ++i) {
-      /* the stage's point and its sensitivity S_i = B + c_i h D_{i-1} */
       for (cint r = 0; r < NX; ++r) xi[r] = xs[r] + (i ? c[i] * h * k[r] : 0.0);
-      for (cint e = 0; e < (cint)NX * NS; ++e) S[e] = B[e] + (i ? c[i] * h * D[e] : 0.0);
       /* k with its qdd rows unsolved (rhs) and M; qdd = M^-1 rhs */
       sarg[0] = xi, sarg[1] = u, sarg[2] = th;
       sres[0] = k, sres[1] = M;
@@ -168,23 +254,33 @@ int transition_step_chain(const double **arg, double **res, cint *iw, double *w,
       sres[0] = J;
       status = rk4_stage_jac(sarg, sres, iw, sw_, 0);
       if (status) return status;
-      sparse_times(sp, J, S, D);
-      for (cint col = 0; col < NS; ++col) ldl_solve(L, dl, D + col * NX + NN);
+      sparse_times(rp, jc, jv, J, Si, D);
+      ldl_solve_rows(L, dl, NS, D + NN * NS);
       for (cint r = 0; r < NX; ++r) kacc[r] += wt[i] * k[r];
-      for (cint e = 0; e < (cint)NX * NS; ++e) Dacc[e] += wt[i] * D[e];
+      double a = (h / 6.0) * wt[i];
+      if (i < 3) {
+        double f = c[i + 1] * h;
+        for (cint e = 0; e < NXS; ++e) {
+          Bn[e] += a * D[e];
+          S[e] = B[e] + f * D[e];
+        }
+        Si = S;
+      } else {
+        for (cint e = 0; e < NXS; ++e) Bn[e] += a * D[e];
+      }
     }
     for (cint r = 0; r < NX; ++r) xs[r] += (h / 6.0) * kacc[r];
-    for (cint e = 0; e < (cint)NX * NS; ++e) B[e] += (h / 6.0) * Dacc[e];
+    double *t = B;
+    B = Bn, Bn = t;
   }
   if (xn) {
     for (cint r = 0; r < NX; ++r) xn[r] = xs[r];
     for (cint r = NX; r < NS; ++r) xn[r] = x[r];
   }
-  /* A (NS x NS, column-major): the plant rows from the sensitivities B, the theta rows E.
-   * Without an A output Gamma reads the plant rows from B. */
+  /* A (NS x NS, column-major): the plant rows from the sensitivities B, the theta rows E */
   if (A) {
     for (cint col = 0; col < NS; ++col) {
-      for (cint r = 0; r < NX; ++r) A[col * NS + r] = B[col * NX + r];
+      for (cint r = 0; r < NX; ++r) A[col * NS + r] = B[r * NS + col];
       for (cint r = NX; r < NS; ++r) A[col * NS + r] = (r == col ? 1.0 : 0.0);
     }
   }
@@ -193,15 +289,15 @@ int transition_step_chain(const double **arg, double **res, cint *iw, double *w,
      * entries, M symmetric, with the first stage's factor), A[:, qmd] / Mm, [0; T I_p];
      * the theta rows of A[:, qd] are zero */
     memset(G, 0, sizeof(double) * (size_t)NS * (2 * NN + NP));
-    for (cint r = 0; r < NX; ++r) {
-      for (cint l = 0; l < NN; ++l) y[l] = B[(NN + l) * NX + r];
-      ldl_solve(L0, dl0, y);
-      for (cint j = 0; j < NN; ++j) G[j * NS + r] = y[j];
-    }
+    double *Y = D; /* free now: Y (n x NX, row-major) = B[:, qd]^T, then M^-1 Y */
+    for (cint r = 0; r < NX; ++r)
+      for (cint l = 0; l < NN; ++l) Y[l * NX + r] = B[r * NS + NN + l];
+    ldl_solve_rows(L0, dl0, NX, Y);
+    for (cint j = 0; j < NN; ++j)
+      for (cint r = 0; r < NX; ++r) G[j * NS + r] = Y[j * NX + r];
     for (cint j = 0; j < NN; ++j) {
       double *Gm = G + (NN + j) * NS;
-      const double *Bqmd = B + (3 * NN + j) * NX;
-      for (cint r = 0; r < NX; ++r) Gm[r] = Bqmd[r] / MM[j];
+      for (cint r = 0; r < NX; ++r) Gm[r] = B[r * NS + 3 * NN + j] / MM[j];
     }
     for (cint t = 0; t < NP; ++t) G[(2 * NN + t) * NS + NX + t] = T;
   }
