@@ -295,6 +295,41 @@ def test_chained_rk4_step_equals_the_generated_one(tmp_path, substeps: int) -> N
             v = np.array(v).reshape(c.shape, order="F")
             assert np.max(np.abs(c - v)) <= 1e-12 * max(1.0, float(np.max(np.abs(v))))
     assert lib.manifest.model_substeps == substeps
+    if substeps == 1:
+        _dynamics_jacobian_equals_pinocchio(robot, lib, rng)
     rows = {r.function: r for r in run_checks(robot, lib, samples=5, seed=1)}
     for name in ("transition_step_chain", "transition", "transition_jacobian", "noise_gain"):
         assert rows[name].passed, rows[name]
+
+
+def _dynamics_jacobian_equals_pinocchio(robot, lib, rng) -> None:
+    """``forward_dynamics_jacobian`` (the chained libraries' dynamics and its jacobian, what
+    ``amsfe bench`` times next to Pinocchio) against ``pin.computeABADerivatives`` with the
+    spring torque as tau (1e-10), and its theta column against central differences of qdd."""
+    import pinocchio as pin
+
+    n, N = robot.n, lib.N
+    f = lib.function("forward_dynamics_jacobian")
+    Ks = np.asarray(robot.Ks, float)
+    for x in random_states(robot, 5, rng):
+        th = x[4 * n :]
+        q, qd, qm = x[:n], x[n : 2 * n], x[2 * n : 3 * n]
+        qdd, J = f(x[: 4 * n], th)
+        model = robot.pin_model_at(th)
+        data = model.createData()
+        tau = Ks * (qm - q)
+        pin.computeABADerivatives(model, data, q, qd, tau)
+        Minv = np.triu(data.Minv) + np.triu(data.Minv, 1).T
+        scale = max(1.0, float(np.max(np.abs(data.ddq_dq))))
+        np.testing.assert_allclose(
+            qdd, data.ddq, rtol=0, atol=1e-10 * max(1.0, np.abs(data.ddq).max())
+        )
+        np.testing.assert_allclose(J[:, :n], data.ddq_dq - Minv * Ks, rtol=0, atol=1e-10 * scale)
+        np.testing.assert_allclose(J[:, n : 2 * n], data.ddq_dv, rtol=0, atol=1e-10 * scale)
+        np.testing.assert_allclose(J[:, 2 * n : 3 * n], Minv * Ks, rtol=0, atol=1e-10 * scale)
+        assert np.all(J[:, 3 * n : 4 * n] == 0)
+        for t in range(N - 4 * n):  # theta: central differences of qdd
+            e = np.zeros(N - 4 * n)
+            e[t] = 1e-6
+            fd = (f(x[: 4 * n], th + e)[0] - f(x[: 4 * n], th - e)[0]) / 2e-6
+            np.testing.assert_allclose(J[:, 4 * n + t], fd, rtol=1e-6, atol=1e-6)

@@ -11,7 +11,7 @@ from typing import Any
 
 import casadi as ca
 
-__all__ = ["stage_split_functions", "step_function"]
+__all__ = ["dynamics_jacobian_function", "stage_split_functions", "step_function"]
 
 
 def stage_split_functions(tr: Any) -> tuple[ca.Function, ca.Function]:
@@ -61,6 +61,32 @@ def stage_split_functions(tr: Any) -> tuple[ca.Function, ca.Function]:
         {"cse": True},
     )
     return fr, fj
+
+
+def dynamics_jacobian_function(tr: Any) -> ca.Function:
+    """``forward_dynamics_jacobian (xp[4n], theta[p]) -> (qdd[n], dqdd[n x N])``: the link
+    acceleration of the flexible-joint model, ``M(q) qdd + b(q, qd) = Ks (qm - q)``, and its
+    exact jacobian with respect to ``z = [q, qd, qm, qmd, theta]`` [1/s^2, 1/s, ...], as an MX
+    graph over the split stage (:func:`stage_split_functions`: one CRBA, one RNEA and its
+    analytic derivatives, two solves with CasADi's ``ldl``).
+
+    What Pinocchio's ``computeABADerivatives(q, v, tau)`` computes for a rigid arm, with the
+    spring torque as tau: ``dqdd/dq = ddq_dq - M^-1 diag(Ks)``, ``dqdd/dqd = ddq_dv``,
+    ``dqdd/dqm = M^-1 diag(Ks)`` (tests/test_generated.py); ``amsfe bench`` times the two
+    side by side (issue 18's "dynamics jacobian vs computeABADerivatives").  The chain of
+    ``runtime/c/amsfe_model.c`` does the same work per stage with its solves in C loops.
+    """
+    n, p = tr.tree.n, tr.tree.p
+    stage_r, stage_j = tr.rk4_stage_split_functions()
+    xp, th = ca.MX.sym("xp", 4 * n), ca.MX.sym("theta", p)
+    u = ca.MX.zeros(n, 1)  # the link rows do not depend on the motor torque
+    kr, M = stage_r(xp, u, th)
+    qdd = ca.solve(M, kr[n : 2 * n], "ldl")
+    Jr = stage_j(xp, u, th, qdd)
+    dqdd = ca.densify(ca.solve(M, ca.densify(Jr[n : 2 * n, :]), "ldl"))
+    return ca.Function(
+        "forward_dynamics_jacobian", [xp, th], [qdd, dqdd], ["xp", "theta"], ["qdd", "dqdd_dz"]
+    )
 
 
 def step_function(tr: Any, expand: bool = True) -> ca.Function:
