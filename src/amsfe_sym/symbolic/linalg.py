@@ -54,13 +54,16 @@ def ldl_solve(A: ca.SX, b: ca.SX) -> ca.SX:
 
 
 def plus_identity(X: ca.MX) -> ca.MX:
-    """``X + I`` (ones added to the leading diagonal of X, which may be rectangular) without a
+    """``X + I`` (ones added to the leading diagonal of X, which may be rectangular and sparse:
+    the result has X's pattern and the diagonal, as ``DM.eye + X`` has) without a
     constant identity in the generated C: ``I - K H`` and the like, written with a dense
     identity, put the whole N x N matrix of zeros and ones in the C file (the Panda's cloning
     update: 947 lines for its 87 x 87 identity).  Equal to ``DM.eye + X`` bit for bit
     (``0 + x = x`` and ``1 + x`` whichever operand comes first)."""
     r, c = X.shape
-    Y = ca.MX(ca.densify(X))  # a new expression: X itself is not changed
-    diag = [i * (r + 1) for i in range(min(r, c))]
+    k = min(r, c)
+    sp = X.sparsity().unite(ca.Sparsity.triplet(r, c, list(range(k)), list(range(k))))
+    Y = ca.project(X, sp)  # X's pattern and the diagonal (a structural zero gets 1)
+    diag = [sp.get_nz(i, i) for i in range(k)]
     Y.nz[diag] = Y.nz[diag] + 1.0
     return Y

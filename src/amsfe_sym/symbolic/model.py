@@ -119,10 +119,20 @@ def build_functions(robot: Robot, parts: tuple[str, ...] = PARTS) -> SymbolicMod
         [("q", q), ("theta", th)],
         [("y", y), ("dy_dq", dy), ("depth", depth(robot.camera, r))],
     )
+    bias = sx_function("bias", [("q", q), ("qd", qd), ("theta", th)], [("b", tree.bias(q, qd, th))])
+    qm_, thm_ = ca.MX.sym("q", n), ca.MX.sym("theta", p)
     fns = [
         sx_function("mass_matrix", [("q", q), ("theta", th)], [("M", M)]),
-        sx_function("bias", [("q", q), ("qd", qd), ("theta", th)], [("b", tree.bias(q, qd, th))]),
-        sx_function("gravity", [("q", q), ("theta", th)], [("g", tree.gravity_torque(q, th))]),
+        bias,
+        # g(q) = b(q, 0): the same RNEA at zero velocity (a call costs what bias costs; it is
+        # called once per simulation and by amsfe check)
+        ca.Function(
+            "gravity",
+            [qm_, thm_],
+            [ca.densify(bias(qm_, ca.MX.zeros(n, 1), thm_))],
+            ["q", "theta"],
+            ["g"],
+        ),
         sx_function("tracked_point", [("q", q), ("theta", th)], [("r", r)]),
         *_camera_wrappers(measure, n, p),
         measure,
