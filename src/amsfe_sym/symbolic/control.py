@@ -145,9 +145,10 @@ def build_control_functions(tree: RigidBodyTree, tr: Transition) -> list[ca.Func
     dv = sf.vt - vt_prev
     reach = T * (g["h"] * sf.s + g["eps"] * sat(sf.s, g["phi"]))
     # u = Mbar/T [Fhat + dv + ...] with Mbar Fhat = Mbar qd - M(q) qd - T f + Mm (qmd+ - qmd)
-    # + T Fm qmd written out, so no solve is needed (F of (29b) at the estimates)
-    Mbar_F = m_times(qbar, qd) - m_times(q, qd) - T * f_link + Mm * (qmd_next - qmd) + T * Fm * qmd
-    u = (Mbar_F + m_times(qbar, dv + sf.lam_terms - reach)) / T
+    # + T Fm qmd written out, so no solve is needed (F of (29b) at the estimates); Mbar is
+    # linear in its vector, so Mbar qd + Mbar w is one RNEA pass, Mbar (qd + w)
+    rest = -m_times(q, qd) - T * f_link + Mm * (qmd_next - qmd) + T * Fm * qmd
+    u = (m_times(qbar, qd + dv + sf.lam_terms - reach) + rest) / T
     law37 = sx_function(
         "control_amsfe_paper",
         [

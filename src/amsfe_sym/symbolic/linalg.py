@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import casadi as ca
 
-__all__ = ["ldl_solve"]
+__all__ = ["ldl_solve", "plus_identity"]
 
 
 def ldl_solve(A: ca.SX, b: ca.SX) -> ca.SX:
@@ -51,3 +51,19 @@ def ldl_solve(A: ca.SX, b: ca.SX) -> ca.SX:
             x[i] = xi
         cols.append(ca.vertcat(*x))
     return ca.horzcat(*cols)
+
+
+def plus_identity(X: ca.MX) -> ca.MX:
+    """``X + I`` (ones added to the leading diagonal of X, which may be rectangular and sparse:
+    the result has X's pattern and the diagonal, as ``DM.eye + X`` has) without a
+    constant identity in the generated C: ``I - K H`` and the like, written with a dense
+    identity, put the whole N x N matrix of zeros and ones in the C file (the Panda's cloning
+    update: 947 lines for its 87 x 87 identity).  Equal to ``DM.eye + X`` bit for bit
+    (``0 + x = x`` and ``1 + x`` whichever operand comes first)."""
+    r, c = X.shape
+    k = min(r, c)
+    sp = X.sparsity().unite(ca.Sparsity.triplet(r, c, list(range(k)), list(range(k))))
+    Y = ca.project(X, sp)  # X's pattern and the diagonal (a structural zero gets 1)
+    diag = [sp.get_nz(i, i) for i in range(k)]
+    Y.nz[diag] = Y.nz[diag] + 1.0
+    return Y

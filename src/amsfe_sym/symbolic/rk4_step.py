@@ -11,7 +11,14 @@ from typing import Any
 
 import casadi as ca
 
-__all__ = ["dynamics_jacobian_function", "stage_split_functions", "step_function"]
+from amsfe_sym.symbolic.linalg import ldl_solve, plus_identity
+
+__all__ = [
+    "dynamics_jacobian_function",
+    "plant_rhs_over_stage",
+    "stage_split_functions",
+    "step_function",
+]
 
 
 def stage_split_functions(tr: Any) -> tuple[ca.Function, ca.Function]:
@@ -89,6 +96,29 @@ def dynamics_jacobian_function(tr: Any) -> ca.Function:
     )
 
 
+def plant_rhs_over_stage(tr: Any) -> ca.Function:
+    """The plant's right-hand side ``plant_rhs (xp, u, theta, tau_d) -> d/dt xp`` as an MX
+    graph over ``rk4_stage_rhs`` (so a library with the split stage emits the dynamics once):
+    the motor torque ``u + tau_m`` is the stage's input, the link rows ``rhs + tau_l`` are
+    solved with the stage's M by ``rk4_mass_solve``, the unrolled LDL^T of
+    :func:`.linalg.ldl_solve` as a small SX function (CasADi's ``ldl`` linear solver made
+    ``plant_step`` 37 % slower on the Panda, this 10 %; issue 18, docs/codegen.md).  The
+    same operations in the same order as :meth:`.Transition.plant_rhs`, so equal to it to
+    rounding."""
+    n, p = tr.tree.n, tr.tree.p
+    stage_r, _ = tr.rk4_stage_split_functions()
+    Ms, bs = ca.SX.sym("M", n, n), ca.SX.sym("b", n)
+    solve = ca.Function(
+        "rk4_mass_solve", [Ms, bs], [ldl_solve(Ms, bs)], ["M", "b"], ["x"], {"cse": True}
+    )
+    xp, u = ca.MX.sym("xp", 4 * n), ca.MX.sym("u", n)
+    th, td = ca.MX.sym("theta", p), ca.MX.sym("tau_d", 2 * n)
+    kr, M = stage_r(xp, u + td[n:], th)
+    f = ca.MX(kr)  # kr with its qdd rows solved, in place (fewer copies than a vertcat)
+    f.nz[n : 2 * n] = solve(M, kr[n : 2 * n] + td[:n])
+    return ca.Function("plant_rhs", [xp, u, th, td], [f], ["xp", "u", "theta", "tau_d"], ["f"])
+
+
 def step_function(tr: Any, expand: bool = True) -> ca.Function:
     """x+ = F(x, u), A = dF/dx and Gamma = dF/dw of the ``rk4`` model in one function.
 
@@ -148,12 +178,13 @@ def step_function(tr: Any, expand: bool = True) -> ca.Function:
         ks, ds = [k1], [d1]
         for c in (0.5, 0.5, 1.0):
             xi = xp + c * h * ks[-1]
-            Si = Sx + c * h * ds[-1]
+            Si = Sx + c * h * ds[-1] if s > 0 else plus_identity(c * h * ds[-1])
             ki, Ji, Mi = stage(xi)
             ks.append(ki)
             ds.append(solved(ca.mtimes(Ji, ca.vertcat(Si, E)), Mi))
         xp = xp + (h / 6.0) * (ks[0] + 2 * ks[1] + 2 * ks[2] + ks[3])
-        Sx = Sx + (h / 6.0) * (ds[0] + 2 * ds[1] + 2 * ds[2] + ds[3])
+        dS = (h / 6.0) * (ds[0] + 2 * ds[1] + 2 * ds[2] + ds[3])
+        Sx = Sx + dS if s > 0 else plus_identity(dS)  # Sx = [I 0] at s = 0 (no constant)
     A = ca.densify(ca.vertcat(Sx, E))
     Mm = ca.DM(tr.robot.Mm)
     if M0 is None:  # A[:, qd] M^-1

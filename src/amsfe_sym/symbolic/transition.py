@@ -43,8 +43,12 @@ from dataclasses import dataclass
 import casadi as ca
 
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
-from amsfe_sym.symbolic.linalg import ldl_solve
-from amsfe_sym.symbolic.rk4_step import stage_split_functions, step_function
+from amsfe_sym.symbolic.linalg import ldl_solve, plus_identity
+from amsfe_sym.symbolic.rk4_step import (
+    plant_rhs_over_stage,
+    stage_split_functions,
+    step_function,
+)
 from amsfe_sym.symbolic.rnea_derivatives import rnea_derivatives
 
 __all__ = [
@@ -388,7 +392,7 @@ class Transition:
         # the cost (one jacobian and one QR per inverse instead of one per iteration)
         xp = back(xn, u)
         _fx, jx, _G = step_fn(ca.vertcat(xp, th_n), u)
-        jinv = ca.solve(jx[: 4 * n, : 4 * n], ca.MX.eye(4 * n), "qr")
+        jinv = ca.solve(jx[: 4 * n, : 4 * n], plus_identity(ca.MX.zeros(4 * n, 4 * n)), "qr")
         fwd = ca.Function("rk4_fwd", [x, u], [step(x[: 4 * n], T)])  # no jacobian
         for _ in range(K):
             xp = xp - ca.mtimes(jinv, fwd(ca.vertcat(xp, th_n), u) - xpn)
@@ -426,11 +430,16 @@ class Transition:
         return ca.vertcat(qd, qdd, qmd, qmdd)
 
     def plant_rhs_function(self) -> ca.Function:
-        """The plant's right-hand side as an SX Function (xp, u, theta, tau_d) -> d/dt xp,
-        built once per robot (the transition and the plant call the same one, so it is
-        emitted once in the C file)."""
+        """The plant's right-hand side as a Function (xp, u, theta, tau_d) -> d/dt xp, built
+        once per robot (the transition and the plant call the same one, so it is emitted once
+        in the C file): SX, or with the split rk4 stage (rk4, more than
+        :data:`EXPAND_MAX_JOINTS` joints) an MX graph over ``rk4_stage_rhs``
+        (:func:`.rk4_step.plant_rhs_over_stage`), which holds the same dynamics."""
         if "plant_rhs" not in self._cache:
             n, p = self.tree.n, self.tree.p
+            if self.integrator == "rk4" and n > EXPAND_MAX_JOINTS:
+                self._cache["plant_rhs"] = plant_rhs_over_stage(self)
+                return self._cache["plant_rhs"]
             xp, u = ca.SX.sym("xp", 4 * n), ca.SX.sym("u", n)
             th, td = ca.SX.sym("theta", p), ca.SX.sym("tau_d", 2 * n)
             self._cache["plant_rhs"] = ca.Function(
