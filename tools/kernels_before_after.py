@@ -80,6 +80,17 @@ print(json.dumps(out))
 """
 
 
+def extract_commit(commit: str, dest: Path) -> None:
+    """The package, robots and scenarios of ``commit`` (``git archive``) into ``dest``."""
+    blob = subprocess.run(
+        ["git", "-C", str(REPO), "archive", commit, "src", "robots", "scenarios", "pyproject.toml"],
+        capture_output=True,
+        check=True,
+    ).stdout
+    with tarfile.open(fileobj=BytesIO(blob)) as tar:
+        tar.extractall(dest, filter="data")
+
+
 def side_env(src: Path, gen: Path) -> dict[str, str]:
     env = dict(os.environ)
     env["PYTHONPATH"] = str(src)
@@ -230,23 +241,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="amsfe-kernels-") as tmpname:
         tmp = Path(tmpname)
         seven = seven_spec(args.seven, tmp)
-        blob = subprocess.run(
-            [
-                "git",
-                "-C",
-                str(REPO),
-                "archive",
-                args.base,
-                "src",
-                "robots",
-                "scenarios",
-                "pyproject.toml",
-            ],
-            capture_output=True,
-            check=True,
-        ).stdout
-        with tarfile.open(fileobj=BytesIO(blob)) as tar:
-            tar.extractall(tmp / "base", filter="data")
+        extract_commit(args.base, tmp / "base")
         sides = {"before": tmp / "base" / "src", "after": REPO / "src"}
         gens = {k: tmp / f"gen-{k}" for k in sides}
         libs = {}

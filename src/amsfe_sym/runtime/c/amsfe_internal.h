@@ -81,6 +81,8 @@ static inline int all_finite(const double *v, long count) {
 AMSFE_HIDDEN int amsfe_cholesky(int m, const double *S, double *L);
 /* b <- S^-1 b with S = L L^T (m x m, leading dimension m). */
 AMSFE_HIDDEN void amsfe_chol_solve(int m, const double *L, double *b);
+/* Li = L^-1 (m x m lower triangular, positive diagonal; Li lower triangular). */
+AMSFE_HIDDEN void amsfe_tri_inverse(int m, const double *L, double *Li);
 /* Upper triangle of the m x m X <- its lower triangle. */
 AMSFE_HIDDEN void amsfe_mirror_lower(int m, double *X);
 /* C = A B (N x N). */

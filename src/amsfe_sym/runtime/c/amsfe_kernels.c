@@ -2,10 +2,15 @@
  *
  * The EKF's covariance algebra of a tick and of a late frame, written once for any state
  * dimension and compiled apart from the generated robot code, at the flags that make them
- * fast (codegen/build.py: the generated files stay at -O1, this file gets -O3).  Every kernel
- * is a set of column axpys over contiguous memory (column-major storage), the form gcc
- * vectorises; no -ffast-math, so sums keep their order and the results do not depend on the
- * vector width (with -march=native gcc may contract a*b + c into an FMA: rounding only).
+ * fast (codegen/build.py: the generated files stay at -O1, this file gets -O3).  No
+ * -ffast-math: every sum keeps its order.  Two kinds of loop:
+ * - the matrix products run in register tiles (tiles_v4/tiles_v2 below: 2 vectors of rows x
+ *   4 columns, accumulators loaded from and stored to the matrices directly); the AVX2 + FMA
+ *   version is chosen once at run time, so an FMA CPU rounds these products differently
+ *   (never in another order) than an SSE2 one;
+ * - the column loops around them (Cholesky panels, triangular solves, the selection picks of
+ *   the Joseph update) have an AVX2 clone without FMA (KERNEL_CLONES): same result on every
+ *   x86-64 CPU.
  *
  * The structure they use (docs/runtime-c.md, "Cost"):
  * - P is symmetric: every symmetric result is computed on its lower triangle and mirrored;
@@ -13,9 +18,16 @@
  *   previous step computed anyway: A P A^T = (A L)(A L)^T, A L costs N^3/2 (L triangular)
  *   and the product N^3/2, against N^3 + N^3/2 for (A P) A^T;
  * - the encoders' H selects states (eq. 5): H P H^T, P H^T and (I - K H) are row and column
- *   picks, never products with H; the Joseph form is evaluated as
+ *   picks, never products with H; the gain is K = P H^T S^-1 with S^-1 from S's Cholesky
+ *   factor (m x m, m^3/2) and one tiled M x m x m product, and the Joseph form is evaluated as
  *   P + V K^T + K V^T with V = K S / 2 - P H^T (algebraically the Joseph form for any K,
  *   Bucy and Joseph 1968; no N x N x N product).
+ *
+ * Cost (callgrind, instructions per amsfe_est_tick of oosm on a recorded closed-loop run,
+ * tick_timer.c; docs/runtime-c.md has the command): Panda N = 29, ne = 14: 225k, of which the
+ * rk4 transition_step 123k (generated stages and amsfe_model.c's chain), these kernels ~98k
+ * (A P A^T 35k, the encoder update 48k, the Cholesky check 15k);
+ * paper_2link N = 9: 16.7k.  A late frame (eq. 23 over a 33-step lag on the Panda) 2.7M.
  */
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC optimize("O3")
@@ -26,6 +38,14 @@
 #include "amsfe_internal.h"
 
 #define AT(M, i, j, ld) (M)[(i) + (long)(j) * (ld)]
+/* The column loops outside the tiles (Cholesky panels, solves, the Joseph update's picks) get
+ * an AVX2 clone chosen at load time, as amsfe_model.c's chain: without FMA, so their results
+ * are the same on every x86-64 CPU. */
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__linux__)
+#define KERNEL_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define KERNEL_CLONES
+#endif
 /* ---- register tiles: C[i, j] = init[i, j] + sum_{m0 <= m < m1} X[i + m N] Y[m sm + j sj]
  * for the rows i of [lo, N) and the columns j of [0, ncols): every matrix product below is one
  * of these (A L: Y = L with sm = 1, sj = N; B B^T: Y = B with sm = N, sj = 1).  Tiles of
@@ -34,34 +54,34 @@
  * shared entry gets the same value (init is read, never the output: overlap-safe).  With an
  * AVX2 + FMA CPU the 4-wide version runs (chosen once at run time, so the library stays
  * portable x86-64); otherwise 2-wide vectors (SSE2, NEON). */
-#define TILE_BODY(V, W, OP)                                                                   \
+#define TILE_BODY(V, VU, W, OP)                                                               \
   for (int j0 = 0;; j0 += 4) {                                                              \
     if (j0 > ncols - 4) j0 = ncols - 4;                                                     \
     int first = lower && j0 > lo ? j0 : lo, ms = tri && j0 > m0 ? j0 : m0;                  \
     for (int i0 = first < N - 2 * W ? first : N - 2 * W;; i0 += 2 * W) {                    \
       if (i0 > N - 2 * W) i0 = N - 2 * W;                                                   \
-      V c[4][2];                                                                            \
-      for (int b = 0; b < 4; ++b)                                                           \
-        for (int h = 0; h < 2; ++h) {                                                       \
-          if (init)                                                                         \
-            memcpy(&c[b][h], init + i0 + h * W + (long)(j0 + b) * N, sizeof(V));            \
-          else                                                                              \
-            memset(&c[b][h], 0, sizeof(V));                                                 \
-        }                                                                                   \
-      for (int m = ms; m < m1; ++m) {                                                       \
-        V x0, x1;                                                                           \
-        memcpy(&x0, X + (long)m * N + i0, sizeof(V));                                       \
-        memcpy(&x1, X + (long)m * N + i0 + W, sizeof(V));                                   \
-        const double *ym = Y + m * sm + j0 * sj;                                            \
-        for (int b = 0; b < 4; ++b) {                                                       \
-          double y = ym[b * sj];                                                            \
-          c[b][0] OP x0 * y;                                                                \
-          c[b][1] OP x1 * y;                                                                \
-        }                                                                                   \
+      V c00, c01, c10, c11, c20, c21, c30, c31;                                             \
+      if (init) {                                                                           \
+        const double *p = init + i0 + (long)j0 * N;                                         \
+        c00 = *(const VU *)p, c01 = *(const VU *)(p + W), p += N;                           \
+        c10 = *(const VU *)p, c11 = *(const VU *)(p + W), p += N;                           \
+        c20 = *(const VU *)p, c21 = *(const VU *)(p + W), p += N;                           \
+        c30 = *(const VU *)p, c31 = *(const VU *)(p + W);                                   \
+      } else {                                                                              \
+        c00 = c01 = c10 = c11 = c20 = c21 = c30 = c31 = (V){0};                             \
       }                                                                                     \
-      for (int b = 0; b < 4; ++b)                                                           \
-        for (int h = 0; h < 2; ++h)                                                         \
-          memcpy(C + i0 + h * W + (long)(j0 + b) * N, &c[b][h], sizeof(V));                 \
+      const double *xm = X + (long)ms * N + i0, *ym = Y + ms * sm + j0 * sj;                \
+      for (int m = ms; m < m1; ++m, xm += N, ym += sm) {                                    \
+        V x0 = *(const VU *)xm, x1 = *(const VU *)(xm + W);                                 \
+        double y0 = ym[0], y1 = ym[sj], y2 = ym[2 * sj], y3 = ym[3 * sj];                   \
+        c00 OP x0 * y0, c01 OP x1 * y0, c10 OP x0 * y1, c11 OP x1 * y1;                     \
+        c20 OP x0 * y2, c21 OP x1 * y2, c30 OP x0 * y3, c31 OP x1 * y3;                     \
+      }                                                                                     \
+      double *p = C + i0 + (long)j0 * N;                                                    \
+      *(VU *)p = c00, *(VU *)(p + W) = c01, p += N;                                         \
+      *(VU *)p = c10, *(VU *)(p + W) = c11, p += N;                                         \
+      *(VU *)p = c20, *(VU *)(p + W) = c21, p += N;                                         \
+      *(VU *)p = c30, *(VU *)(p + W) = c31;                                                 \
       if (i0 == N - 2 * W) break;                                                           \
     }                                                                                       \
     if (j0 == ncols - 4) break;                                                             \
@@ -72,15 +92,20 @@
       const double *restrict Y, long sm, long sj, const double *restrict init,             \
       double *restrict C
 
+/* the vectors, and their unaligned, aliasing views for loads and stores */
 typedef double v2d __attribute__((vector_size(16)));
-static void tiles_v2(TILE_ARGS) { TILE_BODY(v2d, 2, +=) }
-static void tiles_v2_sub(TILE_ARGS) { TILE_BODY(v2d, 2, -=) }
+typedef double v2du __attribute__((vector_size(16), aligned(8), may_alias));
+static void tiles_v2(TILE_ARGS) { TILE_BODY(v2d, v2du, 2, +=) }
+static void tiles_v2_sub(TILE_ARGS) { TILE_BODY(v2d, v2du, 2, -=) }
 
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 typedef double v4d __attribute__((vector_size(32)));
-__attribute__((target("avx2,fma"))) static void tiles_v4(TILE_ARGS) { TILE_BODY(v4d, 4, +=) }
+typedef double v4du __attribute__((vector_size(32), aligned(8), may_alias));
+__attribute__((target("avx2,fma"))) static void tiles_v4(TILE_ARGS) {
+  TILE_BODY(v4d, v4du, 4, +=)
+}
 __attribute__((target("avx2,fma"))) static void tiles_v4_sub(TILE_ARGS) {
-  TILE_BODY(v4d, 4, -=)
+  TILE_BODY(v4d, v4du, 4, -=)
 }
 static int have_avx2(void) {
   static int known = -1;
@@ -125,7 +150,7 @@ void amsfe_mirror_lower(int m, double *restrict X) {
 
 /* Left-looking in panels of 4 columns: L[j0:, panel] = S[j0:, panel] - L[j0:, :j0] L[panel, :j0]^T
  * (one register-tiled product), then the panel column by column. */
-int amsfe_cholesky(int m, const double *restrict S, double *restrict L) {
+KERNEL_CLONES int amsfe_cholesky(int m, const double *restrict S, double *restrict L) {
   for (int j0 = 0; j0 < m; j0 += 4) {
     int w = m - j0 < 4 ? m - j0 : 4;
     if (j0 == 0)
@@ -151,7 +176,7 @@ int amsfe_cholesky(int m, const double *restrict S, double *restrict L) {
   return 1;
 }
 
-void amsfe_chol_solve(int m, const double *restrict L, double *restrict b) {
+KERNEL_CLONES void amsfe_chol_solve(int m, const double *restrict L, double *restrict b) {
   for (int k = 0; k < m; ++k) { /* L y = b, column-oriented */
     double y = b[k] / AT(L, k, k, m);
     b[k] = y;
@@ -163,6 +188,21 @@ void amsfe_chol_solve(int m, const double *restrict L, double *restrict b) {
     double v = b[i];
     for (int k = i + 1; k < m; ++k) v -= li[k] * b[k];
     b[i] = v / li[i];
+  }
+}
+
+/* Li = L^-1 for L lower triangular m x m with a positive diagonal (column-major; Li's strict
+ * upper part set to zero): column b of Li by forward substitution on e_b. */
+KERNEL_CLONES void amsfe_tri_inverse(int m, const double *restrict L, double *restrict Li) {
+  for (int b = 0; b < m; ++b) {
+    double *restrict lb = Li + (long)b * m;
+    for (int i = 0; i < m; ++i) lb[i] = i == b ? 1.0 : 0.0;
+    for (int k = b; k < m; ++k) { /* column axpys: no dependent chain of divisions */
+      const double *restrict lk = L + (long)k * m;
+      double y = lb[k] / lk[k];
+      lb[k] = y;
+      for (int i = k + 1; i < m; ++i) lb[i] -= lk[i] * y;
+    }
   }
 }
 
@@ -249,10 +289,12 @@ int amsfe_lu_solve(int N, double *restrict A, double *restrict b) {
  * P + V K^T + K V^T with V = K S / 2 - P[:, rows] (equal for any K).  Writes x2, P2 (exactly
  * symmetric), *nis, nu[m]; returns 0 when S is not positive definite (then only nu is
  * written).  w: AMSFE_JOSEPH_WORK(M, m) doubles. */
-int amsfe_joseph_select(int M, int m, const int *restrict rows, const double *restrict r,
-                        const double *restrict x, const double *restrict P,
-                        const double *restrict z, double *restrict x2, double *restrict P2,
-                        double *restrict nis, double *restrict nu, double *restrict w) {
+KERNEL_CLONES int amsfe_joseph_select(int M, int m, const int *restrict rows,
+                                      const double *restrict r, const double *restrict x,
+                                      const double *restrict P, const double *restrict z,
+                                      double *restrict x2, double *restrict P2,
+                                      double *restrict nis, double *restrict nu,
+                                      double *restrict w) {
   /* W = [V | K | V] (M x 3m): [V | K] and [K | V] are both contiguous column blocks */
   double *restrict V = w, *restrict K = w + (long)M * m, *restrict V2 = K + (long)M * m;
   double *restrict Pn = V2 + (long)M * m, *restrict S = Pn + (long)M * m;
@@ -278,28 +320,18 @@ int amsfe_joseph_select(int M, int m, const int *restrict rows, const double *re
       na[i] = -pa[i]; /* -P H^T */
     }
   }
-  for (long c = 0; c < m; ++c) { /* K = P H^T Ls^-T: forward over the columns */
-    double *kc = K + c * M;
-    const double *restrict nc = Pn + c * M;
-    for (int i = 0; i < M; ++i) kc[i] = -nc[i];
-    for (long a = 0; a < c; ++a) {
-      const double *ka = K + (long)a * M;
-      double f = AT(Ls, c, a, m);
-      for (int i = 0; i < M; ++i) kc[i] -= ka[i] * f;
+  /* K = P H^T S^-1 as one register-tiled product with S^-1 = Li^T Li, Li = Ls^-1 (m^3/2
+   * flops on m x m; column solves of K over M rows were 2/3 of this kernel's instructions).
+   * Li goes where V will be, S^-1 where V2 will be: both are written only after K. */
+  double *restrict Li = V, *restrict Si = V2;
+  amsfe_tri_inverse(m, Ls, Li);
+  for (int b = 0; b < m; ++b)
+    for (int a = b; a < m; ++a) {
+      double v = 0.0;
+      for (int k = a; k < m; ++k) v += AT(Li, k, a, m) * AT(Li, k, b, m);
+      AT(Si, a, b, m) = v, AT(Si, b, a, m) = v;
     }
-    double d = AT(Ls, c, c, m);
-    for (int i = 0; i < M; ++i) kc[i] /= d;
-  }
-  for (long c = m - 1; c >= 0; --c) { /* K <- K Ls^-1: backward over the columns */
-    double *kc = K + c * M;
-    for (long a = c + 1; a < m; ++a) {
-      const double *ka = K + (long)a * M;
-      double f = AT(Ls, a, c, m);
-      for (int i = 0; i < M; ++i) kc[i] -= ka[i] * f;
-    }
-    double d = AT(Ls, c, c, m);
-    for (int i = 0; i < M; ++i) kc[i] /= d;
-  }
+  tiles_sub(M, m, 0, 0, 0, 0, m, Pn, Si, 1, m, NULL, K); /* K = -(-P H^T) S^-1 */
   for (int i = 0; i < m * m; ++i) Sh[i] = 0.5 * S[i];
   tiles(M, m, 0, 0, 0, 0, m, K, Sh, 1, m, Pn, V); /* V = K S / 2 - P H^T */
   memcpy(V2, V, sizeof(double) * (size_t)M * (size_t)m);
@@ -314,11 +346,12 @@ int amsfe_joseph_select(int M, int m, const int *restrict rows, const double *re
  * Mo = sym(P + Pvv - Pxv - Pxv^T) = P - Q + U Wt^T + Wt U^T with Wt = W^T, U = P_prior H^T -
  * Q H^T / 2, and C = P - Pxv = P - Q + P_prior H^T Wt^T.  Q must be exactly symmetric.  Returns
  * 0 when S is not positive definite.  w: AMSFE_RETRO_WORK(M, m) doubles. */
-int amsfe_a1_retrodict(int M, int m, const int *restrict rows, const double *restrict r,
-                       const double *restrict x, const double *restrict P,
-                       const double *restrict Q, const double *restrict nu,
-                       const double *restrict Pp, double *restrict xs, double *restrict Mo,
-                       double *restrict C, double *restrict w) {
+KERNEL_CLONES int amsfe_a1_retrodict(int M, int m, const int *restrict rows,
+                                     const double *restrict r, const double *restrict x,
+                                     const double *restrict P, const double *restrict Q,
+                                     const double *restrict nu, const double *restrict Pp,
+                                     double *restrict xs, double *restrict Mo,
+                                     double *restrict C, double *restrict w) {
   /* [U | Wt | U] (M x 3m), Pr = P_prior H^T, D = P - Q, S, its factor */
   double *U = w, *Wt = w + (long)M * m, *U2 = Wt + (long)M * m;
   double *restrict Pr = U2 + (long)M * m, *restrict D = Pr + (long)M * m;
