@@ -109,17 +109,35 @@ def test_compile_prints_progress_while_it_runs(monkeypatch, capsys, tmp_path) ->
     and still returns the compiler's exit code and messages."""
     import sys
 
-    from amsfe_sym.codegen import build
+    from amsfe_sym.codegen import compile_units
 
-    monkeypatch.setattr(build, "COMPILE_PROGRESS_S", 0.05)
+    monkeypatch.setattr(compile_units, "COMPILE_PROGRESS_S", 0.05)
     cmd = [sys.executable, "-c", "import sys, time; time.sleep(0.3); sys.exit('boom')"]
-    proc = build._compile(cmd, tmp_path, True, "slow")
+    proc = compile_units.run_commands([cmd], tmp_path, True, "slow")
     assert proc.returncode == 1 and "boom" in proc.stderr
     err = capsys.readouterr().err
     assert err.count("[amsfe] slow: compiling, ") >= 2
-    quiet = build._compile(cmd, tmp_path, False, "slow")
+    quiet = compile_units.run_commands([cmd], tmp_path, False, "slow")
     assert quiet.returncode == 1 and "boom" in quiet.stderr
     assert capsys.readouterr().err == ""
+
+
+def test_parallel_units_stop_at_the_first_failure(tmp_path) -> None:
+    """Commands run two at a time: the failing one's exit code and messages come back, the
+    one still running is killed (it never writes its file), the pending one never starts."""
+    import sys
+
+    from amsfe_sym.codegen import compile_units
+
+    slow = [sys.executable, "-c", "import time; time.sleep(5); open('slow', 'w')"]
+    bad = [sys.executable, "-c", "import sys; sys.exit('bad unit')"]
+    never = [sys.executable, "-c", "open('never', 'w')"]
+    proc = compile_units.run_commands([slow, bad, never], tmp_path, False, "x", jobs=2)
+    assert proc.returncode == 1 and "bad unit" in proc.stderr and proc.args == bad
+    assert not (tmp_path / "slow").exists() and not (tmp_path / "never").exists()
+    ok = [sys.executable, "-c", "import sys; print('warn', file=sys.stderr)"]
+    done = compile_units.run_commands([ok, ok, ok], tmp_path, False, "x", jobs=2)
+    assert done.returncode == 0 and "warn" in done.stderr
 
 
 def test_aba_derivatives_timing_on_the_panda() -> None:

@@ -246,7 +246,8 @@ def test_cache_reuse_and_invalidation(tmp_path) -> None:
     fourth.manifest_path.write_text("{ not json")
     fifth = generate(src, out=out, extra_cflags=["-DAMSFE_TEST_FLAG=1"])
     assert not fifth.reused and json.loads(fifth.manifest_path.read_text())["T"] == 0.003
-    assert sorted(p.name for p in out.iterdir()) == ["dp"]  # no temporary folders left
+    # no temporary folders left (.objects: the robot-independent objects, codegen/compile_units)
+    assert sorted(p.name for p in out.iterdir()) == [".objects", "dp"]
 
 
 def test_a_model_only_library_has_no_laws_and_keeps_the_full_one(tmp_path) -> None:

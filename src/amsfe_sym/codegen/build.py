@@ -20,7 +20,6 @@ import functools
 import json
 import os
 import shutil
-import subprocess
 import tempfile
 import time
 from collections.abc import Callable, Sequence
@@ -43,6 +42,7 @@ from amsfe_sym.codegen.cache import (
     default_out_dir,
     replace_dir,
 )
+from amsfe_sym.codegen.compile_units import OBJECT_CACHE, Unit, compile_library
 from amsfe_sym.codegen.manifest import manifest_document
 from amsfe_sym.core.interrupts import DeferredSignals, checkpoint
 from amsfe_sym.errors import CodegenError, describe
@@ -153,7 +153,9 @@ def generate(
                 return GenerateResult(
                     out_dir, out_dir / MANIFEST, lib, True, time.perf_counter() - t_start, {}
                 )
-        return _build(spec, parts, flags, key, hash_inputs, parent, out_dir, progress, t_start)
+        return _build(
+            spec, parts, flags, key, hash_inputs, parent, out_dir, progress, t_start, force
+        )
 
 
 def _signals_held(fn: Callable[..., GenerateResult]) -> Callable[..., GenerateResult]:
@@ -178,6 +180,7 @@ def _build(
     out_dir: Path,
     progress: bool,
     t_start: float,
+    force: bool = False,
 ) -> GenerateResult:
     """Load, build the symbols, generate C, compile and move into ``out_dir`` (see
     :func:`generate`).
@@ -234,21 +237,31 @@ def _build(
         timings["codegen"] = time.perf_counter() - t
         t = time.perf_counter()
         libname = f"lib{spec.name}.so"
-        glue = []
+        units = [Unit(cname)]  # first: the largest unit starts first
         (tmp / "amsfe_model_config.h").write_text(model_config_header(model))
         if model.chained:  # the contract functions written in C over the generated stage
-            glue.append(str(_RUNTIME_C / "amsfe_model.c"))
+            units.append(Unit(str(_RUNTIME_C / "amsfe_model.c")))
         if "estimator" in parts:  # the C glue calls the est_* functions
             shutil.copy(_RUNTIME_C / "amsfe_runtime.h", tmp)
-            glue.append(str(_RUNTIME_C / "amsfe_runtime.c"))
+            units.append(Unit(str(_RUNTIME_C / "amsfe_runtime.c")))
         if set(parts) == set(ALL_PARTS):  # the loop calls the laws, the plant, the estimators
             shutil.copy(_RUNTIME_C / "amsfe_loop.h", tmp)
-            glue.append(str(_RUNTIME_C / "amsfe_loop.c"))
+            units.append(Unit(str(_RUNTIME_C / "amsfe_loop.c"), shared=True))
         if "estimator" in parts:  # the dense kernels of the estimators and the loop (O3 pragma)
-            glue.append(str(_RUNTIME_C / "amsfe_kernels.c"))
-        cmd = [compiler(), *flags, "-I.", "-o", libname, cname, *glue, "-lm"]
-        _say(progress, f"[amsfe] {spec.name}: compiling ({' '.join(cmd)})")
-        proc = _compile(cmd, tmp, progress, spec.name)
+            units.append(Unit(str(_RUNTIME_C / "amsfe_kernels.c"), shared=True))
+        # --force rebuilds the shared objects too (and refreshes them in the cache)
+        proc = compile_library(
+            units,
+            compiler(),
+            flags,
+            tmp,
+            libname,
+            {k: hash_inputs.get(k) for k in ("compiler", "cflags", "machine", "cpu")},
+            parent / OBJECT_CACHE,
+            progress,
+            spec.name,
+            reuse=not force,
+        )
         checkpoint()  # a Ctrl-C in the terminal stops the compiler too: say that, not its exit
         if proc.returncode != 0:
             raise CodegenError(
@@ -307,38 +320,6 @@ def model_config_header(model: Any) -> str:
         f"#define AMSFE_MODEL_CHAIN {1 if model.chained else 0}\n"
         "#endif\n"
     )
-
-
-#: Seconds between the progress lines of a compile (``progress=True``).
-COMPILE_PROGRESS_S = 5.0
-
-
-def _compile(
-    cmd: list[str], cwd: Path, progress: bool, name: str
-) -> subprocess.CompletedProcess[str]:
-    """Run the compiler; with ``progress``, a line on stderr every :data:`COMPILE_PROGRESS_S`
-    seconds while it runs (a large arm compiles for tens of seconds).  A held Ctrl-C or
-    SIGTERM (:func:`~amsfe_sym.core.interrupts.checkpoint`, polled every 0.1 s) stops it."""
-    with tempfile.TemporaryFile("w+") as err:
-        proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.DEVNULL, stderr=err, text=True)
-        t0 = last = time.perf_counter()
-        try:
-            while True:
-                try:
-                    proc.wait(timeout=0.1)
-                    break
-                except subprocess.TimeoutExpired:
-                    checkpoint()
-                    now = time.perf_counter()
-                    if progress and now - last >= COMPILE_PROGRESS_S:
-                        last = now
-                        _say(True, f"[amsfe] {name}: compiling, {now - t0:.0f} s so far")
-        except BaseException:
-            proc.kill()
-            proc.wait()
-            raise
-        err.seek(0)
-        return subprocess.CompletedProcess(cmd, proc.returncode, "", err.read())
 
 
 def _say(on: bool, msg: str) -> None:
