@@ -73,7 +73,7 @@ def count(exe: Path, lib: Path, data: Path, work: Path) -> dict[str, Any]:
         check=True,
     )
     ann = subprocess.run(
-        ["callgrind_annotate", "--inclusive=yes", str(out_file)],
+        ["callgrind_annotate", "--inclusive=yes", "--threshold=100", str(out_file)],
         capture_output=True,
         text=True,
         check=True,

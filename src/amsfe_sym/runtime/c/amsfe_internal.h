@@ -110,6 +110,11 @@ AMSFE_HIDDEN int amsfe_a1_retrodict(int M, int m, const int *rows, const double 
                                     const double *x, const double *P, const double *Q,
                                     const double *nu, const double *Pp, double *xs, double *Mo,
                                     double *C, double *w);
+/* The lower Cholesky factor (N x N, column-major) of the estimator's current P, computed
+ * now if it is stale (the next prediction then reuses it, as it reuses the factor of the
+ * step's own check); NULL when P is not positive definite.  amsfe_runtime.c. */
+struct amsfe_est;
+AMSFE_HIDDEN const double *amsfe_est_factor(struct amsfe_est *e);
 #define AMSFE_RETRO_WORK(M, m) (4L * (M) * (m) + (long)(M) * (M) + 2L * (m) * (m))
 #define AMSFE_PREDICT_WORK(N, nw) (2L * (N) * (N) + (long)(N) * (nw))
 #define AMSFE_JOSEPH_WORK(M, m) (4L * (M) * (m) + 3L * (m) * (m) + (m))

@@ -528,7 +528,7 @@ struct amsfe_sim {
   pending *queue;
   amsfe_frame *due;
   int *status;
-  double *xp, *xp_next, *xt, *xh, *P, *L, *err, *z, *u, *y, *J, *depth, *s, *bound;
+  double *xp, *xp_next, *xt, *xh, *P, *err, *z, *u, *y, *J, *depth, *s, *bound;
 };
 
 static size_t sim_layout(amsfe_sim *s, const amsfe_sim_params *p, char *base) {
@@ -543,7 +543,7 @@ static size_t sim_layout(amsfe_sim *s, const amsfe_sim_params *p, char *base) {
   s->due = (amsfe_frame *)carve(&cv, sizeof(amsfe_frame) * (size_t)p->max_in_flight);
   s->status = (int *)carve(&cv, sizeof(int) * (size_t)p->max_in_flight);
   s->xp = DBL(&cv, 4 * n), s->xp_next = DBL(&cv, 4 * n), s->xt = DBL(&cv, N);
-  s->xh = DBL(&cv, N), s->P = DBL(&cv, N * N), s->L = DBL(&cv, N * N), s->err = DBL(&cv, N);
+  s->xh = DBL(&cv, N), s->P = DBL(&cv, N * N), s->err = DBL(&cv, N);
   s->z = DBL(&cv, 2 * n), s->u = DBL(&cv, n), s->y = DBL(&cv, 2), s->J = DBL(&cv, 2 * N);
   s->depth = DBL(&cv, 1), s->s = DBL(&cv, n), s->bound = DBL(&cv, n);
   carve_work(&cv, WORKS, sizeof(WORKS) / sizeof(WORKS[0]), &s->g);
@@ -655,10 +655,10 @@ static int camera_tick(amsfe_sim *s, long k, const double *q, int *count) {
   return AMSFE_OK;
 }
 
-/* e^T P^-1 e by the estimators' Cholesky kernels (NaN if P is not positive definite); L and
- * w are scratch (N x N, N). */
-static double nees(int N, const double *P, double *L, const double *e, double *w) {
-  if (!amsfe_cholesky(N, P, L)) return NAN;
+/* e^T P^-1 e with L the Cholesky factor of P (NaN when there is none: P not positive
+ * definite); w: N of scratch. */
+static double nees(int N, const double *L, const double *e, double *w) {
+  if (!L) return NAN;
   memcpy(w, e, sizeof(double) * (size_t)N);
   amsfe_chol_solve(N, L, w);
   double acc = 0.0;
@@ -738,7 +738,8 @@ int amsfe_sim_run(amsfe_sim *s, long ticks, const amsfe_sim_records *rec) {
     if (rec->x_hat) memcpy(rec->x_hat + k * N, s->xh, sizeof(double) * (size_t)N);
     if (rec->P_diag)
       for (long i = 0; i < N; ++i) rec->P_diag[k * N + i] = s->P[i + i * N];
-    if (rec->nees) rec->nees[k] = nees((int)N, s->P, s->L, s->err, s->J);
+    /* the estimator's own factor of P: the one its next prediction uses (eq. 14) */
+    if (rec->nees) rec->nees[k] = nees((int)N, amsfe_est_factor(s->est), s->err, s->J);
     if (rec->u) memcpy(rec->u + k * n, s->u, sizeof(double) * (size_t)n);
     if (rec->z_enc) memcpy(rec->z_enc + k * 2 * n, s->z, sizeof(double) * (size_t)(2 * n));
     if (rec->s) memcpy(rec->s + k * n, s->s, sizeof(double) * (size_t)n);

@@ -337,6 +337,11 @@ amsfe_est *amsfe_est_create(const amsfe_params *p, int *status) {
 
 void amsfe_est_destroy(amsfe_est *e) { free(e); }
 
+const double *amsfe_est_factor(amsfe_est *e) {
+  if (!e->lp_ok) pd_state(e);
+  return e->lp_ok ? e->LP : NULL;
+}
+
 /* ------------------------------------------------------------------ EKF steps */
 /* ekf.predict on (x, P) with u; A and Gamma written to A, G (N x N, N x nw) */
 static int predict(amsfe_est *e, const double *u, double *A, double *G) {
