@@ -24,7 +24,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from amsfe_sym.errors import ConfigError, EstimatorError, ShapeError, describe
 from amsfe_sym.estimation.models import MeasurementModel, TransitionModel
@@ -77,6 +76,8 @@ def gate_threshold(probability: float | None, dim: int) -> float:
     """
     if probability is None:
         return math.inf
+    from scipy.stats import chi2  # here: scipy.stats costs ~1 s to import, every CLI start
+
     return float(chi2.ppf(probability, dim))
 
 
