@@ -15,7 +15,7 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -24,11 +24,12 @@ from amsfe_sym.core.provenance import provenance
 from amsfe_sym.core.toml import dump_toml, tomllib
 from amsfe_sym.errors import LogError, describe
 from amsfe_sym.logs.read import RobotLog, read_config, read_log
-from amsfe_sym.logs.replay import LogEstimate, estimate_log
 from amsfe_sym.logs.spec import read_log_spec
-from amsfe_sym.logs.write import write_estimate_bag
 from amsfe_sym.scenario import Scenario, load_scenario, parse_scenario
 from amsfe_sym.sim.record import check_out
+
+if TYPE_CHECKING:  # the estimators (scipy) are imported when a log is estimated, not at start
+    from amsfe_sym.logs.replay import LogEstimate
 
 __all__ = [
     "EstimateOptions",
@@ -116,6 +117,8 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
     sensors = build_sensors(sc, lib, np.random.default_rng(sc.seed), scenario_timing(sc, lib))
     est = build_estimator(sc, lib, sensors, log.z[0], compiled=options.runtime == "compiled")
     t1 = time.perf_counter()
+    from amsfe_sym.logs.replay import estimate_log
+
     result = estimate_log(log, est)
     estimate_s = time.perf_counter() - t1
     run = EstimateRun(log, result, sc, out, read_s, estimate_s)
@@ -205,6 +208,8 @@ def _write(run: EstimateRun, joints: tuple[str, ...] | list[str], options: Estim
             f"# the scenario amsfe estimate used on {log.path}\n"
             + dump_toml(run.scenario.to_dict())
         )
+        from amsfe_sym.logs.write import write_estimate_bag
+
         write_estimate_bag(
             tmp / "estimates", log.t0_ns * 1e-9, log.t, joints, est.x_hat, est.P_diag
         )
