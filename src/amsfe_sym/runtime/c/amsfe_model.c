@@ -128,31 +128,44 @@ static void rows_of(const cint *sp, cint *rp, cint *jc, cint *jv, cint *fill) {
 }
 
 /* D (NX x NS, row-major) = Jr [S; E] with S (NX x NS, row-major) and E = [0 I_p] (theta is
- * constant): row r of D is the sum over row r's nonzeros of Jr of J[r, j] times row j of S,
- * one contiguous axpy of NS each (a theta column j = NX + t adds J[r, j] at column j). */
+ * constant): row r of D is the sum over row r's nonzeros of Jr of J[r, j] times row j of S
+ * (a theta column j = NX + t adds J[r, j] at column j), accumulated in NV vectors of 4 held
+ * in registers and stored once: the same sums in the same order as axpys into D, without a
+ * load and a store of D's row per nonzero.  Lanes past NS read the next row of S (or, for
+ * the last row, the scratch that follows S: inside w) and are never stored. */
+#define NV ((NS + 3) / 4)
+typedef double v4d __attribute__((vector_size(32)));
+typedef double v4du __attribute__((vector_size(32), aligned(8), may_alias));
 INLINE void sparse_times(const cint *rp, const cint *jc, const cint *jv, const double *J,
                          const double *restrict S, double *restrict D) {
   for (cint r = 0; r < NX; ++r) {
-    double *restrict Dr = D + r * NS;
+    v4d acc[NV];
     cint e = rp[r], end = rp[r + 1];
     if (e < end && jc[e] < NX) { /* the first product initialises the row */
       double v = J[jv[e]];
-      const double *restrict Sj = S + jc[e] * NS;
-      for (cint c = 0; c < NS; ++c) Dr[c] = v * Sj[c];
+      const double *Sj = S + jc[e] * NS;
+#pragma GCC unroll 16
+      for (int q = 0; q < NV; ++q) acc[q] = v * *(const v4du *)(Sj + 4 * q);
       ++e;
     } else {
-      for (cint c = 0; c < NS; ++c) Dr[c] = 0.0;
+#pragma GCC unroll 16
+      for (int q = 0; q < NV; ++q) acc[q] = (v4d){0};
     }
     for (; e < end; ++e) {
       cint j = jc[e];
       double v = J[jv[e]];
       if (j < NX) {
-        const double *restrict Sj = S + j * NS;
-        for (cint c = 0; c < NS; ++c) Dr[c] += v * Sj[c];
+        const double *Sj = S + j * NS;
+#pragma GCC unroll 16
+        for (int q = 0; q < NV; ++q) acc[q] += v * *(const v4du *)(Sj + 4 * q);
       } else {
-        Dr[j] += v;
+        acc[j / 4][j % 4] += v;
       }
     }
+    double *restrict Dr = D + r * NS;
+#pragma GCC unroll 16
+    for (int q = 0; q < NS / 4; ++q) *(v4du *)(Dr + 4 * q) = acc[q];
+    for (int c = NS / 4 * 4; c < NS; ++c) Dr[c] = acc[c / 4][c % 4];
   }
 }
 
