@@ -104,7 +104,7 @@ def main() -> None:
         if shutil.which(tool) is None:
             raise SystemExit(f"expected {tool} on PATH, found none: install valgrind and retry")
     from amsfe_sym.apps.bench.tick import build_tick_timer, record_tick_inputs, write_tick_input
-    from amsfe_sym.core.provenance import cpu_name
+    from amsfe_sym.core.provenance import cpu_name, git_revision
     from amsfe_sym.runtime.library import ModelLibrary
     from amsfe_sym.scenario import load_scenario
 
@@ -139,15 +139,11 @@ def main() -> None:
                 "final_x_max_diff": float(np.max(np.abs(res["before"]["x"] - res["after"]["x"]))),
             }
             print(f"[instructions] {name}: {rows[name]}", flush=True)
+    rev, dirty = git_revision()
     report = {
         "command": "tools/tick_instructions.py " + " ".join(sys.argv[1:]),
         "base": args.base,
-        "after": subprocess.run(
-            ["git", "-C", str(REPO), "rev-parse", "--short=12", "HEAD"],
-            capture_output=True,
-            text=True,
-        ).stdout.strip()
-        + " + worktree",
+        "after": rev + (" (dirty)" if dirty else ""),
         "machine": f"{cpu_name()}, {os.cpu_count()} CPUs",
         "seconds": round(time.time() - t0, 1),
         "rows": rows,

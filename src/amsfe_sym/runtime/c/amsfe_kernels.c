@@ -24,8 +24,8 @@
  *   Bucy and Joseph 1968; no N x N x N product).
  *
  * Cost (callgrind, instructions per amsfe_est_tick of oosm on a recorded closed-loop run,
- * tick_timer.c; docs/runtime-c.md has the command): Panda N = 29, ne = 14: 225k, of which the
- * rk4 transition_step 123k (generated stages and amsfe_model.c's chain), these kernels ~98k
+ * tick_timer.c; docs/runtime-c.md has the command): Panda N = 29, ne = 14: 222.5k, of which
+ * the rk4 transition_step 121k (generated stages and amsfe_model.c's chain), these kernels ~98k
  * (A P A^T 35k, the encoder update 48k, the Cholesky check 15k);
  * paper_2link N = 9: 16.7k.  A late frame (eq. 23 over a 33-step lag on the Panda) 2.7M.
  */
