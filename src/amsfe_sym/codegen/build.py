@@ -42,7 +42,14 @@ from amsfe_sym.codegen.cache import (
     default_out_dir,
     replace_dir,
 )
-from amsfe_sym.codegen.compile_units import OBJECT_CACHE, Unit, compile_library
+from amsfe_sym.codegen.compile_units import (
+    OBJECT_CACHE,
+    RUNTIME_C,
+    Unit,
+    compile_library,
+    runtime_unit,
+)
+from amsfe_sym.codegen.compile_units import say as _say
 from amsfe_sym.codegen.manifest import manifest_document
 from amsfe_sym.core.interrupts import DeferredSignals, checkpoint
 from amsfe_sym.errors import CodegenError, describe
@@ -52,7 +59,6 @@ from amsfe_sym.runtime.library import file_sha256
 __all__ = ["GenerateResult", "cached_library", "generate"]
 
 #: The hand-written C glue of the compiled estimators, built into every library.
-_RUNTIME_C = Path(__file__).resolve().parent.parent / "runtime" / "c"
 
 
 @dataclass(frozen=True)
@@ -240,15 +246,15 @@ def _build(
         units = [Unit(cname)]  # first: the largest unit starts first
         (tmp / "amsfe_model_config.h").write_text(model_config_header(model))
         if model.chained:  # the contract functions written in C over the generated stage
-            units.append(Unit(str(_RUNTIME_C / "amsfe_model.c")))
+            units.append(runtime_unit("amsfe_model.c"))
         if "estimator" in parts:  # the C glue calls the est_* functions
-            shutil.copy(_RUNTIME_C / "amsfe_runtime.h", tmp)
-            units.append(Unit(str(_RUNTIME_C / "amsfe_runtime.c")))
+            shutil.copy(RUNTIME_C / "amsfe_runtime.h", tmp)
+            units.append(runtime_unit("amsfe_runtime.c"))
         if set(parts) == set(ALL_PARTS):  # the loop calls the laws, the plant, the estimators
-            shutil.copy(_RUNTIME_C / "amsfe_loop.h", tmp)
-            units.append(Unit(str(_RUNTIME_C / "amsfe_loop.c"), shared=True))
+            shutil.copy(RUNTIME_C / "amsfe_loop.h", tmp)
+            units.append(runtime_unit("amsfe_loop.c"))
         if "estimator" in parts:  # the dense kernels of the estimators and the loop (O3 pragma)
-            units.append(Unit(str(_RUNTIME_C / "amsfe_kernels.c"), shared=True))
+            units.append(runtime_unit("amsfe_kernels.c"))
         # --force rebuilds the shared objects too (and refreshes them in the cache)
         proc = compile_library(
             units,
@@ -320,10 +326,3 @@ def model_config_header(model: Any) -> str:
         f"#define AMSFE_MODEL_CHAIN {1 if model.chained else 0}\n"
         "#endif\n"
     )
-
-
-def _say(on: bool, msg: str) -> None:
-    if on:
-        import sys
-
-        print(msg, file=sys.stderr, flush=True)

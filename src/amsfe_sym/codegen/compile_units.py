@@ -36,14 +36,18 @@ from amsfe_sym.core.interrupts import checkpoint
 
 __all__ = [
     "OBJECT_CACHE",
+    "RUNTIME_C",
     "SHARED_UNITS",
     "Unit",
     "build_jobs",
     "compile_library",
     "run_commands",
+    "runtime_unit",
+    "say",
 ]
 
-_RUNTIME_C = Path(__file__).resolve().parent.parent / "runtime" / "c"
+#: The hand-written C of the runtime (``runtime/c``).
+RUNTIME_C = Path(__file__).resolve().parent.parent / "runtime" / "c"
 
 #: The files of ``runtime/c`` whose object does not depend on the robot.
 SHARED_UNITS = ("amsfe_kernels.c", "amsfe_loop.c")
@@ -68,6 +72,12 @@ class Unit:
     shared: bool = False
 
 
+def runtime_unit(name: str) -> Unit:
+    """The unit of the file ``name`` of ``runtime/c``, shared when it is in
+    :data:`SHARED_UNITS`."""
+    return Unit(str(RUNTIME_C / name), shared=name in SHARED_UNITS)
+
+
 def build_jobs() -> int:
     """Compiler processes at a time: ``$AMSFE_BUILD_JOBS``, else the CPUs this process may
     use (at least 1)."""
@@ -84,7 +94,7 @@ def object_key(unit: Path, key_inputs: dict[str, Any]) -> str:
     """The object cache's key of a shared unit (see the module docstring)."""
     h = hashlib.sha256(json.dumps(key_inputs, sort_keys=True).encode())
     h.update(unit.name.encode() + b"\0" + unit.read_bytes())
-    for header in sorted(_RUNTIME_C.glob("*.h")):
+    for header in sorted(RUNTIME_C.glob("*.h")):
         h.update(header.name.encode() + b"\0" + header.read_bytes())
     return h.hexdigest()
 
@@ -129,7 +139,7 @@ def run_commands(
                     now = time.perf_counter()
                     if progress and now - last >= COMPILE_PROGRESS_S:
                         last = now
-                        _say(f"[amsfe] {name}: compiling, {now - t0:.0f} s so far")
+                        say(True, f"[amsfe] {name}: compiling, {now - t0:.0f} s so far")
         except BaseException:
             _stop(running)
             raise
@@ -190,7 +200,7 @@ def compile_library(
         objects.append(obj)
         if cached is not None:
             to_cache.append((cwd / obj, cached))
-    _say_if(
+    say(
         progress,
         f"[amsfe] {name}: compiling ({len(compiles)} of {len(units)} unit(s), "
         f"{len(units) - len(compiles)} from the object cache, {build_jobs()} at a time: "
@@ -223,12 +233,9 @@ def _store(built: Path, dest: Path) -> None:
                 os.unlink(tmp)
 
 
-def _say_if(on: bool, msg: str) -> None:
+def say(on: bool, msg: str) -> None:
+    """``msg`` on stderr when ``on`` (generate's progress lines)."""
     if on:
-        _say(msg)
+        import sys
 
-
-def _say(msg: str) -> None:
-    import sys
-
-    print(msg, file=sys.stderr, flush=True)
+        print(msg, file=sys.stderr, flush=True)
