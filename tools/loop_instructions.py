@@ -19,9 +19,7 @@ docs/data/loop-instructions.json and .md.
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import re
 import shutil
 import statistics
 import subprocess
@@ -32,6 +30,9 @@ from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO / "tools"))
+from tick_instructions import callgrind, write_report  # noqa: E402  (a sibling tool)
+
 SCENARIOS = ("paper-sim", "ur5-control", "panda-control")
 PARTS = {
     "loop": "ffi_call",
@@ -61,29 +62,13 @@ def _python(*args: str) -> list[str]:
 def count(name: str, duration: float, work: Path) -> dict[str, Any]:
     """Inclusive instructions of :data:`PARTS` over one compiled run of ``name``."""
     subprocess.run(_python(name, str(duration), "build"), check=True)  # outside valgrind
-    out = work / f"{name}.callgrind"
-    proc = subprocess.run(
-        [
-            "valgrind",
-            "--tool=callgrind",
-            f"--callgrind-out-file={out}",
-            *_python(name, str(duration), "run"),
-        ],
-        capture_output=True,
-        text=True,
-        check=True,
+    stdout, found = callgrind(
+        _python(name, str(duration), "run"), work / f"{name}.callgrind", list(PARTS.values())
     )
-    ticks = int(proc.stdout.split()[0])
-    ann = subprocess.run(
-        ["callgrind_annotate", "--inclusive=yes", "--threshold=100", str(out)],
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout
+    ticks = int(stdout.split()[0])
     row: dict[str, Any] = {"ticks": ticks}
     for key, fn in PARTS.items():
-        m = re.search(r"^\s*([\d,]+)\s+\([^)]*\)\s+\S*:" + fn + r"\b", ann, re.M)
-        row[key] = round(int(m.group(1).replace(",", "")) / ticks) if m else 0
+        row[key] = round(found[fn] / ticks)
     row["other"] = row["loop"] - sum(row[k] for k in PARTS if k != "loop")
     return row
 
@@ -128,10 +113,7 @@ def main() -> None:
         "seconds": round(time.time() - t0, 1),
         "rows": rows,
     }
-    out = Path(args.out)
-    (out / "loop-instructions.json").write_text(json.dumps(report, indent=2) + "\n")
-    (out / "loop-instructions.md").write_text(markdown(report))
-    print(markdown(report))
+    write_report(Path(args.out), "loop-instructions", report, markdown(report))
 
 
 def markdown(r: dict[str, Any]) -> str:

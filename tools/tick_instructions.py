@@ -25,6 +25,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -57,19 +58,15 @@ def build_side(src: Path, gen: Path) -> dict[str, str]:
     return out
 
 
-def count(exe: Path, lib: Path, data: Path, work: Path) -> dict[str, Any]:
-    """Inclusive instructions of amsfe_est_tick and amsfe_est_camera_frame over the replay."""
-    out_file = work / "callgrind.out"
-    subprocess.run(
-        [
-            "valgrind",
-            "--tool=callgrind",
-            f"--callgrind-out-file={out_file}",
-            str(exe),
-            str(lib),
-            str(data),
-        ],
+def callgrind(
+    cmd: list[str], out_file: Path, functions: Sequence[str]
+) -> tuple[str, dict[str, int]]:
+    """Run ``cmd`` under ``valgrind --tool=callgrind``: its stdout, and the inclusive
+    instructions of each of ``functions`` (0 for one that never ran)."""
+    proc = subprocess.run(
+        ["valgrind", "--tool=callgrind", f"--callgrind-out-file={out_file}", *cmd],
         capture_output=True,
+        text=True,
         check=True,
     )
     ann = subprocess.run(
@@ -79,11 +76,26 @@ def count(exe: Path, lib: Path, data: Path, work: Path) -> dict[str, Any]:
         check=True,
     ).stdout
     found = {}
-    for name in ("amsfe_est_tick", "amsfe_est_camera_frame"):
+    for name in functions:
         m = re.search(r"^\s*([\d,]+)\s+\([^)]*\)\s+\S*:" + name + r"\b", ann, re.M)
         found[name] = int(m.group(1).replace(",", "")) if m else 0
-    run = subprocess.run([str(exe), str(lib), str(data)], capture_output=True, text=True)
-    lines = run.stdout.splitlines()
+    return proc.stdout, found
+
+
+def write_report(out: Path, stem: str, report: dict[str, Any], text: str) -> None:
+    """``<stem>.json`` and ``<stem>.md`` in ``out``; the markdown printed too."""
+    (out / f"{stem}.json").write_text(json.dumps(report, indent=2) + "\n")
+    (out / f"{stem}.md").write_text(text)
+    print(text)
+
+
+def count(exe: Path, lib: Path, data: Path, work: Path) -> dict[str, Any]:
+    """Inclusive instructions of amsfe_est_tick and amsfe_est_camera_frame over the replay."""
+    cmd = [str(exe), str(lib), str(data)]
+    stdout, found = callgrind(
+        cmd, work / "callgrind.out", ("amsfe_est_tick", "amsfe_est_camera_frame")
+    )
+    lines = stdout.splitlines()
     x = np.array([float(v) for v in lines[1].split()])
     frames = int(lines[2].split()[2]) if len(lines) > 2 else 0
     return {
@@ -148,10 +160,7 @@ def main() -> None:
         "seconds": round(time.time() - t0, 1),
         "rows": rows,
     }
-    out = Path(args.out)
-    (out / "tick-instructions.json").write_text(json.dumps(report, indent=2) + "\n")
-    (out / "tick-instructions.md").write_text(markdown(report))
-    print(markdown(report))
+    write_report(Path(args.out), "tick-instructions", report, markdown(report))
 
 
 def markdown(r: dict[str, Any]) -> str:
