@@ -81,6 +81,8 @@ ALLOWED: dict[str, set[str]] = {
         "estimation.registry",
     },
     "runtime": {"errors"},
+    # what a topic means, for logs and live nodes alike
+    "topics": {"errors", "core"},
     # the compiled estimators implement estimation's Estimator interface over the library
     "runtime.compiled_estimator": {"errors", "runtime", "estimation", "core.camera_frame"},
     "runtime.compiled_loop": {"errors", "runtime", "estimation", "core.camera_frame"},
@@ -106,6 +108,22 @@ ALLOWED: dict[str, set[str]] = {
         "runtime",
         "estimation",
         "sim",
+        "topics",
+    },
+    # the live ROS 2 nodes: the applications' peers (rclpy imported only inside ros/)
+    "ros": {
+        "errors",
+        "core",
+        "load",
+        "scenario",
+        "signals",
+        "codegen",
+        "runtime",
+        "estimation",
+        "control",
+        "sim",
+        "logs",
+        "topics",
     },
     # the applications may import every room, never the command line
     "apps": {
@@ -121,6 +139,8 @@ ALLOWED: dict[str, set[str]] = {
         "control",
         "sim",
         "logs",
+        "topics",
+        "ros",
     },
     "apps.cli": {""},  # the command line: everything
     "__main__": {"apps.cli"},

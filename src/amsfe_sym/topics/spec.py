@@ -1,0 +1,203 @@
+"""The topic spec: which topic plays which role (:mod:`amsfe_sym.topics.roles`), the log's
+joint names, what its effort is, the timing tolerances and the QoS of live topics.  Every key
+has a default; a small TOML file overrides any of them, and the same file serves
+``amsfe estimate`` on a recording and ``amsfe node`` live (docs/topics.md).
+
+```toml
+[topics]                          # any role of topics.roles.ROLES; unset: the default topic,
+encoders = "/joint_states"        # or, for a log, found by message type and joint names
+effort = "/joint_states"          # one topic may serve several roles
+camera = "/camera/marker"
+
+[joints]
+names = ["joint1", "joint2"]      # JointState names in the robot's q order (default: the robot's)
+
+[effort]
+kind = "joint_torque"             # "applied" | "joint_torque" | "none" (default: by shape)
+
+[timing]
+grid_tolerance = 0.25             # |stamp - k T| allowed for a sample on the tick grid [T]
+max_gap_steps = 5                 # missing encoder samples predicted through; more: refused
+
+[qos]                             # live topics (amsfe node, sim-node, play)
+reliability = "reliable"          # or "best_effort" (what most drivers' sensor topics use)
+depth = 100                       # history depth (KEEP_LAST)
+```
+
+The key ``[topics] torque`` of older log specs is read as ``effort``.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any, Literal
+
+from amsfe_sym.core.toml import read_toml
+from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.topics.roles import EFFORT_KINDS, ROLES, EffortKind
+
+__all__ = ["FIELDS", "TopicSpec", "parse_topic_spec", "read_topic_spec"]
+
+_TOPIC_KEYS = tuple(ROLES)
+_ALIASES = {"torque": "effort"}
+
+
+@dataclass(frozen=True)
+class TopicSpec:
+    """Where amsfe's inputs and outputs live, and how to read them.
+
+    Attributes:
+        encoders, effort, camera, truth, config: Topics of the input roles
+            (:data:`~amsfe_sym.topics.roles.ROLES` says what each means).
+        estimate, estimate_std, theta, diagnostics, commands, clock: Topics of the outputs.
+        explicit: The roles whose topic the spec file set (the others are defaults: a log
+            reader may find them by message type and joint names instead).
+        joint_names: JointState names in the robot's q order (None: the robot's joints).
+        effort_kind: What the effort is (None: the default for the message's shape, decided
+            by the reader: docs/topics.md).
+        grid_tolerance: How far a stamp may be from the tick grid [T].
+        max_gap_steps: Missing encoder samples in a row the estimator predicts through.
+        reliability: QoS reliability of live topics: ``reliable`` or ``best_effort``.
+        depth: QoS history depth of live topics (KEEP_LAST).
+        source: The file read (None: the defaults).
+    """
+
+    encoders: str = ROLES["encoders"].topic
+    effort: str = ROLES["effort"].topic
+    camera: str = ROLES["camera"].topic
+    truth: str = ROLES["truth"].topic
+    config: str = ROLES["config"].topic
+    estimate: str = ROLES["estimate"].topic
+    estimate_std: str = ROLES["estimate_std"].topic
+    theta: str = ROLES["theta"].topic
+    diagnostics: str = ROLES["diagnostics"].topic
+    commands: str = ROLES["commands"].topic
+    clock: str = ROLES["clock"].topic
+    explicit: frozenset[str] = frozenset()
+    joint_names: tuple[str, ...] | None = None
+    effort_kind: EffortKind | None = None
+    grid_tolerance: float = 0.25
+    max_gap_steps: int = 5
+    reliability: Literal["reliable", "best_effort"] = "reliable"
+    depth: int = 100
+    source: Path | None = field(default=None, compare=False)
+
+    def topic(self, role: str) -> str:
+        """The topic of ``role`` (a key of :data:`~amsfe_sym.topics.roles.ROLES`)."""
+        if role not in ROLES:
+            raise ConfigError(describe("topic role", f"one of {list(ROLES)}", repr(role), ""))
+        return str(getattr(self, role))
+
+    def roles_of(self, topic: str, roles: tuple[str, ...] = tuple(ROLES)) -> list[str]:
+        """Every role among ``roles`` that ``topic`` plays (a driver's ``/joint_states`` plays
+        ``encoders`` and ``effort`` at once)."""
+        return [r for r in roles if self.topic(r) == topic]
+
+    @property
+    def torque(self) -> str:
+        """The effort topic under its former name (log specs before the effort kinds)."""
+        return self.effort
+
+
+_SECTIONS = {
+    "topics": _TOPIC_KEYS + tuple(_ALIASES),
+    "joints": ("names",),
+    "effort": ("kind",),
+    "timing": ("grid_tolerance", "max_gap_steps"),
+    "qos": ("reliability", "depth"),
+}
+
+
+def _number(where: str, value: Any, lo: float, hi: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not lo < value < hi:
+        raise ConfigError(describe(where, f"a number in ({lo:g}, {hi:g})", repr(value), "fix it"))
+    return float(value)
+
+
+def _count(where: str, value: Any, lo: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < lo:
+        raise ConfigError(describe(where, f"an integer >= {lo}", repr(value), "fix it"))
+    return int(value)
+
+
+def parse_topic_spec(data: dict[str, Any], where: str = "topic spec") -> TopicSpec:
+    """A :class:`TopicSpec` from a parsed TOML document.
+
+    Raises:
+        ConfigError: an unknown section or key, a value of the wrong type, one joint named
+            twice, a topic name that does not start with ``/``.
+    """
+    unknown = sorted(set(data) - set(_SECTIONS))
+    if unknown:
+        raise ConfigError(
+            describe(where, f"sections among {sorted(_SECTIONS)}", f"{unknown}", "remove them")
+        )
+    out: dict[str, Any] = {}
+    explicit: set[str] = set()
+    for section, keys in _SECTIONS.items():
+        table = data.get(section, {})
+        if not isinstance(table, dict):
+            raise ConfigError(describe(f"{where} [{section}]", "a table", repr(table), "fix it"))
+        bad = sorted(set(table) - set(keys))
+        if bad:
+            raise ConfigError(
+                describe(f"{where} [{section}]", f"keys among {list(keys)}", str(bad), "drop them")
+            )
+        for key, value in table.items():
+            at = f"{where} [{section}] {key}"
+            if section == "topics":
+                if not isinstance(value, str) or not value.startswith("/") or " " in value:
+                    raise ConfigError(describe(at, "a topic name like '/x'", repr(value), "fix it"))
+                role: str = _ALIASES.get(str(key), str(key))
+                if role in explicit and role != key:
+                    raise ConfigError(
+                        describe(at, f"one of '{key}' and '{role}'", "both", f"keep '{role}'")
+                    )
+                out[role] = value
+                explicit.add(role)
+            elif key == "names":
+                if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+                    raise ConfigError(describe(at, "a list of joint names", repr(value), "fix it"))
+                twice = sorted({v for v in value if value.count(v) > 1})
+                if twice:
+                    raise ConfigError(
+                        describe(at, "each joint name once", f"{twice} repeated", "fix the list")
+                    )
+                out["joint_names"] = tuple(value)
+            elif key == "kind":
+                if value not in EFFORT_KINDS:
+                    raise ConfigError(
+                        describe(at, f"one of {list(EFFORT_KINDS)}", repr(value), "fix it")
+                    )
+                out["effort_kind"] = value
+            elif key == "grid_tolerance":
+                out[key] = _number(at, value, 0.0, 0.5)
+            elif key == "max_gap_steps":
+                out[key] = _count(at, value, 0)
+            elif key == "reliability":
+                if value not in ("reliable", "best_effort"):
+                    raise ConfigError(
+                        describe(at, "'reliable' or 'best_effort'", repr(value), "fix it")
+                    )
+                out[key] = value
+            else:  # depth
+                out[key] = _count(at, value, 1)
+    return replace(TopicSpec(), explicit=frozenset(explicit), **out)
+
+
+def read_topic_spec(path: str | os.PathLike[str] | None) -> TopicSpec:
+    """The topic spec in the TOML file ``path`` (None: the defaults).
+
+    Raises:
+        ConfigError: an unreadable file, or what :func:`parse_topic_spec` refuses.
+    """
+    if path is None:
+        return TopicSpec()
+    p = Path(path)
+    return replace(parse_topic_spec(read_toml(p, ConfigError), str(p)), source=p)
+
+
+#: Field names of the spec (for tools that list or override them).
+FIELDS = tuple(f.name for f in fields(TopicSpec))
