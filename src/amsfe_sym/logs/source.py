@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from amsfe_sym.errors import LogError, describe
+from amsfe_sym.logs.decode import Encoding, deserialize, typestore
 
 __all__ = ["Message", "iter_messages", "typestore"]
 
@@ -23,13 +24,16 @@ class Message:
         topic: Its topic.
         msgtype: Its ROS 2 type, e.g. ``sensor_msgs/msg/JointState``.
         log_time_ns: When the recorder received it [ns] (the arrival time).
-        raw: Its CDR bytes (decoded by :meth:`decode` once its type was checked).
+        raw: Its payload (decoded by :meth:`decode` once its type was checked, or in bulk
+            per topic by :mod:`amsfe_sym.logs.decode`).
+        encoding: How ``raw`` is serialized: ``cdr`` (ROS 2) or ``ros1`` (a ROS 1 bag).
     """
 
     topic: str
     msgtype: str
     log_time_ns: int
     raw: bytes
+    encoding: Encoding = "cdr"
 
     def decode(self) -> Any:
         """The message as a ``rosbags`` dataclass.
@@ -37,30 +41,8 @@ class Message:
         Raises:
             LogError: the bytes do not decode as the message's type (a corrupt message).
         """
-        try:
-            return typestore().deserialize_cdr(self.raw, self.msgtype)
-        except Exception as exc:  # rosbags' SerdeError and friends: one line, not a trace
-            raise LogError(
-                describe(
-                    f"a {self.msgtype} message on {self.topic} at {self.log_time_ns} ns",
-                    "bytes that decode as that type",
-                    f"{type(exc).__name__}: {exc}",
-                    "check the recorder and the message definitions",
-                )
-            ) from exc
-
-
-_STORE: Any = None
-
-
-def typestore() -> Any:
-    """The ROS 2 (Humble) standard message definitions of ``rosbags``."""
-    global _STORE
-    if _STORE is None:
-        from rosbags.typesys import Stores, get_typestore
-
-        _STORE = get_typestore(Stores.ROS2_HUMBLE)
-    return _STORE
+        where = f"a {self.msgtype} message on {self.topic} at {self.log_time_ns} ns"
+        return deserialize(self.raw, self.msgtype, self.encoding, where)
 
 
 def _unreadable(path: Path, exc: BaseException) -> LogError:
