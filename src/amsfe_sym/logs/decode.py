@@ -32,6 +32,7 @@ __all__ = [
     "decode_strings",
     "deserialize",
     "typestore",
+    "typestore_ros1",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -89,6 +90,7 @@ class Strings:
 
 
 _STORE: Any = None
+_STORE_ROS1: Any = None
 
 
 def typestore() -> Any:
@@ -101,6 +103,18 @@ def typestore() -> Any:
     return _STORE
 
 
+def typestore_ros1() -> Any:
+    """The ROS 1 (Noetic) standard message definitions of ``rosbags``: a ROS 1 ``Header``
+    carries ``seq`` before its stamp, so ROS 1 payloads are decoded with these (same type
+    names, ``sensor_msgs/msg/JointState``; same field names)."""
+    global _STORE_ROS1
+    if _STORE_ROS1 is None:
+        from rosbags.typesys import Stores, get_typestore
+
+        _STORE_ROS1 = get_typestore(Stores.ROS1_NOETIC)
+    return _STORE_ROS1
+
+
 def deserialize(raw: bytes, msgtype: str, encoding: Encoding = "cdr", where: str = "") -> Any:
     """One payload as a ``rosbags`` message object.
 
@@ -109,7 +123,7 @@ def deserialize(raw: bytes, msgtype: str, encoding: Encoding = "cdr", where: str
     """
     try:
         if encoding == "ros1":
-            return typestore().deserialize_ros1(raw, msgtype)
+            return typestore_ros1().deserialize_ros1(raw, msgtype)
         return typestore().deserialize_cdr(raw, msgtype)
     except Exception as exc:  # rosbags' SerdeError and friends: one line, not a trace
         raise LogError(
