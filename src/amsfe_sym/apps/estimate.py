@@ -1,19 +1,22 @@
-"""``amsfe estimate LOG``: an estimator of a generated robot over a recorded rosbag2 / MCAP
-log, into a run folder (docs/logs.md).
+"""``amsfe estimate LOG``: an estimator of a generated robot over a recorded log (a ROS 1
+``.bag``, a rosbag2 folder, an ``.mcap``), into a run folder (docs/logs.md).
 
 A log written by ``amsfe simulate --bag`` carries its robot, scenario and estimator
 (``/amsfe/config``), so ``amsfe estimate LOG`` alone reproduces the run's estimates; any
-other log needs ``--scenario`` (its robot, ``[filter]`` and ``[estimate0]``, and the sensor
-noise R defaults from its ``[encoders]`` / ``[camera]``) and, where its topics differ from
-the defaults, a log spec.
+other log needs ``--robot ROBOT`` (the estimate starts from the log's first samples, the
+filter from its defaults) or ``--scenario FILE`` (to tune the filter).  Topics are found by
+message type and joint names (a driver's ``/joint_states``); a topic spec (``--log-spec``)
+is for the unusual log.  The log's topics, types, joint names and rate are checked before
+the robot's library is generated or loaded.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -23,7 +26,8 @@ from amsfe_sym.core.folders import write_folder
 from amsfe_sym.core.provenance import provenance
 from amsfe_sym.core.toml import dump_toml, tomllib
 from amsfe_sym.errors import LogError, describe
-from amsfe_sym.logs.read import RobotLog, read_config, read_log
+from amsfe_sym.logs.read import RobotLog, plan_log, read_config, read_log
+from amsfe_sym.logs.source import log_topics
 from amsfe_sym.logs.spec import read_log_spec
 from amsfe_sym.scenario import Scenario, load_scenario, parse_scenario
 from amsfe_sym.sim.record import check_out
@@ -36,8 +40,10 @@ __all__ = [
     "EstimateRun",
     "add_arguments",
     "default_out",
+    "default_scenario",
     "estimate_command",
     "from_args",
+    "nis_report",
     "print_summary",
     "summary",
 ]
@@ -49,11 +55,14 @@ class EstimateOptions:
 
     Attributes:
         scenario: Scenario file for a log without amsfe's config (or to override it).
-        log_spec: Log spec TOML (topics, joint names, timing), or None for the defaults.
+        log_spec: Topic spec TOML (topics, joint names, effort kind, timing), or None.
         estimator: Estimator name overriding the scenario's.
         runtime: ``"compiled"`` (the library's C estimator) or ``"python"`` (the reference).
         plots: Draw the figures.
         force: Replace an existing run folder.
+        robot: The robot (a shipped name or a ``robot.toml``) for a log without amsfe's
+            config, when no scenario is given: filter defaults, start from the log.
+        verbose: Print which topic plays which role, and the clock offset.
     """
 
     scenario: str | None = None
@@ -62,6 +71,8 @@ class EstimateOptions:
     runtime: str = "compiled"
     plots: bool = True
     force: bool = False
+    robot: str | None = None
+    verbose: bool = False
 
 
 @dataclass
@@ -76,58 +87,227 @@ class EstimateRun:
     estimate_s: float
 
 
+def default_scenario(robot: str) -> Scenario:
+    """The settings ``amsfe estimate LOG --robot ROBOT`` runs with: the scenario defaults
+    (``[filter]``: process noise 0.1 N m, buffer 1000 steps; ``[encoders]`` and
+    ``[camera]``: the sensor noise the filter's R is built from; docs/scenarios.md), the
+    ``oosm`` estimator, and the estimate's start replaced by the log's first sample
+    (:func:`_start_from_log`).  No plant or trajectory is used."""
+    from amsfe_sym.codegen.preflight import modelled_joints
+    from amsfe_sym.load.spec import load_spec
+
+    spec = load_spec(robot)
+    n = len(modelled_joints(spec) or ())
+    zeros = [0.0] * n
+    data = {
+        "name": f"estimate-{spec.name}",
+        "robot": str(spec.spec_path or spec.urdf) if Path(robot).exists() else robot,
+        "estimator": "oosm",
+        "trajectory": {"kind": "constant", "q": zeros},
+        "plant": {"q0": zeros, "qd0": zeros},
+        "estimate0": {"q": zeros, "qd": zeros, "motor": "encoders"},
+    }
+    if spec.camera.delay + 1 > 1000:
+        data["filter"] = {"buffer_steps": 2 * spec.camera.delay + 1}
+    return parse_scenario(data, Path(f"--robot {robot}"))
+
+
+def _start_from_log(sc: Scenario, log: RobotLog) -> Scenario:
+    """``[estimate0]`` from the log's first encoder sample: link angles = the measured
+    positions, link rates = the measured velocities (motor states: the sample itself)."""
+    n = log.u.shape[1]
+    z0 = log.z[0]
+    e0 = replace(sc.estimate0, q=tuple(map(float, z0[:n])), qd=tuple(map(float, z0[n:])))
+    return replace(sc, estimate0=e0)
+
+
+def _robot_of(scenario_robot: str) -> tuple[str, list[str], float, int]:
+    """(name, joints, T, N) of a robot from its spec, without generating anything."""
+    from amsfe_sym.codegen.preflight import modelled_joints
+    from amsfe_sym.load.spec import load_spec
+
+    spec = load_spec(scenario_robot)
+    joints = modelled_joints(spec) or []
+    return spec.name, joints, spec.model.T, 4 * len(joints) + len(spec.theta)
+
+
 def _scenario(path: Path, config: dict[str, Any] | None, options: EstimateOptions) -> Scenario:
+    from_config = None
+    if config is not None and "scenario_toml" in config:
+        from_config = parse_scenario(tomllib.loads(str(config["scenario_toml"])), path)
     if options.scenario is not None:
         sc = load_scenario(options.scenario)
-    elif config is not None and "scenario_toml" in config:
-        sc = parse_scenario(tomllib.loads(str(config["scenario_toml"])), path)
+    elif options.robot is not None:
+        sc = default_scenario(options.robot)
+    elif from_config is not None:
+        sc = from_config
     else:
         raise LogError(
             describe(
                 f"log {path}",
                 "amsfe's run config (/amsfe/config, written by amsfe simulate --bag)",
                 "none",
-                "pass --scenario FILE: its robot, [filter], [estimate0] and sensor noise "
-                "(start from a copy of scenarios/paper-sim.toml; docs/logs.md)",
+                "pass --robot ROBOT (a shipped robot or a robot.toml: the estimate starts "
+                "from the log), or --scenario FILE to tune the filter (docs/logs.md)",
             )
         )
+    if from_config is not None and sc is not from_config:
+        mine, theirs = _robot_of(sc.robot), _robot_of(from_config.robot)
+        if (mine[0], mine[1]) != (theirs[0], theirs[1]):
+            raise LogError(
+                describe(
+                    f"log {path}",
+                    f"a log of robot {mine[0]} ({len(mine[1])} joints: {mine[1]})",
+                    f"its config says robot {theirs[0]} ({len(theirs[1])} joints)",
+                    f"estimate it with --robot {theirs[0]}, or a scenario of that robot",
+                )
+            )
     return sc.with_overrides(estimator=options.estimator)
+
+
+def _effort_support(kind: str, log_path: Path) -> None:
+    """Refuse an effort kind this build cannot estimate with, before compiling."""
+    if kind == "applied":
+        return
+    import importlib.util
+    import inspect
+
+    from amsfe_sym.sim.builders import build_estimator
+
+    ok = importlib.util.find_spec("amsfe_sym.estimation.effort") is not None and (
+        "effort" in inspect.signature(build_estimator).parameters
+    )
+    if not ok:
+        raise LogError(
+            describe(
+                f"log {log_path}: effort of kind {kind!r}",
+                "an estimator for that kind (amsfe_sym.estimation.effort)",
+                "this build estimates with the applied torque only",
+                'say [effort] kind = "applied" in a topic spec if the effort is the applied '
+                "motor torque (docs/topics.md)",
+            )
+        )
 
 
 def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> EstimateRun:
     """Estimate over ``log_path`` and write the run folder ``out``: ``estimates.parquet``,
     ``summary.json``, ``config.toml``, figures and ``estimates/`` (a rosbag2 in MCAP).
 
+    Everything about the log (container, topics, types, joint names, rate, stamps) is
+    checked before the robot's library is generated or loaded.
+
     Raises:
         LogError: the log cannot be used (one line: what, found, fix).
         ConfigError, RunFolderError: bad settings, an existing ``out`` without ``force``.
     """
-    from amsfe_sym.codegen import library_for
-    from amsfe_sym.sim.builders import build_estimator, build_sensors, scenario_timing
-
     check_out(out, options.force)
     spec = read_log_spec(options.log_spec)
     t0 = time.perf_counter()
-    config = read_config(log_path, spec)
+    topics = log_topics(log_path)
+    config = read_config(log_path, spec, topics)
     sc = _scenario(log_path, config, options)
-    lib = library_for(sc)
-    log = read_log(log_path, spec, lib.manifest.joints, lib.T, lib.N)
+    name, joints, T, N = _robot_of(sc.robot)
+    plan = plan_log(log_path, spec, joints)
+    if options.verbose:
+        for line in plan.lines():
+            print(f"  {line}")
+    log = read_log(log_path, spec, joints, T, N, plan, robot=name)
+    log.config = config
+    _effort_support(log.effort_kind, log_path)
+    if options.scenario is None and config is None:
+        sc = _start_from_log(sc, log)
     read_s = time.perf_counter() - t0
-    # the estimator as the loop builds it: R from the scenario's sensors unless [filter] sets it
-    sensors = build_sensors(sc, lib, np.random.default_rng(sc.seed), scenario_timing(sc, lib))
-    est = build_estimator(sc, lib, sensors, log.z[0], compiled=options.runtime == "compiled")
+    if options.verbose:
+        c = log.clock
+        print(
+            f"  clock: log time - header stamp = {c.median:+.6f} s (spread {c.spread:.2e} s); "
+            "log times moved onto the stamp clock"
+        )
+    from amsfe_sym.codegen import library_for
+
+    lib = library_for(sc)
+    est, feed = _estimator(sc, lib, log, options)
     t1 = time.perf_counter()
     from amsfe_sym.logs.replay import estimate_log
 
-    result = estimate_log(log, est)
+    result = estimate_log(feed, est)
     estimate_s = time.perf_counter() - t1
     run = EstimateRun(log, result, sc, out, read_s, estimate_s)
     _write(run, lib.manifest.joints, options)
     return run
 
 
+def _estimator(sc: Scenario, lib: Any, log: RobotLog, options: EstimateOptions) -> Any:
+    """The estimator and the log it is fed (for a non-applied effort: the inputs and
+    encoder measurements :mod:`amsfe_sym.estimation.effort` derives)."""
+    from amsfe_sym.sim.builders import build_estimator, build_sensors, scenario_timing
+
+    sensors = build_sensors(sc, lib, np.random.default_rng(sc.seed), scenario_timing(sc, lib))
+    compiled = options.runtime == "compiled"
+    if log.effort_kind == "applied":
+        return build_estimator(sc, lib, sensors, log.z[0], compiled=compiled), log
+    import importlib
+
+    # issue 26.3's effort kinds (helper modules typed as Any until they are in every build)
+    eff = importlib.import_module("amsfe_sym.estimation.effort")
+    builders = importlib.import_module("amsfe_sym.sim.builders")
+    spec = eff.EffortSpec(kind=log.effort_kind)
+    est = builders.build_estimator(sc, lib, sensors, log.z[0], compiled=False, effort=spec)
+    qd_std = sc.filter.encoder_qd_std or np.sqrt(sensors.encoders.variance[lib.n :])
+    inputs = eff.estimator_inputs(spec, log.z, log.effort, builders.motor_params(lib), qd_std)
+    return est, replace(log, u=inputs.u, z=inputs.z_encoder)
+
+
+def _finite(x: float) -> float | None:
+    """A number for JSON: None where it is not finite (NaN is not JSON)."""
+    return float(x) if math.isfinite(x) else None
+
+
+def _field(record: Any, name: str, index: int) -> Any:
+    if isinstance(record, dict):
+        return record.get(name)
+    if hasattr(record, name):
+        return getattr(record, name)
+    return record[index]
+
+
+def _nis_stats(values: np.ndarray, dof: int) -> dict[str, Any]:
+    from scipy.stats import chi2
+
+    lo, hi = (float(v) for v in chi2.ppf([0.025, 0.975], dof))
+    v = values[np.isfinite(values)]
+    inside = float(np.mean((v >= lo) & (v <= hi))) if v.size else math.nan
+    return {
+        "dof": dof,
+        "samples": int(v.size),
+        "mean": _finite(float(np.mean(v))) if v.size else None,
+        "band_95": [lo, hi],
+        "inside_95": _finite(inside),
+    }
+
+
+def nis_report(run: EstimateRun) -> dict[str, Any]:
+    """Normalized innovation squared of the encoder updates (dof 2n; 3n with a joint
+    torque) and of the camera frames (dof 2): mean and the fraction inside the two-sided
+    chi-square 95 % band.  A filter whose model and noise fit the arm has mean NIS near the
+    dof and about 95 % inside (docs/logs.md, "Consistency without truth").  Empty where the
+    replay did not record NIS."""
+    est, log = run.estimate, run.log
+    n = log.u.shape[1]
+    out: dict[str, Any] = {}
+    enc = getattr(est, "encoder_nis", None)
+    if enc is not None:
+        dof = 3 * n if log.effort_kind == "joint_torque" else 2 * n
+        out["encoders"] = _nis_stats(np.asarray(enc, dtype=float), dof)
+    frames = getattr(est, "frame_nis", None)
+    if frames is not None:
+        vals = np.array([float(_field(r, "nis", 2)) for r in frames], dtype=float)
+        out["camera"] = _nis_stats(vals, 2)
+    return out
+
+
 def summary(run: EstimateRun) -> dict[str, Any]:
-    """The ``summary.json`` of an estimate run."""
+    """The ``summary.json`` of an estimate run (every number finite or null)."""
     log, est = run.log, run.estimate
     n = len(log.u[0])
     out: dict[str, Any] = {
@@ -137,6 +317,12 @@ def summary(run: EstimateRun) -> dict[str, Any]:
         "duration_s": log.K * log.T,
         "frames_fused": est.counters.get("frames_applied", 0),
         "counters": est.counters,
+        "topics": {r: u.as_dict() for r, u in log.usage.items()},
+        "effort_kind": log.effort_kind,
+        "log_period_s": _finite(log.period_s),
+        "clock_offset_s": _finite(log.clock.median),
+        "clock_offset_spread_s": _finite(log.clock.spread),
+        "nis": nis_report(run),
         "read_s": round(run.read_s, 4),
         "estimate_s": round(run.estimate_s, 4),
         "real_time_factor": round(log.K * log.T / max(run.read_s + run.estimate_s, 1e-9), 2),
@@ -144,8 +330,11 @@ def summary(run: EstimateRun) -> dict[str, Any]:
     if log.truth is not None and est.nees is not None:
         w = slice(int(0.2 * log.K), log.K)
         err = log.truth[w] - est.x_hat[w]
-        out["estimation_rmse_q"] = np.sqrt(np.nanmean(err[:, :n] ** 2, axis=0)).tolist()
-        out["nees_mean"] = float(np.nanmean(est.nees[w]))
+        with np.errstate(all="ignore"):
+            rmse = np.sqrt(np.nanmean(err[:, :n] ** 2, axis=0))
+            nees = float(np.nanmean(est.nees[w])) if np.isfinite(est.nees[w]).any() else math.nan
+        out["estimation_rmse_q"] = [_finite(float(v)) for v in rmse]
+        out["nees_mean"] = _finite(nees)
         out["nees_dof"] = int(est.x_hat.shape[1])
     out["provenance"] = provenance()
     return out
@@ -153,9 +342,16 @@ def summary(run: EstimateRun) -> dict[str, Any]:
 
 def add_arguments(e: argparse.ArgumentParser) -> None:
     """The options of ``amsfe estimate``."""
-    e.add_argument("log", help="rosbag2 folder or .mcap file (amsfe simulate --bag writes one)")
-    e.add_argument("--scenario", default=None, help="robot + filter settings (logs not ours)")
-    e.add_argument("--log-spec", default=None, metavar="FILE", help="topics, joint names (TOML)")
+    e.add_argument("log", help="a ROS 1 .bag, a rosbag2 folder or an .mcap file")
+    e.add_argument(
+        "--robot",
+        default=None,
+        help="the robot (name or robot.toml) for a log not written by amsfe",
+    )
+    e.add_argument("--scenario", default=None, help="robot + filter settings, to tune the filter")
+    e.add_argument(
+        "--log-spec", default=None, metavar="FILE", help="topics, joint names, effort kind (TOML)"
+    )
     e.add_argument("--estimator", default=None, help="estimator name (default the scenario's)")
     e.add_argument("--out", default=None, help="run folder (default runs/estimate-<log>-<stamp>)")
     e.add_argument("--runtime", choices=("compiled", "python"), default="compiled")
@@ -168,23 +364,48 @@ def from_args(args: argparse.Namespace) -> int:
     log = Path(args.log)
     out = Path(args.out) if args.out else default_out(log)
     opts = EstimateOptions(
-        args.scenario, args.log_spec, args.estimator, args.runtime, not args.no_plots, args.force
+        args.scenario,
+        args.log_spec,
+        args.estimator,
+        args.runtime,
+        not args.no_plots,
+        args.force,
+        robot=args.robot,
+        verbose=True,
     )
     print_summary(summary(estimate_command(log, out, opts)), out)
     return 0
 
 
 def print_summary(s: dict[str, Any], out: Path) -> None:
-    """The headline of an estimate run: ticks, frames fused, what was skipped, speed, NEES."""
+    """The headline of an estimate run: ticks, frames fused, each role's messages used and
+    skipped, speed, NIS and NEES."""
     c = s["counters"]
     print(f"run folder: {out} ({s['ticks']} ticks, {s['duration_s']:.2f} s of log)")
     print(
         f"  {s['estimator']}: {s['frames_fused']} camera frames fused; read {s['read_s']:.2f} s, "
         f"estimated {s['estimate_s']:.2f} s ({s['real_time_factor']:.0f}x real time)"
     )
-    skipped = {k: v for k, v in c.items() if v and k not in ("frames_applied", "frames_in_log")}
-    print("  skipped or refused: " + (", ".join(f"{k} {v}" for k, v in skipped.items()) or "none"))
-    if "nees_mean" in s:
+    for role, u in s.get("topics", {}).items():
+        if u["topic"] is None:
+            print(f"  {role}: no topic in the log (not used)")
+            continue
+        why = ", ".join(f"{k} {v}" for k, v in u["skipped"].items()) or "none"
+        print(f"  {role} {u['topic']}: {u['messages']} messages, {u['used']} used; skipped: {why}")
+    refused = {k: v for k, v in c.items() if v and k.startswith("refused")}
+    if refused:
+        print("  refused by the estimator: " + ", ".join(f"{k} {v}" for k, v in refused.items()))
+    for what, r in s.get("nis", {}).items():
+        if r["mean"] is None:
+            print(f"  NIS {what}: no samples")
+            continue
+        lo, hi = r["band_95"]
+        print(
+            f"  NIS {what}: mean {r['mean']:.2f} (dof {r['dof']}), "
+            f"{100 * (r['inside_95'] or 0):.1f} % of {r['samples']} inside the 95 % band "
+            f"[{lo:.2f}, {hi:.2f}]"
+        )
+    if s.get("nees_mean") is not None:
         print(f"  mean NEES {s['nees_mean']:.2f} (N = {s['nees_dof']}) against the log's truth")
 
 
@@ -203,7 +424,9 @@ def _write(run: EstimateRun, joints: tuple[str, ...] | list[str], options: Estim
         if est.nees is not None:
             cols["nees"] = est.nees
         pd.DataFrame(cols).to_parquet(tmp / "estimates.parquet")
-        (tmp / "summary.json").write_text(json.dumps(summary(run), indent=2) + "\n")
+        (tmp / "summary.json").write_text(
+            json.dumps(summary(run), indent=2, allow_nan=False) + "\n"
+        )
         (tmp / "config.toml").write_text(
             f"# the scenario amsfe estimate used on {log.path}\n"
             + dump_toml(run.scenario.to_dict())
@@ -246,6 +469,39 @@ def _figures(run: EstimateRun, folder: Path) -> None:
     fig.suptitle(f"{run.scenario.estimator} on {log.path.name}")
     fig.tight_layout()
     fig.savefig(folder / "estimate.png", dpi=110)
+    plt.close(fig)
+    _nis_figure(run, folder)
+
+
+def _nis_figure(run: EstimateRun, folder: Path) -> None:
+    """``nis.png``: NIS of the encoder updates and of the camera frames over time, with
+    their chi-square 95 % bands (nothing drawn where the replay recorded no NIS)."""
+    import matplotlib.pyplot as plt
+
+    log, est = run.log, run.estimate
+    rep = nis_report(run)
+    if not rep:
+        return
+    fig, axes = plt.subplots(len(rep), 1, figsize=(8, 2.6 * len(rep) + 0.6), squeeze=False)
+    for ax, (what, r) in zip(axes[:, 0], rep.items(), strict=True):
+        if what == "encoders":
+            t, v = log.t, np.asarray(est.encoder_nis, dtype=np.float64)  # type: ignore[attr-defined]
+            ax.plot(t, v, lw=0.4, label="encoder update")
+        else:
+            recs = est.frame_nis  # type: ignore[attr-defined]
+            t = np.array([float(_field(x, "arrival", 1)) * log.T for x in recs])
+            v = np.array([float(_field(x, "nis", 2)) for x in recs])
+            ax.plot(t, v, ".", ms=3, label="camera frame (at its arrival)")
+        lo, hi = r["band_95"]
+        ax.axhspan(lo, hi, color="g", alpha=0.12, label=f"chi2({r['dof']}) 95 % band")
+        ax.axhline(r["dof"], color="g", lw=0.6)
+        ax.set_yscale("log")
+        ax.set_ylabel(f"NIS {what}")
+        ax.legend(loc="upper right", fontsize=7)
+    axes[-1, 0].set_xlabel("t [s]")
+    fig.suptitle(f"consistency without truth: NIS on {log.path.name}")
+    fig.tight_layout()
+    fig.savefig(folder / "nis.png", dpi=110)
     plt.close(fig)
 
 
