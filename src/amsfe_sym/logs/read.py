@@ -292,6 +292,8 @@ def plan_log(path: Path, spec: LogSpec, joints: Sequence[str]) -> LogPlan:
             joints missing from the encoder topic (named).
     """
     topics = log_topics(path)
+    if topics and not any(i.encoding in ("cdr", "ros1") for i in topics.values()):
+        next(iter(topics.values())).payload_encoding(path)  # e.g. a JSON MCAP: named
     names = tuple(spec.joint_names or joints)
     if len(names) != len(joints):
         raise _refuse(
@@ -525,6 +527,12 @@ def read_log(
     d = np.diff(stamps[sel]).astype(np.float64) * 1e-9
     d = d[d > 0]
     period = float(np.median(d)) if d.size else T
+    if period > 0 and sel.size > 2:  # least squares over each sample's count of periods
+        rel = (stamps[sel] - stamps[sel[0]]).astype(np.float64) * 1e-9
+        idx = np.rint(rel / period)
+        if idx[-1] > 0:
+            ic, rc = idx - idx.mean(), rel - rel.mean()
+            period = float(ic @ rc / (ic @ ic))
     mismatch = abs(period - T) > 0.01 * T
     t0 = _fit_t0(stamps[sel], T)
     grid = _Grid(t0, T, spec.grid_tolerance)
@@ -652,7 +660,8 @@ def _effort(
     _skip(use, "not one value per joint", int((~shaped).sum()))
     finite = shaped & np.isfinite(values).all(axis=1)
     _skip(use, "a non-finite value", int((shaped & ~finite).sum()))
-    # zero-order hold by stamp: u(k) = the last effort stamped at or before t_k (+ tol)
+    # zero-order hold by stamp: u(k) = the last effort stamped before t_k + T/2 (an effort
+    # stamped off the encoder grid, or late by a receive latency, goes to its nearest tick)
     t_rel = (stamps.astype(np.int64) - grid.t0) * 1e-9 / grid.T
     far = finite & ((t_rel < -1e6) | (t_rel > K + 1e6))
     _skip(use, "stamp far outside the log", int(far.sum()))
@@ -666,7 +675,7 @@ def _effort(
         )
     order = good[np.argsort(t_rel[good], kind="stable")]
     ts = t_rel[order]
-    last = np.searchsorted(ts, np.arange(K) + grid.tol, side="right") - 1
+    last = np.searchsorted(ts, np.arange(K) + 0.5, side="left") - 1
     if last[0] < 0:
         raise _refuse(
             where,
