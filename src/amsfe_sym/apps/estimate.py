@@ -433,9 +433,10 @@ def _write(run: EstimateRun, joints: tuple[str, ...] | list[str], options: Estim
         )
         from amsfe_sym.logs.write import write_estimate_bag
 
-        write_estimate_bag(
-            tmp / "estimates", log.t0_ns * 1e-9, log.t, joints, est.x_hat, est.P_diag
-        )
+        # a bag's times are unsigned: a sim-time log whose first stamp is jittered below 0
+        # starts its estimates at 0 (moved by less than T / 2)
+        start = max(log.t0_ns, 0) * 1e-9
+        write_estimate_bag(tmp / "estimates", start, log.t, joints, est.x_hat, est.P_diag)
         if options.plots:
             _figures(run, tmp)
 

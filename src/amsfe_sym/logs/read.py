@@ -343,6 +343,8 @@ def plan_log(path: Path, spec: LogSpec, joints: Sequence[str]) -> LogPlan:
             )
         roles["encoders"], how["encoders"] = cands[0], "found"
     enc = roles["encoders"]
+    if enc in firsts:  # the robot's joints in the encoder topic, checked by name now
+        _columns(firsts[enc], names, f"log {path}: {enc}")
     if "effort" not in roles:
         first = firsts.get(enc)
         if first is not None and _has(first, names, 2):
@@ -529,11 +531,15 @@ def read_log(
     period = float(np.median(d)) if d.size else T
     if period > 0 and sel.size > 2:  # least squares over each sample's count of periods
         rel = (stamps[sel] - stamps[sel[0]]).astype(np.float64) * 1e-9
-        idx = np.rint(rel / period)
+        # counted in the robot's T when the median is near it (a jittered median is off by
+        # a few %, enough to miscount a long log), else in the median
+        idx = np.rint(rel / (T if abs(period - T) < 0.1 * T else period))
         if idx[-1] > 0:
             ic, rc = idx - idx.mean(), rel - rel.mean()
             period = float(ic @ rc / (ic @ ic))
-    mismatch = abs(period - T) > 0.01 * T
+    # another rate: more than 10 % off T (a multiple of T would put every sample on the grid
+    # with gaps between); a drift of less is judged by the stamps off the grid below
+    mismatch = abs(period - T) > 0.1 * T
     t0 = _fit_t0(stamps[sel], T)
     grid = _Grid(t0, T, spec.grid_tolerance)
     k_all, on = grid.steps(stamps[sel])
