@@ -258,7 +258,7 @@ STAMP_FAULTS = ["none"] * 6 + ["zero", "far", "duplicate", "backwards", "all_zer
 @st.composite
 def arm_logs(draw: st.DrawFn, res) -> tuple[list, str, dict]:
     """(events, container, expectation) of a random log of ``res``."""
-    from tests.test_real_logs import F64, JS, PT, STR, Ev
+    from tests.test_log_reader import F64, JS, PT, STR, Ev
 
     T, n = res.lib.T, res.lib.n
     joints = list(res.lib.manifest.joints)
@@ -350,7 +350,7 @@ def test_fuzz_log_reader(
     from amsfe_sym.apps.cli import main
     from amsfe_sym.logs.read import read_log
     from amsfe_sym.logs.spec import read_log_spec
-    from tests.test_real_logs import write_log
+    from tests.test_log_reader import write_log
 
     res = short_run
     events, fmt, expect = data.draw(arm_logs(res))

@@ -388,7 +388,11 @@ def print_summary(s: dict[str, Any], out: Path) -> None:
     )
     for role, u in s.get("topics", {}).items():
         if u["topic"] is None:
-            print(f"  {role}: no topic in the log (not used)")
+            other = u.get("topics_of_this_type_not_used")
+            print(
+                f"  {role}: no topic"
+                + (f"; not used: {other} (name one in [topics] {role})" if other else "")
+            )
             continue
         why = ", ".join(f"{k} {v}" for k, v in u["skipped"].items()) or "none"
         print(f"  {role} {u['topic']}: {u['messages']} messages, {u['used']} used; skipped: {why}")

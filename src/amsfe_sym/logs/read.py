@@ -92,6 +92,8 @@ class LogPlan:
         effort_kind: What the effort is (``none`` when there is no effort topic).
         kind_how: ``named`` (the spec said) or the shape rule that chose it.
         names: The log's JointState names of the robot's joints, in q order.
+        unused: Role without a topic -> the log's topics of that role's types that play no
+            role (a stream that is there but not used is said, never silent).
     """
 
     path: Path
@@ -101,6 +103,7 @@ class LogPlan:
     effort_kind: EffortKind
     kind_how: str
     names: tuple[str, ...]
+    unused: dict[str, list[str]] = field(default_factory=dict)
 
     def lines(self) -> list[str]:
         """One line per role saying which topic plays it and why (printed by estimate)."""
@@ -108,7 +111,11 @@ class LogPlan:
         for role in _ROLES:
             topic = self.roles.get(role)
             if topic is None:
-                out.append(f"{role}: none")
+                other = self.unused.get(role)
+                out.append(
+                    f"{role}: none"
+                    + (f" (not used: {other}; name one in [topics] {role})" if other else "")
+                )
                 continue
             info = self.topics[topic]
             line = f"{role}: {topic} ({info.msgtype}, {self.how[role]})"
@@ -137,12 +144,14 @@ class RoleUse:
         messages: Messages on the topic.
         used: Messages that entered the estimate.
         skipped: Messages not used, by reason.
+        not_used: Without a topic: the log's topics of the role's types (not used).
     """
 
     topic: str | None
     messages: int = 0
     used: int = 0
     skipped: dict[str, int] = field(default_factory=dict)
+    not_used: list[str] = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
         """For ``summary.json``."""
@@ -151,6 +160,7 @@ class RoleUse:
             "messages": self.messages,
             "used": self.used,
             "skipped": dict(self.skipped),
+            "topics_of_this_type_not_used": list(self.not_used),
         }
 
 
@@ -384,7 +394,15 @@ def plan_log(path: Path, spec: LogSpec, joints: Sequence[str]) -> LogPlan:
             )
         else:
             kind, kind_how = "applied", "a separate effort topic: the applied torque"
-    return LogPlan(path, topics, roles, how, kind, kind_how, names)
+    used = set(roles.values())
+    unused = {
+        r: sorted(t for t, i in topics.items() if i.msgtype in ROLES[r].types and t not in used)
+        for r in _ROLES
+        if r not in roles
+    }
+    return LogPlan(
+        path, topics, roles, how, kind, kind_how, names, {r: u for r, u in unused.items() if u}
+    )
 
 
 # ---------------------------------------------------------------------------- the grid
@@ -436,6 +454,28 @@ def _decode(path: Path, data: TopicData) -> Any:
     return decode_strings(data.raws, enc, where)
 
 
+def _read_decoded(path: Path, plan: LogPlan) -> tuple[dict[str, IntArray], dict[str, Any]]:
+    """Log times and decoded columns of every topic the plan uses (a topic without a
+    message: absent), in one pass: through the bulk reader ``amsfe_sym.logs.stream`` where
+    this build has it (issue 26.8: MCAP chunks cut with numpy), else
+    :func:`~amsfe_sym.logs.source.read_topics` and :mod:`amsfe_sym.logs.decode`."""
+    import importlib.util
+
+    wanted = set(plan.roles.values())
+    if importlib.util.find_spec("amsfe_sym.logs.stream") is not None:
+        stream = importlib.import_module("amsfe_sym.logs.stream")
+        got = stream.read_topics(path, wanted)
+        return (
+            {t: np.asarray(v.log_time_ns, dtype=np.int64) for t, v in got.items()},
+            {t: v.decoded for t, v in got.items()},
+        )
+    data = {t: d for t, d in read_topics(path, wanted, plan.topics).items() if len(d)}
+    return (
+        {t: d.log_time_ns for t, d in data.items()},
+        {t: _decode(path, d) for t, d in data.items()},
+    )
+
+
 def _columns(js: JointStates, names: Sequence[str], where: str) -> IntArray:
     """(M, n) column of each robot joint in each message's padded arrays."""
     try:
@@ -466,12 +506,19 @@ def read_log(
     plan = plan or plan_log(path, spec, joints)
     n = len(joints)
     names = plan.names
-    data = read_topics(path, set(plan.roles.values()), plan.topics)
-    decoded = {t: _decode(path, d) for t, d in data.items()}
-    usage = {r: RoleUse(plan.roles.get(r)) for r in _ROLES}
+    times, decoded = _read_decoded(path, plan)
+    usage = {r: RoleUse(plan.roles.get(r), not_used=plan.unused.get(r, [])) for r in _ROLES}
     for ru in usage.values():
         if ru.topic is not None:
-            ru.messages = len(data[ru.topic])
+            ru.messages = len(times.get(ru.topic, ()))
+    if plan.roles["encoders"] not in decoded:
+        raise _refuse(
+            f"log {path}",
+            f"messages on the encoder topic {plan.roles['encoders']}",
+            "none",
+            "record the encoders, or name the topic that has them ([topics] encoders)",
+        )
+    present = {r: t for r, t in plan.roles.items() if t in decoded}
 
     # ------------------------------------------------------------------ encoders: the grid
     et = plan.roles["encoders"]
@@ -485,7 +532,7 @@ def read_log(
     shaped = (js.counts[:, 0] == width) & (js.counts[:, 1] == width)
     _skip(use, "sample without a position and a velocity per joint", int((~shaped).sum()))
     stamps = js.stamp_ns
-    log_ns = data[et].log_time_ns
+    log_ns = times[et]
     ok = shaped.copy()
     if not ok.any():
         raise _refuse(
@@ -599,19 +646,19 @@ def read_log(
 
     # ------------------------------------------------------------------ effort: hold by stamp
     effort: FloatArray | None = None
-    if "effort" in plan.roles:
-        effort = _effort(path, plan, spec, data, decoded, grid, clock, K, usage["effort"], n)
+    if "effort" in present:
+        effort = _effort(path, plan, spec, times, decoded, grid, clock, K, usage["effort"], n)
     u = effort if plan.effort_kind == "applied" and effort is not None else np.zeros((K, n))
 
     # ------------------------------------------------------------------ camera frames
     frames: list[CameraFrame] = []
-    if "camera" in plan.roles:
-        frames = _frames(plan, data, decoded, grid, clock, K, usage["camera"])
+    if "camera" in present:
+        frames = _frames(plan, times, decoded, grid, clock, K, usage["camera"])
 
     # ------------------------------------------------------------------ truth
     truth = None
-    if "truth" in plan.roles:
-        truth = _truth(path, plan, data, decoded, grid, clock, K, N, usage["truth"])
+    if "truth" in present:
+        truth = _truth(path, plan, times, decoded, grid, clock, K, N, usage["truth"])
 
     for r, ru in usage.items():
         for reason, c in ru.skipped.items():
@@ -641,7 +688,7 @@ def _effort(
     path: Path,
     plan: LogPlan,
     spec: LogSpec,
-    data: dict[str, TopicData],
+    times: dict[str, IntArray],
     decoded: dict[str, Any],
     grid: _Grid,
     clock: ClockOffset,
@@ -662,7 +709,7 @@ def _effort(
     else:  # Float64MultiArray: no header, stamped by its arrival (on the stamp clock)
         values = d.values[:, :n] if d.values.shape[1] >= n else np.full((len(d.counts), n), np.nan)
         shaped = d.counts == n
-        stamps = data[topic].log_time_ns - round(clock.median * 1e9)
+        stamps = times[topic] - round(clock.median * 1e9)
     _skip(use, "not one value per joint", int((~shaped).sum()))
     finite = shaped & np.isfinite(values).all(axis=1)
     _skip(use, "a non-finite value", int((shaped & ~finite).sum()))
@@ -698,7 +745,7 @@ def _effort(
 
 def _frames(
     plan: LogPlan,
-    data: dict[str, TopicData],
+    times: dict[str, IntArray],
     decoded: dict[str, Any],
     grid: _Grid,
     clock: ClockOffset,
@@ -707,7 +754,7 @@ def _frames(
 ) -> list[CameraFrame]:
     topic = plan.roles["camera"]
     pts = decoded[topic]
-    log_ns = data[topic].log_time_ns - round(clock.median * 1e9)
+    log_ns = times[topic] - round(clock.median * 1e9)
     kappa, on = grid.steps(pts.stamp_ns)
     arrive = grid.arrivals(log_ns)
     frames: list[CameraFrame] = []
@@ -737,7 +784,7 @@ def _frames(
 def _truth(
     path: Path,
     plan: LogPlan,
-    data: dict[str, TopicData],
+    times: dict[str, IntArray],
     decoded: dict[str, Any],
     grid: _Grid,
     clock: ClockOffset,
@@ -756,7 +803,7 @@ def _truth(
             "estimate with the robot the log was recorded for (--robot / the scenario's robot)",
         )
     truth = np.full((K, N), np.nan)
-    k, on = grid.steps(data[topic].log_time_ns - round(clock.median * 1e9))
+    k, on = grid.steps(times[topic] - round(clock.median * 1e9))
     inside = on & (k >= 0) & (k < K)
     _skip(use, "off the tick grid or outside the log", int((~inside).sum()))
     truth[k[inside]] = arr.values[inside, :N]

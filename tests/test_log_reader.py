@@ -511,3 +511,62 @@ def test_containers_that_are_not_logs_are_named(tmp_path, capsys) -> None:
         )
         _one_line(code, err, out)
         assert what in err, (name, err)
+
+
+def test_a_stream_that_is_there_but_not_used_is_said(res, tmp_path, capsys) -> None:
+    """Frames on /marker (not the default /camera/marker): the summary names the unused
+    PointStamped topic under camera, never 'skipped: none' for a dropped stream."""
+    ev, _ = arm_events(res)
+    for e in ev:
+        if e.topic == "/camera/marker":
+            e.topic = "/marker"
+    log = write_log(tmp_path / "m", ev, "mcap")
+    spec = _spec(tmp_path, '[effort]\nkind = "applied"\n')
+    out = tmp_path / "o"
+    code, stdout, err = _cli(
+        [
+            "estimate",
+            str(log),
+            "--robot",
+            "paper_2link",
+            "--log-spec",
+            str(spec),
+            "--out",
+            str(out),
+            "--no-plots",
+        ],
+        capsys,
+    )
+    assert code == 0, err
+    assert "camera: no topic; not used: ['/marker']" in stdout
+    s = json.loads((out / "summary.json").read_text())
+    assert s["topics"]["camera"]["topics_of_this_type_not_used"] == ["/marker"]
+
+
+def test_nis_report_bands_and_fractions() -> None:
+    """NIS summary against scipy's chi-square: chi2(dof) draws give mean ~dof and ~95 %
+    inside the two-sided 95 % band; values 10x too large give ~0 % inside; NaN (no encoder
+    update at a tick) is left out, never written into JSON."""
+    from types import SimpleNamespace
+
+    from scipy.stats import chi2
+
+    from amsfe_sym.apps.estimate import nis_report
+
+    rng = np.random.default_rng(0)
+    enc = chi2.rvs(4, size=20000, random_state=rng)
+    enc[::100] = np.nan
+    frames = [
+        SimpleNamespace(kappa=k, arrival=k + 3, nis=v, fused=True)
+        for k, v in enumerate(100 * chi2.rvs(2, size=500, random_state=rng))
+    ]
+    log = SimpleNamespace(u=np.zeros((1, 2)), effort_kind="applied")
+    run_ = SimpleNamespace(estimate=SimpleNamespace(encoder_nis=enc, frame_nis=frames), log=log)
+    rep = nis_report(run_)  # type: ignore[arg-type]
+    e, c = rep["encoders"], rep["camera"]
+    assert e["dof"] == 4 and e["samples"] == 20000 - 200
+    assert abs(e["mean"] - 4) < 0.1 and abs(e["inside_95"] - 0.95) < 0.01
+    assert np.allclose(e["band_95"], chi2.ppf([0.025, 0.975], 4))
+    assert c["dof"] == 2 and c["inside_95"] < 0.07  # P = 0.036 for 100x chi2(2)
+    json.dumps(rep, allow_nan=False)
+    assert nis_report(SimpleNamespace(estimate=SimpleNamespace(), log=log)) == {}  # type: ignore[arg-type]
