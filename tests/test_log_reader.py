@@ -569,4 +569,13 @@ def test_nis_report_bands_and_fractions() -> None:
     assert np.allclose(e["band_95"], chi2.ppf([0.025, 0.975], 4))
     assert c["dof"] == 2 and c["inside_95"] < 0.07  # P = 0.036 for 100x chi2(2)
     json.dumps(rep, allow_nan=False)
+    # the replay's struct of arrays (logs.replay.FrameNis) reads as the list of records
+    arrays = SimpleNamespace(
+        kappa=np.array([f.kappa for f in frames]),
+        arrival=np.array([f.arrival for f in frames]),
+        nis=np.array([f.nis for f in frames]),
+        fused=np.ones(len(frames), bool),
+    )
+    run2 = SimpleNamespace(estimate=SimpleNamespace(encoder_nis=enc, frame_nis=arrays), log=log)
+    assert nis_report(run2) == rep  # type: ignore[arg-type]
     assert nis_report(SimpleNamespace(estimate=SimpleNamespace(), log=log)) == {}  # type: ignore[arg-type]

@@ -263,6 +263,19 @@ def _finite(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
+def _frame_nis(est: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    """(arrival step, NIS) of each frame given to the estimator, from the replay's
+    ``frame_nis`` (arrays ``arrival``, ``nis``; or records with those fields), or None."""
+    fr: Any = getattr(est, "frame_nis", None)
+    if fr is None:
+        return None
+    if hasattr(fr, "nis") and hasattr(fr, "arrival"):
+        return np.asarray(fr.arrival, dtype=np.float64), np.asarray(fr.nis, dtype=np.float64)
+    rows = [(_field(r, "arrival", 1), _field(r, "nis", 2)) for r in fr]
+    arr = np.asarray(rows, dtype=np.float64).reshape(-1, 2)
+    return arr[:, 0], arr[:, 1]
+
+
 def _field(record: Any, name: str, index: int) -> Any:
     if isinstance(record, dict):
         return record.get(name)
@@ -295,14 +308,13 @@ def nis_report(run: EstimateRun) -> dict[str, Any]:
     est, log = run.estimate, run.log
     n = log.u.shape[1]
     out: dict[str, Any] = {}
-    enc = getattr(est, "encoder_nis", None)
-    if enc is not None:
+    enc: Any = getattr(est, "encoder_nis", None)
+    if enc is not None and len(enc):
         dof = 3 * n if log.effort_kind == "joint_torque" else 2 * n
-        out["encoders"] = _nis_stats(np.asarray(enc, dtype=float), dof)
-    frames = getattr(est, "frame_nis", None)
+        out["encoders"] = _nis_stats(np.asarray(enc, dtype=np.float64), dof)
+    frames = _frame_nis(est)
     if frames is not None:
-        vals = np.array([float(_field(r, "nis", 2)) for r in frames], dtype=float)
-        out["camera"] = _nis_stats(vals, 2)
+        out["camera"] = _nis_stats(frames[1], 2)
     return out
 
 
@@ -490,13 +502,11 @@ def _nis_figure(run: EstimateRun, folder: Path) -> None:
     fig, axes = plt.subplots(len(rep), 1, figsize=(8, 2.6 * len(rep) + 0.6), squeeze=False)
     for ax, (what, r) in zip(axes[:, 0], rep.items(), strict=True):
         if what == "encoders":
-            t, v = log.t, np.asarray(est.encoder_nis, dtype=np.float64)  # type: ignore[attr-defined]
+            t, v = log.t, np.asarray(getattr(est, "encoder_nis", None), dtype=np.float64)
             ax.plot(t, v, lw=0.4, label="encoder update")
         else:
-            recs = est.frame_nis  # type: ignore[attr-defined]
-            t = np.array([float(_field(x, "arrival", 1)) * log.T for x in recs])
-            v = np.array([float(_field(x, "nis", 2)) for x in recs])
-            ax.plot(t, v, ".", ms=3, label="camera frame (at its arrival)")
+            arrival, v = _frame_nis(est) or (np.zeros(0), np.zeros(0))
+            ax.plot(arrival * log.T, v, ".", ms=3, label="camera frame (at its arrival)")
         lo, hi = r["band_95"]
         ax.axhspan(lo, hi, color="g", alpha=0.12, label=f"chi2({r['dof']}) 95 % band")
         ax.axhline(r["dof"], color="g", lw=0.6)
