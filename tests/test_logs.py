@@ -180,10 +180,8 @@ def test_refusals_are_one_line_and_leave_nothing(sim, tmp_path, capsys) -> None:
     spec.write_text('[effort]\nkind = "applied"\n')
     for what, bag in cases.items():
         out = tmp_path / f"out-{what.replace(' ', '_')}"
-        code = main(
-            ["estimate", str(bag), "--out", str(out), "--no-plots", "--scenario", str(scen)]
-            + ["--log-spec", str(spec)]
-        )
+        args = ["estimate", str(bag), "--out", str(out), "--no-plots", "--scenario", str(scen)]
+        code = main([*args, "--log-spec", str(spec)])
         err = capsys.readouterr().err.strip()
         assert code == 2, what
         assert err.startswith("error:") and "\n" not in err, (what, err)
