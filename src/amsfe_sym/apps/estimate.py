@@ -503,7 +503,13 @@ def _nis_figure(run: EstimateRun, folder: Path) -> None:
     for ax, (what, r) in zip(axes[:, 0], rep.items(), strict=True):
         if what == "encoders":
             t, v = log.t, np.asarray(getattr(est, "encoder_nis", None), dtype=np.float64)
-            ax.plot(t, v, lw=0.4, label="encoder update")
+            ax.plot(t, v, lw=0.3, alpha=0.5, label="encoder update")
+            w = max(1, len(v) // 100)  # its running mean over 1 % of the log
+            ok = np.isfinite(v)
+            mean = np.convolve(np.where(ok, v, 0), np.ones(w), "same") / np.maximum(
+                np.convolve(ok, np.ones(w), "same"), 1
+            )
+            ax.plot(t, mean, lw=1.0, color="k", label=f"running mean ({w} ticks)")
         else:
             arrival, v = _frame_nis(est) or (np.zeros(0), np.zeros(0))
             ax.plot(arrival * log.T, v, ".", ms=3, label="camera frame (at its arrival)")
