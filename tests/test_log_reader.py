@@ -138,6 +138,7 @@ def arm_events(
     camera: bool = True,
     topic: str = "/joint_states",
     seed: int = 0,
+    finger_names: Sequence[str] | None = None,
 ) -> tuple[list[Ev], dict[int, list[CameraFrame]]]:
     """A driver-style log of ``res``: one JointState topic with position, velocity and
     (``effort``) the applied torque of each joint, plus two finger joints, names in another
@@ -148,6 +149,8 @@ def arm_events(
     T, n = res.lib.T, res.lib.n
     joints = list(res.lib.manifest.joints)
     names = ["finger_a", *reversed(joints), "finger_b"] if fingers else list(reversed(joints))
+    if finger_names is not None:  # franka_ros' order: the arm's joints, then the fingers
+        names = [*joints, *finger_names]
     order = [names.index(j) for j in joints]
     ev: list[Ev] = []
     for k, t in enumerate(res.t):
@@ -579,3 +582,33 @@ def test_nis_report_bands_and_fractions() -> None:
     run2 = SimpleNamespace(estimate=SimpleNamespace(encoder_nis=enc, frame_nis=arrays), log=log)
     assert nis_report(run2) == rep  # type: ignore[arg-type]
     assert nis_report(SimpleNamespace(estimate=SimpleNamespace(), log=log)) == {}  # type: ignore[arg-type]
+
+
+def test_a_franka_shaped_panda_bag_in_one_command(tmp_path, capsys) -> None:
+    """The Panda (7 joints; its library from the session cache): a ROS 1 bag as franka_ros
+    records it (/joint_states: 7 arm joints then 2 fingers, position, velocity, effort),
+    stamps 203.6 s ahead, 0.2 T jitter, camera frames.  With its run's scenario and the effort
+    declared applied it equals the compiled estimator fed directly (1e-12); with --robot
+    alone the effort is the driver's (kind none): run where the build has the effort kinds,
+    else refused in one line."""
+    sc = load_scenario("panda-control").with_overrides(duration=0.3, controller="amsfe")
+    res_p = run(sc, library_for(sc), runtime="compiled")
+    fingers = ("panda_finger_joint1", "panda_finger_joint2")
+    ev, expected = arm_events(res_p, finger_names=fingers)
+    log = write_log(tmp_path / "franka.bag", ev, "bag")
+    spec = _spec(tmp_path, '[effort]\nkind = "applied"\n')
+    opts = EstimateOptions(
+        scenario=str(_scenario_file(res_p, tmp_path)), log_spec=str(spec), plots=False
+    )
+    got = estimate_command(log, tmp_path / "est", opts)
+    assert np.max(np.abs(got.estimate.x_hat - _direct(res_p, expected))) <= 1e-12
+    assert got.log.usage["camera"].used == len(res_p.frames) > 0
+    out = tmp_path / "one"
+    code, stdout, err = _cli(
+        ["estimate", str(log), "--robot", "panda", "--out", str(out), "--no-plots"], capsys
+    )
+    assert "kind none" in stdout
+    if code != 0:
+        _one_line(code, err, out)
+    else:
+        assert json.loads((out / "summary.json").read_text())["effort_kind"] == "none"
