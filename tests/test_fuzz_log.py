@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from amsfe_sym.codegen import compiler, library_for
@@ -319,6 +319,20 @@ def arm_logs(draw: st.DrawFn, res) -> tuple[list, str, dict]:
             ev.append(Ev(lt, topic, enc_type, st_k, names, pos, vel, eff))
         if good:
             kept[k] = res.z_enc[k]
+    effort = draw(st.sampled_from(["shared"] * 3 + ["array", "array_short", "state", "late"]))
+    if effort != "shared":  # a separate /motor_torque (the default effort topic) too
+        short = effort == "array_short"
+        for k in range(K):
+            if effort == "late" and k < 3:
+                continue
+            if effort in ("array", "array_short"):
+                data_k = res.u[k, : n - 1] if short else res.u[k]
+                ev.append(Ev(2.0 + k * T + 2e-4, "/motor_torque", F64, data=data_k))
+            else:
+                st_e = 2.0 + k * T + offset + 0.3 * T
+                ev.append(
+                    Ev(2.0 + k * T + 2e-4, "/motor_torque", JS, st_e, joints, (), (), res.u[k])
+                )
     if draw(st.booleans()):  # camera frames, maybe of the wrong type
         cam_type = draw(st.sampled_from([PT] * 4 + [F64]))
         for kappa in range(0, K, 25):
@@ -354,19 +368,20 @@ def test_fuzz_log_reader(
 
     res = short_run
     events, fmt, expect = data.draw(arm_logs(res))
-    cut = data.draw(
-        st.sampled_from([None, None, None, 0.0]) | st.floats(0.0, 0.999)
-    )  # a file log truncated anywhere
+    # a quarter of the logs truncated anywhere (the file, or a rosbag2 folder's storage file)
+    cut = data.draw(st.one_of(st.none(), st.none(), st.none(), st.floats(0.0, 0.999)))
     tmp = tmp_path_factory.mktemp("arm")
     log = write_log(tmp / ("log.bag" if fmt == "bag" else "log"), events, fmt)
-    if cut is not None and log.is_file():
-        raw = log.read_bytes()
-        log.write_bytes(raw[: int(cut * len(raw))])
+    if cut is not None:  # the file, or the storage file of a rosbag2 folder
+        files = [log] if log.is_file() else [p for p in log.iterdir() if p.suffix != ".yaml"]
+        raw = files[0].read_bytes()
+        files[0].write_bytes(raw[: int(cut * len(raw))])
     spec = tmp / "spec.toml"
     spec.write_text('[effort]\nkind = "applied"\n')
     out = tmp / "out"
     args = ["estimate", str(log), "--robot", "paper_2link", "--log-spec", str(spec)]
     code = main([*args, "--out", str(out), "--no-plots"])
+    event(f"exit {code}")  # --hypothesis-show-statistics: how many ran, how many refused
     if code != 0:
         assert code == 2
         assert not out.exists()
