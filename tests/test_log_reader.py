@@ -477,15 +477,21 @@ def test_issue25_log_cases_are_refused_by_name(res, tmp_path, capsys) -> None:
 
 
 def test_a_log_of_another_robot_than_the_scenario_is_refused(tmp_path, capsys) -> None:
-    """A 2-link amsfe log estimated with a 1-link scenario: refused before the run."""
+    """A 2-link amsfe log estimated with a 1-link robot: refused before the run; with its own
+    robot, --robot starts from the log's first sample (not the config's scenario)."""
     from amsfe_sym.logs.write import write_run_bag
 
     sc = load_scenario("paper-sim").with_overrides(duration=0.05, controller="amsfe")
-    bag = write_run_bag(run(sc, library_for(sc), runtime="compiled"), tmp_path / "two")
+    r = run(sc, library_for(sc), runtime="compiled")
+    bag = write_run_bag(r, tmp_path / "two")
     out = tmp_path / "o"
     code, _, err = _cli(["estimate", str(bag), "--robot", "paper_1link", "--out", str(out)], capsys)
     _one_line(code, err, out)
     assert "paper_2link" in err
+    got = estimate_command(bag, tmp_path / "e", EstimateOptions(robot="paper_2link", plots=False))
+    n = r.lib.n
+    assert np.array_equal(got.estimate.x_hat[0, :n], r.z_enc[0, :n])
+    assert got.scenario.estimate0.q == tuple(r.z_enc[0, :n])
 
 
 def test_containers_that_are_not_logs_are_named(tmp_path, capsys) -> None:

@@ -214,8 +214,8 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
     log = read_log(log_path, spec, joints, T, N, plan, robot=name)
     log.config = config
     _effort_support(log.effort_kind, log_path)
-    if options.scenario is None and config is None:
-        sc = _start_from_log(sc, log)
+    if options.scenario is None and (options.robot is not None or config is None):
+        sc = _start_from_log(sc, log)  # --robot: the defaults, started from the log
     read_s = time.perf_counter() - t0
     if options.verbose:
         c = log.clock
