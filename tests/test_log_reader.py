@@ -368,9 +368,17 @@ def test_stamp_faults_are_counted_or_refused(res, tmp_path) -> None:
     st.insert(50, base[50])
     got = _read(res, write_log(tmp_path / "dup", _enc_events(res, st, sorted(st)), "mcap"))
     assert got.usage["encoders"].skipped["duplicate (a second sample for a tick)"] == 1
+    # one stamp 0.9 s ahead (inside the far limit): it lands on a later tick's sample; the
+    # sample whose log time fits is kept there, the bad one's own tick is predicted through
+    long = [1.7e9 + k * T for k in range(1001)]
+    st = list(long)
+    st[100] += 0.9
+    got = _read(res, write_log(tmp_path / "ahead", _enc_events(res, st, long), "mcap"))
+    assert got.usage["encoders"].skipped == {"duplicate (a second sample for a tick)": 1}
+    assert np.isnan(got.z[100]).all() and np.array_equal(got.z[1000], res.z_enc[1000])
     # stamps running backwards: refused by name
     back = base[::-1]
-    with pytest.raises(LogError, match="earlier than one received before them"):
+    with pytest.raises(LogError, match="earlier than the one received before them"):
         _read(res, write_log(tmp_path / "back", _enc_events(res, back, base), "mcap"))
     # all stamps zero: refused, not a 1-tick run
     with pytest.raises(LogError, match="advancing header stamps"):
