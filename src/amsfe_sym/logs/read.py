@@ -60,6 +60,7 @@ from amsfe_sym.topics.roles import ROLES, EffortKind, joint_order
 __all__ = [
     "ClockOffset",
     "LogPlan",
+    "LogRateError",
     "RobotLog",
     "RoleUse",
     "plan_log",
@@ -76,6 +77,19 @@ _ROLES = ("encoders", "effort", "camera", "truth")
 #: An encoder stamp whose (log time - stamp) is this far from the median is skipped [s] (a
 #: stamp from another clock or a corrupt one); at least 100 T.
 _FAR_S = 1.0
+
+
+class LogRateError(LogError):
+    """The log is sampled at another rate than the robot's T.
+
+    Attributes:
+        period: The log's period [s], to the 6 digits the message prints (the value to
+            generate the robot at: ``amsfe generate ROBOT --period <period>``).
+    """
+
+    def __init__(self, message: str, period: float) -> None:
+        super().__init__(message)
+        self.period = period
 
 
 @dataclass(frozen=True)
@@ -454,6 +468,23 @@ def _decode(path: Path, data: TopicData) -> Any:
     return decode_strings(data.raws, enc, where)
 
 
+def _rate_fix(robot: str, period: float) -> str:
+    """The one-step fix for a log at another rate: ``codegen.modes.period_fix`` where the
+    build has it (the command with the substeps the joint modes need), else the command."""
+    import importlib.util
+
+    if robot != "ROBOT" and importlib.util.find_spec("amsfe_sym.codegen.modes") is not None:
+        try:
+            modes = importlib.import_module("amsfe_sym.codegen.modes")
+            return f"{modes.period_fix(robot, period)}, or record at the robot's rate"
+        except Exception:  # the plain command below still holds
+            pass
+    return (
+        f"generate the robot at the log's period: amsfe generate {robot} --period "
+        f"{period:.6g} (or record at the robot's rate)"
+    )
+
+
 def _read_decoded(path: Path, plan: LogPlan) -> tuple[dict[str, IntArray], dict[str, Any]]:
     """Log times and decoded columns of every topic the plan uses (a topic without a
     message: absent), in one pass: through the bulk reader ``amsfe_sym.logs.stream`` where
@@ -592,13 +623,15 @@ def read_log(
     k_all, on = grid.steps(stamps[sel])
     offgrid = int((~on).sum())
     if mismatch or offgrid > 0.01 * sel.size:
-        raise _refuse(
-            where,
-            f"samples every T = {T:g} s (robot {robot}'s sampling interval)",
-            f"samples every {period:.6g} s (median), {offgrid} of {sel.size} stamps off the "
-            f"grid of T within {spec.grid_tolerance:g} T",
-            f"generate the robot at the log's period: amsfe generate {robot} --period "
-            f"{period:.6g} (or record at the robot's rate)",
+        raise LogRateError(
+            describe(
+                where,
+                f"samples every T = {T:g} s (robot {robot}'s sampling interval)",
+                f"samples every {period:.6g} s (median), {offgrid} of {sel.size} stamps off "
+                f"the grid of T within {spec.grid_tolerance:g} T",
+                _rate_fix(robot, period),
+            ),
+            float(f"{period:.6g}"),
         )
     _skip(use, "stamp off the tick grid", offgrid)
     sel, k_all = sel[on], k_all[on]
