@@ -1,6 +1,6 @@
 """``backward_map = "inverse"`` (the paper's eqs. (22), (24)) on both paths: the compiled C
-runtime against the Python reference over a paper-sim run (x, P within 1e-9, the same
-decisions), a non-converged inverse refused on both paths as a counted frame, and the scenario
+runtime against the Python reference over a paper-sim and a UR5 run (x, P within 1e-9, the
+same decisions), a non-converged inverse refused on both paths as a counted frame, and the scenario
 setting ``[filter] backward_map`` reaching the estimator (``--set filter.backward_map=inverse``).
 
 The linear-model identity of the two maps is in tests/estimation/test_backward_map.py.
@@ -128,3 +128,11 @@ def test_the_log_refuses_an_inverse_estimator(paper_sim: Recording) -> None:
     with pytest.raises(ConfigError, match="backward_map"):
         estimator_log_lines(c)
     assert estimator_log_lines(make_compiled_estimator("oosm", **paper_sim.kwargs))
+
+
+def test_inverse_map_compiled_equals_python_on_the_6dof_ur5() -> None:
+    """The same equivalence on the UR5 (N = 25, ur5-demo, 1 s: lag 33, rk4 inverse)."""
+    rec = record("ur5-demo", duration=1.0)
+    worst = run_both(rec, with_map(rec, "inverse"), len(rec.u) - 1)
+    print(worst)
+    assert worst["applied"] >= 20 and worst["no_convergence"] == 0
