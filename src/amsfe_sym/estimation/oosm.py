@@ -15,8 +15,8 @@ covariance ``S``, jacobian ``H``, prior ``P(k|k-1)``):
   ``x(j|j)``, priors ``x(j+1|j) = F(x(j|j))`` and jacobians ``A_j``, one linear solve with
   ``Phi`` per frame instead of ``L`` Newton inverses of the transition (exact for a linear
   model; for a nonlinear one the error is second order in the corrections the updates made
-  over the lag, see ``docs/estimation-algorithms.md``);
-  With ``FilterConfig.backward_map = "inverse"`` it is the paper's form instead
+  over the lag, see ``docs/estimation-algorithms.md``); with
+  ``FilterConfig.backward_map = "inverse"`` it is the paper's form instead
   (:func:`backward_inverse`): ``L`` applications of the model's inverse transition
   (eq. (22)) from ``x(k|k) - v_hat``, and ``Fb`` below the jacobian of that map at the points
   it passes through (``Phi_b^-1``, ``Phi_b`` the product of the forward jacobians at the
@@ -469,12 +469,9 @@ class OosmAl1Estimator(OosmEstimator):
         self._store_posterior(self.k + 1)
 
     def _retrodict(self, kappa: int, k: int, Phi: FloatArray, Q: FloatArray) -> A1Retrodiction:
-        size, B = self.config.buffer_steps + 1, self.config.buffer_steps
+        size = self.config.buffer_steps + 1
         x_pred = self._post_x[kappa % size].copy()
-        for j in range(kappa, k):  # x(k|kappa): the posterior at kappa predicted, no updates
-            u_j = self._u[j % B]
-            if u_j is None:  # cannot happen: the base class refuses frames older than the buffer
-                raise EstimatorError(f"oosm-al1: no stored input for step {j}")
+        for u_j in self._inputs(kappa, k):  # x(k|kappa): the posterior at kappa, no updates
             x_pred = self.model.step(x_pred, u_j)[0]
         P_pred = symmetrize(Phi @ self._post_P[kappa % size] @ Phi.T + Q)
         return al1_retrodict(self.x, self.P, Q, x_pred, P_pred)
