@@ -14,7 +14,12 @@ from typing import Any
 
 from amsfe_sym.errors import AmsfeError, describe
 
-__all__ = ["C_INT_MAX", "is_number", "read_int", "read_number"]
+__all__ = ["BACKWARD_MAPS", "C_INT_MAX", "is_number", "read_int", "read_number"]
+
+#: The values of ``[filter] backward_map`` / ``FilterConfig.backward_map`` (``oosm``'s
+#: backward map of eq. (24)), in the order of the C runtime's codes
+#: (``amsfe_params.backward_map``: 0 linearised, 1 inverse).
+BACKWARD_MAPS = ("linearised", "inverse")
 
 #: The largest C ``int`` (the runtime's parameter blocks hold counts as ``int``).
 C_INT_MAX = 2**31 - 1

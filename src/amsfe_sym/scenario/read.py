@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from amsfe_sym.core.toml import read_toml
-from amsfe_sym.core.values import C_INT_MAX, read_int, read_number
+from amsfe_sym.core.values import BACKWARD_MAPS, C_INT_MAX, read_int, read_number
 from amsfe_sym.errors import ConfigError, check_known_keys, describe
 from amsfe_sym.load.spec import INTEGRATORS, data_dir
 from amsfe_sym.scenario.model import (
@@ -274,6 +274,15 @@ def validate(sc: Scenario, where: str = "scenario") -> None:
     positive(f.link_torque_std, "[filter] link_torque_std")
     positive(f.motor_torque_std, "[filter] motor_torque_std")
     positive(f.theta_rate_std, "[filter] theta_rate_std", allow_zero=True)
+    if f.backward_map not in BACKWARD_MAPS:
+        raise ConfigError(
+            describe(
+                f"{where}: [filter] backward_map",
+                "one of " + ", ".join(repr(m) for m in BACKWARD_MAPS),
+                repr(f.backward_map),
+                'write backward_map = "linearised" (or "inverse", the paper\'s eq. (22))',
+            )
+        )
     for name in ("encoder_q_std", "encoder_qd_std", "camera_pixel_std"):
         positive(getattr(f, name), f"[filter] {name}", allow_zero=True)
     positive(sc.encoders.q_std, "[encoders] q_std", allow_zero=True)
