@@ -12,6 +12,7 @@ import shlex
 import signal
 import sys
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
 from amsfe_sym import __version__
 from amsfe_sym.apps.arguments import (
@@ -27,6 +28,7 @@ from amsfe_sym.apps.arguments import (
 from amsfe_sym.apps.estimate import add_arguments as add_estimate_arguments
 from amsfe_sym.apps.estimate import from_args as estimate_from_args
 from amsfe_sym.apps.sweep.command import from_args as sweep_from_args
+from amsfe_sym.core.outputs import check_output, interrupted_note, ledger
 from amsfe_sym.errors import AmsfeError, ConfigError, SpecError, describe
 
 __all__ = ["get_argument_parser", "main"]
@@ -58,7 +60,12 @@ def get_argument_parser() -> argparse.ArgumentParser:
 
     g = sub.add_parser("generate", help="URDF/robot -> generated/<name>/ (C, library, manifest)")
     g.add_argument("robot", nargs="?", default="paper_2link", help="robot name, folder or URDF")
-    g.add_argument("--out", default=None, help="parent output folder (default: generated/)")
+    g.add_argument(
+        "--out",
+        default=None,
+        help="parent folder of the libraries (default: generated/); a file or a folder of "
+        "yours at <out>/<robot> is never replaced",
+    )
     g.add_argument(
         "--lock",
         nargs="+",
@@ -72,7 +79,11 @@ def get_argument_parser() -> argparse.ArgumentParser:
 
     c = sub.add_parser("check", help="every generated function vs Pinocchio / finite differences")
     c.add_argument("robot", nargs="?", default="paper_2link")
-    c.add_argument("--out", default=None, help="parent folder of generated libraries")
+    c.add_argument(
+        "--out",
+        default=None,
+        help="parent folder of generated libraries (a missing library is built there)",
+    )
     c.add_argument("--lock", nargs="+", type=lock_arg, default=[], metavar="JOINT[=VALUE]")
     c.add_argument("--samples", type=SAMPLES, default=50, help="random states (default 50)")
     c.add_argument("--seed", type=SEED, default=0)
@@ -96,10 +107,20 @@ def get_argument_parser() -> argparse.ArgumentParser:
     )
     s.add_argument("--seed", type=SEED, default=None)
     s.add_argument("--duration", type=DURATION, default=None, help="simulated time [s]")
-    s.add_argument("--out", default=None, help="run folder (default runs/<scenario>-<stamp>)")
+    s.add_argument(
+        "--out",
+        default=None,
+        help="run folder (default runs/<scenario>-<stamp>); an existing one is refused "
+        "(docs/scenarios.md, 'Output paths')",
+    )
     s.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     s.add_argument("--no-plots", action="store_true", help="skip the figures")
-    s.add_argument("--force", action="store_true", help="replace an existing --out run folder")
+    s.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing --out (and --bag) that amsfe wrote; never a folder of "
+        "yours, never an input",
+    )
     s.add_argument(
         "--runtime",
         choices=("compiled", "python"),
@@ -112,7 +133,9 @@ def get_argument_parser() -> argparse.ArgumentParser:
         const="",
         default=None,
         metavar="DIR",
-        help="also write the run as a rosbag2 in MCAP (default <run folder>/bag; docs/logs.md)",
+        help="also write the run as a rosbag2 in MCAP (default <run folder>/bag; docs/logs.md); "
+        "DIR elsewhere is written together with the run folder, both or neither, and follows "
+        "the --out rules",
     )
     _add_set(s)
 
@@ -122,10 +145,25 @@ def get_argument_parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
     b.add_argument("robot", nargs="?", default="paper_2link")
-    b.add_argument("--out", default=None, help="parent folder of generated libraries")
+    b.add_argument(
+        "--out",
+        default=None,
+        help="parent folder of generated libraries (a missing library is built there)",
+    )
     b.add_argument("--repeat", type=COUNT, default=20000, help="calls per timing")
     b.add_argument("--rounds", type=COUNT, default=5, help="timing rounds (median reported)")
-    b.add_argument("--json", default=None, metavar="FILE", help="also write the report as JSON")
+    b.add_argument(
+        "--json",
+        default=None,
+        metavar="FILE",
+        help="also write the report as JSON; an existing FILE is refused (checked before "
+        "the timings)",
+    )
+    b.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing --json report that amsfe bench wrote (never another file)",
+    )
     b.add_argument(
         "--skip",
         nargs="+",
@@ -189,7 +227,16 @@ def get_argument_parser() -> argparse.ArgumentParser:
     st.add_argument("--estimators", default="all", help="all | name,name (default all)")
     st.add_argument("--duration", type=DURATION, default=None, help="simulated time [s]")
     st.add_argument("--workers", type=COUNT, default=2, help="processes (default 2)")
-    st.add_argument("--out", default=None, help="folder (default runs/study-<scenario>-<stamp>)")
+    st.add_argument(
+        "--out",
+        default=None,
+        help="study folder (default runs/study-<scenario>-<stamp>); an existing one is refused",
+    )
+    st.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing --out study folder that amsfe wrote (never a folder of yours)",
+    )
     _add_set(st)
     st.add_argument(
         "--variant",
@@ -212,7 +259,12 @@ def get_argument_parser() -> argparse.ArgumentParser:
         "sweep", help="scenario grid x estimators x controllers x seeds on Dask (docs/sweeps.md)"
     )
     sw.add_argument("spec", help="sweep file (.toml), e.g. sweeps/camera-delay.toml")
-    sw.add_argument("--out", default=None, help="sweep folder (default runs/sweep-<name>)")
+    sw.add_argument(
+        "--out",
+        default=None,
+        help="sweep folder (default runs/sweep-<name>): the same sweep there resumes; a "
+        "folder of yours is refused",
+    )
     sw.add_argument(
         "--scheduler",
         default=None,
@@ -228,7 +280,9 @@ def get_argument_parser() -> argparse.ArgumentParser:
     sw.add_argument("--batch", type=COUNT, default=None, help="runs per task (default auto)")
     sw.add_argument("--retry-errors", action="store_true", help="run the error rows again")
     sw.add_argument(
-        "--force", action="store_true", help="start afresh in a folder of another sweep"
+        "--force",
+        action="store_true",
+        help="start afresh in a folder of another sweep (never in a folder of yours)",
     )
     sw.add_argument(
         "--repair",
@@ -284,19 +338,21 @@ def _main(argv: Sequence[str] | None) -> int:
         "study": _study,
         "sweep": sweep_from_args,
     }
-    try:
-        if args.command in commands:
-            return commands[args.command](args)
-    except AmsfeError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt as exc:
-        how = "SIGTERM" if isinstance(exc, Terminated) else "Ctrl-C"
-        print(
-            f"interrupted: amsfe {args.command} stopped by {how}; nothing half-written was kept",
-            file=sys.stderr,
-        )
-        return 143 if isinstance(exc, Terminated) else 130
+    with ledger() as book:
+        try:
+            if args.command in commands:
+                return commands[args.command](args)
+        except AmsfeError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt as exc:
+            how = "SIGTERM" if isinstance(exc, Terminated) else "Ctrl-C"
+            print(
+                f"interrupted: amsfe {args.command} stopped by {how}; nothing half-written "
+                f"was kept: {interrupted_note(book)}",
+                file=sys.stderr,
+            )
+            return 143 if isinstance(exc, Terminated) else 130
     raise SpecError(
         describe(
             "command",
@@ -310,6 +366,8 @@ def _main(argv: Sequence[str] | None) -> int:
 def _generate(args: argparse.Namespace) -> int:
     from amsfe_sym.codegen import generate
 
+    if args.out:
+        check_output(args.out, option="--out", kind="parent")
     extra = args.cflags.split() if args.cflags else None
     res = generate(
         args.robot,
@@ -332,6 +390,8 @@ def _check(args: argparse.Namespace) -> int:
     from amsfe_sym.load import load_robot
     from amsfe_sym.runtime.library import ModelLibrary
 
+    if args.out:
+        check_output(args.out, option="--out", kind="parent")
     lock = dict(args.lock)
     extra = shlex.split(args.cflags) if args.cflags else None
     # the checks cover the model functions: reuse the full library if it is built, else build
@@ -362,9 +422,13 @@ def _simulate(args: argparse.Namespace) -> int:
     """``amsfe simulate``: load the scenario, apply the overrides, generate its library, run,
     write the run folder and print the headline numbers (:mod:`amsfe_sym.apps.simulate`)."""
     from datetime import datetime, timezone
-    from pathlib import Path
 
-    from amsfe_sym.apps.simulate import SimulateOptions, simulate_comparison, simulate_one
+    from amsfe_sym.apps.simulate import (
+        BAG_IN_RUN,
+        SimulateOptions,
+        simulate_comparison,
+        simulate_one,
+    )
     from amsfe_sym.codegen import library_for
     from amsfe_sym.scenario import apply_sets, load_scenario
 
@@ -384,7 +448,8 @@ def _simulate(args: argparse.Namespace) -> int:
         force=args.force,
         progress=not args.no_progress,
         runtime=args.runtime,
-        bag=None if args.bag is None else Path(args.bag) if args.bag else Path(),
+        bag=None if args.bag is None else Path(args.bag) if args.bag else BAG_IN_RUN,
+        inputs=_input_files(args.scenario),
     )
     if compare and args.controller is None:  # the paper's comparison on one seed
         out = Path(args.out) if args.out else Path("runs") / f"{sc.name}-{stamp}"
@@ -395,9 +460,19 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _input_files(*names: str | None) -> tuple[Path, ...]:
+    """The arguments that name existing files or folders (a scenario or robot may also be
+    a shipped name): the inputs an output may not be, hold or lie inside."""
+    return tuple(Path(n) for n in names if n and Path(n).exists())
+
+
 def _bench(args: argparse.Namespace) -> int:
     from amsfe_sym.apps.bench import BenchOptions, run_bench
 
+    if args.out:
+        check_output(args.out, option="--out", kind="parent")
+    if args.json:
+        check_output(args.json, option="--json", kind="file", force=args.force)
     sets = args.compare_cflags
     return run_bench(
         BenchOptions(
@@ -440,17 +515,18 @@ def _parse_variant(items: Sequence[str]) -> tuple[str, list[str]]:
 def _study(args: argparse.Namespace) -> int:
     from amsfe_sym.apps.study import run_study
 
+    inputs = _input_files(args.scenario)
     if args.claims:  # the claim table of docs/reproduction.md on these seeds
-        from pathlib import Path
-
         from amsfe_sym.apps.study.claims import format_claims, run_claims, write_claims
 
+        if args.out:
+            check_output(args.out, option="--out", force=args.force, inputs=inputs)
         t = run_claims(
             args.scenario, args.first_seed, args.seeds, args.duration, args.workers, args.set
         )
         print(format_claims(t))
         if args.out:
-            write_claims(t, Path(args.out))
+            write_claims(t, Path(args.out), force=args.force)
         return 0
     variants = dict(_parse_variant(v) for v in (args.variant or [])) or None
     res = run_study(
@@ -465,6 +541,8 @@ def _study(args: argparse.Namespace) -> int:
         first_seed=args.first_seed,
         progress=not args.no_progress,
         runtime=args.runtime,
+        force=args.force,
+        inputs=inputs,
     )
     print(res.table)
     print(f"study folder: {res.out} (study.md, study.json, {len(res.figures)} figures)")

@@ -13,7 +13,6 @@ signed-rank p-value (diverged seeds excluded from the test only, counted).
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
@@ -21,6 +20,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from amsfe_sym.core.folders import write_folder
+from amsfe_sym.core.jsonfile import write_json
 
 __all__ = ["CLAIM_PAIRS", "CLAIM_ROWS", "ClaimTable", "format_claims", "run_claims"]
 
@@ -183,9 +185,10 @@ def format_claims(t: ClaimTable) -> str:
     return head + "\n".join(lines) + "\n" + "\n".join(pairs) + "\n"
 
 
-def write_claims(t: ClaimTable, out: Path) -> None:
-    """``claims.json`` and ``claims.md`` into ``out``."""
-    out.mkdir(parents=True, exist_ok=True)
+def write_claims(t: ClaimTable, out: Path, force: bool = False) -> None:
+    """``claims.json`` and ``claims.md`` as the folder ``out``, complete or absent (an
+    existing ``out`` is replaced only with ``force``; the caller checks it with
+    :func:`amsfe_sym.core.outputs.check_output` before the runs)."""
     doc = {
         "scenario": t.scenario,
         "seeds": [t.seeds[0], t.seeds[-1]],
@@ -194,5 +197,9 @@ def write_claims(t: ClaimTable, out: Path) -> None:
         "pairs": t.pairs,
         "rmse": t.rmse,
     }
-    (out / "claims.json").write_text(json.dumps(doc, indent=1) + "\n")
-    (out / "claims.md").write_text(format_claims(t))
+
+    def fill(tmp: Path) -> None:
+        write_json(tmp / "claims.json", doc, indent=1)
+        (tmp / "claims.md").write_text(format_claims(t))
+
+    write_folder(out, fill, replace=force)
