@@ -472,7 +472,13 @@ def _bench(args: argparse.Namespace) -> int:
     if args.out:
         check_output(args.out, option="--out", kind="parent")
     if args.json:
-        check_output(args.json, option="--json", kind="file", force=args.force)
+        check_output(
+            args.json,
+            option="--json",
+            kind="file",
+            force=args.force,
+            inputs=_input_files(args.robot),
+        )
     sets = args.compare_cflags
     return run_bench(
         BenchOptions(

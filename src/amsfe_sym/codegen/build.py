@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import ctypes
 import functools
-import json
 import os
 import shutil
 import tempfile
@@ -53,6 +52,7 @@ from amsfe_sym.codegen.compile_units import (
 from amsfe_sym.codegen.compile_units import say as _say
 from amsfe_sym.codegen.manifest import manifest_document
 from amsfe_sym.core.interrupts import DeferredSignals, checkpoint
+from amsfe_sym.core.jsonfile import to_json
 from amsfe_sym.errors import CodegenError, RunFolderError, describe
 from amsfe_sym.load.spec import RobotSpec, load_spec
 from amsfe_sym.runtime.library import file_sha256
@@ -295,7 +295,7 @@ def _build(
             ) from exc
         manifest = manifest_document(model, key, hash_inputs, libname, cname, timings)
         manifest["library_sha256"] = file_sha256(tmp / libname)
-        (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
+        (tmp / MANIFEST).write_text(to_json(manifest))
         checkpoint()
         replace_dir(tmp, out_dir)
     except BaseException:

@@ -99,12 +99,12 @@ def _refuse(label: str, expected: str, found: str, fix: str) -> RunFolderError:
     return RunFolderError(describe(label, expected, found, fix))
 
 
-def _relation(out: Path, other: Path) -> str | None:
+def _relation(out: Path, other: Path, kind: Kind = "folder") -> str | None:
     if out == other:
         return "is"
     if other in out.parents:
         return "is inside"
-    if out in other.parents:
+    if out in other.parents and kind != "parent":  # (a parent folder is never replaced)
         return "holds"
     return None
 
@@ -174,7 +174,7 @@ def check_output(
     target = resolved(given)
     label = f"{option} {given}"
     for inp in inputs:
-        rel = _relation(target, resolved(inp))
+        rel = _relation(target, resolved(inp), kind)
         if rel is not None:
             raise _refuse(
                 label,

@@ -12,7 +12,6 @@ robot, resolved scenario and runtime), ``/robot_description`` (String: the URDF)
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -21,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.core.folders import FolderJob, write_folders
+from amsfe_sym.core.jsonfile import to_json
 from amsfe_sym.core.toml import dump_toml
 from amsfe_sym.logs.source import typestore
 from amsfe_sym.logs.spec import LogSpec
@@ -144,7 +144,12 @@ def run_bag_filler(res: RunResult, urdf_text: str | None = None) -> Callable[[Pa
     def fill(path: Path) -> None:
         bag = _Bag(path)
         try:
-            bag.write(spec.config, "std_msgs/msg/String", 0.0, String(data=json.dumps(config)))
+            bag.write(
+                spec.config,
+                "std_msgs/msg/String",
+                0.0,
+                String(data=to_json(config, indent=None).strip()),
+            )
             if urdf_text is not None:
                 bag.write("/robot_description", "std_msgs/msg/String", 0.0, String(data=urdf_text))
             fi = 0

@@ -32,7 +32,7 @@ def from_args(args: argparse.Namespace) -> int:
     if not args.report:  # before --repair moves anything
         from amsfe_sym.apps.sweep.engine import check_sweep_out
 
-        check_sweep_out(out, args.force)
+        check_sweep_out(out, args.force, [spec.source] if spec.source else [])
     if args.repair and out.is_dir():
         for path in repair(out):
             print(f"set aside (unreadable, its runs will be run again): {path}")

@@ -128,16 +128,20 @@ def is_sweep_folder(path: Path) -> bool:
     return is_run_folder(path) or any((path / n).exists() for n in (META, RESULTS, PARTS))
 
 
-def check_sweep_out(out: Path, force: bool = False) -> Output:
+def check_sweep_out(
+    out: Path, force: bool = False, inputs: Sequence[str | os.PathLike[str]] = ()
+) -> Output:
     """``--out`` of a sweep (:func:`amsfe_sym.core.outputs.check_output`, kind ``resume``):
-    new, empty or a sweep folder (which the sweep resumes); a file or a folder of the
-    user's is refused, with or without ``--force``."""
-    return check_output(out, option="--out", kind="resume", force=force, own=is_sweep_folder)
+    new, empty or a sweep folder (which the sweep resumes); a file, a folder of the user's
+    or an input (the sweep file) is refused, with or without ``--force``."""
+    return check_output(
+        out, option="--out", kind="resume", force=force, inputs=inputs, own=is_sweep_folder
+    )
 
 
 def _check_folder(spec: SweepSpec, opts: SweepOptions) -> None:
     out = opts.out
-    check_sweep_out(out, opts.force)
+    check_sweep_out(out, opts.force, [spec.source] if spec.source else [])
     meta = out / META
     if meta_damaged(out) and not opts.force:
         raise RunFolderError(
