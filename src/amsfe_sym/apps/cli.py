@@ -426,6 +426,7 @@ def _simulate(args: argparse.Namespace) -> int:
     from amsfe_sym.apps.simulate import (
         BAG_IN_RUN,
         SimulateOptions,
+        check_outputs,
         simulate_comparison,
         simulate_one,
     )
@@ -440,7 +441,6 @@ def _simulate(args: argparse.Namespace) -> int:
     )
     if args.set:
         sc = apply_sets(sc, args.set)
-    lib = library_for(sc)
     stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
     compare = tuple(args.compare.split(",")) if args.compare else sc.compare
     options = SimulateOptions(
@@ -451,12 +451,15 @@ def _simulate(args: argparse.Namespace) -> int:
         bag=None if args.bag is None else Path(args.bag) if args.bag else BAG_IN_RUN,
         inputs=_input_files(args.scenario),
     )
-    if compare and args.controller is None:  # the paper's comparison on one seed
-        out = Path(args.out) if args.out else Path("runs") / f"{sc.name}-{stamp}"
-        simulate_comparison(sc, lib, compare, out, options)
-    else:
-        out = Path(args.out) if args.out else Path("runs") / f"{sc.name}-{sc.estimator}-{stamp}"
+    one = not (compare and args.controller is None)  # else: the paper's comparison
+    name = f"{sc.name}-{sc.estimator}-{stamp}" if one else f"{sc.name}-{stamp}"
+    out = Path(args.out) if args.out else Path("runs") / name
+    check_outputs(out, options)  # before the library is generated and the run
+    lib = library_for(sc)
+    if one:
         simulate_one(sc, lib, out, options)
+    else:
+        simulate_comparison(sc, lib, compare, out, options)
     return 0
 
 
