@@ -178,10 +178,13 @@ def test_the_ledger_says_what_was_kept(tmp_path: Path) -> None:
         run = check_output(tmp_path / "run", option="--out")
         check_output(tmp_path / "bag", option="--bag", others=[run])
         note = interrupted_note(book)
-        assert note == f"not written: --out {tmp_path}/run, --bag {tmp_path}/bag"
+        assert note == (
+            f"nothing half-written was kept; not written: --out {tmp_path}/run, "
+            f"--bag {tmp_path}/bag"
+        )
         note_written([run.resolved])
-        assert interrupted_note(book).startswith(f"kept, complete: --out {tmp_path}/run;")
-    assert interrupted_note([]) == "nothing was written"
+        assert f"kept, complete: --out {tmp_path}/run; not written: --bag" in interrupted_note(book)
+    assert interrupted_note([]) == "nothing half-written was kept"
 
 
 # ------------------------------------------------------------------ folders as one unit

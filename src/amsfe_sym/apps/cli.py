@@ -348,8 +348,7 @@ def _main(argv: Sequence[str] | None) -> int:
         except KeyboardInterrupt as exc:
             how = "SIGTERM" if isinstance(exc, Terminated) else "Ctrl-C"
             print(
-                f"interrupted: amsfe {args.command} stopped by {how}; nothing half-written "
-                f"was kept: {interrupted_note(book)}",
+                f"interrupted: amsfe {args.command} stopped by {how}; {interrupted_note(book)}",
                 file=sys.stderr,
             )
             return 143 if isinstance(exc, Terminated) else 130

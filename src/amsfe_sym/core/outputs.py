@@ -281,12 +281,11 @@ def note_written(paths: Sequence[Path]) -> None:
 
 
 def interrupted_note(book: Sequence[Output]) -> str:
-    """What an interrupted command kept, in words: the outputs it put in place, those it did
-    not write (an earlier one left as it was), and a resumable folder's finished part."""
-    if not book:
-        return "nothing was written"
+    """What an interrupted command kept, in words: nothing half-written, then the outputs it
+    put in place, those it did not write (an earlier one left as it was), and a resumable
+    folder's finished part."""
+    parts = ["nothing half-written was kept"]
     kept = [o.label for o in book if o.written and o.kind != "parent"]
-    parts = []
     if kept:
         parts.append("kept, complete: " + ", ".join(kept))
     for kind_ in ("folder", "file"):
@@ -300,4 +299,4 @@ def interrupted_note(book: Sequence[Output]) -> str:
     for o in book:
         if o.kind == "resume":
             parts.append(f"{o.label} keeps the runs finished so far (the same command resumes)")
-    return "; ".join(parts) or "nothing was written"
+    return "; ".join(parts)
