@@ -629,3 +629,64 @@ def test_every_json_the_tool_writes_is_strict_json(tmp: Path, capsys) -> None:
     assert {"summary.json", "comparison.json", "study.json", "sweep.json", "bench.json"} <= names
     for p in files:
         _strict(p.read_text())
+
+
+def test_a_nan_metric_is_null_with_its_reason_in_summary_json(
+    tmp: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A run whose NEES is NaN (a filter that lost its covariance) wrote ``NaN`` into
+    summary.json, which no strict parser reads; the real writer, fed that summary, writes
+    null and records why."""
+    import amsfe_sym.sim.record as record
+
+    real = record.summarize
+
+    def nan_nees(res):  # type: ignore[no-untyped-def]
+        return {**real(res), "nees_mean": float("nan")}
+
+    monkeypatch.setattr(record, "summarize", nan_nees)
+    assert main([*SIM, "--out", str(tmp / "run")]) == 0
+    doc = _strict((tmp / "run" / "summary.json").read_text())
+    assert isinstance(doc, dict)
+    assert doc["nees_mean"] is None and doc[NON_FINITE]["nees_mean"] == "nan"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_a_real_signal_during_simulate_bag_leaves_nothing(tmp_path: Path, sig: str) -> None:
+    """The same as a process: the signal mid-run (Python loop, 60 s of simulated time) ends
+    it with 130 / 143, one line naming the run folder and the bag as not written, and
+    nothing left (no run folder without its bag, no hidden temporary)."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "amsfe_sym",
+            *SIM[:3],
+            "--duration",
+            "60",
+            "--runtime",
+            "python",
+            "--no-plots",
+            "--no-progress",
+            "--out",
+            str(tmp_path / "run"),
+            "--bag",
+            str(tmp_path / "b"),
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    time.sleep(6.0)  # past the imports, inside the run
+    proc.send_signal(getattr(signal, sig))
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == (130 if sig == "SIGINT" else 143), err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "nothing half-written was kept; not written:" in lines[0], err
+    assert f"--out {tmp_path / 'run'}" in lines[0] and f"--bag {tmp_path / 'b'}" in lines[0]
+    assert list(tmp_path.iterdir()) == []
