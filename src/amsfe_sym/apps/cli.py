@@ -16,33 +16,25 @@ from pathlib import Path
 
 from amsfe_sym import __version__
 from amsfe_sym.apps.arguments import (
-    COUNT,
     DURATION,
-    JOINT_RANGE,
     SAMPLES,
     SEED,
     Parser,
     lock_arg,
-    number_type,
 )
 from amsfe_sym.apps.estimate import add_arguments as add_estimate_arguments
 from amsfe_sym.apps.estimate import from_args as estimate_from_args
+from amsfe_sym.apps.options import (
+    add_bench_arguments,
+    add_set,
+    add_study_arguments,
+    add_sweep_arguments,
+)
 from amsfe_sym.apps.sweep.command import from_args as sweep_from_args
 from amsfe_sym.core.outputs import check_output, interrupted_note, ledger
 from amsfe_sym.errors import AmsfeError, ConfigError, SpecError, describe
 
 __all__ = ["get_argument_parser", "main"]
-
-
-def _add_set(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scenario field, e.g. integrator=paper, filter.link_torque_std=2, "
-        'camera.delay=0 (see docs/scenarios.md; "robot" restores the robot\'s camera timing)',
-    )
 
 
 def get_argument_parser() -> argparse.ArgumentParser:
@@ -82,7 +74,8 @@ def get_argument_parser() -> argparse.ArgumentParser:
     c.add_argument(
         "--out",
         default=None,
-        help="parent folder of generated libraries (a missing library is built there)",
+        help="parent folder of generated libraries (a missing library is built there; a "
+        "folder of yours at <out>/<robot> is never replaced)",
     )
     c.add_argument("--lock", nargs="+", type=lock_arg, default=[], metavar="JOINT[=VALUE]")
     c.add_argument("--samples", type=SAMPLES, default=50, help="random states (default 50)")
@@ -137,168 +130,24 @@ def get_argument_parser() -> argparse.ArgumentParser:
         "DIR elsewhere is written together with the run folder, both or neither, and follows "
         "the --out rules",
     )
-    _add_set(s)
+    add_set(s)
 
     add_estimate_arguments(
         sub.add_parser("estimate", help="an estimator over a recorded rosbag2 / MCAP log")
     )
 
-    b = sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
-    b.add_argument("robot", nargs="?", default="paper_2link")
-    b.add_argument(
-        "--out",
-        default=None,
-        help="parent folder of generated libraries (a missing library is built there)",
+    add_bench_arguments(
+        sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
     )
-    b.add_argument("--repeat", type=COUNT, default=20000, help="calls per timing")
-    b.add_argument("--rounds", type=COUNT, default=5, help="timing rounds (median reported)")
-    b.add_argument(
-        "--json",
-        default=None,
-        metavar="FILE",
-        help="also write the report as JSON; an existing FILE is refused (checked before "
-        "the timings)",
+    add_study_arguments(
+        sub.add_parser("study", help="Monte Carlo over seeds x estimators: tables, NEES, figures")
     )
-    b.add_argument(
-        "--force",
-        action="store_true",
-        help="replace an existing --json report that amsfe bench wrote (never another file)",
+    add_sweep_arguments(
+        sub.add_parser(
+            "sweep",
+            help="scenario grid x estimators x controllers x seeds on Dask (docs/sweeps.md)",
+        )
     )
-    b.add_argument(
-        "--skip",
-        nargs="+",
-        choices=["generation", "calls", "estimators", "tick", "loop", "scaling"],
-        default=[],
-        help="sections to leave out",
-    )
-    b.add_argument(
-        "--joints",
-        type=JOINT_RANGE,
-        default=None,
-        metavar="A-B",
-        help="chain lengths of the scaling table (default 1-12)",
-    )
-    b.add_argument(
-        "--no-panda",
-        action="store_true",
-        help="leave the Panda (7 DOF, ~30 s of compile) out of the scaling table",
-    )
-    b.add_argument(
-        "--scaling-loop-duration",
-        type=DURATION,
-        default=2.0,
-        help="simulated time of each scaling row's closed loop [s]",
-    )
-    b.add_argument(
-        "--duration", type=DURATION, default=2.0, help="simulated time per estimator [s]"
-    )
-    b.add_argument(
-        "--loop-scenarios",
-        default=None,
-        metavar="A,B",
-        help="scenarios of the closed-loop section (default: the robot's timing scenario, "
-        "and ur5-control for the 2-link arm)",
-    )
-    b.add_argument(
-        "--loop-duration",
-        type=DURATION,
-        default=10.0,
-        help="simulated time of the closed-loop section [s] (default 10)",
-    )
-    b.add_argument("--scenario", default=None, help="scenario of the estimator section")
-    b.add_argument(
-        "--estimators", nargs="+", default=None, help="estimators to time (default all five)"
-    )
-    b.add_argument(
-        "--compare-cflags",
-        nargs="?",
-        const="",
-        default=None,
-        metavar="SETS",
-        help="recompile with comma-separated flag sets, e.g. --compare-cflags=-O0,-O1,'-O1 "
-        "-march=native' (no value: -O0..-O3, -Os, -O1 -march=native)",
-    )
-    b.add_argument("--compile-repeat", type=COUNT, default=1, help="builds per flag set (min)")
-
-    st = sub.add_parser("study", help="Monte Carlo over seeds x estimators: tables, NEES, figures")
-    st.add_argument("scenario", nargs="?", default="paper-sim", help="scenario name or .toml")
-    st.add_argument("--seeds", type=COUNT, default=20, help="number of seeds (default 20)")
-    st.add_argument("--first-seed", type=SEED, default=0, help="first seed (default 0)")
-    st.add_argument("--estimators", default="all", help="all | name,name (default all)")
-    st.add_argument("--duration", type=DURATION, default=None, help="simulated time [s]")
-    st.add_argument("--workers", type=COUNT, default=2, help="processes (default 2)")
-    st.add_argument(
-        "--out",
-        default=None,
-        help="study folder (default runs/study-<scenario>-<stamp>); an existing one is refused",
-    )
-    st.add_argument(
-        "--force",
-        action="store_true",
-        help="replace an existing --out study folder that amsfe wrote (never a folder of yours)",
-    )
-    _add_set(st)
-    st.add_argument(
-        "--variant",
-        nargs="+",
-        action="append",
-        default=[],
-        metavar="LABEL KEY=VALUE",
-        help="a named scenario variant (repeatable): --variant paper integrator=paper",
-    )
-    st.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    st.add_argument("--claims", action="store_true", help="the claim table of docs/reproduction.md")
-    st.add_argument(
-        "--runtime",
-        choices=("compiled", "python"),
-        default="compiled",
-        help="compiled: the loop in generated C (default); python: the reference",
-    )
-
-    sw = sub.add_parser(
-        "sweep", help="scenario grid x estimators x controllers x seeds on Dask (docs/sweeps.md)"
-    )
-    sw.add_argument("spec", help="sweep file (.toml), e.g. sweeps/camera-delay.toml")
-    sw.add_argument(
-        "--out",
-        default=None,
-        help="sweep folder (default runs/sweep-<name>): the same sweep there resumes; a "
-        "folder of yours is refused",
-    )
-    sw.add_argument(
-        "--scheduler",
-        default=None,
-        metavar="ADDRESS",
-        help="a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a local cluster)",
-    )
-    sw.add_argument(
-        "--workers",
-        type=number_type(int, 0, True, "pass --workers 2 (0: no Dask, runs in this process)"),
-        default=None,
-        help="local worker processes (default: the cores; 0: in this process, no Dask)",
-    )
-    sw.add_argument("--batch", type=COUNT, default=None, help="runs per task (default auto)")
-    sw.add_argument("--retry-errors", action="store_true", help="run the error rows again")
-    sw.add_argument(
-        "--force",
-        action="store_true",
-        help="start afresh in a folder of another sweep (never in a folder of yours)",
-    )
-    sw.add_argument(
-        "--repair",
-        action="store_true",
-        help="move unreadable parts or table to damaged/, keep the readable rows, go on",
-    )
-    sw.add_argument(
-        "--report",
-        action="store_true",
-        help="run nothing: print the table of the folder's results (and write the figures)",
-    )
-    sw.add_argument("--metric", default=None, help="metric of the table and figures")
-    sw.add_argument("--x", default=None, help="axis of the line plots (default [report] x)")
-    sw.add_argument("--y", default=None, help="second axis: heatmaps (default [report] y)")
-    sw.add_argument("--no-plots", action="store_true", help="skip the figures")
-    sw.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     return parser
 
 

@@ -12,6 +12,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from amsfe_sym.core.interrupts import DeferredSignals
+from amsfe_sym.core.ledger import note_written, resolved
 from amsfe_sym.errors import RunFolderError, describe
 
 __all__ = [
@@ -155,13 +157,11 @@ def write_folders(jobs: Sequence[FolderJob]) -> list[Path]:
     Ctrl-C and SIGTERM held for the renames (a run folder and its bag elsewhere: both or
     neither).  An error or interruption before leaves nothing of them, and what was there
     before untouched.  The outputs are marked written in the command's
-    :func:`~amsfe_sym.core.outputs.ledger`.
+    :func:`~amsfe_sym.core.ledger.ledger`.
 
     Returns:
         The ``out`` of each job, resolved.
     """
-    from amsfe_sym.core.interrupts import DeferredSignals
-    from amsfe_sym.core.outputs import note_written, resolved
 
     jobs = [FolderJob(resolved(j.out), j.fill, j.replace) for j in jobs]
     tmps: list[Path] = []

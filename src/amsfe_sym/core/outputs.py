@@ -23,14 +23,19 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
-from contextvars import ContextVar
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Literal
 
 from amsfe_sym.core.folders import is_run_folder
+from amsfe_sym.core.ledger import (
+    Kind,
+    Output,
+    interrupted_note,
+    ledger,
+    note_written,
+    record,
+    resolved,
+)
 from amsfe_sym.errors import RunFolderError, describe
 
 __all__ = [
@@ -45,44 +50,8 @@ __all__ = [
     "resolved",
 ]
 
-#: What is written at a path: ``folder`` a folder written whole (a run, an estimate, a bag);
-#: ``resume`` a folder the command adds to and resumes (a sweep); ``file`` one file
-#: (``bench --json``); ``parent`` a folder the command writes named children into (the
-#: libraries of ``generate --out``), never replaced itself.
-Kind = Literal["folder", "resume", "file", "parent"]
-
 #: The key of a JSON file's top-level object that marks it as the tool's own output.
 OWN_KEY = "written_by"
-
-
-@dataclass
-class Output:
-    """A path a command will write, as :func:`check_output` found it.
-
-    Attributes:
-        option: The command-line option that named it (``--out``, ``--bag``, ...).
-        path: The path as given (for messages).
-        resolved: The same path after ``resolve()`` (what is compared and written).
-        kind: What is written there (:data:`Kind`).
-        existed: Something was there before (a tool output to replace or resume).
-        written: The command has put it in place (set by the writers).
-    """
-
-    option: str
-    path: Path
-    resolved: Path
-    kind: Kind
-    existed: bool
-    written: bool = field(default=False)
-
-    @property
-    def label(self) -> str:
-        return f"{self.option} {self.path}"
-
-
-def resolved(path: str | os.PathLike[str]) -> Path:
-    """``path`` made absolute with symlinks and ``..`` resolved (as far as it exists)."""
-    return Path(path).expanduser().resolve()
 
 
 def is_own_file(path: Path) -> bool:
@@ -250,53 +219,5 @@ def check_output(
     else:
         _check_parent(label, option, target)
     out = Output(option, given, target, kind, existed)
-    book = _LEDGER.get()
-    if book is not None and not any(o.resolved == target and o.option == option for o in book):
-        book.append(out)
+    record(out)
     return out
-
-
-_LEDGER: ContextVar[list[Output] | None] = ContextVar("amsfe_outputs", default=None)
-
-
-@contextmanager
-def ledger() -> Iterator[list[Output]]:
-    """Record the outputs checked inside the block (the command line runs each command in
-    one), for :func:`interrupted_note`."""
-    book: list[Output] = []
-    token = _LEDGER.set(book)
-    try:
-        yield book
-    finally:
-        _LEDGER.reset(token)
-
-
-def note_written(paths: Sequence[Path]) -> None:
-    """Mark the outputs at ``paths`` (resolved) as put in place (called by the writers)."""
-    book = _LEDGER.get() or []
-    done = {Path(p) for p in paths}
-    for o in book:
-        if o.resolved in done:
-            o.written = True
-
-
-def interrupted_note(book: Sequence[Output]) -> str:
-    """What an interrupted command kept, in words: nothing half-written, then the outputs it
-    put in place, those it did not write (an earlier one left as it was), and a resumable
-    folder's finished part."""
-    parts = ["nothing half-written was kept"]
-    kept = [o.label for o in book if o.written and o.kind != "parent"]
-    if kept:
-        parts.append("kept, complete: " + ", ".join(kept))
-    for kind_ in ("folder", "file"):
-        missing = [o for o in book if o.kind == kind_ and not o.written]
-        if missing:
-            words = [
-                o.label + (" (the earlier one left as it was)" if o.existed else "")
-                for o in missing
-            ]
-            parts.append("not written: " + ", ".join(words))
-    for o in book:
-        if o.kind == "resume":
-            parts.append(f"{o.label} keeps the runs finished so far (the same command resumes)")
-    return "; ".join(parts)
