@@ -192,7 +192,15 @@ def check_output(
                 f"choose another {option}, or pass --force to replace it",
             )
     if existed and kind in ("folder", "resume") and target.is_dir():
-        empty = not any(target.iterdir())
+        try:
+            empty = not any(target.iterdir())
+        except OSError as exc:  # a folder this user cannot list: not one to replace
+            raise _refuse(
+                label,
+                "a folder this user can read",
+                f"one that cannot be listed ({exc.strerror})",
+                f"choose another {option}",
+            ) from exc
         if not empty and not is_own(target):
             raise _refuse(
                 label,
