@@ -690,3 +690,27 @@ def test_a_real_signal_during_simulate_bag_leaves_nothing(tmp_path: Path, sig: s
     assert len(lines) == 1 and "nothing half-written was kept; not written:" in lines[0], err
     assert f"--out {tmp_path / 'run'}" in lines[0] and f"--bag {tmp_path / 'b'}" in lines[0]
     assert list(tmp_path.iterdir()) == []
+
+
+def test_folders_written_before_the_marker_are_the_tools(tmp: Path, capsys) -> None:
+    """The study, claims and sweep folders in docs/data were written before the marker
+    existed: they count as the tool's own (their documented commands re-run with --force),
+    a folder of other files does not."""
+    from amsfe_sym.apps.study.claims import is_claims_folder
+    from amsfe_sym.apps.study.runner import is_study_folder
+    from amsfe_sym.apps.sweep.engine import is_sweep_folder
+
+    data = Path(__file__).resolve().parent.parent / "docs" / "data"
+    assert is_claims_folder(data / "claims-paper-sim")
+    assert is_study_folder(data / "study-paper-sim-estimators")
+    assert is_sweep_folder(data / "sweeps" / "camera-delay")
+    for check in (is_claims_folder, is_study_folder, is_sweep_folder):
+        assert not check(data)
+    argv = CASES[("study", "--out")].argv(tmp, tmp / "st")
+    assert main(argv) == 0
+    (tmp / "st" / MARKER).unlink()  # as an older amsfe wrote it
+    capsys.readouterr()
+    assert main(argv) == 2
+    _one_line(capsys, "pass --force")
+    assert main([*argv, "--force"]) == 0
+    assert (tmp / "st" / MARKER).is_file()

@@ -374,10 +374,17 @@ def _study(args: argparse.Namespace) -> int:
 
     inputs = _input_files(args.scenario)
     if args.claims:  # the claim table of docs/reproduction.md on these seeds
-        from amsfe_sym.apps.study.claims import format_claims, run_claims, write_claims
+        from amsfe_sym.apps.study.claims import (
+            format_claims,
+            is_claims_folder,
+            run_claims,
+            write_claims,
+        )
 
         if args.out:
-            check_output(args.out, option="--out", force=args.force, inputs=inputs)
+            check_output(
+                args.out, option="--out", force=args.force, inputs=inputs, own=is_claims_folder
+            )
         t = run_claims(
             args.scenario, args.first_seed, args.seeds, args.duration, args.workers, args.set
         )

@@ -13,6 +13,7 @@ signed-rank p-value (diverged seeds excluded from the test only, counted).
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
@@ -24,7 +25,15 @@ import numpy as np
 from amsfe_sym.core.folders import write_folder
 from amsfe_sym.core.jsonfile import write_json
 
-__all__ = ["CLAIM_PAIRS", "CLAIM_ROWS", "ClaimTable", "format_claims", "run_claims"]
+__all__ = [
+    "CLAIM_PAIRS",
+    "CLAIM_ROWS",
+    "ClaimTable",
+    "format_claims",
+    "is_claims_folder",
+    "run_claims",
+    "write_claims",
+]
 
 #: The rows: (controller, estimator).
 CLAIM_ROWS: tuple[tuple[str, str], ...] = (
@@ -183,6 +192,20 @@ def format_claims(t: ClaimTable) -> str:
                 f"{_mrad(s['p90_b'])} | {'-' if pv is None else f'{pv:.2g}'} |"
             )
     return head + "\n".join(lines) + "\n" + "\n".join(pairs) + "\n"
+
+
+def is_claims_folder(path: Path) -> bool:
+    """Whether ``path`` is a claims folder amsfe wrote: it holds the marker, or (written
+    before the marker existed) a ``claims.json`` with the claim table's keys."""
+    from amsfe_sym.core.folders import is_run_folder
+
+    if is_run_folder(path):
+        return True
+    try:
+        doc = json.loads((path / "claims.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(doc, dict) and {"rows", "pairs"} <= set(doc)
 
 
 def write_claims(t: ClaimTable, out: Path, force: bool = False) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import os
@@ -31,7 +32,7 @@ from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.estimation import ESTIMATORS
 from amsfe_sym.scenario import Scenario, apply_sets, load_scenario
 
-__all__ = ["StudyResult", "parse_estimators", "run_study"]
+__all__ = ["StudyResult", "is_study_folder", "parse_estimators", "run_study"]
 
 
 def parse_estimators(text: str | Sequence[str] | None) -> tuple[str, ...]:
@@ -150,7 +151,8 @@ def run_study(
         )
     stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
     folder = Path(out) if out else Path("runs") / f"study-{base.name}-{stamp}"
-    check_output(folder, option="--out", force=force, inputs=inputs)  # before the runs
+    # before the runs
+    check_output(folder, option="--out", force=force, inputs=inputs, own=is_study_folder)
 
     # Libraries: generated (if needed) here, once; workers load them by path.  Building every
     # (variant, estimator) run surfaces configuration errors before the pool starts.
@@ -280,6 +282,26 @@ def run_study(
     return StudyResult(
         out=folder, table=md, aggregate=agg, runs=[r["summary"] for r in done], figures=figs
     )
+
+
+def is_study_folder(path: Path) -> bool:
+    """Whether ``path`` is a study folder amsfe wrote: it holds the marker, or (written
+    before the marker existed) a ``study.json`` with the study's keys, or a ``study.md``
+    whose first line is the study report's title."""
+    from amsfe_sym.core.folders import is_run_folder
+
+    if is_run_folder(path):
+        return True
+    try:
+        doc = json.loads((path / "study.json").read_text())
+        return isinstance(doc, dict) and {"command", "aggregate"} <= set(doc)
+    except (OSError, ValueError):
+        pass
+    try:
+        with (path / "study.md").open() as f:
+            return f.readline().startswith("# Study: ")
+    except OSError:
+        return False
 
 
 def _jsonable(x: Any) -> Any:
