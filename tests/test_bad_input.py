@@ -581,6 +581,9 @@ def test_estimate_never_writes_over_its_own_log(here: Path, capsys) -> None:
         assert main(["estimate", "run/bag", "--out", out, "--force", "--no-plots"]) == 2
         line = _err_line(capsys)
         assert "the input run/bag" in line and "even with --force" in line, line
+    mcap = next((here / "run" / "bag").glob("*.mcap")).relative_to(here)
+    assert main(["estimate", str(mcap), "--out", "run/bag/est", "--no-plots"]) == 2
+    assert "the input run/bag" in _err_line(capsys)  # the .mcap's bag folder is the log
     assert _tree(here) == before
 
 

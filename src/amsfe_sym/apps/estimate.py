@@ -118,6 +118,8 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
     from amsfe_sym.sim.builders import build_estimator, build_sensors, scenario_timing
 
     inputs = [p for p in (log_path, options.scenario, options.log_spec) if p and Path(p).exists()]
+    if log_path.is_file() and (log_path.parent / "metadata.yaml").is_file():
+        inputs.append(log_path.parent)  # the .mcap of a bag folder: the folder is the log
     check_output(out, option="--out", force=options.force, inputs=inputs)
     spec = read_log_spec(options.log_spec)
     t0 = time.perf_counter()
