@@ -102,12 +102,16 @@ class FolderJob:
         fill: ``fill(tmp)`` writes its content into the hidden temporary folder ``tmp``.
         replace: An existing ``out`` is replaced (the caller checked it may be, see
             :func:`amsfe_sym.core.outputs.check_output`); off: an ``out`` that appeared
-            meanwhile (another writer) is refused.
+            meanwhile (another writer) is refused.  Even on, only the tool's own output is
+            replaced (``own``; an empty folder too): never a file or a folder of the user's.
+        own: Whether an existing folder is the tool's own output (default
+            :func:`is_run_folder`).
     """
 
     out: Path
     fill: Callable[[Path], None]
     replace: bool = True
+    own: Callable[[Path], bool] | None = None
 
 
 def _another_writer(out: Path) -> RunFolderError:
@@ -121,6 +125,29 @@ def _another_writer(out: Path) -> RunFolderError:
     )
 
 
+def _not_ours(job: FolderJob) -> RunFolderError | None:
+    """The error if ``job.out`` exists and is not the tool's own output (the last guard:
+    whatever a caller decided, a file or a folder of the user's is never replaced)."""
+    out = job.out
+    if not out.exists():
+        return None
+    if not out.is_dir():
+        found = "a file"
+    elif any(out.iterdir()) and not (job.own or is_run_folder)(out):
+        found = "a folder of other files (amsfe did not write it)"
+    else:
+        return None
+    return RunFolderError(
+        describe(
+            f"output folder {out}",
+            "a new folder or one amsfe wrote",
+            found,
+            "choose another path; amsfe never replaces what it did not write "
+            "(nothing of this run was kept)",
+        )
+    )
+
+
 def _commit(jobs: Sequence[FolderJob], tmps: Sequence[Path]) -> None:
     """Rename every ``tmps[i]`` to ``jobs[i].out``: all of them, or none (an error on the
     way puts back what was there before)."""
@@ -128,6 +155,8 @@ def _commit(jobs: Sequence[FolderJob], tmps: Sequence[Path]) -> None:
     try:
         for job, tmp in zip(jobs, tmps, strict=True):
             old = None
+            if job.replace and (refused := _not_ours(job)) is not None:
+                raise refused
             if job.replace and job.out.exists():
                 old = job.out.with_name(f".{job.out.name}.old-{os.getpid()}-{time.time_ns()}")
                 job.out.rename(old)
@@ -163,7 +192,7 @@ def write_folders(jobs: Sequence[FolderJob]) -> list[Path]:
         The ``out`` of each job, resolved.
     """
 
-    jobs = [FolderJob(resolved(j.out), j.fill, j.replace) for j in jobs]
+    jobs = [FolderJob(resolved(j.out), j.fill, j.replace, j.own) for j in jobs]
     tmps: list[Path] = []
     try:
         for job in jobs:
@@ -186,7 +215,12 @@ def write_folders(jobs: Sequence[FolderJob]) -> list[Path]:
     return [j.out for j in jobs]
 
 
-def write_folder(out: Path, fill: Callable[[Path], None], replace: bool = True) -> Path:
+def write_folder(
+    out: Path,
+    fill: Callable[[Path], None],
+    replace: bool = True,
+    own: Callable[[Path], bool] | None = None,
+) -> Path:
     """``fill(tmp)`` writes the folder's content into a hidden sibling ``tmp`` of ``out``,
     which then replaces ``out`` (:func:`write_folders` with one job; the caller decides
     beforehand whether it may be replaced).
@@ -197,5 +231,5 @@ def write_folder(out: Path, fill: Callable[[Path], None], replace: bool = True) 
     Returns:
         ``out``.
     """
-    write_folders([FolderJob(out, fill, replace)])
+    write_folders([FolderJob(out, fill, replace, own)])
     return out

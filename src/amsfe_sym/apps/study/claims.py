@@ -225,4 +225,4 @@ def write_claims(t: ClaimTable, out: Path, force: bool = False) -> None:
         write_json(tmp / "claims.json", doc, indent=1)
         (tmp / "claims.md").write_text(format_claims(t))
 
-    write_folder(out, fill, replace=force)
+    write_folder(out, fill, replace=force, own=is_claims_folder)

@@ -277,7 +277,7 @@ def run_study(
         write_json(tmp / "study.json", doc, indent=1, default=str)
         written.update(agg=agg, md=md, figs=[folder / f.relative_to(tmp) for f in figs])
 
-    write_folder(folder, fill, replace=force)
+    write_folder(folder, fill, replace=force, own=is_study_folder)
     agg, md, figs = written["agg"], written["md"], written["figs"]
     return StudyResult(
         out=folder, table=md, aggregate=agg, runs=[r["summary"] for r in done], figures=figs
