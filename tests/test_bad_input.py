@@ -72,6 +72,16 @@ CASES: list[tuple[str, dict[str, str], list[str], list[str]]] = [
     # allocation traceback): refused before anything is built, with the bytes
     ("duration_tiny", {}, ["simulate", "--duration", "1e-9"], ["duration", "T = 0.001", "1e-09"]),
     ("duration_huge", {}, ["simulate", "--duration", "1e7"], ["duration", "GiB", "bytes"]),
+    # ---- one seed rule (issue 25): 0 .. 2^63 - 1, so every config.toml re-runs
+    ("seed_2_64", {}, ["simulate", "--seed", str(2**64)], ["--seed", f"<= {2**63 - 1}"]),
+    ("seed_2_63", {}, ["simulate", "--seed", str(2**63)], ["--seed", f"<= {2**63 - 1}"]),
+    (
+        "toml_seed_2_63",
+        {"s.toml": _scenario(seed=str(2**63))},
+        ["simulate", "s.toml"],
+        ["seed", "2^63 - 1", str(2**63)],
+    ),
+    ("study_first_seed_2_64", {}, ["study", "--first-seed", str(2**64)], ["--first-seed"]),
     ("check_samples_zero", {}, ["check", "--samples", "0"], ["--samples", ">= 1", "cannot fail"]),
     ("check_samples_negative", {}, ["check", "--samples", "-3"], ["--samples", "'-3'"]),
     ("check_seed_text", {}, ["check", "--seed", "x"], ["--seed", "'x'"]),
@@ -512,3 +522,146 @@ def test_output_folders_follow_the_umask_and_clean_a_killed_runs_leftovers(
         os.umask(old)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
     assert (tmp_path / "run").stat().st_mode & 0o777 == 0o755
+
+
+# ---- issue 25: paths the tool writes (the full rule is walked in tests/test_outputs.py)
+@pytest.fixture()
+def here(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """An empty working folder (generated libraries stay in the session's shared cache)."""
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def _tree(folder: Path) -> dict[str, bytes | None]:
+    return {
+        str(p.relative_to(folder)): None if p.is_dir() else p.read_bytes()
+        for p in sorted(folder.rglob("*"))
+    }
+
+
+def _err_line(capsys: pytest.CaptureFixture[str]) -> str:
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: "), lines
+    return lines[0]
+
+
+def test_bag_never_replaces_what_the_user_did_not_hand_it(here: Path, capsys) -> None:
+    """``simulate --out RUN --bag DIR`` replaced whatever was at DIR without --force: a
+    folder of the user's, a file (only a hidden ``.NAME.old-*`` copy was left), the run
+    folder itself (``--bag RUN``), an earlier estimate folder.  All refused, untouched."""
+    assert main([*RUN, "--out", "earlier", "--bag"]) == 0
+    assert main(["estimate", "earlier/bag", "--no-plots", "--out", "est"]) == 0
+    (here / "mine").mkdir()
+    (here / "mine" / "data.csv").write_text("1,2,3")
+    (here / "notes.txt").write_text("mine")
+    capsys.readouterr()
+    before = _tree(here)
+    for bag, words in (
+        ("mine", ["did not write"]),
+        ("notes.txt", ["an existing file"]),
+        ("run", ["apart from --out run"]),
+        ("est", ["an existing folder", "--force"]),
+    ):
+        assert main([*RUN, "--out", "run", "--bag", bag]) == 2, bag
+        line = _err_line(capsys)
+        assert all(w in line for w in words), (bag, line)
+    assert _tree(here) == before  # nothing replaced, no hidden copies, no run folder
+    assert main([*RUN, "--out", "run", "--bag", "mine", "--force"]) == 2
+    assert "did not write" in _err_line(capsys)
+    assert _tree(here) == before
+
+
+def test_estimate_never_writes_over_its_own_log(here: Path, capsys) -> None:
+    """``amsfe estimate BAG --out BAG --force`` deleted the input log (the bag carries the
+    marker --force trusts) and wrote the estimate in its place, exit 0."""
+    assert main([*RUN, "--out", "run", "--bag"]) == 0
+    capsys.readouterr()
+    before = _tree(here)
+    for out in ("run/bag", "run", "run/bag/estimate"):
+        assert main(["estimate", "run/bag", "--out", out, "--force", "--no-plots"]) == 2
+        line = _err_line(capsys)
+        assert "the input run/bag" in line and "even with --force" in line, line
+    mcap = next((here / "run" / "bag").glob("*.mcap")).relative_to(here)
+    assert main(["estimate", str(mcap), "--out", "run/bag/est", "--no-plots"]) == 2
+    assert "the input run/bag" in _err_line(capsys)  # the .mcap's bag folder is the log
+    assert _tree(here) == before
+
+
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        ([*RUN, "--out", "notes.txt/run"], ["notes.txt is a file"]),
+        ([*RUN, "--out", "/proc/amsfe/run"], ["not writable"]),
+        ([*RUN, "--out", "run", "--bag", "/sys/amsfe-bag"], ["--bag", "not writable"]),
+        (["bench", "--skip", "calls", "--json", "folder"], ["--json folder", "existing folder"]),
+    ],
+    ids=["out_under_a_file", "out_read_only_parent", "bag_under_sys", "bench_json_folder"],
+)
+def test_path_problems_are_found_before_any_work(here: Path, capsys, argv, words) -> None:
+    """Found only after the whole run, with a traceback, before (issue 25): now one line
+    before anything runs or is generated (no library, no output on stdout)."""
+    (here / "notes.txt").write_text("mine")
+    (here / "folder").mkdir()
+    before = _tree(here)
+    assert main(argv) == 2
+    out, err = capsys.readouterr()
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and all(w in lines[0] for w in words), lines
+    assert out == ""
+    assert _tree(here) == before
+
+
+@pytest.mark.parametrize("seed", [0, 2**63 - 1])
+def test_config_toml_reruns_for_the_edge_seeds(here: Path, seed: int) -> None:
+    """A seed ``simulate`` accepts is one its own config.toml re-runs (2^64 was accepted,
+    then refused on the re-run): same seed, same time series."""
+    assert main([*RUN, "--seed", str(seed), "--out", "a"]) == 0
+    assert f"seed = {seed}" in (here / "a" / "config.toml").read_text()
+    rerun = ["simulate", "a/config.toml", "--no-progress", "--no-plots", "--out", "b"]
+    assert main(rerun) == 0
+    assert (here / "a" / "timeseries.csv").read_text() == (
+        here / "b" / "timeseries.csv"
+    ).read_text()
+
+
+@pytest.mark.parametrize("jobs", ["abc", "0", "-1"])
+def test_bad_build_jobs_is_one_line(here: Path, capsys, monkeypatch, jobs: str) -> None:
+    """``AMSFE_BUILD_JOBS=abc`` was ignored without a word."""
+    monkeypatch.setenv("AMSFE_BUILD_JOBS", jobs)
+    assert main(["generate", "paper_1link"]) == 2
+    line = _err_line(capsys)
+    assert "$AMSFE_BUILD_JOBS" in line and repr(jobs) in line and "export" in line
+    assert list(here.iterdir()) == []
+
+
+def test_a_log_whose_scenario_is_not_toml_is_one_line(here: Path, capsys) -> None:
+    """A log config whose ``scenario_toml`` is not TOML ended in a traceback: the bag of a
+    real run, rewritten with that one message changed."""
+    import json
+
+    from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+
+    from amsfe_sym.logs.source import typestore
+
+    assert main([*RUN, "--out", "run", "--bag"]) == 0
+    ts = typestore()
+    with (
+        Reader(here / "run" / "bag") as r,
+        Writer(here / "broken", version=9, storage_plugin=StoragePlugin.MCAP) as w,
+    ):
+        conns = {}
+        for c, t, raw in r.messages():
+            if c.topic not in conns:
+                conns[c.topic] = w.add_connection(c.topic, c.msgtype, typestore=ts)
+            if c.topic == "/amsfe/config":
+                cfg = json.loads(ts.deserialize_cdr(raw, c.msgtype).data)
+                cfg["scenario_toml"] = "robot = [unclosed"
+                msg = ts.types["std_msgs/msg/String"](data=json.dumps(cfg))
+                raw = ts.serialize_cdr(msg, c.msgtype)
+            w.write(conns[c.topic], t, raw)
+    capsys.readouterr()
+    before = _tree(here)
+    assert main(["estimate", "broken", "--no-plots", "--out", "est"]) == 2
+    line = _err_line(capsys)
+    assert "scenario_toml" in line and "not TOML" in line and "--scenario" in line, line
+    assert _tree(here) == before

@@ -80,5 +80,16 @@ def test_build_jobs_reads_the_environment(monkeypatch, jobs: str) -> None:
 
     monkeypatch.setenv("AMSFE_BUILD_JOBS", jobs)
     assert build_jobs() == int(jobs)
-    monkeypatch.setenv("AMSFE_BUILD_JOBS", "zero")
-    assert build_jobs() >= 1
+    monkeypatch.delenv("AMSFE_BUILD_JOBS")
+    assert build_jobs() >= 1  # unset: the cores
+
+
+@pytest.mark.parametrize("jobs", ["zero", "abc", "0", "-1", "2.5"])
+def test_a_bad_build_jobs_is_refused_not_ignored(monkeypatch, jobs: str) -> None:
+    """``$AMSFE_BUILD_JOBS=abc`` was ignored without a word (issue 25): one line now."""
+    from amsfe_sym.codegen.compile_units import build_jobs
+    from amsfe_sym.errors import CodegenError
+
+    monkeypatch.setenv("AMSFE_BUILD_JOBS", jobs)
+    with pytest.raises(CodegenError, match=r"\$AMSFE_BUILD_JOBS.*integer >= 1.*Fix: export"):
+        build_jobs()

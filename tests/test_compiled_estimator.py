@@ -168,8 +168,9 @@ def test_compiled_equals_python_on_the_6dof_ur5(name: str) -> None:
 def test_a_non_converged_inverse_does_not_refuse_frames(
     paper_sim: Recording, tmp_path_factory: pytest.TempPathFactory
 ) -> None:
-    """An inverse transition that does not converge no longer matters to oosm (issue 18): the
-    backward map of eq. (24) is linearised about the stored forward pass on both paths.
+    """An inverse transition that does not converge no longer matters to oosm's default
+    backward map (issue 18): it is linearised about the stored forward pass on both paths
+    (``backward_map = "inverse"`` refuses such frames: tests/test_compiled_backward_map.py).
 
     The paper_2link arm with its ``paper`` integrator and one chord step in the inverse
     (``inverse_iterations = 1``: residuals ~1e-6..1e-4, which refused every late frame of

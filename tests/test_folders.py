@@ -37,3 +37,25 @@ def test_complete_or_absent(tmp_path: Path) -> None:
         write_folder(out, broken)
     assert sorted(p.name for p in out.iterdir()) == [MARKER, "a.txt"]  # the old one, whole
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+def test_a_file_or_a_folder_of_the_users_is_never_replaced_even_when_asked(
+    tmp_path: Path,
+) -> None:
+    """The last guard, below every caller's check (issue 25): ``replace=True`` replaces
+    only the tool's own output or an empty folder."""
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "thesis.tex").write_text("months of work")
+    notes = tmp_path / "notes.txt"
+    notes.write_text("mine")
+    for target in (mine, notes):
+        with pytest.raises(RunFolderError, match="never replaces what it did not write"):
+            write_folder(target, lambda tmp: (tmp / "a.txt").write_text("1"), replace=True)
+    assert (mine / "thesis.tex").read_text() == "months of work"
+    assert notes.read_text() == "mine"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine", "notes.txt"]
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    write_folder(empty, lambda tmp: (tmp / "a.txt").write_text("1"), replace=True)
+    assert is_run_folder(empty)

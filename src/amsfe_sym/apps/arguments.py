@@ -7,6 +7,7 @@ import argparse
 import math
 from typing import Any, NoReturn
 
+from amsfe_sym.core.values import SEED_MAX
 from amsfe_sym.errors import describe
 
 __all__ = [
@@ -36,10 +37,13 @@ def lock_arg(text: str) -> tuple[str, float]:
     return name, v
 
 
-def number_type(kind: type, low: float, inclusive: bool, fix: str) -> Any:
+def number_type(kind: type, low: float, inclusive: bool, fix: str, high: int | None = None) -> Any:
     """An argparse ``type=`` that accepts a finite ``kind`` >= ``low`` (> when not inclusive)
-    and otherwise says, in one line, what it expected, what it found and how to fix it."""
+    and <= ``high`` (if given), and otherwise says, in one line, what it expected, what it
+    found and how to fix it."""
     bound = f"{'>=' if inclusive else '>'} {low:g}"
+    if high is not None:
+        bound += f" and <= {high}"
     expected = f"{'an integer' if kind is int else 'a finite number'} {bound}"
 
     def parse(text: str) -> Any:
@@ -48,7 +52,11 @@ def number_type(kind: type, low: float, inclusive: bool, fix: str) -> Any:
         except ValueError:
             value = None
         ok = value is not None and math.isfinite(value)
-        if not ok or (value < low if inclusive else value <= low):
+        if (
+            not ok
+            or (value < low if inclusive else value <= low)
+            or (high is not None and value > high)
+        ):
             raise argparse.ArgumentTypeError(
                 describe("value", expected, repr(text), fix).removeprefix("value: ")
             )
@@ -58,7 +66,8 @@ def number_type(kind: type, low: float, inclusive: bool, fix: str) -> Any:
     return parse
 
 
-SEED = number_type(int, 0, True, "pass a seed >= 0, e.g. --seed 0")
+#: The seed rule of :func:`amsfe_sym.core.values.read_seed`: 0 .. 2^63 - 1.
+SEED = number_type(int, 0, True, "pass a seed in that range, e.g. --seed 0", high=SEED_MAX)
 COUNT = number_type(int, 1, True, "pass a count >= 1")
 SAMPLES = number_type(int, 1, True, "pass --samples 50 (a check over no state cannot fail)")
 DURATION = number_type(float, 0.0, False, "pass a simulated time in seconds, e.g. --duration 2")

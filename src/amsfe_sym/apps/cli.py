@@ -12,35 +12,29 @@ import shlex
 import signal
 import sys
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
 from amsfe_sym import __version__
 from amsfe_sym.apps.arguments import (
-    COUNT,
     DURATION,
-    JOINT_RANGE,
     SAMPLES,
     SEED,
     Parser,
     lock_arg,
-    number_type,
 )
 from amsfe_sym.apps.estimate import add_arguments as add_estimate_arguments
 from amsfe_sym.apps.estimate import from_args as estimate_from_args
+from amsfe_sym.apps.options import (
+    add_bench_arguments,
+    add_set,
+    add_study_arguments,
+    add_sweep_arguments,
+)
 from amsfe_sym.apps.sweep.command import from_args as sweep_from_args
+from amsfe_sym.core.outputs import check_output, interrupted_note, ledger
 from amsfe_sym.errors import AmsfeError, ConfigError, SpecError, describe
 
 __all__ = ["get_argument_parser", "main"]
-
-
-def _add_set(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scenario field, e.g. integrator=paper, filter.link_torque_std=2, "
-        'camera.delay=0 (see docs/scenarios.md; "robot" restores the robot\'s camera timing)',
-    )
 
 
 def get_argument_parser() -> argparse.ArgumentParser:
@@ -58,7 +52,12 @@ def get_argument_parser() -> argparse.ArgumentParser:
 
     g = sub.add_parser("generate", help="URDF/robot -> generated/<name>/ (C, library, manifest)")
     g.add_argument("robot", nargs="?", default="paper_2link", help="robot name, folder or URDF")
-    g.add_argument("--out", default=None, help="parent output folder (default: generated/)")
+    g.add_argument(
+        "--out",
+        default=None,
+        help="parent folder of the libraries (default: generated/); a file or a folder of "
+        "yours at <out>/<robot> is never replaced",
+    )
     g.add_argument(
         "--lock",
         nargs="+",
@@ -72,7 +71,12 @@ def get_argument_parser() -> argparse.ArgumentParser:
 
     c = sub.add_parser("check", help="every generated function vs Pinocchio / finite differences")
     c.add_argument("robot", nargs="?", default="paper_2link")
-    c.add_argument("--out", default=None, help="parent folder of generated libraries")
+    c.add_argument(
+        "--out",
+        default=None,
+        help="parent folder of generated libraries (a missing library is built there; a "
+        "folder of yours at <out>/<robot> is never replaced)",
+    )
     c.add_argument("--lock", nargs="+", type=lock_arg, default=[], metavar="JOINT[=VALUE]")
     c.add_argument("--samples", type=SAMPLES, default=50, help="random states (default 50)")
     c.add_argument("--seed", type=SEED, default=0)
@@ -96,10 +100,20 @@ def get_argument_parser() -> argparse.ArgumentParser:
     )
     s.add_argument("--seed", type=SEED, default=None)
     s.add_argument("--duration", type=DURATION, default=None, help="simulated time [s]")
-    s.add_argument("--out", default=None, help="run folder (default runs/<scenario>-<stamp>)")
+    s.add_argument(
+        "--out",
+        default=None,
+        help="run folder (default runs/<scenario>-<stamp>); an existing one is refused "
+        "(docs/scenarios.md, 'Output paths')",
+    )
     s.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     s.add_argument("--no-plots", action="store_true", help="skip the figures")
-    s.add_argument("--force", action="store_true", help="replace an existing --out run folder")
+    s.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing --out (and --bag) that amsfe wrote; never a folder of "
+        "yours, never an input",
+    )
     s.add_argument(
         "--runtime",
         choices=("compiled", "python"),
@@ -112,139 +126,28 @@ def get_argument_parser() -> argparse.ArgumentParser:
         const="",
         default=None,
         metavar="DIR",
-        help="also write the run as a rosbag2 in MCAP (default <run folder>/bag; docs/logs.md)",
+        help="also write the run as a rosbag2 in MCAP (default <run folder>/bag; docs/logs.md); "
+        "DIR elsewhere is written together with the run folder, both or neither, and follows "
+        "the --out rules",
     )
-    _add_set(s)
+    add_set(s)
 
     add_estimate_arguments(
         sub.add_parser("estimate", help="an estimator over a recorded rosbag2 / MCAP log")
     )
 
-    b = sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
-    b.add_argument("robot", nargs="?", default="paper_2link")
-    b.add_argument("--out", default=None, help="parent folder of generated libraries")
-    b.add_argument("--repeat", type=COUNT, default=20000, help="calls per timing")
-    b.add_argument("--rounds", type=COUNT, default=5, help="timing rounds (median reported)")
-    b.add_argument("--json", default=None, metavar="FILE", help="also write the report as JSON")
-    b.add_argument(
-        "--skip",
-        nargs="+",
-        choices=["generation", "calls", "estimators", "tick", "loop", "scaling"],
-        default=[],
-        help="sections to leave out",
+    add_bench_arguments(
+        sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
     )
-    b.add_argument(
-        "--joints",
-        type=JOINT_RANGE,
-        default=None,
-        metavar="A-B",
-        help="chain lengths of the scaling table (default 1-12)",
+    add_study_arguments(
+        sub.add_parser("study", help="Monte Carlo over seeds x estimators: tables, NEES, figures")
     )
-    b.add_argument(
-        "--no-panda",
-        action="store_true",
-        help="leave the Panda (7 DOF, ~30 s of compile) out of the scaling table",
+    add_sweep_arguments(
+        sub.add_parser(
+            "sweep",
+            help="scenario grid x estimators x controllers x seeds on Dask (docs/sweeps.md)",
+        )
     )
-    b.add_argument(
-        "--scaling-loop-duration",
-        type=DURATION,
-        default=2.0,
-        help="simulated time of each scaling row's closed loop [s]",
-    )
-    b.add_argument(
-        "--duration", type=DURATION, default=2.0, help="simulated time per estimator [s]"
-    )
-    b.add_argument(
-        "--loop-scenarios",
-        default=None,
-        metavar="A,B",
-        help="scenarios of the closed-loop section (default: the robot's timing scenario, "
-        "and ur5-control for the 2-link arm)",
-    )
-    b.add_argument(
-        "--loop-duration",
-        type=DURATION,
-        default=10.0,
-        help="simulated time of the closed-loop section [s] (default 10)",
-    )
-    b.add_argument("--scenario", default=None, help="scenario of the estimator section")
-    b.add_argument(
-        "--estimators", nargs="+", default=None, help="estimators to time (default all five)"
-    )
-    b.add_argument(
-        "--compare-cflags",
-        nargs="?",
-        const="",
-        default=None,
-        metavar="SETS",
-        help="recompile with comma-separated flag sets, e.g. --compare-cflags=-O0,-O1,'-O1 "
-        "-march=native' (no value: -O0..-O3, -Os, -O1 -march=native)",
-    )
-    b.add_argument("--compile-repeat", type=COUNT, default=1, help="builds per flag set (min)")
-
-    st = sub.add_parser("study", help="Monte Carlo over seeds x estimators: tables, NEES, figures")
-    st.add_argument("scenario", nargs="?", default="paper-sim", help="scenario name or .toml")
-    st.add_argument("--seeds", type=COUNT, default=20, help="number of seeds (default 20)")
-    st.add_argument("--first-seed", type=SEED, default=0, help="first seed (default 0)")
-    st.add_argument("--estimators", default="all", help="all | name,name (default all)")
-    st.add_argument("--duration", type=DURATION, default=None, help="simulated time [s]")
-    st.add_argument("--workers", type=COUNT, default=2, help="processes (default 2)")
-    st.add_argument("--out", default=None, help="folder (default runs/study-<scenario>-<stamp>)")
-    _add_set(st)
-    st.add_argument(
-        "--variant",
-        nargs="+",
-        action="append",
-        default=[],
-        metavar="LABEL KEY=VALUE",
-        help="a named scenario variant (repeatable): --variant paper integrator=paper",
-    )
-    st.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    st.add_argument("--claims", action="store_true", help="the claim table of docs/reproduction.md")
-    st.add_argument(
-        "--runtime",
-        choices=("compiled", "python"),
-        default="compiled",
-        help="compiled: the loop in generated C (default); python: the reference",
-    )
-
-    sw = sub.add_parser(
-        "sweep", help="scenario grid x estimators x controllers x seeds on Dask (docs/sweeps.md)"
-    )
-    sw.add_argument("spec", help="sweep file (.toml), e.g. sweeps/camera-delay.toml")
-    sw.add_argument("--out", default=None, help="sweep folder (default runs/sweep-<name>)")
-    sw.add_argument(
-        "--scheduler",
-        default=None,
-        metavar="ADDRESS",
-        help="a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a local cluster)",
-    )
-    sw.add_argument(
-        "--workers",
-        type=number_type(int, 0, True, "pass --workers 2 (0: no Dask, runs in this process)"),
-        default=None,
-        help="local worker processes (default: the cores; 0: in this process, no Dask)",
-    )
-    sw.add_argument("--batch", type=COUNT, default=None, help="runs per task (default auto)")
-    sw.add_argument("--retry-errors", action="store_true", help="run the error rows again")
-    sw.add_argument(
-        "--force", action="store_true", help="start afresh in a folder of another sweep"
-    )
-    sw.add_argument(
-        "--repair",
-        action="store_true",
-        help="move unreadable parts or table to damaged/, keep the readable rows, go on",
-    )
-    sw.add_argument(
-        "--report",
-        action="store_true",
-        help="run nothing: print the table of the folder's results (and write the figures)",
-    )
-    sw.add_argument("--metric", default=None, help="metric of the table and figures")
-    sw.add_argument("--x", default=None, help="axis of the line plots (default [report] x)")
-    sw.add_argument("--y", default=None, help="second axis: heatmaps (default [report] y)")
-    sw.add_argument("--no-plots", action="store_true", help="skip the figures")
-    sw.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     return parser
 
 
@@ -284,19 +187,20 @@ def _main(argv: Sequence[str] | None) -> int:
         "study": _study,
         "sweep": sweep_from_args,
     }
-    try:
-        if args.command in commands:
-            return commands[args.command](args)
-    except AmsfeError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt as exc:
-        how = "SIGTERM" if isinstance(exc, Terminated) else "Ctrl-C"
-        print(
-            f"interrupted: amsfe {args.command} stopped by {how}; nothing half-written was kept",
-            file=sys.stderr,
-        )
-        return 143 if isinstance(exc, Terminated) else 130
+    with ledger() as book:
+        try:
+            if args.command in commands:
+                return commands[args.command](args)
+        except AmsfeError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt as exc:
+            how = "SIGTERM" if isinstance(exc, Terminated) else "Ctrl-C"
+            print(
+                f"interrupted: amsfe {args.command} stopped by {how}; {interrupted_note(book)}",
+                file=sys.stderr,
+            )
+            return 143 if isinstance(exc, Terminated) else 130
     raise SpecError(
         describe(
             "command",
@@ -310,6 +214,8 @@ def _main(argv: Sequence[str] | None) -> int:
 def _generate(args: argparse.Namespace) -> int:
     from amsfe_sym.codegen import generate
 
+    if args.out:
+        check_output(args.out, option="--out", kind="parent")
     extra = args.cflags.split() if args.cflags else None
     res = generate(
         args.robot,
@@ -332,6 +238,8 @@ def _check(args: argparse.Namespace) -> int:
     from amsfe_sym.load import load_robot
     from amsfe_sym.runtime.library import ModelLibrary
 
+    if args.out:
+        check_output(args.out, option="--out", kind="parent")
     lock = dict(args.lock)
     extra = shlex.split(args.cflags) if args.cflags else None
     # the checks cover the model functions: reuse the full library if it is built, else build
@@ -362,9 +270,14 @@ def _simulate(args: argparse.Namespace) -> int:
     """``amsfe simulate``: load the scenario, apply the overrides, generate its library, run,
     write the run folder and print the headline numbers (:mod:`amsfe_sym.apps.simulate`)."""
     from datetime import datetime, timezone
-    from pathlib import Path
 
-    from amsfe_sym.apps.simulate import SimulateOptions, simulate_comparison, simulate_one
+    from amsfe_sym.apps.simulate import (
+        BAG_IN_RUN,
+        SimulateOptions,
+        check_outputs,
+        simulate_comparison,
+        simulate_one,
+    )
     from amsfe_sym.codegen import library_for
     from amsfe_sym.scenario import apply_sets, load_scenario
 
@@ -376,7 +289,6 @@ def _simulate(args: argparse.Namespace) -> int:
     )
     if args.set:
         sc = apply_sets(sc, args.set)
-    lib = library_for(sc)
     stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
     compare = tuple(args.compare.split(",")) if args.compare else sc.compare
     options = SimulateOptions(
@@ -384,20 +296,40 @@ def _simulate(args: argparse.Namespace) -> int:
         force=args.force,
         progress=not args.no_progress,
         runtime=args.runtime,
-        bag=None if args.bag is None else Path(args.bag) if args.bag else Path(),
+        bag=None if args.bag is None else Path(args.bag) if args.bag else BAG_IN_RUN,
+        inputs=_input_files(args.scenario),
     )
-    if compare and args.controller is None:  # the paper's comparison on one seed
-        out = Path(args.out) if args.out else Path("runs") / f"{sc.name}-{stamp}"
-        simulate_comparison(sc, lib, compare, out, options)
-    else:
-        out = Path(args.out) if args.out else Path("runs") / f"{sc.name}-{sc.estimator}-{stamp}"
+    one = not (compare and args.controller is None)  # else: the paper's comparison
+    name = f"{sc.name}-{sc.estimator}-{stamp}" if one else f"{sc.name}-{stamp}"
+    out = Path(args.out) if args.out else Path("runs") / name
+    check_outputs(out, options)  # before the library is generated and the run
+    lib = library_for(sc)
+    if one:
         simulate_one(sc, lib, out, options)
+    else:
+        simulate_comparison(sc, lib, compare, out, options)
     return 0
+
+
+def _input_files(*names: str | None) -> tuple[Path, ...]:
+    """The arguments that name existing files or folders (a scenario or robot may also be
+    a shipped name): the inputs an output may not be, hold or lie inside."""
+    return tuple(Path(n) for n in names if n and Path(n).exists())
 
 
 def _bench(args: argparse.Namespace) -> int:
     from amsfe_sym.apps.bench import BenchOptions, run_bench
 
+    if args.out:
+        check_output(args.out, option="--out", kind="parent")
+    if args.json:
+        check_output(
+            args.json,
+            option="--json",
+            kind="file",
+            force=args.force,
+            inputs=_input_files(args.robot),
+        )
     sets = args.compare_cflags
     return run_bench(
         BenchOptions(
@@ -440,17 +372,25 @@ def _parse_variant(items: Sequence[str]) -> tuple[str, list[str]]:
 def _study(args: argparse.Namespace) -> int:
     from amsfe_sym.apps.study import run_study
 
+    inputs = _input_files(args.scenario)
     if args.claims:  # the claim table of docs/reproduction.md on these seeds
-        from pathlib import Path
+        from amsfe_sym.apps.study.claims import (
+            format_claims,
+            is_claims_folder,
+            run_claims,
+            write_claims,
+        )
 
-        from amsfe_sym.apps.study.claims import format_claims, run_claims, write_claims
-
+        if args.out:
+            check_output(
+                args.out, option="--out", force=args.force, inputs=inputs, own=is_claims_folder
+            )
         t = run_claims(
             args.scenario, args.first_seed, args.seeds, args.duration, args.workers, args.set
         )
         print(format_claims(t))
         if args.out:
-            write_claims(t, Path(args.out))
+            write_claims(t, Path(args.out), force=args.force)
         return 0
     variants = dict(_parse_variant(v) for v in (args.variant or [])) or None
     res = run_study(
@@ -465,6 +405,8 @@ def _study(args: argparse.Namespace) -> int:
         first_seed=args.first_seed,
         progress=not args.no_progress,
         runtime=args.runtime,
+        force=args.force,
+        inputs=inputs,
     )
     print(res.table)
     print(f"study folder: {res.out} (study.md, study.json, {len(res.figures)} figures)")

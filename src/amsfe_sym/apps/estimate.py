@@ -13,7 +13,6 @@ the robot's library is generated or loaded.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import time
 from dataclasses import dataclass, replace
@@ -23,6 +22,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from amsfe_sym.core.folders import write_folder
+from amsfe_sym.core.jsonfile import write_json
+from amsfe_sym.core.outputs import check_output
 from amsfe_sym.core.provenance import provenance
 from amsfe_sym.core.toml import dump_toml, tomllib
 from amsfe_sym.errors import LogError, describe
@@ -30,7 +31,6 @@ from amsfe_sym.logs.read import LogRateError, RobotLog, plan_log, read_config, r
 from amsfe_sym.logs.source import log_topics
 from amsfe_sym.logs.spec import read_log_spec
 from amsfe_sym.scenario import Scenario, load_scenario, parse_scenario
-from amsfe_sym.sim.record import check_out
 
 if TYPE_CHECKING:  # the estimators (scipy) are imported when a log is estimated, not at start
     from amsfe_sym.logs.replay import LogEstimate
@@ -131,10 +131,25 @@ def _robot_of(scenario_robot: str) -> tuple[str, list[str], float, int]:
     return spec.name, joints, spec.model.T, 4 * len(joints) + len(spec.theta)
 
 
+def _config_scenario(path: Path, config: dict[str, Any]) -> Scenario:
+    try:
+        data = tomllib.loads(str(config["scenario_toml"]))
+    except tomllib.TOMLDecodeError as exc:
+        raise LogError(
+            describe(
+                f"log {path}: /amsfe/config scenario_toml",
+                "the run's scenario as TOML (written by amsfe simulate --bag)",
+                f"text that is not TOML ({exc})",
+                "pass --scenario FILE (or --robot ROBOT) to give it yourself (docs/logs.md)",
+            )
+        ) from exc
+    return parse_scenario(data, path)
+
+
 def _scenario(path: Path, config: dict[str, Any] | None, options: EstimateOptions) -> Scenario:
     from_config = None
     if config is not None and "scenario_toml" in config:
-        from_config = parse_scenario(tomllib.loads(str(config["scenario_toml"])), path)
+        from_config = _config_scenario(path, config)
     if options.scenario is not None:
         sc = load_scenario(options.scenario)
     elif options.robot is not None:
@@ -215,9 +230,13 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
 
     Raises:
         LogError: the log cannot be used (one line: what, found, fix).
-        ConfigError, RunFolderError: bad settings, an existing ``out`` without ``force``.
+        ConfigError, RunFolderError: bad settings, an existing ``out`` without ``force``, an
+            ``out`` that is, holds or lies inside an input (the log), even with ``force``.
     """
-    check_out(out, options.force)
+    inputs = [p for p in (log_path, options.scenario, options.log_spec) if p and Path(p).exists()]
+    if log_path.is_file() and (log_path.parent / "metadata.yaml").is_file():
+        inputs.append(log_path.parent)  # the .mcap of a bag folder: the folder is the log
+    check_output(out, option="--out", force=options.force, inputs=inputs)
     spec = read_log_spec(options.log_spec)
     t0 = time.perf_counter()
     topics = log_topics(log_path)
@@ -391,10 +410,19 @@ def add_arguments(e: argparse.ArgumentParser) -> None:
         "--log-spec", default=None, metavar="FILE", help="topics, joint names, effort kind (TOML)"
     )
     e.add_argument("--estimator", default=None, help="estimator name (default the scenario's)")
-    e.add_argument("--out", default=None, help="run folder (default runs/estimate-<log>-<stamp>)")
+    e.add_argument(
+        "--out",
+        default=None,
+        help="run folder (default runs/estimate-<log>-<stamp>); never the log, inside it or "
+        "around it, even with --force",
+    )
     e.add_argument("--runtime", choices=("compiled", "python"), default="compiled")
     e.add_argument("--no-plots", action="store_true", help="skip the figures")
-    e.add_argument("--force", action="store_true", help="replace an existing --out run folder")
+    e.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing --out run folder that amsfe wrote (never an input)",
+    )
 
 
 def from_args(args: argparse.Namespace) -> int:
@@ -466,9 +494,7 @@ def _write(run: EstimateRun, joints: tuple[str, ...] | list[str], options: Estim
         if est.nees is not None:
             cols["nees"] = est.nees
         pd.DataFrame(cols).to_parquet(tmp / "estimates.parquet")
-        (tmp / "summary.json").write_text(
-            json.dumps(summary(run), indent=2, allow_nan=False) + "\n"
-        )
+        write_json(tmp / "summary.json", summary(run))
         (tmp / "config.toml").write_text(
             f"# the scenario amsfe estimate used on {log.path}\n"
             + dump_toml(run.scenario.to_dict())

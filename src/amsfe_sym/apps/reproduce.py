@@ -20,7 +20,6 @@ A diverged run is drawn up to the time it diverged, and the figures say so.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -29,13 +28,15 @@ from typing import Any
 import numpy as np
 
 from amsfe_sym.core.folders import write_folder
+from amsfe_sym.core.jsonfile import write_json
+from amsfe_sym.core.outputs import check_output
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.sim.loop import run
-from amsfe_sym.sim.record import check_out, summarize, write_run
+from amsfe_sym.sim.record import run_filler, summarize
 from amsfe_sym.sim.result import RunResult
 
-__all__ = ["Comparison", "run_comparison", "write_comparison"]
+__all__ = ["Comparison", "comparison_filler", "run_comparison", "write_comparison"]
 
 
 @dataclass
@@ -83,6 +84,31 @@ def comparison_table(cmp: Comparison) -> dict[str, Any]:
     }
 
 
+def comparison_filler(
+    cmp: Comparison,
+    figures: Callable[[Comparison, Path], object] | None = None,
+    extra: Callable[[str, RunResult, Path], object] | None = None,
+) -> Callable[[Path], None]:
+    """The ``fill(folder)`` of a comparison folder: each run in ``folder/<controller>/``
+    (then ``extra(controller, result, run_folder)``, e.g. its bag), ``comparison.json`` and
+    ``figures(cmp, folder)``."""
+
+    def fill(tmp: Path) -> None:
+        for name, res in cmp.results.items():
+            run_dir = tmp / name
+
+            def more(folder: Path, name: str = name, res: RunResult = res) -> None:
+                if extra is not None:
+                    extra(name, res, folder)
+
+            write_folder(run_dir, run_filler(res, run_dir, extra=more), replace=False)
+        write_json(tmp / "comparison.json", comparison_table(cmp))
+        if figures is not None:
+            figures(cmp, tmp)
+
+    return fill
+
+
 def write_comparison(
     cmp: Comparison,
     out: Path,
@@ -93,18 +119,11 @@ def write_comparison(
     (``figures(cmp, folder)``, e.g. :func:`amsfe_sym.apps.plots.paper.plot_comparison`).
 
     The folder is built beside ``out`` under a hidden name and renamed at the end, so it is
-    complete or absent; an existing ``out`` is refused unless ``force`` (see ``check_out``).
+    complete or absent; an existing ``out`` is refused unless ``force`` and this tool wrote
+    it (:func:`amsfe_sym.core.outputs.check_output`).
     """
-    check_out(out, force)
-
-    def fill(tmp: Path) -> None:
-        for name, res in cmp.results.items():
-            write_run(res, tmp / name)
-        (tmp / "comparison.json").write_text(json.dumps(comparison_table(cmp), indent=2) + "\n")
-        if figures is not None:
-            figures(cmp, tmp)
-
-    return write_folder(out, fill, replace=force) / "comparison.json"
+    check_output(out, option="out", force=force)
+    return write_folder(out, comparison_filler(cmp, figures), replace=force) / "comparison.json"
 
 
 def print_comparison(cmp: Comparison, out: Path) -> None:

@@ -13,13 +13,29 @@ from pathlib import Path
 
 import numpy as np
 
+from amsfe_sym.core.folders import FolderJob, write_folders
+from amsfe_sym.core.outputs import Output, check_output
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.sim.loop import run
-from amsfe_sym.sim.record import check_out, summarize, write_run
+from amsfe_sym.sim.record import run_filler, summarize
 from amsfe_sym.sim.result import RunResult
 
-__all__ = ["RunResult", "SimulateOptions", "print_run", "simulate_comparison", "simulate_one"]
+__all__ = [
+    "BAG_IN_RUN",
+    "RunResult",
+    "SimulateOptions",
+    "SimulateOutputs",
+    "check_outputs",
+    "print_run",
+    "simulate_comparison",
+    "simulate_one",
+    "write_bag",
+]
+
+
+#: ``SimulateOptions.bag`` for the bag inside the run folder (``--bag`` without a folder).
+BAG_IN_RUN = "<run folder>/bag"
 
 
 @dataclass(frozen=True)
@@ -28,51 +44,109 @@ class SimulateOptions:
 
     Attributes:
         plots: Draw the figures into the run folder.
-        force: Replace an existing run folder.
+        force: Replace an existing run folder (and bag) that this tool wrote.
         progress: Show a progress bar.
         runtime: ``"compiled"`` (the C loop) or ``"python"`` (the reference loop).
         bag: Also write the run as a rosbag2 in MCAP (:mod:`amsfe_sym.logs.write`) at this
-            folder; ``Path()`` (empty): ``<run folder>/bag``; None: no bag.
+            folder; :data:`BAG_IN_RUN`: ``<run folder>/bag``; None: no bag.
+        inputs: Files the command reads (the scenario file): never written.
     """
 
     plots: bool = True
     force: bool = False
     progress: bool = False
     runtime: str = "compiled"
-    bag: Path | None = None
+    bag: Path | str | None = None
+    inputs: tuple[Path, ...] = ()
+
+
+@dataclass(frozen=True)
+class SimulateOutputs:
+    """The checked outputs of one ``amsfe simulate``: the run (or comparison) folder and,
+    when ``--bag DIR`` names a folder elsewhere, that bag folder."""
+
+    run: Output
+    bag: Output | None
+
+
+def check_outputs(out: Path, options: SimulateOptions) -> SimulateOutputs:
+    """Check ``out`` and ``options.bag`` before the run (:func:`check_output`): an explicit
+    ``--bag`` may not be, hold or lie inside ``--out`` (``--bag`` alone writes it there).
+
+    Raises:
+        RunFolderError: one line naming the path, what is there and what to do.
+    """
+    run_out = check_output(out, option="--out", force=options.force, inputs=options.inputs)
+    bag = None
+    if options.bag is not None and options.bag != BAG_IN_RUN:
+        bag = check_output(
+            options.bag,
+            option="--bag",
+            force=options.force,
+            inputs=options.inputs,
+            others=[run_out],
+        )
+    return SimulateOutputs(run_out, bag)
+
+
+def _urdf_text(res: RunResult) -> str | None:
+    urdf = Path(res.lib.manifest.urdf)
+    return urdf.read_text() if urdf.is_file() else None
+
+
+def _write_bag_into(res: RunResult, folder: Path) -> None:
+    """The run's bag as ``folder/bag``, inside the run folder being written."""
+    from amsfe_sym.logs.write import run_bag_filler
+
+    run_bag_filler(res, _urdf_text(res))(folder / "bag")
 
 
 def simulate_one(
     sc: Scenario, lib: ModelLibrary, out: Path, options: SimulateOptions = SimulateOptions()
 ) -> RunResult:
     """Run ``sc`` on ``lib``, write the run folder ``out`` (with figures if
-    ``options.plots``) and print its headline numbers.
+    ``options.plots``, and its bag) and print its headline numbers.
+
+    The run folder and the bag are one unit: a bag inside the run folder is written in the
+    same temporary folder, a bag elsewhere is renamed into place together with it
+    (:func:`~amsfe_sym.core.folders.write_folders`): both or neither.
 
     Raises:
-        RunFolderError: ``out`` exists and ``options.force`` is off (checked before the run).
+        RunFolderError: ``out`` or the bag cannot be written as asked (checked before the
+            run).
     """
-    check_out(out, options.force)  # before the run: nothing is computed for nothing
+    from amsfe_sym.logs.write import bag_job, run_bag_filler
+
+    outs = check_outputs(out, options)  # before the run: nothing is computed for nothing
     res = run(sc, lib, progress=options.progress, runtime=options.runtime)
     figures = None
     if options.plots:
         from amsfe_sym.apps.plots.run import plot_run
 
         figures = plot_run
-    write_run(res, out, figures=figures, force=options.force)
+    inside = options.bag == BAG_IN_RUN
+
+    def extra(folder: Path) -> None:
+        if inside:
+            _write_bag_into(res, folder)
+
+    jobs = [FolderJob(out, run_filler(res, out, figures, extra), options.force)]
+    if outs.bag is not None:
+        jobs.append(bag_job(outs.bag.path, run_bag_filler(res, _urdf_text(res)), options.force))
+    write_folders(jobs)
     if options.bag is not None:
-        bag = write_bag(res, out / "bag" if options.bag == Path() else options.bag)
+        bag = out / "bag" if inside else Path(options.bag)
         print(f"bag: {bag} (open its .mcap in Foxglove; amsfe estimate {bag})")
     print_run(res, out)
     return res
 
 
-def write_bag(res: RunResult, path: Path) -> Path:
+def write_bag(res: RunResult, path: Path, replace: bool = False) -> Path:
     """The run as a rosbag2 in MCAP with its URDF, ``/tf`` of the true and estimated arms,
     sensors, torque, truth and config (``amsfe estimate`` reads it back)."""
     from amsfe_sym.logs.write import write_run_bag
 
-    urdf = Path(res.lib.manifest.urdf)
-    return write_run_bag(res, path, urdf.read_text() if urdf.is_file() else None)
+    return write_run_bag(res, path, _urdf_text(res), replace)
 
 
 def simulate_comparison(
@@ -83,21 +157,37 @@ def simulate_comparison(
     options: SimulateOptions = SimulateOptions(),
 ) -> None:
     """Run ``sc`` once per controller (same seed and noise), write ``out/<controller>/``,
-    ``comparison.json`` and the paper's figures, and print the comparison."""
-    from amsfe_sym.apps.reproduce import print_comparison, run_comparison, write_comparison
+    ``comparison.json`` and the paper's figures, and print the comparison.  The bags go to
+    ``out/<controller>/bag``, or ``<--bag>/<controller>`` written together with ``out``."""
+    from amsfe_sym.apps.reproduce import comparison_filler, print_comparison, run_comparison
+    from amsfe_sym.logs.write import bag_job, run_bag_filler
 
-    check_out(out, options.force)  # before the runs
+    outs = check_outputs(out, options)  # before the runs
     cmp = run_comparison(sc, controllers, lib, progress=options.progress, runtime=options.runtime)
     figures = None
     if options.plots:
         from amsfe_sym.apps.plots.paper import plot_comparison
 
         figures = plot_comparison
-    write_comparison(cmp, out, figures=figures, force=options.force)
-    if options.bag is not None:
+    inside = options.bag == BAG_IN_RUN
+
+    def extra(name: str, res: RunResult, folder: Path) -> None:
+        if inside:
+            _write_bag_into(res, folder)
+
+    def bags(folder: Path) -> None:
+        folder.mkdir()
         for name, res in cmp.results.items():
-            where = out / name / "bag" if options.bag == Path() else options.bag / name
-            print(f"bag: {write_bag(res, where)}")
+            run_bag_filler(res, _urdf_text(res))(folder / name)
+
+    jobs = [FolderJob(out, comparison_filler(cmp, figures, extra), options.force)]
+    if outs.bag is not None:
+        jobs.append(bag_job(outs.bag.path, bags, options.force))
+        # (bag_job writes into a child named after the folder: one bag per controller below)
+    write_folders(jobs)
+    if options.bag is not None:
+        for name in cmp.results:
+            print(f"bag: {out / name / 'bag' if inside else Path(options.bag) / name}")
     print_comparison(cmp, out)
 
 

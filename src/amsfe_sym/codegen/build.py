@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import ctypes
 import functools
-import json
 import os
 import shutil
 import tempfile
@@ -46,13 +45,15 @@ from amsfe_sym.codegen.compile_units import (
     OBJECT_CACHE,
     RUNTIME_C,
     Unit,
+    build_jobs,
     compile_library,
     runtime_unit,
 )
 from amsfe_sym.codegen.compile_units import say as _say
 from amsfe_sym.codegen.manifest import manifest_document
 from amsfe_sym.core.interrupts import DeferredSignals, checkpoint
-from amsfe_sym.errors import CodegenError, describe
+from amsfe_sym.core.jsonfile import to_json
+from amsfe_sym.errors import CodegenError, RunFolderError, describe
 from amsfe_sym.load.spec import RobotSpec, load_spec
 from amsfe_sym.runtime.library import file_sha256
 
@@ -143,6 +144,8 @@ def generate(
     key, hash_inputs = content_hash(spec, flags, parts)
     parent = Path(out) if out is not None else default_out_dir()
     out_dir = parent / (spec.name if parts == ALL_PARTS else f"{spec.name}-{'-'.join(parts)}")
+    _check_library_folder(out_dir)
+    build_jobs()  # a bad $AMSFE_BUILD_JOBS is refused before any work, not ignored
     if not force:
         lib = cached_dir(out_dir, key)
         if lib is not None:
@@ -292,7 +295,7 @@ def _build(
             ) from exc
         manifest = manifest_document(model, key, hash_inputs, libname, cname, timings)
         manifest["library_sha256"] = file_sha256(tmp / libname)
-        (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
+        (tmp / MANIFEST).write_text(to_json(manifest))
         checkpoint()
         replace_dir(tmp, out_dir)
     except BaseException:
@@ -306,6 +309,27 @@ def _build(
         False,
         time.perf_counter() - t_start,
         timings,
+    )
+
+
+def _check_library_folder(out_dir: Path) -> None:
+    """A library folder is new, empty or one this tool generated (it holds its manifest): a
+    file or a folder of the user's there is never replaced (issue 25).  A library whose
+    manifest was lost (its ``lib*.so`` is there) is rebuilt."""
+    if not out_dir.exists() or (out_dir / MANIFEST).is_file():
+        return
+    if out_dir.is_dir() and any(out_dir.glob("lib*.so")):
+        return
+    if out_dir.is_dir() and not any(out_dir.iterdir()):
+        return
+    raise RunFolderError(
+        describe(
+            f"library folder {out_dir}",
+            f"a new folder or a library amsfe generated (it holds {MANIFEST})",
+            "a folder of other files" if out_dir.is_dir() else "a file",
+            "choose another --out (the parent of generated libraries); amsfe never replaces "
+            "what it did not write",
+        )
     )
 
 

@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from amsfe_sym.core.interrupts import checkpoint
+from amsfe_sym.errors import CodegenError, describe
 
 __all__ = [
     "OBJECT_CACHE",
@@ -80,9 +81,23 @@ def runtime_unit(name: str) -> Unit:
 
 def build_jobs() -> int:
     """Compiler processes at a time: ``$AMSFE_BUILD_JOBS``, else the CPUs this process may
-    use (at least 1)."""
+    use (at least 1).
+
+    Raises:
+        CodegenError: ``$AMSFE_BUILD_JOBS`` is set but not an integer >= 1 (it used to be
+            ignored without a word).
+    """
     env = os.environ.get("AMSFE_BUILD_JOBS", "").strip()
-    if env.isdigit() and int(env) > 0:
+    if env:
+        if not (env.isdigit() and int(env) > 0):
+            raise CodegenError(
+                describe(
+                    "$AMSFE_BUILD_JOBS",
+                    "an integer >= 1 (compiler processes at a time)",
+                    repr(os.environ["AMSFE_BUILD_JOBS"]),
+                    "export AMSFE_BUILD_JOBS=2, or unset it to use every core",
+                )
+            )
         return int(env)
     try:
         return max(1, len(os.sched_getaffinity(0)))

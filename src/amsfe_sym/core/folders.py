@@ -8,18 +8,23 @@ import os
 import shutil
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
+from amsfe_sym.core.interrupts import DeferredSignals
+from amsfe_sym.core.ledger import note_written, resolved
 from amsfe_sym.errors import RunFolderError, describe
 
 __all__ = [
     "MARKER",
     "STALE_TMP_SECONDS",
+    "FolderJob",
     "clean_stale_tmp",
     "is_run_folder",
     "replace_dir",
     "write_folder",
+    "write_folders",
 ]
 
 #: A hidden temporary folder older than this is left over from a killed run [s].
@@ -88,10 +93,137 @@ def replace_dir(new: Path, target: Path) -> None:
         shutil.rmtree(old, ignore_errors=True)
 
 
-def write_folder(out: Path, fill: Callable[[Path], None], replace: bool = True) -> Path:
+@dataclass(frozen=True)
+class FolderJob:
+    """One output folder of a :func:`write_folders` group.
+
+    Attributes:
+        out: Where the folder goes.
+        fill: ``fill(tmp)`` writes its content into the hidden temporary folder ``tmp``.
+        replace: An existing ``out`` is replaced (the caller checked it may be, see
+            :func:`amsfe_sym.core.outputs.check_output`); off: an ``out`` that appeared
+            meanwhile (another writer) is refused.  Even on, only the tool's own output is
+            replaced (``own``; an empty folder too): never a file or a folder of the user's.
+        own: Whether an existing folder is the tool's own output (default
+            :func:`is_run_folder`).
+    """
+
+    out: Path
+    fill: Callable[[Path], None]
+    replace: bool = True
+    own: Callable[[Path], bool] | None = None
+
+
+def _another_writer(out: Path) -> RunFolderError:
+    return RunFolderError(
+        describe(
+            f"run folder {out}",
+            "a new folder",
+            "one another process wrote meanwhile",
+            "choose another --out (nothing of this run was kept)",
+        )
+    )
+
+
+def _not_ours(job: FolderJob) -> RunFolderError | None:
+    """The error if ``job.out`` exists and is not the tool's own output (the last guard:
+    whatever a caller decided, a file or a folder of the user's is never replaced)."""
+    out = job.out
+    if not out.exists():
+        return None
+    if not out.is_dir():
+        found = "a file"
+    elif any(out.iterdir()) and not (job.own or is_run_folder)(out):
+        found = "a folder of other files (amsfe did not write it)"
+    else:
+        return None
+    return RunFolderError(
+        describe(
+            f"output folder {out}",
+            "a new folder or one amsfe wrote",
+            found,
+            "choose another path; amsfe never replaces what it did not write "
+            "(nothing of this run was kept)",
+        )
+    )
+
+
+def _commit(jobs: Sequence[FolderJob], tmps: Sequence[Path]) -> None:
+    """Rename every ``tmps[i]`` to ``jobs[i].out``: all of them, or none (an error on the
+    way puts back what was there before)."""
+    done: list[tuple[Path, Path | None]] = []  # (out, the old folder moved aside)
+    try:
+        for job, tmp in zip(jobs, tmps, strict=True):
+            old = None
+            if job.replace and (refused := _not_ours(job)) is not None:
+                raise refused
+            if job.replace and job.out.exists():
+                old = job.out.with_name(f".{job.out.name}.old-{os.getpid()}-{time.time_ns()}")
+                job.out.rename(old)
+            try:
+                tmp.rename(job.out)  # rename(2) refuses a non-empty target
+            except OSError as exc:
+                if old is not None:
+                    old.rename(job.out)
+                if not job.replace:
+                    raise _another_writer(job.out) from exc
+                raise
+            done.append((job.out, old))
+    except BaseException:
+        for out, old in reversed(done):
+            shutil.rmtree(out, ignore_errors=True)
+            if old is not None:
+                old.rename(out)
+        raise
+    for _, old in done:
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+
+
+def write_folders(jobs: Sequence[FolderJob]) -> list[Path]:
+    """Write several output folders as one unit: each ``fill`` writes into a hidden sibling
+    of its ``out``; only when all are filled are they renamed into place, together, with
+    Ctrl-C and SIGTERM held for the renames (a run folder and its bag elsewhere: both or
+    neither).  An error or interruption before leaves nothing of them, and what was there
+    before untouched.  The outputs are marked written in the command's
+    :func:`~amsfe_sym.core.ledger.ledger`.
+
+    Returns:
+        The ``out`` of each job, resolved.
+    """
+
+    jobs = [FolderJob(resolved(j.out), j.fill, j.replace, j.own) for j in jobs]
+    tmps: list[Path] = []
+    try:
+        for job in jobs:
+            job.out.parent.mkdir(parents=True, exist_ok=True)
+            clean_stale_tmp(job.out.parent, job.out.name)  # what a killed run left here
+            tmp = Path(
+                tempfile.mkdtemp(prefix=f".{job.out.name}.tmp-{os.getpid()}-", dir=job.out.parent)
+            )
+            tmp.chmod(0o777 & ~_umask())  # mkdtemp's 0700 would ignore the user's umask
+            tmps.append(tmp)
+            job.fill(tmp)
+            (tmp / MARKER).write_text("written by amsfe_sym; `--force` may replace this folder\n")
+        with DeferredSignals():
+            _commit(jobs, tmps)
+            note_written([j.out for j in jobs])
+    except BaseException:
+        for tmp in tmps:
+            shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return [j.out for j in jobs]
+
+
+def write_folder(
+    out: Path,
+    fill: Callable[[Path], None],
+    replace: bool = True,
+    own: Callable[[Path], bool] | None = None,
+) -> Path:
     """``fill(tmp)`` writes the folder's content into a hidden sibling ``tmp`` of ``out``,
-    which then replaces ``out`` (an existing ``out`` is moved aside first and removed after;
-    the caller decides beforehand whether it may be replaced).
+    which then replaces ``out`` (:func:`write_folders` with one job; the caller decides
+    beforehand whether it may be replaced).
 
     With ``replace`` off, an ``out`` that appeared meanwhile (another writer) is not
     replaced: :class:`~amsfe_sym.errors.RunFolderError`.
@@ -99,28 +231,5 @@ def write_folder(out: Path, fill: Callable[[Path], None], replace: bool = True) 
     Returns:
         ``out``.
     """
-    out.parent.mkdir(parents=True, exist_ok=True)
-    clean_stale_tmp(out.parent, out.name)  # what a killed run (SIGKILL) left here
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-{os.getpid()}-", dir=out.parent))
-    tmp.chmod(0o777 & ~_umask())  # mkdtemp's 0700 would ignore the user's umask
-    try:
-        fill(tmp)
-        (tmp / MARKER).write_text("written by amsfe_sym; `--force` may replace this folder\n")
-        if replace:
-            replace_dir(tmp, out)
-        else:  # rename(2) refuses a non-empty target: two writers cannot both win
-            try:
-                tmp.rename(out)
-            except OSError as exc:
-                raise RunFolderError(
-                    describe(
-                        f"run folder {out}",
-                        "a new folder",
-                        "one another process wrote meanwhile",
-                        "choose another --out (nothing of this run was kept)",
-                    )
-                ) from exc
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+    write_folders([FolderJob(out, fill, replace, own)])
     return out

@@ -14,10 +14,27 @@ from typing import Any
 
 from amsfe_sym.errors import AmsfeError, describe
 
-__all__ = ["C_INT_MAX", "is_number", "read_int", "read_number"]
+__all__ = [
+    "BACKWARD_MAPS",
+    "C_INT_MAX",
+    "SEED_MAX",
+    "is_number",
+    "read_int",
+    "read_number",
+    "read_seed",
+]
+
+#: The values of ``[filter] backward_map`` / ``FilterConfig.backward_map`` (``oosm``'s
+#: backward map of eq. (24)), in the order of the C runtime's codes
+#: (``amsfe_params.backward_map``: 0 linearised, 1 inverse).
+BACKWARD_MAPS = ("linearised", "inverse")
 
 #: The largest C ``int`` (the runtime's parameter blocks hold counts as ``int``).
 C_INT_MAX = 2**31 - 1
+
+#: The largest seed: TOML's largest integer (a signed 64-bit one), so the ``config.toml``
+#: of every run re-runs (``amsfe simulate RUN/config.toml``) and any TOML reader reads it.
+SEED_MAX = 2**63 - 1
 
 
 def is_number(x: object) -> bool:
@@ -67,5 +84,28 @@ def read_int(x: Any, where: str, error: type[AmsfeError], low: int, high: int = 
         fix = f"write {key} = {int(x)}" if whole else f"write a whole number, e.g. {key} = 1"
         raise error(describe(where, "an integer", _found(x), fix))
     if not low <= x <= high:
-        raise error(describe(where, f"an integer in [{low}, {high}]", repr(x), "change it"))
+        raise error(
+            describe(
+                where, f"an integer in [{low}, {high}]", repr(x), "write a value in that range"
+            )
+        )
     return x
+
+
+def read_seed(x: Any, where: str, error: type[AmsfeError]) -> int:
+    """A seed: an integer in ``[0, SEED_MAX]`` (the one rule of the command line's
+    ``--seed`` and of the scenario files' ``seed``).
+
+    Raises:
+        error: not an integer, or out of range.
+    """
+    if isinstance(x, int) and not isinstance(x, bool) and not 0 <= x <= SEED_MAX:
+        raise error(
+            describe(
+                where,
+                f"an integer >= 0 and <= {SEED_MAX} (2^63 - 1, TOML's largest integer)",
+                repr(x),
+                "write a seed in that range, e.g. seed = 0",
+            )
+        )
+    return read_int(x, where, error, 0, SEED_MAX)

@@ -26,7 +26,15 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from amsfe_sym.errors import ConfigError, EstimatorError, MeasurementError, ShapeError, describe
+from amsfe_sym.core.values import BACKWARD_MAPS
+from amsfe_sym.errors import (
+    ConfigError,
+    EstimatorError,
+    MeasurementError,
+    ShapeError,
+    describe,
+    unknown_name,
+)
 from amsfe_sym.estimation.ekf import (
     PredictResult,
     UpdateResult,
@@ -39,7 +47,14 @@ from amsfe_sym.estimation.ekf import (
 )
 from amsfe_sym.estimation.models import CameraFrame, MeasurementModel, TransitionModel
 
-__all__ = ["DEFAULT_CONFIG", "Estimator", "FilterConfig", "StepInputs", "StepReport"]
+__all__ = [
+    "BACKWARD_MAPS",
+    "DEFAULT_CONFIG",
+    "Estimator",
+    "FilterConfig",
+    "StepInputs",
+    "StepReport",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -70,6 +85,12 @@ class FilterConfig:
         camera_max_delay: Largest delay ``d`` + jitter [steps] a frame may have; ``cloning``
             drops a clone this many steps after its exposure (a dropped frame). ``None``
             means ``buffer_steps``.
+        backward_map: How ``oosm`` maps the current estimate back to the exposure time
+            (eq. (24)): ``"linearised"`` (default) linearises the backward map about the
+            filter's stored forward pass (one linear solve per frame); ``"inverse"`` is the
+            paper's form, ``L`` applications of the model's inverse transition (eq. (22)) with
+            the jacobian of the backward map taken at the points it passes through.  See
+            ``docs/estimation-algorithms.md``.
     """
 
     gate_probability: float | None = 0.9999
@@ -79,6 +100,7 @@ class FilterConfig:
     camera_period: int | None = None
     camera_phase: int = 0
     camera_max_delay: int | None = None
+    backward_map: str = "linearised"
 
     def __post_init__(self) -> None:
         for name in ("gate_probability", "encoder_gate_probability"):
@@ -100,6 +122,8 @@ class FilterConfig:
             )
         if self.camera_max_delay is not None:
             _check_int("camera_max_delay", self.camera_max_delay, 0, "give d + max jitter")
+        if self.backward_map not in BACKWARD_MAPS:
+            raise unknown_name("backward_map", self.backward_map, BACKWARD_MAPS)
 
 
 #: The largest value of a C ``int`` (the C runtime's parameter blocks hold these settings).

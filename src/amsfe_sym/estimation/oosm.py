@@ -15,7 +15,12 @@ covariance ``S``, jacobian ``H``, prior ``P(k|k-1)``):
   ``x(j|j)``, priors ``x(j+1|j) = F(x(j|j))`` and jacobians ``A_j``, one linear solve with
   ``Phi`` per frame instead of ``L`` Newton inverses of the transition (exact for a linear
   model; for a nonlinear one the error is second order in the corrections the updates made
-  over the lag, see ``docs/estimation-algorithms.md``);
+  over the lag, see ``docs/estimation-algorithms.md``); with
+  ``FilterConfig.backward_map = "inverse"`` it is the paper's form instead
+  (:func:`backward_inverse`): ``L`` applications of the model's inverse transition
+  (eq. (22)) from ``x(k|k) - v_hat``, and ``Fb`` below the jacobian of that map at the points
+  it passes through (``Phi_b^-1``, ``Phi_b`` the product of the forward jacobians at the
+  retrodicted states), not at the stored trajectory;
 - ``Pvv = Q - Q H^T S^-1 H Q``, ``Pxv = Q - P(k|k-1) H^T S^-1 H Q``,
   ``P(kappa|k) = Fb (P(k|k) + Pvv - Pxv - Pxv^T) Fb^T`` (eq. (27), corrected);
 - ``Pxz = (P(k|k) - Pxv) Fb^T Hc^T``, ``Szz = Hc P(kappa|k) Hc^T + Rc`` (eq. (26));
@@ -38,7 +43,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.errors import EstimatorError, describe
+from amsfe_sym.errors import ConvergenceError, EstimatorError, describe
 from amsfe_sym.estimation.base import Estimator, StepInputs, StepReport
 from amsfe_sym.estimation.ekf import (
     UpdateResult,
@@ -47,16 +52,18 @@ from amsfe_sym.estimation.ekf import (
     measure,
     symmetrize,
 )
-from amsfe_sym.estimation.models import CameraFrame
+from amsfe_sym.estimation.models import CameraFrame, TransitionModel
 
 __all__ = [
     "A1Correction",
     "A1Retrodiction",
+    "BackwardPass",
     "OosmAl1Estimator",
     "OosmEstimator",
     "a1_correct",
     "a1_retrodict",
     "al1_retrodict",
+    "backward_inverse",
     "backward_map",
 ]
 
@@ -269,15 +276,59 @@ def backward_map(
     return np.asarray(x_post_kappa + step, dtype=np.float64)
 
 
+@dataclass(slots=True)
+class BackwardPass:
+    """The paper's backward map over a lag (eqs. (22), (24)), from :func:`backward_inverse`.
+
+    Attributes:
+        x: ``x(kappa|k) = F^-1(... F^-1(x_shift, u_{k-1}) ..., u_kappa)``.
+        Phi: ``A(x_{k-1}) ... A(x_kappa)``: the forward jacobians at the retrodicted states
+            ``x_j``; the backward map's jacobian is ``Phi^-1`` (the inverse of the forward
+            one at the matching point, ``shared/PAPER-NOTES.md`` section 1).
+    """
+
+    x: FloatArray
+    Phi: FloatArray
+
+
+def backward_inverse(
+    model: TransitionModel, x_end: FloatArray, inputs: list[FloatArray]
+) -> BackwardPass:
+    """``x(kappa|k) = F_{kappa,k}(x_end)`` through the model's inverse transition (eq. (22)).
+
+    For ``j = k-1 .. kappa``: ``x_j = F^-1(x_{j+1}, u_j)`` (``model.inverse``), then
+    ``A_j = dF/dx(x_j, u_j)`` (``model.step``); ``Phi = A_{k-1} ... A_kappa``.
+
+    Args:
+        model: The transition (its ``inverse`` and ``step``).
+        x_end: The state at ``k`` to map back (``x(k|k) - v_hat``, eq. (24)).
+        inputs: ``u_kappa .. u_{k-1}`` in time order (``L`` entries).
+
+    Returns:
+        The :class:`BackwardPass`.
+
+    Raises:
+        ConvergenceError: An inverse step did not converge (the caller refuses the frame).
+    """
+    x = np.asarray(x_end, dtype=np.float64)
+    Phi = np.eye(x.shape[0])
+    for u_j in reversed(inputs):
+        x = model.inverse(x, u_j)
+        Phi = Phi @ model.step(x, u_j)[1]
+    return BackwardPass(x, Phi)
+
+
 class OosmEstimator(Estimator):
     """EKF + the paper's out-of-sequence camera update (A1 over the whole lag).
 
     Keeps, for the last ``buffer_steps`` steps, the inputs, the forward jacobians, the process
     noise and the start and end states of each prediction, and the last encoder update (a late
-    frame costs ``L`` N^3 products and no model evaluation). A frame with lag 0 gets a
-    standard update; an older one the A1 update above. When A1 yields an indefinite
-    covariance (a long lag with many encoder updates in between), the frame is rejected with
-    a warning rather than corrupting ``P``.
+    frame costs ``L`` N^3 products and no model evaluation with the default
+    ``backward_map = "linearised"``; ``"inverse"`` adds ``L`` inverse transitions and ``L``
+    jacobians of the model, and refuses the frame when an inverse does not converge).
+    A frame with lag 0 gets a standard update; an older one the A1 update above. When A1
+    yields an indefinite covariance (a long lag with many encoder updates in between), the
+    frame is rejected with a warning rather than corrupting ``P``.
     """
 
     name: ClassVar[str] = "oosm"
@@ -315,6 +366,17 @@ class OosmEstimator(Estimator):
         """A1 with the last encoder update (none at k: the innovation terms vanish)."""
         return a1_retrodict(self.x, self.P, Q, self._last)
 
+    def _inputs(self, kappa: int, k: int) -> list[FloatArray]:
+        """The stored inputs ``u_kappa .. u_{k-1}``."""
+        B = self.config.buffer_steps
+        inputs = []
+        for j in range(kappa, k):
+            u_j = self._u[j % B]
+            if u_j is None:  # cannot happen: the base class refuses frames older than the buffer
+                raise EstimatorError(f"oosm: no stored input for step {j}")
+            inputs.append(u_j)
+        return inputs
+
     def _late_frame(self, frame: CameraFrame, k: int, report: StepReport) -> None:
         kappa = frame.exposure_step
         B = self.config.buffer_steps
@@ -331,9 +393,16 @@ class OosmEstimator(Estimator):
                 s += self._x_post[(j + 1) % B] - self._x_prior[j % B]
         Q = symmetrize(Q)
         retro = self._retrodict(kappa, k, Phi, Q)
-        # eq. (24): x(kappa|k) = F_{kappa,k}(x_shift), linearised about the stored trajectory
-        target = retro.x_shift - self._x_prior[(k - 1) % B]
-        x_r = backward_map(Phi, self._x_post[kappa % B], s, target)
+        if self.config.backward_map == "inverse":  # eqs. (22), (24): the paper's form
+            try:
+                back = backward_inverse(self.model, retro.x_shift, self._inputs(kappa, k))
+            except ConvergenceError as exc:
+                report.reject(f"camera frame kappa={kappa} (lag {k - kappa}): {exc}")
+                return
+            x_r, Phi = back.x, back.Phi
+        else:  # eq. (24) linearised about the stored trajectory
+            target = retro.x_shift - self._x_prior[(k - 1) % B]
+            x_r = backward_map(Phi, self._x_post[kappa % B], s, target)
         if not np.isfinite(x_r).all():
             raise EstimatorError(
                 describe(
@@ -400,12 +469,9 @@ class OosmAl1Estimator(OosmEstimator):
         self._store_posterior(self.k + 1)
 
     def _retrodict(self, kappa: int, k: int, Phi: FloatArray, Q: FloatArray) -> A1Retrodiction:
-        size, B = self.config.buffer_steps + 1, self.config.buffer_steps
+        size = self.config.buffer_steps + 1
         x_pred = self._post_x[kappa % size].copy()
-        for j in range(kappa, k):  # x(k|kappa): the posterior at kappa predicted, no updates
-            u_j = self._u[j % B]
-            if u_j is None:  # cannot happen: the base class refuses frames older than the buffer
-                raise EstimatorError(f"oosm-al1: no stored input for step {j}")
+        for u_j in self._inputs(kappa, k):  # x(k|kappa): the posterior at kappa, no updates
             x_pred = self.model.step(x_pred, u_j)[0]
         P_pred = symmetrize(Phi @ self._post_P[kappa % size] @ Phi.T + Q)
         return al1_retrodict(self.x, self.P, Q, x_pred, P_pred)

@@ -12,7 +12,6 @@ robot, resolved scenario and runtime), ``/robot_description`` (String: the URDF)
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -20,13 +19,21 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.core.folders import write_folder
+from amsfe_sym.core.folders import FolderJob, write_folders
+from amsfe_sym.core.jsonfile import to_json
 from amsfe_sym.core.toml import dump_toml
 from amsfe_sym.logs.source import typestore
 from amsfe_sym.logs.spec import LogSpec
 from amsfe_sym.sim.result import RunResult
 
-__all__ = ["TF_RATE_HZ", "joint_state", "write_estimate_bag", "write_run_bag"]
+__all__ = [
+    "TF_RATE_HZ",
+    "bag_job",
+    "joint_state",
+    "run_bag_filler",
+    "write_estimate_bag",
+    "write_run_bag",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -83,9 +90,14 @@ class _Bag:
         self.writer.close()
 
 
-def _atomic(out: Path, fill: Callable[[Path], None]) -> Path:
-    """Write the bag folder ``out`` complete or not at all (rosbags' writer creates the
-    folder itself, so it writes into a child of the temporary one)."""
+def bag_job(out: Path, fill: Callable[[Path], None], replace: bool = False) -> FolderJob:
+    """The bag folder ``out`` as one job of :func:`~amsfe_sym.core.folders.write_folders`
+    (complete or not at all; ``fill(path)`` writes a bag at a path that does not exist:
+    rosbags' writer creates the folder itself, so it writes into a child of the temporary
+    one).  ``replace``: an existing ``out`` may be replaced (the caller checked it is the
+    tool's own output, :func:`amsfe_sym.core.outputs.check_output`)."""
+
+    out = out.expanduser().resolve()
 
     def inner(tmp: Path) -> None:
         bag = tmp / out.name  # (the .mcap inside is named after the folder)
@@ -94,11 +106,21 @@ def _atomic(out: Path, fill: Callable[[Path], None]) -> Path:
             p.rename(tmp / p.name)
         bag.rmdir()
 
-    return write_folder(out, inner)
+    return FolderJob(out, inner, replace)
 
 
-def write_run_bag(res: RunResult, out: Path, urdf_text: str | None = None) -> Path:
-    """Write ``res`` as the rosbag2 folder ``out`` (must not exist)."""
+def write_run_bag(
+    res: RunResult, out: Path, urdf_text: str | None = None, replace: bool = False
+) -> Path:
+    """Write ``res`` as the rosbag2 folder ``out`` (an existing ``out`` is replaced only with
+    ``replace``; the caller checks first that it may be)."""
+    write_folders([bag_job(out, run_bag_filler(res, urdf_text), replace)])
+    return out
+
+
+def run_bag_filler(res: RunResult, urdf_text: str | None = None) -> Callable[[Path], None]:
+    """``fill(path)``: writes ``res`` as a rosbag2 folder at ``path`` (which must not exist):
+    its URDF, ``/tf`` of the true and estimated arms, sensors, torque, truth and config."""
     lib, sc = res.lib, res.scenario
     n, N = lib.n, lib.N
     joints = list(lib.manifest.joints)
@@ -122,7 +144,12 @@ def write_run_bag(res: RunResult, out: Path, urdf_text: str | None = None) -> Pa
     def fill(path: Path) -> None:
         bag = _Bag(path)
         try:
-            bag.write(spec.config, "std_msgs/msg/String", 0.0, String(data=json.dumps(config)))
+            bag.write(
+                spec.config,
+                "std_msgs/msg/String",
+                0.0,
+                String(data=to_json(config, indent=None).strip()),
+            )
             if urdf_text is not None:
                 bag.write("/robot_description", "std_msgs/msg/String", 0.0, String(data=urdf_text))
             fi = 0
@@ -163,7 +190,7 @@ def write_run_bag(res: RunResult, out: Path, urdf_text: str | None = None) -> Pa
         finally:
             bag.close()
 
-    return _atomic(out, fill)
+    return fill
 
 
 def _tf_frames(res: RunResult, urdf_text: str | None) -> dict[int, Any] | None:
@@ -238,4 +265,5 @@ def write_estimate_bag(
         finally:
             bag.close()
 
-    return _atomic(out, fill)
+    write_folders([bag_job(out, fill, replace=False)])
+    return out

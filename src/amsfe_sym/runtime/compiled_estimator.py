@@ -24,6 +24,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from amsfe_sym.core.values import BACKWARD_MAPS
 from amsfe_sym.errors import ConfigError, EstimatorError, describe, unknown_name
 from amsfe_sym.estimation.base import Estimator, StepInputs, StepReport
 from amsfe_sym.estimation.models import CameraFrame
@@ -184,6 +185,7 @@ class CompiledEstimator(Estimator):
             self._gate_encoder,
             *ptr,
             self.k,
+            BACKWARD_MAPS.index(cfg.backward_map),
         )
         size = self._c["amsfe_est_memory_size"](ctypes.byref(self._params))
         if size == 0:
@@ -358,6 +360,15 @@ def log_numbers(values: Any) -> str:
 def estimator_log_lines(est: CompiledEstimator) -> list[str]:
     """The estimator block of a log (its parameter block as built at construction)."""
     p = est._params
+    if p.backward_map != 0:  # the log's params line has no field for it
+        raise ConfigError(
+            describe(
+                "backward_map of a logged estimator",
+                "'linearised' (the log format records no backward map)",
+                repr(BACKWARD_MAPS[p.backward_map]),
+                'log a run with [filter] backward_map = "linearised"',
+            )
+        )
     lines = [
         f"params {p.estimator} {p.buffer_steps} {p.camera_iterations} {p.camera_period} "
         f"{p.camera_phase} {p.camera_max_delay} {p.max_frames_per_step} "

@@ -83,6 +83,8 @@ class FilterSettings:
         gate_probability: Chi-square gate on camera innovations (0 disables).
         camera_iterations: Iterated-EKF steps of the camera update (naive, replay); 1 = EKF.
         buffer_steps: History kept for late frames [steps].
+        backward_map: ``oosm``'s backward map of eq. (24): ``"linearised"`` about the stored
+            forward pass, or ``"inverse"`` through the generated inverse transition (eq. (22)).
     """
 
     link_torque_std: float = 0.1
@@ -94,6 +96,7 @@ class FilterSettings:
     gate_probability: float = 0.9999
     camera_iterations: int = 1
     buffer_steps: int = 1000
+    backward_map: str = "linearised"
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from amsfe_sym.core.toml import read_toml
-from amsfe_sym.core.values import C_INT_MAX, read_int, read_number
+from amsfe_sym.core.values import BACKWARD_MAPS, C_INT_MAX, read_int, read_number, read_seed
 from amsfe_sym.errors import ConfigError, check_known_keys, describe
 from amsfe_sym.load.spec import INTEGRATORS, data_dir
 from amsfe_sym.scenario.model import (
@@ -114,8 +114,10 @@ def parse_scenario(data: Mapping[str, Any], path: Path) -> Scenario:
             for k, v in raw.items()
         }
         sections[key] = cls(**raw)
-    top = {
-        k: _typed(data[k], str(f.type), f"{where}: {k}")
+    top: dict[str, Any] = {
+        k: read_seed(data[k], f"{where}: {k}", ConfigError)
+        if k == "seed"
+        else _typed(data[k], str(f.type), f"{where}: {k}")
         for f in dataclasses.fields(Scenario)
         if (k := f.name) in data and k not in _SECTIONS and k != "compare"
     }
@@ -247,10 +249,7 @@ def validate(sc: Scenario, where: str = "scenario") -> None:
 
     positive(sc.duration, "duration", fix="set the simulated time in seconds, e.g. duration = 10.0")
     _finite_vectors(sc, where)
-    if sc.seed < 0:
-        raise ConfigError(
-            describe(f"{where}: seed", "an integer >= 0", repr(sc.seed), "write seed = 0")
-        )
+    read_seed(sc.seed, f"{where}: seed", ConfigError)
     for k, v in sc.estimate0.std.items():
         if not isinstance(v, int | float) or isinstance(v, bool):
             raise ConfigError(
@@ -274,6 +273,15 @@ def validate(sc: Scenario, where: str = "scenario") -> None:
     positive(f.link_torque_std, "[filter] link_torque_std")
     positive(f.motor_torque_std, "[filter] motor_torque_std")
     positive(f.theta_rate_std, "[filter] theta_rate_std", allow_zero=True)
+    if f.backward_map not in BACKWARD_MAPS:
+        raise ConfigError(
+            describe(
+                f"{where}: [filter] backward_map",
+                "one of " + ", ".join(repr(m) for m in BACKWARD_MAPS),
+                repr(f.backward_map),
+                'write backward_map = "linearised" (or "inverse", the paper\'s eq. (22))',
+            )
+        )
     for name in ("encoder_q_std", "encoder_qd_std", "camera_pixel_std"):
         positive(getattr(f, name), f"[filter] {name}", allow_zero=True)
     positive(sc.encoders.q_std, "[encoders] q_std", allow_zero=True)

@@ -163,6 +163,7 @@ def filter_config(sc: Scenario, timing: CameraTiming) -> FilterConfig:
         camera_period=timing.period,
         camera_phase=timing.phase,
         camera_max_delay=timing.max_delay,
+        backward_map=f.backward_map,
     )
 
 

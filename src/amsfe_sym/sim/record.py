@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -12,9 +11,11 @@ from typing import Any
 import numpy as np
 
 from amsfe_sym.control.metrics import control_metrics, sliding_conditions
-from amsfe_sym.core.folders import MARKER, is_run_folder, write_folder
+from amsfe_sym.core.folders import write_folder
+from amsfe_sym.core.jsonfile import write_json
+from amsfe_sym.core.outputs import check_output
 from amsfe_sym.core.provenance import provenance
-from amsfe_sym.errors import ConfigError, RunFolderError, describe
+from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.scenario import Scenario, dump_toml
 from amsfe_sym.sim.builders import scenario_timing
 from amsfe_sym.sim.result import RunResult
@@ -22,7 +23,7 @@ from amsfe_sym.sim.result import RunResult
 #: Draws a finished run's figures into a folder: ``figures(result, folder)``.
 Figures = Callable[[RunResult, Path], object]
 
-__all__ = ["WINDOW_START", "nees_band", "summarize", "window", "write_run"]
+__all__ = ["WINDOW_START", "nees_band", "run_filler", "summarize", "window", "write_run"]
 
 #: Metrics are taken over the last 80 % of a run (the start transient left out).
 WINDOW_START = 0.2
@@ -114,41 +115,24 @@ def controller_gains(sc: Scenario) -> dict[str, Any]:
     return {**(cls.gain_defaults if cls else {}), **sc.gains_for()}
 
 
-def check_out(out: Path, force: bool = False) -> None:
-    """Refuse ``out`` if it is a file, or an existing folder and ``force`` is off.
+def run_filler(
+    res: RunResult,
+    final: Path,
+    figures: Figures | None = None,
+    extra: Callable[[Path], object] | None = None,
+) -> Callable[[Path], None]:
+    """The ``fill(folder)`` of a run folder that will be named ``final``: config.toml,
+    timeseries.csv, frames.csv, summary.json, then ``figures(res, folder)`` and
+    ``extra(folder)`` (e.g. the run's bag, written inside the same temporary folder)."""
 
-    Raises:
-        RunFolderError: one line saying what is there and how to proceed.
-    """
-    if out.is_file() or (out.exists() and not out.is_dir()):
-        raise RunFolderError(
-            describe(
-                f"run folder {out}",
-                "a new folder",
-                "an existing file",
-                "choose another --out (a file is never replaced)",
-            )
-        )
-    if out.is_dir() and not force:
-        raise RunFolderError(
-            describe(
-                f"run folder {out}",
-                "a new folder",
-                "an existing folder",
-                "choose another --out, or pass --force to replace it",
-            )
-        )
-    if out.is_dir() and not is_run_folder(out) and any(out.iterdir()):
-        # --force replaces only what this tool wrote (a folder of a user's own files, or
-        # `--out .`, is never deleted)
-        raise RunFolderError(
-            describe(
-                f"--force on {out}",
-                f"a run folder amsfe wrote (it holds {MARKER}) or an empty folder",
-                "a folder of other files",
-                "choose another --out; --force never replaces a folder it did not write",
-            )
-        )
+    def fill(tmp: Path) -> None:
+        _write(res, tmp, final)
+        if figures is not None:
+            figures(res, tmp)
+        if extra is not None:
+            extra(tmp)
+
+    return fill
 
 
 def write_run(
@@ -161,21 +145,17 @@ def write_run(
     nothing itself).
 
     Complete or absent: everything is written to a hidden sibling folder, which is renamed to
-    ``out`` at the end (an existing ``out`` is replaced only with ``force``); an error or
-    Ctrl-C on the way removes it.  ``summary.json`` also records the
+    ``out`` at the end (an existing ``out`` is replaced only with ``force``, and only if
+    this tool wrote it: :func:`amsfe_sym.core.outputs.check_output`); an error or Ctrl-C on
+    the way removes it.  ``summary.json`` also records the
     :func:`~amsfe_sym.core.provenance.provenance` of the run.
 
     Raises:
-        RunFolderError: ``out`` is a file, or exists and ``force`` is off.
+        RunFolderError: ``out`` is a file, or exists and ``force`` is off, or is a folder
+            this tool did not write.
     """
-    check_out(out, force)
-
-    def fill(tmp: Path) -> None:
-        _write(res, tmp, out)
-        if figures is not None:
-            figures(res, tmp)
-
-    return write_folder(out, fill, replace=force) / "summary.json"
+    check_output(out, option="out", force=force)
+    return write_folder(out, run_filler(res, out, figures), replace=force) / "summary.json"
 
 
 def _write(res: RunResult, out: Path, final: Path) -> None:
@@ -229,4 +209,4 @@ def _write(res: RunResult, out: Path, final: Path) -> None:
     )
     summary = summarize(res)
     summary["provenance"] = provenance()
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    write_json(out / "summary.json", summary)

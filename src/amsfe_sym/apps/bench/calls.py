@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.apps.bench.timing import CTimer, Timing, round4, run_checked, time_calls
+from amsfe_sym.core.jsonfile import to_json
 
 __all__ = [
     "CALL_FUNCTIONS",
@@ -309,7 +310,7 @@ def bench_cflags(
             # this build is ours: record its own hash, as generate does
             manifest = json.loads((lib.dir / "manifest.json").read_text())
             manifest["library_sha256"] = file_sha256(d / lib.manifest.library)
-            (d / "manifest.json").write_text(json.dumps(manifest))
+            (d / "manifest.json").write_text(to_json(manifest))
             blib = ModelLibrary(d)
             f = blib.function(function)
             t_py = time_calls(f.call_into, args, repeat, rounds)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -13,6 +12,7 @@ from amsfe_sym.apps.bench.loop import bench_closed_loop
 from amsfe_sym.apps.bench.scaling import bench_scaling
 from amsfe_sym.apps.bench.tick import bench_tick
 from amsfe_sym.apps.bench.ticks import ESTIMATOR_NAMES, bench_estimators, timing_scenario
+from amsfe_sym.core.jsonfile import write_json
 from amsfe_sym.core.provenance import provenance
 from amsfe_sym.errors import ConfigError, describe
 
@@ -385,7 +385,7 @@ def run_bench(opts: BenchOptions) -> int:
     print(format_report(report))
     if opts.json:
         Path(opts.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(opts.json).write_text(json.dumps(report, indent=2) + "\n")
+        write_json(Path(opts.json).expanduser().resolve(), report, own="amsfe bench")
         print(f"wrote {opts.json}")
     return 0
 

@@ -22,7 +22,18 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["CLAIM_PAIRS", "CLAIM_ROWS", "ClaimTable", "format_claims", "run_claims"]
+from amsfe_sym.core.folders import write_folder
+from amsfe_sym.core.jsonfile import write_json
+
+__all__ = [
+    "CLAIM_PAIRS",
+    "CLAIM_ROWS",
+    "ClaimTable",
+    "format_claims",
+    "is_claims_folder",
+    "run_claims",
+    "write_claims",
+]
 
 #: The rows: (controller, estimator).
 CLAIM_ROWS: tuple[tuple[str, str], ...] = (
@@ -183,9 +194,24 @@ def format_claims(t: ClaimTable) -> str:
     return head + "\n".join(lines) + "\n" + "\n".join(pairs) + "\n"
 
 
-def write_claims(t: ClaimTable, out: Path) -> None:
-    """``claims.json`` and ``claims.md`` into ``out``."""
-    out.mkdir(parents=True, exist_ok=True)
+def is_claims_folder(path: Path) -> bool:
+    """Whether ``path`` is a claims folder amsfe wrote: it holds the marker, or (written
+    before the marker existed) a ``claims.json`` with the claim table's keys."""
+    from amsfe_sym.core.folders import is_run_folder
+
+    if is_run_folder(path):
+        return True
+    try:
+        doc = json.loads((path / "claims.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(doc, dict) and {"rows", "pairs"} <= set(doc)
+
+
+def write_claims(t: ClaimTable, out: Path, force: bool = False) -> None:
+    """``claims.json`` and ``claims.md`` as the folder ``out``, complete or absent (an
+    existing ``out`` is replaced only with ``force``; the caller checks it with
+    :func:`amsfe_sym.core.outputs.check_output` before the runs)."""
     doc = {
         "scenario": t.scenario,
         "seeds": [t.seeds[0], t.seeds[-1]],
@@ -194,5 +220,9 @@ def write_claims(t: ClaimTable, out: Path) -> None:
         "pairs": t.pairs,
         "rmse": t.rmse,
     }
-    (out / "claims.json").write_text(json.dumps(doc, indent=1) + "\n")
-    (out / "claims.md").write_text(format_claims(t))
+
+    def fill(tmp: Path) -> None:
+        write_json(tmp / "claims.json", doc, indent=1)
+        (tmp / "claims.md").write_text(format_claims(t))
+
+    write_folder(out, fill, replace=force, own=is_claims_folder)

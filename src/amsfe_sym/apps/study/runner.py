@@ -24,12 +24,15 @@ from amsfe_sym.apps.study.metrics import (
     format_table,
 )
 from amsfe_sym.apps.study.workers import Task, progress_bar, run_tasks
+from amsfe_sym.core.folders import write_folder
+from amsfe_sym.core.jsonfile import write_json
+from amsfe_sym.core.outputs import check_output
 from amsfe_sym.core.provenance import provenance
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.estimation import ESTIMATORS
 from amsfe_sym.scenario import Scenario, apply_sets, load_scenario
 
-__all__ = ["StudyResult", "parse_estimators", "run_study"]
+__all__ = ["StudyResult", "is_study_folder", "parse_estimators", "run_study"]
 
 
 def parse_estimators(text: str | Sequence[str] | None) -> tuple[str, ...]:
@@ -84,6 +87,8 @@ def run_study(
     progress: bool = False,
     command: str | None = None,
     runtime: str = "compiled",
+    force: bool = False,
+    inputs: Sequence[str | os.PathLike[str]] = (),
 ) -> StudyResult:
     """Run the Monte Carlo study and write its folder.
 
@@ -101,10 +106,17 @@ def run_study(
         progress: Show a progress bar.
         command: The command line recorded in ``study.md`` (default: rebuilt from arguments).
         runtime: ``"compiled"`` (the C loop) or ``"python"`` (the reference loop).
+        force: Replace an existing ``out`` that this tool wrote.
+        inputs: Files the study reads (the scenario file): ``out`` may not be, hold or lie
+            inside one.
+
+    The folder is written whole at the end (complete or absent); ``out`` is checked before
+    anything runs (:func:`amsfe_sym.core.outputs.check_output`).
 
     Raises:
         ConfigError: Bad names, keys or values, or a scenario the run builders refuse (found
             before the pool starts by building each variant and estimator's run).
+        RunFolderError: ``out`` cannot be written as asked.
     """
     from amsfe_sym.codegen import library_for
     from amsfe_sym.runtime.library import ModelLibrary
@@ -129,7 +141,18 @@ def run_study(
     fig_seed = first_seed if figure_seed is None else figure_seed
     seed_list = list(range(first_seed, first_seed + seeds))
     if fig_seed not in seed_list:
-        raise ConfigError(describe("figure_seed", f"one of {seed_list}", str(fig_seed), "fix"))
+        raise ConfigError(
+            describe(
+                "figure_seed",
+                f"one of {seed_list}",
+                str(fig_seed),
+                "pass a seed of the study (first_seed .. first_seed + seeds - 1)",
+            )
+        )
+    stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
+    folder = Path(out) if out else Path("runs") / f"study-{base.name}-{stamp}"
+    # before the runs
+    check_output(folder, option="--out", force=force, inputs=inputs, own=is_study_folder)
 
     # Libraries: generated (if needed) here, once; workers load them by path.  Building every
     # (variant, estimator) run surfaces configuration errors before the pool starts.
@@ -167,92 +190,118 @@ def run_study(
     finally:
         quiet.setLevel(old_level)
 
-    stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
-    folder = Path(out) if out else Path("runs") / f"study-{base.name}-{stamp}"
-    folder.mkdir(parents=True, exist_ok=True)
     done = [r for r in results if r is not None]
-    agg: dict[str, dict[str, Any]] = {}
-    figs: list[Path] = []
-    series: dict[str, dict[str, Any]] = {}
-    for v in scen:
-        lib = libs[v]
-        agg[v] = {}
-        series[v] = {}
-        for name in names:
-            rs = [
-                r
-                for r in done
-                if r["summary"]["variant"] == v and r["summary"]["estimator"] == name
-            ]
-            rs.sort(key=lambda r: int(r["summary"]["seed"]))
-            ok = [r for r in rs if not r.get("failed")]
-            failed = [r["summary"] for r in rs if r.get("failed")]
-            if not ok:
-                agg[v][name] = {
-                    "M": 0,
-                    "failed_seeds": [int(f["seed"]) for f in failed],
-                    "errors": [f["error"] for f in failed],
-                }
-                continue
-            K = ok[0]["nees"].size
-            t = np.arange(K) * lib.T
-            nees = np.stack([r["nees"] for r in ok])
-            th = np.stack([r["theta_hat"] for r in ok])
-            agg[v][name] = aggregate(
-                [r["summary"] for r in ok], nees, th, t, lib.theta_true.tolist()
-            )
-            agg[v][name]["failed_seeds"] = [int(f["seed"]) for f in failed]
-            agg[v][name]["errors"] = [f["error"] for f in failed]
-            fig_run = next((r for r in ok if "err" in r), None)
-            nan = np.full((K, 2 * lib.n), np.nan)
-            series[v][name] = {
-                "t": t,
-                "avg_nees": nees.mean(axis=0),
-                "theta_all": th,
-                "M": len(ok),
-                "err": fig_run["err"] if fig_run else nan,
-                "sd": fig_run["sd"] if fig_run else nan,
-                "theta_hat": fig_run["theta_hat"] if fig_run else np.full_like(th[0], np.nan),
-            }
-        suffix = "" if len(scen) == 1 else f"-{v}"
-        if series[v]:
-            figs += plot_study(series[v], libs[v], scen[v], fig_seed, folder, suffix, seeds)
+    written: dict[str, Any] = {}
 
-    cmd = command or _command_line(
-        scenario if not isinstance(scenario, Scenario) else base.name,
-        seeds,
-        names,
-        duration,
-        workers,
-        folder,
-        sets,
-        variants or {},
-        first_seed,
-        runtime,
-    )
-    md = _report(cmd, base, scen, variant_sets, libs, agg, seeds, first_seed, wall, workers, sets)
-    (folder / "study.md").write_text(md)
-    doc = {
-        "command": cmd,
-        "scenario": base.name,
-        "provenance": provenance(),
-        "workers": workers,
-        "runtime": runtime,
-        "wall_time_s": round(wall, 2),
-        "seeds": seed_list,
-        "estimators": list(names),
-        "variants": {
-            v: {"sets": [*sets, *variant_sets[v]], "scenario": _jsonable(scen[v].to_dict())}
-            for v in scen
-        },
-        "window": "last 80 % of the run",
-        "aggregate": agg,
-        "runs": [r["summary"] for r in done],
-    }
-    (folder / "study.json").write_text(json.dumps(_jsonable(doc), indent=1) + "\n")
+    def fill(tmp: Path) -> None:
+        agg: dict[str, dict[str, Any]] = {}
+        figs: list[Path] = []
+        series: dict[str, dict[str, Any]] = {}
+        for v in scen:
+            lib = libs[v]
+            agg[v] = {}
+            series[v] = {}
+            for name in names:
+                rs = [
+                    r
+                    for r in done
+                    if r["summary"]["variant"] == v and r["summary"]["estimator"] == name
+                ]
+                rs.sort(key=lambda r: int(r["summary"]["seed"]))
+                ok = [r for r in rs if not r.get("failed")]
+                failed = [r["summary"] for r in rs if r.get("failed")]
+                if not ok:
+                    agg[v][name] = {
+                        "M": 0,
+                        "failed_seeds": [int(f["seed"]) for f in failed],
+                        "errors": [f["error"] for f in failed],
+                    }
+                    continue
+                K = ok[0]["nees"].size
+                t = np.arange(K) * lib.T
+                nees = np.stack([r["nees"] for r in ok])
+                th = np.stack([r["theta_hat"] for r in ok])
+                agg[v][name] = aggregate(
+                    [r["summary"] for r in ok], nees, th, t, lib.theta_true.tolist()
+                )
+                agg[v][name]["failed_seeds"] = [int(f["seed"]) for f in failed]
+                agg[v][name]["errors"] = [f["error"] for f in failed]
+                fig_run = next((r for r in ok if "err" in r), None)
+                nan = np.full((K, 2 * lib.n), np.nan)
+                series[v][name] = {
+                    "t": t,
+                    "avg_nees": nees.mean(axis=0),
+                    "theta_all": th,
+                    "M": len(ok),
+                    "err": fig_run["err"] if fig_run else nan,
+                    "sd": fig_run["sd"] if fig_run else nan,
+                    "theta_hat": fig_run["theta_hat"] if fig_run else np.full_like(th[0], np.nan),
+                }
+            suffix = "" if len(scen) == 1 else f"-{v}"
+            if series[v]:
+                figs += plot_study(series[v], libs[v], scen[v], fig_seed, tmp, suffix, seeds)
+
+        cmd = command or _command_line(
+            scenario if not isinstance(scenario, Scenario) else base.name,
+            seeds,
+            names,
+            duration,
+            workers,
+            folder,
+            sets,
+            variants or {},
+            first_seed,
+            runtime,
+        )
+        md = _report(
+            cmd, base, scen, variant_sets, libs, agg, seeds, first_seed, wall, workers, sets
+        )
+        (tmp / "study.md").write_text(md)
+        doc = {
+            "command": cmd,
+            "scenario": base.name,
+            "provenance": provenance(),
+            "workers": workers,
+            "runtime": runtime,
+            "wall_time_s": round(wall, 2),
+            "seeds": seed_list,
+            "estimators": list(names),
+            "variants": {
+                v: {"sets": [*sets, *variant_sets[v]], "scenario": _jsonable(scen[v].to_dict())}
+                for v in scen
+            },
+            "window": "last 80 % of the run",
+            "aggregate": agg,
+            "runs": [r["summary"] for r in done],
+        }
+        write_json(tmp / "study.json", doc, indent=1, default=str)
+        written.update(agg=agg, md=md, figs=[folder / f.relative_to(tmp) for f in figs])
+
+    write_folder(folder, fill, replace=force, own=is_study_folder)
+    agg, md, figs = written["agg"], written["md"], written["figs"]
     return StudyResult(
         out=folder, table=md, aggregate=agg, runs=[r["summary"] for r in done], figures=figs
     )
+
+
+def is_study_folder(path: Path) -> bool:
+    """Whether ``path`` is a study folder amsfe wrote: it holds the marker, or (written
+    before the marker existed) a ``study.json`` with the study's keys, or a ``study.md``
+    whose first line is the study report's title."""
+    from amsfe_sym.core.folders import is_run_folder
+
+    if is_run_folder(path):
+        return True
+    try:
+        doc = json.loads((path / "study.json").read_text())
+        return isinstance(doc, dict) and {"command", "aggregate"} <= set(doc)
+    except (OSError, ValueError):
+        pass
+    try:
+        with (path / "study.md").open() as f:
+            return f.readline().startswith("# Study: ")
+    except OSError:
+        return False
 
 
 def _jsonable(x: Any) -> Any:

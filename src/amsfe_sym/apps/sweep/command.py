@@ -29,6 +29,10 @@ def from_args(args: argparse.Namespace) -> int:
             raise ConfigError(
                 describe(flag, f"an axis of the sweep {list(spec.axes)}", repr(axis), "name one")
             )
+    if not args.report:  # before --repair moves anything
+        from amsfe_sym.apps.sweep.engine import check_sweep_out
+
+        check_sweep_out(out, args.force, [spec.source] if spec.source else [])
     if args.repair and out.is_dir():
         for path in repair(out):
             print(f"set aside (unreadable, its runs will be run again): {path}")

@@ -39,6 +39,9 @@ from amsfe_sym.apps.sweep.table import (
     read_rows,
     write_part,
 )
+from amsfe_sym.core.folders import MARKER, is_run_folder
+from amsfe_sym.core.jsonfile import write_json
+from amsfe_sym.core.outputs import Output, check_output
 from amsfe_sym.core.provenance import provenance
 from amsfe_sym.errors import ConfigError, RunFolderError, describe
 
@@ -120,12 +123,25 @@ def _auto_batch(n_jobs: int, workers: int) -> int:
     return max(1, min(MAX_AUTO_BATCH, per))
 
 
+def is_sweep_folder(path: Path) -> bool:
+    """Whether ``path`` is a sweep folder this tool wrote (its marker, or a sweep's files)."""
+    return is_run_folder(path) or any((path / n).exists() for n in (META, RESULTS, PARTS))
+
+
+def check_sweep_out(
+    out: Path, force: bool = False, inputs: Sequence[str | os.PathLike[str]] = ()
+) -> Output:
+    """``--out`` of a sweep (:func:`amsfe_sym.core.outputs.check_output`, kind ``resume``):
+    new, empty or a sweep folder (which the sweep resumes); a file, a folder of the user's
+    or an input (the sweep file) is refused, with or without ``--force``."""
+    return check_output(
+        out, option="--out", kind="resume", force=force, inputs=inputs, own=is_sweep_folder
+    )
+
+
 def _check_folder(spec: SweepSpec, opts: SweepOptions) -> None:
     out = opts.out
-    if out.exists() and not out.is_dir():
-        raise ConfigError(
-            describe(f"--out {str(out)!r}", "a folder", "a file", "pass a folder path")
-        )
+    check_sweep_out(out, opts.force, [spec.source] if spec.source else [])
     meta = out / META
     if meta_damaged(out) and not opts.force:
         raise RunFolderError(
@@ -223,6 +239,7 @@ def run_sweep(spec: SweepSpec, opts: SweepOptions) -> SweepResult:
     _check_folder(spec, opts)
     out = opts.out
     out.mkdir(parents=True, exist_ok=True)
+    (out / MARKER).touch()  # the tool's folder: a later sweep may resume it
     have = read_rows(out)
     keep = have if opts.retry_errors is False or not len(have) else have[have.status != "error"]
     done = set(keep["run_id"]) if len(keep) else set()
@@ -320,6 +337,4 @@ def _write_meta(spec: SweepSpec, opts: SweepOptions, res: SweepResult, n_jobs: i
         "scenario": spec.scenario.to_dict(),
         "provenance": provenance(),
     }
-    tmp = path.with_name(f".{META}.tmp")
-    tmp.write_text(json.dumps(meta, indent=2, default=str) + "\n")
-    tmp.replace(path)
+    write_json(path, meta, default=str)

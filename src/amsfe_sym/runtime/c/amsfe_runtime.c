@@ -32,6 +32,7 @@ DECLARE(est_camera_update)
 DECLARE(est_oosm_correct)
 DECLARE(est_clone_camera)
 DECLARE(transition_step)
+DECLARE(transition_inverse)
 
 #include "amsfe_model_config.h"
 #if AMSFE_MODEL_CHAIN
@@ -46,7 +47,7 @@ DECLARE(transition_step_chain)
 #endif
 
 static const cwork WORKS[] = {est_camera_update_work, est_oosm_correct_work, est_clone_camera_work,
-                              STEP_WORK};
+                              STEP_WORK, transition_inverse_work};
 
 struct amsfe_est {
   amsfe_params par; /* pointers in it point into this block */
@@ -178,6 +179,8 @@ static int params_ok(const amsfe_params *p) {
   if (d.ne > AMSFE_MAX_ENCODERS) return 0;
   if (p->estimator < AMSFE_ENCODERS || p->estimator > AMSFE_CLONING) return 0;
   if (p->buffer_steps < 1 || p->camera_iterations < 1 || p->max_frames_per_step < 1) return 0;
+  if (p->backward_map != AMSFE_BACKWARD_LINEARISED && p->backward_map != AMSFE_BACKWARD_INVERSE)
+    return 0;
   if (isnan(p->gate_camera) || isnan(p->gate_encoder)) return 0;
   for (int i = 0; i < d.nw; ++i)
     if (!(p->qw[i] >= 0 && isfinite(p->qw[i]))) return 0;
@@ -515,6 +518,37 @@ int amsfe_est_tick(amsfe_est *e, const double *z_encoder, const double *u) {
 }
 
 /* ------------------------------------------------------------------ late frames */
+/* oosm.backward_inverse (eqs. 22, 24): xr <- x_j = F^-1(x_{j+1}, u_j) for j = k-1 .. kappa
+ * from x_{k} = xs, each step refused unless its residual converged (CompiledTransition.
+ * inverse); Phi <- A(x_{k-1}) ... A(x_kappa), the backward map's jacobian being Phi^-1. */
+static int oosm_backward_inverse(amsfe_est *e, long kappa) {
+  long N = e->d.N, NN = N * N;
+  cint n_out = transition_inverse_n_out();
+  copy(e->xr, e->xs, N);
+  memset(e->Phi, 0, sizeof(double) * (size_t)NN);
+  for (long i = 0; i < N; ++i) e->Phi[i * (N + 1)] = 1.0;
+  for (long j = e->k - 1; j >= kappa; --j) {
+    const double *uj = e->u_buf + pmod(j, e->B) * e->d.n;
+    double residual = NAN, scale = 1.0;
+    for (long i = 0; i < N; ++i) scale = fmax(scale, fabs(e->xr[i])); /* max(1, |x_next|) */
+    for (cint i = 2; i < n_out; ++i) e->g.res[i] = NULL;
+    const double *ii[2] = {e->xr, uj};
+    double *io[2] = {e->sv, &residual};
+    gcall(&e->g, transition_inverse, ii, 2, io, 2);
+    if (!(residual <= e->inv_tol * scale)) { /* NaN too */
+      e->inv_residual = residual, e->inv_limit = e->inv_tol * scale;
+      return AMSFE_REFUSED_NO_CONVERGENCE;
+    }
+    const double *si[2] = {e->sv, uj};
+    double *so[3] = {NULL, e->A1, NULL};
+    gcall(&e->g, STEP, si, 2, so, 3); /* A(x_j) */
+    amsfe_matmul((int)N, e->Phi, e->A1, e->Phi2);
+    copy(e->Phi, e->Phi2, NN);
+    copy(e->xr, e->sv, N);
+  }
+  return AMSFE_OK;
+}
+
 /* OosmEstimator._late_frame (A1 over the lag) */
 static int oosm_late(amsfe_est *e, const double *z, long kappa, double *nis) {
   long N = e->d.N, NN = N * N, k = e->k;
@@ -549,9 +583,11 @@ static int oosm_late(amsfe_est *e, const double *z, long kappa, double *nis) {
     copy(e->xs, e->x, N);
     for (long i = 0; i < NN; ++i) e->M[i] = e->C[i] = e->P[i] - e->Q[i];
   }
-  /* eq. (24): x(kappa|k) = F_{kappa,k}(x_shift) linearised about the stored trajectory:
-   * x(kappa|kappa) + Phi^-1 (s + x_shift - x(k|k-1)) (oosm.backward_map) */
-  {
+  if (e->par.backward_map == AMSFE_BACKWARD_INVERSE) {
+    int st = oosm_backward_inverse(e, kappa);
+    if (st != AMSFE_OK) return st;
+  } else { /* eq. (24): x(kappa|k) = F_{kappa,k}(x_shift) linearised about the stored
+              * trajectory: x(kappa|kappa) + Phi^-1 (s + x_shift - x(k|k-1)) (oosm.backward_map) */
     const double *prior_k = e->xprior_buf + pmod(k - 1, e->B) * N;
     for (long i = 0; i < N; ++i) e->xr[i] = e->sv[i] + (e->xs[i] - prior_k[i]);
     copy(e->Phi2, e->Phi, NN);

@@ -43,9 +43,9 @@ enum amsfe_status {
   AMSFE_ERR_FAILED = -5,         /* an earlier call failed: call amsfe_est_reset */
   AMSFE_ERR_CONFIG = -6,         /* bad parameter block (see amsfe_est_init) */
   AMSFE_ERR_MEMORY = -7,         /* the memory block is too small or misaligned */
-  AMSFE_REFUSED_NO_CONVERGENCE = 10, /* the inverse transition (eq. 22) did not converge.  Not
-                                        returned since issue 18: oosm's backward map of eq. 24
-                                        comes from the stored forward pass, with no inverse */
+  AMSFE_REFUSED_NO_CONVERGENCE = 10, /* oosm with backward_map AMSFE_BACKWARD_INVERSE: the
+                                        inverse transition (eq. 22) did not converge over the
+                                        lag (amsfe_est_inverse_residual says by how much) */
   AMSFE_REFUSED_DUPLICATE = 11 /* a frame of an exposure step already used (fused or gated):
                                   measurements are idempotent, a repeated one is not fused twice */
 };
@@ -60,6 +60,13 @@ enum amsfe_estimator {
   AMSFE_OOSM = 2,     /* the paper's A1 over the lag (eqs. 19-27) */
   AMSFE_REPLAY = 3,   /* rewind to the exposure and re-filter (exact, linear-Gaussian) */
   AMSFE_CLONING = 4   /* stochastic cloning at each scheduled exposure (exact) */
+};
+
+enum amsfe_backward_map {
+  AMSFE_BACKWARD_LINEARISED = 0, /* linearised about the stored forward pass: one LU solve */
+  AMSFE_BACKWARD_INVERSE = 1     /* the paper's form: L inverse transitions (eq. 22), the
+                                    jacobian at the retrodicted states; a step that does not
+                                    converge refuses the frame (AMSFE_REFUSED_NO_CONVERGENCE) */
 };
 
 /* Sizes of the library's model: n joints, N = 4n + p states, nw = 2n + p noise inputs,
@@ -87,6 +94,8 @@ typedef struct {
   const double *x0;       /* [N] initial x(k0|k0) */
   const double *P0;       /* [N*N] initial P(k0|k0), symmetric positive definite */
   long k0;                /* step index of x0 */
+  int backward_map;       /* oosm's backward map of eq. 24: enum amsfe_backward_map (0, the
+                             zero of a memset block, is the linearised one) */
 } amsfe_params;
 
 /* Counters and the outcome of the last calls. */
@@ -135,14 +144,14 @@ int amsfe_est_camera_frame(amsfe_est *est, const double *z, long exposure_step, 
 void amsfe_est_state(const amsfe_est *est, double *x, double *P);
 void amsfe_est_diagnostics(const amsfe_est *est, amsfe_diag *diag);
 
-/* Tolerance of the inverse transition's convergence check (AMSFE_REFUSED_NO_CONVERGENCE).
- * Kept for compatibility: since issue 18 no estimator calls the inverse (oosm's backward map
- * of eq. 24 is linearised about the stored forward pass), so the tolerance decides nothing.
- * Returns AMSFE_OK, or AMSFE_ERR_INPUT (NULL, or tol not > 0). */
+/* Tolerance of the inverse transition's convergence check (AMSFE_REFUSED_NO_CONVERGENCE):
+ * a step of oosm's backward map with AMSFE_BACKWARD_INVERSE is refused unless its residual
+ * max|F(x, u) - x_next| <= tol max(1, max|x_next|).  Returns AMSFE_OK, or AMSFE_ERR_INPUT
+ * (NULL, or tol not > 0). */
 int amsfe_est_set_inverse_tolerance(amsfe_est *est, double tol);
 
-/* The residual and limit of the last AMSFE_REFUSED_NO_CONVERGENCE: NaN (none is returned
- * since issue 18; either pointer may be NULL). */
+/* The residual and limit of the last AMSFE_REFUSED_NO_CONVERGENCE (NaN before the first;
+ * either pointer may be NULL). */
 void amsfe_est_inverse_residual(const amsfe_est *est, double *residual, double *limit);
 
 /* A short English name of a status. */

@@ -32,6 +32,7 @@ typedef struct {
   double gate_camera, gate_encoder;
   const double *qw, *r_encoder, *r_camera, *x0, *P0;
   long k0;
+  int backward_map; /* amsfe_params.backward_map: 0, the linearised map */
 } params_t;
 
 static void *sym(void *h, const char *name) {
@@ -96,6 +97,7 @@ int main(int argc, char **argv) {
   p.qw = doubles(f, d.nw), p.r_encoder = doubles(f, d.ne), p.r_camera = doubles(f, d.nc);
   p.x0 = doubles(f, d.N), p.P0 = doubles(f, (long)d.N * d.N);
   p.k0 = 0;
+  p.backward_map = 0;
   double *rec = doubles(f, K * (d.n + d.ne));
   int F = 0;
   if (fread(&F, sizeof(int), 1, f) != 1) F = 0;
