@@ -168,3 +168,36 @@ def test_writers_refuse_what_they_cannot_write(tmp_path: Path) -> None:
             tmp_path / "y", ur, rng, URLikeOptions(newton_metres_per_ampere=[1.0] * 5)
         )
     assert not (tmp_path / "x.bag").exists() and not (tmp_path / "y").exists()
+
+
+def test_rest_effort_against_gravity_finds_the_missing_load(tmp_path: Path) -> None:
+    """A Panda at rest in three poses logs the gravity torque of its URDF plus 0.6 kg at the
+    TCP (Pinocchio: a body appended to joint 7, computeGeneralizedGravity); the tool's fit
+    (the TCP Jacobian's transpose against the effort minus the URDF's g(q)) finds +0.6 kg."""
+    import pinocchio as pin
+
+    urdf = ROOT / "robots" / "panda" / "panda.urdf"
+    loaded = pin.buildModelFromUrdf(str(urdf))
+    tcp = loaded.frames[loaded.getFrameId("panda_hand_tcp")]
+    inertia = pin.Inertia(0.6, np.zeros(3), np.zeros((3, 3)))
+    loaded.appendBodyToJoint(tcp.parentJoint, inertia, tcp.placement)
+    data = loaded.createData()
+    rng = np.random.default_rng(3)
+    poses = rng.uniform(-1.0, 1.0, (3, 7)) + np.array([0, 0, 0, -1.8, 0, 1.6, 0])
+    q = np.repeat(poses, 1000, axis=0)  # 1 s each at 1 kHz
+    effort = np.empty_like(q)
+    for k, pose in enumerate(poses):
+        full = pin.neutral(loaded)
+        full[:7] = pose
+        effort[k * 1000 : (k + 1) * 1000] = pin.computeGeneralizedGravity(loaded, data, full)[:7]
+    motion = ArmMotion(FRANKA_ARM, 0.001, q, np.zeros_like(q), effort)
+    log = write_franka_like_bag(tmp_path / "rest.bag", motion, rng)
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    args = [str(log.path), "--urdf", str(urdf), "--mass-at", "panda_hand_tcp", "--json"]
+    run = subprocess.run(
+        [sys.executable, str(TOOL), *args], capture_output=True, text=True, env=env, check=True
+    )
+    (js,) = json.loads(run.stdout)["joint_states"]
+    assert js["rest_samples"] == len(log.stamp_ns)
+    assert js["mass_fit_kg"] == pytest.approx(0.6, abs=1e-9)
+    assert max(abs(v) for v in js["residual_after_mass_fit"].values()) < 1e-9

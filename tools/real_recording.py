@@ -10,7 +10,8 @@ repeated verbatim, the velocity against the positions' finite differences and, w
 
 Usage (the numbers in docs/data/real-recording.md)::
 
-    .venv/bin/python tools/real_recording.py LOG [--urdf robots/panda/panda.urdf] [--json]
+    .venv/bin/python tools/real_recording.py LOG [--urdf robots/panda/panda.urdf
+        [--mass-at panda_hand_tcp]] [--json]
 
 Nothing is written; ``--json`` prints the facts as one JSON object (the tests read it to
 check this script against logs whose timing they made themselves, tests/real_logs.py).
@@ -88,6 +89,9 @@ class JointStateFacts:
     velocity_vs_difference: dict[str, float]  # rms(velocity - d position / d stamp)
     rest_samples: int = 0
     effort_minus_gravity_at_rest: dict[str, Spread] = field(default_factory=dict)
+    mass_frame: str | None = None  # the point mass fitted to the rest residual sits here
+    mass_fit_kg: float | None = None  # least squares over every rest sample and joint
+    residual_after_mass_fit: dict[str, float] = field(default_factory=dict)  # medians [N m]
 
 
 @dataclass(frozen=True)
@@ -118,25 +122,37 @@ def _size(path: Path) -> int:
     return path.stat().st_size
 
 
-def _gravity(urdf: Path) -> Any:
-    """A function q-by-name -> g(q) by name (Pinocchio, the URDF's own gravity [0,0,-9.81])."""
+def _gravity(urdf: Path, frame: str | None) -> Any:
+    """A function q-by-name -> (g(q), J_p(q)^T [0, 0, 9.81]) by name: the URDF's gravity
+    torque and the torque of 1 kg at the origin of ``frame`` (Pinocchio; zeros if no frame)."""
     import pinocchio as pin
 
     model = pin.buildModelFromUrdf(str(urdf))
     data = model.createData()
+    fid = model.getFrameId(frame) if frame else None
+    if fid is not None and fid >= model.nframes:
+        raise SystemExit(f"real_recording: no frame {frame!r} in {urdf}; pass one of its frames")
 
-    def g(values: dict[str, float]) -> dict[str, float]:
+    def g(values: dict[str, float]) -> tuple[dict[str, float], dict[str, float]]:
         q = pin.neutral(model)
         for j in range(1, model.njoints):
             name = model.names[j]
             if name in values and model.joints[j].nq == 1:
                 q[model.joints[j].idx_q] = values[name]
         tau = pin.computeGeneralizedGravity(model, data, q)
+        unit = np.zeros(model.nv)
+        if fid is not None:
+            pin.computeJointJacobians(model, data, q)
+            pin.updateFramePlacements(model, data)
+            jac = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)[:3]
+            unit = jac.T @ np.array([0.0, 0.0, 9.81])
         out: dict[str, float] = {}
+        per_kg: dict[str, float] = {}
         for j in range(1, model.njoints):
             if model.joints[j].nv == 1:
                 out[model.names[j]] = float(tau[model.joints[j].idx_v])
-        return out
+                per_kg[model.names[j]] = float(unit[model.joints[j].idx_v])
+        return out, per_kg
 
     return g
 
@@ -151,6 +167,7 @@ def _joint_state_facts(
     vel: FloatArray,
     eff: FloatArray,
     urdf: Path | None,
+    mass_frame: str | None = None,
 ) -> JointStateFacts:
     n = len(names)
     dts = np.diff(stamps)
@@ -179,19 +196,28 @@ def _joint_state_facts(
         vvd = {names[i]: float(np.sqrt(np.mean((vm[:, i] - fd[:, i]) ** 2))) for i in range(n)}
     rest = 0
     egr: dict[str, Spread] = {}
+    fit: float | None = None
+    after: dict[str, float] = {}
     if urdf is not None and pos.shape[1] == n and eff.shape[1] == n:
-        g = _gravity(urdf)
+        g = _gravity(urdf, mass_frame)
         moving = np.abs(vel) if vel.shape[1] == n else np.zeros_like(pos)
         arm = [i for i in range(n) if np.ptp(pos[:, i]) > 0 or np.any(eff[:, i] != 0)]
         at_rest = np.all(moving[:, arm] < REST_SPEED, axis=1)
         rest = int(at_rest.sum())
-        diffs: dict[str, list[float]] = {names[i]: [] for i in arm}
+        res: list[list[float]] = []
+        col: list[list[float]] = []
         for k in np.flatnonzero(at_rest):
-            gk = g({names[i]: float(pos[k, i]) for i in range(n)})
-            for i in arm:
-                if names[i] in gk:
-                    diffs[names[i]].append(float(eff[k, i]) - gk[names[i]])
-        egr = {k: Spread.of(np.asarray(v)) for k, v in diffs.items() if v}
+            gk, uk = g({names[i]: float(pos[k, i]) for i in range(n)})
+            used = [i for i in arm if names[i] in gk]
+            res.append([float(eff[k, i]) - gk[names[i]] for i in used])
+            col.append([uk[names[i]] for i in used])
+        if res:
+            r, c = np.asarray(res), np.asarray(col)
+            egr = {names[i]: Spread.of(r[:, m]) for m, i in enumerate(used)}
+            if mass_frame and float(np.sum(c * c)) > 0:
+                fit = float(np.sum(c * r) / np.sum(c * c))
+                left = np.median(r - fit * c, axis=0)
+                after = {names[i]: float(left[m]) for m, i in enumerate(used)}
     return JointStateFacts(
         topic=topic,
         count=len(stamps),
@@ -213,6 +239,9 @@ def _joint_state_facts(
         velocity_vs_difference=vvd,
         rest_samples=rest,
         effort_minus_gravity_at_rest=egr,
+        mass_frame=mass_frame,
+        mass_fit_kg=fit,
+        residual_after_mass_fit=after,
     )
 
 
@@ -223,8 +252,12 @@ def _stack(rows: list[FloatArray], n: int) -> FloatArray:
     return np.vstack(rows)
 
 
-def recording_facts(path: Path, urdf: Path | None = None) -> RecordingFacts:
-    """Read the log at ``path`` once and return its facts."""
+def recording_facts(
+    path: Path, urdf: Path | None = None, mass_frame: str | None = None
+) -> RecordingFacts:
+    """Read the log at ``path`` once and return its facts (with ``urdf``: the effort at rest
+    against its g(q); with ``mass_frame`` too: the point mass [kg] at that frame that best
+    explains the difference, a negative one meaning the arm carries less than the URDF)."""
     from rosbags.highlevel import AnyReader
 
     topics: list[TopicFacts] = []
@@ -267,7 +300,9 @@ def recording_facts(path: Path, urdf: Path | None = None) -> RecordingFacts:
             logs = (lg - base) / 1e9
 
             p, v, e = (_stack(r[key], len(names)) for key in ("p", "v", "e"))
-            js.append(_joint_state_facts(topic, stamps, logs, names, constant, p, v, e, urdf))
+            js.append(
+                _joint_state_facts(topic, stamps, logs, names, constant, p, v, e, urdf, mass_frame)
+            )
         start, end = int(reader.start_time), int(reader.end_time)
         count = int(reader.message_count)
     return RecordingFacts(
@@ -332,6 +367,12 @@ def format_facts(f: RecordingFacts) -> str:
             )
             for name, s in j.effort_minus_gravity_at_rest.items():
                 out.append(f"  {name}: effort - g(q) {_fmt(s, 1.0, ' N m')}")
+        if j.mass_fit_kg is not None:
+            left = ", ".join(f"{v:.3g}" for v in j.residual_after_mass_fit.values())
+            out.append(
+                f"  point mass at {j.mass_frame} fitted to effort - g(q): {j.mass_fit_kg:.4g} kg;"
+                f" median residual after it [N m]: {left}"
+            )
     return "\n".join(out)
 
 
@@ -339,12 +380,13 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("log", type=Path, help="a ROS 1 .bag, a rosbag2 folder or an .mcap")
     ap.add_argument("--urdf", type=Path, help="compare the effort at rest with this URDF's g(q)")
+    ap.add_argument("--mass-at", help="with --urdf: fit a point mass at this frame to the rest")
     ap.add_argument("--json", action="store_true", help="print the facts as JSON")
     a = ap.parse_args(argv)
     if not a.log.exists():
         print(f"real_recording: no log at {a.log}; pass a .bag, a rosbag2 folder or an .mcap")
         return 2
-    facts = recording_facts(a.log, a.urdf)
+    facts = recording_facts(a.log, a.urdf, a.mass_at)
     print(json.dumps(asdict(facts), indent=1) if a.json else format_facts(facts))
     return 0
 
