@@ -117,6 +117,10 @@ def test_real_recording_tool_finds_the_drawn_timing(
     dts = np.diff(log.stamp_ns) / 1e9
     assert js["stamp_period_s"]["median"] == pytest.approx(np.median(dts), abs=1e-9)
     assert js["stamp_period_s"]["median"] == pytest.approx(1 / 30, rel=2e-3)
+    assert js["stamp_minus_log_mean_s"] == pytest.approx(np.mean(offset), abs=1e-9)
+    # the fitted grid: the writer's rate, and its stamp jitter (std 0.049 ms) about it
+    assert js["grid_period_s"] == pytest.approx(1 / 30, rel=1e-5)
+    assert js["grid_residual_std_s"] == pytest.approx(FrankaLikeOptions().stamp_jitter, rel=0.1)
     assert js["repeated_samples"] == 0
     assert js["backwards_stamps"] == js["repeated_stamps"] == js["zero_stamps"] == 0
 

@@ -78,6 +78,9 @@ class JointStateFacts:
     log_period_s: Spread  # log time differences [s]
     jitter_over_period: Spread  # (stamp dt - median dt) / median dt
     stamp_minus_log_s: Spread  # header stamp - log time [s]; > 0: stamps ahead
+    stamp_minus_log_mean_s: float
+    grid_period_s: float  # the uniform grid fitted to the stamps (least squares) [s]
+    grid_residual_std_s: float  # the stamps' std about that grid [s]
     backwards_stamps: int
     repeated_stamps: int
     zero_stamps: int
@@ -218,6 +221,13 @@ def _joint_state_facts(
                 fit = float(np.sum(c * r) / np.sum(c * c))
                 left = np.median(r - fit * c, axis=0)
                 after = {names[i]: float(left[m]) for m, i in enumerate(used)}
+    grid, resid = float("nan"), float("nan")
+    if len(stamps) > 2:
+        idx = np.arange(len(stamps), dtype=np.float64)
+        a = np.vstack([idx, np.ones_like(idx)]).T
+        coef = np.linalg.lstsq(a, stamps - stamps[0], rcond=None)[0]
+        grid = float(coef[0])
+        resid = float(np.std(stamps - stamps[0] - a @ coef))
     return JointStateFacts(
         topic=topic,
         count=len(stamps),
@@ -228,6 +238,9 @@ def _joint_state_facts(
         log_period_s=Spread.of(dtl),
         jitter_over_period=Spread.of((dts - med) / med) if dts.size else Spread.of(dts),
         stamp_minus_log_s=Spread.of(stamps - logs),
+        stamp_minus_log_mean_s=float(np.mean(stamps - logs)),
+        grid_period_s=grid,
+        grid_residual_std_s=resid,
         backwards_stamps=int(np.sum(dts < 0)),
         repeated_stamps=int(np.sum(dts == 0)),
         zero_stamps=int(np.sum(stamps == 0)),
@@ -344,7 +357,10 @@ def format_facts(f: RecordingFacts) -> str:
             f"  stamp period: {_fmt(j.stamp_period_s, 1e3, ' ms')}",
             f"  log period: {_fmt(j.log_period_s, 1e3, ' ms')}",
             f"  jitter (stamp dt - median) / median: {_fmt(j.jitter_over_period)}",
-            f"  stamp - log time: {_fmt(j.stamp_minus_log_s, 1e3, ' ms')}",
+            f"  stamp - log time: {_fmt(j.stamp_minus_log_s, 1e3, ' ms')}, "
+            f"mean {j.stamp_minus_log_mean_s * 1e3:.6g} ms",
+            f"  stamps about a fitted uniform grid: period {j.grid_period_s * 1e3:.6g} ms, "
+            f"residual std {j.grid_residual_std_s * 1e3:.4g} ms",
             f"  stamps backwards {j.backwards_stamps}, repeated {j.repeated_stamps}, "
             f"zero {j.zero_stamps}; samples repeated verbatim {j.repeated_samples}",
         ]
