@@ -121,6 +121,7 @@ def test_real_recording_tool_finds_the_drawn_timing(
     # the fitted grid: the writer's rate, and its stamp jitter (std 0.049 ms) about it
     assert js["grid_period_s"] == pytest.approx(1 / 30, rel=1e-5)
     assert js["grid_residual_std_s"] == pytest.approx(FrankaLikeOptions().stamp_jitter, rel=0.1)
+    assert js["gaps"] == 0 and js["largest_gap_periods"] < 1.1
     assert js["repeated_samples"] == 0
     assert js["backwards_stamps"] == js["repeated_stamps"] == js["zero_stamps"] == 0
 

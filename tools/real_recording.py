@@ -81,6 +81,8 @@ class JointStateFacts:
     stamp_minus_log_mean_s: float
     grid_period_s: float  # the uniform grid fitted to the stamps (least squares) [s]
     grid_residual_std_s: float  # the stamps' std about that grid [s]
+    gaps: int  # stamp differences over 1.5 median periods (messages missing)
+    largest_gap_periods: float  # the largest stamp difference over the median
     backwards_stamps: int
     repeated_stamps: int
     zero_stamps: int
@@ -223,7 +225,8 @@ def _joint_state_facts(
                 after = {names[i]: float(left[m]) for m, i in enumerate(used)}
     grid, resid = float("nan"), float("nan")
     if len(stamps) > 2:
-        idx = np.arange(len(stamps), dtype=np.float64)
+        # each stamp's slot on the grid (a dropped message leaves its slot empty)
+        idx = np.round((stamps - stamps[0]) / med)
         a = np.vstack([idx, np.ones_like(idx)]).T
         coef = np.linalg.lstsq(a, stamps - stamps[0], rcond=None)[0]
         grid = float(coef[0])
@@ -241,6 +244,8 @@ def _joint_state_facts(
         stamp_minus_log_mean_s=float(np.mean(stamps - logs)),
         grid_period_s=grid,
         grid_residual_std_s=resid,
+        gaps=int(np.sum(dts > 1.5 * med)),
+        largest_gap_periods=float(dts.max() / med) if dts.size else float("nan"),
         backwards_stamps=int(np.sum(dts < 0)),
         repeated_stamps=int(np.sum(dts == 0)),
         zero_stamps=int(np.sum(stamps == 0)),
@@ -360,7 +365,8 @@ def format_facts(f: RecordingFacts) -> str:
             f"  stamp - log time: {_fmt(j.stamp_minus_log_s, 1e3, ' ms')}, "
             f"mean {j.stamp_minus_log_mean_s * 1e3:.6g} ms",
             f"  stamps about a fitted uniform grid: period {j.grid_period_s * 1e3:.6g} ms, "
-            f"residual std {j.grid_residual_std_s * 1e3:.4g} ms",
+            f"residual std {j.grid_residual_std_s * 1e3:.4g} ms; gaps over 1.5 periods "
+            f"{j.gaps}, the largest {j.largest_gap_periods:.4g} periods",
             f"  stamps backwards {j.backwards_stamps}, repeated {j.repeated_stamps}, "
             f"zero {j.zero_stamps}; samples repeated verbatim {j.repeated_samples}",
         ]
