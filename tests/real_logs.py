@@ -42,6 +42,7 @@ __all__ = [
     "FrankaLikeOptions",
     "URLikeOptions",
     "WrittenLog",
+    "motion_from_run",
     "smooth_motion",
     "write_franka_like_bag",
     "write_ur_like_rosbag2",
@@ -173,6 +174,28 @@ def smooth_motion(
     qd = amplitude * w * np.cos(arg)
     effort = 5.0 * np.sin(arg + 1.0)
     return ArmMotion(tuple(names), period, q, qd, effort)
+
+
+def motion_from_run(
+    res: Any, effort: Literal["joint_torque", "applied"] = "joint_torque"
+) -> ArmMotion:
+    """The true link motion of a simulated run (``amsfe_sym.sim.result.RunResult``) on its
+    T grid, with the effort a real arm would log: ``joint_torque``, the spring torque
+    ``Ks (qm - q)`` [N m] that Franka's and KUKA's torque sensors measure (Ks at the run's true
+    theta), or ``applied``, the motor torque ``u`` [N m] applied over [t_k, t_k + T] (what a
+    UR's currents measure, :func:`write_ur_like_rosbag2` divides it into amperes)."""
+    lib = res.lib
+    lay = lib.layout
+    x = np.asarray(res.x_true, dtype=np.float64)
+    q, qd, qm = x[:, lay["q"]], x[:, lay["qd"]], x[:, lay["qm"]]
+    if effort == "joint_torque":
+        ks = lib.stiffness(x[0, lay["theta"]])
+        tau = (qm - q) * ks
+    elif effort == "applied":
+        tau = np.asarray(res.u, dtype=np.float64)
+    else:
+        raise ValueError(f"motion_from_run: effort {effort!r}; pass 'joint_torque' or 'applied'")
+    return ArmMotion(tuple(lib.manifest.joints), float(lib.T), q.copy(), qd.copy(), tau.copy())
 
 
 def _timing(

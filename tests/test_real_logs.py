@@ -21,6 +21,7 @@ from tests.real_logs import (
     FrankaLikeOptions,
     URLikeOptions,
     WrittenLog,
+    motion_from_run,
     smooth_motion,
     write_franka_like_bag,
     write_ur_like_rosbag2,
@@ -206,3 +207,36 @@ def test_rest_effort_against_gravity_finds_the_missing_load(tmp_path: Path) -> N
     assert js["rest_samples"] == len(log.stamp_ns)
     assert js["mass_fit_kg"] == pytest.approx(0.6, abs=1e-9)
     assert max(abs(v) for v in js["residual_after_mass_fit"].values()) < 1e-9
+
+
+@pytest.mark.slow
+def test_a_simulated_ur5_run_as_a_ur_driver_logs_it(tmp_path: Path) -> None:
+    """One second of the shipped UR5 scenario (its ur5_rk4 library: ~15 s of compile on a
+    fresh checkout, then cached) written as a UR driver's log: the currents times N m per
+    ampere give back the applied torque u, the positions the true link angles; and the
+    joint-torque effort is Ks (qm - q) with Ks read from the robot spec, not the library."""
+    from amsfe_sym.codegen import library_for
+    from amsfe_sym.load import load_robot
+    from amsfe_sym.scenario import load_scenario
+    from amsfe_sym.sim.loop import run
+
+    sc = load_scenario("ur5-demo").with_overrides(duration=1.0)
+    lib = library_for(sc)
+    res = run(sc, lib=lib)
+    applied = motion_from_run(res, "applied")
+    assert applied.names == UR_JOINTS and applied.period == lib.T
+    k = np.array([12.0, 12.0, 10.0, 5.0, 5.0, 5.0])
+    rng = np.random.default_rng(11)
+    opts = URLikeOptions(newton_metres_per_ampere=list(k))
+    log = write_ur_like_rosbag2(tmp_path / "ur5", applied, rng, opts)
+    got = _read(log.path)
+    perm = [UR_JOINTS.index(n) for n in sorted(UR_JOINTS)]
+    rows = log.sample_index
+    assert len(rows) == 126  # 1 s at 125 Hz
+    np.testing.assert_array_equal(got["p"], res.x_true[rows][:, lib.layout["q"]][:, perm])
+    np.testing.assert_allclose(got["e"] * k[perm], res.u[rows][:, perm], rtol=1e-14, atol=1e-12)
+    spring = motion_from_run(res, "joint_torque")
+    ks = load_robot("ur5").Ks
+    x = res.x_true
+    expected = ks * (x[:, lib.layout["qm"]] - x[:, lib.layout["q"]])
+    np.testing.assert_allclose(spring.effort, expected, rtol=1e-12, atol=1e-12)
