@@ -240,3 +240,24 @@ def test_a_simulated_ur5_run_as_a_ur_driver_logs_it(tmp_path: Path) -> None:
     x = res.x_true
     expected = ks * (x[:, lib.layout["qm"]] - x[:, lib.layout["q"]])
     np.testing.assert_allclose(spring.effort, expected, rtol=1e-12, atol=1e-12)
+
+
+def test_make_real_like_logs_writes_or_refuses_in_one_line(tmp_path: Path) -> None:
+    tool = ROOT / "tools" / "make_real_like_logs.py"
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+
+    def call(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, str(tool), *args], capture_output=True, text=True, env=env
+        )
+
+    out = tmp_path / "f.bag"
+    ok = call("franka", str(out), "--duration", "2", "--offset", "-5.0")
+    assert ok.returncode == 0, ok.stderr
+    (js,) = _facts(out)["joint_states"]
+    assert js["count"] == 61 and js["stamp_minus_log_s"]["max"] < -5.0
+    again = call("franka", str(out), "--duration", "2")
+    assert again.returncode == 2 and again.stdout.count("\n") == 1 and "exists" in again.stdout
+    lone = call("ur", str(tmp_path / "u"), "--truth", str(tmp_path / "t.npz"))
+    assert lone.returncode == 2 and "--scenario" in lone.stdout
+    assert not (tmp_path / "u").exists() and not (tmp_path / "t.npz").exists()

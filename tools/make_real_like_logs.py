@@ -8,14 +8,19 @@
   alphabetical joint order, motor currents as effort.
 
 The motion is a smooth sinusoid per joint (tests/real_logs.py ``smooth_motion``: not the
-dynamics of any arm; the tests feed simulated runs instead).  Usage::
+dynamics of any arm), or with ``--scenario`` a simulated run of a shipped scenario on its
+robot (``panda-control`` for franka, ``ur5-demo`` / ``ur5-control`` for ur): the effort is
+then the spring torque Ks (qm - q) (franka: what its torque sensors measure) or the applied
+torque u turned into currents (ur), and ``--truth FILE.npz`` saves the run's true state and
+which sample each message carries.  Usage::
 
     .venv/bin/python tools/make_real_like_logs.py franka OUT.bag [--duration 60] [--seed 0]
-        [--offset 203.6] [--jitter 4.9e-5] [--repeat 0.0]
+        [--offset 203.6] [--jitter 4.9e-5] [--repeat 0.0] [--scenario panda-control]
+        [--truth OUT.npz]
     .venv/bin/python tools/make_real_like_logs.py ur OUT_FOLDER [--storage mcap|sqlite3]
-        [--rate 125]
+        [--rate 125] [--scenario ur5-demo]
 
-The output must not exist; nothing else is written.
+The outputs must not exist; nothing else is written.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any, Literal
 
 import numpy as np
 
@@ -31,12 +37,40 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from tests.real_logs import (  # (after the repository root is on the path)
     FRANKA_ARM,
     UR_JOINTS,
+    ArmMotion,
     FrankaLikeOptions,
     URLikeOptions,
+    motion_from_run,
     smooth_motion,
     write_franka_like_bag,
     write_ur_like_rosbag2,
 )
+
+_RUN: list[Any] = []  # the simulated run behind the motion, if any
+
+
+def _motion(
+    a: argparse.Namespace,
+    names: tuple[str, ...],
+    effort: Literal["joint_torque", "applied"],
+    rng: np.random.Generator,
+) -> ArmMotion:
+    if a.scenario is None:
+        return smooth_motion(names, a.duration, 0.001, rng)
+    from amsfe_sym.codegen import library_for
+    from amsfe_sym.scenario import load_scenario
+    from amsfe_sym.sim.loop import run
+
+    sc = load_scenario(a.scenario).with_overrides(duration=a.duration)
+    res = run(sc, lib=library_for(sc))
+    _RUN.append(res)
+    motion = motion_from_run(res, effort)
+    if motion.names != names:
+        raise SystemExit(
+            f"make_real_like_logs: scenario {a.scenario} moves {motion.names}; pass a scenario "
+            f"of a robot with joints {names}"
+        )
+    return motion
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -50,9 +84,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jitter", type=float, help="stamp std about the grid [s]")
     ap.add_argument("--repeat", type=float, default=0.0, help="franka: P(sample re-sent)")
     ap.add_argument("--storage", choices=["mcap", "sqlite3"], default="mcap")
+    ap.add_argument("--scenario", help="simulate this shipped scenario for the motion")
+    ap.add_argument("--truth", type=Path, help="with --scenario: save the truth (.npz)")
     a = ap.parse_args(argv)
-    if a.out.exists():
-        print(f"make_real_like_logs: {a.out} exists; pass a new path (nothing was written)")
+    for out in (a.out, a.truth):
+        if out is not None and out.exists():
+            print(f"make_real_like_logs: {out} exists; pass a new path (nothing was written)")
+            return 2
+    if a.truth is not None and a.scenario is None:
+        print("make_real_like_logs: --truth needs --scenario (a sinusoid has no other truth)")
         return 2
     if not a.duration > 0:
         print(f"make_real_like_logs: --duration {a.duration}; pass a duration > 0 s")
@@ -66,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
             stamp_jitter=f.stamp_jitter if a.jitter is None else a.jitter,
             repeat_probability=a.repeat,
         )
-        motion = smooth_motion(FRANKA_ARM, a.duration, 0.001, rng)
+        motion = _motion(a, FRANKA_ARM, "joint_torque", rng)
         log = write_franka_like_bag(a.out, motion, rng, opts)
     else:
         u = URLikeOptions()
@@ -76,8 +116,22 @@ def main(argv: list[str] | None = None) -> int:
             stamp_jitter=u.stamp_jitter if a.jitter is None else a.jitter,
             storage=a.storage,
         )
-        motion = smooth_motion(UR_JOINTS, a.duration, 0.001, rng)
+        motion = _motion(a, UR_JOINTS, "applied", rng)
         log = write_ur_like_rosbag2(a.out, motion, rng, uopts)
+    if a.truth is not None and _RUN:
+        res = _RUN[0]
+        np.savez(
+            a.truth,
+            t=res.t,
+            x_true=res.x_true,
+            u=res.u,
+            sample_index=log.sample_index,
+            true_time=log.true_time,
+            stamp_ns=log.stamp_ns,
+            log_time_ns=log.log_time_ns,
+            joints=np.array(res.lib.manifest.joints),
+        )
+        print(f"wrote {a.truth}: the run's t, x_true, u and each message's sample")
     print(
         f"wrote {log.path}: {len(log.stamp_ns)} messages on {log.topic}, joints "
         f"{', '.join(log.names)}; header stamps {log.clock_offset_s:+g} s from the log time"
