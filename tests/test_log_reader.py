@@ -659,3 +659,60 @@ def test_a_log_at_another_rate_runs_once_the_robot_is_generated_at_it(res, tmp_p
     assert "the log's period 0.002 s: library paper_2link_T2000us" in stdout
     s = json.loads((tmp_path / "b" / "summary.json").read_text())
     assert s["ticks"] == len(ev) and s["topics"]["encoders"]["used"] == len(ev)
+
+
+# ------------------------------------------------- logs from the independent writers of
+# tests/real_logs.py (helper "recording"): a franka_ros bag, a UR driver's rosbag2
+def _expect_on_ticks(written, motion, T: float) -> dict[int, np.ndarray]:
+    """Tick -> [q, qd] each message of ``written`` carries (first message of a tick)."""
+    order = np.argsort(written.stamp_ns, kind="stable")
+    t0 = written.stamp_ns[order[0]]
+    out: dict[int, np.ndarray] = {}
+    for i in order:
+        k = round((written.stamp_ns[i] - t0) * 1e-9 / T)
+        row = written.sample_index[i]
+        out.setdefault(k, np.concatenate([motion.q[row], motion.qd[row]]))
+    return out
+
+
+def test_a_franka_ros_bag_from_the_recording_writer(tmp_path) -> None:
+    """write_franka_like_bag: 30 Hz, 7 arm joints + 2 fingers, measured joint torque as
+    effort, stamps 203.6 s ahead, 0.049 ms jitter, 0.26-0.53 ms latency.  Found without a
+    spec (effort kind none), read at T = 1/30 s with every sample on its tick and the offset
+    measured to the latency."""
+    from tests.real_logs import FRANKA_ARM, smooth_motion, write_franka_like_bag
+
+    rng = np.random.default_rng(7)
+    T = 1 / 30
+    motion = smooth_motion(FRANKA_ARM, 4.0, T, rng)
+    written = write_franka_like_bag(tmp_path / "franka.bag", motion, rng)
+    plan = plan_log(written.path, LogSpec(), FRANKA_ARM)
+    assert plan.roles["encoders"] == plan.roles["effort"] == "/joint_states"
+    assert plan.effort_kind == "none" and plan.names == FRANKA_ARM
+    log = read_log(written.path, LogSpec(), FRANKA_ARM, T, 28, plan)
+    expected = _expect_on_ticks(written, motion, T)
+    assert max(expected) + 1 == log.K and not log.usage["encoders"].skipped
+    for k, z in expected.items():
+        assert np.array_equal(log.z[k], z), k
+    lat = (written.log_time_ns - written.stamp_ns) * 1e-9 + written.clock_offset_s
+    assert abs(log.clock.median - (np.median(lat) - written.clock_offset_s)) < 1e-6
+    assert log.effort is not None and np.array_equal(log.effort[0], motion.effort[0])
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_a_ur_driver_rosbag2_from_the_recording_writer(tmp_path, storage: str) -> None:
+    """write_ur_like_rosbag2: 125 Hz, joints in alphabetical order, motor currents [A] as
+    effort.  The encoders come back in the robot's kinematic order; the currents are kind
+    none by default (never fed as a torque)."""
+    from tests.real_logs import UR_JOINTS, URLikeOptions, smooth_motion, write_ur_like_rosbag2
+
+    rng = np.random.default_rng(8)
+    T = 0.008
+    motion = smooth_motion(UR_JOINTS, 2.0, T, rng)
+    written = write_ur_like_rosbag2(tmp_path / "ur", motion, rng, URLikeOptions(storage=storage))
+    assert written.names[0] == "elbow_joint"  # the driver's order, not the robot's
+    plan = plan_log(written.path, LogSpec(), UR_JOINTS)
+    assert plan.effort_kind == "none" and "joint_torque" in plan.kind_how
+    log = read_log(written.path, LogSpec(), UR_JOINTS, T, 24, plan)
+    for k, z in _expect_on_ticks(written, motion, T).items():
+        assert np.array_equal(log.z[k], z), k
