@@ -680,7 +680,7 @@ def test_a_franka_ros_bag_from_the_recording_writer(tmp_path) -> None:
     effort, stamps 203.6 s ahead, 0.049 ms jitter, 0.26-0.53 ms latency.  Found without a
     spec (effort kind none), read at T = 1/30 s with every sample on its tick and the offset
     measured to the latency."""
-    from tests.real_logs import FRANKA_ARM, smooth_motion, write_franka_like_bag
+    from tests.real_logs import FRANKA_ARM, FrankaLikeOptions, smooth_motion, write_franka_like_bag
 
     rng = np.random.default_rng(7)
     T = 1 / 30
@@ -697,6 +697,14 @@ def test_a_franka_ros_bag_from_the_recording_writer(tmp_path) -> None:
     lat = (written.log_time_ns - written.stamp_ns) * 1e-9 + written.clock_offset_s
     assert abs(log.clock.median - (np.median(lat) - written.clock_offset_s)) < 1e-6
     assert log.effort is not None and np.array_equal(log.effort[0], motion.effort[0])
+    # the writer's republished samples (the real recording: 19 of 987) are noted, not hidden
+    rep = write_franka_like_bag(
+        tmp_path / "rep.bag", motion, rng, FrankaLikeOptions(repeat_probability=0.1)
+    )
+    repeated = int((np.diff(rep.sample_index) == 0).sum())
+    log = read_log(rep.path, LogSpec(), FRANKA_ARM, T, 28)
+    notes = log.usage["encoders"].notes
+    assert repeated > 0 and sum(notes.values()) == repeated, (notes, repeated)
 
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])

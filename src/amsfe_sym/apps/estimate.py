@@ -462,6 +462,8 @@ def print_summary(s: dict[str, Any], out: Path) -> None:
             continue
         why = ", ".join(f"{k} {v}" for k, v in u["skipped"].items()) or "none"
         print(f"  {role} {u['topic']}: {u['messages']} messages, {u['used']} used; skipped: {why}")
+        for note, count in u.get("notes", {}).items():
+            print(f"    note: {count} {note}")
     refused = {k: v for k, v in c.items() if v and k.startswith("refused")}
     if refused:
         print("  refused by the estimator: " + ", ".join(f"{k} {v}" for k, v in refused.items()))

@@ -159,6 +159,8 @@ class RoleUse:
         used: Messages that entered the estimate.
         skipped: Messages not used, by reason.
         not_used: Without a topic: the log's topics of the role's types (not used).
+        notes: Counts worth a look that changed nothing (used samples identical to the
+            previous one: a driver republishing its last state, or an arm at rest).
     """
 
     topic: str | None
@@ -166,6 +168,7 @@ class RoleUse:
     used: int = 0
     skipped: dict[str, int] = field(default_factory=dict)
     not_used: list[str] = field(default_factory=list)
+    notes: dict[str, int] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         """For ``summary.json``."""
@@ -175,6 +178,7 @@ class RoleUse:
             "used": self.used,
             "skipped": dict(self.skipped),
             "topics_of_this_type_not_used": list(self.not_used),
+            "notes": dict(self.notes),
         }
 
 
@@ -676,6 +680,10 @@ def read_log(
     if not np.isfinite(z[0]).all():
         raise _refuse(where, "a finite first encoder sample", "NaN or inf", "cut the log there")
     use.used = int(uniq.size) - bad_samples
+    step1 = np.flatnonzero(np.diff(uniq) == 1)  # consecutive ticks with identical samples
+    same = int((z[uniq[step1 + 1]] == z[uniq[step1]]).all(axis=1).sum())
+    if same:
+        use.notes["identical to the previous tick's sample (republished, or at rest)"] = same
     skipped: dict[str, int] = {}
     missing = int(bad.sum())
     if missing:
