@@ -55,6 +55,7 @@ from amsfe_sym.core.interrupts import DeferredSignals, checkpoint
 from amsfe_sym.errors import CodegenError, describe
 from amsfe_sym.load.spec import RobotSpec, load_spec
 from amsfe_sym.runtime.library import file_sha256
+from amsfe_sym.runtime.stability import JointMode, StiffJoint, modes_from_manifest, stiff_joints
 
 __all__ = ["GenerateResult", "cached_library", "generate"]
 
@@ -71,7 +72,10 @@ class GenerateResult:
         library_path: The shared library.
         reused: True when the cache matched and nothing was rebuilt.
         seconds: Wall time of the call [s].
-        timings: Per-stage wall times [s] (load, symbolic, codegen, compile) when built.
+        timings: Per-stage wall times [s] (load, modes, symbolic, codegen, compile) when built.
+        modes: Each joint's elastic mode over the workspace (the manifest's ``joint_modes``;
+            empty for a library built before they were stored): :meth:`stiff` lists the
+            joints the library's model cannot integrate.
     """
 
     out_dir: Path
@@ -80,6 +84,15 @@ class GenerateResult:
     reused: bool
     seconds: float
     timings: dict[str, float]
+    modes: tuple[JointMode, ...] = ()
+
+    def stiff(self) -> tuple[StiffJoint, ...]:
+        """The joints whose elastic mode the library's model cannot integrate at its T
+        (:func:`~amsfe_sym.runtime.stability.stiff_joints`), from the manifest."""
+        raw = json.loads(self.manifest_path.read_text())
+        return stiff_joints(
+            self.modes, float(raw["T"]), str(raw["integrator"]), int(raw["model_substeps"])
+        )
 
 
 def cached_library(
@@ -101,7 +114,18 @@ def cached_library(
     lib = cached_dir(out_dir, key)
     if lib is None:
         return None
-    return GenerateResult(out_dir, out_dir / MANIFEST, lib, True, time.perf_counter() - t_start, {})
+    return _reused(out_dir, lib, t_start)
+
+
+def _reused(out_dir: Path, lib: Path, t_start: float) -> GenerateResult:
+    """The result of a cache hit, with the joint modes its manifest stores."""
+    try:
+        modes = modes_from_manifest(json.loads((out_dir / MANIFEST).read_text())) or ()
+    except (OSError, ValueError):
+        modes = ()
+    return GenerateResult(
+        out_dir, out_dir / MANIFEST, lib, True, time.perf_counter() - t_start, {}, modes
+    )
 
 
 def generate(
@@ -146,9 +170,7 @@ def generate(
     if not force:
         lib = cached_dir(out_dir, key)
         if lib is not None:
-            return GenerateResult(
-                out_dir, out_dir / MANIFEST, lib, True, time.perf_counter() - t_start, {}
-            )
+            return _reused(out_dir, lib, t_start)
 
     # one build per library at a time, across processes (pytest-xdist workers, study
     # workers, two shells): the others wait and then find it in the cache
@@ -156,9 +178,7 @@ def generate(
         if not force:
             lib = cached_dir(out_dir, key)
             if lib is not None:
-                return GenerateResult(
-                    out_dir, out_dir / MANIFEST, lib, True, time.perf_counter() - t_start, {}
-                )
+                return _reused(out_dir, lib, t_start)
         return _build(
             spec, parts, flags, key, hash_inputs, parent, out_dir, progress, t_start, force
         )
@@ -196,6 +216,7 @@ def _build(
     while the compiler runs: raised inside the yourdfpy/trimesh imports or CasADi they used
     to be swallowed (the build went on to the end).  The temporary folder is removed."""
     # heavy imports only when building
+    from amsfe_sym.codegen.modes import joint_modes, modes_document
     from amsfe_sym.load import load_robot
     from amsfe_sym.symbolic.model import build_functions
 
@@ -203,6 +224,9 @@ def _build(
     t = time.perf_counter()
     robot_obj = load_robot(spec)
     timings["load"] = time.perf_counter() - t
+    t = time.perf_counter()
+    modes = joint_modes(robot_obj)
+    timings["modes"] = time.perf_counter() - t
     checkpoint()
     t = time.perf_counter()
     model = build_functions(robot_obj, parts)
@@ -292,6 +316,7 @@ def _build(
             ) from exc
         manifest = manifest_document(model, key, hash_inputs, libname, cname, timings)
         manifest["library_sha256"] = file_sha256(tmp / libname)
+        manifest["joint_modes"] = modes_document(robot_obj, modes)
         (tmp / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n")
         checkpoint()
         replace_dir(tmp, out_dir)
@@ -306,6 +331,7 @@ def _build(
         False,
         time.perf_counter() - t_start,
         timings,
+        modes,
     )
 
 

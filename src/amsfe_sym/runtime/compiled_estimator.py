@@ -34,6 +34,7 @@ from amsfe_sym.runtime.models import (
     EncoderMeasurement,
     inverse_not_converged,
 )
+from amsfe_sym.runtime.stability import STATUS_NOT_PD, covariance_hint
 
 __all__ = [
     "COMPILED_ESTIMATORS",
@@ -244,13 +245,17 @@ class CompiledEstimator(Estimator):
         self.P = np.ascontiguousarray(self._Pbuf)
 
     def _error(self, what: str, status: int) -> EstimatorError:
+        fix = (
+            "check the inputs and the model at the current state (the runtime must be "
+            "reset before it runs again)"
+        )
+        hint = covariance_hint(self.lib.manifest.raw) if status == STATUS_NOT_PD else None
         return EstimatorError(
             describe(
                 f"compiled {self.name}: {what} at step {self.k + 1}",
                 "a usable numerical result",
                 f"status {status}: {self.status_string(status)}",
-                "check the inputs and the model at the current state (the runtime must be "
-                "reset before it runs again)",
+                hint or fix,
             )
         )
 
