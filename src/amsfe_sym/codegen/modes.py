@@ -17,8 +17,9 @@ are Pinocchio and numpy only (no CasADi): 200 samples of the Panda take 0.04 s
 (docs/codegen.md, "Joint modes").
 
 :func:`spec_at_period` derives, in memory, the spec of a robot sampled at another T (the robot
-folder is never edited), with ``model_substeps`` chosen from the modes; :func:`library_at_period`
-generates (or reuses, cached by content like every library) and loads it.
+folder is never edited), with ``model_substeps`` chosen from the modes;
+:func:`amsfe_sym.codegen.libraries.library_at_period` generates (or reuses, cached by content
+like every library) and loads it.
 """
 
 from __future__ import annotations
@@ -52,7 +53,6 @@ __all__ = [
     "ModeSet",
     "derived_name",
     "joint_modes",
-    "library_at_period",
     "modes_at",
     "modes_document",
     "source_name",
@@ -230,10 +230,12 @@ def spec_at_period(
     ``model_substeps`` is ``substeps`` or the smallest that keeps every joint's w h <=
     ``margin`` (:func:`~amsfe_sym.runtime.stability.substeps_for`).  A robot whose
     integrator is ``paper`` or ``semi_implicit`` keeps it when it is stable at T, else
-    becomes ``rk4`` (the only integrator with substeps).  Kept in real time, not in steps:
-    the camera's period and delay (rounded, >= 1 and >= 0 steps) and the plant's RK4 step
-    (``plant_substeps`` scaled, at least as many as the model's).  The stiffness is fixed
-    to the loaded robot's (a bare URDF's default Ks depends on T).  Named by
+    becomes ``rk4`` (the only integrator with substeps).  The camera's period and delay are
+    kept in real time (rounded, >= 1 and >= 0 steps).  The truth plant (simulation only)
+    takes the robot's ``plant_substeps`` or the modes' substeps if more: stable, not as
+    accurate as at the robot's own T (scaling them with T made a 2-link library at T = 0.5 s
+    unroll 1000 steps and compile for 60 s).  The stiffness is fixed to the loaded robot's (a
+    bare URDF's default Ks depends on T).  Named by
     :func:`derived_name`, so it never replaces the robot's own library.
 
     Raises:
@@ -259,8 +261,7 @@ def spec_at_period(
             integrator = "rk4"
     if integrator != "rk4":
         substeps = spec.model.model_substeps
-    scale = T / spec.model.T
-    plant = max(math.ceil(spec.model.plant_substeps * scale - 1e-9), substeps)
+    plant = max(spec.model.plant_substeps, substeps_for(modes, T, margin))
     cam = spec.camera
     model = replace(
         spec.model,
@@ -280,23 +281,3 @@ def spec_at_period(
             delay=max(0, round(cam.delay * spec.model.T / T)),
         ),
     )
-
-
-def library_at_period(
-    robot: str | os.PathLike[str] | RobotSpec,
-    T: float,
-    substeps: int | None = None,
-    out: str | os.PathLike[str] | None = None,
-    progress: bool = False,
-) -> Any:
-    """Generate (or reuse from the cache) and load the library of ``robot`` at period ``T``
-    [s] (:func:`spec_at_period`; ``substeps`` None: chosen from the joint modes).
-
-    Returns:
-        The :class:`~amsfe_sym.runtime.library.ModelLibrary`.
-    """
-    from amsfe_sym.codegen.build import generate
-    from amsfe_sym.runtime.library import ModelLibrary
-
-    spec = spec_at_period(robot, T, substeps)
-    return ModelLibrary(generate(spec, out=out, progress=progress).out_dir)

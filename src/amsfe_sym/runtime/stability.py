@@ -359,9 +359,14 @@ def covariance_hint(raw: Mapping[str, Any]) -> str | None:
     block = raw["joint_modes"]
     robot = str(block.get("robot", raw.get("name", "ROBOT")))
     k = substeps_for(modes, T)
+    what = (
+        f"model_substeps = {k}"
+        if integrator == "rk4"
+        else f'integrator = "rk4" and model_substeps = {k}'
+    )
     return (
         "the model cannot integrate the elastic mode of "
         + "; ".join(s.line() for s in stiff)
-        + f"; fix: amsfe generate {robot} --period {T:.6g} (picks model_substeps = {k}) or "
-        f"set [model] model_substeps = {k} in robots/{robot}/robot.toml"
+        + f": amsfe generate {robot} --period {T:.6g} (picks model_substeps = {k}), or set "
+        f"[model] {what} in robots/{robot}/robot.toml"
     )
