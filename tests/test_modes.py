@@ -29,6 +29,7 @@ from amsfe_sym.codegen.modes import (
     joint_modes,
     modes_at,
     modes_document,
+    robot_source,
     spec_at_period,
     warn_stiff,
 )
@@ -50,6 +51,7 @@ from amsfe_sym.runtime.stability import (
     modal_spectral_radius,
     stable_wh,
     stiff_joints,
+    stiffness_fix,
     substeps_for,
 )
 
@@ -136,7 +138,7 @@ def test_panda_warns_at_30_hz_and_not_at_its_own_T(panda: Robot, capsys) -> None
     assert max(m.highest.w for m in modes) * T_LOG / k <= 2.0
     assert max(m.highest.w for m in modes) * T_LOG / (k - 1) > 2.0  # the smallest such k
     assert stiff_joints(modes, T_LOG, "rk4", k) == ()
-    warn_stiff(stiff, "panda", modes)
+    warn_stiff(stiff, robot_source(panda.spec), modes)
     lines = capsys.readouterr().err.splitlines()
     assert len(lines) == len(panda.joints)
     for line, s in zip(lines, stiff, strict=True):
@@ -153,7 +155,8 @@ def test_covariance_hint_names_the_joints_and_the_fix(panda: Robot) -> None:
     assert hint is not None
     k = substeps_for(modes, T_LOG)
     assert "joint panda_joint3: w = " in hint and "> 2.83 (rk4" in hint
-    assert f"amsfe generate panda --period 0.0333333 (picks model_substeps = {k}), or" in hint
+    assert f"model_substeps = {k} in robots/panda/robot.toml or generate" in hint
+    assert f"(amsfe generate panda --period 0.0333333 --substeps {k})" in hint
     assert covariance_hint({**raw, "model_substeps": k}) is None
     assert covariance_hint({**raw, "joint_modes": None}) is None  # an older library
 
@@ -171,6 +174,27 @@ def test_spec_at_period_is_derived_in_memory(panda: Robot) -> None:
     # a paper-integrator robot its Euler form cannot integrate at T becomes rk4
     one = spec_at_period("paper_1link", 0.2)
     assert one.model.integrator == "rk4" and one.name.endswith("_rk4x2")
+
+
+def test_the_fix_names_what_the_user_edits(tmp_path) -> None:
+    """A shipped robot by name, a robot folder of one's own by its path, a bare URDF with no
+    robot.toml to edit."""
+    shipped = robot_source(load_spec("panda"))
+    assert (shipped.robot, shipped.spec_file) == ("panda", "robots/panda/robot.toml")
+    mine = tmp_path / "my_arm"
+    mine.mkdir()
+    urdf = robots_dir() / "paper_2link" / "paper_2link.urdf"
+    (mine / "robot.toml").write_text(f'urdf = "{urdf}"\n[model]\nT = 0.0333\n')
+    own = robot_source(load_spec(mine))
+    assert (own.robot, own.spec_file) == (str(mine), str(mine / "robot.toml"))
+    bare = robot_source(load_spec(urdf))
+    assert (bare.robot, bare.spec_file) == (str(urdf), None)
+    modes = joint_modes(load_robot(mine))
+    stiff = stiff_joints(modes, 0.0333, "semi_implicit")
+    assert stiffness_fix(own, 0.0333, "semi_implicit", 1).startswith(
+        f'set [model] integrator = "rk4" and model_substeps = 1 in {mine / "robot.toml"}'
+    )
+    assert stiff == ()  # the 2-link arm's modes (w <= 19.4 rad/s) at 30 Hz, symplectic Euler
 
 
 def test_bad_period_is_one_line_and_writes_nothing(tmp_path, capsys) -> None:
@@ -274,4 +298,4 @@ def test_covariance_failure_names_the_stiff_joint() -> None:
     msg = str(err.value)
     assert "lost positive definiteness" in msg
     assert "joint joint2: w = " in msg and "(rk4, T = 0.5 s)" in msg
-    assert "amsfe generate paper_2link --period 0.5 (picks model_substeps = " in msg
+    assert "(amsfe generate paper_2link --period 0.5 --substeps 5)" in msg

@@ -324,12 +324,12 @@ def _main(argv: Sequence[str] | None) -> int:
 
 def _generate(args: argparse.Namespace) -> int:
     from amsfe_sym.codegen import generate
-    from amsfe_sym.codegen.modes import source_name, spec_at_period, warn_stiff
+    from amsfe_sym.codegen.modes import robot_source, spec_at_period, warn_stiff
     from amsfe_sym.load.spec import load_spec
 
     extra = args.cflags.split() if args.cflags else None
     spec = load_spec(args.robot).with_locked(dict(args.lock))
-    robot = source_name(spec)
+    source = robot_source(spec)
     if args.substeps is not None and args.period is None:
         args.period = spec.model.T  # --substeps alone: the robot's T, other substeps
     if args.period is not None:
@@ -345,7 +345,8 @@ def _generate(args: argparse.Namespace) -> int:
         )
     if res.timings:
         print("  " + ", ".join(f"{k} {v:.2f} s" for k, v in res.timings.items()))
-    warn_stiff(res.stiff(), robot, res.modes)
+    if res.reused:  # a build says it before compiling
+        warn_stiff(res.stiff(), source, res.modes)
     return 0
 
 

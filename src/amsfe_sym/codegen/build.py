@@ -145,7 +145,9 @@ def generate(
         lock: Extra joints to lock, name -> value [rad or m].
         extra_cflags: Extra compiler flags (hashed into the cache key).
         force: Rebuild even if the cache matches.
-        progress: Print stage timings to stderr.
+        progress: Print stage timings to stderr, and one warning line per joint whose
+            elastic mode the model cannot integrate (before compiling; a cache hit's
+            result has them too: :meth:`GenerateResult.stiff`).
         parts: Function groups to build, among ``model`` (always), ``control`` and
             ``estimator``.  A partial library goes to ``<out>/<name>-<parts>/`` so it never
             evicts the full one from the cache (checks of third-party arms need the model
@@ -216,7 +218,7 @@ def _build(
     while the compiler runs: raised inside the yourdfpy/trimesh imports or CasADi they used
     to be swallowed (the build went on to the end).  The temporary folder is removed."""
     # heavy imports only when building
-    from amsfe_sym.codegen.modes import joint_modes, modes_document
+    from amsfe_sym.codegen.modes import joint_modes, modes_document, robot_source, warn_stiff
     from amsfe_sym.load import load_robot
     from amsfe_sym.symbolic.model import build_functions
 
@@ -227,6 +229,11 @@ def _build(
     t = time.perf_counter()
     modes = joint_modes(robot_obj)
     timings["modes"] = time.perf_counter() - t
+    if progress:  # before the compile, not after it (a 7-DOF arm compiles for ~20 s)
+        m = spec.model
+        warn_stiff(
+            stiff_joints(modes, m.T, m.integrator, m.model_substeps), robot_source(spec), modes
+        )
     checkpoint()
     t = time.perf_counter()
     model = build_functions(robot_obj, parts)

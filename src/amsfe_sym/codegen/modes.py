@@ -35,12 +35,13 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import SpecError, describe
-from amsfe_sym.load.spec import INTEGRATORS, RobotSpec, load_spec
+from amsfe_sym.load.spec import INTEGRATORS, RobotSpec, load_spec, robots_dir
 from amsfe_sym.load.types import Robot
 from amsfe_sym.runtime.stability import (
     DEFAULT_MARGIN,
     JointMode,
     ModalPoint,
+    RobotSource,
     StiffJoint,
     stable_wh,
     stiff_joints,
@@ -55,7 +56,7 @@ __all__ = [
     "joint_modes",
     "modes_at",
     "modes_document",
-    "source_name",
+    "robot_source",
     "spec_at_period",
     "warn_stiff",
 ]
@@ -178,31 +179,42 @@ def joint_modes(
 def modes_document(
     robot: Robot, modes: tuple[JointMode, ...], samples: int = DEFAULT_SAMPLES, seed: int = 0
 ) -> dict[str, Any]:
-    """The manifest's ``joint_modes`` entry: the modes, how they were sampled, and the robot
-    (the name the fixes of :mod:`amsfe_sym.runtime.stability` print)."""
+    """The manifest's ``joint_modes`` entry: the modes, how they were sampled, and where the
+    user fixes the robot (:func:`robot_source`, for the fixes
+    :mod:`amsfe_sym.runtime.stability` prints)."""
+    source = robot_source(robot.spec)
     return {
-        "robot": source_name(robot.spec),
+        "robot": source.robot,
+        "spec_file": source.spec_file,
         "samples": samples,
         "seed": seed,
         "joints": [m.as_dict() for m in modes],
     }
 
 
-def source_name(spec: RobotSpec) -> str:
-    """The name a user generates ``spec`` by: its robot folder's (a derived spec keeps its
-    source's ``robot.toml``), else its name."""
-    if spec.spec_path is not None and spec.spec_path.name == "robot.toml":
-        return spec.spec_path.parent.name
-    return spec.name
+def robot_source(spec: RobotSpec) -> RobotSource:
+    """What the user passes to ``amsfe generate`` for ``spec`` and which file they edit: a
+    shipped robot by name (``robots/<name>/robot.toml``), another by its folder (or its
+    ``.toml``), a bare URDF by its path.  A derived spec (:func:`spec_at_period`) keeps its
+    source's ``spec_path``, so it points back to the robot it came from."""
+    if spec.spec_path is None:
+        return RobotSource(str(spec.urdf), None)
+    path = spec.spec_path
+    shipped = robots_dir().resolve() / path.parent.name / "robot.toml"
+    if path.name == "robot.toml" and path.resolve() == shipped:
+        return RobotSource(path.parent.name, f"robots/{path.parent.name}/robot.toml")
+    return RobotSource(str(path.parent if path.name == "robot.toml" else path), str(path))
 
 
-def warn_stiff(stiff: tuple[StiffJoint, ...], robot: str, modes: tuple[JointMode, ...]) -> None:
+def warn_stiff(
+    stiff: tuple[StiffJoint, ...], source: RobotSource, modes: tuple[JointMode, ...]
+) -> None:
     """One line on stderr per joint the model cannot integrate, with the fix."""
     if not stiff:
         return
     T = stiff[0].T
     k = substeps_for(modes, T)
-    fix = stiffness_fix(robot, T, stiff[0].integrator, k)
+    fix = stiffness_fix(source, T, stiff[0].integrator, k)
     for s in stiff:
         print(f"[amsfe] warning: {s.line()}; fix: {fix}", file=sys.stderr, flush=True)
 

@@ -46,6 +46,7 @@ __all__ = [
     "STATUS_NOT_PD",
     "JointMode",
     "ModalPoint",
+    "RobotSource",
     "StiffJoint",
     "covariance_hint",
     "growth_per_step",
@@ -69,7 +70,8 @@ INTEGRATOR_LIMITS: dict[str, float] = {
 DEFAULT_MARGIN = 2.0
 #: A mode past its limit is reported only when it grows faster than this [1/s]: the paper's
 #: 2-link arm (explicit Euler, joint 2's motor damping 0.5 N m s/rad) has a mode past its limit
-#: that grows by 2e-5 per 1 ms step (0.02 /s measured from its transition_jacobian at rest),
+#: that grows by 2e-5 per 1 ms step at q = 0 (measured from its transition_jacobian at rest;
+#: 1.5e-4, 0.15 /s, at the worst of the 200 sampled configurations),
 #: far slower than the arm's own gravity instability there (eigenvalue 1.0039 per step, 3.9 /s)
 #: and absorbed by every measurement update; a mode at w T = 26 under rk4 grows 1e4-fold per
 #: step.
@@ -317,17 +319,32 @@ def substeps_for(modes: Sequence[JointMode], T: float, margin: float = DEFAULT_M
     return m
 
 
-def stiffness_fix(robot: str, T: float, integrator: str, substeps: int) -> str:
+@dataclass(frozen=True)
+class RobotSource:
+    """Where a user fixes a robot: ``robot``, what to pass to ``amsfe generate`` (a shipped
+    robot's name, a folder, a URDF), and ``spec_file``, the ``robot.toml`` to edit (None for
+    a bare URDF)."""
+
+    robot: str
+    spec_file: str | None
+
+
+def stiffness_fix(source: RobotSource, T: float, integrator: str, substeps: int) -> str:
     """The fix for :func:`stiff_joints`' joints: ``substeps`` rk4 steps per T, in the robot's
     spec or by generating at the period."""
     what = (
-        f"set [model] model_substeps = {substeps}"
+        f"model_substeps = {substeps}"
         if integrator == "rk4"
-        else f'set [model] integrator = "rk4" and model_substeps = {substeps}'
+        else f'integrator = "rk4" and model_substeps = {substeps}'
+    )
+    where = (
+        f"in {source.spec_file}"
+        if source.spec_file is not None
+        else "in a robot.toml next to the URDF"
     )
     return (
-        f"{what} in robots/{robot}/robot.toml or generate with --period/--substeps "
-        f"(amsfe generate {robot} --period {T:.6g} --substeps {substeps})"
+        f"set [model] {what} {where} or generate with --period/--substeps "
+        f"(amsfe generate {source.robot} --period {T:.6g} --substeps {substeps})"
     )
 
 
@@ -357,16 +374,13 @@ def covariance_hint(raw: Mapping[str, Any]) -> str | None:
     if not stiff:
         return None
     block = raw["joint_modes"]
-    robot = str(block.get("robot", raw.get("name", "ROBOT")))
-    k = substeps_for(modes, T)
-    what = (
-        f"model_substeps = {k}"
-        if integrator == "rk4"
-        else f'integrator = "rk4" and model_substeps = {k}'
+    source = RobotSource(
+        str(block.get("robot", raw.get("name", "ROBOT"))),
+        None if block.get("spec_file") is None else str(block["spec_file"]),
     )
+    fix = stiffness_fix(source, T, integrator, substeps_for(modes, T))
     return (
         "the model cannot integrate the elastic mode of "
         + "; ".join(s.line() for s in stiff)
-        + f": amsfe generate {robot} --period {T:.6g} (picks model_substeps = {k}), or set "
-        f"[model] {what} in robots/{robot}/robot.toml"
+        + f": {fix}"
     )
