@@ -29,6 +29,7 @@ from amsfe_sym.codegen.modes import (
     joint_modes,
     modes_at,
     modes_document,
+    period_fix,
     robot_source,
     spec_at_period,
     warn_stiff,
@@ -171,6 +172,9 @@ def test_spec_at_period_is_derived_in_memory(panda: Robot) -> None:
     assert (spec.camera.period, spec.camera.delay) == (1, 1)  # 33 ms at 1 kHz: one step
     assert spec.model.plant_substeps == k  # stable (the robot's own 2 are not)
     assert toml.read_bytes() == before and spec.spec_path == toml.resolve()
+    assert period_fix("panda", T_LOG, loaded=panda).startswith(
+        f"amsfe generate panda --period 0.0333333 (its own library, model_substeps = {k} "
+    )
     # a paper-integrator robot its Euler form cannot integrate at T becomes rk4
     one = spec_at_period("paper_1link", 0.2)
     assert one.model.integrator == "rk4" and one.name.endswith("_rk4x2")

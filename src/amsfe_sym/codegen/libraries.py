@@ -66,7 +66,7 @@ def library_at_period(
 ) -> ModelLibrary:
     """Generate (or reuse from the cache) and load the library of ``robot`` at sampling
     interval ``T`` [s]: :func:`~amsfe_sym.codegen.modes.spec_at_period` derives its spec in
-    memory (``<robot>_T<us>us_rk4x<m>``; the robot's own library is untouched), with
+    memory (``<robot>_T<us>us_<integrator>x<m>``; the robot's own library is untouched), with
     ``substeps`` rk4 steps per T or, when None, the fewest that integrate every joint's
     elastic mode (w h <= 2.0).
 

@@ -56,6 +56,7 @@ __all__ = [
     "joint_modes",
     "modes_at",
     "modes_document",
+    "period_fix",
     "robot_source",
     "spec_at_period",
     "warn_stiff",
@@ -219,15 +220,32 @@ def warn_stiff(
         print(f"[amsfe] warning: {s.line()}; fix: {fix}", file=sys.stderr, flush=True)
 
 
+def period_fix(
+    robot: str | os.PathLike[str] | RobotSpec, T: float, loaded: Robot | None = None
+) -> str:
+    """The one-step fix for a log sampled at ``T`` [s] that is not ``robot``'s T: the
+    command that generates the robot at that period, with the substeps the joint modes
+    choose (for a message such as "the log's period 0.0333 s is not the robot's T = 0.001 s;
+    fix: ...")."""
+    from amsfe_sym.load import load_robot
+
+    spec = robot if isinstance(robot, RobotSpec) else load_spec(robot)
+    rob = loaded if loaded is not None else load_robot(spec)
+    k = substeps_for(joint_modes(rob), T)
+    return (
+        f"amsfe generate {robot_source(spec).robot} --period {T:.6g} (its own library, "
+        f"model_substeps = {k} from the joint modes; in Python: "
+        f"amsfe_sym.codegen.library_at_period(robot, {T:.6g}))"
+    )
+
+
 def derived_name(spec: RobotSpec, T: float, integrator: str, substeps: int) -> str:
-    """The library name of ``spec`` at period T: ``<name>_T<T in us>us`` plus ``_rk4x<m>``
-    when its model is rk4 with m steps per T (a C-identifier, like every robot name)."""
+    """The library name of ``spec`` at period T with ``integrator`` and m = ``substeps``
+    rk4 steps per T: ``<name>_T<T in us>us_<integrator>x<m>``, e.g. ``panda_T33333p333us_rk4x16``
+    (a C identifier, like every robot name)."""
     us = T * 1e6
     tag = f"{us:.0f}" if abs(us - round(us)) < 1e-6 else f"{us:.3f}".rstrip("0").replace(".", "p")
-    name = f"{spec.name}_T{tag}us"
-    if integrator == "rk4":
-        name += f"_rk4x{substeps}"
-    return name
+    return f"{spec.name}_T{tag}us_{integrator}x{substeps}"
 
 
 def spec_at_period(
@@ -240,9 +258,10 @@ def spec_at_period(
     """The spec of ``robot`` sampled at period ``T`` [s], derived in memory.
 
     ``model_substeps`` is ``substeps`` or the smallest that keeps every joint's w h <=
-    ``margin`` (:func:`~amsfe_sym.runtime.stability.substeps_for`).  A robot whose
-    integrator is ``paper`` or ``semi_implicit`` keeps it when it is stable at T, else
-    becomes ``rk4`` (the only integrator with substeps).  The camera's period and delay are
+    ``margin`` (:func:`~amsfe_sym.runtime.stability.substeps_for`; it is also what a
+    scenario's ``integrator = "rk4"`` override uses).  A robot whose integrator is ``paper``
+    or ``semi_implicit`` keeps it when it is stable at T, else becomes ``rk4`` (the only
+    integrator with substeps).  The camera's period and delay are
     kept in real time (rounded, >= 1 and >= 0 steps).  The truth plant (simulation only)
     takes the robot's ``plant_substeps`` or the modes' substeps if more: stable, not as
     accurate as at the robot's own T (scaling them with T made a 2-link library at T = 0.5 s
@@ -269,10 +288,8 @@ def spec_at_period(
     integrator = spec.model.integrator
     if substeps is None:
         substeps = substeps_for(modes, T, margin)
-        if integrator != "rk4" and stiff_joints(modes, T, integrator):
-            integrator = "rk4"
-    if integrator != "rk4":
-        substeps = spec.model.model_substeps
+    if integrator != "rk4" and stiff_joints(modes, T, integrator):
+        integrator = "rk4"
     plant = max(spec.model.plant_substeps, substeps_for(modes, T, margin))
     cam = spec.camera
     model = replace(
