@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from collections.abc import Callable
 
 import numpy as np
 import pinocchio as pin
@@ -110,7 +111,9 @@ def accuracy(robot: Robot, period: float, steps: list[int]) -> None:
         print(f"  {m:4d} {wmax * period / m:6.2f} {err:30.2e} {fast.max():15.3g} {fast.min():9.3g}")
 
 
-def _rhs(robot: Robot, model: pin.Model, data: pin.Data, u: np.ndarray):  # type: ignore[no-untyped-def]
+def _rhs(
+    robot: Robot, model: pin.Model, data: pin.Data, u: np.ndarray
+) -> Callable[[float, np.ndarray], np.ndarray]:
     """d/dt [q, qd, qm, qmd] of the flexible-joint model (eqs. 1a-1d in continuous time)."""
     n = robot.n
     Ks, Mm, Fm = robot.Ks, robot.Mm, robot.Fm
