@@ -116,6 +116,13 @@ def modes_at(robot: Robot, qs: NDArray[np.float64], theta: NDArray[np.float64]) 
         B[s, :n, :n] = np.triu(M) + np.triu(M, 1).T
     B[:, n:, n:] = np.diag(Mm)
     K = np.block([[np.diag(Ks), -np.diag(Ks)], [-np.diag(Ks), np.diag(Ks)]])
+    # a configuration where M(q) is not numerically positive definite (a URDF link with no
+    # inertia about a joint axis, not caught by load's 8-sample check) has no modes: it is
+    # given the smallest positive inertia instead of stopping `amsfe generate`
+    floor = 1e-12 * max(1.0, float(np.abs(B).max()))
+    low = np.linalg.eigvalsh(B)[:, 0] <= floor
+    if low.any():
+        B[low] += floor * np.eye(2 * n)
     L = np.linalg.cholesky(B)  # B = L L^T: K phi = w^2 B phi  <=>  (L^-1 K L^-T) y = w^2 y
     Linv = np.linalg.inv(L)
     lam, Y = np.linalg.eigh(Linv @ K @ np.swapaxes(Linv, 1, 2))
