@@ -24,8 +24,8 @@ sqrt(zeta^2 - 1))`` overdamped).  It is stable only through the motor damping Fm
 mode grows at every step.
 
 Only the ``rk4`` model takes ``model_substeps`` (h = T / m); the Euler forms step once per T.
-The limits are for the linearisation at rest (no Coriolis, no gravity gradient): the margin of
-:func:`substeps_for` (``w h <= 2.0`` against rk4's 2.83) covers what the sampling misses.
+The limits are for the linearisation at rest (no Coriolis, no gravity gradient).  Stable is not
+consistent: :func:`substeps_for` asks for ``w h <= 0.5`` (:data:`DEFAULT_MARGIN`, measured).
 Numpy only: the runtime reads the stored modes to explain a covariance failure.
 """
 
@@ -43,6 +43,7 @@ __all__ = [
     "DEFAULT_MARGIN",
     "GROWTH_PER_S",
     "INTEGRATOR_LIMITS",
+    "STABILITY_MARGIN",
     "STATUS_NOT_PD",
     "JointMode",
     "ModalPoint",
@@ -64,10 +65,18 @@ INTEGRATOR_LIMITS: dict[str, float] = {
     "semi_implicit": 2.0,
     "paper": 0.0,
 }
-#: :func:`substeps_for` keeps every joint's w h at or below this (rk4's limit is 2.83): each
-#: rk4 step then multiplies an undamped mode by |R(2i)| = 0.745 at most, so modes the model
-#: cannot resolve are damped by it, not amplified.
-DEFAULT_MARGIN = 2.0
+#: The w h that keeps a mode stable with headroom (rk4's limit is 2.83): each rk4 step
+#: multiplies an undamped mode by |R(2i)| = 0.745 at most, and 200 samples can miss modes up
+#: to 19 % faster (tools/joint_modes.py).  Stable is not enough for an estimator, see below.
+STABILITY_MARGIN = 2.0
+#: :func:`substeps_for` keeps every joint's fastest w h at or below this.  Measured
+#: (tools/period_consistency.py: the Panda at T = 1/30 s, compiled encoders filter against a
+#: DOP853 truth driven by the filter's own noise, 5 seeds x 10 s): median NEES/N 4.2e4 (two
+#: seeds diverged) at w h = 1.93, 1.22 at 0.96, 1.10 at 0.64 and at 0.48: a stable model that
+#: damps the modes the truth keeps (|R|^m down to 0.15 per period at w h = 1.93) makes the
+#: filter overconfident.  0.5 keeps the consistent 0.64 even for a mode 19 % faster than the
+#: sampled maximum (docs/codegen.md, "Joint modes and other sampling intervals").
+DEFAULT_MARGIN = 0.5
 #: A mode past its limit is reported only when it grows faster than this [1/s]: the paper's
 #: 2-link arm (explicit Euler, joint 2's motor damping 0.5 N m s/rad) has a mode past its limit
 #: that grows by 2e-5 per 1 ms step at q = 0 (measured from its transition_jacobian at rest;
@@ -304,7 +313,8 @@ def substeps_for(modes: Sequence[JointMode], T: float, margin: float = DEFAULT_M
     Args:
         modes: The robot's joint modes.
         T: Sampling interval [s].
-        margin: Bound of w h (rk4 is stable to 2.83; :data:`DEFAULT_MARGIN`).
+        margin: Bound of w h: :data:`DEFAULT_MARGIN` (0.5, a consistent filter) or
+            :data:`STABILITY_MARGIN` (2.0, a stable model; rk4 is stable to 2.83).
 
     Returns:
         m >= 1.
