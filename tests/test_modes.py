@@ -174,7 +174,7 @@ def test_spec_at_period_is_derived_in_memory(panda: Robot) -> None:
     assert spec.name == f"panda_T33333p333us_rk4x{k}"
     assert (spec.model.T, spec.model.model_substeps, spec.model.integrator) == (T_LOG, k, "rk4")
     assert (spec.camera.period, spec.camera.delay) == (1, 1)  # 33 ms at 1 kHz: one step
-    assert spec.model.plant_substeps == k  # stable (the robot's own 2 are not)
+    assert spec.model.plant_substeps == 16  # stable, w h <= 2.0 (the robot's own 2 are not)
     assert toml.read_bytes() == before and spec.spec_path == toml.resolve()
     assert period_fix("panda", T_LOG, loaded=panda).startswith(
         f"amsfe generate panda --period 0.0333333 (its own library, model_substeps = {k} "

@@ -39,6 +39,7 @@ from amsfe_sym.load.spec import INTEGRATORS, RobotSpec, load_spec, robots_dir
 from amsfe_sym.load.types import Robot
 from amsfe_sym.runtime.stability import (
     DEFAULT_MARGIN,
+    STABILITY_MARGIN,
     JointMode,
     ModalPoint,
     RobotSource,
@@ -270,10 +271,10 @@ def spec_at_period(
     or ``semi_implicit`` keeps it when it is stable at T, else becomes ``rk4`` (the only
     integrator with substeps).  The camera's period and delay are
     kept in real time (rounded, >= 1 and >= 0 steps).  The truth plant (simulation only)
-    takes the robot's ``plant_substeps`` or the modes' substeps if more: stable, not as
-    accurate as at the robot's own T (scaling them with T made a 2-link library at T = 0.5 s
-    unroll 1000 steps and compile for 60 s).  The stiffness is fixed to the loaded robot's (a
-    bare URDF's default Ks depends on T).  Named by
+    takes the robot's ``plant_substeps`` or the fewest stable ones (w h <= 2.0) if more:
+    stable, not as accurate as at the robot's own T (scaling them with T made a 2-link
+    library at T = 0.5 s unroll 1000 steps and compile for 60 s).  The stiffness is fixed to
+    the loaded robot's (a bare URDF's default Ks depends on T).  Named by
     :func:`derived_name`, so it never replaces the robot's own library.
 
     Raises:
@@ -297,7 +298,7 @@ def spec_at_period(
         substeps = substeps_for(modes, T, margin)
     if integrator != "rk4" and stiff_joints(modes, T, integrator):
         integrator = "rk4"
-    plant = max(spec.model.plant_substeps, substeps_for(modes, T, margin))
+    plant = max(spec.model.plant_substeps, substeps_for(modes, T, STABILITY_MARGIN))
     cam = spec.camera
     model = replace(
         spec.model,
