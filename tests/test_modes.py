@@ -254,7 +254,7 @@ def _rho(M: np.ndarray) -> float:
 
 
 @pytest.mark.slow
-def test_panda_at_30_hz_is_stable_and_cached(panda: Robot) -> None:
+def test_panda_at_30_hz_is_stable_and_cached(panda: Robot, capsys) -> None:
     """~20-40 s: one 7-DOF compile (a second call must not compile).  The fewest substeps
     that are stable (w h <= 2.0: 16) keep the compile short; the default (w h <= 0.5, 62)
     has more, so it is stable too (rk4 is stable for every w h <= 2.83)."""
@@ -279,6 +279,11 @@ def test_panda_at_30_hz_is_stable_and_cached(panda: Robot) -> None:
         assert _rho(_rk4_map(T_LOG * Ac)) > 100 * physical
     again = generate(spec_at_period("panda", T_LOG, substeps=k, loaded=panda))
     assert again.reused and again.out_dir == lib.dir and again.stiff() == ()
+    assert main(["generate", "panda", "--period", repr(T_LOG), "--substeps", str(k)]) == 0
+    out, err = capsys.readouterr()
+    assert "panda_T33333p333us_rk4x16: up to date (cached)" in out
+    assert "integrator rk4, model_substeps 16, camera period 1 / delay 1 steps" in out
+    assert "warning" not in err
 
 
 @pytest.mark.slow
