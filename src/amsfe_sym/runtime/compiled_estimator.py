@@ -34,7 +34,7 @@ from amsfe_sym.runtime.models import (
     EncoderMeasurement,
     inverse_not_converged,
 )
-from amsfe_sym.runtime.stability import STATUS_NOT_PD, covariance_hint
+from amsfe_sym.runtime.stability import NUMERICAL_FAILURES, covariance_hint
 
 __all__ = [
     "COMPILED_ESTIMATORS",
@@ -249,7 +249,7 @@ class CompiledEstimator(Estimator):
             "check the inputs and the model at the current state (the runtime must be "
             "reset before it runs again)"
         )
-        hint = covariance_hint(self.lib.manifest.raw) if status == STATUS_NOT_PD else None
+        hint = covariance_hint(self.lib.manifest.raw) if status in NUMERICAL_FAILURES else None
         return EstimatorError(
             describe(
                 f"compiled {self.name}: {what} at step {self.k + 1}",

@@ -43,6 +43,7 @@ __all__ = [
     "DEFAULT_MARGIN",
     "GROWTH_PER_S",
     "INTEGRATOR_LIMITS",
+    "NUMERICAL_FAILURES",
     "STABILITY_MARGIN",
     "STATUS_NOT_PD",
     "JointMode",
@@ -88,6 +89,11 @@ GROWTH_PER_S = 1.0
 #: ``AMSFE_ERR_NOT_PD`` of runtime/c/amsfe_runtime.h: the covariance lost positive
 #: definiteness (the status :func:`covariance_hint` explains).
 STATUS_NOT_PD = -2
+#: The statuses a model that cannot integrate its joints ends in (runtime/c/amsfe_runtime.h):
+#: ``AMSFE_ERR_NOT_PD``, ``AMSFE_ERR_NONFINITE`` (the model gave NaN or inf: a mode that grew
+#: 1e4-fold per step overflows within ~80 steps) and ``AMSFE_ERR_S_NOT_PD`` (an innovation
+#: covariance built from that P); the runtime adds :func:`covariance_hint` to each.
+NUMERICAL_FAILURES: tuple[int, ...] = (-2, -3, -4)
 #: RK4's stability interval on the negative real axis: R(z) = 1 at z = -2.785...
 _RK4_REAL = 2.785293563405282
 
