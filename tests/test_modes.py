@@ -314,5 +314,8 @@ def test_covariance_failure_names_the_stiff_joint() -> None:
     msg = str(err.value)
     assert "lost positive definiteness" in msg
     assert "joint joint2: w = " in msg and "(rk4, T = 0.5 s)" in msg
+    # NaN from the model and a non-PD innovation covariance say the same; bad input does not
+    for status, named in ((-3, True), (-4, True), (-1, False)):
+        assert ("joint joint2: w = " in str(est._error("tick", status))) is named
     k = substeps_for(res.modes, 0.5)
     assert k == 20 and f"(amsfe generate paper_2link --period 0.5 --substeps {k})" in msg
