@@ -21,6 +21,7 @@ from amsfe_sym.apps.arguments import (
     SEED,
     Parser,
     lock_arg,
+    number_type,
 )
 from amsfe_sym.apps.estimate import add_arguments as add_estimate_arguments
 from amsfe_sym.apps.estimate import from_args as estimate_from_args
@@ -68,6 +69,21 @@ def get_argument_parser() -> argparse.ArgumentParser:
     )
     g.add_argument("--force", action="store_true", help="rebuild even if the cache matches")
     g.add_argument("--cflags", default=None, help="extra compiler flags (quoted)")
+    g.add_argument(
+        "--period",
+        type=number_type(float, 0.0, False, "pass the log's sampling interval, e.g. 0.0333"),
+        default=None,
+        metavar="T",
+        help="generate at this sampling interval [s] instead of the robot's T, as a library of "
+        "its own (<robot>_T<us>us...), model_substeps chosen from the joint modes",
+    )
+    g.add_argument(
+        "--substeps",
+        type=number_type(int, 1, True, "pass --substeps 4, or omit it to choose from the modes"),
+        default=None,
+        metavar="K",
+        help="rk4 model steps per T (with --period; default: from the joint modes)",
+    )
 
     c = sub.add_parser("check", help="every generated function vs Pinocchio / finite differences")
     c.add_argument("robot", nargs="?", default="paper_2link")
@@ -213,22 +229,31 @@ def _main(argv: Sequence[str] | None) -> int:
 
 def _generate(args: argparse.Namespace) -> int:
     from amsfe_sym.codegen import generate
+    from amsfe_sym.codegen.modes import robot_source, spec_at_period, warn_stiff
+    from amsfe_sym.load.spec import load_spec
 
     if args.out:
         check_output(args.out, option="--out", kind="parent")
     extra = args.cflags.split() if args.cflags else None
-    res = generate(
-        args.robot,
-        out=args.out,
-        lock=dict(args.lock),
-        extra_cflags=extra,
-        force=args.force,
-        progress=True,
-    )
+    spec = load_spec(args.robot).with_locked(dict(args.lock))
+    source = robot_source(spec)
+    if args.substeps is not None and args.period is None:
+        args.period = spec.model.T  # --substeps alone: the robot's T, other substeps
+    if args.period is not None:
+        spec = spec_at_period(spec, args.period, args.substeps)
+    res = generate(spec, out=args.out, extra_cflags=extra, force=args.force, progress=True)
     state = "up to date (cached)" if res.reused else "generated"
     print(f"{res.out_dir}: {state} in {res.seconds:.2f} s")
+    if args.period is not None:
+        m = spec.model
+        print(
+            f"  T = {m.T:.6g} s, integrator {m.integrator}, model_substeps {m.model_substeps}, "
+            f"camera period {spec.camera.period} / delay {spec.camera.delay} steps"
+        )
     if res.timings:
         print("  " + ", ".join(f"{k} {v:.2f} s" for k, v in res.timings.items()))
+    if res.reused:  # a build says it before compiling
+        warn_stiff(res.stiff(), source, res.modes)
     return 0
 
 
