@@ -14,6 +14,7 @@ import sys
 from collections.abc import Callable, Sequence
 
 from amsfe_sym import __version__
+from amsfe_sym.apps import ros_nodes
 from amsfe_sym.apps.arguments import (
     COUNT,
     DURATION,
@@ -120,6 +121,8 @@ def get_argument_parser() -> argparse.ArgumentParser:
         sub.add_parser("estimate", help="an estimator over a recorded rosbag2 / MCAP log")
     )
 
+    ros_nodes.add_sim_node_arguments(sub.add_parser("sim-node", help="the simulated arm on ROS 2"))
+    ros_nodes.add_node_arguments(sub.add_parser("node", help="estimator/controller on ROS 2"))
     b = sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
     b.add_argument("robot", nargs="?", default="paper_2link")
     b.add_argument("--out", default=None, help="parent folder of generated libraries")
@@ -283,6 +286,8 @@ def _main(argv: Sequence[str] | None) -> int:
         "bench": _bench,
         "study": _study,
         "sweep": sweep_from_args,
+        "sim-node": ros_nodes.sim_node_from_args,
+        "node": ros_nodes.node_from_args,
     }
     try:
         if args.command in commands:
@@ -300,7 +305,7 @@ def _main(argv: Sequence[str] | None) -> int:
     raise SpecError(
         describe(
             "command",
-            "generate|check|simulate|estimate|bench|study|sweep",
+            "|".join(commands),
             args.command,
             "run amsfe -h for the commands",
         )

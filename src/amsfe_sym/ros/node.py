@@ -1,0 +1,344 @@
+"""``amsfe node``: the generated estimator (and controller) of a scenario as the ROS 2 node
+``amsfe_node`` (docs/ros.md).
+
+It subscribes the encoders, the camera, the effort (when it runs no controller) and the
+truth (when a simulated arm sends it) of the topic spec (ROS parameters override it); each
+encoder sample goes through :class:`amsfe_sym.ros.live.LiveLoop` by its header stamp, and
+the node publishes the estimate (JointState q, qd), its standard deviations, theta, the
+command (with a controller; Float64MultiArray for a ros2_control forward command
+controller) and diagnostics (JSON: frames fused, refused and skipped by reason, NIS).
+
+Fail-safe (docs/ros.md, "Hold"): on encoder silence longer than ``encoder_timeout`` (after
+the first sample), a non-finite estimate or an estimator failure it publishes the hold
+command (:data:`~amsfe_sym.ros.live.HoldKind`), says why in one line and returns exit code
+:data:`EXIT_HOLD`; on Ctrl-C or SIGTERM it publishes the hold command and the interrupt goes
+on (the command line exits 130 / 143); at the end of ``duration`` it publishes the hold
+command and returns 0.  A record (``--record``) is written on every one of these exits.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amsfe_sym.errors import AmsfeError
+from amsfe_sym.ros.live import HoldKind, LiveLoop, TickOut
+from amsfe_sym.ros.middleware import qos_profile, spec_parameters, start, stop
+from amsfe_sym.ros.record import NodeRecord
+from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.scenario import Scenario
+from amsfe_sym.topics import TopicSpec, joint_order
+
+__all__ = ["EXIT_HOLD", "NodeOptions", "NodeReport", "run_node"]
+
+FloatArray = NDArray[np.float64]
+
+#: Exit code of a fail-safe stop (encoder silence, non-finite estimate, estimator failure).
+EXIT_HOLD = 3
+
+
+@dataclass(frozen=True)
+class NodeOptions:
+    """How ``amsfe node`` runs.
+
+    Attributes:
+        controller: Run the scenario's controller and publish commands.
+        compiled: The library's C estimator (else the Python reference).
+        spec: The topic spec (ROS parameters override it).
+        encoder_timeout: Encoder silence that triggers the hold [s, wall].
+        hold: The hold command's kind.
+        duration: Stop after this much of the samples' time [s] (None: run until stopped).
+        record: Write a rosbag2 (MCAP) of the session here (None: none).
+        ros_args: ``--ros-args`` for rclpy.
+        domain_id: ROS_DOMAIN_ID (None: the environment's).
+        subscriber_wait: Longest wait for a subscriber of the commands before the first
+            command [s] (a command published before a subscriber matched is lost).
+    """
+
+    controller: bool = False
+    compiled: bool = True
+    spec: TopicSpec = field(default_factory=TopicSpec)
+    encoder_timeout: float = 0.5
+    hold: HoldKind = "gravity"
+    duration: float | None = None
+    record: Path | None = None
+    ros_args: tuple[str, ...] = ()
+    domain_id: int | None = None
+    subscriber_wait: float = 5.0
+
+
+@dataclass(frozen=True)
+class NodeReport:
+    """How a node run ended.
+
+    Attributes:
+        ticks: Encoder samples processed.
+        reason: Why it stopped (one line).
+        exit_code: 0 (duration reached, shutdown) or :data:`EXIT_HOLD`.
+        hold: The hold command published [N m] (None: none was).
+        counters: The estimator's decisions and the skipped messages by reason.
+        record: The record written (None: none).
+    """
+
+    ticks: int
+    reason: str
+    exit_code: int
+    hold: FloatArray | None
+    counters: dict[str, int]
+    record: Path | None
+
+
+@dataclass(frozen=True)
+class _Stop:
+    """Why the node stops: one line, the exit code, the error to raise (bad input)."""
+
+    reason: str
+    code: int
+    error: AmsfeError | None = None
+
+
+class _Node:
+    """The rclpy side: subscriptions feed the :class:`LiveLoop`, each tick publishes."""
+
+    def __init__(
+        self, ctx: Any, sc: Scenario, lib: ModelLibrary, options: NodeOptions, node: Any
+    ) -> None:
+        from amsfe_sym.ros import messages as m
+
+        self.m, self.node, self.lib, self.options = m, node, lib, options
+        spec = spec_parameters(node, options.spec, tuple(lib.manifest.joints))
+        self.spec = spec
+        self.names = tuple(spec.joint_names or lib.manifest.joints)
+        self.live = LiveLoop(
+            sc,
+            lib,
+            controller=options.controller,
+            compiled=options.compiled,
+            grid_tolerance=spec.grid_tolerance,
+            max_gap_steps=spec.max_gap_steps,
+        )
+        self.n = lib.n
+        self.record = None if options.record is None else NodeRecord(sc, lib, spec, self.names)
+        self.last: TickOut | None = None
+        self.last_rx: float | None = None
+        self.stop: _Stop | None = None
+        self.end_k = None if options.duration is None else round(options.duration / lib.T)
+        self._orders: dict[tuple[str, ...], list[int]] = {}
+        self._truth: FloatArray | None = None
+        self._first_command = True
+        self._rx_frames: list[tuple[int, FloatArray]] = []
+        qos = qos_profile(spec)
+        # the camera is subscribed first: a frame and a sample ready at once, the frame first
+        node.create_subscription(m.PointStamped, spec.camera, self.on_frame, qos)
+        node.create_subscription(m.Float64MultiArray, spec.truth, self.on_truth, qos)
+        self.effort_kind = spec.effort_kind or "applied"
+        use_effort = not options.controller and self.effort_kind == "applied"
+        if use_effort and spec.effort != spec.encoders:
+            node.create_subscription(m.JointState, spec.effort, self.on_effort, qos)
+        self.effort_in_encoders = use_effort and spec.effort == spec.encoders
+        node.create_subscription(m.JointState, spec.encoders, self.on_encoders, qos)
+        self.pub_est = node.create_publisher(m.JointState, spec.estimate, qos)
+        self.pub_std = node.create_publisher(m.JointState, spec.estimate_std, qos)
+        self.pub_theta = node.create_publisher(m.Float64MultiArray, spec.theta, qos)
+        self.pub_diag = node.create_publisher(m.String, spec.diagnostics, qos)
+        self.pub_cmd = (
+            node.create_publisher(m.Float64MultiArray, spec.commands, qos)
+            if options.controller
+            else None
+        )
+
+    # ---------------------------------------------------------------- callbacks
+    def _order(self, names: Any) -> list[int]:
+        key = tuple(names)
+        if key not in self._orders:
+            where = f"{self.spec.encoders} JointState names"
+            self._orders[key] = joint_order(key, self.names, where)
+        return self._orders[key]
+
+    def on_frame(self, msg: Any) -> None:
+        ns = self.m.stamp_ns(msg.header.stamp)
+        pixel = np.array([msg.point.x, msg.point.y])
+        self.live.frame(ns, pixel)
+        if self.record is not None and self.live.k >= 0:
+            self._rx_frames.append((ns, pixel))
+
+    def on_truth(self, msg: Any) -> None:
+        self._truth = self.m.values(msg.data)
+
+    def on_effort(self, msg: Any) -> None:
+        if self.stop is not None:
+            return
+        try:
+            idx = self._order(msg.name)
+        except AmsfeError as exc:
+            self.stop = _Stop(str(exc), 2, exc)
+            return
+        eff = self.m.values(msg.effort)
+        u = eff[idx] if eff.size == len(msg.name) else np.full(self.n, np.nan)
+        self.live.applied(self.m.stamp_ns(msg.header.stamp), u)
+
+    def on_encoders(self, msg: Any) -> None:
+        if self.stop is not None:
+            return
+        try:
+            idx = self._order(msg.name)
+        except AmsfeError as exc:  # the robot's joints are not all in the message
+            self.stop = _Stop(str(exc), 2, exc)
+            return
+        try:
+            pos, vel = self.m.values(msg.position), self.m.values(msg.velocity)
+            if pos.size != len(msg.name) or vel.size != len(msg.name):
+                z = np.full(2 * self.n, np.nan)
+            else:
+                z = np.concatenate([pos[idx], vel[idx]])
+            ns = self.m.stamp_ns(msg.header.stamp)
+            out = self.live.encoders(ns, z)
+        except AmsfeError as exc:
+            self.stop = _Stop(f"hold: the estimator stopped: {exc}", EXIT_HOLD)
+            return
+        if out is None:
+            return
+        if self.effort_in_encoders:
+            eff = self.m.values(msg.effort)
+            if eff.size == len(msg.name):
+                self.live.applied(ns, eff[idx])
+        self._publish(out, z)
+        self.last_rx = time.monotonic()  # after the work: a slow first tick is no silence
+
+    # ---------------------------------------------------------------- outputs
+    def _publish(self, out: TickOut, z: FloatArray) -> None:
+        m, n, ns = self.m, self.n, out.stamp_ns
+        if not np.all(np.isfinite(out.x_hat)) or not np.all(np.isfinite(out.P_diag)):
+            self.stop = _Stop(f"hold: non-finite estimate at t = {out.t:.3f} s", EXIT_HOLD)
+            return
+        self.last = out
+        x, std = out.x_hat, np.sqrt(np.maximum(out.P_diag, 0.0))
+        L = self.lib.layout
+        self.pub_est.publish(m.joint_state(ns, self.names, x[:n], x[n : 2 * n]))
+        self.pub_std.publish(m.joint_state(ns, self.names, std[:n], std[n : 2 * n]))
+        self.pub_theta.publish(m.float64_array(x[L["theta"]]))
+        if out.u is not None and self.pub_cmd is not None:
+            if self._first_command:
+                self._wait_subscriber()
+            self.pub_cmd.publish(m.float64_array(out.u))
+        rep = out.report
+        if out.k == 0 or (rep is not None and (rep.frames_applied or rep.frames_rejected)):
+            self.pub_diag.publish(m.String(data=json.dumps(self.diagnostics(out))))
+        if self.record is not None:
+            self._record(out, z)
+        if self.end_k is not None and out.k >= self.end_k:
+            self.stop = _Stop(f"done: {out.k + 1} ticks ({out.t:.3f} s of samples)", 0)
+
+    def _record(self, out: TickOut, z: FloatArray) -> None:
+        rec = self.record
+        assert rec is not None
+        ns = out.stamp_ns
+        rec.encoders(ns, z)
+        for exposure_ns, pixel in self._rx_frames:  # logged at their arrival: this tick
+            rec.frame(ns, exposure_ns, pixel)
+        self._rx_frames.clear()
+        if self._truth is not None:
+            rec.truth(ns, self._truth)
+        L = self.lib.layout
+        std = np.sqrt(np.maximum(out.P_diag, 0.0))
+        rec.outputs(ns, out.x_hat, std, out.x_hat[L["theta"]], out.u)
+        rec.applied(ns, self.live.u)
+
+    def _wait_subscriber(self) -> None:
+        assert self.pub_cmd is not None
+        self._first_command = False
+        deadline = time.monotonic() + self.options.subscriber_wait
+        while self.pub_cmd.get_subscription_count() < 1 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        if self.pub_cmd.get_subscription_count() < 1:
+            self.node.get_logger().warning(
+                f"no subscriber on {self.spec.commands} after "
+                f"{self.options.subscriber_wait:g} s: commands go nowhere"
+            )
+
+    def diagnostics(self, out: TickOut | None) -> dict[str, Any]:
+        """The diagnostics JSON: tick, frames fused, refused and skipped by reason, NIS."""
+        c = self.live.counters
+        d: dict[str, Any] = {
+            "k": None if out is None else out.k,
+            "t": None if out is None else out.t,
+            "frames_fused": c.get("frames_applied", 0),
+            "frames_refused": c.get("frames_rejected", 0),
+            "refused": {k: v for k, v in c.items() if k.startswith("refused_") and v},
+            "skipped": dict(self.live.skipped),
+        }
+        if out is not None and out.report is not None:
+            d["frame_nis"] = list(out.report.frame_nis)
+            d["encoder_nis"] = out.report.encoder_nis
+        return d
+
+    def hold(self) -> FloatArray | None:
+        """Publish the hold command (with a controller): returns it."""
+        if self.pub_cmd is None:
+            return None
+        u = self.live.hold_command(self.options.hold, self.last)
+        try:
+            self.pub_cmd.publish(self.m.float64_array(u))
+            from rclpy.duration import Duration
+
+            self.pub_cmd.wait_for_all_acked(Duration(seconds=1))
+        except Exception:  # a context already down cannot publish
+            return None
+        return u
+
+
+def run_node(sc: Scenario, lib: ModelLibrary, options: NodeOptions) -> NodeReport:
+    """Run the node until a stop (module docstring); the record is written on every exit.
+
+    Raises:
+        KeyboardInterrupt: Ctrl-C or SIGTERM (after the hold and the record).
+        RosError: rclpy missing or failing to start.
+        ConfigError: bad parameters, a joint missing from the encoders' names.
+    """
+    ctx = start(list(options.ros_args), options.domain_id)
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    node = rclpy.create_node("amsfe_node", context=ctx)
+    state: _Node | None = None
+    hold: FloatArray | None = None
+    reason, code = "shutdown", 0
+    try:
+        state = _Node(ctx, sc, lib, options, node)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        while state.stop is None and ctx.ok():
+            ex.spin_once(timeout_sec=0.05)
+            last = state.last_rx
+            if last is not None and time.monotonic() - last > options.encoder_timeout:
+                state.stop = _Stop(
+                    f"hold: no encoder sample on {state.spec.encoders} for "
+                    f"{options.encoder_timeout:g} s (last tick {state.live.k})",
+                    EXIT_HOLD,
+                )
+        if state.stop is not None:
+            reason, code = state.stop.reason, state.stop.code
+        hold = state.hold()
+    except KeyboardInterrupt:
+        if state is not None:
+            hold = state.hold()
+            print("hold: interrupted, hold command published", flush=True)
+        raise
+    finally:
+        if state is not None and state.record is not None and options.record is not None:
+            try:
+                state.record.write(options.record)
+            finally:
+                stop(ctx, node)
+        else:
+            stop(ctx, node)
+    if state.stop is not None and state.stop.error is not None:
+        raise state.stop.error
+    counters = {**state.live.counters, **state.live.skipped}
+    return NodeReport(state.live.k + 1, reason, code, hold, counters, options.record)

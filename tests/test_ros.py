@@ -1,0 +1,192 @@
+"""The ROS 2 nodes (issue 27, docs/ros.md).
+
+In process (no middleware): the simulated arm and the live loop of ``amsfe node`` reproduce
+:func:`amsfe_sym.sim.loop.run` tick for tick, and the live loop skips what a log's reader
+skips.  Over real DDS (marker ``ros``, skipped without the ``[ros]`` extra): ``amsfe sim-node
+--lockstep`` + ``amsfe node --controller`` reproduce ``amsfe simulate``; each test on its own
+ROS_DOMAIN_ID, localhost only, every process bounded in time and killed in a ``finally``.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from amsfe_sym.codegen import library_for
+from amsfe_sym.errors import ConfigError
+from amsfe_sym.ros.arm import SimArm
+from amsfe_sym.ros.live import LiveLoop
+from amsfe_sym.scenario import load_scenario
+from amsfe_sym.sim.loop import run
+
+SRC = Path(__file__).resolve().parent.parent / "src"
+_COUNTER = itertools.count()
+
+
+@pytest.fixture(scope="module")
+def paper() -> Any:
+    sc = load_scenario("paper-sim").with_overrides(duration=2.0)
+    return sc, library_for(sc)
+
+
+def _drive(sc: Any, lib: Any, **live: Any) -> tuple[np.ndarray, np.ndarray, LiveLoop]:
+    """The arm and the live loop of the nodes, in process, in the order the nodes use."""
+    arm, loop = SimArm(sc, lib), LiveLoop(sc, lib, controller=True, **live)
+    T_ns = round(lib.T * 1e9)
+    x, u = [], []
+    for k in range(arm.K):
+        s = arm.sense()
+        for f in s.frames:
+            loop.frame(f.exposure_step * T_ns, f.z)
+        out = loop.encoders(k * T_ns, s.z)
+        assert out is not None and out.u is not None
+        x.append(out.x_hat)
+        u.append(out.u)
+        if k + 1 < arm.K:
+            arm.advance(out.u)
+    return np.array(x), np.array(u), loop
+
+
+def test_live_loop_is_the_loop(paper: Any) -> None:
+    """SimArm + LiveLoop (the nodes' per-tick objects) equal the in-process loop: the Python
+    reference with the C estimator, and the compiled loop (docs/ros.md says why both)."""
+    sc, lib = paper
+    x, u, loop = _drive(sc, lib)
+    for ref in (run(sc, lib, compiled_estimator=True), run(sc, lib, runtime="compiled")):
+        np.testing.assert_allclose(x, ref.x_hat, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(u, ref.u, rtol=0, atol=1e-12)
+    assert loop.counters["frames_applied"] == ref.counters["frames_applied"] > 0
+
+
+def test_live_loop_skips_as_a_log(paper: Any) -> None:
+    """Duplicated, NaN, off-grid and early frames, a duplicated and a missing encoder sample
+    are skipped and counted under the log reader's reasons; a gap is predicted through."""
+    sc, lib = paper
+    loop = LiveLoop(sc, lib, controller=False)
+    T = round(lib.T * 1e9)
+    z = np.zeros(2 * lib.n)
+    loop.frame(0, np.array([1.0, 2.0]))  # before the first sample
+    assert loop.encoders(10 * T, z) is not None
+    loop.applied(10 * T, np.ones(lib.n))
+    loop.frame(10 * T, np.array([np.nan, 1.0]))
+    loop.frame(10 * T + T // 2, np.array([1.0, 1.0]))
+    loop.frame(10 * T, np.array([300.0, 200.0]))
+    loop.frame(10 * T, np.array([300.0, 200.0]))
+    assert loop.encoders(11 * T, z) is not None
+    assert loop.encoders(11 * T, z) is None
+    out = loop.encoders(14 * T, z)
+    assert out is not None and out.k == 4 and out.predicted == 2
+    assert loop.skipped == {
+        "frame exposed before the first encoder sample": 1,
+        "frame with a non-finite pixel": 1,
+        "frame exposure off the tick grid": 1,
+        "frame duplicated (an exposure already seen)": 1,
+        "encoder sample duplicated": 1,
+        "encoder samples missing (predicted through)": 2,
+        "torque held from the previous tick": 3,
+    }
+    assert loop.counters["frames_applied"] + loop.counters["frames_rejected"] == 1
+
+
+def test_oracle_controller_refused(paper: Any) -> None:
+    sc, lib = paper
+    with pytest.raises(ConfigError, match="oracle"):
+        LiveLoop(sc.with_overrides(controller="truth"), lib, controller=True)
+
+
+# ---------------------------------------------------------------------- over real DDS
+def _ros_env(tmp: Path) -> dict[str, str]:
+    """The environment of one test's processes: its own ROS_DOMAIN_ID (from the xdist worker
+    and a counter, in 1..101), localhost discovery only, logs in ``tmp``."""
+    pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (pip install -e '.[ros]')")
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw")
+    domain = 1 + (int(worker or 0) * 17 + next(_COUNTER)) % 101
+    env = dict(os.environ)
+    env.update(
+        ROS_DOMAIN_ID=str(domain),
+        ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+        ROS_LOG_DIR=str(tmp / "ros-log"),
+        PYTHONPATH=os.pathsep.join([str(SRC), env.get("PYTHONPATH", "")]),
+    )
+    env.pop("ROS_LOCALHOST_ONLY", None)  # deprecated in kilted: the range above says it
+    return env
+
+
+def _start(env: dict[str, str], *args: str) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "amsfe_sym", *args],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
+    )
+
+
+def _finish(procs: list[subprocess.Popen[str]], timeout: float) -> list[tuple[int, str]]:
+    """Wait for every process (``timeout`` [s] in all), kill what is left; (code, output)."""
+    deadline = time.monotonic() + timeout
+    out = []
+    try:
+        for p in procs:
+            text, _ = p.communicate(timeout=max(0.1, deadline - time.monotonic()))
+            out.append((p.returncode, text))
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGKILL)
+                p.wait()
+    return out
+
+
+def _bag(path: Path) -> dict[str, list[Any]]:
+    from rosbags.highlevel import AnyReader
+
+    from amsfe_sym.logs.source import typestore
+
+    topics: dict[str, list[Any]] = {}
+    with AnyReader([path], default_typestore=typestore()) as r:
+        for c, _t, raw in r.messages():
+            topics.setdefault(c.topic, []).append(r.deserialize(raw, c.msgtype))
+    return topics
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_lockstep_reproduces_simulate(paper: Any, tmp_path: Path) -> None:
+    """``sim-node --lockstep`` + ``node --controller amsfe`` on paper-sim for 2 s over DDS:
+    the node's estimates, theta and commands equal ``amsfe simulate`` of the same seed."""
+    sc, lib = paper
+    env = _ros_env(tmp_path)
+    rec = tmp_path / "rec"
+    procs = []
+    try:
+        procs.append(
+            _start(env, "node", "paper-sim", "--controller", "amsfe", "--duration", "2",
+                   "--record", str(rec))
+        )  # fmt: skip
+        procs.append(_start(env, "sim-node", "paper-sim", "--lockstep", "--duration", "2"))
+    finally:
+        results = _finish(procs, 120.0)
+    for code, text in results:
+        assert code == 0, text
+    ref = run(sc, lib, runtime="compiled")
+    n = lib.n
+    bag = _bag(rec)
+    est = np.array([np.r_[m.position, m.velocity] for m in bag["/amsfe/estimate"]])
+    cmd = np.array([m.data for m in bag["/effort_controller/commands"]])
+    theta = np.array([m.data for m in bag["/amsfe/theta"]])
+    assert est.shape == (ref.t.size, 2 * n)
+    np.testing.assert_allclose(est, ref.x_hat[:, : 2 * n], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(theta, ref.x_hat[:, 4 * n :], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(cmd, ref.u, rtol=0, atol=1e-9)
+    assert len(bag["/camera/marker"]) == ref.counters["frames_delivered"] > 0
