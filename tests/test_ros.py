@@ -190,3 +190,35 @@ def test_lockstep_reproduces_simulate(paper: Any, tmp_path: Path) -> None:
     np.testing.assert_allclose(theta, ref.x_hat[:, 4 * n :], rtol=0, atol=1e-9)
     np.testing.assert_allclose(cmd, ref.u, rtol=0, atol=1e-9)
     assert len(bag["/camera/marker"]) == ref.counters["frames_delivered"] > 0
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_play_into_node_is_estimate(paper: Any, tmp_path: Path) -> None:
+    """``amsfe play`` of a simulated bag into ``amsfe node`` (estimator only, reliable QoS)
+    gives the estimates of ``amsfe estimate`` on that bag; the node's record, estimated
+    again, gives them too."""
+    from amsfe_sym.apps.estimate import EstimateOptions, estimate_command
+    from amsfe_sym.logs.write import write_run_bag
+
+    sc, lib = paper
+    bag = write_run_bag(run(sc, lib, runtime="compiled"), tmp_path / "bag")
+    ref = estimate_command(bag, tmp_path / "est", EstimateOptions(plots=False)).estimate
+    env = _ros_env(tmp_path)
+    rec = tmp_path / "rec"
+    depth = ["--ros-args", "-p", "qos.depth:=5000"]  # no sample lost on a loaded machine
+    procs = []
+    try:
+        procs.append(_start(env, "node", "paper-sim", "--duration", "2", "--record", str(rec),
+                            *depth))  # fmt: skip
+        procs.append(_start(env, "play", str(bag), *depth))
+    finally:
+        results = _finish(procs, 120.0)
+    for code, text in results:
+        assert code == 0, text
+    n = lib.n
+    got = _bag(rec)
+    est = np.array([np.r_[m.position, m.velocity] for m in got["/amsfe/estimate"]])
+    np.testing.assert_allclose(est, ref.x_hat[:, : 2 * n], rtol=0, atol=1e-9)
+    again = estimate_command(rec, tmp_path / "est2", EstimateOptions(plots=False)).estimate
+    np.testing.assert_allclose(again.x_hat, ref.x_hat, rtol=0, atol=1e-9)

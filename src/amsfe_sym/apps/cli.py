@@ -123,6 +123,7 @@ def get_argument_parser() -> argparse.ArgumentParser:
 
     ros_nodes.add_sim_node_arguments(sub.add_parser("sim-node", help="the simulated arm on ROS 2"))
     ros_nodes.add_node_arguments(sub.add_parser("node", help="estimator/controller on ROS 2"))
+    ros_nodes.add_play_arguments(sub.add_parser("play", help="a log's sensor topics on ROS 2"))
     b = sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
     b.add_argument("robot", nargs="?", default="paper_2link")
     b.add_argument("--out", default=None, help="parent folder of generated libraries")
@@ -288,6 +289,7 @@ def _main(argv: Sequence[str] | None) -> int:
         "sweep": sweep_from_args,
         "sim-node": ros_nodes.sim_node_from_args,
         "node": ros_nodes.node_from_args,
+        "play": ros_nodes.play_from_args,
     }
     try:
         if args.command in commands:

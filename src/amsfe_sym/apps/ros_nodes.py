@@ -19,8 +19,10 @@ from amsfe_sym.errors import ConfigError, describe
 
 __all__ = [
     "add_node_arguments",
+    "add_play_arguments",
     "add_sim_node_arguments",
     "node_from_args",
+    "play_from_args",
     "sim_node_from_args",
 ]
 
@@ -163,3 +165,32 @@ def node_from_args(args: argparse.Namespace) -> int:
     if rep.record is not None:
         print(f"node: record {rep.record} (amsfe estimate {rep.record})", flush=True)
     return rep.exit_code
+
+
+def add_play_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``amsfe play``."""
+    p.add_argument("log", help="rosbag2 folder or .mcap file (amsfe simulate --bag writes one)")
+    p.add_argument("--rate", type=SECONDS, default=1.0, help="speed factor of the recorded pace")
+    p.add_argument(
+        "--topic-spec", default=None, metavar="FILE", help="topics, joints, QoS (docs/topics.md)"
+    )
+    p.add_argument("--start-timeout", type=SECONDS, default=30.0, help="wait for a node [s]")
+    p.add_argument("--ros-args", nargs=argparse.REMAINDER, default=[], help="the rest: ROS 2")
+
+
+def play_from_args(args: argparse.Namespace) -> int:
+    """``amsfe play LOG`` from its parsed options."""
+    from amsfe_sym.ros.play import PlayOptions, play_log
+    from amsfe_sym.topics import read_topic_spec
+
+    opts = PlayOptions(
+        rate=args.rate,
+        spec=read_topic_spec(args.topic_spec),
+        start_timeout=args.start_timeout,
+        ros_args=tuple(args.ros_args),
+        domain_id=_domain(),
+    )
+    rep = play_log(Path(args.log), opts)
+    sent = ", ".join(f"{t} {c}" for t, c in rep.messages.items())
+    print(f"play: {rep.log_s:.2f} s of log in {rep.wall_s:.2f} s wall: {sent}", flush=True)
+    return 0

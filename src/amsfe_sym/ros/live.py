@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from amsfe_sym.control import Controller, LawInputs
 from amsfe_sym.core.camera_frame import CameraFrame
-from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.errors import ConfigError, EstimatorError, describe
 from amsfe_sym.estimation import Estimator
 from amsfe_sym.estimation.base import StepReport
 from amsfe_sym.runtime.library import ModelLibrary
@@ -75,6 +75,7 @@ class TickOut:
 @dataclass
 class _Frames:
     pending: list[CameraFrame] = field(default_factory=list)
+    sent: list[int | None] = field(default_factory=list)  # source timestamps of ``pending``
     seen: set[int] = field(default_factory=set)
 
 
@@ -127,6 +128,9 @@ class LiveLoop:
             self.ctrl, _ = build_controller(sc, lib)
             K = run_ticks(sc, lib.T, lib.n, lib.N)
             self.ctrl.prepare(np.arange(K, dtype=float) * lib.T)  # the loop's grid
+        # built once now (imports, the library's C estimator loaded: ~1 s the first time) and
+        # again at the first sample, which then takes ~1 ms instead of holding the samples up
+        build_estimator(sc, lib, self._sensors, np.zeros(2 * lib.n), compiled=compiled)
         self.est: Estimator | None = None
         self.k = -1
         self.t0_ns = 0
@@ -134,6 +138,8 @@ class LiveLoop:
         self.u = np.zeros(lib.n)
         self._frames = _Frames()
         self._effort: dict[int, FloatArray] = {}
+        self._sent: int | None = None
+        self._early: list[tuple[int, FloatArray]] = []
         self.counters: dict[str, int] = dict.fromkeys(DECISION_COUNTERS, 0)
         self.skipped: dict[str, int] = {}
         self._nan = np.full(4 * lib.n, np.nan)
@@ -150,9 +156,11 @@ class LiveLoop:
         k = round(rel / self._T_ns)
         return k if abs(rel - k * self._T_ns) <= self._tol * self._T_ns else None
 
-    def frame(self, exposure_ns: int, z: FloatArray) -> None:
-        """A camera frame arrived: pixel ``z`` [px], exposed at ``exposure_ns`` [ns]; it is
-        fused at the next tick (or skipped, counted by reason)."""
+    def frame(self, exposure_ns: int, z: FloatArray, sent_ns: int | None = None) -> None:
+        """A camera frame arrived: pixel ``z`` [px], exposed at ``exposure_ns`` [ns], sent
+        by its publisher at ``sent_ns`` (its source timestamp; None: unknown); it is fused at
+        the first encoder sample sent at or after it (the next one when either is unknown),
+        or skipped, counted by reason."""
         if self.k < 0:
             self._skip("frame exposed before the first encoder sample")
             return
@@ -168,16 +176,23 @@ class LiveLoop:
         else:
             self._frames.seen.add(kappa)
             self._frames.pending.append(CameraFrame(kappa, np.array(z, dtype=float)))
+            self._frames.sent.append(sent_ns)
 
     def applied(self, stamp_ns: int, u: FloatArray) -> None:
         """The torque [N m] applied over [t_j, t_j+1], j the tick of ``stamp_ns`` (an effort
         topic of kind ``applied``; used when the node runs no controller): the step j -> j+1
-        uses it, whichever of it and the sample of j+1 arrives first."""
+        uses it, whichever of it and the sample of j+1 arrives first (one that arrives
+        before the first sample waits for it)."""
+        if self.k < 0:
+            self._early.append((stamp_ns, np.array(u, dtype=float)))
+            return
         j = self.tick_of(stamp_ns)
-        if j is None or j < self.k:
+        if j is None:
             self._skip("torque sample off the tick grid")
         elif np.size(u) != self.n or not np.all(np.isfinite(u)):
             self._skip("torque sample not n finite values")
+        elif j < self.k:
+            self._skip("torque sample after its tick was estimated")
         else:
             self._effort[j] = np.array(u, dtype=float)
 
@@ -193,15 +208,25 @@ class LiveLoop:
                 del self._effort[old]
         return self.u
 
-    def encoders(self, stamp_ns: int, z: FloatArray) -> TickOut | None:
-        """An encoder sample [qm [rad], qmd [rad/s]] stamped ``stamp_ns``: the estimate (and
-        command) of its tick, or None when it is skipped (off the grid, duplicated or older
-        than the last, or after a gap longer than ``max_gap_steps``: counted)."""
+    def encoders(self, stamp_ns: int, z: FloatArray, sent_ns: int | None = None) -> TickOut | None:
+        """An encoder sample [qm [rad], qmd [rad/s]] stamped ``stamp_ns`` (sent at
+        ``sent_ns``: see :meth:`frame`): the estimate (and command) of its tick, or None when
+        it is skipped (off the grid, duplicated or older than the last: counted).
+
+        Raises:
+            EstimatorError: more than ``max_gap_steps`` samples missing before this one (the
+                node holds), or the estimator failed.
+        """
         z = np.array(z, dtype=float)
+        self._sent = sent_ns
         if self.est is None:
             self.t0_ns, self.k = stamp_ns, 0
             self.est = build_estimator(self.sc, self.lib, self._sensors, z, compiled=self._compiled)
             self._frames.pending.clear()  # the loop uses no frame at tick 0
+            self._frames.sent.clear()
+            for early in self._early:
+                self.applied(*early)
+            self._early.clear()
             return self._control(stamp_ns, z, None, 0)
         k = self.tick_of(stamp_ns)
         if k is None:
@@ -212,8 +237,15 @@ class LiveLoop:
             return None
         gap = k - self.k - 1
         if gap > self._max_gap:
-            self._skip("encoder samples after a gap longer than max_gap_steps")
-            return None
+            raise EstimatorError(
+                describe(
+                    f"encoder sample at t = {k * self.T:.3f} s",
+                    f"at most max_gap_steps = {self._max_gap} missing samples before it",
+                    f"{gap} missing",
+                    "the arm's encoders stalled: check the driver (or raise [timing] "
+                    "max_gap_steps in the topic spec)",
+                )
+            )
         for _ in range(gap):  # predicted through, as a log's gaps are
             self.k += 1
             count_decisions(
@@ -228,10 +260,18 @@ class LiveLoop:
         return self._control(stamp_ns, z, report, gap)
 
     def _due(self) -> list[CameraFrame]:
-        """The pending frames exposed at or before the current tick, delivered now."""
-        due = [f for f in self._frames.pending if f.exposure_step <= self.k]
-        self._frames.pending = [f for f in self._frames.pending if f.exposure_step > self.k]
-        return [CameraFrame(f.exposure_step, f.z, self.k) for f in due]
+        """The pending frames exposed at or before the current tick and sent before its
+        sample, delivered now."""
+        due, keep, sent = [], [], []
+        for f, s in zip(self._frames.pending, self._frames.sent, strict=True):
+            before = s is None or self._sent is None or s <= self._sent
+            if f.exposure_step <= self.k and before:
+                due.append(CameraFrame(f.exposure_step, f.z, self.k))
+            else:
+                keep.append(f)
+                sent.append(s)
+        self._frames.pending, self._frames.sent = keep, sent
+        return due
 
     def _control(
         self, stamp_ns: int, z: FloatArray, report: StepReport | None, gap: int

@@ -132,7 +132,7 @@ class _Node:
         self._orders: dict[tuple[str, ...], list[int]] = {}
         self._truth: FloatArray | None = None
         self._first_command = True
-        self._rx_frames: list[tuple[int, FloatArray]] = []
+        self._rx_frames: list[tuple[int, FloatArray, int]] = []
         qos = qos_profile(spec)
         # the camera is subscribed first: a frame and a sample ready at once, the frame first
         node.create_subscription(m.PointStamped, spec.camera, self.on_frame, qos)
@@ -161,12 +161,13 @@ class _Node:
             self._orders[key] = joint_order(key, self.names, where)
         return self._orders[key]
 
-    def on_frame(self, msg: Any) -> None:
+    def on_frame(self, msg: Any, info: Any) -> None:
         ns = self.m.stamp_ns(msg.header.stamp)
         pixel = np.array([msg.point.x, msg.point.y])
-        self.live.frame(ns, pixel)
+        sent = int(info["source_timestamp"])
+        self.live.frame(ns, pixel, sent)
         if self.record is not None and self.live.k >= 0:
-            self._rx_frames.append((ns, pixel))
+            self._rx_frames.append((ns, pixel, sent))
 
     def on_truth(self, msg: Any) -> None:
         self._truth = self.m.values(msg.data)
@@ -181,9 +182,12 @@ class _Node:
             return
         eff = self.m.values(msg.effort)
         u = eff[idx] if eff.size == len(msg.name) else np.full(self.n, np.nan)
-        self.live.applied(self.m.stamp_ns(msg.header.stamp), u)
+        ns = self.m.stamp_ns(msg.header.stamp)
+        self.live.applied(ns, u)
+        if self.record is not None:
+            self.record.applied(ns, u)
 
-    def on_encoders(self, msg: Any) -> None:
+    def on_encoders(self, msg: Any, info: Any) -> None:
         if self.stop is not None:
             return
         try:
@@ -198,7 +202,7 @@ class _Node:
             else:
                 z = np.concatenate([pos[idx], vel[idx]])
             ns = self.m.stamp_ns(msg.header.stamp)
-            out = self.live.encoders(ns, z)
+            out = self.live.encoders(ns, z, int(info["source_timestamp"]))
         except AmsfeError as exc:
             self.stop = _Stop(f"hold: the estimator stopped: {exc}", EXIT_HOLD)
             return
@@ -208,11 +212,13 @@ class _Node:
             eff = self.m.values(msg.effort)
             if eff.size == len(msg.name):
                 self.live.applied(ns, eff[idx])
-        self._publish(out, z)
+                if self.record is not None:
+                    self.record.applied(ns, eff[idx])
+        self._publish(out, z, int(info["source_timestamp"]))
         self.last_rx = time.monotonic()  # after the work: a slow first tick is no silence
 
     # ---------------------------------------------------------------- outputs
-    def _publish(self, out: TickOut, z: FloatArray) -> None:
+    def _publish(self, out: TickOut, z: FloatArray, sent: int) -> None:
         m, n, ns = self.m, self.n, out.stamp_ns
         if not np.all(np.isfinite(out.x_hat)) or not np.all(np.isfinite(out.P_diag)):
             self.stop = _Stop(f"hold: non-finite estimate at t = {out.t:.3f} s", EXIT_HOLD)
@@ -231,24 +237,29 @@ class _Node:
         if out.k == 0 or (rep is not None and (rep.frames_applied or rep.frames_rejected)):
             self.pub_diag.publish(m.String(data=json.dumps(self.diagnostics(out))))
         if self.record is not None:
-            self._record(out, z)
+            self._record(out, z, sent)
         if self.end_k is not None and out.k >= self.end_k:
             self.stop = _Stop(f"done: {out.k + 1} ticks ({out.t:.3f} s of samples)", 0)
 
-    def _record(self, out: TickOut, z: FloatArray) -> None:
+    def _record(self, out: TickOut, z: FloatArray, sent: int) -> None:
         rec = self.record
         assert rec is not None
         ns = out.stamp_ns
         rec.encoders(ns, z)
-        for exposure_ns, pixel in self._rx_frames:  # logged at their arrival: this tick
-            rec.frame(ns, exposure_ns, pixel)
-        self._rx_frames.clear()
+        keep = []
+        for exposure_ns, pixel, frame_sent in self._rx_frames:  # logged at their arrival
+            if frame_sent <= sent:
+                rec.frame(ns, exposure_ns, pixel)
+            else:
+                keep.append((exposure_ns, pixel, frame_sent))
+        self._rx_frames = keep
         if self._truth is not None:
             rec.truth(ns, self._truth)
         L = self.lib.layout
         std = np.sqrt(np.maximum(out.P_diag, 0.0))
         rec.outputs(ns, out.x_hat, std, out.x_hat[L["theta"]], out.u)
-        rec.applied(ns, self.live.u)
+        if out.u is not None:  # the node's own command is the applied torque
+            rec.applied(ns, out.u)
 
     def _wait_subscriber(self) -> None:
         assert self.pub_cmd is not None
