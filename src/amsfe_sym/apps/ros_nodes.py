@@ -79,6 +79,9 @@ def add_sim_node_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--command-timeout", type=SECONDS, default=5.0, help="lockstep: wait for a command [s]"
     )
+    p.add_argument(
+        "--rate", type=SECONDS, default=1.0, help="free running: speed of the wall clock"
+    )
 
 
 def sim_node_from_args(args: argparse.Namespace) -> int:
@@ -95,6 +98,7 @@ def sim_node_from_args(args: argparse.Namespace) -> int:
         spec=spec,
         start_timeout=args.start_timeout,
         command_timeout=args.command_timeout,
+        rate=args.rate,
         ros_args=tuple(args.ros_args),
         domain_id=_domain(),
     )
@@ -105,6 +109,7 @@ def sim_node_from_args(args: argparse.Namespace) -> int:
     if not args.lockstep:
         line += f", {rep.late_ticks} late ticks, {rep.stale_ticks} without a new command"
     print(line, flush=True)
+    print(f"sim-node: {rep.latency_line()}", flush=True)
     return 0
 
 
@@ -158,10 +163,7 @@ def node_from_args(args: argparse.Namespace) -> int:
     )
     ctrl = f", controller {sc.controller}" if opts.controller else ""
     print(f"node: {sc.name}, estimator {sc.estimator}{ctrl}; waiting for encoders", flush=True)
-    rep = run_node(sc, lib, opts)
-    print(f"node: {rep.reason}", flush=True)
-    if rep.hold is not None:
-        print(f"node: hold command {[round(float(v), 6) for v in rep.hold]} N m", flush=True)
+    rep = run_node(sc, lib, opts, say=lambda line: print(line, flush=True))
     if rep.record is not None:
         print(f"node: record {rep.record} (amsfe estimate {rep.record})", flush=True)
     return rep.exit_code

@@ -134,10 +134,11 @@ class LiveLoop:
         self.est: Estimator | None = None
         self.k = -1
         self.t0_ns = 0
-        #: The torque applied over the last tick [N m] (the controller's, or the effort topic's).
+        #: The torque applied over the last tick [N m] (the effort topic's, or the controller's).
         self.u = np.zeros(lib.n)
         self._frames = _Frames()
         self._effort: dict[int, FloatArray] = {}
+        self._cmds: dict[int, FloatArray] = {}
         self._sent: int | None = None
         self._early: list[tuple[int, FloatArray]] = []
         self.counters: dict[str, int] = dict.fromkeys(DECISION_COUNTERS, 0)
@@ -180,9 +181,10 @@ class LiveLoop:
 
     def applied(self, stamp_ns: int, u: FloatArray) -> None:
         """The torque [N m] applied over [t_j, t_j+1], j the tick of ``stamp_ns`` (an effort
-        topic of kind ``applied``; used when the node runs no controller): the step j -> j+1
-        uses it, whichever of it and the sample of j+1 arrives first (one that arrives
-        before the first sample waits for it)."""
+        topic of kind ``applied``): the step j -> j+1 uses it rather than the controller's
+        command (a command applied late or not at all is what the arm did) if it arrives
+        before the sample of j+1 is estimated (after: counted; before the first sample: it
+        waits for it)."""
         if self.k < 0:
             self._early.append((stamp_ns, np.array(u, dtype=float)))
             return
@@ -197,15 +199,19 @@ class LiveLoop:
             self._effort[j] = np.array(u, dtype=float)
 
     def _u_for(self, j: int) -> FloatArray:
-        """The torque over [t_j, t_j+1]: the controller's, or the effort topic's of tick j
-        (else the previous one, held and counted)."""
-        if self.ctrl is None:
-            if j in self._effort:
-                self.u = self._effort.pop(j)
-            else:
-                self._skip("torque held from the previous tick")
-            for old in [i for i in self._effort if i < j]:
-                del self._effort[old]
+        """The torque over [t_j, t_j+1]: the effort topic's of tick j (what the arm says it
+        applied), else the controller's command of tick j, else the previous one (held and
+        counted)."""
+        if j in self._effort:
+            self.u = self._effort.pop(j)
+        elif j in self._cmds:
+            self.u = self._cmds[j]
+        else:
+            self._skip("torque held from the previous tick")
+        for old in [i for i in self._effort if i < j]:
+            del self._effort[old]
+        for old in [i for i in self._cmds if i <= j]:
+            del self._cmds[old]
         return self.u
 
     def encoders(self, stamp_ns: int, z: FloatArray, sent_ns: int | None = None) -> TickOut | None:
@@ -284,7 +290,7 @@ class LiveLoop:
         if self.ctrl is not None:
             law = LawInputs(self.k, t, self._nan, self._nan[: self.lib.p], x, z, P_diag)
             u, _ = self.ctrl.saturate(self.ctrl.torque(law))
-            self.u = np.array(u, dtype=float)
+            self._cmds[self.k] = np.array(u, dtype=float)
         return TickOut(self.k, t, stamp_ns, np.array(x, dtype=float), P_diag, u, report, gap)
 
     def hold_command(self, kind: HoldKind, last: TickOut | None) -> FloatArray:

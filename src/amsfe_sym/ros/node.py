@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -138,7 +139,8 @@ class _Node:
         node.create_subscription(m.PointStamped, spec.camera, self.on_frame, qos)
         node.create_subscription(m.Float64MultiArray, spec.truth, self.on_truth, qos)
         self.effort_kind = spec.effort_kind or "applied"
-        use_effort = not options.controller and self.effort_kind == "applied"
+        use_effort = self.effort_kind == "applied"
+        self.use_effort = use_effort
         if use_effort and spec.effort != spec.encoders:
             node.create_subscription(m.JointState, spec.effort, self.on_effort, qos)
         self.effort_in_encoders = use_effort and spec.effort == spec.encoders
@@ -258,7 +260,7 @@ class _Node:
         L = self.lib.layout
         std = np.sqrt(np.maximum(out.P_diag, 0.0))
         rec.outputs(ns, out.x_hat, std, out.x_hat[L["theta"]], out.u)
-        if out.u is not None:  # the node's own command is the applied torque
+        if out.u is not None and not self.use_effort:  # its own command is the applied one
             rec.applied(ns, out.u)
 
     def _wait_subscriber(self) -> None:
@@ -294,18 +296,24 @@ class _Node:
         if self.pub_cmd is None:
             return None
         u = self.live.hold_command(self.options.hold, self.last)
+        if self.record is not None:
+            self.record.hold(self.last.stamp_ns if self.last is not None else 0, u)
         try:
             self.pub_cmd.publish(self.m.float64_array(u))
             from rclpy.duration import Duration
 
-            self.pub_cmd.wait_for_all_acked(Duration(seconds=1))
+            self.pub_cmd.wait_for_all_acked(Duration(seconds=0.5))
         except Exception:  # a context already down cannot publish
             return None
         return u
 
 
-def run_node(sc: Scenario, lib: ModelLibrary, options: NodeOptions) -> NodeReport:
+def run_node(
+    sc: Scenario, lib: ModelLibrary, options: NodeOptions, say: Callable[[str], None] = print
+) -> NodeReport:
     """Run the node until a stop (module docstring); the record is written on every exit.
+    ``say`` gets the one line of why it stopped and the hold command, as soon as the hold
+    command is out (before the record is written).
 
     Raises:
         KeyboardInterrupt: Ctrl-C or SIGTERM (after the hold and the record).
@@ -336,10 +344,11 @@ def run_node(sc: Scenario, lib: ModelLibrary, options: NodeOptions) -> NodeRepor
         if state.stop is not None:
             reason, code = state.stop.reason, state.stop.code
         hold = state.hold()
+        say(f"node: {reason}" + _held(hold))
     except KeyboardInterrupt:
         if state is not None:
             hold = state.hold()
-            print("hold: interrupted, hold command published", flush=True)
+            say("node: hold: interrupted" + _held(hold))
         raise
     finally:
         if state is not None and state.record is not None and options.record is not None:
@@ -353,3 +362,9 @@ def run_node(sc: Scenario, lib: ModelLibrary, options: NodeOptions) -> NodeRepor
         raise state.stop.error
     counters = {**state.live.counters, **state.live.skipped}
     return NodeReport(state.live.k + 1, reason, code, hold, counters, options.record)
+
+
+def _held(hold: FloatArray | None) -> str:
+    if hold is None:
+        return ""
+    return f"; hold command {[round(float(v), 6) for v in hold]} N m published"

@@ -91,6 +91,11 @@ class NodeRecord:
         if u is not None:
             self._add(self.spec.commands, F64, ns, np.array(u, dtype=float))
 
+    def hold(self, ns: int, u: FloatArray) -> None:
+        """The hold command published when the node stopped (logged at ``ns``, the last
+        tick's stamp)."""
+        self._add(self.spec.commands, F64, ns, np.array(u, dtype=float))
+
     def write(self, out: Path) -> Path:
         """Write the bag folder ``out`` (complete or absent)."""
         from rosbags.rosbag2 import StoragePlugin, Writer

@@ -43,7 +43,10 @@ class SimNodeOptions:
         spec: The topic spec (ROS parameters override it).
         start_timeout: Longest wait for a subscriber of the encoders (and, in lockstep, a
             publisher of the commands) [s, wall].
-        command_timeout: Lockstep: longest wait for one tick's command [s, wall].
+        command_timeout: Lockstep: longest wait for one tick's command (free running: for
+            the first one, which starts the wall clock) [s, wall].
+        rate: Free running: speed factor of the wall clock (0.25: a tick every 4 T, for a
+            machine that cannot keep up with the robot's rate).
         ros_args: ``--ros-args`` for rclpy (parameters, remaps).
         domain_id: ROS_DOMAIN_ID (None: the environment's).
     """
@@ -52,6 +55,7 @@ class SimNodeOptions:
     spec: TopicSpec = field(default_factory=TopicSpec)
     start_timeout: float = 30.0
     command_timeout: float = 5.0
+    rate: float = 1.0
     ros_args: tuple[str, ...] = ()
     domain_id: int | None = None
 
@@ -68,6 +72,10 @@ class SimNodeReport:
             clock (the machine could not keep up).
         stale_ticks: Free running: ticks whose command was not new (none arrived during the
             tick: the previous one was applied again).
+        command_latency_s: Per command: its arrival minus the publication of the encoder
+            sample it answers (the i-th command answers the i-th sample: a node sends one per
+            sample) [s, wall].
+        estimate_latency_s: The same for the estimates (``/amsfe/estimate``) [s, wall].
     """
 
     ticks: int
@@ -75,6 +83,20 @@ class SimNodeReport:
     wall_s: float
     late_ticks: int
     stale_ticks: int
+    command_latency_s: FloatArray = field(default_factory=lambda: np.zeros(0))
+    estimate_latency_s: FloatArray = field(default_factory=lambda: np.zeros(0))
+
+    def latency_line(self) -> str:
+        """p50 / p99 / max of both latencies [ms], one line."""
+        parts = []
+        both = (("estimate", self.estimate_latency_s), ("command", self.command_latency_s))
+        for what, lat in both:
+            if lat.size:
+                p50, p99 = np.percentile(lat, [50, 99]) * 1e3
+                parts.append(
+                    f"encoder -> {what} p50 {p50:.3f} p99 {p99:.3f} max {lat.max() * 1e3:.3f} ms"
+                )
+        return "; ".join(parts) or "no latency measured"
 
 
 def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> SimNodeReport:
@@ -108,12 +130,19 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
 
         def on_command(msg: m.Float64MultiArray) -> None:
             u = m.values(msg.data)
+            cmd_at.append(time.perf_counter())
             if u.size == n and np.all(np.isfinite(u)):
                 commands.append(u)
             else:
                 node.get_logger().warning(f"command of {u.size} values refused (need {n} finite)")
 
         sub = node.create_subscription(m.Float64MultiArray, spec.commands, on_command, qos)
+        cmd_at: list[float] = []
+        est_at: list[float] = []
+        sent_at = np.zeros(arm.K)
+        node.create_subscription(
+            m.JointState, spec.estimate, lambda _msg: est_at.append(time.perf_counter()), qos
+        )
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
         _wait_peers(ex, pub_enc, sub if options.lockstep else None, options.start_timeout)
@@ -128,8 +157,11 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
             pub_truth.publish(m.float64_array(s.x_true))
             for fr in s.frames:
                 pub_cam.publish(m.point_stamped(fr.exposure_step * T_ns, fr.z[0], fr.z[1]))
+            sent_at[k] = time.perf_counter()
             pub_enc.publish(m.joint_state(ns, names, s.z[:n], s.z[n:]))
-            if options.lockstep:
+            if k and k % round(1.0 / lib.T) == 0:
+                print(f"sim-node: t = {k * lib.T:.1f} s", flush=True)
+            if options.lockstep or k == 0:  # free running starts on the first command
                 deadline = time.monotonic() + options.command_timeout
                 while len(commands) <= k:
                     left = deadline - time.monotonic()
@@ -145,9 +177,10 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
                         )
                     ex.spin_once(timeout_sec=min(left, 0.05))
                 u = commands[k]
+                t0 = time.perf_counter() - lib.T / options.rate if k == 0 else t0
             else:
                 before = len(commands)
-                end = t0 + (k + 1) * lib.T
+                end = t0 + (k + 1) * lib.T / options.rate
                 if time.perf_counter() > end:
                     late += 1
                 while (left := end - time.perf_counter()) > 0:
@@ -161,7 +194,15 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
                 arm.advance(u)
         wall = time.perf_counter() - t0
         _acked(pub_eff, 1.0)
-        return SimNodeReport(arm.K, len(commands), wall, late, stale)
+        ex.spin_once(timeout_sec=0.05)  # the last tick's estimate
+
+        def latency(at: list[float]) -> FloatArray:
+            c = min(len(at), arm.K)
+            return np.asarray(at[:c], dtype=float) - sent_at[:c]
+
+        return SimNodeReport(
+            arm.K, len(commands), wall, late, stale, latency(cmd_at), latency(est_at)
+        )
     finally:
         stop(ctx, *([node] if node is not None else []))
 
