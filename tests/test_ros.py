@@ -98,6 +98,42 @@ def test_live_loop_skips_as_a_log(paper: Any) -> None:
     assert loop.counters["frames_applied"] + loop.counters["frames_rejected"] == 1
 
 
+def test_live_loop_refuses_a_frame_older_than_its_history(paper: Any) -> None:
+    """A frame exposed before the estimator's history (``buffer_steps``) is refused by the
+    estimator and counted as a log's would be (``refused_too_late``)."""
+    sc, lib = paper
+    arm, loop = SimArm(sc, lib), LiveLoop(sc, lib, controller=True)
+    T = round(lib.T * 1e9)
+    K = sc.filter.buffer_steps + 10
+    for k in range(K + 1):
+        s = arm.sense()  # the arm's own frames are not given: only the old one below
+        if k == K:
+            loop.frame(T, np.array([300.0, 200.0]))
+        out = loop.encoders(k * T, s.z)
+        assert out is not None and out.u is not None
+        arm.advance(out.u)
+    assert loop.counters["refused_too_late"] == loop.counters["frames_rejected"] == 1
+
+
+def test_cli_starts_without_rclpy(tmp_path: Path) -> None:
+    """``amsfe --help`` works without the [ros] extra; ``amsfe node`` then says in one line
+    how to install it (exit 2)."""
+    block = "import sys; sys.modules['rclpy'] = None; from amsfe_sym.apps.cli import main; "
+    env = {**os.environ, "PYTHONPATH": str(SRC)}
+    helped = subprocess.run(
+        [sys.executable, "-c", block + "sys.exit(main(['--help']))"],
+        env=env, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert helped.returncode == 0 and "sim-node" in helped.stdout, helped.stderr
+    node = subprocess.run(
+        [sys.executable, "-c", block + "sys.exit(main(['node', 'paper-sim']))"],
+        env=env, capture_output=True, text=True, timeout=120, cwd=tmp_path,
+    )  # fmt: skip
+    assert node.returncode == 2, node.stderr
+    lines = [x for x in node.stderr.splitlines() if x.startswith("error:")]
+    assert len(lines) == 1 and ".[ros]" in lines[0], node.stderr
+
+
 def test_oracle_controller_refused(paper: Any) -> None:
     sc, lib = paper
     with pytest.raises(ConfigError, match="oracle"):
