@@ -123,6 +123,16 @@ def stop(ctx: Any, *nodes: Any) -> None:
             ctx.shutdown()
 
 
+def executor(ctx: Any) -> Any:
+    """The executor of a node: rclpy's SingleThreadedExecutor.  (rclpy 9.1's C++
+    EventsExecutor would cost less a callback, but a callback taking the message info, as
+    the node's do for the source timestamps, fails in it with ``SystemError: null argument
+    to internal routine`` when a message arrives.)"""
+    from rclpy.executors import SingleThreadedExecutor
+
+    return SingleThreadedExecutor(context=ctx)
+
+
 def spec_parameters(node: Any, spec: TopicSpec, joints: tuple[str, ...]) -> TopicSpec:
     """The topic spec as ROS parameters of ``node`` (declared with ``spec``'s values as
     defaults: ``topics.<role>``, ``joints.names``, ``effort.kind``, ``timing.*``,

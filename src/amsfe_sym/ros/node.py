@@ -1,8 +1,9 @@
 """``amsfe node``: the generated estimator (and controller) of a scenario as the ROS 2 node
 ``amsfe_node`` (docs/ros.md).
 
-It subscribes the encoders, the camera, the effort (when it runs no controller) and the
-truth (when a simulated arm sends it) of the topic spec (ROS parameters override it); each
+It subscribes the encoders, the camera, the effort (kind ``applied``: the torque the arm
+applied, which drives the estimator) and, when it records, the truth of a simulated arm, on
+the topics of the topic spec (ROS parameters override it); each
 encoder sample goes through :class:`amsfe_sym.ros.live.LiveLoop` by its header stamp, and
 the node publishes the estimate (JointState q, qd), its standard deviations, theta, the
 command (with a controller; Float64MultiArray for a ros2_control forward command
@@ -30,7 +31,7 @@ from numpy.typing import NDArray
 
 from amsfe_sym.errors import AmsfeError
 from amsfe_sym.ros.live import HoldKind, LiveLoop, TickOut
-from amsfe_sym.ros.middleware import qos_profile, spec_parameters, start, stop
+from amsfe_sym.ros.middleware import executor, qos_profile, spec_parameters, start, stop
 from amsfe_sym.ros.record import NodeRecord
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
@@ -137,7 +138,8 @@ class _Node:
         qos = qos_profile(spec)
         # the camera is subscribed first: a frame and a sample ready at once, the frame first
         node.create_subscription(m.PointStamped, spec.camera, self.on_frame, qos)
-        node.create_subscription(m.Float64MultiArray, spec.truth, self.on_truth, qos)
+        if self.record is not None:  # the truth only goes into a record (for its NEES)
+            node.create_subscription(m.Float64MultiArray, spec.truth, self.on_truth, qos)
         self.effort_kind = spec.effort_kind or "applied"
         use_effort = self.effort_kind == "applied"
         self.use_effort = use_effort
@@ -225,16 +227,19 @@ class _Node:
         if not np.all(np.isfinite(out.x_hat)) or not np.all(np.isfinite(out.P_diag)):
             self.stop = _Stop(f"hold: non-finite estimate at t = {out.t:.3f} s", EXIT_HOLD)
             return
+        if out.u is not None and not np.all(np.isfinite(out.u)):
+            self.stop = _Stop(f"hold: non-finite command at t = {out.t:.3f} s", EXIT_HOLD)
+            return
         self.last = out
+        if out.u is not None and self.pub_cmd is not None:  # first: the arm waits for it
+            if self._first_command:
+                self._wait_subscriber()
+            self.pub_cmd.publish(m.float64_array(out.u))
         x, std = out.x_hat, np.sqrt(np.maximum(out.P_diag, 0.0))
         L = self.lib.layout
         self.pub_est.publish(m.joint_state(ns, self.names, x[:n], x[n : 2 * n]))
         self.pub_std.publish(m.joint_state(ns, self.names, std[:n], std[n : 2 * n]))
         self.pub_theta.publish(m.float64_array(x[L["theta"]]))
-        if out.u is not None and self.pub_cmd is not None:
-            if self._first_command:
-                self._wait_subscriber()
-            self.pub_cmd.publish(m.float64_array(out.u))
         rep = out.report
         if out.k == 0 or (rep is not None and (rep.frames_applied or rep.frames_rejected)):
             self.pub_diag.publish(m.String(data=json.dumps(self.diagnostics(out))))
@@ -322,7 +327,6 @@ def run_node(
     """
     ctx = start(list(options.ros_args), options.domain_id)
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
 
     node = rclpy.create_node("amsfe_node", context=ctx)
     state: _Node | None = None
@@ -330,7 +334,7 @@ def run_node(
     reason, code = "shutdown", 0
     try:
         state = _Node(ctx, sc, lib, options, node)
-        ex = SingleThreadedExecutor(context=ctx)
+        ex = executor(ctx)
         ex.add_node(node)
         while state.stop is None and ctx.ok():
             ex.spin_once(timeout_sec=0.05)

@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from amsfe_sym.errors import RosError, describe
 from amsfe_sym.ros.arm import SimArm
-from amsfe_sym.ros.middleware import qos_profile, spec_parameters, start, stop
+from amsfe_sym.ros.middleware import executor, qos_profile, spec_parameters, start, stop
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.topics import TopicSpec
@@ -108,8 +108,6 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
     """
     arm = SimArm(sc, lib)
     ctx = start(list(options.ros_args), options.domain_id)
-    from rclpy.executors import SingleThreadedExecutor
-
     from amsfe_sym.ros import messages as m
 
     node = None
@@ -143,7 +141,7 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         node.create_subscription(
             m.JointState, spec.estimate, lambda _msg: est_at.append(time.perf_counter()), qos
         )
-        ex = SingleThreadedExecutor(context=ctx)
+        ex = executor(ctx)
         ex.add_node(node)
         _wait_peers(ex, pub_enc, sub if options.lockstep else None, options.start_timeout)
         T_ns = round(lib.T * 1e9)
