@@ -336,8 +336,8 @@ def test_free_running_tracks(tmp_path: Path) -> None:
 def test_faults_hold_and_clean_exits(tmp_path: Path) -> None:
     """The encoder publisher killed mid-run: the node holds within its encoder timeout
     (0.5 s, plus its 0.05 s spin and a margin for this loaded machine) and exits 3 with a
-    readable record; Ctrl-C of the node: hold, exit 130, record readable; Ctrl-C of the
-    sim-node: exit 130."""
+    readable record; Ctrl-C of the node: hold, exit 130, record readable; SIGTERM of the
+    sim-node: exit 143."""
     env = _ros_env(tmp_path)
     procs: list[_Proc] = []
     try:
@@ -364,8 +364,8 @@ def test_faults_hold_and_clean_exits(tmp_path: Path) -> None:
         sim.wait_for("t = 1.0 s", 60.0)
         node.kill(signal.SIGINT)
         assert node.p.wait(timeout=30.0) == 130, node.text
-        sim.kill(signal.SIGINT)
-        assert sim.p.wait(timeout=30.0) == 130, sim.text
+        sim.kill(signal.SIGTERM)
+        assert sim.p.wait(timeout=30.0) == 143, sim.text
     finally:
         _finish(procs, 1.0)
     assert "hold: interrupted; hold command" in node.text, node.text

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -126,20 +127,25 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         commands: list[FloatArray] = []
         n = lib.n
 
-        def on_command(msg: m.Float64MultiArray) -> None:
+        def on_command(msg: m.Float64MultiArray, info: Any) -> None:
             u = m.values(msg.data)
-            cmd_at.append(time.perf_counter())
+            cmd_at.append(int(info["received_timestamp"]))
             if u.size == n and np.all(np.isfinite(u)):
                 commands.append(u)
             else:
                 node.get_logger().warning(f"command of {u.size} values refused (need {n} finite)")
 
         sub = node.create_subscription(m.Float64MultiArray, spec.commands, on_command, qos)
-        cmd_at: list[float] = []
-        est_at: list[float] = []
-        sent_at = np.zeros(arm.K)
+        # latency by the middleware's receive stamps (system clock [ns]): not delayed by
+        # this node's own executor
+        cmd_at: list[int] = []
+        est_at: list[int] = []
+        sent_at = np.zeros(arm.K, dtype=np.int64)
         node.create_subscription(
-            m.JointState, spec.estimate, lambda _msg: est_at.append(time.perf_counter()), qos
+            m.JointState,
+            spec.estimate,
+            lambda _msg, info: est_at.append(int(info["received_timestamp"])),
+            qos,
         )
         ex = executor(ctx)
         ex.add_node(node)
@@ -155,7 +161,7 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
             pub_truth.publish(m.float64_array(s.x_true))
             for fr in s.frames:
                 pub_cam.publish(m.point_stamped(fr.exposure_step * T_ns, fr.z[0], fr.z[1]))
-            sent_at[k] = time.perf_counter()
+            sent_at[k] = time.time_ns()
             pub_enc.publish(m.joint_state(ns, names, s.z[:n], s.z[n:]))
             if k and k % round(1.0 / lib.T) == 0:
                 print(f"sim-node: t = {k * lib.T:.1f} s", flush=True)
@@ -194,9 +200,9 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         _acked(pub_eff, 1.0)
         ex.spin_once(timeout_sec=0.05)  # the last tick's estimate
 
-        def latency(at: list[float]) -> FloatArray:
+        def latency(at: list[int]) -> FloatArray:
             c = min(len(at), arm.K)
-            return np.asarray(at[:c], dtype=float) - sent_at[:c]
+            return np.asarray((np.asarray(at[:c], dtype=np.int64) - sent_at[:c]) * 1e-9, float)
 
         return SimNodeReport(
             arm.K, len(commands), wall, late, stale, latency(cmd_at), latency(est_at)
