@@ -348,7 +348,12 @@ def run_node(
         if state.stop is not None:
             reason, code = state.stop.reason, state.stop.code
         hold = state.hold()
-        say(f"node: {reason}" + _held(hold))
+        bad_input = state.stop is not None and state.stop.error is not None
+        say(
+            "node: stopped on bad input" + _held(hold)
+            if bad_input
+            else f"node: {reason}" + _held(hold)
+        )
     except KeyboardInterrupt:
         if state is not None:
             hold = state.hold()
