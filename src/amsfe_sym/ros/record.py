@@ -4,9 +4,11 @@ in the layout of ``amsfe simulate --bag`` (:mod:`amsfe_sym.logs.write`), so that
 
 Topics and times (ns, the samples' own stamps; a frame is logged at the tick that fused it,
 its arrival): the encoders, camera frames (stamp = exposure), the applied torque (JointState
-effort: the node's command, or the effort topic's), the truth when a simulated arm sends it,
-``/amsfe/config`` (robot, scenario, estimator: what ``amsfe estimate`` needs), and the
-outputs: estimate, estimate_std, theta, commands.  Kept in memory, written when the node
+effort: the effort topic's, or the node's command), the truth and ``/joint_states`` (true q,
+qd) when a simulated arm sends it, ``/amsfe/config`` (robot, scenario, estimator: what
+``amsfe estimate`` needs), ``/robot_description`` (the URDF), and the outputs: estimate,
+estimate_std, theta, commands (the hold command last).  Not written: ``/tf`` (``simulate
+--bag`` draws it with Pinocchio after the run).  Kept in memory, written when the node
 stops (complete or absent: :func:`amsfe_sym.core.folders.write_folder`).
 """
 
@@ -50,6 +52,8 @@ class NodeRecord:
         self, sc: Scenario, lib: ModelLibrary, spec: TopicSpec, names: Sequence[str]
     ) -> None:
         self.spec, self.names, self.n = spec, list(names), lib.n
+        urdf = Path(lib.manifest.urdf) if lib.manifest.urdf else None
+        self.urdf = urdf.read_text() if urdf is not None and urdf.is_file() else None
         self._rows: list[tuple[str, str, int, tuple[Any, ...]]] = []
         self.config = {
             "tool": "amsfe_sym",
@@ -77,8 +81,11 @@ class NodeRecord:
         self._add(self.spec.effort, JS, ns, ns, None, None, None, np.array(u, dtype=float))
 
     def truth(self, ns: int, x: FloatArray) -> None:
-        """The true state [q, qd, qm, qmd, theta] at the tick ``ns``."""
+        """The true state [q, qd, qm, qmd, theta] at the tick ``ns`` (and, as
+        ``amsfe simulate --bag`` has it, the true q, qd on ``/joint_states``)."""
+        n = self.n
         self._add(self.spec.truth, F64, ns, np.array(x, dtype=float))
+        self._add("/joint_states", JS, ns, ns, None, x[:n], x[n : 2 * n], None)
 
     def outputs(
         self, ns: int, x_hat: FloatArray, std: FloatArray, theta: FloatArray, u: FloatArray | None
@@ -139,7 +146,10 @@ class NodeRecord:
             writer.open()
             conns: dict[str, Any] = {}
             try:
-                rows = [(self.spec.config, STR, start, (json.dumps(self.config),)), *self._rows]
+                head = [(self.spec.config, STR, start, (json.dumps(self.config),))]
+                if self.urdf is not None:  # Foxglove draws the arm from it
+                    head.append(("/robot_description", STR, start, (self.urdf,)))
+                rows = [*head, *self._rows]
                 for topic, msgtype, ns, data in rows:
                     if topic not in conns:
                         conns[topic] = writer.add_connection(topic, msgtype, typestore=store)
