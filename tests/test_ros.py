@@ -309,9 +309,11 @@ def test_free_running_tracks(tmp_path: Path) -> None:
     rec = tmp_path / "rec"
     procs = []
     try:
+        depth = ["--ros-args", "-p", "qos.depth:=5000"]  # a slow moment loses no sample
         procs.append(_start(env, "node", "paper-sim", "--controller", "amsfe", "--duration", "1",
-                            "--record", str(rec)))  # fmt: skip
-        procs.append(_start(env, "sim-node", "paper-sim", "--duration", "1", "--rate", "0.25"))
+                            "--record", str(rec), *depth))  # fmt: skip
+        procs.append(_start(env, "sim-node", "paper-sim", "--duration", "1", "--rate", "0.25",
+                            *depth))  # fmt: skip
     finally:
         results = _finish(procs, 120.0)
     for code, text in results:
