@@ -68,6 +68,17 @@ def test_live_loop_is_the_loop(paper: Any) -> None:
     assert loop.counters["frames_applied"] == ref.counters["frames_applied"] > 0
 
 
+def test_live_loop_python_runtime_is_the_python_loop(paper: Any) -> None:
+    """``amsfe node --runtime python`` (the Python estimator) equals ``simulate --runtime
+    python``."""
+    sc, lib = paper
+    sc = sc.with_overrides(duration=0.5)
+    x, u, _ = _drive(sc, lib, compiled=False)
+    ref = run(sc, lib, runtime="python")
+    np.testing.assert_allclose(x, ref.x_hat, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(u, ref.u, rtol=0, atol=1e-12)
+
+
 def test_live_loop_skips_as_a_log(paper: Any) -> None:
     """Duplicated, NaN, off-grid and early frames, a duplicated and a missing encoder sample
     are skipped and counted under the log reader's reasons; a gap is predicted through."""
