@@ -10,6 +10,7 @@ ROS_DOMAIN_ID, localhost only, every process bounded in time and killed in a ``f
 from __future__ import annotations
 
 import itertools
+import json
 import os
 import signal
 import subprocess
@@ -271,6 +272,9 @@ def test_lockstep_reproduces_simulate(paper: Any, tmp_path: Path) -> None:
     np.testing.assert_allclose(theta, ref.x_hat[:, 4 * n :], rtol=0, atol=1e-9)
     np.testing.assert_allclose(cmd[:-1], ref.u, rtol=0, atol=1e-9)  # the last: the hold
     assert len(bag["/camera/marker"]) == ref.counters["frames_delivered"] > 0
+    diag = json.loads(bag["/amsfe/diagnostics"][-1].data)
+    assert diag["frames_fused"] == ref.counters["frames_applied"] > 0
+    assert diag["frames_refused"] == ref.counters["frames_rejected"]
 
 
 @pytest.mark.ros

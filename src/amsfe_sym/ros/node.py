@@ -242,7 +242,10 @@ class _Node:
         self.pub_theta.publish(m.float64_array(x[L["theta"]]))
         rep = out.report
         if out.k == 0 or (rep is not None and (rep.frames_applied or rep.frames_rejected)):
-            self.pub_diag.publish(m.String(data=json.dumps(self.diagnostics(out))))
+            text = json.dumps(self.diagnostics(out))
+            self.pub_diag.publish(m.String(data=text))
+            if self.record is not None:
+                self.record.diagnostics(ns, text)
         if self.record is not None:
             self._record(out, z, sent)
         if self.end_k is not None and out.k >= self.end_k:

@@ -7,8 +7,8 @@ its arrival): the encoders, camera frames (stamp = exposure), the applied torque
 effort: the effort topic's, or the node's command), the truth and ``/joint_states`` (true q,
 qd) when a simulated arm sends it, ``/amsfe/config`` (robot, scenario, estimator: what
 ``amsfe estimate`` needs), ``/robot_description`` (the URDF), and the outputs: estimate,
-estimate_std, theta, commands (the hold command last).  Not written: ``/tf`` (``simulate
---bag`` draws it with Pinocchio after the run).  Kept in memory, written when the node
+estimate_std, theta, diagnostics, commands (the hold command last).  Not written:
+``/tf`` (``simulate --bag`` draws it with Pinocchio after the run).  Kept in memory, written when the node
 stops (complete or absent: :func:`amsfe_sym.core.folders.write_folder`).
 """
 
@@ -97,6 +97,10 @@ class NodeRecord:
         self._add(self.spec.theta, F64, ns, np.array(theta, dtype=float))
         if u is not None:
             self._add(self.spec.commands, F64, ns, np.array(u, dtype=float))
+
+    def diagnostics(self, ns: int, text: str) -> None:
+        """A diagnostics JSON the node published at the tick ``ns``."""
+        self._add(self.spec.diagnostics, STR, ns, text)
 
     def hold(self, ns: int, u: FloatArray) -> None:
         """The hold command published when the node stopped (logged at ``ns``, the last
