@@ -8,8 +8,8 @@ effort: the effort topic's, or the node's command), the truth and ``/joint_state
 qd) when a simulated arm sends it, ``/amsfe/config`` (robot, scenario, estimator: what
 ``amsfe estimate`` needs), ``/robot_description`` (the URDF), and the outputs: estimate,
 estimate_std, theta, diagnostics, commands (the hold command last).  Not written:
-``/tf`` (``simulate --bag`` draws it with Pinocchio after the run).  Kept in memory, written when the node
-stops (complete or absent: :func:`amsfe_sym.core.folders.write_folder`).
+``/tf`` (``simulate --bag`` draws it with Pinocchio after the run).  Kept in memory,
+written when the node stops (complete or absent: :func:`amsfe_sym.core.folders.write_folder`).
 """
 
 from __future__ import annotations
