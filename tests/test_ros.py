@@ -9,6 +9,7 @@ ROS_DOMAIN_ID, localhost only, every process bounded in time and killed in a ``f
 
 from __future__ import annotations
 
+import ast
 import itertools
 import json
 import os
@@ -144,6 +145,43 @@ def test_cli_starts_without_rclpy(tmp_path: Path) -> None:
     assert node.returncode == 2, node.stderr
     lines = [x for x in node.stderr.splitlines() if x.startswith("error:")]
     assert len(lines) == 1 and ".[ros]" in lines[0], node.stderr
+
+
+ROS_PACKAGES = (
+    "rclpy",
+    "builtin_interfaces",
+    "geometry_msgs",
+    "rosgraph_msgs",
+    "sensor_msgs",
+    "std_msgs",
+)
+
+
+def _imports(tree: ast.AST, top_only: bool) -> list[str]:
+    nodes = tree.body if top_only and isinstance(tree, ast.Module) else ast.walk(tree)
+    out = []
+    for node in nodes:
+        if isinstance(node, ast.Import):
+            out += [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            out += [node.module, *(f"{node.module}.{a.name}" for a in node.names)]
+    return out
+
+
+def test_ros_is_imported_only_inside_ros_and_lazily() -> None:
+    """rclpy and the message packages are imported only in ``ros/``; at module level only by
+    ``ros/messages.py``, which no module imports at its top (``amsfe --help`` needs none)."""
+    root = SRC / "amsfe_sym"
+    for path in sorted(root.rglob("*.py")):
+        tree = ast.parse(path.read_text())
+        ros = [m for m in _imports(tree, False) if m.split(".")[0] in ROS_PACKAGES]
+        top = [m for m in _imports(tree, True) if m.split(".")[0] in ROS_PACKAGES]
+        rel = path.relative_to(root).as_posix()
+        if not rel.startswith("ros/"):
+            assert not ros, f"{rel} imports {ros}"
+        elif rel != "ros/messages.py":
+            assert not top, f"{rel} imports {top} at module level"
+        assert "amsfe_sym.ros.messages" not in _imports(tree, True), rel
 
 
 def test_oracle_controller_refused(paper: Any) -> None:
