@@ -426,3 +426,62 @@ def test_faults_hold_and_clean_exits(tmp_path: Path) -> None:
     assert "hold: interrupted; hold command" in node.text, node.text
     got = _bag(rec2)
     assert len(got["/amsfe/estimate"]) == len(got["/effort_controller/commands"]) - 1 >= 1000
+
+
+_LIFECYCLE_CLIENT = """
+import json, sys
+import rclpy
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState, GetState
+
+node, names = sys.argv[1], sys.argv[2:]
+ids = {"configure": Transition.TRANSITION_CONFIGURE, "activate": Transition.TRANSITION_ACTIVATE}
+rclpy.init()
+client = rclpy.create_node("lifecycle_test")
+change = client.create_client(ChangeState, f"/{node}/change_state")
+get = client.create_client(GetState, f"/{node}/get_state")
+assert change.wait_for_service(timeout_sec=60.0), "no lifecycle service"
+labels = []
+for name in names:
+    req = ChangeState.Request()
+    req.transition.id = ids[name]
+    fut = change.call_async(req)
+    rclpy.spin_until_future_complete(client, fut, timeout_sec=60.0)
+    assert fut.result() is not None and fut.result().success, name
+    fut = get.call_async(GetState.Request())
+    rclpy.spin_until_future_complete(client, fut, timeout_sec=30.0)
+    labels.append(fut.result().current_state.label)
+print(json.dumps(labels))
+"""
+
+
+def _lifecycle(env: dict[str, str], node: str, *transitions: str) -> list[str]:
+    """Drive ``node``'s lifecycle by a client process on the test's domain: the state label
+    after each transition."""
+    done = subprocess.run(
+        [sys.executable, "-c", _LIFECYCLE_CLIENT, node, *transitions],
+        env=env, capture_output=True, text=True, timeout=150,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    return list(json.loads(done.stdout.strip().splitlines()[-1]))
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_managed_node(tmp_path: Path) -> None:
+    """``amsfe node --managed``: a lifecycle client configures it (``inactive``) and activates
+    it (``active``); then it closes the lockstep loop as the plain node does."""
+    env = _ros_env(tmp_path)
+    rec = tmp_path / "rec"
+    procs: list[_Proc] = []
+    try:
+        node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--managed",
+                      "--duration", "0.5", "--record", str(rec))  # fmt: skip
+        procs.append(node)
+        assert _lifecycle(env, "amsfe_node", "configure", "activate") == ["inactive", "active"]
+        procs.insert(0, _start(env, "sim-node", "paper-sim", "--lockstep", "--duration", "0.5"))
+    finally:
+        results = _finish(procs, 60.0)
+    for code, text in results:
+        assert code == 0, text
+    assert len(_bag(rec)["/amsfe/estimate"]) == 501

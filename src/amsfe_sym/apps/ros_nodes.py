@@ -130,6 +130,11 @@ def add_node_arguments(p: argparse.ArgumentParser) -> None:
         "--encoder-timeout", type=SECONDS, default=0.5, help="encoder silence -> hold [s]"
     )
     p.add_argument(
+        "--managed",
+        action="store_true",
+        help="a lifecycle node: configure, then activate before it processes samples",
+    )
+    p.add_argument(
         "--hold",
         choices=("gravity", "zero"),
         default="gravity",
@@ -156,13 +161,15 @@ def node_from_args(args: argparse.Namespace) -> int:
         spec=spec,
         encoder_timeout=args.encoder_timeout,
         hold=args.hold,
+        managed=args.managed,
         duration=args.duration,
         record=record,
         ros_args=tuple(args.ros_args),
         domain_id=_domain(),
     )
     ctrl = f", controller {sc.controller}" if opts.controller else ""
-    print(f"node: {sc.name}, estimator {sc.estimator}{ctrl}; waiting for encoders", flush=True)
+    wait = "configure and activate" if args.managed else "encoders"
+    print(f"node: {sc.name}, estimator {sc.estimator}{ctrl}; waiting for {wait}", flush=True)
     rep = run_node(sc, lib, opts, say=lambda line: print(line, flush=True))
     if rep.record is not None:
         print(f"node: record {rep.record} (amsfe estimate {rep.record})", flush=True)

@@ -61,6 +61,9 @@ class NodeOptions:
         domain_id: ROS_DOMAIN_ID (None: the environment's).
         subscriber_wait: Longest wait for a subscriber of the commands before the first
             command [s] (a command published before a subscriber matched is lost).
+        managed: A lifecycle node: it reads the spec and builds the estimator on
+            ``configure``, processes samples only while ``active``, holds on ``deactivate``
+            and stops on ``shutdown`` (docs/ros.md, "Managed node").
     """
 
     controller: bool = False
@@ -73,6 +76,7 @@ class NodeOptions:
     ros_args: tuple[str, ...] = ()
     domain_id: int | None = None
     subscriber_wait: float = 5.0
+    managed: bool = False
 
 
 @dataclass(frozen=True)
@@ -135,6 +139,9 @@ class _Node:
         self._truth: FloatArray | None = None
         self._first_command = True
         self._rx_frames: list[tuple[int, FloatArray, int]] = []
+        #: Samples are processed only while active (a managed node: between activate and
+        #: deactivate; an unmanaged one: always).
+        self.active = not options.managed
         qos = qos_profile(spec)
         # the camera is subscribed first: a frame and a sample ready at once, the frame first
         node.create_subscription(m.PointStamped, spec.camera, self.on_frame, qos)
@@ -166,6 +173,8 @@ class _Node:
         return self._orders[key]
 
     def on_frame(self, msg: Any, info: Any) -> None:
+        if not self.active:
+            return
         ns = self.m.stamp_ns(msg.header.stamp)
         pixel = np.array([msg.point.x, msg.point.y])
         sent = int(info["source_timestamp"])
@@ -177,7 +186,7 @@ class _Node:
         self._truth = self.m.values(msg.data)
 
     def on_effort(self, msg: Any) -> None:
-        if self.stop is not None:
+        if self.stop is not None or not self.active:
             return
         try:
             idx = self._order(msg.name)
@@ -192,7 +201,7 @@ class _Node:
             self.record.applied(ns, u)
 
     def on_encoders(self, msg: Any, info: Any) -> None:
-        if self.stop is not None:
+        if self.stop is not None or not self.active:
             return
         try:
             idx = self._order(msg.name)
@@ -331,23 +340,34 @@ def run_node(
     ctx = start(list(options.ros_args), options.domain_id)
     import rclpy
 
-    node = rclpy.create_node("amsfe_node", context=ctx)
+    holder: list[_Node] = []
+    down: list[bool] = []  # a managed node's shutdown transition happened
+    if options.managed:
+        node = _managed(ctx, lambda n: _Node(ctx, sc, lib, options, n), holder, down)
+    else:
+        node = rclpy.create_node("amsfe_node", context=ctx)
     state: _Node | None = None
     hold: FloatArray | None = None
     reason, code = "shutdown", 0
     try:
-        state = _Node(ctx, sc, lib, options, node)
+        if not options.managed:
+            holder.append(_Node(ctx, sc, lib, options, node))
         ex = executor(ctx)
         ex.add_node(node)
-        while state.stop is None and ctx.ok():
+        while ctx.ok() and not down and (not holder or holder[-1].stop is None):
             ex.spin_once(timeout_sec=0.05)
-            last = state.last_rx
-            if last is not None and time.monotonic() - last > options.encoder_timeout:
+            state = holder[-1] if holder else None
+            last = None if state is None or not state.active else state.last_rx
+            if state and last is not None and time.monotonic() - last > options.encoder_timeout:
                 state.stop = _Stop(
                     f"hold: no encoder sample on {state.spec.encoders} for "
                     f"{options.encoder_timeout:g} s (last tick {state.live.k})",
                     EXIT_HOLD,
                 )
+        state = holder[-1] if holder else None
+        if state is None:  # a managed node shut down before it was configured
+            say("node: shut down before it was configured")
+            return NodeReport(0, "shutdown", 0, None, {}, None)
         if state.stop is not None:
             reason, code = state.stop.reason, state.stop.code
         hold = state.hold()
@@ -358,6 +378,7 @@ def run_node(
             else f"node: {reason}" + _held(hold)
         )
     except KeyboardInterrupt:
+        state = holder[-1] if holder else None
         if state is not None:
             hold = state.hold()
             say("node: hold: interrupted" + _held(hold))
@@ -380,3 +401,44 @@ def _held(hold: FloatArray | None) -> str:
     if hold is None:
         return ""
     return f"; hold command {[round(float(v), 6) for v in hold]} N m published"
+
+
+def _managed(ctx: Any, build: Callable[[Any], _Node], holder: list[_Node], down: list[bool]) -> Any:
+    """The lifecycle node ``amsfe_node``: ``configure`` builds the :class:`_Node` (spec
+    parameters, estimator, subscriptions) into ``holder``, ``activate`` starts processing,
+    ``deactivate`` publishes the hold and stops processing, ``shutdown`` stops the node."""
+    from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
+
+    ok, failed = TransitionCallbackReturn.SUCCESS, TransitionCallbackReturn.FAILURE
+
+    class Managed(LifecycleNode):
+        def on_configure(self, state: Any) -> Any:
+            if holder:
+                return ok
+            try:
+                holder.append(build(self))
+            except AmsfeError as exc:
+                self.get_logger().error(str(exc))
+                return failed
+            return ok
+
+        def on_activate(self, state: Any) -> Any:
+            holder[-1].active = True
+            return ok
+
+        def on_deactivate(self, state: Any) -> Any:
+            holder[-1].active, holder[-1].last_rx = False, None
+            holder[-1].hold()
+            return ok
+
+        def on_cleanup(self, state: Any) -> Any:
+            return ok
+
+        def on_shutdown(self, state: Any) -> Any:
+            down.append(True)
+            if holder:
+                holder[-1].active = False
+                holder[-1].stop = _Stop("shut down by its lifecycle manager", 0)
+            return ok
+
+    return Managed("amsfe_node", context=ctx)
