@@ -15,6 +15,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from amsfe_sym import __version__
+from amsfe_sym.apps import ros_nodes
 from amsfe_sym.apps.arguments import (
     DURATION,
     SAMPLES,
@@ -152,6 +153,9 @@ def get_argument_parser() -> argparse.ArgumentParser:
         sub.add_parser("estimate", help="an estimator over a recorded rosbag2 / MCAP log")
     )
 
+    ros_nodes.add_sim_node_arguments(sub.add_parser("sim-node", help="the simulated arm on ROS 2"))
+    ros_nodes.add_node_arguments(sub.add_parser("node", help="estimator/controller on ROS 2"))
+    ros_nodes.add_play_arguments(sub.add_parser("play", help="a log's sensor topics on ROS 2"))
     add_bench_arguments(
         sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
     )
@@ -202,6 +206,9 @@ def _main(argv: Sequence[str] | None) -> int:
         "bench": _bench,
         "study": _study,
         "sweep": sweep_from_args,
+        "sim-node": ros_nodes.sim_node_from_args,
+        "node": ros_nodes.node_from_args,
+        "play": ros_nodes.play_from_args,
     }
     with ledger() as book:
         try:
@@ -220,7 +227,7 @@ def _main(argv: Sequence[str] | None) -> int:
     raise SpecError(
         describe(
             "command",
-            "generate|check|simulate|estimate|bench|study|sweep",
+            "|".join(commands),
             args.command,
             "run amsfe -h for the commands",
         )
