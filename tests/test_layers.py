@@ -84,9 +84,16 @@ ALLOWED: dict[str, set[str]] = {
     # what a topic means, for logs and live nodes alike
     "topics": {"errors", "core"},
     # the compiled estimators implement estimation's Estimator interface over the library
-    "runtime.compiled_estimator": {"errors", "runtime", "estimation", "core.camera_frame"},
+    "runtime.compiled_estimator": {
+        "errors",
+        "runtime",
+        "estimation",
+        "core.camera_frame",
+        "core.values",
+    },
     "runtime.compiled_loop": {"errors", "runtime", "estimation", "core.camera_frame"},
-    "estimation": {"errors", "core.camera_frame"},
+    # core.values: the named settings shared with the scenario (BACKWARD_MAPS)
+    "estimation": {"errors", "core.camera_frame", "core.values"},
     "control": {"errors", "runtime", "signals.trajectory"},
     "sim": {
         "errors",

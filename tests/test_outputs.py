@@ -395,10 +395,22 @@ CASES: dict[tuple[str, str], Case] = {
         "paper_2link-model",  # check builds the model part only
     ),
     ("bench", "--out"): Case(lambda tmp, p: [*BENCH, "--out", str(p)], "parent", False, None),
+    # refused before rclpy is touched; a good path would start a live node (tests/test_ros.py)
+    ("node", "--record"): Case(
+        lambda tmp, p: ["node", "--record", str(p), "--duration", "0.05"], "folder", False, None
+    ),
 }
 
 #: Options that name a path the command reads (not an output).
-INPUTS = {("estimate", "log"), ("estimate", "--log-spec"), ("sweep", "spec")}
+INPUTS = {
+    ("estimate", "log"),
+    ("estimate", "--log-spec"),
+    ("sweep", "spec"),
+    ("play", "log"),
+    ("node", "--topic-spec"),
+    ("sim-node", "--topic-spec"),
+    ("play", "--topic-spec"),
+}
 
 
 def _subcommands() -> dict[str, argparse.ArgumentParser]:
@@ -523,7 +535,7 @@ def test_an_input_of_the_command_is_refused_even_with_force(key, tmp: Path, caps
 
 
 @pytest.mark.parametrize(
-    "key", [k for k in OPTIONS if CASES[k].kind in ("folder", "file")], ids=_id
+    "key", [k for k in OPTIONS if CASES[k].kind in ("folder", "file") and CASES[k].force], ids=_id
 )
 def test_the_tools_own_output_is_replaced_only_with_force(key, tmp: Path, capsys) -> None:
     case = CASES[key]

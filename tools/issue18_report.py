@@ -46,7 +46,8 @@ def run_bench(dest: Path) -> dict[str, Any]:
         "lscpu": {
             k.strip(): v.strip()
             for k, v in (ln.split(":", 1) for ln in lscpu.splitlines() if ":" in ln)
-            if k.strip() in ("Model name", "CPU(s)", "Thread(s) per core", "CPU max MHz", "L3 cache")
+            if k.strip()
+            in ("Model name", "CPU(s)", "Thread(s) per core", "CPU max MHz", "L3 cache")
         },
     }
     dest.write_text(json.dumps(report, indent=2) + "\n")

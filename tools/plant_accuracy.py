@@ -418,7 +418,9 @@ def main() -> None:
         saved = json.loads(Path(args.from_json).read_text())
         for res in saved["results"]:
             res["choice"] = _choice(res["rows"])
-        (ROOT / "docs" / "plant-accuracy.md").write_text(write_page(saved["results"], saved["machine"]))
+        (ROOT / "docs" / "plant-accuracy.md").write_text(
+            write_page(saved["results"], saved["machine"])
+        )
         Path(args.from_json).write_text(json.dumps(saved, indent=2) + "\n")
         print("wrote docs/plant-accuracy.md")
         return

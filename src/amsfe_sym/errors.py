@@ -18,6 +18,7 @@ __all__ = [
     "LogError",
     "MeasurementError",
     "ModelError",
+    "RosError",
     "RunFolderError",
     "ShapeError",
     "SpecError",
@@ -78,6 +79,11 @@ class ConvergenceError(EstimatorError):
     """An iterative generated function (the inverse transition, eq. 22) did not converge:
     its ``residual`` output is above the tolerance, so its result is not used.  Estimators
     treat it like a refused frame (counted, estimate untouched)."""
+
+
+class RosError(AmsfeError, RuntimeError):
+    """ROS 2 cannot be used as asked: rclpy not installed, no peer on a topic in time, the
+    middleware failing (docs/ros.md)."""
 
 
 class LogError(AmsfeError, ValueError):

@@ -15,12 +15,14 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from amsfe_sym import __version__
+from amsfe_sym.apps import ros_nodes
 from amsfe_sym.apps.arguments import (
     DURATION,
     SAMPLES,
     SEED,
     Parser,
     lock_arg,
+    number_type,
 )
 from amsfe_sym.apps.estimate import add_arguments as add_estimate_arguments
 from amsfe_sym.apps.estimate import from_args as estimate_from_args
@@ -68,6 +70,21 @@ def get_argument_parser() -> argparse.ArgumentParser:
     )
     g.add_argument("--force", action="store_true", help="rebuild even if the cache matches")
     g.add_argument("--cflags", default=None, help="extra compiler flags (quoted)")
+    g.add_argument(
+        "--period",
+        type=number_type(float, 0.0, False, "pass the log's sampling interval, e.g. 0.0333"),
+        default=None,
+        metavar="T",
+        help="generate at this sampling interval [s] instead of the robot's T, as a library of "
+        "its own (<robot>_T<us>us...), model_substeps chosen from the joint modes",
+    )
+    g.add_argument(
+        "--substeps",
+        type=number_type(int, 1, True, "pass --substeps 4, or omit it to choose from the modes"),
+        default=None,
+        metavar="K",
+        help="rk4 model steps per T (with --period; default: from the joint modes)",
+    )
 
     c = sub.add_parser("check", help="every generated function vs Pinocchio / finite differences")
     c.add_argument("robot", nargs="?", default="paper_2link")
@@ -136,6 +153,9 @@ def get_argument_parser() -> argparse.ArgumentParser:
         sub.add_parser("estimate", help="an estimator over a recorded rosbag2 / MCAP log")
     )
 
+    ros_nodes.add_sim_node_arguments(sub.add_parser("sim-node", help="the simulated arm on ROS 2"))
+    ros_nodes.add_node_arguments(sub.add_parser("node", help="estimator/controller on ROS 2"))
+    ros_nodes.add_play_arguments(sub.add_parser("play", help="a log's sensor topics on ROS 2"))
     add_bench_arguments(
         sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
     )
@@ -186,6 +206,9 @@ def _main(argv: Sequence[str] | None) -> int:
         "bench": _bench,
         "study": _study,
         "sweep": sweep_from_args,
+        "sim-node": ros_nodes.sim_node_from_args,
+        "node": ros_nodes.node_from_args,
+        "play": ros_nodes.play_from_args,
     }
     with ledger() as book:
         try:
@@ -204,7 +227,7 @@ def _main(argv: Sequence[str] | None) -> int:
     raise SpecError(
         describe(
             "command",
-            "generate|check|simulate|estimate|bench|study|sweep",
+            "|".join(commands),
             args.command,
             "run amsfe -h for the commands",
         )
@@ -213,22 +236,31 @@ def _main(argv: Sequence[str] | None) -> int:
 
 def _generate(args: argparse.Namespace) -> int:
     from amsfe_sym.codegen import generate
+    from amsfe_sym.codegen.modes import robot_source, spec_at_period, warn_stiff
+    from amsfe_sym.load.spec import load_spec
 
     if args.out:
         check_output(args.out, option="--out", kind="parent")
     extra = args.cflags.split() if args.cflags else None
-    res = generate(
-        args.robot,
-        out=args.out,
-        lock=dict(args.lock),
-        extra_cflags=extra,
-        force=args.force,
-        progress=True,
-    )
+    spec = load_spec(args.robot).with_locked(dict(args.lock))
+    source = robot_source(spec)
+    if args.substeps is not None and args.period is None:
+        args.period = spec.model.T  # --substeps alone: the robot's T, other substeps
+    if args.period is not None:
+        spec = spec_at_period(spec, args.period, args.substeps)
+    res = generate(spec, out=args.out, extra_cflags=extra, force=args.force, progress=True)
     state = "up to date (cached)" if res.reused else "generated"
     print(f"{res.out_dir}: {state} in {res.seconds:.2f} s")
+    if args.period is not None:
+        m = spec.model
+        print(
+            f"  T = {m.T:.6g} s, integrator {m.integrator}, model_substeps {m.model_substeps}, "
+            f"camera period {spec.camera.period} / delay {spec.camera.delay} steps"
+        )
     if res.timings:
         print("  " + ", ".join(f"{k} {v:.2f} s" for k, v in res.timings.items()))
+    if res.reused:  # a build says it before compiling
+        warn_stiff(res.stiff(), source, res.modes)
     return 0
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import ctypes
 import functools
+import json
 import os
 import shutil
 import tempfile
@@ -56,6 +57,7 @@ from amsfe_sym.core.jsonfile import to_json
 from amsfe_sym.errors import CodegenError, RunFolderError, describe
 from amsfe_sym.load.spec import RobotSpec, load_spec
 from amsfe_sym.runtime.library import file_sha256
+from amsfe_sym.runtime.stability import JointMode, StiffJoint, modes_from_manifest, stiff_joints
 
 __all__ = ["GenerateResult", "cached_library", "generate"]
 
@@ -72,7 +74,10 @@ class GenerateResult:
         library_path: The shared library.
         reused: True when the cache matched and nothing was rebuilt.
         seconds: Wall time of the call [s].
-        timings: Per-stage wall times [s] (load, symbolic, codegen, compile) when built.
+        timings: Per-stage wall times [s] (load, modes, symbolic, codegen, compile) when built.
+        modes: Each joint's elastic mode over the workspace (the manifest's ``joint_modes``;
+            empty for a library built before they were stored): :meth:`stiff` lists the
+            joints the library's model cannot integrate.
     """
 
     out_dir: Path
@@ -81,6 +86,15 @@ class GenerateResult:
     reused: bool
     seconds: float
     timings: dict[str, float]
+    modes: tuple[JointMode, ...] = ()
+
+    def stiff(self) -> tuple[StiffJoint, ...]:
+        """The joints whose elastic mode the library's model cannot integrate at its T
+        (:func:`~amsfe_sym.runtime.stability.stiff_joints`), from the manifest."""
+        raw = json.loads(self.manifest_path.read_text())
+        return stiff_joints(
+            self.modes, float(raw["T"]), str(raw["integrator"]), int(raw["model_substeps"])
+        )
 
 
 def cached_library(
@@ -102,7 +116,18 @@ def cached_library(
     lib = cached_dir(out_dir, key)
     if lib is None:
         return None
-    return GenerateResult(out_dir, out_dir / MANIFEST, lib, True, time.perf_counter() - t_start, {})
+    return _reused(out_dir, lib, t_start)
+
+
+def _reused(out_dir: Path, lib: Path, t_start: float) -> GenerateResult:
+    """The result of a cache hit, with the joint modes its manifest stores."""
+    try:
+        modes = modes_from_manifest(json.loads((out_dir / MANIFEST).read_text())) or ()
+    except (OSError, ValueError):
+        modes = ()
+    return GenerateResult(
+        out_dir, out_dir / MANIFEST, lib, True, time.perf_counter() - t_start, {}, modes
+    )
 
 
 def generate(
@@ -122,7 +147,9 @@ def generate(
         lock: Extra joints to lock, name -> value [rad or m].
         extra_cflags: Extra compiler flags (hashed into the cache key).
         force: Rebuild even if the cache matches.
-        progress: Print stage timings to stderr.
+        progress: Print stage timings to stderr, and one warning line per joint whose
+            elastic mode the model cannot integrate (before compiling; a cache hit's
+            result has them too: :meth:`GenerateResult.stiff`).
         parts: Function groups to build, among ``model`` (always), ``control`` and
             ``estimator``.  A partial library goes to ``<out>/<name>-<parts>/`` so it never
             evicts the full one from the cache (checks of third-party arms need the model
@@ -149,9 +176,7 @@ def generate(
     if not force:
         lib = cached_dir(out_dir, key)
         if lib is not None:
-            return GenerateResult(
-                out_dir, out_dir / MANIFEST, lib, True, time.perf_counter() - t_start, {}
-            )
+            return _reused(out_dir, lib, t_start)
 
     # one build per library at a time, across processes (pytest-xdist workers, study
     # workers, two shells): the others wait and then find it in the cache
@@ -159,9 +184,7 @@ def generate(
         if not force:
             lib = cached_dir(out_dir, key)
             if lib is not None:
-                return GenerateResult(
-                    out_dir, out_dir / MANIFEST, lib, True, time.perf_counter() - t_start, {}
-                )
+                return _reused(out_dir, lib, t_start)
         return _build(
             spec, parts, flags, key, hash_inputs, parent, out_dir, progress, t_start, force
         )
@@ -199,6 +222,7 @@ def _build(
     while the compiler runs: raised inside the yourdfpy/trimesh imports or CasADi they used
     to be swallowed (the build went on to the end).  The temporary folder is removed."""
     # heavy imports only when building
+    from amsfe_sym.codegen.modes import joint_modes, modes_document, robot_source, warn_stiff
     from amsfe_sym.load import load_robot
     from amsfe_sym.symbolic.model import build_functions
 
@@ -206,6 +230,14 @@ def _build(
     t = time.perf_counter()
     robot_obj = load_robot(spec)
     timings["load"] = time.perf_counter() - t
+    t = time.perf_counter()
+    modes = joint_modes(robot_obj)
+    timings["modes"] = time.perf_counter() - t
+    if progress:  # before the compile, not after it (a 7-DOF arm compiles for ~20 s)
+        m = spec.model
+        warn_stiff(
+            stiff_joints(modes, m.T, m.integrator, m.model_substeps), robot_source(spec), modes
+        )
     checkpoint()
     t = time.perf_counter()
     model = build_functions(robot_obj, parts)
@@ -295,6 +327,7 @@ def _build(
             ) from exc
         manifest = manifest_document(model, key, hash_inputs, libname, cname, timings)
         manifest["library_sha256"] = file_sha256(tmp / libname)
+        manifest["joint_modes"] = modes_document(robot_obj, modes)
         (tmp / MANIFEST).write_text(to_json(manifest))
         checkpoint()
         replace_dir(tmp, out_dir)
@@ -309,6 +342,7 @@ def _build(
         False,
         time.perf_counter() - t_start,
         timings,
+        modes,
     )
 
 

@@ -7,11 +7,12 @@ from dataclasses import replace
 from typing import Any
 
 from amsfe_sym.codegen.build import generate
+from amsfe_sym.codegen.modes import spec_at_period
 from amsfe_sym.load.spec import RobotSpec, load_spec
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario, camera_timing
 
-__all__ = ["library_for", "load_library"]
+__all__ = ["library_at_period", "library_for", "load_library"]
 
 
 def load_library(
@@ -54,3 +55,23 @@ def library_for(
             model=replace(spec.model, integrator=sc.integrator),  # type: ignore[arg-type]
         )
     return load_library(spec, out=out)
+
+
+def library_at_period(
+    robot: str | os.PathLike[str] | RobotSpec,
+    T: float,
+    substeps: int | None = None,
+    out: str | os.PathLike[str] | None = None,
+    progress: bool = False,
+) -> ModelLibrary:
+    """Generate (or reuse from the cache) and load the library of ``robot`` at sampling
+    interval ``T`` [s]: :func:`~amsfe_sym.codegen.modes.spec_at_period` derives its spec in
+    memory (``<robot>_T<us>us_<integrator>x<m>``; the robot's own library is untouched), with
+    ``substeps`` rk4 steps per T or, when None, the fewest that integrate every joint's
+    elastic mode (w h <= 2.0).
+
+    Raises:
+        SpecError: T not > 0, or substeps < 1.
+    """
+    spec = spec_at_period(robot, T, substeps)
+    return ModelLibrary(generate(spec, out=out, progress=progress).out_dir)

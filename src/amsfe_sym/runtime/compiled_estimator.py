@@ -35,6 +35,7 @@ from amsfe_sym.runtime.models import (
     EncoderMeasurement,
     inverse_not_converged,
 )
+from amsfe_sym.runtime.stability import NUMERICAL_FAILURES, covariance_hint
 
 __all__ = [
     "COMPILED_ESTIMATORS",
@@ -246,13 +247,17 @@ class CompiledEstimator(Estimator):
         self.P = np.ascontiguousarray(self._Pbuf)
 
     def _error(self, what: str, status: int) -> EstimatorError:
+        fix = (
+            "check the inputs and the model at the current state (the runtime must be "
+            "reset before it runs again)"
+        )
+        hint = covariance_hint(self.lib.manifest.raw) if status in NUMERICAL_FAILURES else None
         return EstimatorError(
             describe(
                 f"compiled {self.name}: {what} at step {self.k + 1}",
                 "a usable numerical result",
                 f"status {status}: {self.status_string(status)}",
-                "check the inputs and the model at the current state (the runtime must be "
-                "reset before it runs again)",
+                hint or fix,
             )
         )
 

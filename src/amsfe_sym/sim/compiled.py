@@ -26,6 +26,7 @@ from amsfe_sym.runtime.compiled_loop import (
     SimulationInputs,
 )
 from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.runtime.stability import NUMERICAL_FAILURES, covariance_hint
 from amsfe_sym.scenario import Scenario, run_ticks
 from amsfe_sym.sim.builders import RunParts, build_run, build_sensors
 from amsfe_sym.sim.result import (
@@ -164,7 +165,11 @@ def run_compiled(scenario: Scenario, lib: ModelLibrary, progress: bool = False) 
         what = sim.status_string(state.status)
         cls = MeasurementError if state.plant_nonfinite else EstimatorError
         fix = "run with --runtime python to see where the reference fails"
-        if cls is EstimatorError and not sc.filter.gate_probability:
+        stiff = cls is EstimatorError and state.status in NUMERICAL_FAILURES
+        hint = covariance_hint(lib.manifest.raw) if stiff else None
+        if hint is not None:
+            fix = hint
+        elif cls is EstimatorError and not sc.filter.gate_probability:
             fix += (
                 " (the camera gate is off, gate_probability = 0: an outlier fused unchecked is "
                 "a likely cause; turn the gate on)"

@@ -1,0 +1,207 @@
+"""``amsfe sim-node``, ``amsfe node`` and ``amsfe play``: the command-line side of the ROS 2
+nodes of :mod:`amsfe_sym.ros` (docs/ros.md).  One ``add_*_arguments`` / ``*_from_args`` pair
+per command; rclpy is imported only when a command runs.
+
+Exit codes: 0 done; 2 bad input (one ``error:`` line); 3 (``amsfe node``) a fail-safe hold
+(encoder silence, non-finite estimate, estimator failure); 130 / 143 Ctrl-C / SIGTERM (the
+node publishes its hold command first; a record is written).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+from typing import Any
+
+from amsfe_sym.apps.arguments import DURATION, SEED, number_type
+from amsfe_sym.errors import ConfigError, describe
+
+__all__ = [
+    "add_node_arguments",
+    "add_play_arguments",
+    "add_sim_node_arguments",
+    "node_from_args",
+    "play_from_args",
+    "sim_node_from_args",
+]
+
+SECONDS = number_type(float, 0.0, False, "pass a time in seconds > 0, e.g. 0.5")
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scenario", nargs="?", default="paper-sim", help="scenario name or .toml")
+    p.add_argument("--seed", type=SEED, default=None)
+    p.add_argument("--duration", type=DURATION, default=None, help="[s] of sample time")
+    p.add_argument(
+        "--topic-spec", default=None, metavar="FILE", help="topics, joints, QoS (docs/topics.md)"
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario field (as amsfe simulate --set)",
+    )
+    p.add_argument(
+        "--ros-args",
+        nargs=argparse.REMAINDER,
+        default=[],
+        help="the rest goes to ROS 2 (e.g. -p topics.encoders:=/joint_states -p qos.depth:=10)",
+    )
+
+
+def _scenario(args: argparse.Namespace, **over: Any) -> Any:
+    from amsfe_sym.scenario import apply_sets, load_scenario
+
+    sc = load_scenario(args.scenario).with_overrides(seed=args.seed, duration=args.duration, **over)
+    return apply_sets(sc, args.set) if args.set else sc
+
+
+def _domain() -> int | None:
+    raw = os.environ.get("ROS_DOMAIN_ID")
+    if raw is None or raw == "":
+        return None
+    if not raw.isdigit() or not 0 <= int(raw) <= 232:
+        raise ConfigError(
+            describe("ROS_DOMAIN_ID", "an integer in 0..232 (0..101 is safe)", repr(raw), "fix it")
+        )
+    return int(raw)
+
+
+def add_sim_node_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``amsfe sim-node``."""
+    _common(p)
+    p.add_argument(
+        "--lockstep", action="store_true", help="a tick advances only when its command arrived"
+    )
+    p.add_argument("--start-timeout", type=SECONDS, default=30.0, help="wait for a node [s]")
+    p.add_argument(
+        "--command-timeout", type=SECONDS, default=5.0, help="lockstep: wait for a command [s]"
+    )
+    p.add_argument(
+        "--rate", type=SECONDS, default=1.0, help="free running: speed of the wall clock"
+    )
+
+
+def sim_node_from_args(args: argparse.Namespace) -> int:
+    """``amsfe sim-node`` from its parsed options."""
+    from amsfe_sym.codegen import library_for
+    from amsfe_sym.ros.sim_node import SimNodeOptions, run_sim_node
+    from amsfe_sym.topics import read_topic_spec
+
+    sc = _scenario(args)
+    spec = read_topic_spec(args.topic_spec)
+    lib = library_for(sc)
+    opts = SimNodeOptions(
+        lockstep=args.lockstep,
+        spec=spec,
+        start_timeout=args.start_timeout,
+        command_timeout=args.command_timeout,
+        rate=args.rate,
+        ros_args=tuple(args.ros_args),
+        domain_id=_domain(),
+    )
+    mode = "lockstep" if args.lockstep else "free running"
+    print(f"sim-node: {sc.name} seed {sc.seed}, {sc.duration:g} s, {mode}", flush=True)
+    rep = run_sim_node(sc, lib, opts)
+    line = f"sim-node: {rep.ticks} ticks in {rep.wall_s:.2f} s wall, {rep.commands} commands"
+    if not args.lockstep:
+        line += f", {rep.late_ticks} late ticks, {rep.stale_ticks} without a new command"
+    print(line, flush=True)
+    print(f"sim-node: {rep.latency_line()}", flush=True)
+    return 0
+
+
+def add_node_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``amsfe node``."""
+    _common(p)
+    p.add_argument("--estimator", default=None, help="estimator name (default the scenario's)")
+    p.add_argument(
+        "--controller",
+        nargs="?",
+        const="",
+        default=None,
+        help="run a controller and publish commands (no name: the scenario's)",
+    )
+    p.add_argument("--record", default=None, metavar="DIR", help="write a rosbag2 (MCAP) here")
+    p.add_argument("--runtime", choices=("compiled", "python"), default="compiled")
+    p.add_argument(
+        "--encoder-timeout", type=SECONDS, default=0.5, help="encoder silence -> hold [s]"
+    )
+    p.add_argument(
+        "--managed",
+        action="store_true",
+        help="a lifecycle node: configure, then activate before it processes samples",
+    )
+    p.add_argument(
+        "--hold",
+        choices=("gravity", "zero"),
+        default="gravity",
+        help="the fail-safe command: g(q_hat) or zero (docs/ros.md)",
+    )
+
+
+def node_from_args(args: argparse.Namespace) -> int:
+    """``amsfe node`` from its parsed options."""
+    from amsfe_sym.codegen import library_for
+    from amsfe_sym.core.outputs import check_output
+    from amsfe_sym.ros.node import NodeOptions, run_node
+    from amsfe_sym.topics import read_topic_spec
+
+    sc = _scenario(args, estimator=args.estimator, controller=args.controller or None)
+    record = None if args.record is None else Path(args.record)
+    if record is not None:
+        # before anything runs: nothing there is replaced, and no input is written over
+        inputs = [p for p in (args.scenario, args.topic_spec) if p and Path(p).exists()]
+        check_output(record, option="--record", kind="folder", inputs=inputs)
+    spec = read_topic_spec(args.topic_spec)
+    lib = library_for(sc)
+    opts = NodeOptions(
+        controller=args.controller is not None,
+        compiled=args.runtime == "compiled",
+        spec=spec,
+        encoder_timeout=args.encoder_timeout,
+        hold=args.hold,
+        managed=args.managed,
+        duration=args.duration,
+        record=record,
+        ros_args=tuple(args.ros_args),
+        domain_id=_domain(),
+    )
+    ctrl = f", controller {sc.controller}" if opts.controller else ""
+    wait = "configure and activate" if args.managed else "encoders"
+    print(f"node: {sc.name}, estimator {sc.estimator}{ctrl}; waiting for {wait}", flush=True)
+    rep = run_node(sc, lib, opts, say=lambda line: print(line, flush=True))
+    if rep.record is not None:
+        print(f"node: record {rep.record} (amsfe estimate {rep.record})", flush=True)
+    return rep.exit_code
+
+
+def add_play_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``amsfe play``."""
+    p.add_argument("log", help="rosbag2 folder or .mcap file (amsfe simulate --bag writes one)")
+    p.add_argument("--rate", type=SECONDS, default=1.0, help="speed factor of the recorded pace")
+    p.add_argument(
+        "--topic-spec", default=None, metavar="FILE", help="topics, joints, QoS (docs/topics.md)"
+    )
+    p.add_argument("--start-timeout", type=SECONDS, default=30.0, help="wait for a node [s]")
+    p.add_argument("--ros-args", nargs=argparse.REMAINDER, default=[], help="the rest: ROS 2")
+
+
+def play_from_args(args: argparse.Namespace) -> int:
+    """``amsfe play LOG`` from its parsed options."""
+    from amsfe_sym.ros.play import PlayOptions, play_log
+    from amsfe_sym.topics import read_topic_spec
+
+    opts = PlayOptions(
+        rate=args.rate,
+        spec=read_topic_spec(args.topic_spec),
+        start_timeout=args.start_timeout,
+        ros_args=tuple(args.ros_args),
+        domain_id=_domain(),
+    )
+    rep = play_log(Path(args.log), opts)
+    sent = ", ".join(f"{t} {c}" for t, c in rep.messages.items())
+    print(f"play: {rep.log_s:.2f} s of log in {rep.wall_s:.2f} s wall: {sent}", flush=True)
+    return 0

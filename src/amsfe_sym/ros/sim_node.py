@@ -1,0 +1,236 @@
+"""``amsfe sim-node``: the simulated arm (:class:`amsfe_sym.ros.arm.SimArm`) as a ROS 2 node.
+
+Each tick k it publishes ``/clock`` (t_k), the truth, the camera frames delivered at k
+(stamped at their exposure, published at their arrival), then the encoder sample (stamped
+t_k); it applies a command u_k over [t_k, t_k + T] and publishes it as the applied torque
+(effort topic, JointState effort, stamped t_k).  Topics, joint names and QoS come from the
+topic spec (ROS parameters override it).
+
+``lockstep``: tick k waits for the k-th command received (commands carry no stamp: a node
+answers each encoder sample with one command), so a run is deterministic and as fast as DDS
+allows; the frames of a tick are acknowledged by every reader (reliable QoS) before its
+encoder sample goes out, so a node has them when the sample arrives.  Without it the plant
+runs on the wall clock (one tick every T) and applies the latest command it has when a tick
+ends (real latency, real drops).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amsfe_sym.errors import RosError, describe
+from amsfe_sym.ros.arm import SimArm
+from amsfe_sym.ros.middleware import executor, qos_profile, spec_parameters, start, stop
+from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.scenario import Scenario
+from amsfe_sym.topics import TopicSpec
+
+__all__ = ["SimNodeOptions", "SimNodeReport", "run_sim_node"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class SimNodeOptions:
+    """How ``amsfe sim-node`` runs.
+
+    Attributes:
+        lockstep: Advance a tick only when its command arrived.
+        spec: The topic spec (ROS parameters override it).
+        start_timeout: Longest wait for a subscriber of the encoders (and, in lockstep, a
+            publisher of the commands) [s, wall].
+        command_timeout: Lockstep: longest wait for one tick's command (free running: for
+            the first one, which starts the wall clock) [s, wall].
+        rate: Free running: speed factor of the wall clock (0.25: a tick every 4 T, for a
+            machine that cannot keep up with the robot's rate).
+        ros_args: ``--ros-args`` for rclpy (parameters, remaps).
+        domain_id: ROS_DOMAIN_ID (None: the environment's).
+    """
+
+    lockstep: bool = False
+    spec: TopicSpec = field(default_factory=TopicSpec)
+    start_timeout: float = 30.0
+    command_timeout: float = 5.0
+    rate: float = 1.0
+    ros_args: tuple[str, ...] = ()
+    domain_id: int | None = None
+
+
+@dataclass(frozen=True)
+class SimNodeReport:
+    """What a sim-node run did.
+
+    Attributes:
+        ticks: Ticks simulated.
+        commands: Commands received.
+        wall_s: Wall time of the ticks [s].
+        late_ticks: Free running: ticks that started later than one period behind the wall
+            clock (the machine could not keep up).
+        stale_ticks: Free running: ticks whose command was not new (none arrived during the
+            tick: the previous one was applied again).
+        command_latency_s: Per command: its arrival minus the publication of the encoder
+            sample it answers (the i-th command answers the i-th sample: a node sends one per
+            sample) [s, wall].
+        estimate_latency_s: The same for the estimates (``/amsfe/estimate``) [s, wall].
+    """
+
+    ticks: int
+    commands: int
+    wall_s: float
+    late_ticks: int
+    stale_ticks: int
+    command_latency_s: FloatArray = field(default_factory=lambda: np.zeros(0))
+    estimate_latency_s: FloatArray = field(default_factory=lambda: np.zeros(0))
+
+    def latency_line(self) -> str:
+        """p50 / p99 / max of both latencies [ms], one line."""
+        parts = []
+        both = (("estimate", self.estimate_latency_s), ("command", self.command_latency_s))
+        for what, lat in both:
+            if lat.size:
+                p50, p99 = np.percentile(lat, [50, 99]) * 1e3
+                parts.append(
+                    f"encoder -> {what} p50 {p50:.3f} p99 {p99:.3f} max {lat.max() * 1e3:.3f} ms"
+                )
+        return "; ".join(parts) or "no latency measured"
+
+
+def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> SimNodeReport:
+    """Run the arm of ``sc`` for its duration as the node ``amsfe_sim``.
+
+    Raises:
+        RosError: no subscriber within ``start_timeout``; lockstep: no command for a tick
+            within ``command_timeout``; rclpy missing.
+    """
+    arm = SimArm(sc, lib)
+    ctx = start(list(options.ros_args), options.domain_id)
+    from amsfe_sym.ros import messages as m
+
+    node = None
+    try:
+        import rclpy
+
+        node = rclpy.create_node("amsfe_sim", context=ctx)
+        spec = spec_parameters(node, options.spec, tuple(lib.manifest.joints))
+        names = list(spec.joint_names or lib.manifest.joints)
+        qos = qos_profile(spec)
+        pub_enc = node.create_publisher(m.JointState, spec.encoders, qos)
+        pub_cam = node.create_publisher(m.PointStamped, spec.camera, qos)
+        pub_eff = node.create_publisher(m.JointState, spec.effort, qos)
+        pub_truth = node.create_publisher(m.Float64MultiArray, spec.truth, qos)
+        pub_clock = node.create_publisher(m.Clock, spec.clock, qos_profile(spec, depth=1))
+        commands: list[FloatArray] = []
+        n = lib.n
+
+        def on_command(msg: m.Float64MultiArray, info: Any) -> None:
+            u = m.values(msg.data)
+            cmd_at.append(int(info["received_timestamp"]))
+            if u.size == n and np.all(np.isfinite(u)):
+                commands.append(u)
+            else:
+                node.get_logger().warning(f"command of {u.size} values refused (need {n} finite)")
+
+        sub = node.create_subscription(m.Float64MultiArray, spec.commands, on_command, qos)
+        # latency by the middleware's receive stamps (system clock [ns]): not delayed by
+        # this node's own executor
+        cmd_at: list[int] = []
+        est_at: list[int] = []
+        sent_at = np.zeros(arm.K, dtype=np.int64)
+        node.create_subscription(
+            m.JointState,
+            spec.estimate,
+            lambda _msg, info: est_at.append(int(info["received_timestamp"])),
+            qos,
+        )
+        ex = executor(ctx)
+        ex.add_node(node)
+        _wait_peers(ex, pub_enc, sub if options.lockstep else None, options.start_timeout)
+        T_ns = round(lib.T * 1e9)
+        u = np.zeros(n)
+        late = stale = 0
+        t0 = time.perf_counter()
+        for k in range(arm.K):
+            s = arm.sense()
+            ns = k * T_ns
+            pub_clock.publish(m.clock(ns))
+            pub_truth.publish(m.float64_array(s.x_true))
+            for fr in s.frames:
+                pub_cam.publish(m.point_stamped(fr.exposure_step * T_ns, fr.z[0], fr.z[1]))
+            sent_at[k] = time.time_ns()
+            pub_enc.publish(m.joint_state(ns, names, s.z[:n], s.z[n:]))
+            if k and k % round(1.0 / lib.T) == 0:
+                print(f"sim-node: t = {k * lib.T:.1f} s", flush=True)
+            if options.lockstep or k == 0:  # free running starts on the first command
+                deadline = time.monotonic() + options.command_timeout
+                while len(commands) <= k:
+                    left = deadline - time.monotonic()
+                    if left <= 0:
+                        raise RosError(
+                            describe(
+                                f"sim-node tick {k} (t = {k * lib.T:.3f} s)",
+                                f"its command on {spec.commands}",
+                                f"none within {options.command_timeout:g} s",
+                                "start `amsfe node SCENARIO --controller amsfe` on the same "
+                                "ROS_DOMAIN_ID, or run without --lockstep",
+                            )
+                        )
+                    ex.spin_once(timeout_sec=min(left, 0.05))
+                u = commands[k]
+                t0 = time.perf_counter() - lib.T / options.rate if k == 0 else t0
+            else:
+                before = len(commands)
+                end = t0 + (k + 1) * lib.T / options.rate
+                if time.perf_counter() > end:
+                    late += 1
+                while (left := end - time.perf_counter()) > 0:
+                    ex.spin_once(timeout_sec=left)
+                ex.spin_once(timeout_sec=0.0)
+                stale += int(len(commands) == before)
+                if commands:
+                    u = commands[-1]
+            pub_eff.publish(m.joint_state(ns, names, effort=u))
+            if k + 1 < arm.K:
+                arm.advance(u)
+        wall = time.perf_counter() - t0
+        _acked(pub_eff, 1.0)
+        ex.spin_once(timeout_sec=0.05)  # the last tick's estimate
+
+        def latency(at: list[int]) -> FloatArray:
+            c = min(len(at), arm.K)
+            return np.asarray((np.asarray(at[:c], dtype=np.int64) - sent_at[:c]) * 1e-9, float)
+
+        return SimNodeReport(
+            arm.K, len(commands), wall, late, stale, latency(cmd_at), latency(est_at)
+        )
+    finally:
+        stop(ctx, *([node] if node is not None else []))
+
+
+def _acked(pub: object, timeout: float) -> None:
+    from rclpy.duration import Duration
+
+    pub.wait_for_all_acked(Duration(nanoseconds=int(timeout * 1e9)))  # type: ignore[attr-defined]
+
+
+def _wait_peers(ex: object, pub: object, sub: object | None, timeout: float) -> None:
+    """Wait until ``pub`` has a subscriber and ``sub`` (if any) a publisher."""
+    deadline = time.monotonic() + timeout
+    while pub.get_subscription_count() < 1 or (  # type: ignore[attr-defined]
+        sub is not None and sub.get_publisher_count() < 1  # type: ignore[attr-defined]
+    ):
+        if time.monotonic() > deadline:
+            raise RosError(
+                describe(
+                    "sim-node start",
+                    f"a subscriber of {pub.topic_name}"  # type: ignore[attr-defined]
+                    + ("" if sub is None else f" and a publisher of {sub.topic_name}"),  # type: ignore[attr-defined]
+                    f"none within {timeout:g} s",
+                    "start `amsfe node SCENARIO` on the same ROS_DOMAIN_ID",
+                )
+            )
+        ex.spin_once(timeout_sec=0.05)  # type: ignore[attr-defined]
