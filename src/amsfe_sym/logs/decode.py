@@ -21,13 +21,17 @@ from numpy.typing import NDArray
 from amsfe_sym.errors import LogError, describe
 
 __all__ = [
+    "DECODERS",
     "Encoding",
     "Float64Arrays",
     "JointStates",
+    "Payloads",
     "Points",
     "Strings",
+    "concat_decoded",
     "decode_float64_arrays",
     "decode_joint_states",
+    "decode_payloads",
     "decode_points",
     "decode_strings",
     "deserialize",
@@ -86,6 +90,36 @@ class Strings:
     """``std_msgs/msg/String`` payloads."""
 
     data: list[str]
+
+
+class Payloads(Sequence[bytes]):
+    """Many payloads in one buffer, without a ``bytes`` object each: payload i is
+    ``buffer[offsets[i] : offsets[i] + lengths[i]]`` (a sequence of ``bytes`` to whoever
+    iterates it; the bulk decoders gather rows of equal length from the buffer at once)."""
+
+    def __init__(self, buffer: NDArray[np.uint8], offsets: IntArray, lengths: IntArray) -> None:
+        self.buffer, self.offsets, self.lengths = buffer, offsets, lengths
+
+    @classmethod
+    def of(cls, raws: Sequence[bytes]) -> Payloads:
+        """Payloads given one by one."""
+        lengths = np.fromiter((len(r) for r in raws), dtype=np.int64, count=len(raws))
+        offsets = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
+        buffer = np.frombuffer(b"".join(bytes(r) for r in raws), dtype=np.uint8)
+        return cls(buffer, offsets[: len(raws)], lengths)
+
+    def __len__(self) -> int:
+        return int(self.lengths.size)
+
+    def __getitem__(self, i: Any) -> Any:
+        if isinstance(i, slice):
+            return [self[j] for j in range(*i.indices(len(self)))]
+        start = int(self.offsets[i])
+        return self.buffer[start : start + int(self.lengths[i])].tobytes()
+
+    def rows(self, index: IntArray, length: int) -> NDArray[np.uint8]:
+        """Payloads ``index`` (all ``length`` bytes long) as a (len(index), length) array."""
+        return self.buffer[self.offsets[index][:, None] + np.arange(length)]
 
 
 _STORES: dict[str, Any] = {}
@@ -355,15 +389,15 @@ class _Group:
 
 def _groups(raws: Sequence[bytes], encoding: Encoding, walk: Any) -> list[_Group] | None:
     """The payloads by layout, or None when one of them is for the reference."""
-    lengths = np.fromiter((len(r) for r in raws), dtype=np.int64, count=len(raws))
+    payloads = raws if isinstance(raws, Payloads) else Payloads.of(raws)
+    lengths = payloads.lengths
     out: list[_Group] = []
     for length in np.unique(lengths):
         rows = np.flatnonzero(lengths == length)
-        data = np.frombuffer(b"".join(raws[int(i)] for i in rows), dtype=np.uint8)
-        data = data.reshape(len(rows), int(length))
+        data = payloads.rows(rows, int(length))
         for _ in range(_MAX_LAYOUTS):
             try:
-                layout = walk(raws[int(rows[0])], encoding)
+                layout = walk(payloads[int(rows[0])], encoding)
             except _UnusualError:
                 return None
             mask = layout.structure
@@ -452,3 +486,69 @@ def decode_strings(raws: Sequence[bytes], encoding: Encoding = "cdr", where: str
         except _UnusualError:
             return _reference_strings(raws, encoding, where)
     return Strings(out)
+
+
+#: The bulk decoder of each message type.
+DECODERS: dict[str, Any] = {
+    "sensor_msgs/msg/JointState": decode_joint_states,
+    "geometry_msgs/msg/PointStamped": decode_points,
+    "std_msgs/msg/Float64MultiArray": decode_float64_arrays,
+    "std_msgs/msg/String": decode_strings,
+}
+
+
+def decode_payloads(
+    msgtype: str, raws: Sequence[bytes], encoding: Encoding = "cdr", where: str = ""
+) -> JointStates | Points | Float64Arrays | Strings | None:
+    """The payloads of one topic by its type's decoder; None for a type without one."""
+    fn = DECODERS.get(msgtype)
+    return None if fn is None else fn(raws, encoding, where)
+
+
+def _pad(a: FloatArray, width: int) -> FloatArray:
+    if a.shape[1] == width:
+        return a
+    out = np.full((a.shape[0], width), np.nan)
+    out[:, : a.shape[1]] = a
+    return out
+
+
+def concat_decoded(parts: Sequence[Any]) -> Any:
+    """Decoded slices of one topic (one type), joined as if decoded in one call."""
+    first = parts[0]
+    if isinstance(first, Strings):
+        return Strings([s for p in parts for s in p.data])
+    if isinstance(first, Points):
+        return Points(
+            np.concatenate([p.stamp_ns for p in parts]), np.concatenate([p.xyz for p in parts])
+        )
+    if isinstance(first, Float64Arrays):
+        width = max(p.values.shape[1] for p in parts)
+        return Float64Arrays(
+            np.concatenate([_pad(p.values, width) for p in parts]),
+            np.concatenate([p.counts for p in parts]),
+        )
+    names: list[tuple[str, ...]] = []
+    seen: dict[tuple[str, ...], int] = {}
+    index = []
+    for p in parts:
+        for n in p.names:
+            if n not in seen:
+                seen[n] = len(names)
+                names.append(n)
+        remap = np.array([seen[n] for n in p.names] or [0], np.int64)
+        index.append(remap[p.names_index])
+    width = max(p.position.shape[1] for p in parts)
+
+    def joined(f: str) -> FloatArray:
+        return np.concatenate([_pad(getattr(p, f), width) for p in parts])
+
+    return JointStates(
+        np.concatenate([p.stamp_ns for p in parts]),
+        names,
+        np.concatenate(index),
+        joined("position"),
+        joined("velocity"),
+        joined("effort"),
+        np.concatenate([p.counts for p in parts]),
+    )
