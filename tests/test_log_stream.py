@@ -1,0 +1,144 @@
+"""logs/stream.py's read_topics against the reference (``iter_messages``, then each payload
+decoded by ``rosbags``): the same log times and columns, bit for bit, for a simulated log
+rewritten as MCAP with zstd, lz4 and no compression, small chunks, unchunked, without message
+indexes, with messages out of log-time order in the file, and as sqlite3; a damaged file is
+refused with one line."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from amsfe_sym.codegen import library_for
+from amsfe_sym.errors import LogError
+from amsfe_sym.logs import decode as dec
+from amsfe_sym.logs.source import iter_messages
+from amsfe_sym.logs.stream import read_topics
+from amsfe_sym.logs.write import write_run_bag
+from amsfe_sym.scenario import load_scenario
+from amsfe_sym.sim.loop import run
+
+TOPICS = {"/motor_encoders", "/motor_torque", "/camera/marker", "/amsfe/truth", "/amsfe/config"}
+REFERENCE = {
+    "sensor_msgs/msg/JointState": dec._reference_joint_states,
+    "geometry_msgs/msg/PointStamped": dec._reference_points,
+    "std_msgs/msg/Float64MultiArray": dec._reference_float64_arrays,
+    "std_msgs/msg/String": dec._reference_strings,
+}
+
+
+@pytest.fixture(scope="module")
+def bag(tmp_path_factory) -> Path:
+    """A 1 s paper-sim run written by ``amsfe simulate --bag``'s writer (rosbag2, MCAP)."""
+    sc = load_scenario("paper-sim").with_overrides(controller="amsfe", duration=1.0, seed=2)
+    res = run(sc, library_for(sc), runtime="compiled")
+    return write_run_bag(res, tmp_path_factory.mktemp("stream") / "bag")
+
+
+def _check(path: Path) -> None:
+    got = read_topics(path, TOPICS)
+    by: dict[str, tuple[str, list[bytes], list[int]]] = {}
+    for m in iter_messages(path, TOPICS):
+        entry = by.setdefault(m.topic, (m.msgtype, [], []))
+        entry[1].append(m.raw)
+        entry[2].append(m.log_time_ns)
+    assert set(got) == set(by)
+    for topic, (msgtype, raws, times) in by.items():
+        g = got[topic]
+        assert g.msgtype == msgtype and g.log_time_ns.tolist() == sorted(times)
+        order = np.argsort(np.array(times), kind="stable")
+        ref = REFERENCE[msgtype]([raws[i] for i in order])
+        for f in dataclasses.fields(ref):
+            x, y = getattr(ref, f.name), getattr(g.decoded, f.name)
+            if isinstance(x, np.ndarray):
+                assert x.dtype == y.dtype and x.shape == y.shape and x.tobytes() == y.tobytes()
+            else:
+                assert x == y, (topic, f.name)
+
+
+def _rewrite(src: Path, out: Path, shuffle: bool = False, **options: Any) -> Path:
+    """The messages of ``src`` written again with mcap's own writer and ``options``."""
+    from mcap.writer import Writer
+
+    msgs = list(iter_messages(src, TOPICS | {"/joint_states", "/tf"}))
+    if shuffle:  # the recorder's order is not log-time order (late frames written late)
+        rng = np.random.default_rng(0)
+        msgs = [msgs[i] for i in rng.permutation(len(msgs))]
+    with out.open("wb") as fh:
+        w = Writer(fh, **options)
+        w.start()
+        schemas: dict[str, int] = {}
+        channels: dict[str, int] = {}
+        for m in msgs:
+            if m.msgtype not in schemas:
+                schemas[m.msgtype] = w.register_schema(m.msgtype, "ros2msg", b"")
+            if m.topic not in channels:
+                channels[m.topic] = w.register_channel(m.topic, "cdr", schemas[m.msgtype])
+            w.add_message(channels[m.topic], m.log_time_ns, m.raw, m.log_time_ns)
+        w.finish()
+    return out
+
+
+def test_the_simulated_bag_and_its_mcap_file(bag: Path) -> None:
+    _check(bag)
+    _check(next(bag.glob("*.mcap")))
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"compression": "ZSTD", "chunk_size": 4096},
+        {"compression": "LZ4", "chunk_size": 20000},
+        {"compression": "NONE"},
+        {"use_chunking": False},
+        {"index_types": "NONE", "chunk_size": 8192},
+        {"compression": "ZSTD", "chunk_size": 3000, "shuffle": True},
+    ],
+    ids=["zstd-small", "lz4", "none", "unchunked", "no-index", "shuffled"],
+)
+def test_mcap_variants(bag: Path, tmp_path: Path, options: dict[str, Any]) -> None:
+    from mcap.writer import CompressionType, IndexType
+
+    opts = dict(options)
+    shuffle = bool(opts.pop("shuffle", False))
+    if "compression" in opts:
+        opts["compression"] = CompressionType[opts["compression"]]
+    if "index_types" in opts:
+        opts["index_types"] = IndexType[opts["index_types"]]
+    _check(_rewrite(next(bag.glob("*.mcap")), tmp_path / "log.mcap", shuffle, **opts))
+
+
+def test_sqlite3_goes_through_the_messages(bag: Path, tmp_path: Path) -> None:
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    from amsfe_sym.logs.source import typestore
+
+    out = tmp_path / "sql"
+    with Writer(out, version=9, storage_plugin=StoragePlugin.SQLITE3) as w:
+        conns: dict[str, Any] = {}
+        for m in iter_messages(bag, TOPICS):
+            if m.topic not in conns:
+                conns[m.topic] = w.add_connection(m.topic, m.msgtype, typestore=typestore())
+            w.write(conns[m.topic], m.log_time_ns, m.raw)
+    _check(out)
+
+
+def test_a_damaged_file_is_refused_in_one_line(bag: Path, tmp_path: Path) -> None:
+    data = next(bag.glob("*.mcap")).read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) // 2])  # no summary: the message path, which refuses
+    with pytest.raises(LogError) as exc:
+        read_topics(cut, TOPICS)
+    assert "\n" not in str(exc.value)
+    broken = bytearray(data)
+    chunk_at = data.index(b"\x06", 8)  # the first chunk's records: garbage in place
+    broken[chunk_at + 60 : chunk_at + 400] = b"\xff" * 340
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(broken))
+    with pytest.raises(LogError) as exc2:
+        read_topics(bad, TOPICS)
+    assert "\n" not in str(exc2.value)
