@@ -1,0 +1,202 @@
+"""Speed and memory of reading and estimating a recorded log (docs/logs.md, "Speed"): the
+10 s, 1 kHz paper-sim log (paper_2link) and the 60 s, 1 kHz panda-control log (7 joints, a
+30 Hz camera), written by ``amsfe simulate --bag`` with fixed seeds, each timed before and
+after in the same run, interleaved, the median of ``--repeat`` runs:
+
+- ``read_log``: the log reader as it is in this tree (``logs/read.py``);
+- ``iter+ref``: every message of the estimator's topics through ``iter_messages`` and decoded
+  one by one by ``rosbags`` (the reference decoders of ``logs/decode.py``);
+- ``read_topics``: the same topics read and decoded in bulk (``logs/stream.py``);
+- ``per-tick``: ``estimate_log(..., batch=False)``, one Python ``step`` per tick;
+- ``batch``: ``estimate_log`` of a compiled estimator, one C call per 2000 ticks.
+
+Peak RSS is measured in a fresh process per (log, path): ``before`` = read_log + per-tick,
+``after`` = read_topics + read_log's grid + batch.
+
+    .venv/bin/python tools/log_speed.py            # writes the logs into /tmp/amsfe-log-speed
+    .venv/bin/python tools/log_speed.py --repeat 5 --out DIR
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+LOGS = {  # name: (scenario, duration [s], seed)
+    "paper-sim 10 s": ("paper-sim", 10.0, 1),
+    "panda-control 60 s": ("panda-control", 60.0, 1),
+}
+TOPICS = ("/motor_encoders", "/motor_torque", "/camera/marker", "/amsfe/truth", "/amsfe/config")
+
+
+def write_logs(out: Path) -> dict[str, Path]:
+    """``amsfe simulate SCENARIO --bag`` for each log (skipped when its bag exists)."""
+    bags = {}
+    for name, (scenario, duration, seed) in LOGS.items():
+        folder = out / scenario
+        bag = folder / "bag"
+        if not (bag / "metadata.yaml").is_file():
+            cmd = [
+                sys.executable, "-m", "amsfe_sym", "simulate", scenario, "--controller",
+                "amsfe", "--duration", str(duration), "--seed", str(seed), "--bag",
+                "--out", str(folder), "--no-plots", "--no-progress", "--force",
+            ]  # fmt: skip
+            print("$", " ".join(cmd[1:]), flush=True)
+            subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+        bags[name] = bag
+    return bags
+
+
+def _setup(bag: Path) -> tuple[Any, Any, Any]:
+    from amsfe_sym.apps.estimate import EstimateOptions, _scenario
+    from amsfe_sym.codegen import library_for
+    from amsfe_sym.logs.read import read_config
+    from amsfe_sym.logs.spec import LogSpec
+
+    spec = LogSpec()
+    sc = _scenario(bag, read_config(bag, spec), EstimateOptions())
+    return spec, sc, library_for(sc)
+
+
+def _estimator(sc: Any, lib: Any, z0: Any) -> Any:
+    import numpy as np
+
+    from amsfe_sym.sim.builders import build_estimator, build_sensors, scenario_timing
+
+    sensors = build_sensors(sc, lib, np.random.default_rng(sc.seed), scenario_timing(sc, lib))
+    return build_estimator(sc, lib, sensors, z0, compiled=True)
+
+
+def _timed(fn: Any) -> tuple[tuple[float, float], Any]:
+    """(wall, CPU) [s] of ``fn()``, and its result."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    out = fn()
+    return (time.perf_counter() - t0, time.process_time() - c0), out
+
+
+def measure(bag: Path, repeat: int) -> dict[str, Any]:
+    """Median times [s] of each part over ``repeat`` interleaved runs."""
+    from amsfe_sym.logs import decode
+    from amsfe_sym.logs.read import read_log
+    from amsfe_sym.logs.replay import estimate_log
+    from amsfe_sym.logs.source import iter_messages
+    from amsfe_sym.logs.stream import read_topics
+
+    spec, sc, lib = _setup(bag)
+    times: dict[str, list[tuple[float, float]]] = {}
+
+    def iter_ref() -> None:
+        by: dict[tuple[str, str], list[bytes]] = {}
+        for m in iter_messages(bag, set(TOPICS)):
+            by.setdefault((m.topic, m.msgtype), []).append(m.raw)
+        for (_, msgtype), raws in by.items():
+            kind = decode.DECODERS[msgtype].__name__.removeprefix("decode_")
+            getattr(decode, f"_reference_{kind}")(raws)
+
+    log = None
+    for _ in range(repeat):
+        dt, log = _timed(lambda: read_log(bag, spec, lib.manifest.joints, lib.T, lib.N))
+        times.setdefault("read_log", []).append(dt)
+        times.setdefault("iter+ref", []).append(_timed(iter_ref)[0])
+        times.setdefault("read_topics", []).append(_timed(lambda: read_topics(bag, TOPICS))[0])
+        for label, batch in (("per-tick", False), ("batch", True)):
+            est = _estimator(sc, lib, log.z[0])
+            dt = _timed(lambda g=log, e=est, b=batch: estimate_log(g, e, batch=b, progress=False))[
+                0
+            ]
+            times.setdefault(label, []).append(dt)
+    assert log is not None  # repeat >= 1 (argparse)
+    med = {k: statistics.median(w for w, _ in v) for k, v in times.items()}
+    med |= {f"{k} cpu": statistics.median(c for _, c in v) for k, v in times.items()}
+    return {"ticks": log.K, "duration_s": log.K * log.T, "frames": len(log.frames), **med}
+
+
+def _vm(key: str) -> float:
+    """A ``/proc/self/status`` size [MB] (VmRSS: now, VmHWM: the peak since the last reset)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith(key + ":"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def peak_rss(bag: Path, path: str) -> dict[str, float]:
+    """One path in this (fresh) process: how far its peak RSS [MB] rises above the process
+    ready to read (the library loaded), and its wall and CPU times [s].  ``before``: read_log
+    + the per-tick estimate; ``after``: read_topics + the batch estimate (on read_log's grid,
+    made before the peak is reset: the reader's own grid arrays are the log's, counted in
+    ``log_mb``)."""
+    import mcap.reader  # noqa: F401 - imports are not the log's: loaded before the clock
+    import numpy as np
+    import zstandard  # noqa: F401
+
+    from amsfe_sym.logs.read import read_log
+    from amsfe_sym.logs.replay import estimate_log
+    from amsfe_sym.logs.stream import read_topics
+
+    spec, sc, lib = _setup(bag)
+    log = read_log(bag, spec, lib.manifest.joints, lib.T, lib.N) if path == "after" else None
+    est = _estimator(sc, lib, np.zeros(2 * len(lib.manifest.joints)))  # warm: scipy, ctypes
+    del est
+    ready = _vm("VmRSS")
+    Path("/proc/self/clear_refs").write_text("5")  # VmHWM <- VmRSS (Linux >= 4.0)
+    t0, c0 = time.perf_counter(), time.process_time()
+    if path == "after":
+        topics = read_topics(bag, TOPICS)
+    else:
+        log = read_log(bag, spec, lib.manifest.joints, lib.T, lib.N)
+    assert log is not None
+    est = _estimator(sc, lib, np.asarray(log.z[0]))
+    estimate_log(log, est, batch=path == "after", progress=False)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    if path == "after":
+        del topics
+    arrays = sum(a.nbytes for a in (log.z, log.u) if a is not None) / 2**20
+    return {"rise_mb": _vm("VmHWM") - ready, "log_mb": arrays, "wall_s": wall, "cpu_s": cpu}
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--out", default="/tmp/amsfe-log-speed", help="where the logs are written")
+    p.add_argument("--repeat", type=int, default=3, choices=range(1, 50), metavar="N")
+    p.add_argument("--rss", nargs=2, metavar=("BAG", "PATH"), help=argparse.SUPPRESS)
+    args = p.parse_args()
+    logging.getLogger("amsfe_sym").setLevel(logging.ERROR)
+    if args.rss:
+        print(json.dumps(peak_rss(Path(args.rss[0]), args.rss[1])))
+        return
+    bags = write_logs(Path(args.out))
+    for name, bag in bags.items():
+        m = measure(bag, args.repeat)
+        d = m["duration_s"]
+        before = m["read_log"] + m["per-tick"]
+        after = m["read_topics"] + m["batch"]
+        print(f"\n{name}: {m['ticks']} ticks, {m['frames']} frames, {bag}")
+        for k in ("read_log", "iter+ref", "read_topics", "per-tick", "batch"):
+            print(f"  {k:12s} wall {m[k]:8.3f} s  CPU {m[k + ' cpu']:8.3f} s")
+        cb = m["read_log cpu"] + m["per-tick cpu"]
+        ca = m["read_topics cpu"] + m["batch cpu"]
+        print(
+            f"  end to end before (read_log + per-tick): {before:.3f} s = {d / before:.0f}x "
+            f"real time; after (read_topics + batch): {after:.3f} s = {d / after:.0f}x"
+        )
+        print(f"  on CPU time: before {d / cb:.0f}x, after {d / ca:.0f}x real time")
+        for path in ("before", "after"):
+            cmd = [sys.executable, __file__, "--rss", str(bag), path]
+            out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+            r = json.loads(out.strip().splitlines()[-1])
+            print(
+                f"  {path:6s} fresh process: peak RSS +{r['rise_mb']:.0f} MB over the process "
+                f"ready to read; wall {r['wall_s']:.3f} s, CPU {r['cpu_s']:.3f} s "
+                f"({d / r['cpu_s']:.0f}x real time on CPU time)"
+            )
+
+
+if __name__ == "__main__":
+    main()
