@@ -39,13 +39,41 @@ from amsfe_sym.logs.decode import (
     decode_payloads,
 )
 
-__all__ = ["SLICE", "Topic", "read_topics"]
+__all__ = ["PROGRESS_MIN_S", "SLICE", "Topic", "read_topics"]
 
 IntArray = NDArray[np.int64]
 Decoded = JointStates | Points | Float64Arrays | Strings
 
 #: Messages decoded at once on the message-by-message path (bounds the raw bytes held).
 SLICE = 65536
+#: Logs spanning at least this long [s] get a progress bar (``progress=None``).
+PROGRESS_MIN_S = 5.0
+
+Progress = Callable[[int, int], None]
+
+
+class _Bar:
+    """A tqdm bar behind the ``(done, total)`` callback (made when first called)."""
+
+    def __init__(self, desc: str, unit: str) -> None:
+        self.desc, self.unit, self.last = desc, unit, 0
+        self.bar: Any = None
+
+    def __call__(self, done: int, total: int) -> None:
+        if self.bar is None:
+            from tqdm import tqdm
+
+            scale = self.unit == "B"
+            self.bar = tqdm(
+                total=total or None, desc=self.desc, unit=self.unit, unit_scale=scale,
+                mininterval=0.5, leave=False,
+            )  # fmt: skip
+        self.bar.update(done - self.last)
+        self.last = done
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
 
 
 @dataclass
@@ -131,14 +159,16 @@ def _take(dec: Any, order: IntArray) -> Any:
 def read_topics(
     path: Path,
     topics: Iterable[str],
-    progress: Callable[[int, int], None] | None = None,
+    progress: Progress | bool | None = None,
 ) -> dict[str, Topic]:
     """The ``topics`` of the log at ``path``, decoded (a topic with no message: absent).
 
     Args:
         path: A rosbag2 folder, a ``.mcap`` file, or what ``iter_messages`` reads.
         topics: The topics wanted.
-        progress: Called with (bytes or messages done, total) as the read goes on.
+        progress: A callback ``(done, total)`` (bytes of an MCAP, else messages with total
+            0), True or False for a tqdm bar or none; None: a bar for an MCAP spanning at
+            least :data:`PROGRESS_MIN_S`, or once :data:`SLICE` messages were read otherwise.
 
     Raises:
         LogError: unreadable, truncated, or a payload that does not decode.
@@ -147,14 +177,27 @@ def read_topics(
     files = _mcap_files(path)
     if files is not None:
         parts: dict[str, _Parts] = {}
+        bar = _Bar(f"read {path.name}", "B")
         try:
             for f in files:
-                _read_mcap(f, wanted, parts, progress)
+                _read_mcap(f, wanted, parts, _callback(progress, bar), auto=progress is None)
             out = {name: p.topic() for name, p in parts.items()}
             return {name: t for name, t in out.items() if t.count}
         except _NotIndexed:
             pass
-    return _read_messages(path, wanted, progress)
+        finally:
+            bar.close()
+    bar = _Bar(f"read {path.name}", "msg")
+    try:
+        return _read_messages(path, wanted, _callback(progress, bar))
+    finally:
+        bar.close()
+
+
+def _callback(progress: Progress | bool | None, bar: _Bar) -> Progress | None:
+    if progress is None or progress is True:
+        return bar
+    return progress or None
 
 
 class _NotIndexed(Exception):  # noqa: N818 - a signal to take the other path, not an error
@@ -172,9 +215,7 @@ def _mcap_files(path: Path) -> list[Path] | None:
     return None
 
 
-def _read_messages(
-    path: Path, wanted: set[str], progress: Callable[[int, int], None] | None
-) -> dict[str, Topic]:
+def _read_messages(path: Path, wanted: set[str], progress: Progress | None) -> dict[str, Topic]:
     from amsfe_sym.logs.source import iter_messages
 
     parts: dict[str, _Parts] = {}
@@ -253,9 +294,14 @@ def _read_mcap(
     path: Path,
     wanted: set[str],
     parts: dict[str, _Parts],
-    progress: Callable[[int, int], None] | None,
+    progress: Progress | None,
+    auto: bool = False,
 ) -> None:
     summary = _summary(path)
+    stats = summary.statistics
+    span = 0.0 if stats is None else (stats.message_end_time - stats.message_start_time) * 1e-9
+    if auto and span < PROGRESS_MIN_S:
+        progress = None
     channels = {
         cid: ch
         for cid, ch in summary.channels.items()
