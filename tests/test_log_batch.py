@@ -18,6 +18,7 @@ from amsfe_sym.logs.read import RobotLog, read_log
 from amsfe_sym.logs.replay import LogEstimate, estimate_log
 from amsfe_sym.logs.spec import LogSpec
 from amsfe_sym.logs.write import write_run_bag
+from amsfe_sym.runtime.estimator_batch import run_log
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.builders import build_estimator, build_sensors, scenario_timing
 from amsfe_sym.sim.loop import run
@@ -148,6 +149,6 @@ def test_run_log_refuses_a_used_estimator(logs) -> None:
     from amsfe_sym.errors import ConfigError
 
     with pytest.raises(ConfigError, match="fresh estimator"):
-        est.run_log(log.u, log.z, np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 2)))
+        run_log(est, log.u, log.z, np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 2)))
     # estimate_log steps it from Python instead (the per-tick path takes any state)
     assert estimate_log(log, est, progress=False).x_hat.shape == (log.K, est.nx)

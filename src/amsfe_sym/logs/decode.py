@@ -13,12 +13,22 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import LogError, describe
+from amsfe_sym.logs.layout import (
+    Encoding,
+    Payloads,
+    UnusualError,
+    Walk,
+    groups,
+    walk_float64_array,
+    walk_joint_state,
+    walk_point,
+)
 
 __all__ = [
     "DECODERS",
@@ -40,9 +50,6 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-
-#: How payloads are serialized: ``cdr`` (ROS 2: rosbag2, MCAP) or ``ros1`` (a ROS 1 ``.bag``).
-Encoding = Literal["cdr", "ros1"]
 
 
 @dataclass
@@ -90,36 +97,6 @@ class Strings:
     """``std_msgs/msg/String`` payloads."""
 
     data: list[str]
-
-
-class Payloads(Sequence[bytes]):
-    """Many payloads in one buffer, without a ``bytes`` object each: payload i is
-    ``buffer[offsets[i] : offsets[i] + lengths[i]]`` (a sequence of ``bytes`` to whoever
-    iterates it; the bulk decoders gather rows of equal length from the buffer at once)."""
-
-    def __init__(self, buffer: NDArray[np.uint8], offsets: IntArray, lengths: IntArray) -> None:
-        self.buffer, self.offsets, self.lengths = buffer, offsets, lengths
-
-    @classmethod
-    def of(cls, raws: Sequence[bytes]) -> Payloads:
-        """Payloads given one by one."""
-        lengths = np.fromiter((len(r) for r in raws), dtype=np.int64, count=len(raws))
-        offsets = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
-        buffer = np.frombuffer(b"".join(bytes(r) for r in raws), dtype=np.uint8)
-        return cls(buffer, offsets[: len(raws)], lengths)
-
-    def __len__(self) -> int:
-        return int(self.lengths.size)
-
-    def __getitem__(self, i: Any) -> Any:
-        if isinstance(i, slice):
-            return [self[j] for j in range(*i.indices(len(self)))]
-        start = int(self.offsets[i])
-        return self.buffer[start : start + int(self.lengths[i])].tobytes()
-
-    def rows(self, index: IntArray, length: int) -> NDArray[np.uint8]:
-        """Payloads ``index`` (all ``length`` bytes long) as a (len(index), length) array."""
-        return self.buffer[self.offsets[index][:, None] + np.arange(length)]
 
 
 _STORES: dict[str, Any] = {}
@@ -234,183 +211,6 @@ def _reference_strings(
     return Strings([str(deserialize(r, "std_msgs/msg/String", encoding, where).data) for r in raws])
 
 
-# ---------------------------------------------------------------------- bulk decoders
-# A topic's messages almost always share one layout: the same frame_id, joint names and
-# value counts, only the stamp and the values change.  One payload is walked in Python (the
-# rules of rosbags' deserializers: CDR aligns each primitive to its size relative to the
-# payload after the 4-byte encapsulation header, an empty float64 sequence is not aligned,
-# strings carry a NUL, up to 3 trailing bytes are allowed; ROS 1 has no alignment, no NUL and
-# a uint32 seq before the stamp), which marks every byte as structure (lengths, counts,
-# strings, the encapsulation kind) or value (stamp, seq, float64s, padding).  Every payload of
-# the same length whose structure bytes equal the walked one's has the same layout: its
-# values are read for all of them at once with numpy.  Payloads of another layout get their
-# own walk (up to _MAX_LAYOUTS per length); a payload the walk does not take (big-endian,
-# truncated, bad UTF-8, ...) sends the whole call to the reference, errors included.
-
-_MAX_LAYOUTS = 16
-
-
-class _UnusualError(Exception):
-    """A payload the bulk walk does not take (the reference decides)."""
-
-
-class _Walk:
-    """One payload's layout: the structure mask and the offsets of its values."""
-
-    def __init__(self, raw: bytes, encoding: Encoding) -> None:
-        self.raw, self.cdr = raw, encoding == "cdr"
-        self.base = 4 if self.cdr else 0
-        self.pos = 0  # relative to the encapsulation header's end (CDR alignment)
-        self.structure = np.ones(len(raw), dtype=np.bool_)
-        if self.cdr:
-            if len(raw) < 4 or raw[:2] != b"\x00\x01":  # little-endian CDR only
-                raise _UnusualError
-            self.structure[2:4] = False  # encapsulation options: ignored by rosbags too
-
-    def _take(self, n: int, value: bool) -> int:
-        at = self.base + self.pos
-        if n < 0 or at + n > len(self.raw):
-            raise _UnusualError
-        if value:
-            self.structure[at : at + n] = False
-        self.pos += n
-        return at
-
-    def align(self, n: int) -> None:
-        if self.cdr:
-            self._take(-self.pos % n, value=True)  # padding: any bytes
-
-    def u32(self, value: bool = False) -> int:
-        self.align(4)
-        at = self._take(4, value)
-        return int.from_bytes(self.raw[at : at + 4], "little")
-
-    def string(self) -> str:
-        n = self.u32()
-        if self.cdr and n < 1:
-            raise _UnusualError
-        at = self._take(n, value=False)
-        if self.cdr and self.raw[at + n - 1] != 0:
-            raise _UnusualError
-        try:
-            return self.raw[at : at + n - self.cdr].decode()
-        except UnicodeDecodeError:
-            raise _UnusualError from None
-
-    def header(self) -> int:
-        """The header; returns the offset of ``stamp`` (int32 sec, uint32 nanosec)."""
-        if not self.cdr:
-            self.u32(value=True)  # ROS 1 seq
-        self.align(4)
-        at = self._take(8, value=True)
-        self.string()  # frame_id
-        return at
-
-    def float64s(self) -> tuple[int, int]:
-        """A ``float64[]``: (offset, count)."""
-        count = self.u32()
-        if count and self.cdr:
-            self.align(8)
-        return self._take(8 * count, value=True), count
-
-    def fixed_float64s(self, count: int) -> int:
-        self.align(8)
-        return self._take(8 * count, value=True)
-
-    def finish(self) -> None:
-        end = self.base + self.pos
-        trailing = len(self.raw) - end
-        if trailing < 0 or trailing > (3 if self.cdr else 0):
-            raise _UnusualError
-        self.structure[end:] = False
-
-
-@dataclass
-class _Layout:
-    """What a walk found: the structure mask and, per message type, its offsets."""
-
-    structure: NDArray[np.bool_]
-    stamp: int = -1
-    names: tuple[str, ...] = ()
-    arrays: tuple[tuple[int, int], ...] = ()  # float64 sequences (offset, count)
-
-
-def _walk_joint_state(raw: bytes, encoding: Encoding) -> _Layout:
-    w = _Walk(raw, encoding)
-    stamp = w.header()
-    names = tuple(w.string() for _ in range(w.u32()))
-    arrays = tuple(w.float64s() for _ in range(3))
-    w.finish()
-    return _Layout(w.structure, stamp, names, arrays)
-
-
-def _walk_point(raw: bytes, encoding: Encoding) -> _Layout:
-    w = _Walk(raw, encoding)
-    stamp = w.header()
-    xyz = w.fixed_float64s(3)
-    w.finish()
-    return _Layout(w.structure, stamp, (), ((xyz, 3),))
-
-
-def _walk_float64_array(raw: bytes, encoding: Encoding) -> _Layout:
-    w = _Walk(raw, encoding)
-    for _ in range(w.u32()):  # layout.dim: label (structure), size, stride (values)
-        w.string()
-        w.u32(value=True)
-        w.u32(value=True)
-    w.u32(value=True)  # data_offset
-    data = w.float64s()
-    w.finish()
-    return _Layout(w.structure, -1, (), (data,))
-
-
-@dataclass
-class _Group:
-    """Payloads of one layout: their row numbers and their bytes, one row each."""
-
-    rows: IntArray
-    data: NDArray[np.uint8]
-    layout: _Layout
-
-    def column(self, offset: int, count: int, dtype: str) -> NDArray[Any]:
-        size = np.dtype(dtype).itemsize
-        block = np.ascontiguousarray(self.data[:, offset : offset + size * count])
-        return block.view(dtype).reshape(len(self.rows), count)
-
-    def stamps(self) -> IntArray:
-        sec = self.column(self.layout.stamp, 1, "<i4")[:, 0].astype(np.int64)
-        nanosec = self.column(self.layout.stamp + 4, 1, "<u4")[:, 0].astype(np.int64)
-        return sec * 1_000_000_000 + nanosec
-
-    def float64s(self, i: int) -> FloatArray:
-        offset, count = self.layout.arrays[i]
-        return self.column(offset, count, "<f8").astype(np.float64)
-
-
-def _groups(raws: Sequence[bytes], encoding: Encoding, walk: Any) -> list[_Group] | None:
-    """The payloads by layout, or None when one of them is for the reference."""
-    payloads = raws if isinstance(raws, Payloads) else Payloads.of(raws)
-    lengths = payloads.lengths
-    out: list[_Group] = []
-    for length in np.unique(lengths):
-        rows = np.flatnonzero(lengths == length)
-        data = payloads.rows(rows, int(length))
-        for _ in range(_MAX_LAYOUTS):
-            try:
-                layout = walk(payloads[int(rows[0])], encoding)
-            except _UnusualError:
-                return None
-            mask = layout.structure
-            same = (data[:, mask] == data[0, mask]).all(axis=1)
-            out.append(_Group(rows[same], data[same], layout))
-            rows, data = rows[~same], data[~same]
-            if rows.size == 0:
-                break
-        else:
-            return None  # more layouts than it is worth: the reference
-    return out
-
-
 def decode_joint_states(
     raws: Sequence[bytes], encoding: Encoding = "cdr", where: str = ""
 ) -> JointStates:
@@ -420,22 +220,22 @@ def decode_joint_states(
     Raises:
         LogError: a payload that does not decode.
     """
-    groups = _groups(raws, encoding, _walk_joint_state) if raws else []
-    if groups is None:
+    found = groups(raws, encoding, walk_joint_state) if raws else []
+    if found is None:
         return _reference_joint_states(raws, encoding, where)
     M = len(raws)
     first: dict[tuple[str, ...], int] = {}  # names -> the first row carrying them
-    for g in groups:
+    for g in found:
         first[g.layout.names] = min(first.get(g.layout.names, M), int(g.rows[0]))
     names = sorted(first, key=first.__getitem__)
     order = {n: i for i, n in enumerate(names)}
     counts = np.zeros((M, 3), np.int64)
-    for g in groups:
+    for g in found:
         counts[g.rows] = [c for _, c in g.layout.arrays]
     width = max([len(n) for n in names] + [int(counts.max(initial=0))])
     stamps, index = np.zeros(M, np.int64), np.zeros(M, np.int64)
     fields = [np.full((M, width), np.nan) for _ in range(3)]
-    for g in groups:
+    for g in found:
         stamps[g.rows] = g.stamps()
         index[g.rows] = order[g.layout.names]
         for i, out in enumerate(fields):
@@ -447,11 +247,11 @@ def decode_joint_states(
 
 def decode_points(raws: Sequence[bytes], encoding: Encoding = "cdr", where: str = "") -> Points:
     """``geometry_msgs/msg/PointStamped`` payloads -> :class:`Points` (in bulk)."""
-    groups = _groups(raws, encoding, _walk_point) if raws else []
-    if groups is None:
+    found = groups(raws, encoding, walk_point) if raws else []
+    if found is None:
         return _reference_points(raws, encoding, where)
     stamps, xyz = np.zeros(len(raws), np.int64), np.zeros((len(raws), 3))
-    for g in groups:
+    for g in found:
         stamps[g.rows] = g.stamps()
         xyz[g.rows] = g.float64s(0)
     return Points(stamps, xyz)
@@ -461,14 +261,14 @@ def decode_float64_arrays(
     raws: Sequence[bytes], encoding: Encoding = "cdr", where: str = ""
 ) -> Float64Arrays:
     """``std_msgs/msg/Float64MultiArray`` payloads -> :class:`Float64Arrays` (in bulk)."""
-    groups = _groups(raws, encoding, _walk_float64_array) if raws else []
-    if groups is None:
+    found = groups(raws, encoding, walk_float64_array) if raws else []
+    if found is None:
         return _reference_float64_arrays(raws, encoding, where)
     counts = np.zeros(len(raws), np.int64)
-    for g in groups:
+    for g in found:
         counts[g.rows] = g.layout.arrays[0][1]
     values = np.full((len(raws), int(counts.max(initial=0))), np.nan)
-    for g in groups:
+    for g in found:
         count = g.layout.arrays[0][1]
         if count:
             values[g.rows, :count] = g.float64s(0)
@@ -480,10 +280,10 @@ def decode_strings(raws: Sequence[bytes], encoding: Encoding = "cdr", where: str
     out = []
     for raw in raws:
         try:
-            w = _Walk(raw, encoding)
+            w = Walk(raw, encoding)
             out.append(w.string())
             w.finish()
-        except _UnusualError:
+        except UnusualError:
             return _reference_strings(raws, encoding, where)
     return Strings(out)
 

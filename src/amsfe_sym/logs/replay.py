@@ -208,10 +208,11 @@ def _frame_rows(
 
 def _batch(log: RobotLog, est: Estimator, progress: Callable[[int], None] | None) -> LogEstimate:
     from amsfe_sym.runtime.compiled_estimator import STATUS, CompiledEstimator, frame_reason
+    from amsfe_sym.runtime.estimator_batch import run_log
 
     est = cast(CompiledEstimator, est)  # _batch_ok checked it
     kappa, arrival, fz = _frame_arrays(_given_frames(log))
-    res = est.run_log(log.u, log.z, kappa, arrival, fz, log.truth, progress)
+    res = run_log(est, log.u, log.z, kappa, arrival, fz, log.truth, progress)
     K = log.K
     counters = dict.fromkeys(DECISION_COUNTERS, 0)
     has_z = np.asarray(np.isfinite(log.z).all(axis=1), dtype=np.bool_)
