@@ -200,3 +200,17 @@ def test_ros1_payloads_carry_the_seq() -> None:
     assert raw[4:8] == (3).to_bytes(4, "little") and raw[12:18] == b"\x02\x00\x00\x00ab"
     js = _bulk("joint_states", [raw], "ros1")
     assert js.stamp_ns.tolist() == [3 * 10**9 + 15] and js.names == [("j1", "j2")]
+
+
+@pytest.mark.parametrize("encoding", ENCODINGS)
+def test_nan_payload_bits_are_kept(encoding: str) -> None:
+    """A quiet NaN with a payload and a signalling NaN come out with their bits."""
+    raw = bytearray(_js(encoding, k=4))
+    nan_at = raw.index(np.float64(np.nan).tobytes())  # position[1]
+    raws = []
+    for bits in (0x7FF8000000000001, 0x7FF0000000000001, 0xFFF8000000000000):
+        raw[nan_at : nan_at + 8] = bits.to_bytes(8, "little")
+        raws.append(bytes(raw))
+    got = _bulk("joint_states", raws, encoding)
+    _same(got, dec._reference_joint_states(raws, encoding))
+    assert got.position[0, 1].tobytes() == (0x7FF8000000000001).to_bytes(8, "little")
