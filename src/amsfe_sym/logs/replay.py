@@ -96,7 +96,12 @@ def _progress(log: RobotLog, est: Estimator, show: bool | None) -> Any:
     from tqdm import tqdm
 
     return tqdm(
-        total=log.K, desc=f"estimate [{est.name}]", unit="tick", mininterval=0.5, leave=False
+        total=log.K,
+        desc=f"estimate [{est.name}]",
+        unit="tick",
+        mininterval=0.5,
+        leave=False,
+        delay=1.0,  # shown once the run has taken 1 s
     )
 
 

@@ -66,7 +66,7 @@ class _Bar:
             scale = self.unit == "B"
             self.bar = tqdm(
                 total=total or None, desc=self.desc, unit=self.unit, unit_scale=scale,
-                mininterval=0.5, leave=False,
+                mininterval=0.5, leave=False, delay=1.0,
             )  # fmt: skip
         self.bar.update(done - self.last)
         self.last = done
@@ -168,7 +168,8 @@ def read_topics(
         topics: The topics wanted.
         progress: A callback ``(done, total)`` (bytes of an MCAP, else messages with total
             0), True or False for a tqdm bar or none; None: a bar for an MCAP spanning at
-            least :data:`PROGRESS_MIN_S`, or once :data:`SLICE` messages were read otherwise.
+            least :data:`PROGRESS_MIN_S`, or once :data:`SLICE` messages were read otherwise
+            (a bar shows once the read has taken 1 s).
 
     Raises:
         LogError: unreadable, truncated, or a payload that does not decode.
