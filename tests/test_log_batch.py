@@ -152,3 +152,14 @@ def test_run_log_refuses_a_used_estimator(logs) -> None:
         run_log(est, log.u, log.z, np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 2)))
     # estimate_log steps it from Python instead (the per-tick path takes any state)
     assert estimate_log(log, est, progress=False).x_hat.shape == (log.K, est.nx)
+
+
+def test_progress_bars_change_nothing(logs, capsys) -> None:
+    """The tqdm bar over the ticks (forced on for a short log) leaves the numbers alone."""
+    sc, lib, _, log = logs["replay"]
+    plain = _estimate(sc, lib, log, batch=True)
+    sensors = build_sensors(sc, lib, np.random.default_rng(sc.seed), scenario_timing(sc, lib))
+    for batch in (True, False):
+        est = build_estimator(sc, lib, sensors, log.z[0], compiled=True)
+        shown = estimate_log(log, est, batch=batch, progress=True)
+        _same(shown, plain)

@@ -7,6 +7,7 @@ refused with one line."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from pathlib import Path
 from typing import Any
 
@@ -142,3 +143,13 @@ def test_a_damaged_file_is_refused_in_one_line(bag: Path, tmp_path: Path) -> Non
     with pytest.raises(LogError) as exc2:
         read_topics(bad, TOPICS)
     assert "\n" not in str(exc2.value)
+
+
+def test_progress_reports_every_byte(bag: Path) -> None:
+    calls: list[tuple[int, int]] = []
+    read_topics(bag, TOPICS, progress=lambda done, total: calls.append((done, total)))
+    size = next(bag.glob("*.mcap")).stat().st_size
+    assert calls and calls[-1][0] == calls[-1][1] and 0 < calls[-1][1] <= size
+    assert all(a[0] <= b[0] for a, b in itertools.pairwise(calls))
+    quiet = read_topics(bag, TOPICS, progress=False)
+    assert quiet.keys() == read_topics(bag, TOPICS, progress=True).keys()
