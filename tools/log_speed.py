@@ -8,10 +8,12 @@ after in the same run, interleaved, the median of ``--repeat`` runs:
   one by one by ``rosbags`` (the reference decoders of ``logs/decode.py``);
 - ``read_topics``: the same topics read and decoded in bulk (``logs/stream.py``);
 - ``per-tick``: ``estimate_log(..., batch=False)``, one Python ``step`` per tick;
+- ``grid``: the tick grid from read_topics' columns (:func:`grid_log`, checked equal to
+  read_log's on these logs);
 - ``batch``: ``estimate_log`` of a compiled estimator, one C call per 2000 ticks.
 
 Peak RSS is measured in a fresh process per (log, path): ``before`` = read_log + per-tick,
-``after`` = read_topics + read_log's grid + batch.
+``after`` = read_topics + grid + batch.
 
     .venv/bin/python tools/log_speed.py            # writes the logs into /tmp/amsfe-log-speed
     .venv/bin/python tools/log_speed.py --repeat 5 --out DIR
@@ -81,6 +83,68 @@ def _timed(fn: Any) -> tuple[tuple[float, float], Any]:
     return (time.perf_counter() - t0, time.process_time() - c0), out
 
 
+def grid_log(bag: Path, topics: dict[str, Any], joints: Any, T: float, N: int) -> Any:
+    """A RobotLog from ``read_topics``' columns, vectorised, for the clean logs ``amsfe
+    simulate --bag`` writes (every stamp on the grid, no gap, one layout per topic): the
+    tick grid of logs/read.py's docstring, so that the "after" path is timed whole.  Not a
+    reader (no tolerance handling, no refusals): :func:`measure` checks it equals read_log.
+    """
+    import math
+
+    import numpy as np
+
+    from amsfe_sym.core.camera_frame import CameraFrame
+    from amsfe_sym.logs.read import RobotLog
+
+    def order(js: Any) -> Any:
+        if len(js.names) != 1:
+            raise SystemExit(f"{bag}: more than one joint-name list; use read_log")
+        names = list(js.names[0])
+        return [names.index(j) for j in joints]
+
+    enc = topics["/motor_encoders"].decoded
+    idx = order(enc)
+    t0 = int(enc.stamp_ns.min())
+    k = np.rint((enc.stamp_ns - t0) * 1e-9 / T).astype(np.int64)
+    K = int(k.max()) + 1
+    z = np.full((K, 2 * len(idx)), np.nan)
+    z[k] = np.hstack([enc.position[:, idx], enc.velocity[:, idx]])
+    tq = topics["/motor_torque"].decoded
+    kt = np.rint((tq.stamp_ns - t0) * 1e-9 / T).astype(np.int64)
+    u = np.full((K, len(idx)), np.nan)
+    u[kt[kt < K]] = tq.effort[kt < K][:, order(tq)]
+    have = np.isfinite(u).all(axis=1)
+    last = np.maximum.accumulate(np.where(have, np.arange(K), 0))
+    u = u[last]  # zero-order hold
+    cam = topics["/camera/marker"]
+    kappa = np.rint((cam.decoded.stamp_ns - t0) * 1e-9 / T).astype(np.int64)
+    arrive = [math.ceil((t - t0) * 1e-9 / T - 0.25) for t in cam.log_time_ns.tolist()]
+    frames = [
+        CameraFrame(int(a), cam.decoded.xyz[i, :2].copy(), int(b))
+        for i, (a, b) in enumerate(zip(kappa.tolist(), arrive, strict=True))
+        if b < K
+    ]
+    truth = None
+    if "/amsfe/truth" in topics:
+        tr = topics["/amsfe/truth"]
+        kk = np.rint((tr.log_time_ns - t0) * 1e-9 / T).astype(np.int64)
+        truth = np.full((K, N), np.nan)
+        ok = (kk >= 0) & (kk < K) & (tr.decoded.counts == N)
+        truth[kk[ok]] = tr.decoded.values[ok][:, :N]
+    return RobotLog(bag, T, t0, z, u, frames, truth, None, {})
+
+
+def _same_log(a: Any, b: Any) -> bool:
+    import numpy as np
+
+    arrays = all(
+        np.array_equal(getattr(a, f), getattr(b, f), equal_nan=True) for f in ("z", "u", "truth")
+    )
+    fa = [(f.exposure_step, f.delivery_step, tuple(f.z)) for f in a.frames]
+    fb = [(f.exposure_step, f.delivery_step, tuple(f.z)) for f in b.frames]
+    return bool(arrays and fa == fb and a.t0_ns == b.t0_ns)
+
+
 def measure(bag: Path, repeat: int) -> dict[str, Any]:
     """Median times [s] of each part over ``repeat`` interleaved runs."""
     from amsfe_sym.logs import decode
@@ -105,7 +169,12 @@ def measure(bag: Path, repeat: int) -> dict[str, Any]:
         dt, log = _timed(lambda: read_log(bag, spec, lib.manifest.joints, lib.T, lib.N))
         times.setdefault("read_log", []).append(dt)
         times.setdefault("iter+ref", []).append(_timed(iter_ref)[0])
-        times.setdefault("read_topics", []).append(_timed(lambda: read_topics(bag, TOPICS))[0])
+        dt, topics = _timed(lambda: read_topics(bag, TOPICS, progress=False))
+        times.setdefault("read_topics", []).append(dt)
+        dt, gridded = _timed(lambda t=topics: grid_log(bag, t, lib.manifest.joints, lib.T, lib.N))
+        times.setdefault("grid", []).append(dt)
+        if not _same_log(gridded, log):
+            raise SystemExit(f"{bag}: the tool's grid differs from read_log's")
         for label, batch in (("per-tick", False), ("batch", True)):
             est = _estimator(sc, lib, log.z[0])
             dt = _timed(lambda g=log, e=est, b=batch: estimate_log(g, e, batch=b, progress=False))[
@@ -129,9 +198,7 @@ def _vm(key: str) -> float:
 def peak_rss(bag: Path, path: str) -> dict[str, float]:
     """One path in this (fresh) process: how far its peak RSS [MB] rises above the process
     ready to read (the library loaded), and its wall and CPU times [s].  ``before``: read_log
-    + the per-tick estimate; ``after``: read_topics + the batch estimate (on read_log's grid,
-    made before the peak is reset: the reader's own grid arrays are the log's, counted in
-    ``log_mb``)."""
+    + the per-tick estimate; ``after``: read_topics + :func:`grid_log` + the batch."""
     import mcap.reader  # noqa: F401 - imports are not the log's: loaded before the clock
     import numpy as np
     import zstandard  # noqa: F401
@@ -141,24 +208,22 @@ def peak_rss(bag: Path, path: str) -> dict[str, float]:
     from amsfe_sym.logs.stream import read_topics
 
     spec, sc, lib = _setup(bag)
-    log = read_log(bag, spec, lib.manifest.joints, lib.T, lib.N) if path == "after" else None
     est = _estimator(sc, lib, np.zeros(2 * len(lib.manifest.joints)))  # warm: scipy, ctypes
     del est
     ready = _vm("VmRSS")
     Path("/proc/self/clear_refs").write_text("5")  # VmHWM <- VmRSS (Linux >= 4.0)
     t0, c0 = time.perf_counter(), time.process_time()
     if path == "after":
-        topics = read_topics(bag, TOPICS)
+        topics = read_topics(bag, TOPICS, progress=False)
+        log = grid_log(bag, topics, lib.manifest.joints, lib.T, lib.N)
     else:
         log = read_log(bag, spec, lib.manifest.joints, lib.T, lib.N)
-    assert log is not None
     est = _estimator(sc, lib, np.asarray(log.z[0]))
     estimate_log(log, est, batch=path == "after", progress=False)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     if path == "after":
         del topics
-    arrays = sum(a.nbytes for a in (log.z, log.u) if a is not None) / 2**20
-    return {"rise_mb": _vm("VmHWM") - ready, "log_mb": arrays, "wall_s": wall, "cpu_s": cpu}
+    return {"rise_mb": _vm("VmHWM") - ready, "wall_s": wall, "cpu_s": cpu}
 
 
 def main() -> None:
@@ -176,15 +241,15 @@ def main() -> None:
         m = measure(bag, args.repeat)
         d = m["duration_s"]
         before = m["read_log"] + m["per-tick"]
-        after = m["read_topics"] + m["batch"]
+        after = m["read_topics"] + m["grid"] + m["batch"]
         print(f"\n{name}: {m['ticks']} ticks, {m['frames']} frames, {bag}")
-        for k in ("read_log", "iter+ref", "read_topics", "per-tick", "batch"):
+        for k in ("read_log", "iter+ref", "read_topics", "grid", "per-tick", "batch"):
             print(f"  {k:12s} wall {m[k]:8.3f} s  CPU {m[k + ' cpu']:8.3f} s")
         cb = m["read_log cpu"] + m["per-tick cpu"]
-        ca = m["read_topics cpu"] + m["batch cpu"]
+        ca = m["read_topics cpu"] + m["grid cpu"] + m["batch cpu"]
         print(
             f"  end to end before (read_log + per-tick): {before:.3f} s = {d / before:.0f}x "
-            f"real time; after (read_topics + batch): {after:.3f} s = {d / after:.0f}x"
+            f"real time; after (read_topics + grid + batch): {after:.3f} s = {d / after:.0f}x"
         )
         print(f"  on CPU time: before {d / cb:.0f}x, after {d / ca:.0f}x real time")
         for path in ("before", "after"):
