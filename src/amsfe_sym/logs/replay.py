@@ -59,8 +59,9 @@ class LogEstimate:
         nees: e^T P^-1 e against the log's true state, (K,), or None without one.
         counters: The estimator's decisions (the names of a run's ``summary.json``) and
             the reader's skipped messages by reason.
-        encoder_nis: NIS of each tick's encoder update (chi-square with 2n degrees of
-            freedom when the model fits), (K,); NaN where there was none (tick 0, gaps).
+        encoder_nis: NIS of each tick's encoder innovation (eqs. 15-17; chi-square with 2n
+            degrees of freedom when the model fits), (K,); NaN where no sample reached the
+            update (tick 0, gaps); a sample the encoder gate refused keeps its NIS.
         frame_nis: The camera frames given to the estimator, their NIS and outcome.
     """
 
