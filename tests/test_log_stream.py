@@ -153,3 +153,29 @@ def test_progress_reports_every_byte(bag: Path) -> None:
     assert all(a[0] <= b[0] for a, b in itertools.pairwise(calls))
     quiet = read_topics(bag, TOPICS, progress=False)
     assert quiet.keys() == read_topics(bag, TOPICS, progress=True).keys()
+
+
+def test_a_type_without_decoder_keeps_its_payloads(tmp_path: Path) -> None:
+    """A type with no decoder: no columns, its payloads in log-time order; no topic: absent."""
+    from mcap.writer import Writer
+
+    path = tmp_path / "odd.mcap"
+    payloads = [(30, b"\x00\x01\x00\x00c"), (10, b"\x00\x01\x00\x00a"), (20, b"\x00\x01\x00\x00bb")]
+    with path.open("wb") as fh:
+        w = Writer(fh)
+        w.start()
+        channel = w.register_channel(
+            "/odd", "cdr", w.register_schema("foo_msgs/msg/Bar", "ros2msg", b"")
+        )
+        for t, raw in payloads:
+            w.add_message(channel, t, raw, t)
+        w.finish()
+    odd = read_topics(path, {"/odd"})["/odd"]
+    assert odd.decoded is None and odd.msgtype == "foo_msgs/msg/Bar"
+    assert (
+        odd.raw
+        == [raw for _, raw in sorted(payloads)]
+        == [m.raw for m in iter_messages(path, {"/odd"})]
+    )
+    assert odd.log_time_ns.tolist() == [10, 20, 30]
+    assert read_topics(path, {"/no/such/topic"}) == {}
