@@ -12,6 +12,9 @@ after in the same run, interleaved, the median of ``--repeat`` runs:
   read_log's on these logs);
 - ``batch``: ``estimate_log`` of a compiled estimator, one C call per 2000 ticks.
 
+Also a ROS 1 ``.bag`` of 60,000 9-joint JointStates (franka_ros' shape): read_topics
+against ``rosbags``' bag reader + the reference decoding, CPU time.
+
 Peak RSS is measured in a fresh process per (log, path): ``before`` = read_log + per-tick,
 ``after`` = read_topics + grid + batch.
 
@@ -226,6 +229,48 @@ def peak_rss(bag: Path, path: str) -> dict[str, float]:
     return {"rise_mb": _vm("VmHWM") - ready, "wall_s": wall, "cpu_s": cpu}
 
 
+def ros1_bag(out: Path, count: int = 60_000) -> dict[str, float]:
+    """A ROS 1 bag of ``count`` 9-joint JointStates at 1 kHz (franka_ros' /joint_states shape,
+    random values, seed 0): CPU time [s] of read_topics against rosbags' bag reader followed
+    by the reference decoding, median of 3."""
+    import numpy as np
+    from rosbags.rosbag1 import Reader, Writer
+
+    from amsfe_sym.logs import decode
+    from amsfe_sym.logs.stream import read_topics
+
+    path = out / "joint_states.bag"
+    if not path.is_file():
+        ts = decode.typestore("ros1")
+        T = ts.types
+        names = [f"panda_joint{i}" for i in range(1, 8)] + ["finger1", "finger2"]
+        rng = np.random.default_rng(0)
+        with Writer(path) as w:
+            c = w.add_connection("/joint_states", "sensor_msgs/msg/JointState", typestore=ts)
+            for k in range(count):
+                t = 1_700_000_000 * 10**9 + k * 10**6
+                stamp = T["builtin_interfaces/msg/Time"](sec=t // 10**9, nanosec=t % 10**9)
+                msg = T["sensor_msgs/msg/JointState"](
+                    header=T["std_msgs/msg/Header"](seq=k, stamp=stamp, frame_id=""),
+                    name=names,
+                    position=rng.normal(size=9),
+                    velocity=rng.normal(size=9),
+                    effort=rng.normal(size=9),
+                )
+                w.write(c, t, bytes(ts.serialize_ros1(msg, "sensor_msgs/msg/JointState")))
+
+    def reference() -> None:
+        with Reader(path) as r:
+            raws = [bytes(raw) for _, _, raw in r.messages()]
+        decode._reference_joint_states(raws, "ros1")
+
+    bulk = statistics.median(
+        _timed(lambda: read_topics(path, {"/joint_states"}, progress=False))[0][1] for _ in range(3)
+    )
+    ref = statistics.median(_timed(reference)[0][1] for _ in range(3))
+    return {"messages": count, "mb": path.stat().st_size / 1e6, "bulk_cpu": bulk, "ref_cpu": ref}
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--out", default="/tmp/amsfe-log-speed", help="where the logs are written")
@@ -236,6 +281,11 @@ def main() -> None:
     if args.rss:
         print(json.dumps(peak_rss(Path(args.rss[0]), args.rss[1])))
         return
+    r1 = ros1_bag(Path(args.out))
+    print(
+        f"ROS 1 bag, {r1['messages']} JointStates ({r1['mb']:.1f} MB): read_topics CPU "
+        f"{r1['bulk_cpu']:.3f} s; rosbags' reader + reference decoding CPU {r1['ref_cpu']:.3f} s"
+    )
     bags = write_logs(Path(args.out))
     for name, bag in bags.items():
         m = measure(bag, args.repeat)

@@ -10,9 +10,13 @@ payloads at a time, never every message as an object.
   (none, zstd, lz4) and message indexes; a chunk is decompressed once and each wanted
   channel's payloads are cut out of it with numpy at the offsets its message index lists, no
   Python object per message.
-- Anything else (an MCAP without a summary or message indexes, sqlite3 storage, a ROS 1
-  ``.bag``) goes through :func:`amsfe_sym.logs.source.iter_messages` and is decoded in
-  slices of :data:`SLICE` messages.
+- A ROS 1 ``.bag`` is read the same way: ``rosbags``' reader parses its index (chunk and
+  offset of each message), each chunk is decompressed once (none, bz2, lz4) and the
+  payloads are cut out of it with numpy.
+- Anything else (an MCAP without a summary or message indexes, sqlite3 storage, a bag
+  whose index does not point at message records) goes through
+  :func:`amsfe_sym.logs.source.iter_messages` and is decoded in slices of :data:`SLICE`
+  messages.
 
 Both give each topic's messages in log-time order (ties: file order), as ``iter_messages``.
 """
@@ -175,6 +179,16 @@ def read_topics(
         LogError: unreadable, truncated, or a payload that does not decode.
     """
     wanted = set(topics)
+    if path.is_file() and path.suffix == ".bag":
+        parts_bag: dict[str, _Parts] = {}
+        bar = _Bar(f"read {path.name}", "B")
+        try:
+            _read_bag(path, wanted, parts_bag, _callback(progress, bar))
+            return {name: t for name, p in parts_bag.items() if (t := p.topic()).count}
+        except _NotIndexed:
+            pass
+        finally:
+            bar.close()
     files = _mcap_files(path)
     if files is not None:
         parts: dict[str, _Parts] = {}
@@ -378,3 +392,87 @@ def _gather_u64(buf: NDArray[np.uint8], at: IntArray) -> IntArray:
     """Little-endian uint64 at each offset ``at`` of ``buf``."""
     idx = at[:, None] + np.arange(8)
     return np.ascontiguousarray(buf[idx]).view("<u8")[:, 0].astype(np.int64)
+
+
+# ---------------------------------------------------------------------- ROS 1 .bag
+def _gather_u32(buf: NDArray[np.uint8], at: IntArray) -> IntArray:
+    """Little-endian uint32 at each offset ``at`` of ``buf``."""
+    idx = at[:, None] + np.arange(4)
+    return np.ascontiguousarray(buf[idx]).view("<u4")[:, 0].astype(np.int64)
+
+
+def _read_bag(
+    path: Path, wanted: set[str], parts: dict[str, _Parts], progress: Progress | None
+) -> None:
+    """A ROS 1 bag (format 2.0) through its index, chunk by chunk."""
+    from rosbags.rosbag1 import Reader
+
+    try:
+        reader = Reader(path)
+        reader.open()
+    except Exception as exc:  # rosbags' ReaderError and OS errors: one line either way
+        raise LogError(
+            describe(
+                f"log {path}",
+                "a complete, indexed ROS 1 bag (format 2.0)",
+                f"{type(exc).__name__}: {exc}",
+                "re-record it, or run `rosbag reindex` on it (a recorder killed mid-write "
+                "leaves a bag without its index)",
+            )
+        ) from exc
+    try:
+        conns = {c.id: c for c in reader.connections if c.topic in wanted}
+        by_chunk: dict[int, dict[int, list[tuple[int, int]]]] = {}
+        for cid, c in conns.items():
+            if c.topic not in parts:
+                parts[c.topic] = _Parts(c.topic, c.msgtype, "ros1")
+            elif parts[c.topic].msgtype != c.msgtype:
+                raise _NotIndexed  # two types on one topic: the message path refuses it
+            for e in reader.indexes.get(cid, []):
+                by_chunk.setdefault(e.chunk_pos, {}).setdefault(cid, []).append((e.time, e.offset))
+        total = sum(reader.chunks[pos].datasize for pos in by_chunk) or 1
+        done = 0
+        with path.open("rb") as fh:
+            for pos in sorted(by_chunk):
+                chunk = reader.chunks[pos]
+                fh.seek(chunk.datapos)
+                try:
+                    data = bytes(chunk.decompressor(fh.read(chunk.datasize)))
+                except Exception as exc:
+                    raise _unreadable(path, exc) from exc
+                buf = np.frombuffer(data, dtype=np.uint8)
+                for cid, entries in sorted(by_chunk[pos].items()):
+                    _bag_messages(path, data, buf, entries, parts[conns[cid].topic])
+                done += chunk.datasize
+                if progress is not None:
+                    progress(done, total)
+    finally:
+        reader.close()
+
+
+def _bag_messages(
+    path: Path,
+    data: bytes,
+    buf: NDArray[np.uint8],
+    entries: list[tuple[int, int]],
+    part: _Parts,
+) -> None:
+    """One connection's messages in one decompressed chunk: a record is a uint32 header
+    length, the header (``op=0x02`` for message data), a uint32 data length, the data."""
+    arr = np.array(sorted(entries, key=lambda e: e[0]), dtype=np.int64).reshape(-1, 2)
+    times, offsets = arr[:, 0], arr[:, 1]
+    if offsets.size == 0:
+        return
+    if offsets.max() + 4 > buf.size:
+        raise _unreadable(path, ValueError("an index entry points past its chunk"))
+    header = _gather_u32(buf, offsets)
+    if np.any(offsets + 8 + header > buf.size):
+        raise _unreadable(path, ValueError("a record runs past its chunk"))
+    for off, n in zip(offsets.tolist(), header.tolist(), strict=True):
+        if data.find(b"op=\x02", off + 4, off + 4 + n) < 0:
+            raise _NotIndexed  # a connection record first, or worse: the message path decides
+    length = _gather_u32(buf, offsets + 4 + header)
+    start = offsets + 8 + header
+    if np.any(start + length > buf.size):
+        raise _unreadable(path, ValueError("a message runs past its chunk"))
+    part.add(times, Payloads(buf, start, length), f"topic {part.name}")
