@@ -229,6 +229,27 @@ def peak_rss(bag: Path, path: str) -> dict[str, float]:
     return {"rise_mb": _vm("VmHWM") - ready, "wall_s": wall, "cpu_s": cpu}
 
 
+def per_type(bag: Path) -> list[tuple[str, str, int, float, float]]:
+    """Each topic's payloads (as iter_messages gives them) decoded by the reference and by
+    the bulk decoder: (topic, type, messages, reference CPU [s], bulk CPU [s]), median of 3."""
+    from amsfe_sym.logs import decode
+    from amsfe_sym.logs.source import iter_messages
+
+    by: dict[tuple[str, str], list[bytes]] = {}
+    for m in iter_messages(bag, set(TOPICS)):
+        by.setdefault((m.topic, m.msgtype), []).append(m.raw)
+    rows = []
+    for (topic, msgtype), raws in sorted(by.items()):
+        bulk = decode.DECODERS[msgtype]
+        ref = getattr(decode, "_reference_" + bulk.__name__.removeprefix("decode_"))
+        cpu = [
+            statistics.median(_timed(lambda f=f, r=raws: f(r))[0][1] for _ in range(3))
+            for f in (ref, bulk)
+        ]
+        rows.append((topic, msgtype, len(raws), cpu[0], cpu[1]))
+    return rows
+
+
 def ros1_bag(out: Path, count: int = 60_000) -> dict[str, float]:
     """A ROS 1 bag of ``count`` 9-joint JointStates at 1 kHz (franka_ros' /joint_states shape,
     random values, seed 0): CPU time [s] of read_topics against rosbags' bag reader followed
@@ -288,6 +309,12 @@ def main() -> None:
     )
     bags = write_logs(Path(args.out))
     for name, bag in bags.items():
+        print(f"\n{name}: decoding per type, CPU (reference -> bulk):")
+        for topic, msgtype, count, ref, bulk in per_type(bag):
+            print(
+                f"  {topic:16s} {msgtype:32s} {count:6d} msgs  {1e6 * ref / count:6.1f} -> "
+                f"{1e6 * bulk / count:5.2f} us a message ({ref / max(bulk, 1e-9):.0f}x)"
+            )
         m = measure(bag, args.repeat)
         d = m["duration_s"]
         before = m["read_log"] + m["per-tick"]

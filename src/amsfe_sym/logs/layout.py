@@ -57,7 +57,7 @@ class Payloads(Sequence[bytes]):
         """Payloads given one by one."""
         lengths = np.fromiter((len(r) for r in raws), dtype=np.int64, count=len(raws))
         offsets = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
-        buffer = np.frombuffer(b"".join(bytes(r) for r in raws), dtype=np.uint8)
+        buffer = np.frombuffer(b"".join(raws), dtype=np.uint8)
         return cls(buffer, offsets[: len(raws)], lengths)
 
     def __len__(self) -> int:
