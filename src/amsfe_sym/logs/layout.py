@@ -71,7 +71,11 @@ class Payloads(Sequence[bytes]):
 
     def rows(self, index: IntArray, length: int) -> NDArray[np.uint8]:
         """Payloads ``index`` (all ``length`` bytes long) as a (len(index), length) array."""
-        return self.buffer[self.offsets[index][:, None] + np.arange(length)]
+        if length == 0:
+            return np.zeros((len(index), 0), dtype=np.uint8)
+        # rows of a sliding-window view: no (rows x length) index array, one copy of the bytes
+        windows = np.lib.stride_tricks.sliding_window_view(self.buffer, length)
+        return np.asarray(windows[self.offsets[index]])
 
 
 MAX_LAYOUTS = 16
