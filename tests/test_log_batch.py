@@ -163,3 +163,24 @@ def test_progress_bars_change_nothing(logs, capsys) -> None:
         est = build_estimator(sc, lib, sensors, log.z[0], compiled=True)
         shown = estimate_log(log, est, batch=batch, progress=True)
         _same(shown, plain)
+
+
+@pytest.mark.parametrize("name", ["naive", "replay", "cloning"])
+def test_batch_equals_per_tick_with_the_encoder_gate_on(name: str, logs, monkeypatch) -> None:
+    """Encoder samples gated out (a gate at p = 0.5 refuses about half): counted, and their
+    NIS kept, the same on both paths (replay re-filters the gated steps after a frame)."""
+    from amsfe_sym.sim import builders
+
+    plain = builders.filter_config
+    monkeypatch.setattr(
+        builders,
+        "filter_config",
+        lambda sc, timing: dataclasses.replace(plain(sc, timing), encoder_gate_probability=0.5),
+    )
+    sc, lib, _, log = logs[name]
+    batch = _estimate(sc, lib, log, batch=True)
+    per_tick = _estimate(sc, lib, log, batch=False)
+    _same(batch, per_tick)
+    gated = batch.counters["encoder_rejected"]
+    assert 0.2 * log.K < gated < 0.8 * log.K
+    assert np.isfinite(batch.encoder_nis[1:]).all()
