@@ -150,6 +150,19 @@ def test_run_log_refuses_a_used_estimator(logs) -> None:
 
     with pytest.raises(ConfigError, match="fresh estimator"):
         run_log(est, log.u, log.z, np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 2)))
+    # arrays of the wrong shape are refused before the C call reads them
+    from amsfe_sym.errors import ShapeError
+
+    fresh = build_estimator(sc, lib, sensors, log.z[0], compiled=True)
+    none_i, none_z = np.zeros(0, np.int64), np.zeros((0, 2))
+    for u, z in ((log.u[:, :1], log.z), (log.u, log.z[:-1]), (log.u[0], log.z)):
+        with pytest.raises(ShapeError):
+            run_log(fresh, u, z, none_i, none_i, none_z)
+    with pytest.raises(ShapeError):
+        run_log(fresh, log.u, log.z, np.zeros(2, np.int64), np.zeros(2, np.int64), none_z)
+    with pytest.raises(ShapeError):
+        run_log(fresh, log.u, log.z, none_i, none_i, none_z, truth=np.zeros((3, 3)))
+    assert fresh.k == fresh.k0  # nothing ran
     # estimate_log steps it from Python instead (the per-tick path takes any state)
     assert estimate_log(log, est, progress=False).x_hat.shape == (log.K, est.nx)
 

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.errors import ConfigError, ShapeError, describe
 from amsfe_sym.runtime.cheader import c_struct
 from amsfe_sym.runtime.compiled_estimator import STATUS, CompiledEstimator
 
@@ -27,13 +27,13 @@ _LogOut = c_struct("_LogOut", "amsfe_runtime.h", "amsfe_est_log_out")
 
 @dataclass
 class BatchResult:
-    """What :meth:`CompiledEstimator.run_log` computed (K ticks, F frames).
+    """What :func:`run_log` computed (K ticks, F frames).
 
     Attributes:
         x_hat: x(k|k) per tick, (K, N).
         P_diag: The diagonal of P(k|k), (K, N).
-        encoder_nis: NIS of each tick's encoder update (eq. 16's innovation), (K,); NaN
-            where there was none.
+        encoder_nis: NIS of each tick's encoder innovation (eqs. 15-17), (K,); NaN where no
+            sample reached the update (a gated one keeps its NIS).
         encoder_accepted: The encoder update was applied, (K,).
         nees: e^T P^-1 e against the truth, (K,), or None without one.
         frame_nis: NIS of each frame that reached its update, (F,); NaN otherwise.
@@ -60,22 +60,26 @@ def run_log(
     progress: Callable[[int], None] | None = None,
     chunk: int = 2000,
 ) -> BatchResult:
-    """A whole log in C (``amsfe_est_run``): the numbers of :meth:`step` called per tick.
+    """A whole log in C (``amsfe_est_run``): the numbers of ``est.step`` called per tick.
 
-    Tick 0 records the current posterior; tick k >= 1 is ``step(u[k-1], z[k] or None,
+    Tick 0 records the current posterior; tick k >= 1 is ``est.step(u[k-1], z[k] or None,
     frames arriving at k)``.  The estimator must be fresh (``k == k0``, as built or
-    reset); it is left at the last tick.
+    reset); it is left at the last tick (its ``x``, ``P``, ``k`` and the exposures used).
 
     Args:
+        est: A compiled estimator (its C object runs the log; this module is its friend
+            and reads its handle).
         u: (K, n) input over [k, k+1] [N m].
         z: (K, 2n) encoder samples [rad, rad/s]; a row holding NaN: none.
         frame_exposure, frame_arrival: (F,) exposure and arrival ticks, arrival sorted.
         frame_z: (F, 2) pixels [px].
         truth: (K, N) true state for the NEES, or None.
         progress: Called with the ticks done after each ``chunk`` of them.
+        chunk: Ticks per C call.
 
     Raises:
         ConfigError: the estimator is not fresh, or the frames are not sorted by arrival.
+        ShapeError: an array of another shape than one row per tick or per frame.
         EstimatorError: the runtime failed at a tick (its step named).
     """
     if est.k != est.k0:
@@ -87,7 +91,23 @@ def run_log(
                 "call reset() first",
             )
         )
-    K, N = int(u.shape[0]), est.nx
+    u, z = np.asarray(u, dtype=np.float64), np.asarray(z, dtype=np.float64)
+    K, N, n = int(u.shape[0]) if u.ndim else 0, est.nx, int(est.dims.n)
+    F = int(np.size(frame_arrival))
+    shapes = {
+        "u": (u.shape, (K, n)),
+        "z": (z.shape, (K, 2 * n)),
+        "frame_exposure": (np.shape(frame_exposure), (F,)),
+        "frame_z": (np.shape(frame_z), (F, 2)),
+    }
+    if truth is not None:
+        shapes["truth"] = (np.shape(truth), (K, N))
+    for name, (found, expected) in shapes.items():
+        if tuple(found) != expected:  # the C call reads these sizes: never guess
+            raise ShapeError(
+                describe(f"run_log {name}", f"shape {expected}", f"shape {found}", "pass "
+                         "one row per tick (u, z, truth) and one per frame")
+            )  # fmt: skip
     arrival = np.ascontiguousarray(frame_arrival, dtype=np.int64)
     if arrival.size and np.any(np.diff(arrival) < 0):
         raise ConfigError(
@@ -101,7 +121,6 @@ def run_log(
         np.ascontiguousarray(frame_z, dtype=np.float64).reshape(-1, 2),
     ]
     tr = None if truth is None else np.ascontiguousarray(truth, dtype=np.float64)
-    F = int(arrival.size)
     out = BatchResult(
         np.zeros((K, N)),
         np.zeros((K, N)),
