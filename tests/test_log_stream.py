@@ -264,3 +264,37 @@ def test_a_damaged_ros1_bag_is_refused_in_one_line(tmp_path: Path) -> None:
     with pytest.raises(LogError) as exc:
         read_topics(cut, TOPICS)
     assert "\n" not in str(exc.value)
+
+
+def test_damaged_bytes_give_columns_or_one_line(bag: Path, tmp_path: Path) -> None:
+    """Random bytes overwritten anywhere in the MCAP: read_topics returns columns or raises
+    LogError (one line), never another exception."""
+    data = next(bag.glob("*.mcap")).read_bytes()
+    rng = np.random.default_rng(7)
+    for i in range(25):
+        broken = bytearray(data)
+        at = int(rng.integers(0, len(data) - 16))
+        broken[at : at + 16] = rng.integers(0, 256, 16, dtype=np.uint8).tobytes()
+        path = tmp_path / f"d{i}.mcap"
+        path.write_bytes(bytes(broken))
+        try:
+            read_topics(path, TOPICS, progress=False)
+        except LogError as exc:
+            assert "\n" not in str(exc)
+
+
+@pytest.mark.parametrize("compression", ["none", "bz2"])
+def test_damaged_ros1_bytes_give_columns_or_one_line(tmp_path: Path, compression: str) -> None:
+    data = _ros1_bag(tmp_path / "arm.bag", compression, 20000).read_bytes()
+    rng = np.random.default_rng(5)
+    for i in range(30):
+        broken = bytearray(data)
+        low = 0 if i % 2 else max(0, len(data) - 4000)  # half of them in the index at the end
+        at = int(rng.integers(low, len(data) - 8))
+        broken[at : at + 8] = rng.integers(0, 256, 8, dtype=np.uint8).tobytes()
+        path = tmp_path / f"d{i}.bag"
+        path.write_bytes(bytes(broken))
+        try:
+            read_topics(path, TOPICS | {"/joint_states"}, progress=False)
+        except LogError as exc:
+            assert "\n" not in str(exc)

@@ -257,6 +257,9 @@ def _read_messages(path: Path, wanted: set[str], progress: Progress | None) -> d
 
 # ---------------------------------------------------------------------- MCAP, chunk by chunk
 _MESSAGE_HEADER = 1 + 8 + 2 + 4 + 8 + 8  # opcode, length, channel, sequence, two times
+#: The largest decompressed chunk taken [bytes] (recorders write ~1-10 MB; a larger figure in
+#: a summary is damage, not a chunk to allocate).
+_MAX_CHUNK = 1 << 31
 
 
 def _unreadable(path: Path, exc: BaseException) -> LogError:
@@ -332,6 +335,16 @@ def _read_mcap(
     chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
     if any(not c.message_index_offsets for c in chunks if c.uncompressed_size):
         raise _NotIndexed
+    size = path.stat().st_size
+    for c in chunks:  # the summary's numbers decide what is read: check them first
+        end = c.chunk_start_offset + c.chunk_length
+        index_end = end + c.message_index_length
+        if not (
+            0 < c.chunk_start_offset < end <= index_end <= size
+            and all(end <= off < index_end for off in c.message_index_offsets.values())
+            and 0 <= c.uncompressed_size <= _MAX_CHUNK
+        ):
+            raise _unreadable(path, ValueError(f"a chunk index out of the file: {c}"))
     total = sum(c.chunk_length for c in chunks)
     done = 0
     with path.open("rb") as fh:
@@ -371,7 +384,7 @@ def _chunk(
             pairs = np.frombuffer(record, dtype="<u8", count=count // 8, offset=rel + 15)
             times = pairs[0::2].astype(np.int64)
             offsets = pairs[1::2].astype(np.int64)
-            if offsets.size and (offsets.max() + _MESSAGE_HEADER > buf.size):
+            if offsets.size and (offsets.min() < 0 or offsets.max() + _MESSAGE_HEADER > buf.size):
                 raise ValueError("a message index points past its chunk")
             lengths = _gather_u64(buf, offsets + 1) - (_MESSAGE_HEADER - 9)
             if np.any(buf[offsets] != 0x05) or np.any(lengths < 0):
