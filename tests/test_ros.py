@@ -192,11 +192,12 @@ def test_oracle_controller_refused(paper: Any) -> None:
 
 # ---------------------------------------------------------------------- over real DDS
 def _ros_env(tmp: Path) -> dict[str, str]:
-    """The environment of one test's processes: its own ROS_DOMAIN_ID (from the xdist worker
+    """The environment of one test's processes: its own ROS_DOMAIN_ID (from the process id
     and a counter, in 1..101), localhost discovery only, logs in ``tmp``."""
     pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (pip install -e '.[ros]')")
-    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw")
-    domain = 1 + (int(worker or 0) * 17 + next(_COUNTER)) % 101
+    # from the process id and a counter: two test runs on one machine (two xdist workers, or
+    # two checkouts) must not share a domain, or one's arm hears the other's commands
+    domain = 1 + (os.getpid() * 37 + next(_COUNTER)) % 101
     env = dict(os.environ)
     env.update(
         ROS_DOMAIN_ID=str(domain),

@@ -13,33 +13,43 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import LogError, describe
+from amsfe_sym.logs.layout import (
+    Encoding,
+    Payloads,
+    UnusualError,
+    Walk,
+    groups,
+    walk_float64_array,
+    walk_joint_state,
+    walk_point,
+)
 
 __all__ = [
+    "DECODERS",
     "Encoding",
     "Float64Arrays",
     "JointStates",
+    "Payloads",
     "Points",
     "Strings",
+    "concat_decoded",
     "decode_float64_arrays",
     "decode_joint_states",
+    "decode_payloads",
     "decode_points",
     "decode_strings",
     "deserialize",
     "typestore",
-    "typestore_ros1",
 ]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-
-#: How payloads are serialized: ``cdr`` (ROS 2: rosbag2, MCAP) or ``ros1`` (a ROS 1 ``.bag``).
-Encoding = Literal["cdr", "ros1"]
 
 
 @dataclass
@@ -89,30 +99,18 @@ class Strings:
     data: list[str]
 
 
-_STORE: Any = None
-_STORE_ROS1: Any = None
+_STORES: dict[str, Any] = {}
 
 
-def typestore() -> Any:
-    """The ROS 2 (Humble) standard message definitions of ``rosbags``."""
-    global _STORE
-    if _STORE is None:
+def typestore(encoding: Encoding = "cdr") -> Any:
+    """``rosbags``' standard message definitions: ROS 2 (Humble) for ``cdr``, ROS 1 (Noetic,
+    whose ``std_msgs/Header`` starts with a ``uint32 seq``) for ``ros1``."""
+    if encoding not in _STORES:
         from rosbags.typesys import Stores, get_typestore
 
-        _STORE = get_typestore(Stores.ROS2_HUMBLE)
-    return _STORE
-
-
-def typestore_ros1() -> Any:
-    """The ROS 1 (Noetic) standard message definitions of ``rosbags``: a ROS 1 ``Header``
-    carries ``seq`` before its stamp, so ROS 1 payloads are decoded with these (same type
-    names, ``sensor_msgs/msg/JointState``; same field names)."""
-    global _STORE_ROS1
-    if _STORE_ROS1 is None:
-        from rosbags.typesys import Stores, get_typestore
-
-        _STORE_ROS1 = get_typestore(Stores.ROS1_NOETIC)
-    return _STORE_ROS1
+        store = Stores.ROS1_NOETIC if encoding == "ros1" else Stores.ROS2_HUMBLE
+        _STORES[encoding] = get_typestore(store)
+    return _STORES[encoding]
 
 
 def deserialize(raw: bytes, msgtype: str, encoding: Encoding = "cdr", where: str = "") -> Any:
@@ -123,8 +121,8 @@ def deserialize(raw: bytes, msgtype: str, encoding: Encoding = "cdr", where: str
     """
     try:
         if encoding == "ros1":
-            return typestore_ros1().deserialize_ros1(raw, msgtype)
-        return typestore().deserialize_cdr(raw, msgtype)
+            return typestore("ros1").deserialize_ros1(raw, msgtype)
+        return typestore("cdr").deserialize_cdr(raw, msgtype)
     except Exception as exc:  # rosbags' SerdeError and friends: one line, not a trace
         raise LogError(
             describe(
@@ -147,7 +145,7 @@ def _padded(rows: Sequence[FloatArray], width: int) -> FloatArray:
     return out
 
 
-def decode_joint_states(
+def _reference_joint_states(
     raws: Sequence[bytes], encoding: Encoding = "cdr", where: str = ""
 ) -> JointStates:
     """``sensor_msgs/msg/JointState`` payloads -> :class:`JointStates`.
@@ -185,7 +183,7 @@ def decode_joint_states(
     )
 
 
-def decode_points(raws: Sequence[bytes], encoding: Encoding = "cdr", where: str = "") -> Points:
+def _reference_points(raws: Sequence[bytes], encoding: Encoding = "cdr", where: str = "") -> Points:
     """``geometry_msgs/msg/PointStamped`` payloads -> :class:`Points`."""
     t = "geometry_msgs/msg/PointStamped"
     stamps, xyz = np.zeros(len(raws), np.int64), np.zeros((len(raws), 3))
@@ -196,7 +194,7 @@ def decode_points(raws: Sequence[bytes], encoding: Encoding = "cdr", where: str 
     return Points(stamps, xyz)
 
 
-def decode_float64_arrays(
+def _reference_float64_arrays(
     raws: Sequence[bytes], encoding: Encoding = "cdr", where: str = ""
 ) -> Float64Arrays:
     """``std_msgs/msg/Float64MultiArray`` payloads -> :class:`Float64Arrays`."""
@@ -206,6 +204,151 @@ def decode_float64_arrays(
     return Float64Arrays(_padded(rows, int(counts.max(initial=0))), counts)
 
 
-def decode_strings(raws: Sequence[bytes], encoding: Encoding = "cdr", where: str = "") -> Strings:
+def _reference_strings(
+    raws: Sequence[bytes], encoding: Encoding = "cdr", where: str = ""
+) -> Strings:
     """``std_msgs/msg/String`` payloads -> :class:`Strings`."""
     return Strings([str(deserialize(r, "std_msgs/msg/String", encoding, where).data) for r in raws])
+
+
+def decode_joint_states(
+    raws: Sequence[bytes], encoding: Encoding = "cdr", where: str = ""
+) -> JointStates:
+    """``sensor_msgs/msg/JointState`` payloads -> :class:`JointStates` (in bulk; the same
+    arrays as the reference, ``_reference_joint_states``).
+
+    Raises:
+        LogError: a payload that does not decode.
+    """
+    found = groups(raws, encoding, walk_joint_state) if raws else []
+    if found is None:
+        return _reference_joint_states(raws, encoding, where)
+    M = len(raws)
+    first: dict[tuple[str, ...], int] = {}  # names -> the first row carrying them
+    for g in found:
+        first[g.layout.names] = min(first.get(g.layout.names, M), int(g.rows[0]))
+    names = sorted(first, key=first.__getitem__)
+    order = {n: i for i, n in enumerate(names)}
+    counts = np.zeros((M, 3), np.int64)
+    for g in found:
+        counts[g.rows] = [c for _, c in g.layout.arrays]
+    width = max([len(n) for n in names] + [int(counts.max(initial=0))])
+    stamps, index = np.zeros(M, np.int64), np.zeros(M, np.int64)
+    fields = [np.full((M, width), np.nan) for _ in range(3)]
+    for g in found:
+        stamps[g.rows] = g.stamps()
+        index[g.rows] = order[g.layout.names]
+        for i, out in enumerate(fields):
+            count = g.layout.arrays[i][1]
+            if count:
+                out[g.rows, :count] = g.float64s(i)
+    return JointStates(stamps, names, index, fields[0], fields[1], fields[2], counts)
+
+
+def decode_points(raws: Sequence[bytes], encoding: Encoding = "cdr", where: str = "") -> Points:
+    """``geometry_msgs/msg/PointStamped`` payloads -> :class:`Points` (in bulk)."""
+    found = groups(raws, encoding, walk_point) if raws else []
+    if found is None:
+        return _reference_points(raws, encoding, where)
+    stamps, xyz = np.zeros(len(raws), np.int64), np.zeros((len(raws), 3))
+    for g in found:
+        stamps[g.rows] = g.stamps()
+        xyz[g.rows] = g.float64s(0)
+    return Points(stamps, xyz)
+
+
+def decode_float64_arrays(
+    raws: Sequence[bytes], encoding: Encoding = "cdr", where: str = ""
+) -> Float64Arrays:
+    """``std_msgs/msg/Float64MultiArray`` payloads -> :class:`Float64Arrays` (in bulk)."""
+    found = groups(raws, encoding, walk_float64_array) if raws else []
+    if found is None:
+        return _reference_float64_arrays(raws, encoding, where)
+    counts = np.zeros(len(raws), np.int64)
+    for g in found:
+        counts[g.rows] = g.layout.arrays[0][1]
+    values = np.full((len(raws), int(counts.max(initial=0))), np.nan)
+    for g in found:
+        count = g.layout.arrays[0][1]
+        if count:
+            values[g.rows, :count] = g.float64s(0)
+    return Float64Arrays(values, counts)
+
+
+def decode_strings(raws: Sequence[bytes], encoding: Encoding = "cdr", where: str = "") -> Strings:
+    """``std_msgs/msg/String`` payloads -> :class:`Strings` (each walked without rosbags)."""
+    out = []
+    for raw in raws:
+        try:
+            w = Walk(raw, encoding)
+            out.append(w.string())
+            w.finish()
+        except UnusualError:
+            return _reference_strings(raws, encoding, where)
+    return Strings(out)
+
+
+#: The bulk decoder of each message type.
+DECODERS: dict[str, Any] = {
+    "sensor_msgs/msg/JointState": decode_joint_states,
+    "geometry_msgs/msg/PointStamped": decode_points,
+    "std_msgs/msg/Float64MultiArray": decode_float64_arrays,
+    "std_msgs/msg/String": decode_strings,
+}
+
+
+def decode_payloads(
+    msgtype: str, raws: Sequence[bytes], encoding: Encoding = "cdr", where: str = ""
+) -> JointStates | Points | Float64Arrays | Strings | None:
+    """The payloads of one topic by its type's decoder; None for a type without one."""
+    fn = DECODERS.get(msgtype)
+    return None if fn is None else fn(raws, encoding, where)
+
+
+def _pad(a: FloatArray, width: int) -> FloatArray:
+    if a.shape[1] == width:
+        return a
+    out = np.full((a.shape[0], width), np.nan)
+    out[:, : a.shape[1]] = a
+    return out
+
+
+def concat_decoded(parts: Sequence[Any]) -> Any:
+    """Decoded slices of one topic (one type), joined as if decoded in one call."""
+    first = parts[0]
+    if isinstance(first, Strings):
+        return Strings([s for p in parts for s in p.data])
+    if isinstance(first, Points):
+        return Points(
+            np.concatenate([p.stamp_ns for p in parts]), np.concatenate([p.xyz for p in parts])
+        )
+    if isinstance(first, Float64Arrays):
+        width = max(p.values.shape[1] for p in parts)
+        return Float64Arrays(
+            np.concatenate([_pad(p.values, width) for p in parts]),
+            np.concatenate([p.counts for p in parts]),
+        )
+    names: list[tuple[str, ...]] = []
+    seen: dict[tuple[str, ...], int] = {}
+    index = []
+    for p in parts:
+        for n in p.names:
+            if n not in seen:
+                seen[n] = len(names)
+                names.append(n)
+        remap = np.array([seen[n] for n in p.names] or [0], np.int64)
+        index.append(remap[p.names_index])
+    width = max(p.position.shape[1] for p in parts)
+
+    def joined(f: str) -> FloatArray:
+        return np.concatenate([_pad(getattr(p, f), width) for p in parts])
+
+    return JointStates(
+        np.concatenate([p.stamp_ns for p in parts]),
+        names,
+        np.concatenate(index),
+        joined("position"),
+        joined("velocity"),
+        joined("effort"),
+        np.concatenate([p.counts for p in parts]),
+    )

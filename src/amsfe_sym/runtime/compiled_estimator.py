@@ -43,6 +43,7 @@ __all__ = [
     "CompiledEstimator",
     "RuntimeDiagnostics",
     "estimator_log_lines",
+    "frame_reason",
     "log_numbers",
     "make_compiled_estimator",
     "write_log",
@@ -95,6 +96,7 @@ def _bind(cdll: ctypes.CDLL) -> dict[str, Any]:
         "amsfe_status_string": (ctypes.c_char_p, [ctypes.c_int]),
         "amsfe_est_set_inverse_tolerance": (ctypes.c_int, [_P, ctypes.c_double]),
         "amsfe_est_inverse_residual": (None, [_P, _P, _P]),
+        "amsfe_est_run": (ctypes.c_int, [_P, _P, ctypes.c_long, ctypes.c_long, _P]),
     }
     out = {}
     for name, (restype, argtypes) in spec.items():
@@ -302,23 +304,8 @@ class CompiledEstimator(Estimator):
             raise self._error(f"camera frame kappa={kappa}", status)
         if status in (STATUS["ok"], STATUS["gated"]):
             report.frame_result(kappa, status == STATUS["ok"], nis, self._gate_camera)
-        elif status == STATUS["refused_indefinite"]:
-            report.reject(
-                f"camera frame kappa={kappa} (lag {self.k + 1 - kappa}): the A1 update gives an "
-                "indefinite covariance (the one-step retrodiction does not hold over this lag; "
-                "use 'replay' or 'cloning')"
-            )
-        elif status == STATUS["refused_no_convergence"]:
-            residual, limit = ctypes.c_double(), ctypes.c_double()
-            self._c["amsfe_est_inverse_residual"](
-                self._h, ctypes.byref(residual), ctypes.byref(limit)
-            )
-            report.reject(
-                f"camera frame kappa={kappa} (lag {self.k + 1 - kappa}): "
-                + inverse_not_converged(residual.value, limit.value)
-            )
         else:
-            report.reject(f"camera frame kappa={kappa}: {self.status_string(status)}")
+            report.reject(frame_reason(self, status, kappa))
 
     def _check_covariance(self) -> None:
         """Done by the runtime after every call (a failure is an error status)."""
@@ -330,6 +317,26 @@ class CompiledEstimator(Estimator):
         self._ungated_outlier = None
         self.k = self.k0
         self._fetch()
+
+
+def frame_reason(est: CompiledEstimator, status: int, kappa: int) -> str:
+    """Why the runtime refused a frame (``status`` of ``amsfe_est_camera_frame``, not ok or
+    gated), in the words of the Python estimators (``sim.result.refusal_kind`` counts them)."""
+    if status == STATUS["gated"]:
+        return f"camera frame kappa={kappa} gated out"
+    if status == STATUS["refused_indefinite"]:
+        return (
+            f"camera frame kappa={kappa} (lag {est.k + 1 - kappa}): the A1 update gives an "
+            "indefinite covariance (the one-step retrodiction does not hold over this lag; "
+            "use 'replay' or 'cloning')"
+        )
+    if status == STATUS["refused_no_convergence"]:
+        residual, limit = ctypes.c_double(), ctypes.c_double()
+        est._c["amsfe_est_inverse_residual"](est._h, ctypes.byref(residual), ctypes.byref(limit))
+        return f"camera frame kappa={kappa} (lag {est.k + 1 - kappa}): " + inverse_not_converged(
+            residual.value, limit.value
+        )
+    return f"camera frame kappa={kappa}: {est.status_string(status)}"
 
 
 def _subclass(name: str, code: int, uses_frames: bool = True) -> type[CompiledEstimator]:

@@ -154,6 +154,42 @@ int amsfe_est_set_inverse_tolerance(amsfe_est *est, double tol);
  * either pointer may be NULL). */
 void amsfe_est_inverse_residual(const amsfe_est *est, double *residual, double *limit);
 
+/* ---- a whole recorded log in one call (logs/replay.py's batch path; docs/logs.md, "Speed").
+ * Tick k of the log is step k of the estimator's posterior x(k|k) (k0 = 0 for a log read from
+ * its first encoder sample). */
+typedef struct {
+  long K;                     /* ticks t_0 .. t_{K-1} */
+  const double *u;            /* [K x n] u(k) applied over [k, k+1] [N m] (row K-1 unused) */
+  const double *z;            /* [K x ne] encoder sample at k; a row holding NaN: none (a gap) */
+  const double *truth;        /* [K x N] true state (NEES), or NULL; a row holding NaN: none */
+  long n_frames;              /* camera frames, sorted by arrival tick (non-decreasing) */
+  const long *frame_exposure; /* [n_frames] exposure step kappa */
+  const long *frame_arrival;  /* [n_frames] tick at which the frame is delivered (>= kappa) */
+  const double *frame_z;      /* [n_frames x 2] pixel [px] */
+} amsfe_est_log;
+
+/* Where amsfe_est_run writes (row-major, one row per tick; nees may be NULL). */
+typedef struct {
+  double *x_hat, *P_diag;          /* [K x N] x(k|k) and the diagonal of P(k|k) */
+  double *encoder_nis;             /* [K] NIS of the encoder update; NaN where none */
+  unsigned char *encoder_accepted; /* [K] the encoder update was applied */
+  double *nees;                    /* [K] e^T P^-1 e against truth (NaN where none) */
+  double *frame_nis;               /* [n_frames] NIS of a frame that reached its update, NaN */
+  int *frame_status;               /* [n_frames] its status, the screening's included */
+  long failed_step;                /* the tick whose call returned an error status, else -1 */
+} amsfe_est_log_out;
+
+/* Ticks k_begin <= k < k_end of a log: row 0 records the posterior the estimator holds (call
+ * with k_begin = 0 on a fresh or reset estimator), every later tick is one amsfe_est_tick with
+ * u(k-1) and z(k), then the frames arriving at k screened as the Python estimators do (a
+ * non-finite pixel: AMSFE_REFUSED_NONFINITE; an exposure used already or twice in the tick:
+ * AMSFE_REFUSED_DUPLICATE; older than buffer_steps: AMSFE_REFUSED_TOO_OLD) and the others
+ * given to amsfe_est_camera_frame in increasing exposure step (frames arriving at tick 0 are
+ * not used).  Call it again with the next range to go on (a progress bar).  Returns AMSFE_OK,
+ * or the first error status (out->failed_step says where; the rows before it are written). */
+int amsfe_est_run(amsfe_est *est, const amsfe_est_log *log, long k_begin, long k_end,
+                  amsfe_est_log_out *out);
+
 /* A short English name of a status. */
 const char *amsfe_status_string(int status);
 
