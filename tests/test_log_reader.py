@@ -470,16 +470,34 @@ def test_issue25_log_cases_are_refused_by_name(res, tmp_path, capsys) -> None:
     log = write_log(tmp_path / "twice", twice, "mcap")
     with pytest.raises(LogError, match="more than once"):
         _read(res, log, LogSpec(effort_kind="applied"))
-    # an effort that starts after the encoders: a fix, never an empty "Fix:"
+    # an effort that starts after the encoders: the log starts at its first sample (counted);
+    # an effort with no finite value: refused with a fix, never an empty "Fix:"
     late = [
         Ev(e.t, e.topic, JS, e.stamp, e.names, e.position, e.velocity, e.effort if k > 20 else ())
         for k, e in enumerate(ev)
     ]
-    with pytest.raises(LogError, match="Fix: cut the log") as info:
-        named = LogSpec(
-            effort="/joint_states", explicit=frozenset({"effort"}), effort_kind="applied"
+    named = LogSpec(effort="/joint_states", explicit=frozenset({"effort"}), effort_kind="applied")
+    got = _read(res, write_log(tmp_path / "late", late, "mcap"), named)
+    why = "sample before the first effort sample (the log starts there)"
+    assert got.usage["encoders"].skipped == {why: 21}
+    assert len(ev) - 21 == got.K and np.array_equal(got.z[0], res.z_enc[21])
+    assert np.array_equal(got.u, res.u[21 : len(ev)])
+    assert late[21].stamp is not None and abs(got.t0_ns - late[21].stamp * 1e9) < 1e3  # [ns]
+    nan_effort = [
+        Ev(
+            e.t,
+            e.topic,
+            JS,
+            e.stamp,
+            e.names,
+            e.position,
+            e.velocity,
+            np.full(len(e.names), np.nan),
         )
-        _read(res, write_log(tmp_path / "late", late, "mcap"), named)
+        for e in ev
+    ]
+    with pytest.raises(LogError, match=r"Fix: fix the topic") as info:
+        _read(res, write_log(tmp_path / "nan", nan_effort, "mcap"), named)
     assert "\n" not in str(info.value)
     del T
 
@@ -696,7 +714,9 @@ def test_a_franka_ros_bag_from_the_recording_writer(tmp_path) -> None:
         assert np.array_equal(log.z[k], z), k
     lat = (written.log_time_ns - written.stamp_ns) * 1e-9 + written.clock_offset_s
     assert abs(log.clock.median - (np.median(lat) - written.clock_offset_s)) < 1e-6
-    assert log.effort is not None and np.array_equal(log.effort[0], motion.effort[0])
+    assert log.effort is None and log.usage["effort"].used == 0  # kind none: not used
+    jt = read_log(written.path, LogSpec(effort_kind="joint_torque"), FRANKA_ARM, T, 28)
+    assert jt.effort is not None and np.array_equal(jt.effort[0], motion.effort[0])
     # the writer's republished samples (the real recording: 19 of 987) are noted, not hidden
     rep = write_franka_like_bag(
         tmp_path / "rep.bag", motion, rng, FrankaLikeOptions(repeat_probability=0.1)

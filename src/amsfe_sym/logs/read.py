@@ -340,16 +340,38 @@ def read_log(
     same = int((z[uniq[step1 + 1]] == z[uniq[step1]]).all(axis=1).sum())
     if same:
         use.notes["identical to the previous tick's sample (republished, or at rest)"] = same
-    skipped: dict[str, int] = {}
-    missing = int(bad.sum())
-    if missing:
-        skipped["encoder samples missing (predicted through)"] = missing
-
     # ------------------------------------------------------------------ effort: hold by stamp
     effort: FloatArray | None = None
-    if "effort" in present:
-        effort = held_effort(path, plan, spec, times, decoded, grid, clock, K, usage["effort"], n)
+    if "effort" in present and plan.effort_kind == "none":
+        eu = usage["effort"]
+        count_skip(eu, "not used: effort kind none (say [effort] kind to use it)", eu.messages)
+    elif "effort" in present:
+        effort, first = held_effort(
+            path, plan, spec, times, decoded, grid, clock, K, usage["effort"], n
+        )
+        if first > 0:  # the effort starts later than the encoders: so does the log
+            finite = np.flatnonzero(np.isfinite(z).all(axis=1))
+            later = finite[finite >= first]
+            if later.size < 2:
+                raise refuse(
+                    f"log {path}: {plan.roles['effort']} (effort)",
+                    "effort samples over the encoders' ticks",
+                    f"the first effort at tick {first}, {later.size} encoder samples after it",
+                    'record the effort from the start, or say [effort] kind = "none"',
+                )
+            start = int(later[0])
+            dropped = int((finite < start).sum())
+            count_skip(use, "sample before the first effort sample (the log starts there)", dropped)
+            use.used -= dropped
+            z, effort = z[start:], effort[start:]
+            t0 += round(start * T * 1e9)
+            grid = TickGrid(t0, T, spec.grid_tolerance)
+            K -= start
     u = effort if plan.effort_kind == "applied" and effort is not None else np.zeros((K, n))
+    skipped: dict[str, int] = {}
+    missing = int((~np.isfinite(z).all(axis=1)).sum())
+    if missing:
+        skipped["encoder samples missing (predicted through)"] = missing
 
     # ------------------------------------------------------------------ camera frames
     frames: list[CameraFrame] = []

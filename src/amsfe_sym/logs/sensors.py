@@ -33,7 +33,14 @@ def held_effort(
     K: int,
     use: RoleUse,
     n: int,
-) -> FloatArray:
+) -> tuple[FloatArray, int]:
+    """The effort held by stamp on the K ticks (zero-order hold to the nearest tick: the last
+    effort stamped before t_k + T/2) [N m], (K, n), NaN before the first effort sample, and
+    the first tick that has one.
+
+    Raises:
+        LogError: no effort sample with n finite values, or none before the last tick.
+    """
     topic = plan.roles["effort"]
     where = f"log {path}: {topic} (effort)"
     d = decoded[topic]
@@ -67,18 +74,19 @@ def held_effort(
     order = good[np.argsort(t_rel[good], kind="stable")]
     ts = t_rel[order]
     last = np.searchsorted(ts, np.arange(K) + 0.5, side="left") - 1
-    if last[0] < 0:
+    if last[-1] < 0:
         raise refuse(
             where,
-            "an effort sample at or before the first encoder tick",
-            f"the first effort {ts[0] * grid.T:.4f} s after it",
-            'cut the log\'s start to the first effort sample, or say [effort] kind = "none"',
+            "effort samples over the encoders' ticks",
+            f"the first effort {ts[0] * grid.T:.4f} s after the first encoder tick, past the last",
+            'fix the effort\'s stamps, or say [effort] kind = "none"',
         )
-    out = values[order[last]]
-    used = np.unique(last)
+    out = np.asarray(values[order[np.maximum(last, 0)]], dtype=np.float64)
+    out[last < 0] = np.nan  # before the first effort sample: the caller starts the log later
+    used = np.unique(last[last >= 0])
     use.used = int(used.size)
     count_skip(use, "superseded before a tick (a later one was held)", int(order.size - used.size))
-    return np.asarray(out, dtype=np.float64)
+    return out, int(np.argmax(last >= 0))
 
 
 def camera_frames(
