@@ -1,0 +1,434 @@
+"""What a log's effort is, and how the estimator uses it (issue 26, item 3).
+
+Real arms log different things under "effort":
+
+- ``"applied"``: the applied motor torque ``u`` [N m] (what this toolkit's own logs hold): it
+  is the input of ``F(x, u)`` (paper eqs. (1a)-(1d), (4)), as before.
+- ``"joint_torque"``: the measured joint (spring) torque ``tau_J = Ks (qm - q)`` [N m] of a
+  torque sensor on the link side of the elastic element (Franka Panda, KUKA iiwa).  It is a
+  measurement of the state, fused with the encoders: ``z = [qm, qmd, tau_J]``
+  (:class:`SpringTorqueMeasurement`; when ``Ks`` is a theta parameter the product
+  ``Ks (qm - q)`` is bilinear and its jacobian is exact).  ``u`` is not logged: it is
+  reconstructed from the motor side of the model, eq. (1b) (motor rows), with the trapezoid
+  rule over the step::
+
+      u(k) = Mm (qmd(k+1) - qmd(k)) / T + Fm (qmd(k) + qmd(k+1)) / 2
+             + (tau_J(k) + tau_J(k+1)) / 2
+
+  from the encoder samples, and the noise this adds is carried in the filter's motor-torque
+  process noise (:func:`input_noise_std`).  It uses the sample at ``k+1``; the estimator's step
+  ``k -> k+1`` runs when that sample arrives, so live it costs no latency.
+- ``"none"``: encoders only.  ``u`` is unknown, and so is the spring torque: the encoders
+  give the *net* motor torque ``u - Ks (qm - q) = Mm qmdd + Fm qmd`` (the same trapezoid rule
+  without ``tau_J``), and the estimator's transition is wrapped
+  (:class:`NetTorqueTransition`) so that its input is that net torque: the spring torque is
+  added from the state being predicted, ``u = u_net + Ks (qm - q)``, and the jacobian carries
+  it.  The motor rows then hold no information on the link: the link angles are observed by
+  the camera alone (docs/effort.md measures what that costs, and why the simpler design,
+  ``u = 0`` with the motor torque in the process noise, diverges).
+
+Pure numpy: the robot enters through :class:`MotorParams` (the actuators of eq. (1b)).
+docs/effort.md has the design and the measured consistency of each mode.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from amsfe_sym.errors import ConfigError, ShapeError, describe
+
+__all__ = [
+    "DEFAULT_JOINT_TORQUE_STD",
+    "EFFORT_KINDS",
+    "EffortSpec",
+    "EstimatorInputs",
+    "MotorParams",
+    "NetTorqueTransition",
+    "SpringTorqueMeasurement",
+    "encoder_dim",
+    "estimator_inputs",
+    "input_noise_std",
+    "reconstruct_input",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: What a log's effort can be (see the module docstring).
+EFFORT_KINDS = ("applied", "joint_torque", "none")
+
+#: Default 1-sigma of a joint torque sensor [N m]: the order of the Franka Panda's measured
+#: ``tau_J`` at rest (a few hundredths of a N m); ours, not a datasheet value.
+DEFAULT_JOINT_TORQUE_STD = 0.05
+
+
+@dataclass(frozen=True)
+class EffortSpec:
+    """What a log's effort column is, and the noise the estimator assumes for it.
+
+    Attributes:
+        kind: One of :data:`EFFORT_KINDS`.
+        joint_torque_std: ``joint_torque``: 1-sigma of the measured joint torque [N m].
+        unknown_torque_std: ``none``: 1-sigma [N m] of the unknown motor torque, per joint
+            (scalar or n values); ``None``: :func:`default_unknown_torque_std` of the robot.
+    """
+
+    kind: str = "applied"
+    joint_torque_std: float = DEFAULT_JOINT_TORQUE_STD
+    unknown_torque_std: float | tuple[float, ...] | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in EFFORT_KINDS:
+            raise ConfigError(
+                describe(
+                    "[effort] kind",
+                    f"one of {list(EFFORT_KINDS)}",
+                    repr(self.kind),
+                    '"applied" (motor torque), "joint_torque" (torque sensors) or "none"',
+                )
+            )
+        if not (np.isfinite(self.joint_torque_std) and self.joint_torque_std > 0):
+            raise ConfigError(
+                describe(
+                    "[effort] joint_torque_std",
+                    "a positive, finite standard deviation [N m]",
+                    repr(self.joint_torque_std),
+                    "give the torque sensor's noise, e.g. 0.05",
+                )
+            )
+
+
+@dataclass(frozen=True)
+class MotorParams:
+    """The actuator side of eq. (1b) and the state layout of eq. (2).
+
+    Attributes:
+        Ks: Spring stiffness per joint [N m/rad] (the spec's value; see ``stiffness_theta``).
+        Mm: Motor inertia, link side of the gear [kg m^2].
+        Fm: Motor viscous friction [N m s/rad].
+        T: Sample time [s].
+        p: Number of theta parameters.
+        stiffness_theta: Per joint, the index of the theta entry that holds its stiffness,
+            or -1 (then ``Ks`` is used).
+        u_max: Torque limit per joint [N m] (``inf``: none).
+    """
+
+    Ks: FloatArray
+    Mm: FloatArray
+    Fm: FloatArray
+    T: float
+    p: int = 0
+    stiffness_theta: NDArray[np.int32] = field(default_factory=lambda: np.zeros(0, np.int32))
+    u_max: FloatArray = field(default_factory=lambda: np.zeros(0))
+
+    def __post_init__(self) -> None:
+        n = np.asarray(self.Ks).size
+        for name in ("Ks", "Mm", "Fm"):
+            arr = np.asarray(getattr(self, name), dtype=float).reshape(-1)
+            if arr.size != n:
+                raise ShapeError(
+                    describe(f"MotorParams.{name}", f"{n} values", f"{arr.size}", "one per joint")
+                )
+            object.__setattr__(self, name, arr)
+        idx = np.asarray(self.stiffness_theta, dtype=np.int32).reshape(-1)
+        if idx.size == 0:
+            idx = np.full(n, -1, dtype=np.int32)
+        if idx.size != n or np.any(idx >= self.p) or np.any(idx < -1):
+            raise ShapeError(
+                describe(
+                    "MotorParams.stiffness_theta",
+                    f"{n} indices in [-1, {self.p - 1}]",
+                    repr(idx.tolist()),
+                    "use ModelLibrary.stiffness_theta_index",
+                )
+            )
+        object.__setattr__(self, "stiffness_theta", idx)
+        umax = np.asarray(self.u_max, dtype=float).reshape(-1)
+        object.__setattr__(self, "u_max", np.full(n, np.inf) if umax.size == 0 else umax)
+        if not (np.isfinite(self.T) and self.T > 0):
+            raise ConfigError(
+                describe("MotorParams.T", "a positive sample time [s]", repr(self.T), "use lib.T")
+            )
+
+    @property
+    def n(self) -> int:
+        """Number of joints."""
+        return int(self.Ks.size)
+
+    @property
+    def N(self) -> int:
+        """State size ``4n + p`` (eq. 2)."""
+        return 4 * self.n + self.p
+
+    def stiffness(self, theta: FloatArray) -> FloatArray:
+        """``Ks`` [N m/rad] with the joint-stiffness parameters read from ``theta``."""
+        Ks = self.Ks.copy()
+        mask = self.stiffness_theta >= 0
+        Ks[mask] = theta[self.stiffness_theta[mask]]
+        return Ks
+
+
+def encoder_dim(kind: str, n: int) -> int:
+    """Entries of the encoder measurement the estimator gets each step: ``2n`` ([qm, qmd]),
+    ``3n`` for ``joint_torque`` ([qm, qmd, tau_J])."""
+    return 3 * n if kind == "joint_torque" else 2 * n
+
+
+class SpringTorqueMeasurement:
+    """Encoders plus joint torque sensors: ``z = [qm, qmd, Ks (qm - q)] + v`` (eqs. (5), (1b)).
+
+    A :class:`~amsfe_sym.estimation.models.MeasurementModel`.  With a joint's stiffness a
+    theta parameter, ``h = theta_i (qm_j - q_j)`` is bilinear; its jacobian
+    (``d/dq = -theta_i``, ``d/dqm = theta_i``, ``d/dtheta_i = qm_j - q_j``) is exact.
+
+    Args:
+        motor: Actuators and layout.
+        q_var: Variance of qm [rad^2] (scalar or per joint).
+        qd_var: Variance of qmd [rad^2/s^2].
+        tau_var: Variance of the joint torque [N^2 m^2].
+    """
+
+    def __init__(
+        self, motor: MotorParams, q_var: ArrayLike, qd_var: ArrayLike, tau_var: ArrayLike
+    ) -> None:
+        n, N = motor.n, motor.N
+        self.motor = motor
+        self.dim = 3 * n
+        self.R = np.diag(
+            np.concatenate(
+                [np.broadcast_to(np.asarray(v, dtype=float), (n,)) for v in (q_var, qd_var, tau_var)]
+            )
+        )
+        self._H = np.zeros((3 * n, N))
+        self._H[:n, 2 * n : 3 * n] = np.eye(n)
+        self._H[n : 2 * n, 3 * n : 4 * n] = np.eye(n)
+        self._rows = np.arange(2 * n, 3 * n)
+        self._cols_q = np.arange(n)
+        self._cols_qm = np.arange(2 * n, 3 * n)
+
+    def predict(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Return ``(h(x), dh/dx)``: ``[qm, qmd, Ks (qm - q)]`` and its exact jacobian."""
+        m = self.motor
+        n = m.n
+        Ks = m.stiffness(x[4 * n :])
+        delta = x[2 * n : 3 * n] - x[:n]
+        H = self._H.copy()
+        H[self._rows, self._cols_q] = -Ks
+        H[self._rows, self._cols_qm] = Ks
+        for j in np.flatnonzero(m.stiffness_theta >= 0):
+            H[2 * n + j, 4 * n + m.stiffness_theta[j]] = delta[j]
+        z = np.concatenate([x[2 * n : 4 * n], Ks * delta])
+        return z, H
+
+
+def input_noise_std(
+    spec: EffortSpec, motor: MotorParams, qd_std: ArrayLike, tau_std: float | None = None
+) -> FloatArray:
+    """1-sigma [N m] of the error of the input the estimator is given, per joint.
+
+    Add it in quadrature to the filter's motor-torque noise (eq. (3)): it enters the motor
+    rows of eq. (1b) exactly where a motor torque disturbance does.
+
+    - ``applied``: 0 (the logged u is the input).
+    - ``joint_torque``: the trapezoid reconstruction of the module docstring with encoder
+      rate noise ``qd_std`` [rad/s] and torque noise ``tau_std`` [N m] (default
+      ``spec.joint_torque_std``): ``var = ((Mm/T + Fm/2)^2 + (Mm/T - Fm/2)^2) qd_std^2
+      + tau_std^2 / 2`` (successive inputs share samples; that correlation is not carried).
+    - ``none``: the same without the torque term (the net torque of :class:`NetTorqueTransition`).
+    """
+    n = motor.n
+    if spec.kind == "applied":
+        return np.zeros(n)
+    sv = np.broadcast_to(np.asarray(qd_std, dtype=float), (n,))
+    st = 0.0 if spec.kind == "none" else spec.joint_torque_std if tau_std is None else tau_std
+    a = motor.Mm / motor.T
+    var = ((a + motor.Fm / 2) ** 2 + (a - motor.Fm / 2) ** 2) * sv**2 + st**2 / 2
+    return np.sqrt(var)
+
+
+def reconstruct_input(qmd: FloatArray, tau_j: FloatArray, motor: MotorParams) -> FloatArray:
+    """The motor torque ``u(k)`` over ``[k, k+1]`` from the motor rows of eq. (1b).
+
+    ``u(k) = Mm (qmd(k+1) - qmd(k)) / T + Fm (qmd(k) + qmd(k+1)) / 2 + (tau(k) + tau(k+1)) / 2``
+    (the trapezoid rule on ``Mm qmdd = u - Fm qmd - tau``: second order in T).
+
+    Args:
+        qmd: Motor rates [rad/s], shape (K, n).
+        tau_j: Spring torques [N m], shape (K, n).
+        motor: The actuators.
+
+    Returns:
+        u [N m], shape (K, n); the last row (no sample after it) repeats the one before: it
+        never enters an estimator step.
+    """
+    if qmd.shape != tau_j.shape or qmd.ndim != 2 or qmd.shape[1] != motor.n:
+        raise ShapeError(
+            describe(
+                "reconstruct_input",
+                f"qmd and tau_J of one shape (K, {motor.n})",
+                f"{qmd.shape} and {tau_j.shape}",
+                "pass one row per sample, one column per joint",
+            )
+        )
+    K = qmd.shape[0]
+    u = np.zeros_like(qmd)
+    if K >= 2:
+        a, b = qmd[:-1], qmd[1:]
+        u[:-1] = motor.Mm * (b - a) / motor.T + motor.Fm * (a + b) / 2 + (tau_j[:-1] + tau_j[1:]) / 2
+        u[-1] = u[-2]
+    return u
+
+
+@dataclass(frozen=True)
+class EstimatorInputs:
+    """What an estimator is given for a log with a given kind of effort.
+
+    Step ``k -> k+1`` is ``est.step(u[k], z_encoder[k+1], frames delivered at k+1)``.
+
+    Attributes:
+        kind: The effort kind.
+        u: Input over ``[k, k+1]`` [N m], shape (K, n) (``none``: the net motor torque,
+            the input of :class:`NetTorqueTransition`).
+        z_encoder: Encoder measurement at ``k``: ``[qm, qmd]`` (K, 2n), or
+            ``[qm, qmd, tau_J]`` (K, 3n) for ``joint_torque``.
+        input_std: :func:`input_noise_std` [N m], (n,): add it in quadrature to the filter's
+            motor-torque noise.
+    """
+
+    kind: str
+    u: FloatArray
+    z_encoder: FloatArray
+    input_std: FloatArray
+
+
+def estimator_inputs(
+    spec: EffortSpec,
+    z: ArrayLike,
+    effort: ArrayLike | None,
+    motor: MotorParams,
+    qd_std: ArrayLike,
+) -> EstimatorInputs:
+    """The estimator's inputs and encoder measurements for a log.
+
+    Args:
+        spec: What the effort is (:class:`EffortSpec`).
+        z: Encoder samples ``[qm, qmd]`` [rad, rad/s], shape (K, 2n), one row per step.
+        effort: The logged effort [N m], (K, n): the applied torque (``applied``), the joint
+            torque (``joint_torque``); ``None`` for ``none`` (ignored if given).
+        motor: The robot's actuators (:class:`MotorParams`).
+        qd_std: 1-sigma of the encoder rate [rad/s] (the filter's encoder R).
+
+    Returns:
+        :class:`EstimatorInputs`.
+
+    Raises:
+        ShapeError: ``z`` or ``effort`` of the wrong shape, or ``effort`` missing.
+    """
+    n = motor.n
+    z_arr = np.asarray(z, dtype=float)
+    if z_arr.ndim != 2 or z_arr.shape[1] != 2 * n:
+        raise ShapeError(
+            describe("encoder samples", f"shape (K, {2 * n})", f"{z_arr.shape}", "[qm, qmd] rows")
+        )
+    K = z_arr.shape[0]
+    std = input_noise_std(spec, motor, qd_std)
+    if spec.kind == "none":
+        u_net = reconstruct_input(z_arr[:, n:], np.zeros((K, n)), motor)
+        return EstimatorInputs(spec.kind, u_net, z_arr, std)
+    if effort is None:
+        raise ShapeError(
+            describe(
+                f"effort of kind {spec.kind!r}",
+                f"an array of shape ({K}, {n})",
+                "none",
+                'log the effort, or say [effort] kind = "none"',
+            )
+        )
+    e = np.asarray(effort, dtype=float)
+    if e.shape != (K, n):
+        raise ShapeError(
+            describe("effort", f"shape ({K}, {n})", f"{e.shape}", "one row per encoder sample")
+        )
+    if spec.kind == "applied":
+        return EstimatorInputs(spec.kind, e, z_arr, std)
+    u = reconstruct_input(z_arr[:, n:], e, motor)
+    return EstimatorInputs(spec.kind, u, np.hstack([z_arr, e]), std)
+
+
+class NetTorqueTransition:
+    """A transition whose input is the net motor torque ``u_net = u - Ks (qm - q)`` (``none``).
+
+    A :class:`~amsfe_sym.estimation.models.TransitionModel` around ``inner`` (the robot's
+    ``F(x, u)`` of eqs. (1a)-(1d), (4)): ``F_net(x, u_net) = F(x, u_net + s(x))`` with the
+    spring torque ``s(x) = Ks (qm - q)`` of the state (``Ks`` from theta where it is a
+    parameter), and its jacobian ``dF/dx + (dF/du) ds/dx``.  ``dF/du`` is ``input_gain``;
+    for the compiled models ``T Gamma_m``, the motor-impulse columns of the noise gain of eq.
+    (4) times T: an impulse at the start of the step for a torque held over it, exact for
+    the ``paper`` and ``semi_implicit`` maps and first order in T for ``rk4``.
+
+    Args:
+        inner: The robot's transition.
+        motor: Actuators and layout.
+        input_gain: ``(x, u) -> dF/du`` (N, n).
+        inverse_iterations: Fixed-point steps of :meth:`inverse`.
+    """
+
+    def __init__(
+        self,
+        inner: TransitionLike,
+        motor: MotorParams,
+        input_gain: Callable[[FloatArray, FloatArray], FloatArray],
+        inverse_iterations: int = 4,
+    ) -> None:
+        self.inner = inner
+        self.motor = motor
+        self.input_gain = input_gain
+        self.inverse_iterations = inverse_iterations
+        self.nx: int = motor.N
+        self.nu: int = motor.n
+
+    def spring(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """``s(x) = Ks (qm - q)`` [N m] and ``ds/dx`` (n, N)."""
+        m = self.motor
+        n = m.n
+        Ks = m.stiffness(x[4 * n :])
+        delta = x[2 * n : 3 * n] - x[:n]
+        D = np.zeros((n, m.N))
+        j = np.arange(n)
+        D[j, j] = -Ks
+        D[j, 2 * n + j] = Ks
+        for i in np.flatnonzero(m.stiffness_theta >= 0):
+            D[i, 4 * n + m.stiffness_theta[i]] = delta[i]
+        return Ks * delta, D
+
+    def step(self, x: FloatArray, u: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """``(F(x, u + s(x)), dF/dx + dF/du ds/dx)``."""
+        s, D = self.spring(x)
+        ut = u + s
+        xn, A = self.inner.step(x, ut)
+        return xn, A + self.input_gain(x, ut) @ D
+
+    def inverse(self, x_next: FloatArray, u: FloatArray) -> FloatArray:
+        """``x`` with ``F(x, u + s(x)) = x_next`` (eq. 22), by fixed-point steps on ``s``."""
+        x = self.inner.inverse(x_next, u + self.spring(x_next)[0])
+        for _ in range(self.inverse_iterations):
+            x = self.inner.inverse(x_next, u + self.spring(x)[0])
+        return x
+
+    def process_noise(self, x: FloatArray, u: FloatArray) -> FloatArray:
+        """The inner model's ``Qd`` at ``(x, u + s(x))``."""
+        return self.inner.process_noise(x, u + self.spring(x)[0])
+
+
+class TransitionLike(Protocol):
+    """What :class:`NetTorqueTransition` needs of the model it wraps."""
+
+    def step(self, x: FloatArray, u: FloatArray) -> tuple[FloatArray, FloatArray]: ...
+
+    def inverse(self, x_next: FloatArray, u: FloatArray) -> FloatArray: ...
+
+    def process_noise(self, x: FloatArray, u: FloatArray) -> FloatArray: ...
