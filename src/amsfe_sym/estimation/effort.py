@@ -45,21 +45,38 @@ from amsfe_sym.errors import ConfigError, ShapeError, describe
 __all__ = [
     "DEFAULT_JOINT_TORQUE_STD",
     "EFFORT_KINDS",
+    "INPUT_MODELS",
+    "EffortModels",
     "EffortSpec",
     "EstimatorInputs",
+    "InputStateTransition",
     "MotorParams",
     "NetTorqueTransition",
+    "PaddedMeasurement",
     "SpringTorqueMeasurement",
     "encoder_dim",
     "estimator_inputs",
     "input_noise_std",
     "reconstruct_input",
+    "wrap_models",
 ]
 
 FloatArray = NDArray[np.float64]
 
 #: What a log's effort can be (see the module docstring).
 EFFORT_KINDS = ("applied", "joint_torque", "none")
+
+#: How an estimator without the applied torque gets its input (``joint_torque``, ``none``):
+#: ``"state"``: u is n extra states, a random walk (:class:`InputStateTransition`);
+#: ``"reconstruct"``: u from the encoders (and tau_J), its noise in Q (module docstring).
+INPUT_MODELS = ("state", "reconstruct")
+
+#: Default diffusion of the input random walk [N m / sqrt(s)]: 3.2 N m a step at 1 kHz
+#: (chosen on seed 100 of paper-sim and panda-control, docs/effort.md).
+DEFAULT_INPUT_RATE_STD = 100.0
+
+#: Default 1-sigma of the initial input state [N m].
+DEFAULT_INPUT_STD0 = 50.0
 
 #: Default 1-sigma of a joint torque sensor [N m]: the order of the Franka Panda's measured
 #: ``tau_J`` at rest (a few hundredths of a N m); ours, not a datasheet value.
@@ -73,13 +90,22 @@ class EffortSpec:
     Attributes:
         kind: One of :data:`EFFORT_KINDS`.
         joint_torque_std: ``joint_torque``: 1-sigma of the measured joint torque [N m].
-        unknown_torque_std: ``none``: 1-sigma [N m] of the unknown motor torque, per joint
-            (scalar or n values); ``None``: :func:`default_unknown_torque_std` of the robot.
+        input_model: ``joint_torque`` and ``none``: one of :data:`INPUT_MODELS`.
+        input_rate_std: ``"state"``: diffusion of the input random walk [N m / sqrt(s)]:
+            each step adds a variance ``input_rate_std^2 T``.
+        input_std0: ``"state"``: 1-sigma of the initial input [N m].
     """
 
     kind: str = "applied"
     joint_torque_std: float = DEFAULT_JOINT_TORQUE_STD
-    unknown_torque_std: float | tuple[float, ...] | None = None
+    input_model: str = "state"
+    input_rate_std: float = DEFAULT_INPUT_RATE_STD
+    input_std0: float = DEFAULT_INPUT_STD0
+
+    @property
+    def input_as_state(self) -> bool:
+        """Whether the estimator carries the input as states (:class:`InputStateTransition`)."""
+        return self.kind != "applied" and self.input_model == "state"
 
     def __post_init__(self) -> None:
         if self.kind not in EFFORT_KINDS:
@@ -91,6 +117,26 @@ class EffortSpec:
                     '"applied" (motor torque), "joint_torque" (torque sensors) or "none"',
                 )
             )
+        if self.input_model not in INPUT_MODELS:
+            raise ConfigError(
+                describe(
+                    "[effort] input_model",
+                    f"one of {list(INPUT_MODELS)}",
+                    repr(self.input_model),
+                    '"state" (the default) or "reconstruct"',
+                )
+            )
+        for name in ("input_rate_std", "input_std0"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ConfigError(
+                    describe(
+                        f"[effort] {name}",
+                        "a positive, finite standard deviation",
+                        repr(v),
+                        "leave it out for the default",
+                    )
+                )
         if not (np.isfinite(self.joint_torque_std) and self.joint_torque_std > 0):
             raise ConfigError(
                 describe(
@@ -200,7 +246,10 @@ class SpringTorqueMeasurement:
         self.dim = 3 * n
         self.R = np.diag(
             np.concatenate(
-                [np.broadcast_to(np.asarray(v, dtype=float), (n,)) for v in (q_var, qd_var, tau_var)]
+                [
+                    np.broadcast_to(np.asarray(v, dtype=float), (n,))
+                    for v in (q_var, qd_var, tau_var)
+                ]
             )
         )
         self._H = np.zeros((3 * n, N))
@@ -214,7 +263,7 @@ class SpringTorqueMeasurement:
         """Return ``(h(x), dh/dx)``: ``[qm, qmd, Ks (qm - q)]`` and its exact jacobian."""
         m = self.motor
         n = m.n
-        Ks = m.stiffness(x[4 * n :])
+        Ks = m.stiffness(x[4 * n : m.N])
         delta = x[2 * n : 3 * n] - x[:n]
         H = self._H.copy()
         H[self._rows, self._cols_q] = -Ks
@@ -233,7 +282,8 @@ def input_noise_std(
     Add it in quadrature to the filter's motor-torque noise (eq. (3)): it enters the motor
     rows of eq. (1b) exactly where a motor torque disturbance does.
 
-    - ``applied``: 0 (the logged u is the input).
+    - ``applied``, or the input carried as states: 0 (the logged u is the input; the
+      input states have their own random walk).
     - ``joint_torque``: the trapezoid reconstruction of the module docstring with encoder
       rate noise ``qd_std`` [rad/s] and torque noise ``tau_std`` [N m] (default
       ``spec.joint_torque_std``): ``var = ((Mm/T + Fm/2)^2 + (Mm/T - Fm/2)^2) qd_std^2
@@ -241,7 +291,7 @@ def input_noise_std(
     - ``none``: the same without the torque term (the net torque of :class:`NetTorqueTransition`).
     """
     n = motor.n
-    if spec.kind == "applied":
+    if spec.kind == "applied" or spec.input_as_state:
         return np.zeros(n)
     sv = np.broadcast_to(np.asarray(qd_std, dtype=float), (n,))
     st = 0.0 if spec.kind == "none" else spec.joint_torque_std if tau_std is None else tau_std
@@ -278,7 +328,9 @@ def reconstruct_input(qmd: FloatArray, tau_j: FloatArray, motor: MotorParams) ->
     u = np.zeros_like(qmd)
     if K >= 2:
         a, b = qmd[:-1], qmd[1:]
-        u[:-1] = motor.Mm * (b - a) / motor.T + motor.Fm * (a + b) / 2 + (tau_j[:-1] + tau_j[1:]) / 2
+        u[:-1] = (
+            motor.Mm * (b - a) / motor.T + motor.Fm * (a + b) / 2 + (tau_j[:-1] + tau_j[1:]) / 2
+        )
         u[-1] = u[-2]
     return u
 
@@ -337,6 +389,8 @@ def estimator_inputs(
     K = z_arr.shape[0]
     std = input_noise_std(spec, motor, qd_std)
     if spec.kind == "none":
+        if spec.input_as_state:
+            return EstimatorInputs(spec.kind, np.zeros((K, n)), z_arr, np.zeros(n))
         u_net = reconstruct_input(z_arr[:, n:], np.zeros((K, n)), motor)
         return EstimatorInputs(spec.kind, u_net, z_arr, std)
     if effort is None:
@@ -355,8 +409,11 @@ def estimator_inputs(
         )
     if spec.kind == "applied":
         return EstimatorInputs(spec.kind, e, z_arr, std)
+    z_aug = np.hstack([z_arr, e])
+    if spec.input_as_state:
+        return EstimatorInputs(spec.kind, np.zeros((K, n)), z_aug, np.zeros(n))
     u = reconstruct_input(z_arr[:, n:], e, motor)
-    return EstimatorInputs(spec.kind, u, np.hstack([z_arr, e]), std)
+    return EstimatorInputs(spec.kind, u, z_aug, std)
 
 
 class NetTorqueTransition:
@@ -374,7 +431,7 @@ class NetTorqueTransition:
         inner: The robot's transition.
         motor: Actuators and layout.
         input_gain: ``(x, u) -> dF/du`` (N, n).
-        inverse_iterations: Fixed-point steps of :meth:`inverse`.
+        inverse_iterations: Newton steps of :meth:`inverse`.
     """
 
     def __init__(
@@ -395,7 +452,7 @@ class NetTorqueTransition:
         """``s(x) = Ks (qm - q)`` [N m] and ``ds/dx`` (n, N)."""
         m = self.motor
         n = m.n
-        Ks = m.stiffness(x[4 * n :])
+        Ks = m.stiffness(x[4 * n : m.N])
         delta = x[2 * n : 3 * n] - x[:n]
         D = np.zeros((n, m.N))
         j = np.arange(n)
@@ -413,10 +470,12 @@ class NetTorqueTransition:
         return xn, A + self.input_gain(x, ut) @ D
 
     def inverse(self, x_next: FloatArray, u: FloatArray) -> FloatArray:
-        """``x`` with ``F(x, u + s(x)) = x_next`` (eq. 22), by fixed-point steps on ``s``."""
+        """``x`` with ``F(x, u + s(x)) = x_next`` (eq. 22): Newton steps with :meth:`step`'s
+        jacobian from the inner inverse at ``s(x_next)``."""
         x = self.inner.inverse(x_next, u + self.spring(x_next)[0])
         for _ in range(self.inverse_iterations):
-            x = self.inner.inverse(x_next, u + self.spring(x)[0])
+            xn, A = self.step(x, u)
+            x = x - np.linalg.solve(A, xn - x_next)
         return x
 
     def process_noise(self, x: FloatArray, u: FloatArray) -> FloatArray:
@@ -432,3 +491,148 @@ class TransitionLike(Protocol):
     def inverse(self, x_next: FloatArray, u: FloatArray) -> FloatArray: ...
 
     def process_noise(self, x: FloatArray, u: FloatArray) -> FloatArray: ...
+
+
+class InputStateTransition:
+    """The input carried as states: ``xa = [x, u]``, ``u`` a random walk (``joint_torque``,
+    ``none`` with ``input_model = "state"``).
+
+    A :class:`~amsfe_sym.estimation.models.TransitionModel` of size ``N + n``:
+    ``F_a([x, u]) = [F(x, u), u]`` (eqs. (1a)-(1d), (4) with u held over the step), jacobian
+    ``[[dF/dx, dF/du], [0, I]]``, process noise ``blockdiag(Qd(x, u), input_rate_std^2 T I)``.
+    The input the estimator's ``step`` is given is ignored (pass zeros).  ``dF/du`` is
+    ``input_gain`` (see :class:`NetTorqueTransition`).
+
+    Args:
+        inner: The robot's transition (N states).
+        motor: Actuators and layout.
+        input_gain: ``(x, u) -> dF/du`` (N, n).
+        input_rate_std: Diffusion of the random walk [N m / sqrt(s)].
+    """
+
+    def __init__(
+        self,
+        inner: TransitionLike,
+        motor: MotorParams,
+        input_gain: Callable[[FloatArray, FloatArray], FloatArray],
+        input_rate_std: float,
+    ) -> None:
+        self.inner = inner
+        self.motor = motor
+        self.input_gain = input_gain
+        N, n = motor.N, motor.n
+        self.nx: int = N + n
+        self.nu: int = n
+        self._Qu = np.eye(n) * input_rate_std**2 * motor.T
+        self._A = np.zeros((N + n, N + n))
+        self._A[N:, N:] = np.eye(n)
+        self._Q = np.zeros((N + n, N + n))
+
+    def step(self, x: FloatArray, u: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """``([F(x, u_s), u_s], [[A, B], [0, I]])`` with ``u_s`` the input states."""
+        N = self.motor.N
+        xs, us = x[:N], x[N:]
+        xn, A = self.inner.step(xs, us)
+        Aa = self._A.copy()
+        Aa[:N, :N] = A
+        Aa[:N, N:] = self.input_gain(xs, us)
+        return np.concatenate([xn, us]), Aa
+
+    def inverse(self, x_next: FloatArray, u: FloatArray) -> FloatArray:
+        """``[F^-1(x+, u_s), u_s]`` (eq. 22; the input states do not move)."""
+        N = self.motor.N
+        return np.concatenate([self.inner.inverse(x_next[:N], x_next[N:]), x_next[N:]])
+
+    def process_noise(self, x: FloatArray, u: FloatArray) -> FloatArray:
+        """``blockdiag(Qd(x, u_s), input_rate_std^2 T I)``."""
+        N = self.motor.N
+        Q = self._Q.copy()
+        Q[:N, :N] = self.inner.process_noise(x[:N], x[N:])
+        Q[N:, N:] = self._Qu
+        return Q
+
+
+class _Measurement(Protocol):
+    @property
+    def dim(self) -> int: ...
+
+    @property
+    def R(self) -> FloatArray: ...
+
+    def predict(self, x: FloatArray) -> tuple[FloatArray, FloatArray]: ...
+
+
+class PaddedMeasurement:
+    """A measurement of the first ``N`` states seen from a state with ``extra`` more (the
+    input states of :class:`InputStateTransition`): the same ``h``, ``H`` with zero columns."""
+
+    def __init__(self, inner: _Measurement, N: int, extra: int) -> None:
+        self.inner = inner
+        self.N = N
+        self.extra = extra
+        self.dim: int = int(inner.dim)
+        self.R: FloatArray = np.asarray(inner.R, dtype=float)
+
+    def predict(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """``(h(x[:N]), [H, 0])``."""
+        z, H = self.inner.predict(x[: self.N])
+        return z, np.hstack([H, np.zeros((H.shape[0], self.extra))])
+
+
+@dataclass(frozen=True)
+class EffortModels:
+    """The models and initial posterior of an estimator for a kind of effort.
+
+    Attributes:
+        model: The transition (the robot's, or wrapped).
+        encoder: The encoder measurement model (``[qm, qmd]`` or ``[qm, qmd, tau_J]``).
+        camera: The camera measurement model.
+        x0: Initial mean, (nx,) (``N``, or ``N + n`` with the input states).
+        P0: Initial covariance, (nx, nx).
+    """
+
+    model: object
+    encoder: object
+    camera: object
+    x0: FloatArray
+    P0: FloatArray
+
+
+def wrap_models(
+    spec: EffortSpec,
+    motor: MotorParams,
+    model: TransitionLike,
+    encoder: _Measurement,
+    camera: _Measurement,
+    x0: FloatArray,
+    P0: FloatArray,
+    input_gain: Callable[[FloatArray, FloatArray], FloatArray],
+) -> EffortModels:
+    """Wrap an estimator's models for ``spec`` (``encoder`` is already the right one:
+    :class:`SpringTorqueMeasurement` for ``joint_torque``).
+
+    - ``applied``, or ``none`` reconstructed: unchanged, but ``none`` runs the
+      :class:`NetTorqueTransition`;
+    - input as states: :class:`InputStateTransition`, the measurements padded, ``x0`` extended
+      with ``u0 = Ks (qm0 - q0) + Fm qmd0`` [N m] (the torque that holds the spring at the
+      initial estimate, motor at constant speed), ``P0`` with ``spec.input_std0^2``.
+    """
+    if spec.kind == "applied":
+        return EffortModels(model, encoder, camera, x0, P0)
+    if not spec.input_as_state:
+        if spec.kind == "none":
+            model = NetTorqueTransition(model, motor, input_gain)
+        return EffortModels(model, encoder, camera, x0, P0)
+    n, N = motor.n, motor.N
+    Ks = motor.stiffness(x0[4 * n : N])
+    u0 = Ks * (x0[2 * n : 3 * n] - x0[:n]) + motor.Fm * x0[3 * n : 4 * n]
+    P = np.zeros((N + n, N + n))
+    P[:N, :N] = P0
+    P[N:, N:] = np.eye(n) * spec.input_std0**2
+    return EffortModels(
+        InputStateTransition(model, motor, input_gain, spec.input_rate_std),
+        PaddedMeasurement(encoder, N, n),
+        PaddedMeasurement(camera, N, n),
+        np.concatenate([x0, u0]),
+        P,
+    )

@@ -30,9 +30,9 @@ from amsfe_sym.estimation import Estimator, FilterConfig, make_estimator
 from amsfe_sym.estimation.effort import (
     EffortSpec,
     MotorParams,
-    NetTorqueTransition,
     SpringTorqueMeasurement,
     input_noise_std,
+    wrap_models,
 )
 from amsfe_sym.estimation.registry import estimator_class
 from amsfe_sym.runtime.compiled_estimator import make_compiled_estimator
@@ -239,17 +239,9 @@ def build_estimator(
                 "use the Python estimator (compiled = False) for this log",
             )
         )
-    model: CompiledTransition | NetTorqueTransition = compiled_model
-    if effort.kind == "none":
-        T = lib.T
-        model = NetTorqueTransition(
-            compiled_model, motor, lambda x, u: T * compiled_model.gamma(x, u)[:, n : 2 * n]
-        )
     encoder_model: EncoderMeasurement | SpringTorqueMeasurement
     if effort.kind == "joint_torque":
-        encoder_model = SpringTorqueMeasurement(
-            motor, q_var, qd_var, effort.joint_torque_std**2
-        )
+        encoder_model = SpringTorqueMeasurement(motor, q_var, qd_var, effort.joint_torque_std**2)
     else:
         encoder_model = EncoderMeasurement(lib, q_var, qd_var)
     cam_var = f.camera_pixel_std**2 if f.camera_pixel_std else sensors.camera.config.variance
@@ -287,14 +279,25 @@ def build_estimator(
         )
         ** 2
     )
+    T = lib.T
+    parts = wrap_models(
+        effort,
+        motor,
+        compiled_model,
+        encoder_model,
+        camera_model,
+        x0,
+        P0,
+        lambda x, u: T * compiled_model.gamma(x, u)[:, n : 2 * n],  # dF/du, eq. (4)
+    )
     make = make_compiled_estimator if compiled else make_estimator
     return make(
         sc.estimator,
-        model=model,
-        encoder=encoder_model,
-        camera=camera_model,
-        x0=x0,
-        P0=P0,
+        model=parts.model,
+        encoder=parts.encoder,
+        camera=parts.camera,
+        x0=parts.x0,
+        P0=parts.P0,
         config=filter_config(sc, sensors.timing),
     )
 

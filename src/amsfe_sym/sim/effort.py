@@ -60,7 +60,8 @@ class Refiltered:
     """An estimator's run over a simulated log, against the truth.
 
     Attributes:
-        x_hat: Posterior means x(k|k), (K, N).
+        x_hat: Posterior means x(k|k), (K, N) (input states, if any, left out; NEES is of
+            the robot's N states).
         e_q: Link-angle error q - q_hat [rad], (K, n).
         nees: NEES of the whole state, (K,).
         nees_q: NEES of the link angles alone (their marginal covariance), (K,).
@@ -103,9 +104,10 @@ def refilter(
     for k in range(K):
         if k > 0:
             applied += est.step(inputs.u[k - 1], inputs.z_encoder[k], delivered[k]).frames_applied
-        x_hat[k] = est.x
-        e = run.x_true[k] - est.x
-        nees[k] = float(e @ np.linalg.solve(est.P, e))
+        x, P = est.x[:N], est.P[:N, :N]  # without the input states, if any
+        x_hat[k] = x
+        e = run.x_true[k] - x
+        nees[k] = float(e @ np.linalg.solve(P, e))
         eq = e[Lq]
-        nees_q[k] = float(eq @ np.linalg.solve(est.P[Lq, Lq], eq))
+        nees_q[k] = float(eq @ np.linalg.solve(P[Lq, Lq], eq))
     return Refiltered(x_hat, run.x_true[:, Lq] - x_hat[:, Lq], nees, nees_q, applied)
