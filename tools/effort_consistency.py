@@ -5,14 +5,15 @@ estimator), then each estimator re-run over its recorded encoders and frames (Py
 reference, ``amsfe_sym.sim.effort.refilter``) with the effort an arm would log:
 ``applied`` (the torque u), ``joint_torque`` (the true spring torque Ks (qm - q) plus white
 noise of 0.05 N m) or ``none``; for the last two, each input model (``state``: u carried as
-random-walk states; ``reconstruct``: u from the encoders, its noise in Q).  Metrics over the last 80 % of each run: link-angle RMSE, the
-time-averaged NEES of the link angles / n and of the whole state / N, and the fraction of
-steps at which the seed-averaged NEES of the link angles lies in its two-sided 95 %
-chi-square band (Bar-Shalom's test over M runs).  A run whose estimator stops (covariance
-lost) counts as the worst value (inf) in every column.
+random-walk states; ``reconstruct``: u from the encoders, its noise in Q).
 
-Seeds 100 (paper-sim, panda-control) were used to choose the designs; the table uses
-seeds 300-307, never used for a choice::
+Metrics over the last 80 % of each run: link-angle RMSE, the time-averaged NEES of the link
+angles / n and of the whole state / N, and the fraction of steps at which the seed-averaged
+NEES of the link angles lies in its two-sided 95 % chi-square band (Bar-Shalom's test over
+M runs).  A run whose estimator stops (covariance lost) counts as the worst value (inf).
+
+Seed 100 (paper-sim, panda-control) was used to choose the designs; the table uses seeds
+300-307, never used for a choice::
 
     PYTHONPATH=src .venv/bin/python tools/effort_consistency.py --seeds 300-307
 

@@ -313,7 +313,8 @@ def reconstruct_input(qmd: FloatArray, tau_j: FloatArray, motor: MotorParams) ->
 
     Returns:
         u [N m], shape (K, n); the last row (no sample after it) repeats the one before: it
-        never enters an estimator step.
+        never enters an estimator step.  A row that a missing sample (NaN) leaves undefined
+        holds the last defined row (zero before the first).
     """
     if qmd.shape != tau_j.shape or qmd.ndim != 2 or qmd.shape[1] != motor.n:
         raise ShapeError(
@@ -332,6 +333,8 @@ def reconstruct_input(qmd: FloatArray, tau_j: FloatArray, motor: MotorParams) ->
             motor.Mm * (b - a) / motor.T + motor.Fm * (a + b) / 2 + (tau_j[:-1] + tau_j[1:]) / 2
         )
         u[-1] = u[-2]
+    for k in np.flatnonzero(~np.isfinite(u).all(axis=1)):  # in order: a forward fill
+        u[k] = u[k - 1] if k > 0 else 0.0
     return u
 
 

@@ -16,12 +16,21 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.core.camera_frame import CameraFrame
-from amsfe_sym.estimation.effort import EffortSpec, estimator_inputs
+from amsfe_sym.estimation import Estimator
+from amsfe_sym.estimation.effort import EffortSpec, EstimatorInputs, estimator_inputs
+from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
-from amsfe_sym.sim.builders import build_estimator, build_run, motor_params
+from amsfe_sym.sim.builders import Sensors, build_estimator, build_run, motor_params
 from amsfe_sym.sim.result import RunResult
 
-__all__ = ["Refiltered", "frames_by_delivery", "refilter", "simulated_effort"]
+__all__ = [
+    "EffortEstimator",
+    "Refiltered",
+    "effort_estimator",
+    "frames_by_delivery",
+    "refilter",
+    "simulated_effort",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -56,6 +65,52 @@ def frames_by_delivery(frames: FloatArray, K: int) -> list[list[CameraFrame]]:
 
 
 @dataclass(frozen=True)
+class EffortEstimator:
+    """An estimator built for a log's kind of effort, and what to feed it.
+
+    Step ``k -> k+1`` is ``estimator.step(inputs.u[k], inputs.z_encoder[k+1], frames)``
+    (a row of ``z_encoder`` holding NaN: pass ``None``); the robot's state is
+    ``estimator.x[:N]``, its covariance ``estimator.P[:N, :N]`` (the input states, if any,
+    follow).
+
+    Attributes:
+        estimator: The estimator at x(0|0), P(0|0).
+        inputs: Its inputs and encoder measurements per step.
+        N: The robot's state size (eq. 2).
+    """
+
+    estimator: Estimator
+    inputs: EstimatorInputs
+    N: int
+
+
+def effort_estimator(
+    sc: Scenario,
+    lib: ModelLibrary,
+    sensors: Sensors,
+    z: FloatArray,
+    effort: FloatArray | None,
+    spec: EffortSpec,
+) -> EffortEstimator:
+    """The Python estimator of ``sc`` for a log with effort ``spec.kind`` (docs/effort.md).
+
+    Args:
+        sc: The scenario (``estimator``, ``[filter]``, ``[estimate0]``).
+        lib: The robot's library.
+        sensors: The sensors (encoder and camera noise, camera timing), as for
+            :func:`~amsfe_sym.sim.builders.build_estimator`.
+        z: Encoder samples ``[qm, qmd]`` per step, (K, 2n) (NaN rows: no sample).
+        effort: The logged effort [N m], (K, n), or ``None`` (``none``).
+        spec: What the effort is.
+    """
+    est = build_estimator(sc, lib, sensors, z[0], effort=spec)
+    n = lib.n
+    qd_std = np.sqrt(np.diag(est.R_encoder)[n : 2 * n])
+    inputs = estimator_inputs(spec, z, effort, motor_params(lib), qd_std)
+    return EffortEstimator(est, inputs, lib.N)
+
+
+@dataclass(frozen=True)
 class Refiltered:
     """An estimator's run over a simulated log, against the truth.
 
@@ -86,13 +141,9 @@ def refilter(
     """
     sc_e = sc.with_overrides(estimator=estimator)
     lib = run.lib
-    parts = build_run(sc_e, lib)
     z = run.z_enc
-    est = build_estimator(sc_e, lib, parts.sensors, z[0], effort=spec)
-    enc_R = est.encoder.R
-    n = lib.n
-    qd_std = np.sqrt(np.diag(enc_R)[n : 2 * n])
-    inputs = estimator_inputs(spec, z, effort, motor_params(lib), qd_std)
+    built = effort_estimator(sc_e, lib, build_run(sc_e, lib).sensors, z, effort, spec)
+    est, inputs = built.estimator, built.inputs
     K = z.shape[0]
     delivered = frames_by_delivery(run.frames, K)
     N = lib.N
