@@ -610,6 +610,7 @@ def wrap_models(
     x0: FloatArray,
     P0: FloatArray,
     input_gain: Callable[[FloatArray, FloatArray], FloatArray],
+    u0: FloatArray | None = None,
 ) -> EffortModels:
     """Wrap an estimator's models for ``spec`` (``encoder`` is already the right one:
     :class:`SpringTorqueMeasurement` for ``joint_torque``).
@@ -617,8 +618,10 @@ def wrap_models(
     - ``applied``, or ``none`` reconstructed: unchanged, but ``none`` runs the
       :class:`NetTorqueTransition`;
     - input as states: :class:`InputStateTransition`, the measurements padded, ``x0`` extended
-      with ``u0 = Ks (qm0 - q0) + Fm qmd0`` [N m] (the torque that holds the spring at the
-      initial estimate, motor at constant speed), ``P0`` with ``spec.input_std0^2``.
+      with ``u0`` [N m] (default ``Ks (qm0 - q0) + Fm qmd0``, the torque that holds the spring
+      at the initial estimate with the motor at constant speed; the builder passes the
+      gravity torque ``g(q0) + Fm qmd0`` instead, which a wrong ``q0`` moves far less on a
+      stiff joint), ``P0`` with ``spec.input_std0^2``.
     """
     if spec.kind == "applied":
         return EffortModels(model, encoder, camera, x0, P0)
@@ -627,8 +630,9 @@ def wrap_models(
             model = NetTorqueTransition(model, motor, input_gain)
         return EffortModels(model, encoder, camera, x0, P0)
     n, N = motor.n, motor.N
-    Ks = motor.stiffness(x0[4 * n : N])
-    u0 = Ks * (x0[2 * n : 3 * n] - x0[:n]) + motor.Fm * x0[3 * n : 4 * n]
+    if u0 is None:
+        Ks = motor.stiffness(x0[4 * n : N])
+        u0 = Ks * (x0[2 * n : 3 * n] - x0[:n]) + motor.Fm * x0[3 * n : 4 * n]
     P = np.zeros((N + n, N + n))
     P[:N, :N] = P0
     P[N:, N:] = np.eye(n) * spec.input_std0**2
