@@ -8,24 +8,29 @@ Real arms log different things under "effort":
   torque sensor on the link side of the elastic element (Franka Panda, KUKA iiwa).  It is a
   measurement of the state, fused with the encoders: ``z = [qm, qmd, tau_J]``
   (:class:`SpringTorqueMeasurement`; when ``Ks`` is a theta parameter the product
-  ``Ks (qm - q)`` is bilinear and its jacobian is exact).  ``u`` is not logged: it is
-  reconstructed from the motor side of the model, eq. (1b) (motor rows), with the trapezoid
-  rule over the step::
+  ``Ks (qm - q)`` is bilinear and its jacobian is exact).  ``u`` is not logged.
+- ``"none"``: encoders only; ``u`` is unknown.
+
+Without ``u`` the estimator gets its input one of two ways (:data:`INPUT_MODELS`):
+
+- ``"state"`` (the default): ``u`` is carried as ``n`` extra states, a random walk
+  (:class:`InputStateTransition`; the measurements see the first N states through
+  :class:`PaddedMeasurement`).
+- ``"reconstruct"``: ``u`` from the motor rows of eq. (1b) with the trapezoid rule over the
+  step (:func:`reconstruct_input`)::
 
       u(k) = Mm (qmd(k+1) - qmd(k)) / T + Fm (qmd(k) + qmd(k+1)) / 2
              + (tau_J(k) + tau_J(k+1)) / 2
 
-  from the encoder samples, and the noise this adds is carried in the filter's motor-torque
-  process noise (:func:`input_noise_std`).  It uses the sample at ``k+1``; the estimator's step
-  ``k -> k+1`` runs when that sample arrives, so live it costs no latency.
-- ``"none"``: encoders only.  ``u`` is unknown, and so is the spring torque: the encoders
-  give the *net* motor torque ``u - Ks (qm - q) = Mm qmdd + Fm qmd`` (the same trapezoid rule
-  without ``tau_J``), and the estimator's transition is wrapped
-  (:class:`NetTorqueTransition`) so that its input is that net torque: the spring torque is
-  added from the state being predicted, ``u = u_net + Ks (qm - q)``, and the jacobian carries
-  it.  The motor rows then hold no information on the link: the link angles are observed by
-  the camera alone (docs/effort.md measures what that costs, and why the simpler design,
-  ``u = 0`` with the motor torque in the process noise, diverges).
+  its noise carried in the filter's motor-torque process noise (:func:`input_noise_std`).  It
+  uses the sample at ``k+1``; the estimator's step ``k -> k+1`` runs when that sample arrives,
+  so live it costs no latency.  For ``none`` only the *net* motor torque
+  ``u - Ks (qm - q) = Mm qmdd + Fm qmd`` is reconstructed (no ``tau_J`` term) and
+  :class:`NetTorqueTransition` adds the spring torque of the state being predicted.
+
+:func:`wrap_models` builds the estimator's models for a kind of effort, and
+:func:`estimator_inputs` what to feed it.  docs/effort.md measures each design (and why the
+simplest one, ``u = 0`` with the motor torque in the process noise, diverges).
 
 Pure numpy: the robot enters through :class:`MotorParams` (the actuators of eq. (1b)).
 docs/effort.md has the design and the measured consistency of each mode.
