@@ -91,8 +91,9 @@ def effort_estimator(
     z: FloatArray,
     effort: FloatArray | None,
     spec: EffortSpec,
+    compiled: bool = False,
 ) -> EffortEstimator:
-    """The Python estimator of ``sc`` for a log with effort ``spec.kind`` (docs/effort.md).
+    """The estimator of ``sc`` for a log with effort ``spec.kind`` (docs/effort.md).
 
     Args:
         sc: The scenario (``estimator``, ``[filter]``, ``[estimate0]``).
@@ -102,8 +103,10 @@ def effort_estimator(
         z: Encoder samples ``[qm, qmd]`` per step, (K, 2n) (NaN rows: no sample).
         effort: The logged effort [N m], (K, n), or ``None`` (``none``).
         spec: What the effort is.
+        compiled: The library's C estimator (``applied`` only; the others raise
+            :class:`~amsfe_sym.errors.ConfigError`) instead of the Python reference.
     """
-    est = build_estimator(sc, lib, sensors, z[0], effort=spec)
+    est = build_estimator(sc, lib, sensors, z[0], compiled=compiled, effort=spec)
     n = lib.n
     qd_std = np.sqrt(np.diag(est.R_encoder)[n : 2 * n])
     inputs = estimator_inputs(spec, z, effort, motor_params(lib), qd_std)
@@ -131,10 +134,16 @@ class Refiltered:
 
 
 def refilter(
-    sc: Scenario, run: RunResult, effort: FloatArray | None, spec: EffortSpec, estimator: str
+    sc: Scenario,
+    run: RunResult,
+    effort: FloatArray | None,
+    spec: EffortSpec,
+    estimator: str,
+    compiled: bool = False,
 ) -> Refiltered:
-    """Run ``estimator`` (Python reference) over ``run``'s encoders and frames with the effort
-    ``effort`` of kind ``spec.kind``, and compare it with the truth.
+    """Run ``estimator`` (the Python reference, or with ``compiled`` the C one) over ``run``'s
+    encoders and frames with the effort ``effort`` of kind ``spec.kind``, and compare it with
+    the truth.
 
     The estimator is built as the run's (``build_estimator`` of ``sc`` with ``estimator``),
     starting from the run's first encoder sample.
@@ -142,7 +151,8 @@ def refilter(
     sc_e = sc.with_overrides(estimator=estimator)
     lib = run.lib
     z = run.z_enc
-    built = effort_estimator(sc_e, lib, build_run(sc_e, lib).sensors, z, effort, spec)
+    sensors = build_run(sc_e, lib).sensors
+    built = effort_estimator(sc_e, lib, sensors, z, effort, spec, compiled)
     est, inputs = built.estimator, built.inputs
     K = z.shape[0]
     delivered = frames_by_delivery(run.frames, K)
