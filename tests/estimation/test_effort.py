@@ -27,6 +27,7 @@ from amsfe_sym.estimation.effort import (
     estimator_inputs,
     input_noise_std,
     reconstruct_input,
+    trapezoid_input_gain,
     wrap_models,
 )
 
@@ -84,7 +85,7 @@ def test_net_torque_transition_matches_finite_differences() -> None:
     rng = np.random.default_rng(2)
     m = _motor()
     inner = _linear_inner(m, rng)
-    net = NetTorqueTransition(inner, m, lambda x, u: inner.B)
+    net = NetTorqueTransition(inner, m, lambda x, u, A: inner.B)
     x = rng.normal(size=m.N)
     x[4 * m.n + 1] = 15.0
     u = rng.normal(size=m.n)
@@ -99,7 +100,7 @@ def test_input_state_transition_matches_finite_differences() -> None:
     rng = np.random.default_rng(3)
     m = _motor()
     inner = _linear_inner(m, rng)
-    aug = InputStateTransition(inner, m, lambda x, u: inner.B, input_rate_std=100.0)
+    aug = InputStateTransition(inner, m, 100.0, lambda x, u, A: inner.B)
     xa = rng.normal(size=m.N + m.n)
     ignored = rng.normal(size=m.n)
     xn, A = aug.step(xa, ignored)
@@ -206,6 +207,18 @@ def test_wrap_models_starts_the_input_at_the_spring_torque() -> None:
     z, H = out.encoder.predict(out.x0)  # type: ignore[attr-defined]
     np.testing.assert_array_equal(z, meas.predict(x0)[0])
     assert H.shape == (3 * n, m.N + n) and not H[:, m.N :].any()
+
+
+def test_trapezoid_input_gain_is_exact_for_the_motor_double_integrator() -> None:
+    """A decoupled motor ``Mm qmdd = u - Fm qmd``: the exact discrete input gain is known."""
+    from scipy.linalg import expm
+
+    m = MotorParams(Ks=[0.0], Mm=[0.5], Fm=[0.0], T=1e-3)  # no spring, no friction
+    Ac = np.zeros((4, 4))
+    Ac[2, 3] = 1.0  # qm' = qmd
+    A = expm(Ac * m.T)
+    B = trapezoid_input_gain(m)(np.zeros(4), np.zeros(1), A)
+    np.testing.assert_allclose(B[2:, 0], [m.T**2 / 2 / 0.5, m.T / 0.5], rtol=1e-12)
 
 
 # ---------------------------------------------------------------- with the paper's 2-link arm
@@ -340,3 +353,24 @@ def test_compiled_and_python_agree_on_an_applied_log(paper, estimator: str) -> N
     c = refilter(sc, res, effort, EffortSpec(), estimator, compiled=True)
     assert py.frames_applied == c.frames_applied > 0
     np.testing.assert_allclose(c.x_hat, py.x_hat, rtol=0, atol=1e-9)
+
+
+def test_trapezoid_input_gain_matches_finite_differences(paper) -> None:  # type: ignore[no-untyped-def]
+    """dF/du of the compiled rk4 step: the trapezoid rule against central differences."""
+    from amsfe_sym.runtime.models import CompiledTransition, noise_covariance
+    from amsfe_sym.sim.builders import motor_params
+
+    _sc, lib = paper
+    model = CompiledTransition(lib, noise_covariance(lib, 0.1, 0.1, 0.0))
+    gain = trapezoid_input_gain(motor_params(lib))
+    rng = np.random.default_rng(7)
+    n = lib.n
+    for _ in range(3):
+        x = np.concatenate([rng.uniform(-1, 1, 4 * n), lib.theta_true])
+        u = rng.uniform(-20, 20, n)
+        _xn, A = model.step(x, u)
+        B = gain(x, u, A)
+        B_fd = _fd_jacobian(lambda v, x=x: model.step(x, v)[0].copy(), u, h=1e-3)
+        assert np.max(np.abs(B - B_fd)) < 1e-4 * np.max(np.abs(B_fd))
+        impulse = lib.T * model.gamma(x, u)[:, n : 2 * n]
+        assert np.max(np.abs(impulse - B_fd)) > 10 * np.max(np.abs(B - B_fd))

@@ -279,7 +279,6 @@ def build_estimator(
         )
         ** 2
     )
-    T = lib.T
     g0 = lib.function("gravity")(x0[:n], th0)[0]  # the torque holding the arm at x0
     parts = wrap_models(
         effort,
@@ -289,7 +288,6 @@ def build_estimator(
         camera_model,
         x0,
         P0,
-        lambda x, u: T * compiled_model.gamma(x, u)[:, n : 2 * n],  # dF/du, eq. (4)
         u0=g0 + motor.Fm * x0[3 * n : 4 * n],
     )
     make = make_compiled_estimator if compiled else make_estimator
