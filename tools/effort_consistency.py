@@ -51,7 +51,12 @@ TAU_STD = 0.05  # [N m] joint torque sensor noise (Franka tau_J order)
 
 
 def one(
-    scenario: str, duration: float, seed: int, rate_std: float, out_kinds: tuple[str, ...]
+    scenario: str,
+    duration: float,
+    seed: int,
+    rate_std: float,
+    out_kinds: tuple[str, ...],
+    estimators: tuple[str, ...] = ESTIMATORS,
 ) -> list[dict[str, Any]]:
     from amsfe_sym.codegen import library_for
     from amsfe_sym.errors import EstimatorError
@@ -77,7 +82,7 @@ def one(
             input_model=input_model,
             input_rate_std=rate_std,
         )
-        for est in ESTIMATORS:
+        for est in estimators:
             t0 = time.perf_counter()
             try:
                 r = refilter(sc, res, effort, spec, est)
@@ -107,9 +112,10 @@ def one(
 
 def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     out = []
+    estimators = sorted({r["estimator"] for r in rows}, key=lambda e: (e not in ESTIMATORS, e))
     for sc in SCENARIOS:
         for kind in KINDS:
-            for est in ESTIMATORS:
+            for est in estimators:
                 rs = [
                     r for r in rows if (r["scenario"], r["kind"], r["estimator"]) == (sc, kind, est)
                 ]
@@ -190,6 +196,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--seeds", default="300-307", help="a-b (inclusive)")
     ap.add_argument("--scenarios", nargs="*", default=list(SCENARIOS))
     ap.add_argument("--kinds", nargs="*", default=list(KINDS), help="a subset of the variants")
+    ap.add_argument("--estimators", nargs="*", default=list(ESTIMATORS))
     ap.add_argument(
         "--input-rate-std", type=float, default=DEFAULT_INPUT_RATE_STD, help="[N m/sqrt(s)]"
     )
@@ -202,7 +209,14 @@ def main(argv: list[str] | None = None) -> None:
     rows: list[dict[str, Any]] = []
     for sc in args.scenarios:
         for seed in seeds:
-            rows += one(sc, SCENARIOS[sc], seed, args.input_rate_std, tuple(args.kinds))
+            rows += one(
+                sc,
+                SCENARIOS[sc],
+                seed,
+                args.input_rate_std,
+                tuple(args.kinds),
+                tuple(args.estimators),
+            )
             print(sc, seed, f"{time.perf_counter() - t0:.0f} s", flush=True)
     summary = summarize(rows)
     wall = time.perf_counter() - t0
