@@ -374,3 +374,17 @@ def test_trapezoid_input_gain_matches_finite_differences(paper) -> None:  # type
         assert np.max(np.abs(B - B_fd)) < 1e-4 * np.max(np.abs(B_fd))
         impulse = lib.T * model.gamma(x, u)[:, n : 2 * n]
         assert np.max(np.abs(impulse - B_fd)) > 10 * np.max(np.abs(B - B_fd))
+
+
+def test_effort_spec_from_a_log_spec_table() -> None:
+    from amsfe_sym.estimation.effort import effort_spec
+
+    assert effort_spec({}) == EffortSpec()
+    spec = effort_spec({"kind": "joint_torque", "joint_torque_std": 0.1, "input_rate_std": 30})
+    assert spec == EffortSpec(kind="joint_torque", joint_torque_std=0.1, input_rate_std=30.0)
+    with pytest.raises(ConfigError, match="unknown \\['knd'\\]"):
+        effort_spec({"knd": "none"})
+    with pytest.raises(ConfigError, match="a number"):
+        effort_spec({"joint_torque_std": "0.1"})
+    with pytest.raises(ConfigError, match="positive"):
+        effort_spec({"joint_torque_std": -1.0})

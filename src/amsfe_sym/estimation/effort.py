@@ -38,14 +38,14 @@ docs/effort.md has the design and the measured consistency of each mode.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from amsfe_sym.errors import ConfigError, ShapeError, describe
+from amsfe_sym.errors import ConfigError, ShapeError, check_known_keys, describe
 
 __all__ = [
     "DEFAULT_JOINT_TORQUE_STD",
@@ -59,6 +59,7 @@ __all__ = [
     "NetTorqueTransition",
     "PaddedMeasurement",
     "SpringTorqueMeasurement",
+    "effort_spec",
     "encoder_dim",
     "estimator_inputs",
     "input_noise_std",
@@ -152,6 +153,33 @@ class EffortSpec:
                     "give the torque sensor's noise, e.g. 0.05",
                 )
             )
+
+
+def effort_spec(table: Mapping[str, object], where: str = "[effort]") -> EffortSpec:
+    """The :class:`EffortSpec` of a log spec's ``[effort]`` table (keys: ``kind``,
+    ``joint_torque_std`` [N m], ``input_model``, ``input_rate_std`` [N m/sqrt(s)],
+    ``input_std0`` [N m]; each optional).
+
+    Raises:
+        ConfigError: An unknown key, or a value :class:`EffortSpec` refuses.
+    """
+    fields = ("kind", "joint_torque_std", "input_model", "input_rate_std", "input_std0")
+    check_known_keys(where, table.keys(), fields, "remove or rename them (docs/effort.md)")
+    kw: dict[str, object] = {}
+    for key, value in table.items():
+        if key in ("kind", "input_model"):
+            if not isinstance(value, str):
+                raise ConfigError(
+                    describe(f"{where} {key}", "a string", repr(value), "quote the value")
+                )
+            kw[key] = value
+        elif isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(
+                describe(f"{where} {key}", "a number", repr(value), "give it in SI units")
+            )
+        else:
+            kw[key] = float(value)
+    return EffortSpec(**kw)  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)
