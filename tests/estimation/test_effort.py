@@ -388,3 +388,15 @@ def test_effort_spec_from_a_log_spec_table() -> None:
         effort_spec({"joint_torque_std": "0.1"})
     with pytest.raises(ConfigError, match="positive"):
         effort_spec({"joint_torque_std": -1.0})
+
+
+def test_a_scaled_effort_is_in_newton_metres() -> None:
+    """A UR-style log of motor currents [A] with a torque constant x gear ratio [N m/A]."""
+    m = _motor(n=2, p=0)
+    rng = np.random.default_rng(8)
+    z = rng.normal(size=(6, 4))
+    amps = rng.normal(size=(6, 2))
+    scaled = estimator_inputs(EffortSpec(scale=13.5), z, amps, m, 0.01)
+    np.testing.assert_allclose(scaled.u, 13.5 * amps, rtol=1e-15)
+    with pytest.raises(ConfigError, match="scale"):
+        EffortSpec(scale=0.0)

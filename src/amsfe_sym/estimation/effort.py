@@ -101,6 +101,8 @@ class EffortSpec:
         input_rate_std: ``"state"``: diffusion of the input random walk [N m / sqrt(s)]:
             each step adds a variance ``input_rate_std^2 T``.
         input_std0: ``"state"``: 1-sigma of the initial input [N m].
+        scale: The logged effort times ``scale`` is the effort in N m (a UR logs motor
+            currents [A]: ``scale`` is the torque constant times the gear ratio [N m/A]).
     """
 
     kind: str = "applied"
@@ -108,6 +110,7 @@ class EffortSpec:
     input_model: str = "state"
     input_rate_std: float = DEFAULT_INPUT_RATE_STD
     input_std0: float = DEFAULT_INPUT_STD0
+    scale: float = 1.0
 
     @property
     def input_as_state(self) -> bool:
@@ -133,7 +136,7 @@ class EffortSpec:
                     '"state" (the default) or "reconstruct"',
                 )
             )
-        for name in ("input_rate_std", "input_std0"):
+        for name in ("input_rate_std", "input_std0", "scale"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ConfigError(
@@ -158,12 +161,12 @@ class EffortSpec:
 def effort_spec(table: Mapping[str, object], where: str = "[effort]") -> EffortSpec:
     """The :class:`EffortSpec` of a log spec's ``[effort]`` table (keys: ``kind``,
     ``joint_torque_std`` [N m], ``input_model``, ``input_rate_std`` [N m/sqrt(s)],
-    ``input_std0`` [N m]; each optional).
+    ``input_std0`` [N m], ``scale`` [N m per logged unit]; each optional).
 
     Raises:
         ConfigError: An unknown key, or a value :class:`EffortSpec` refuses.
     """
-    fields = ("kind", "joint_torque_std", "input_model", "input_rate_std", "input_std0")
+    fields = ("kind", "joint_torque_std", "input_model", "input_rate_std", "input_std0", "scale")
     check_known_keys(where, table.keys(), fields, "remove or rename them (docs/effort.md)")
     kw: dict[str, object] = {}
     for key, value in table.items():
@@ -406,8 +409,9 @@ def estimator_inputs(
     Args:
         spec: What the effort is (:class:`EffortSpec`).
         z: Encoder samples ``[qm, qmd]`` [rad, rad/s], shape (K, 2n), one row per step.
-        effort: The logged effort [N m], (K, n): the applied torque (``applied``), the joint
-            torque (``joint_torque``); ``None`` for ``none`` (ignored if given).
+        effort: The logged effort, (K, n), in N m once multiplied by ``spec.scale``: the
+            applied torque (``applied``), the joint torque (``joint_torque``); ``None`` for
+            ``none`` (ignored if given).
         motor: The robot's actuators (:class:`MotorParams`).
         qd_std: 1-sigma of the encoder rate [rad/s] (the filter's encoder R).
 
@@ -439,7 +443,7 @@ def estimator_inputs(
                 'log the effort, or say [effort] kind = "none"',
             )
         )
-    e = np.asarray(effort, dtype=float)
+    e = np.asarray(effort, dtype=float) * spec.scale
     if e.shape != (K, n):
         raise ShapeError(
             describe("effort", f"shape ({K}, {n})", f"{e.shape}", "one row per encoder sample")
