@@ -134,6 +134,8 @@ def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                     [r["rmse_q"] / base[r["seed"]] if r["seed"] in base else np.inf for r in ok]
                     + inf
                 )
+                boot = np.random.default_rng(0).choice(ratio, size=(2000, ratio.size))
+                ci = np.percentile(np.median(boot, axis=1), [2.5, 97.5], method="higher")
                 nq = np.array([r["nees_q"] for r in ok] + inf)
                 nf = np.array([r["nees"] for r in ok] + inf)
                 inband = float("nan")
@@ -154,6 +156,7 @@ def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                         rmse_max=float(np.max(rmse)),
                         ratio_median=float(np.median(ratio)),
                         ratio_max=float(np.max(ratio)),
+                        ratio_ci=[float(ci[0]), float(ci[1])],
                         nees_q_median=float(np.median(nq)),
                         nees_q_max=float(np.max(nq)),
                         nees_median=float(np.median(nf)),
@@ -168,7 +171,8 @@ def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 def table(summary: list[dict[str, Any]], seeds: list[int], wall: float, rate: float) -> str:
     head = (
         "| scenario | effort | estimator | failed | link RMSE median / p90 / max [rad] "
-        "| RMSE / applied's, median / max | NEES_q/n median / max | in 95 % band "
+        "| RMSE / applied's, median [95 % bootstrap] / max | NEES_q/n median / max "
+        "| in 95 % band "
         "| NEES/N median / max | frames fused (median) |\n"
         "|---|---|---|---|---|---|---|---|---|---|\n"
     )
@@ -177,7 +181,8 @@ def table(summary: list[dict[str, Any]], seeds: list[int], wall: float, rate: fl
         lines.append(
             f"| {s['scenario']} | {s['kind']} | {s['estimator']} | {s['failed']}/{s['runs']} "
             f"| {s['rmse_median']:.2e} / {s['rmse_p90']:.2e} / {s['rmse_max']:.2e} "
-            f"| {s['ratio_median']:.3g} / {s['ratio_max']:.3g} "
+            f"| {s['ratio_median']:.3g} [{s['ratio_ci'][0]:.3g}, {s['ratio_ci'][1]:.3g}] "
+            f"/ {s['ratio_max']:.3g} "
             f"| {s['nees_q_median']:.3g} / {s['nees_q_max']:.3g} | {s['in_band']:.2f} "
             f"| {s['nees_median']:.3g} / {s['nees_max']:.3g} | {s['frames_median']:.0f} |"
         )
