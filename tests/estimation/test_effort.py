@@ -20,13 +20,15 @@ from amsfe_sym.errors import ConfigError, ShapeError
 from amsfe_sym.estimation import LinearModel
 from amsfe_sym.estimation.effort import (
     EffortSpec,
-    InputStateTransition,
     MotorParams,
-    NetTorqueTransition,
-    SpringTorqueMeasurement,
     estimator_inputs,
     input_noise_std,
     reconstruct_input,
+)
+from amsfe_sym.estimation.effort_models import (
+    InputStateTransition,
+    NetTorqueTransition,
+    SpringTorqueMeasurement,
     trapezoid_input_gain,
     wrap_models,
 )

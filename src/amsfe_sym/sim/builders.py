@@ -27,13 +27,8 @@ from numpy.typing import NDArray
 from amsfe_sym.control import Controller, make_controller
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.estimation import Estimator, FilterConfig, make_estimator
-from amsfe_sym.estimation.effort import (
-    EffortSpec,
-    MotorParams,
-    SpringTorqueMeasurement,
-    input_noise_std,
-    wrap_models,
-)
+from amsfe_sym.estimation.effort import EffortSpec, MotorParams, input_noise_std
+from amsfe_sym.estimation.effort_models import SpringTorqueMeasurement, wrap_models
 from amsfe_sym.estimation.registry import estimator_class
 from amsfe_sym.runtime.compiled_estimator import make_compiled_estimator
 from amsfe_sym.runtime.library import ModelLibrary
