@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from amsfe_sym.core.values import EFFORT_KINDS
 from amsfe_sym.errors import ConfigError, ShapeError, check_known_keys, describe
 
 __all__ = [
@@ -65,7 +66,6 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 
 #: What a log's effort can be (see the module docstring).
-EFFORT_KINDS = ("applied", "joint_torque", "none")
 
 #: How an estimator without the applied torque gets its input (``joint_torque``, ``none``):
 #: ``"state"``: u is n extra states, a random walk (``effort_models.InputStateTransition``);
