@@ -10,14 +10,16 @@ Each function raises the error class it is given (``SpecError`` for robot.toml,
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Literal
 
 from amsfe_sym.errors import AmsfeError, describe
 
 __all__ = [
     "BACKWARD_MAPS",
     "C_INT_MAX",
+    "EFFORT_KINDS",
     "SEED_MAX",
+    "EffortKind",
     "is_number",
     "read_int",
     "read_number",
@@ -28,6 +30,13 @@ __all__ = [
 #: backward map of eq. (24)), in the order of the C runtime's codes
 #: (``amsfe_params.backward_map``: 0 linearised, 1 inverse).
 BACKWARD_MAPS = ("linearised", "inverse")
+
+#: What a log's or a live topic's effort is (docs/topics.md, docs/effort.md): ``applied``
+#: the motor torque u applied over [t_k, t_k+1] (the input of F, eq. (1b)); ``joint_torque``
+#: the measured joint (spring) torque Ks (qm - q) of torque-sensing arms (Franka, KUKA iiwa),
+#: a measurement of the state, u unknown; ``none`` encoders only, u unknown.
+EffortKind = Literal["applied", "joint_torque", "none"]
+EFFORT_KINDS: tuple[EffortKind, ...] = ("applied", "joint_torque", "none")
 
 #: The largest C ``int`` (the runtime's parameter blocks hold counts as ``int``).
 C_INT_MAX = 2**31 - 1

@@ -27,6 +27,8 @@ from numpy.typing import NDArray
 from amsfe_sym.control import Controller, make_controller
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.estimation import Estimator, FilterConfig, make_estimator
+from amsfe_sym.estimation.effort import EffortSpec, MotorParams, input_noise_std
+from amsfe_sym.estimation.effort_models import SpringTorqueMeasurement, wrap_models
 from amsfe_sym.estimation.registry import estimator_class
 from amsfe_sym.runtime.compiled_estimator import make_compiled_estimator
 from amsfe_sym.runtime.library import ModelLibrary
@@ -49,6 +51,7 @@ __all__ = [
     "build_run",
     "build_sensors",
     "filter_config",
+    "motor_params",
     "plant_start",
     "scenario_timing",
 ]
@@ -167,8 +170,28 @@ def filter_config(sc: Scenario, timing: CameraTiming) -> FilterConfig:
     )
 
 
+def motor_params(lib: ModelLibrary) -> MotorParams:
+    """The actuators of eq. (1b) and the stiffness parameters of ``lib``, for
+    :mod:`amsfe_sym.estimation.effort`."""
+    act = lib.manifest.actuators
+    return MotorParams(
+        Ks=np.array(act.Ks, dtype=float),
+        Mm=np.array(act.Mm, dtype=float),
+        Fm=np.array(act.Fm, dtype=float),
+        T=lib.T,
+        p=lib.p,
+        stiffness_theta=lib.stiffness_theta_index,
+        u_max=np.array(act.u_max or [np.inf] * lib.n, dtype=float),
+    )
+
+
 def build_estimator(
-    sc: Scenario, lib: ModelLibrary, sensors: Sensors, z0: FloatArray, compiled: bool = False
+    sc: Scenario,
+    lib: ModelLibrary,
+    sensors: Sensors,
+    z0: FloatArray,
+    compiled: bool = False,
+    effort: EffortSpec | None = None,
 ) -> Estimator:
     """The estimator of ``sc`` with its models, x(0|0) and P(0|0).
 
@@ -179,21 +202,44 @@ def build_estimator(
         z0: The first encoder sample [qm, qmd] (``[estimate0] motor = "encoders"``).
         compiled: Build the library's C estimator (same arguments, same numbers) instead
             of the Python reference.
+        effort: What the log's effort is (docs/effort.md); ``None``: the applied torque.
+            ``joint_torque``: the encoder model is
+            :class:`~amsfe_sym.estimation.effort.SpringTorqueMeasurement` (``z = [qm, qmd,
+            tau_J]``, Python estimators only); ``joint_torque`` and ``none`` add the input's
+            :func:`~amsfe_sym.estimation.effort.input_noise_std` to ``[filter]
+            motor_torque_std`` in quadrature.  Feed the estimator with
+            :func:`~amsfe_sym.estimation.effort.estimator_inputs`.
 
     Raises:
-        ConfigError: an unknown estimator, a singular camera R, bad initial values.
+        ConfigError: an unknown estimator, a singular camera R, bad initial values, or the
+            compiled estimator asked for ``joint_torque``.
     """
     n, p = lib.n, lib.p
     f = sc.filter
-    model = CompiledTransition(
-        lib, noise_covariance(lib, f.link_torque_std, f.motor_torque_std, f.theta_rate_std)
-    )
+    effort = effort or EffortSpec()
     enc_var = sensors.encoders.variance
-    encoder_model = EncoderMeasurement(
-        lib,
-        f.encoder_q_std**2 if f.encoder_q_std else enc_var[:n],
-        f.encoder_qd_std**2 if f.encoder_qd_std else enc_var[n:],
+    q_var = f.encoder_q_std**2 if f.encoder_q_std else enc_var[:n]
+    qd_var = f.encoder_qd_std**2 if f.encoder_qd_std else enc_var[n:]
+    motor = motor_params(lib)
+    extra = input_noise_std(effort, motor, np.sqrt(qd_var))
+    motor_std = np.sqrt(np.asarray(f.motor_torque_std, dtype=float) ** 2 + extra**2)
+    compiled_model = CompiledTransition(
+        lib, noise_covariance(lib, f.link_torque_std, motor_std, f.theta_rate_std)
     )
+    if compiled and effort.kind != "applied":
+        raise ConfigError(
+            describe(
+                f"effort kind {effort.kind!r}",
+                "the Python estimators (the C estimators take the applied torque only)",
+                "compiled = True",
+                "use the Python estimator (compiled = False) for this log",
+            )
+        )
+    encoder_model: EncoderMeasurement | SpringTorqueMeasurement
+    if effort.kind == "joint_torque":
+        encoder_model = SpringTorqueMeasurement(motor, q_var, qd_var, effort.joint_torque_std**2)
+    else:
+        encoder_model = EncoderMeasurement(lib, q_var, qd_var)
     cam_var = f.camera_pixel_std**2 if f.camera_pixel_std else sensors.camera.config.variance
     if cam_var <= 0:
         raise ConfigError(
@@ -229,14 +275,25 @@ def build_estimator(
         )
         ** 2
     )
+    g0 = lib.function("gravity")(x0[:n], th0)[0]  # the torque holding the arm at x0
+    parts = wrap_models(
+        effort,
+        motor,
+        compiled_model,
+        encoder_model,
+        camera_model,
+        x0,
+        P0,
+        u0=g0 + motor.Fm * x0[3 * n : 4 * n],
+    )
     make = make_compiled_estimator if compiled else make_estimator
     return make(
         sc.estimator,
-        model=model,
-        encoder=encoder_model,
-        camera=camera_model,
-        x0=x0,
-        P0=P0,
+        model=parts.model,
+        encoder=parts.encoder,
+        camera=parts.camera,
+        x0=parts.x0,
+        P0=parts.P0,
         config=filter_config(sc, sensors.timing),
     )
 

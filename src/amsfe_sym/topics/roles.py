@@ -18,6 +18,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
+from amsfe_sym.core.values import EFFORT_KINDS, EffortKind
 from amsfe_sym.errors import ConfigError, describe
 
 __all__ = [
@@ -35,14 +36,6 @@ FLOAT64_ARRAY = "std_msgs/msg/Float64MultiArray"
 POINT_STAMPED = "geometry_msgs/msg/PointStamped"
 STRING = "std_msgs/msg/String"
 CLOCK = "rosgraph_msgs/msg/Clock"
-
-#: What a JointState's effort (or an effort topic's data) is:
-#: ``applied``: the motor torque u applied over [t_k, t_k+1] (the input of F, eq. (1b));
-#: ``joint_torque``: the measured joint (spring) torque Ks (qm - q) of torque-sensing arms
-#: (Franka, KUKA iiwa): a measurement of the state, the input u unknown;
-#: ``none``: not used (encoders only; u unknown).
-EffortKind = Literal["applied", "joint_torque", "none"]
-EFFORT_KINDS: tuple[EffortKind, ...] = ("applied", "joint_torque", "none")
 
 
 @dataclass(frozen=True)
