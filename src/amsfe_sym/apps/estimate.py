@@ -37,8 +37,8 @@ from amsfe_sym.logs.source import log_topics
 from amsfe_sym.logs.spec import read_log_spec
 from amsfe_sym.scenario import Scenario, load_scenario, parse_scenario
 
-if TYPE_CHECKING:  # the estimators (scipy) are imported when a log is estimated, not at start
-    pass
+if TYPE_CHECKING:  # the spec module is imported when a log's rate needs it, not at start
+    from amsfe_sym.load.spec import RobotSpec
 
 __all__ = [
     "EstimateOptions",
@@ -173,60 +173,25 @@ def _scenario(path: Path, config: dict[str, Any] | None, options: EstimateOption
     return sc.with_overrides(estimator=options.estimator)
 
 
-def _generated_at_period(robot: str, period: float) -> Any:
+def _generated_at_period(robot: str, period: float) -> RobotSpec | None:
     """The spec of ``robot`` at ``period`` [s] when ``amsfe generate ROBOT --period`` has
-    already built its library (``codegen.modes``, where the build has it), else None: then
-    the rate refusal stands, with that command as its fix."""
-    import importlib.util
+    already built its library (:func:`~amsfe_sym.codegen.modes.spec_at_period`, found in the
+    cache without building anything), else None: then the rate refusal stands."""
+    from amsfe_sym.codegen.build import cached_library
+    from amsfe_sym.codegen.modes import spec_at_period
 
-    if importlib.util.find_spec("amsfe_sym.codegen.modes") is None:
-        return None
-    try:
-        modes = importlib.import_module("amsfe_sym.codegen.modes")
-        build = importlib.import_module("amsfe_sym.codegen.build")
-        spec = modes.spec_at_period(robot, period)
-        return spec if build.cached_library(spec) is not None else None
-    except Exception:  # an older modes API: the refusal and its fix stand
-        return None
+    spec = spec_at_period(robot, period)
+    return spec if cached_library(spec) is not None else None
 
 
 def _with_modes_fix(exc: LogRateError, robot: str) -> LogRateError:
-    """The rate refusal with ``codegen.modes.period_fix``'s command (the substeps the joint
-    modes need) where the build has it; else as the reader wrote it."""
-    import importlib.util
+    """The rate refusal with :func:`~amsfe_sym.codegen.modes.period_fix`'s command (with the
+    substeps the joint modes need)."""
+    from amsfe_sym.codegen.modes import period_fix
 
-    if importlib.util.find_spec("amsfe_sym.codegen.modes") is None:
-        return exc
-    try:
-        fix = importlib.import_module("amsfe_sym.codegen.modes").period_fix(robot, exc.period)
-    except Exception:  # an older modes API: the reader's plain command stands
-        return exc
     head = str(exc).split(". Fix: ")[0]
+    fix = period_fix(robot, exc.period)
     return LogRateError(f"{head}. Fix: {fix}, or record at the robot's rate", exc.period)
-
-
-def _effort_support(kind: str, log_path: Path) -> None:
-    """Refuse an effort kind this build cannot estimate with, before compiling."""
-    if kind == "applied":
-        return
-    import importlib.util
-    import inspect
-
-    from amsfe_sym.sim.builders import build_estimator
-
-    ok = importlib.util.find_spec("amsfe_sym.estimation.effort") is not None and (
-        "effort" in inspect.signature(build_estimator).parameters
-    )
-    if not ok:
-        raise LogError(
-            describe(
-                f"log {log_path}: effort of kind {kind!r}",
-                "an estimator for that kind (amsfe_sym.estimation.effort)",
-                "this build estimates with the applied torque only",
-                'say [effort] kind = "applied" in a topic spec if the effort is the applied '
-                "motor torque (docs/topics.md)",
-            )
-        )
 
 
 def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> EstimateRun:
@@ -266,7 +231,6 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
             print(f"  the log's period {exc.period:g} s: library {derived.name} (cached)")
         log = read_log(log_path, spec, joints, derived.model.T, N, plan, robot=name)
     log.config = config
-    _effort_support(log.effort_kind, log_path)
     if options.scenario is None and (options.robot is not None or config is None):
         sc = _start_from_log(sc, log)  # --robot: the defaults, started from the log
     read_s = time.perf_counter() - t0
@@ -291,24 +255,20 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
 
 
 def _estimator(sc: Scenario, lib: Any, log: RobotLog, options: EstimateOptions) -> Any:
-    """The estimator and the log it is fed (for a non-applied effort: the inputs and
-    encoder measurements :mod:`amsfe_sym.estimation.effort` derives)."""
+    """The estimator and the log it is fed: for an effort of kind ``joint_torque`` or
+    ``none``, :func:`~amsfe_sym.sim.effort.effort_estimator`'s (the Python estimators; the
+    input and encoder measurements derived from the log, docs/effort.md)."""
+    from amsfe_sym.estimation.effort import EffortSpec
     from amsfe_sym.sim.builders import build_estimator, build_sensors, scenario_timing
+    from amsfe_sym.sim.effort import effort_estimator
 
     sensors = build_sensors(sc, lib, np.random.default_rng(sc.seed), scenario_timing(sc, lib))
-    compiled = options.runtime == "compiled"
     if log.effort_kind == "applied":
+        compiled = options.runtime == "compiled"
         return build_estimator(sc, lib, sensors, log.z[0], compiled=compiled), log
-    import importlib
-
-    # issue 26.3's effort kinds (helper modules typed as Any until they are in every build)
-    eff = importlib.import_module("amsfe_sym.estimation.effort")
-    builders = importlib.import_module("amsfe_sym.sim.builders")
-    spec = eff.EffortSpec(kind=log.effort_kind)
-    est = builders.build_estimator(sc, lib, sensors, log.z[0], compiled=False, effort=spec)
-    qd_std = sc.filter.encoder_qd_std or np.sqrt(sensors.encoders.variance[lib.n :])
-    inputs = eff.estimator_inputs(spec, log.z, log.effort, builders.motor_params(lib), qd_std)
-    return est, replace(log, u=inputs.u, z=inputs.z_encoder)
+    spec = EffortSpec(kind=log.effort_kind)
+    built = effort_estimator(sc, lib, sensors, log.z, log.effort, spec, compiled=False)
+    return built.estimator, replace(log, u=built.inputs.u, z=built.inputs.z_encoder)
 
 
 def add_arguments(e: argparse.ArgumentParser) -> None:

@@ -47,10 +47,6 @@ from amsfe_sym.core.camera_frame import CameraFrame
 from amsfe_sym.errors import describe
 from amsfe_sym.logs.decode import (
     JointStates,
-    decode_float64_arrays,
-    decode_joint_states,
-    decode_points,
-    decode_strings,
 )
 from amsfe_sym.logs.grid import (
     FAR_S,
@@ -62,7 +58,6 @@ from amsfe_sym.logs.grid import (
     fit_t0,
 )
 from amsfe_sym.logs.plan import (
-    JOINT_STATE,
     LOG_ROLES,
     LogPlan,
     joint_columns,
@@ -71,7 +66,6 @@ from amsfe_sym.logs.plan import (
     refuse,
 )
 from amsfe_sym.logs.sensors import camera_frames, held_effort, truth_on_grid
-from amsfe_sym.logs.source import TopicData, read_topics
 from amsfe_sym.logs.spec import LogSpec
 from amsfe_sym.topics.roles import EffortKind
 
@@ -141,38 +135,16 @@ class RobotLog:
         return np.arange(self.K, dtype=np.float64) * self.T
 
 
-def _decode(path: Path, data: TopicData) -> Any:
-    enc = data.info.payload_encoding(path)
-    where = f"log {path}: {data.info.topic}"
-    t = data.info.msgtype
-    if t == JOINT_STATE:
-        return decode_joint_states(data.raws, enc, where)
-    if t == "geometry_msgs/msg/PointStamped":
-        return decode_points(data.raws, enc, where)
-    if t == "std_msgs/msg/Float64MultiArray":
-        return decode_float64_arrays(data.raws, enc, where)
-    return decode_strings(data.raws, enc, where)
-
-
 def _read_decoded(path: Path, plan: LogPlan) -> tuple[dict[str, IntArray], dict[str, Any]]:
     """Log times and decoded columns of every topic the plan uses (a topic without a
-    message: absent), in one pass: through the bulk reader ``amsfe_sym.logs.stream`` where
-    this build has it (issue 26.8: MCAP chunks cut with numpy), else
-    :func:`~amsfe_sym.logs.source.read_topics` and :mod:`amsfe_sym.logs.decode`."""
-    import importlib.util
+    message: absent), in one pass of :func:`amsfe_sym.logs.stream.read_topics` (bounded
+    memory, bulk decoding, a progress bar on long logs)."""
+    from amsfe_sym.logs.stream import read_topics
 
-    wanted = set(plan.roles.values())
-    if importlib.util.find_spec("amsfe_sym.logs.stream") is not None:
-        stream = importlib.import_module("amsfe_sym.logs.stream")
-        got = stream.read_topics(path, wanted)
-        return (
-            {t: np.asarray(v.log_time_ns, dtype=np.int64) for t, v in got.items()},
-            {t: v.decoded for t, v in got.items()},
-        )
-    data = {t: d for t, d in read_topics(path, wanted, plan.topics).items() if len(d)}
+    got = read_topics(path, set(plan.roles.values()))
     return (
-        {t: d.log_time_ns for t, d in data.items()},
-        {t: _decode(path, d) for t, d in data.items()},
+        {t: np.asarray(v.log_time_ns, dtype=np.int64) for t, v in got.items()},
+        {t: v.decoded for t, v in got.items()},
     )
 
 
