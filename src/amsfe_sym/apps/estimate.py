@@ -216,7 +216,7 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
     config = read_config(log_path, spec, topics)
     sc = _scenario(log_path, config, options)
     name, joints, T, N = _robot_of(sc.robot)
-    plan = plan_log(log_path, spec, joints)
+    plan = plan_log(log_path, spec, joints, topics)
     if options.verbose:
         for line in plan.lines():
             print(f"  {line}")

@@ -171,16 +171,22 @@ def _has(js: JointStates, names: Sequence[str], field_: int) -> bool:
     return all(n in have for n in names) and int(js.counts[0, field_]) == len(have) > 0
 
 
-def plan_log(path: Path, spec: LogSpec, joints: Sequence[str]) -> LogPlan:
+def plan_log(
+    path: Path,
+    spec: LogSpec,
+    joints: Sequence[str],
+    topics: dict[str, TopicInfo] | None = None,
+) -> LogPlan:
     """Which topic plays which role in the log at ``path`` for a robot with ``joints`` (q
-    order), from the container's metadata and each candidate topic's first message.
+    order), from the container's metadata (``topics``, as :func:`log_topics` gives it, or
+    read here) and each candidate topic's first message.
 
     Raises:
         LogError: unreadable; a named topic missing or of the wrong type; a default topic of
             the wrong type; no encoder topic, or several that could be it; the robot's
             joints missing from the encoder topic (named).
     """
-    topics = log_topics(path)
+    topics = topics if topics is not None else log_topics(path)
     if topics and not any(i.encoding in ("cdr", "ros1") for i in topics.values()):
         next(iter(topics.values())).payload_encoding(path)  # e.g. a JSON MCAP: named
     names = tuple(spec.joint_names or joints)
