@@ -7,9 +7,9 @@ file) is refused in one line naming what was found.
 
 What a reader gets: :func:`log_topics` (every topic with its type, encoding and count, from
 the container's metadata), :func:`first_payloads` (the first few payloads of some topics, to
-look at joint names before anything is read in full) and :func:`read_topics` (one pass over
-the log collecting each wanted topic's payload bytes and log times: no per-message object is
-kept, the payloads go to :mod:`amsfe_sym.logs.decode` a topic at a time).
+look at joint names before anything is read in full) and :func:`iter_messages` (payloads one
+by one; :mod:`amsfe_sym.logs.stream` reads whole topics in bulk and falls back on it for
+containers it does not cut itself).
 """
 
 from __future__ import annotations
@@ -32,7 +32,6 @@ __all__ = [
     "first_payloads",
     "iter_messages",
     "log_topics",
-    "read_topics",
     "typestore",
 ]
 
@@ -252,25 +251,6 @@ def _payloads(path: Path, topics: set[str]) -> Iterator[tuple[str, int, bytes]]:
         raise
     except Exception as exc:
         raise _unreadable(path, exc) from exc
-
-
-def read_topics(
-    path: Path, topics: set[str], infos: dict[str, TopicInfo] | None = None
-) -> dict[str, TopicData]:
-    """One pass over the log: each of ``topics``' payloads and log times (a topic the log
-    does not have is left out).
-
-    Raises:
-        LogError: as :func:`log_topics`, or the log breaks off while being read.
-    """
-    infos = infos if infos is not None else log_topics(path)
-    wanted = {t for t in topics if t in infos}
-    raws: dict[str, list[bytes]] = {t: [] for t in wanted}
-    times: dict[str, list[int]] = {t: [] for t in wanted}
-    for topic, t, raw in _payloads(path, wanted):
-        raws[topic].append(raw)
-        times[topic].append(t)
-    return {t: TopicData(infos[t], np.asarray(times[t], dtype=np.int64), raws[t]) for t in wanted}
 
 
 def first_payloads(
