@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from amsfe_sym.codegen import compiler, library_for
@@ -236,3 +236,171 @@ def test_fuzz_reader(
     reader = readers[name]
     log = data.draw(damaged(reader.log))
     _check(reader, log, tmp_path_factory.mktemp("f") / "run.log")
+
+
+# ---------------------------------------------------------------- the rosbag / MCAP log reader
+# (issue 25 item 3, issue 26): random topic sets, types, field lengths, stamps, encodings and
+# truncation through `amsfe estimate LOG --robot paper_2link`: exit 0 only with a complete run
+# whose encoder samples are the ones written, on the ticks they were written for; otherwise
+# one line on stderr, exit 2, no run folder.
+@pytest.fixture(scope="module")
+def short_run():
+    """0.3 s of paper-sim (compiled loop): the samples the fuzzed logs carry."""
+    sc = load_scenario("paper-sim").with_overrides(
+        estimator="oosm", controller="amsfe", duration=0.3, seed=4
+    )
+    return run(sc, library_for(sc), runtime="compiled")
+
+
+STAMP_FAULTS = ["none"] * 6 + ["zero", "far", "duplicate", "backwards", "all_zero", "gap", "nan"]
+
+
+@st.composite
+def arm_logs(draw: st.DrawFn, res) -> tuple[list, str, dict]:
+    """(events, container, expectation) of a random log of ``res``."""
+    from tests.test_log_reader import F64, JS, PT, STR, Ev
+
+    T, n = res.lib.T, res.lib.n
+    joints = list(res.lib.manifest.joints)
+    K = draw(st.integers(3, 120))
+    topic = draw(st.sampled_from(["/joint_states", "/motor_encoders", "/arm/state"]))
+    enc_type = draw(st.sampled_from([JS] * 8 + [STR, F64]))
+    names = list(joints)
+    extra = draw(st.sampled_from(["none"] * 4 + ["fingers"] * 3 + ["missing", "twice"]))
+    if extra == "fingers":
+        names = ["finger", *names[::-1]]
+    elif extra == "missing":
+        names = names[:1]
+    elif extra == "twice":
+        names = [names[0], *names]
+    width = len(names)
+    pos_len = draw(st.sampled_from([width] * 12 + [0, width + 1, max(width - 1, 0)]))
+    vel_len = draw(st.sampled_from([width] * 12 + [0, width + 1]))
+    fault = draw(st.sampled_from(STAMP_FAULTS))
+    offset = draw(st.sampled_from([0.0, 203.6, 5.0]))
+    jitter = draw(st.sampled_from([0.0, 0.1, 0.2]))
+    rng = np.random.default_rng(draw(st.integers(0, 2**16)))
+    ev, kept = [], {}
+    for k in range(K):
+        st_k = 2.0 + k * T + offset + rng.uniform(-jitter, jitter) * T  # ROS times are >= 0
+        lt = 2.0 + k * T + 1e-4
+        pos, vel, eff = np.full(width, 0.01), np.full(width, 0.02), np.full(width, 0.03)
+        for j, name in enumerate(joints):
+            if name in names:
+                pos[names.index(name)] = res.z_enc[k, j]
+                vel[names.index(name)] = res.z_enc[k, n + j]
+                eff[names.index(name)] = res.u[k, j]
+        good = True
+        if fault == "zero" and k == K // 2 and offset != 0.0 and k > 0:
+            st_k, good = 0.0, False
+        elif fault == "far" and k == K // 2 and k > 0:
+            st_k, good = st_k + 11.6 * 86400, False
+        elif fault == "all_zero":
+            st_k, good = 0.0, False
+        elif fault == "backwards":
+            st_k, good = 2.0 + (K - k) * T + offset, False
+        elif fault == "gap" and K // 3 <= k < K // 3 + 8:
+            continue
+        elif fault == "nan" and k == K // 2 and k > 0:
+            pos[0], good = draw(st.sampled_from([np.nan, np.inf, -np.inf])), False
+        ev.append(
+            Ev(
+                lt,
+                topic,
+                enc_type,
+                st_k,
+                names,
+                pos[:pos_len] if pos_len <= width else np.append(pos, 0.0),
+                vel[:vel_len] if vel_len <= width else np.append(vel, 0.0),
+                eff,
+            )
+        )
+        if fault == "duplicate" and k == 1:
+            ev.append(Ev(lt, topic, enc_type, st_k, names, pos, vel, eff))
+        if good:
+            kept[k] = res.z_enc[k]
+    effort = draw(st.sampled_from(["shared"] * 3 + ["array", "array_short", "state", "late"]))
+    if effort != "shared":  # a separate /motor_torque (the default effort topic) too
+        short = effort == "array_short"
+        for k in range(K):
+            if effort == "late" and k < 3:
+                continue
+            if effort in ("array", "array_short"):
+                data_k = res.u[k, : n - 1] if short else res.u[k]
+                ev.append(Ev(2.0 + k * T + 2e-4, "/motor_torque", F64, data=data_k))
+            else:
+                st_e = 2.0 + k * T + offset + 0.3 * T
+                ev.append(
+                    Ev(2.0 + k * T + 2e-4, "/motor_torque", JS, st_e, joints, (), (), res.u[k])
+                )
+    if draw(st.booleans()):  # camera frames, maybe of the wrong type
+        cam_type = draw(st.sampled_from([PT] * 4 + [F64]))
+        for kappa in range(0, K, 25):
+            arrive = kappa + draw(st.integers(-2, 30))
+            xy = (draw(st.just(np.nan) | st.floats(-1e3, 1e3)), 200.0)
+            ev.append(
+                Ev(
+                    2.0 + arrive * T + 1e-4,
+                    "/camera/marker",
+                    cam_type,
+                    2.0 + kappa * T + offset,
+                    xy=xy,
+                    data=[1.0],
+                )
+            )
+    fmt = draw(st.sampled_from(["bag", "mcap", "sqlite3", "mcapfile"]))
+    if effort == "late":  # the log starts at the first effort sample (tick 3)
+        later = [k for k in kept if k >= 3]
+        kept = {k: v for k, v in kept.items() if later and k >= min(later)}
+    expect = {"kept": kept, "topic": topic, "fault": fault}
+    return ev, fmt, expect
+
+
+@pytest.mark.slow
+@settings(max_examples=40, deadline=None, suppress_health_check=list(HealthCheck), database=None)
+@given(data=st.data())
+def test_fuzz_log_reader(
+    short_run, data: st.DataObject, tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    import json
+
+    from amsfe_sym.apps.cli import main
+    from amsfe_sym.logs.read import read_log
+    from amsfe_sym.logs.spec import read_log_spec
+    from tests.test_log_reader import write_log
+
+    res = short_run
+    events, fmt, expect = data.draw(arm_logs(res))
+    # a quarter of the logs truncated anywhere (the file, or a rosbag2 folder's storage file)
+    cut = data.draw(st.one_of(st.none(), st.none(), st.none(), st.floats(0.0, 0.999)))
+    tmp = tmp_path_factory.mktemp("arm")
+    log = write_log(tmp / ("log.bag" if fmt == "bag" else "log"), events, fmt)
+    if cut is not None:  # the file, or the storage file of a rosbag2 folder
+        files = [log] if log.is_file() else [p for p in log.iterdir() if p.suffix != ".yaml"]
+        raw = files[0].read_bytes()
+        files[0].write_bytes(raw[: int(cut * len(raw))])
+    spec = tmp / "spec.toml"
+    spec.write_text('[effort]\nkind = "applied"\n')
+    out = tmp / "out"
+    args = ["estimate", str(log), "--robot", "paper_2link", "--log-spec", str(spec)]
+    code = main([*args, "--out", str(out), "--no-plots"])
+    event(f"exit {code}")  # --hypothesis-show-statistics: how many ran, how many refused
+    if code != 0:
+        assert code == 2
+        assert not out.exists()
+        return
+    # exit 0: a complete run, and the encoder samples on the ticks they were written for
+    summary = json.loads((out / "summary.json").read_text())
+    enc = summary["topics"]["encoders"]
+    assert enc["used"] + sum(enc["skipped"].values()) == enc["messages"]
+    lib = res.lib
+    got = read_log(log, read_log_spec(str(spec)), lib.manifest.joints, lib.T, lib.N)
+    kept = expect["kept"]
+    first = min(kept)
+    assert got.K == max(kept) - first + 1 == summary["ticks"]
+    for k, z in kept.items():
+        assert np.array_equal(got.z[k - first], z), (k, expect["fault"])
+    import pandas as pd
+
+    est = pd.read_parquet(out / "estimates.parquet")
+    assert len(est) == got.K and np.isfinite(est.to_numpy()).all()

@@ -174,11 +174,14 @@ def test_refusals_are_one_line_and_leave_nothing(sim, tmp_path, capsys) -> None:
     data = (good / f"{good.name}.mcap").read_bytes()
     mcap.write_bytes(data[: len(data) // 2])
     cases["truncated"] = mcap
+    # the effort said to be the applied torque: a log without it is refused (without a
+    # spec, a log without effort is an encoders-only log: docs/topics.md)
+    spec = tmp_path / "spec.toml"
+    spec.write_text('[effort]\nkind = "applied"\n')
     for what, bag in cases.items():
         out = tmp_path / f"out-{what.replace(' ', '_')}"
-        code = main(
-            ["estimate", str(bag), "--out", str(out), "--no-plots", "--scenario", str(scen)]
-        )
+        args = ["estimate", str(bag), "--out", str(out), "--no-plots", "--scenario", str(scen)]
+        code = main([*args, "--log-spec", str(spec)])
         err = capsys.readouterr().err.strip()
         assert code == 2, what
         assert err.startswith("error:") and "\n" not in err, (what, err)

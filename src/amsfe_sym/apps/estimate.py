@@ -1,43 +1,54 @@
-"""``amsfe estimate LOG``: an estimator of a generated robot over a recorded rosbag2 / MCAP
-log, into a run folder (docs/logs.md).
+"""``amsfe estimate LOG``: an estimator of a generated robot over a recorded log (a ROS 1
+``.bag``, a rosbag2 folder, an ``.mcap``), into a run folder (docs/logs.md).
 
 A log written by ``amsfe simulate --bag`` carries its robot, scenario and estimator
 (``/amsfe/config``), so ``amsfe estimate LOG`` alone reproduces the run's estimates; any
-other log needs ``--scenario`` (its robot, ``[filter]`` and ``[estimate0]``, and the sensor
-noise R defaults from its ``[encoders]`` / ``[camera]``) and, where its topics differ from
-the defaults, a log spec.
+other log needs ``--robot ROBOT`` (the estimate starts from the log's first samples, the
+filter from its defaults) or ``--scenario FILE`` (to tune the filter).  Topics are found by
+message type and joint names (a driver's ``/joint_states``); a topic spec (``--log-spec``)
+is for the unusual log.  The log's topics, types, joint names and rate are checked before
+the robot's library is generated or loaded.
 """
 
 from __future__ import annotations
 
 import argparse
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from amsfe_sym.apps.estimate_report import (
+    EstimateRun,
+    figures,
+    nis_report,
+    print_summary,
+    summary,
+)
 from amsfe_sym.core.folders import write_folder
 from amsfe_sym.core.jsonfile import write_json
 from amsfe_sym.core.outputs import check_output
-from amsfe_sym.core.provenance import provenance
 from amsfe_sym.core.toml import dump_toml, tomllib
 from amsfe_sym.errors import LogError, describe
-from amsfe_sym.logs.read import RobotLog, read_config, read_log
+from amsfe_sym.logs.read import LogRateError, RobotLog, plan_log, read_config, read_log
+from amsfe_sym.logs.source import log_topics
 from amsfe_sym.logs.spec import read_log_spec
 from amsfe_sym.scenario import Scenario, load_scenario, parse_scenario
 
-if TYPE_CHECKING:  # the estimators (scipy) are imported when a log is estimated, not at start
-    from amsfe_sym.logs.replay import LogEstimate
+if TYPE_CHECKING:  # the spec module is imported when a log's rate needs it, not at start
+    from amsfe_sym.load.spec import RobotSpec
 
 __all__ = [
     "EstimateOptions",
     "EstimateRun",
     "add_arguments",
     "default_out",
+    "default_scenario",
     "estimate_command",
     "from_args",
+    "nis_report",
     "print_summary",
     "summary",
 ]
@@ -49,11 +60,14 @@ class EstimateOptions:
 
     Attributes:
         scenario: Scenario file for a log without amsfe's config (or to override it).
-        log_spec: Log spec TOML (topics, joint names, timing), or None for the defaults.
+        log_spec: Topic spec TOML (topics, joint names, effort kind, timing), or None.
         estimator: Estimator name overriding the scenario's.
         runtime: ``"compiled"`` (the library's C estimator) or ``"python"`` (the reference).
         plots: Draw the figures.
         force: Replace an existing run folder.
+        robot: The robot (a shipped name or a ``robot.toml``) for a log without amsfe's
+            config, when no scenario is given: filter defaults, start from the log.
+        verbose: Print which topic plays which role, and the clock offset.
     """
 
     scenario: str | None = None
@@ -62,115 +76,213 @@ class EstimateOptions:
     runtime: str = "compiled"
     plots: bool = True
     force: bool = False
+    robot: str | None = None
+    verbose: bool = False
 
 
-@dataclass
-class EstimateRun:
-    """What ``amsfe estimate`` did: the read log, the estimates, the folder and the timing."""
+def default_scenario(robot: str) -> Scenario:
+    """The settings ``amsfe estimate LOG --robot ROBOT`` runs with: the scenario defaults
+    (``[filter]``: process noise 0.1 N m, buffer 1000 steps; ``[encoders]`` and
+    ``[camera]``: the sensor noise the filter's R is built from; docs/scenarios.md), the
+    ``oosm`` estimator, and the estimate's start replaced by the log's first sample
+    (:func:`_start_from_log`).  No plant or trajectory is used."""
+    from amsfe_sym.codegen.preflight import modelled_joints
+    from amsfe_sym.load.spec import load_spec
 
-    log: RobotLog
-    estimate: LogEstimate
-    scenario: Scenario
-    out: Path
-    read_s: float
-    estimate_s: float
+    spec = load_spec(robot)
+    n = len(modelled_joints(spec) or ())
+    zeros = [0.0] * n
+    data = {
+        "name": f"estimate-{spec.name}",
+        "robot": str(spec.spec_path or spec.urdf) if Path(robot).exists() else robot,
+        "estimator": "oosm",
+        "trajectory": {"kind": "constant", "q": zeros},
+        "plant": {"q0": zeros, "qd0": zeros},
+        "estimate0": {"q": zeros, "qd": zeros, "motor": "encoders"},
+    }
+    if spec.camera.delay + 1 > 1000:
+        data["filter"] = {"buffer_steps": 2 * spec.camera.delay + 1}
+    return parse_scenario(data, Path(f"--robot {robot}"))
+
+
+def _start_from_log(sc: Scenario, log: RobotLog) -> Scenario:
+    """``[estimate0]`` from the log's first encoder sample: link angles = the measured
+    positions, link rates = the measured velocities (motor states: the sample itself)."""
+    n = log.u.shape[1]
+    z0 = log.z[0]
+    e0 = replace(sc.estimate0, q=tuple(map(float, z0[:n])), qd=tuple(map(float, z0[n:])))
+    return replace(sc, estimate0=e0)
+
+
+def _robot_of(scenario_robot: str) -> tuple[str, list[str], float, int]:
+    """(name, joints, T, N) of a robot from its spec, without generating anything."""
+    from amsfe_sym.codegen.preflight import modelled_joints
+    from amsfe_sym.load.spec import load_spec
+
+    spec = load_spec(scenario_robot)
+    joints = modelled_joints(spec) or []
+    return spec.name, joints, spec.model.T, 4 * len(joints) + len(spec.theta)
+
+
+def _config_scenario(path: Path, config: dict[str, Any]) -> Scenario:
+    try:
+        data = tomllib.loads(str(config["scenario_toml"]))
+    except tomllib.TOMLDecodeError as exc:
+        raise LogError(
+            describe(
+                f"log {path}: /amsfe/config scenario_toml",
+                "the run's scenario as TOML (written by amsfe simulate --bag)",
+                f"text that is not TOML ({exc})",
+                "pass --scenario FILE (or --robot ROBOT) to give it yourself (docs/logs.md)",
+            )
+        ) from exc
+    return parse_scenario(data, path)
 
 
 def _scenario(path: Path, config: dict[str, Any] | None, options: EstimateOptions) -> Scenario:
+    from_config = None
+    if config is not None and "scenario_toml" in config:
+        from_config = _config_scenario(path, config)
     if options.scenario is not None:
         sc = load_scenario(options.scenario)
-    elif config is not None and "scenario_toml" in config:
-        try:
-            data = tomllib.loads(str(config["scenario_toml"]))
-        except tomllib.TOMLDecodeError as exc:
-            raise LogError(
-                describe(
-                    f"log {path}: /amsfe/config scenario_toml",
-                    "the run's scenario as TOML (written by amsfe simulate --bag)",
-                    f"text that is not TOML ({exc})",
-                    "pass --scenario FILE to give the scenario yourself (docs/logs.md)",
-                )
-            ) from exc
-        sc = parse_scenario(data, path)
+    elif options.robot is not None:
+        sc = default_scenario(options.robot)
+    elif from_config is not None:
+        sc = from_config
     else:
         raise LogError(
             describe(
                 f"log {path}",
                 "amsfe's run config (/amsfe/config, written by amsfe simulate --bag)",
                 "none",
-                "pass --scenario FILE: its robot, [filter], [estimate0] and sensor noise "
-                "(start from a copy of scenarios/paper-sim.toml; docs/logs.md)",
+                "pass --robot ROBOT (a shipped robot or a robot.toml: the estimate starts "
+                "from the log), or --scenario FILE to tune the filter (docs/logs.md)",
             )
         )
+    if from_config is not None and sc is not from_config:
+        mine, theirs = _robot_of(sc.robot), _robot_of(from_config.robot)
+        if (mine[0], mine[1]) != (theirs[0], theirs[1]):
+            raise LogError(
+                describe(
+                    f"log {path}",
+                    f"a log of robot {mine[0]} ({len(mine[1])} joints: {mine[1]})",
+                    f"its config says robot {theirs[0]} ({len(theirs[1])} joints)",
+                    f"estimate it with --robot {theirs[0]}, or a scenario of that robot",
+                )
+            )
     return sc.with_overrides(estimator=options.estimator)
+
+
+def _generated_at_period(robot: str, period: float) -> RobotSpec | None:
+    """The spec of ``robot`` at ``period`` [s] when ``amsfe generate ROBOT --period`` has
+    already built its library (:func:`~amsfe_sym.codegen.modes.spec_at_period`, found in the
+    cache without building anything), else None: then the rate refusal stands."""
+    from amsfe_sym.codegen.build import cached_library
+    from amsfe_sym.codegen.modes import spec_at_period
+
+    spec = spec_at_period(robot, period)
+    return spec if cached_library(spec) is not None else None
+
+
+def _with_modes_fix(exc: LogRateError, robot: str) -> LogRateError:
+    """The rate refusal with :func:`~amsfe_sym.codegen.modes.period_fix`'s command (with the
+    substeps the joint modes need)."""
+    from amsfe_sym.codegen.modes import period_fix
+
+    head = str(exc).split(". Fix: ")[0]
+    fix = period_fix(robot, exc.period)
+    return LogRateError(f"{head}. Fix: {fix}, or record at the robot's rate", exc.period)
 
 
 def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> EstimateRun:
     """Estimate over ``log_path`` and write the run folder ``out``: ``estimates.parquet``,
     ``summary.json``, ``config.toml``, figures and ``estimates/`` (a rosbag2 in MCAP).
 
+    Everything about the log (container, topics, types, joint names, rate, stamps) is
+    checked before the robot's library is generated or loaded.
+
     Raises:
         LogError: the log cannot be used (one line: what, found, fix).
         ConfigError, RunFolderError: bad settings, an existing ``out`` without ``force``, an
             ``out`` that is, holds or lies inside an input (the log), even with ``force``.
     """
-    from amsfe_sym.codegen import library_for
-    from amsfe_sym.sim.builders import build_estimator, build_sensors, scenario_timing
-
     inputs = [p for p in (log_path, options.scenario, options.log_spec) if p and Path(p).exists()]
     if log_path.is_file() and (log_path.parent / "metadata.yaml").is_file():
         inputs.append(log_path.parent)  # the .mcap of a bag folder: the folder is the log
     check_output(out, option="--out", force=options.force, inputs=inputs)
     spec = read_log_spec(options.log_spec)
     t0 = time.perf_counter()
-    config = read_config(log_path, spec)
+    topics = log_topics(log_path)
+    config = read_config(log_path, spec, topics)
     sc = _scenario(log_path, config, options)
-    lib = library_for(sc)
-    log = read_log(log_path, spec, lib.manifest.joints, lib.T, lib.N)
+    name, joints, T, N = _robot_of(sc.robot)
+    plan = plan_log(log_path, spec, joints, topics)
+    if options.verbose:
+        for line in plan.lines():
+            print(f"  {line}")
+    derived = None
+    try:
+        log = read_log(log_path, spec, joints, T, N, plan, robot=name)
+    except LogRateError as exc:  # the robot generated at the log's period, if it is cached
+        derived = _generated_at_period(sc.robot, exc.period)
+        if derived is None:
+            raise _with_modes_fix(exc, sc.robot) from None
+        if options.verbose:
+            print(f"  the log's period {exc.period:g} s: library {derived.name} (cached)")
+        log = read_log(log_path, spec, joints, derived.model.T, N, plan, robot=name)
+    log.config = config
+    if options.scenario is None and (options.robot is not None or config is None):
+        sc = _start_from_log(sc, log)  # --robot: the defaults, started from the log
     read_s = time.perf_counter() - t0
-    # the estimator as the loop builds it: R from the scenario's sensors unless [filter] sets it
-    sensors = build_sensors(sc, lib, np.random.default_rng(sc.seed), scenario_timing(sc, lib))
-    est = build_estimator(sc, lib, sensors, log.z[0], compiled=options.runtime == "compiled")
+    if options.verbose:
+        c = log.clock
+        print(
+            f"  clock: log time - header stamp = {c.median:+.6f} s (spread {c.spread:.2e} s); "
+            "log times moved onto the stamp clock"
+        )
+    from amsfe_sym.codegen import library_for
+
+    lib = library_for(sc, robot=derived)
+    est, feed = _estimator(sc, lib, log, options)
     t1 = time.perf_counter()
     from amsfe_sym.logs.replay import estimate_log
 
-    result = estimate_log(log, est)
+    result = estimate_log(feed, est)
     estimate_s = time.perf_counter() - t1
     run = EstimateRun(log, result, sc, out, read_s, estimate_s)
     _write(run, lib.manifest.joints, options)
     return run
 
 
-def summary(run: EstimateRun) -> dict[str, Any]:
-    """The ``summary.json`` of an estimate run."""
-    log, est = run.log, run.estimate
-    n = len(log.u[0])
-    out: dict[str, Any] = {
-        "log": str(log.path),
-        "estimator": run.scenario.estimator,
-        "ticks": log.K,
-        "duration_s": log.K * log.T,
-        "frames_fused": est.counters.get("frames_applied", 0),
-        "counters": est.counters,
-        "read_s": round(run.read_s, 4),
-        "estimate_s": round(run.estimate_s, 4),
-        "real_time_factor": round(log.K * log.T / max(run.read_s + run.estimate_s, 1e-9), 2),
-    }
-    if log.truth is not None and est.nees is not None:
-        w = slice(int(0.2 * log.K), log.K)
-        err = log.truth[w] - est.x_hat[w]
-        out["estimation_rmse_q"] = np.sqrt(np.nanmean(err[:, :n] ** 2, axis=0)).tolist()
-        out["nees_mean"] = float(np.nanmean(est.nees[w]))
-        out["nees_dof"] = int(est.x_hat.shape[1])
-    out["provenance"] = provenance()
-    return out
+def _estimator(sc: Scenario, lib: Any, log: RobotLog, options: EstimateOptions) -> Any:
+    """The estimator and the log it is fed: for an effort of kind ``joint_torque`` or
+    ``none``, :func:`~amsfe_sym.sim.effort.effort_estimator`'s (the Python estimators; the
+    input and encoder measurements derived from the log, docs/effort.md)."""
+    from amsfe_sym.estimation.effort import EffortSpec
+    from amsfe_sym.sim.builders import build_estimator, build_sensors, scenario_timing
+    from amsfe_sym.sim.effort import effort_estimator
+
+    sensors = build_sensors(sc, lib, np.random.default_rng(sc.seed), scenario_timing(sc, lib))
+    if log.effort_kind == "applied":
+        compiled = options.runtime == "compiled"
+        return build_estimator(sc, lib, sensors, log.z[0], compiled=compiled), log
+    spec = EffortSpec(kind=log.effort_kind)
+    built = effort_estimator(sc, lib, sensors, log.z, log.effort, spec, compiled=False)
+    return built.estimator, replace(log, u=built.inputs.u, z=built.inputs.z_encoder)
 
 
 def add_arguments(e: argparse.ArgumentParser) -> None:
     """The options of ``amsfe estimate``."""
-    e.add_argument("log", help="rosbag2 folder or .mcap file (amsfe simulate --bag writes one)")
-    e.add_argument("--scenario", default=None, help="robot + filter settings (logs not ours)")
-    e.add_argument("--log-spec", default=None, metavar="FILE", help="topics, joint names (TOML)")
+    e.add_argument("log", help="a ROS 1 .bag, a rosbag2 folder or an .mcap file")
+    e.add_argument(
+        "--robot",
+        default=None,
+        help="the robot (name or robot.toml) for a log not written by amsfe",
+    )
+    e.add_argument("--scenario", default=None, help="robot + filter settings, to tune the filter")
+    e.add_argument(
+        "--log-spec", default=None, metavar="FILE", help="topics, joint names, effort kind (TOML)"
+    )
     e.add_argument("--estimator", default=None, help="estimator name (default the scenario's)")
     e.add_argument(
         "--out",
@@ -192,24 +304,17 @@ def from_args(args: argparse.Namespace) -> int:
     log = Path(args.log)
     out = Path(args.out) if args.out else default_out(log)
     opts = EstimateOptions(
-        args.scenario, args.log_spec, args.estimator, args.runtime, not args.no_plots, args.force
+        args.scenario,
+        args.log_spec,
+        args.estimator,
+        args.runtime,
+        not args.no_plots,
+        args.force,
+        robot=args.robot,
+        verbose=True,
     )
     print_summary(summary(estimate_command(log, out, opts)), out)
     return 0
-
-
-def print_summary(s: dict[str, Any], out: Path) -> None:
-    """The headline of an estimate run: ticks, frames fused, what was skipped, speed, NEES."""
-    c = s["counters"]
-    print(f"run folder: {out} ({s['ticks']} ticks, {s['duration_s']:.2f} s of log)")
-    print(
-        f"  {s['estimator']}: {s['frames_fused']} camera frames fused; read {s['read_s']:.2f} s, "
-        f"estimated {s['estimate_s']:.2f} s ({s['real_time_factor']:.0f}x real time)"
-    )
-    skipped = {k: v for k, v in c.items() if v and k not in ("frames_applied", "frames_in_log")}
-    print("  skipped or refused: " + (", ".join(f"{k} {v}" for k, v in skipped.items()) or "none"))
-    if "nees_mean" in s:
-        print(f"  mean NEES {s['nees_mean']:.2f} (N = {s['nees_dof']}) against the log's truth")
 
 
 def _write(run: EstimateRun, joints: tuple[str, ...] | list[str], options: EstimateOptions) -> None:
@@ -234,43 +339,14 @@ def _write(run: EstimateRun, joints: tuple[str, ...] | list[str], options: Estim
         )
         from amsfe_sym.logs.write import write_estimate_bag
 
-        write_estimate_bag(
-            tmp / "estimates", log.t0_ns * 1e-9, log.t, joints, est.x_hat, est.P_diag
-        )
+        # a bag's times are unsigned: a sim-time log whose first stamp is jittered below 0
+        # starts its estimates at 0 (moved by less than T / 2)
+        start = max(log.t0_ns, 0) * 1e-9
+        write_estimate_bag(tmp / "estimates", start, log.t, joints, est.x_hat, est.P_diag)
         if options.plots:
-            _figures(run, tmp)
+            figures(run, tmp)
 
     write_folder(run.out, fill, replace=options.force)
-
-
-def _figures(run: EstimateRun, folder: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    log, est = run.log, run.estimate
-    n = log.u.shape[1]
-    fig, axes = plt.subplots(n, 1, figsize=(8, 2.4 * n + 0.6), sharex=True, squeeze=False)
-    for j in range(n):
-        ax = axes[j, 0]
-        if log.truth is not None:
-            ax.plot(log.t, log.truth[:, j] - est.x_hat[:, j], lw=0.8, label="error q - q_hat")
-            sd = np.sqrt(np.maximum(est.P_diag[:, j], 0))
-            ax.fill_between(log.t, -2 * sd, 2 * sd, alpha=0.2, label="+-2 sigma")
-            ax.set_ylabel(f"q{j + 1} error [rad]")
-        else:
-            ax.plot(log.t, est.x_hat[:, j], lw=0.8, label="q_hat (link)")
-            ax.plot(log.t, log.z[:, j], lw=0.6, label="qm (encoder)")
-            ax.set_ylabel(f"joint {j + 1} [rad]")
-        for fr in log.frames:
-            ax.axvline(fr.delivery_step * log.T, color="k", lw=0.2, alpha=0.2)
-        ax.legend(loc="upper right", fontsize=7)
-    axes[-1, 0].set_xlabel("t [s] (thin lines: camera frames' arrivals)")
-    fig.suptitle(f"{run.scenario.estimator} on {log.path.name}")
-    fig.tight_layout()
-    fig.savefig(folder / "estimate.png", dpi=110)
-    plt.close(fig)
 
 
 def default_out(log_path: Path) -> Path:

@@ -1,24 +1,40 @@
-"""A recorded log -> the estimator's inputs on its tick grid (docs/logs.md, "Timing").
+"""A recorded log -> the estimator's inputs on its tick grid (docs/logs.md, "Topics" and
+"Timing").
 
-- The tick grid is the encoder's: t_k = t0 + k T, with t0 the first encoder stamp and T the
-  robot's sampling interval.  A sample more than ``grid_tolerance`` T off the grid is
-  skipped and counted; if more than 1 % of them are, the log is refused (its rate is not the
-  robot's T).  Missing samples (a gap) are predicted through, up to ``max_gap_steps`` in a
-  row; a longer gap refuses the log.  A second sample for the same tick is a duplicate.
-- The torque is held from its stamp (zero-order hold, as the plant applies it): u(k) is the
-  last torque stamped at or before t_k.
-- A camera frame is taken at ``header.stamp`` (its exposure step kappa, on the grid within
-  the tolerance) and reaches the estimator at the first tick at or after its log time (its
-  arrival): variable delays, drops and reordering are the log's own.  Frames with a
-  non-finite pixel, a second frame for an exposure step already seen, frames exposed before
-  the first tick, arriving before their exposure or after the last tick are skipped and
-  counted by reason; frames older than the estimator's history are counted by the replay.
+Two steps, both before anything is compiled:
+
+1. :func:`plan_log` reads the container's metadata and the first message of a few topics and
+   says which topic plays which role (:mod:`amsfe_sym.topics.roles`): a role the topic spec
+   names is taken as named (and its type checked); otherwise its default topic if the log
+   has it; otherwise, for the encoders, the JointState topic whose names include every joint
+   of the robot (a driver's ``/joint_states``), and for the effort that same topic when it
+   carries effort values, or an effort-only JointState.  One topic may play several roles.
+   The effort's kind (:data:`~amsfe_sym.topics.roles.EFFORT_KINDS`) is the spec's, else by
+   shape: effort on a topic that also carries positions is ``none`` (a driver's measured
+   effort is not the applied torque u), a separate effort topic is ``applied``.
+2. :func:`read_log` reads those topics in one pass, decodes each a topic at a time
+   (:mod:`amsfe_sym.logs.decode`) and puts them on the tick grid t_k = t0 + k T:
+
+- t0's phase is fitted to every encoder stamp (a jittered first stamp no longer shifts the
+  grid), the log's period is measured (median stamp difference) and a log at another rate
+  than the robot's T is refused with the ``amsfe generate --period`` that fits it;
+- the clock offset between header stamps and log time (two machines) is the median of
+  log time - stamp over the encoder samples; log times (camera arrivals, arrival-stamped
+  topics) are moved onto the stamp clock by it;
+- encoder stamps far from their log time (a stamp 11.6 days ahead, a zero stamp in an
+  epoch-stamped log) are skipped and counted; stamps that run backwards are refused; gaps
+  are judged on the tick indices before any array is allocated; samples that do not advance
+  the grid (all stamps zero) are refused;
+- the effort is held from its stamp (zero-order hold by stamp): u(k) is the last effort
+  stamped at or before t_k (within the tolerance);
+- a camera frame is taken at ``header.stamp`` (its exposure step kappa) and reaches the
+  estimator at the first tick at or after its arrival; skipped frames are counted by reason.
+
+Every role's messages, used and skipped by reason, are in :attr:`RobotLog.usage`.
 """
 
 from __future__ import annotations
 
-import json
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,21 +44,44 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.core.camera_frame import CameraFrame
-from amsfe_sym.errors import LogError, describe
-from amsfe_sym.logs.source import Message, iter_messages
-from amsfe_sym.logs.spec import TORQUE_TYPES, LogSpec
+from amsfe_sym.errors import describe
+from amsfe_sym.logs.decode import (
+    JointStates,
+)
+from amsfe_sym.logs.grid import (
+    FAR_S,
+    ClockOffset,
+    LogRateError,
+    RoleUse,
+    TickGrid,
+    count_skip,
+    fit_t0,
+)
+from amsfe_sym.logs.plan import (
+    LOG_ROLES,
+    LogPlan,
+    joint_columns,
+    plan_log,
+    read_config,
+    refuse,
+)
+from amsfe_sym.logs.sensors import camera_frames, held_effort, truth_on_grid
+from amsfe_sym.logs.spec import LogSpec
+from amsfe_sym.topics.roles import EffortKind
 
-__all__ = ["RobotLog", "read_config", "read_log"]
+__all__ = [
+    "ClockOffset",
+    "LogPlan",
+    "LogRateError",
+    "RobotLog",
+    "RoleUse",
+    "plan_log",
+    "read_config",
+    "read_log",
+]
 
 FloatArray = NDArray[np.float64]
-
-_TYPES = {
-    "encoders": ("sensor_msgs/msg/JointState",),
-    "torque": TORQUE_TYPES,
-    "camera": ("geometry_msgs/msg/PointStamped",),
-    "truth": ("std_msgs/msg/Float64MultiArray",),
-    "config": ("std_msgs/msg/String",),
-}
+IntArray = NDArray[np.int64]
 
 
 @dataclass
@@ -52,13 +91,21 @@ class RobotLog:
     Attributes:
         path: The log.
         T: Sampling interval [s].
-        t0_ns: Time of tick 0 (the first encoder stamp) [ns].
+        t0_ns: Time of tick 0 on the stamp clock [ns].
         z: Encoder samples [qm, qmd] per tick, (K, 2n); a row of NaN: no sample (a gap).
-        u: Torque applied over [t_k, t_k+1] [N m], (K, n).
+        u: Torque applied over [t_k, t_k+1] [N m], (K, n): the effort when its kind is
+            ``applied``, zeros otherwise (then ``effort`` and ``effort_kind`` say what the
+            log has; :mod:`amsfe_sym.estimation.effort` turns them into the input).
         frames: Camera frames with their exposure and delivery steps, in arrival order.
         truth: The true state per tick, (K, N), if the log has it.
         config: amsfe's run config (simulated logs), or None.
-        skipped: Messages skipped, by reason.
+        skipped: Messages skipped, by reason (every role's, flat).
+        effort: The logged effort held by stamp, (K, n) [N m], or None without one.
+        effort_kind: What ``effort`` is (``none`` without one).
+        clock: The offset between log time and header stamps.
+        usage: Role -> :class:`RoleUse`.
+        plan: Which topic played which role.
+        period_s: The encoder period measured from the stamps [s].
     """
 
     path: Path
@@ -70,6 +117,12 @@ class RobotLog:
     truth: FloatArray | None = None
     config: dict[str, Any] | None = None
     skipped: dict[str, int] = field(default_factory=dict)
+    effort: FloatArray | None = None
+    effort_kind: EffortKind = "applied"
+    clock: ClockOffset = field(default_factory=lambda: ClockOffset(0.0, 0.0))
+    usage: dict[str, RoleUse] = field(default_factory=dict)
+    plan: LogPlan | None = None
+    period_s: float = 0.0
 
     @property
     def K(self) -> int:
@@ -82,227 +135,245 @@ class RobotLog:
         return np.arange(self.K, dtype=np.float64) * self.T
 
 
-def _stamp_ns(msg: Any) -> int:
-    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+def _read_decoded(path: Path, plan: LogPlan) -> tuple[dict[str, IntArray], dict[str, Any]]:
+    """Log times and decoded columns of every topic the plan uses (a topic without a
+    message: absent), in one pass of :func:`amsfe_sym.logs.stream.read_topics` (bounded
+    memory, bulk decoding, a progress bar on long logs)."""
+    from amsfe_sym.logs.stream import read_topics
+
+    got = read_topics(path, set(plan.roles.values()))
+    return (
+        {t: np.asarray(v.log_time_ns, dtype=np.int64) for t, v in got.items()},
+        {t: v.decoded for t, v in got.items()},
+    )
 
 
-def _by_topic(path: Path, spec: LogSpec) -> dict[str, list[Message]]:
-    topics = {
-        "encoders": spec.encoders,
-        "torque": spec.torque,
-        "camera": spec.camera,
-        "truth": spec.truth,
-        "config": spec.config,
-    }
-    wanted = {v: k for k, v in topics.items()}
-    out: dict[str, list[Message]] = {k: [] for k in topics}
-    for m in iter_messages(path, set(wanted)):
-        role = wanted[m.topic]
-        if m.msgtype not in _TYPES[role]:
-            raise LogError(
-                describe(
-                    f"log {path}: topic {m.topic}",
-                    f"messages of type {' or '.join(_TYPES[role])}",
-                    m.msgtype,
-                    "point the log spec's [topics] at the right topic (docs/logs.md)",
-                )
-            )
-        out[role].append(m)
-    for role in ("encoders", "torque"):
-        if not out[role]:
-            raise LogError(
-                describe(
-                    f"log {path}",
-                    f"the {role} topic {topics[role]}",
-                    "no message on it",
-                    "record it, or name the log's topic in a log spec (--log-spec)",
-                )
-            )
-    return out
-
-
-def read_config(path: Path, spec: LogSpec | None = None) -> dict[str, Any] | None:
-    """amsfe's run config stored in a log by ``amsfe simulate --bag``, or None."""
-    spec = spec or LogSpec()
-    for m in iter_messages(path, {spec.config}):
-        if m.msgtype == "std_msgs/msg/String":
-            try:
-                data = json.loads(m.decode().data)
-            except ValueError as exc:
-                raise LogError(
-                    describe(f"log {path}: {spec.config}", "a JSON document", str(exc), "")
-                ) from exc
-            return data if isinstance(data, dict) else None
-    return None
-
-
-class _Grid:
-    """Stamps -> tick indices, with the tolerance of the spec."""
-
-    def __init__(self, t0_ns: int, T: float, tolerance: float) -> None:
-        self.t0, self.T, self.tol = t0_ns, T, tolerance
-
-    def step(self, stamp_ns: int) -> int | None:
-        """The tick of a stamp on the grid, or None when it is off the grid."""
-        s = (stamp_ns - self.t0) * 1e-9 / self.T
-        k = round(s)
-        return k if abs(s - k) <= self.tol else None
-
-    def arrival(self, log_ns: int) -> int:
-        """The first tick at or after an arrival time (within the tolerance)."""
-        return math.ceil((log_ns - self.t0) * 1e-9 / self.T - self.tol)
-
-
-def _order(names: Sequence[str], joints: Sequence[str], where: str) -> list[int]:
-    missing = [j for j in joints if j not in names]
-    if missing:
-        raise LogError(
-            describe(
-                where,
-                f"JointState names including {list(joints)}",
-                f"{list(names)}",
-                "map the log's joint names to the robot's in the log spec's [joints] names",
-            )
-        )
-    return [list(names).index(j) for j in joints]
-
-
-def read_log(path: Path, spec: LogSpec, joints: Sequence[str], T: float, N: int) -> RobotLog:
+def read_log(
+    path: Path,
+    spec: LogSpec,
+    joints: Sequence[str],
+    T: float,
+    N: int,
+    plan: LogPlan | None = None,
+    robot: str = "ROBOT",
+) -> RobotLog:
     """Read ``path`` for a robot with ``joints`` (q order), sampling interval ``T`` [s] and
-    ``N`` states.
+    ``N`` states (``robot``: its name, for the fix of a rate mismatch).
 
     Raises:
-        LogError: unreadable, a required topic missing or of the wrong type, joint names not
-            found, samples off the robot's grid, a gap longer than ``max_gap_steps``.
+        LogError: unreadable; topics missing or of the wrong type; joint names not found or
+            named twice; the log's rate not the robot's; stamps that run backwards or do not
+            advance; a gap longer than ``max_gap_steps``; truth of another size than N.
     """
+    plan = plan or plan_log(path, spec, joints)
     n = len(joints)
-    names = spec.joint_names or tuple(joints)
-    if len(names) != n:
-        raise LogError(
-            describe("log spec [joints] names", f"{n} names (the robot's joints)", f"{names}", "")
+    names = plan.names
+    times, decoded = _read_decoded(path, plan)
+    usage = {r: RoleUse(plan.roles.get(r), not_used=plan.unused.get(r, [])) for r in LOG_ROLES}
+    for ru in usage.values():
+        if ru.topic is not None:
+            ru.messages = len(times.get(ru.topic, ()))
+    if plan.roles["encoders"] not in decoded:
+        raise refuse(
+            f"log {path}",
+            f"messages on the encoder topic {plan.roles['encoders']}",
+            "none",
+            "record the encoders, or name the topic that has them ([topics] encoders)",
         )
-    msgs = _by_topic(path, spec)
-    skipped: dict[str, int] = {}
-
-    def skip(reason: str) -> None:
-        skipped[reason] = skipped.get(reason, 0) + 1
+    present = {r: t for r, t in plan.roles.items() if t in decoded}
 
     # ------------------------------------------------------------------ encoders: the grid
-    enc = [(m, m.decode()) for m in msgs["encoders"]]
-    enc.sort(key=lambda e: _stamp_ns(e[1]))
-    grid = _Grid(_stamp_ns(enc[0][1]), T, spec.grid_tolerance)
-    samples: dict[int, FloatArray] = {}
-    for m, msg in enc:
-        k = grid.step(_stamp_ns(msg))
-        if k is None:
-            skip("encoder sample off the tick grid")
-            continue
-        if k in samples:
-            skip("encoder sample duplicated")
-            continue
-        idx = _order(msg.name, names, f"log {path}: {m.topic}")
-        pos, vel = np.asarray(msg.position, float), np.asarray(msg.velocity, float)
-        if pos.size != len(msg.name) or vel.size != len(msg.name):
-            skip("encoder sample without position and velocity per joint")
-            continue
-        samples[k] = np.concatenate([pos[idx], vel[idx]])
-    off = skipped.get("encoder sample off the tick grid", 0)
-    if off > 0.01 * len(enc):
-        raise LogError(
-            describe(
-                f"log {path}: {spec.encoders}",
-                f"samples every T = {T:g} s (the robot's sampling interval)",
-                f"{off} of {len(enc)} stamps off that grid",
-                "record at the robot's rate, or generate the robot with the log's T",
-            )
+    et = plan.roles["encoders"]
+    use = usage["encoders"]
+    js: JointStates = decoded[et]
+    where = f"log {path}: {et}"
+    cols = joint_columns(js, names, where)
+    rows = np.arange(len(js.stamp_ns))[:, None]
+    width = np.array([len(ns) for ns in js.names])[js.names_index]
+    pos, vel = js.position[rows, cols], js.velocity[rows, cols]
+    shaped = (js.counts[:, 0] == width) & (js.counts[:, 1] == width)
+    count_skip(use, "sample without a position and a velocity per joint", int((~shaped).sum()))
+    stamps = js.stamp_ns
+    log_ns = times[et]
+    ok = shaped.copy()
+    if not ok.any():
+        raise refuse(
+            where,
+            "JointState samples with a position and a velocity per joint",
+            f"none of {len(ok)} (counts per message {js.counts[0].tolist()} for "
+            f"{len(js.names[0])} names)",
+            "record the encoders' velocity too, or name another encoder topic",
         )
-    K = max(samples) + 1
+    # the clock offset, and stamps far from their log time (another clock, corrupt)
+    off = (log_ns - stamps).astype(np.float64) * 1e-9
+    med = float(np.median(off[ok]))
+    dev = np.abs(off - med)
+    spread = float(np.percentile(off[ok], 95) - np.percentile(off[ok], 5))
+    far = ok & (dev > max(FAR_S, 100 * T, 10 * spread))
+    count_skip(use, "stamp far from its log time (another clock or corrupt)", int(far.sum()))
+    ok &= ~far
+    # stamps that run backwards (in arrival order) beyond the tolerance
+    st_ok = stamps[ok]
+    back = int((st_ok[1:] < st_ok[:-1] - spec.grid_tolerance * T * 1e9).sum())
+    if back > 0.01 * st_ok.size:
+        raise refuse(
+            where,
+            "header stamps that advance in the order the samples were received",
+            f"{back} of {st_ok.size} stamps earlier than the one received before them",
+            "fix the stamping clock (or cut the log where it jumps back)",
+        )
+    # (fewer: the samples are put in stamp order; none is dropped for it)
+    sel = np.flatnonzero(ok)
+    sel = sel[np.argsort(stamps[sel], kind="stable")]
+    if sel.size < 2 or stamps[sel[-1]] == stamps[sel[0]]:
+        raise refuse(
+            where,
+            "at least two samples with advancing header stamps",
+            f"{sel.size} usable, stamps from {stamps[sel[0]]} to {stamps[sel[-1]]} ns",
+            "stamp each sample with its time (header.stamp), not zero",
+        )
+    off_good = off[sel]
+    clock = ClockOffset(med, float(np.percentile(off_good, 95) - np.percentile(off_good, 5)))
+    # the log's own period, against the robot's T
+    d = np.diff(stamps[sel]).astype(np.float64) * 1e-9
+    d = d[d > 0]
+    period = float(np.median(d)) if d.size else T
+    if period > 0 and sel.size > 2:  # least squares over each sample's count of periods
+        rel = (stamps[sel] - stamps[sel[0]]).astype(np.float64) * 1e-9
+        # counted in the robot's T when the median is near it (a jittered median is off by
+        # a few %, enough to miscount a long log), else in the median
+        idx = np.rint(rel / (T if abs(period - T) < 0.1 * T else period))
+        if idx[-1] > 0:
+            ic, rc = idx - idx.mean(), rel - rel.mean()
+            period = float(ic @ rc / (ic @ ic))
+    # another rate: more than 10 % off T (a multiple of T would put every sample on the grid
+    # with gaps between); a drift of less is judged by the stamps off the grid below
+    mismatch = abs(period - T) > 0.1 * T
+    t0 = fit_t0(stamps[sel], T)
+    grid = TickGrid(t0, T, spec.grid_tolerance)
+    k_all, on = grid.steps(stamps[sel])
+    offgrid = int((~on).sum())
+    if mismatch or offgrid > 0.01 * sel.size:
+        raise LogRateError(
+            describe(
+                where,
+                f"samples every T = {T:g} s (robot {robot}'s sampling interval)",
+                f"samples every {period:.6g} s (median), {offgrid} of {sel.size} stamps off "
+                f"the grid of T within {spec.grid_tolerance:g} T",
+                f"generate the robot at the log's period: amsfe generate {robot} --period "
+                f"{period:.6g} (or record at the robot's rate)",
+            ),
+            float(f"{period:.6g}"),
+        )
+    count_skip(use, "stamp off the tick grid", offgrid)
+    sel, k_all = sel[on], k_all[on]
+    first_k = int(k_all[0])
+    k_all = k_all - first_k
+    t0 += round(first_k * T * 1e9)
+    grid = TickGrid(t0, T, spec.grid_tolerance)
+    # two samples for one tick: the one whose log time fits the clock offset best is kept
+    # (a stamp 0.9 s ahead lands on a later tick's sample; it is that one that goes)
+    order = np.lexsort((dev[sel], k_all))
+    sel, k_all = sel[order], k_all[order]
+    uniq, first_idx = np.unique(k_all, return_index=True)
+    count_skip(use, "duplicate (a second sample for a tick)", int(k_all.size - uniq.size))
+    sel = sel[first_idx]
+    # gaps judged on the tick indices, before anything is allocated
+    steps = np.diff(uniq) - 1
+    if steps.size and int(steps.max()) > spec.max_gap_steps:
+        i = int(np.argmax(steps))
+        raise refuse(
+            where,
+            f"gaps of at most {spec.max_gap_steps} samples (predicted through)",
+            f"{int(steps[i])} missing from t = {(uniq[i] + 1) * T:.4f} s",
+            "raise [timing] max_gap_steps in a topic spec, or cut the log there",
+        )
+    K = int(uniq[-1]) + 1
     z = np.full((K, 2 * n), np.nan)
-    for k, v in samples.items():
-        z[k] = v
-    missing = np.flatnonzero(np.isnan(z).any(axis=1))
-    if missing.size:
-        runs = np.split(missing, np.flatnonzero(np.diff(missing) > 1) + 1)
+    z[uniq] = np.hstack([pos[sel], vel[sel]])
+    bad = ~np.isfinite(z).all(axis=1)
+    bad_samples = int(bad[uniq].sum())
+    count_skip(use, "sample with a non-finite value (predicted through)", bad_samples)
+    z[bad] = np.nan
+    if bad.any():
+        runs = np.split(np.flatnonzero(bad), np.flatnonzero(np.diff(np.flatnonzero(bad)) > 1) + 1)
         longest = max(runs, key=len)
         if len(longest) > spec.max_gap_steps:
-            raise LogError(
-                describe(
-                    f"log {path}: {spec.encoders}",
-                    f"gaps of at most {spec.max_gap_steps} samples (predicted through)",
-                    f"{len(longest)} missing from t = {longest[0] * T:.4f} s",
-                    "raise [timing] max_gap_steps in a log spec, or cut the log there",
-                )
+            raise refuse(
+                where,
+                f"gaps of at most {spec.max_gap_steps} samples (NaN and inf count as missing)",
+                f"{len(longest)} missing or non-finite from t = {longest[0] * T:.4f} s",
+                "raise [timing] max_gap_steps in a topic spec, or cut the log there",
             )
-        skipped["encoder samples missing (predicted through)"] = int(missing.size)
     if not np.isfinite(z[0]).all():
-        raise LogError(describe(f"log {path}", "a finite first encoder sample", "NaN", ""))
-
-    # ------------------------------------------------------------------ torque: zero-order hold
-    u = np.full((K, n), np.nan)
-    for m in msgs["torque"]:
-        msg = m.decode()
-        if m.msgtype == "sensor_msgs/msg/JointState":
-            k = grid.step(_stamp_ns(msg))
-            values = np.asarray(msg.effort, float)
-            idx = _order(msg.name, names, f"log {path}: {m.topic}")
-            values = values[idx] if values.size == len(msg.name) else np.full(n, np.nan)
-        else:  # Float64MultiArray: no header, stamped by its log time
-            k = grid.step(m.log_time_ns)
-            values = np.asarray(msg.data, float)
-        if k is None:
-            skip("torque sample off the tick grid")
-        elif values.size != n or not np.isfinite(values).all():
-            skip("torque sample not n finite values")
-        elif 0 <= k < K:
-            u[k] = values
-    if np.isnan(u[0]).any():
-        raise LogError(
-            describe(f"log {path}: {spec.torque}", "a torque at the first tick", "none", "")
+        raise refuse(where, "a finite first encoder sample", "NaN or inf", "cut the log there")
+    use.used = int(uniq.size) - bad_samples
+    step1 = np.flatnonzero(np.diff(uniq) == 1)  # consecutive ticks with identical samples
+    same = int((z[uniq[step1 + 1]] == z[uniq[step1]]).all(axis=1).sum())
+    if same:
+        use.notes["identical to the previous tick's sample (republished, or at rest)"] = same
+    # ------------------------------------------------------------------ effort: hold by stamp
+    effort: FloatArray | None = None
+    if "effort" in present and plan.effort_kind == "none":
+        eu = usage["effort"]
+        count_skip(eu, "not used: effort kind none (say [effort] kind to use it)", eu.messages)
+    elif "effort" in present:
+        effort, first = held_effort(
+            path, plan, spec, times, decoded, grid, clock, K, usage["effort"], n
         )
-    held = 0
-    for k in range(1, K):
-        if np.isnan(u[k]).any():
-            u[k], held = u[k - 1], held + 1
-    if held:
-        skipped["torque held from the previous tick"] = held
+        if first > 0:  # the effort starts later than the encoders: so does the log
+            finite = np.flatnonzero(np.isfinite(z).all(axis=1))
+            later = finite[finite >= first]
+            if later.size < 2:
+                raise refuse(
+                    f"log {path}: {plan.roles['effort']} (effort)",
+                    "effort samples over the encoders' ticks",
+                    f"the first effort at tick {first}, {later.size} encoder samples after it",
+                    'record the effort from the start, or say [effort] kind = "none"',
+                )
+            start = int(later[0])
+            dropped = int((finite < start).sum())
+            count_skip(use, "sample before the first effort sample (the log starts there)", dropped)
+            use.used -= dropped
+            z, effort = z[start:], effort[start:]
+            t0 += round(start * T * 1e9)
+            grid = TickGrid(t0, T, spec.grid_tolerance)
+            K -= start
+    u = effort if plan.effort_kind == "applied" and effort is not None else np.zeros((K, n))
+    skipped: dict[str, int] = {}
+    missing = int((~np.isfinite(z).all(axis=1)).sum())
+    if missing:
+        skipped["encoder samples missing (predicted through)"] = missing
 
     # ------------------------------------------------------------------ camera frames
     frames: list[CameraFrame] = []
-    seen: set[int] = set()
-    for m in sorted(msgs["camera"], key=lambda m: m.log_time_ns):
-        msg = m.decode()
-        kappa = grid.step(_stamp_ns(msg))
-        pix = np.array([msg.point.x, msg.point.y], dtype=float)
-        arrive = grid.arrival(m.log_time_ns)
-        if kappa is None:
-            skip("frame exposure off the tick grid")
-        elif not np.isfinite(pix).all():
-            skip("frame with a non-finite pixel")
-        elif kappa in seen:
-            skip("frame duplicated (an exposure already seen)")
-        elif kappa < 0:
-            skip("frame exposed before the first encoder sample")
-        elif arrive < kappa:
-            skip("frame arrived before its exposure")
-        elif arrive >= K:
-            skip("frame arrived after the last tick")
-        else:
-            seen.add(kappa)
-            frames.append(CameraFrame(kappa, pix, arrive))
+    if "camera" in present:
+        frames = camera_frames(plan, times, decoded, grid, clock, K, usage["camera"])
 
-    # ------------------------------------------------------------------ truth and config
+    # ------------------------------------------------------------------ truth
     truth = None
-    if msgs["truth"]:
-        truth = np.full((K, N), np.nan)
-        for m in msgs["truth"]:
-            k = grid.step(m.log_time_ns)
-            data = np.asarray(m.decode().data, float)
-            if k is not None and 0 <= k < K and data.size == N:
-                truth[k] = data
-    config = None
-    if msgs["config"]:
-        try:
-            config = json.loads(msgs["config"][0].decode().data)
-        except ValueError:
-            skip("config not JSON")
-    return RobotLog(path, T, grid.t0, z, u, frames, truth, config, skipped)
+    if "truth" in present:
+        truth = truth_on_grid(path, plan, times, decoded, grid, clock, K, N, usage["truth"])
+
+    for r, ru in usage.items():
+        for reason, c in ru.skipped.items():
+            # camera counters keep the names summary.json had before the per-role usage
+            key = f"frame {reason}" if r == "camera" else f"{r}: {reason}"
+            skipped[key] = skipped.get(key, 0) + c
+    return RobotLog(
+        path,
+        T,
+        t0,
+        z,
+        u,
+        frames,
+        truth,
+        None,
+        skipped,
+        effort,
+        plan.effort_kind,
+        clock,
+        usage,
+        plan,
+        period,
+    )

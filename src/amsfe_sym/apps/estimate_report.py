@@ -1,0 +1,234 @@
+"""What ``amsfe estimate`` reports about a run: ``summary.json`` (each role's messages used
+and skipped, the clock offset, NIS), the printed headline and the figures (``estimate.png``,
+``nis.png``); docs/logs.md, "Consistency without truth"."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from amsfe_sym.core.provenance import provenance
+from amsfe_sym.logs.read import RobotLog
+from amsfe_sym.scenario import Scenario
+
+if TYPE_CHECKING:  # the estimators (scipy) are imported when a log is estimated
+    from amsfe_sym.logs.replay import LogEstimate
+
+__all__ = ["EstimateRun", "figures", "nis_report", "print_summary", "summary"]
+
+
+@dataclass
+class EstimateRun:
+    """What ``amsfe estimate`` did: the read log, the estimates, the folder and the timing."""
+
+    log: RobotLog
+    estimate: LogEstimate
+    scenario: Scenario
+    out: Path
+    read_s: float
+    estimate_s: float
+
+
+def _finite(x: float) -> float | None:
+    """A number for JSON: None where it is not finite (NaN is not JSON)."""
+    return float(x) if math.isfinite(x) else None
+
+
+def _frame_nis(est: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    """(arrival step, NIS) of each frame given to the estimator, from the replay's
+    ``frame_nis`` (arrays ``arrival``, ``nis``; or records with those fields), or None."""
+    fr: Any = getattr(est, "frame_nis", None)
+    if fr is None:
+        return None
+    if hasattr(fr, "nis") and hasattr(fr, "arrival"):
+        return np.asarray(fr.arrival, dtype=np.float64), np.asarray(fr.nis, dtype=np.float64)
+    rows = [(_field(r, "arrival", 1), _field(r, "nis", 2)) for r in fr]
+    arr = np.asarray(rows, dtype=np.float64).reshape(-1, 2)
+    return arr[:, 0], arr[:, 1]
+
+
+def _field(record: Any, name: str, index: int) -> Any:
+    if isinstance(record, dict):
+        return record.get(name)
+    if hasattr(record, name):
+        return getattr(record, name)
+    return record[index]
+
+
+def _nis_stats(values: np.ndarray, dof: int) -> dict[str, Any]:
+    from scipy.stats import chi2
+
+    lo, hi = (float(v) for v in chi2.ppf([0.025, 0.975], dof))
+    v = values[np.isfinite(values)]
+    inside = float(np.mean((v >= lo) & (v <= hi))) if v.size else math.nan
+    return {
+        "dof": dof,
+        "samples": int(v.size),
+        "mean": _finite(float(np.mean(v))) if v.size else None,
+        "band_95": [lo, hi],
+        "inside_95": _finite(inside),
+    }
+
+
+def nis_report(run: EstimateRun) -> dict[str, Any]:
+    """Normalized innovation squared of the encoder updates (dof 2n; 3n with a joint
+    torque) and of the camera frames (dof 2): mean and the fraction inside the two-sided
+    chi-square 95 % band.  A filter whose model and noise fit the arm has mean NIS near the
+    dof and about 95 % inside (docs/logs.md, "Consistency without truth").  Empty where the
+    replay did not record NIS."""
+    est, log = run.estimate, run.log
+    n = log.u.shape[1]
+    out: dict[str, Any] = {}
+    enc: Any = getattr(est, "encoder_nis", None)
+    if enc is not None and len(enc):
+        dof = 3 * n if log.effort_kind == "joint_torque" else 2 * n
+        out["encoders"] = _nis_stats(np.asarray(enc, dtype=np.float64), dof)
+    frames = _frame_nis(est)
+    if frames is not None:
+        out["camera"] = _nis_stats(frames[1], 2)
+    return out
+
+
+def summary(run: EstimateRun) -> dict[str, Any]:
+    """The ``summary.json`` of an estimate run (every number finite or null)."""
+    log, est = run.log, run.estimate
+    n = len(log.u[0])
+    out: dict[str, Any] = {
+        "log": str(log.path),
+        "estimator": run.scenario.estimator,
+        "ticks": log.K,
+        "duration_s": log.K * log.T,
+        "frames_fused": est.counters.get("frames_applied", 0),
+        "counters": est.counters,
+        "topics": {r: u.as_dict() for r, u in log.usage.items()},
+        "effort_kind": log.effort_kind,
+        "log_period_s": _finite(log.period_s),
+        "clock_offset_s": _finite(log.clock.median),
+        "clock_offset_spread_s": _finite(log.clock.spread),
+        "nis": nis_report(run),
+        "read_s": round(run.read_s, 4),
+        "estimate_s": round(run.estimate_s, 4),
+        "real_time_factor": round(log.K * log.T / max(run.read_s + run.estimate_s, 1e-9), 2),
+    }
+    if log.truth is not None and est.nees is not None:
+        w = slice(int(0.2 * log.K), log.K)
+        err = log.truth[w] - est.x_hat[w]
+        with np.errstate(all="ignore"):
+            rmse = np.sqrt(np.nanmean(err[:, :n] ** 2, axis=0))
+            nees = float(np.nanmean(est.nees[w])) if np.isfinite(est.nees[w]).any() else math.nan
+        out["estimation_rmse_q"] = [_finite(float(v)) for v in rmse]
+        out["nees_mean"] = _finite(nees)
+        out["nees_dof"] = int(est.x_hat.shape[1])
+    out["provenance"] = provenance()
+    return out
+
+
+def print_summary(s: dict[str, Any], out: Path) -> None:
+    """The headline of an estimate run: ticks, frames fused, each role's messages used and
+    skipped, speed, NIS and NEES."""
+    c = s["counters"]
+    print(f"run folder: {out} ({s['ticks']} ticks, {s['duration_s']:.2f} s of log)")
+    print(
+        f"  {s['estimator']}: {s['frames_fused']} camera frames fused; read {s['read_s']:.2f} s, "
+        f"estimated {s['estimate_s']:.2f} s ({s['real_time_factor']:.0f}x real time)"
+    )
+    for role, u in s.get("topics", {}).items():
+        if u["topic"] is None:
+            other = u.get("topics_of_this_type_not_used")
+            print(
+                f"  {role}: no topic"
+                + (f"; not used: {other} (name one in [topics] {role})" if other else "")
+            )
+            continue
+        why = ", ".join(f"{k} {v}" for k, v in u["skipped"].items()) or "none"
+        print(f"  {role} {u['topic']}: {u['messages']} messages, {u['used']} used; skipped: {why}")
+        for note, count in u.get("notes", {}).items():
+            print(f"    note: {count} {note}")
+    refused = {k: v for k, v in c.items() if v and k.startswith("refused")}
+    if refused:
+        print("  refused by the estimator: " + ", ".join(f"{k} {v}" for k, v in refused.items()))
+    for what, r in s.get("nis", {}).items():
+        if r["mean"] is None:
+            print(f"  NIS {what}: no samples")
+            continue
+        lo, hi = r["band_95"]
+        print(
+            f"  NIS {what}: mean {r['mean']:.2f} (dof {r['dof']}), "
+            f"{100 * (r['inside_95'] or 0):.1f} % of {r['samples']} inside the 95 % band "
+            f"[{lo:.2f}, {hi:.2f}]"
+        )
+    if s.get("nees_mean") is not None:
+        print(f"  mean NEES {s['nees_mean']:.2f} (N = {s['nees_dof']}) against the log's truth")
+
+
+def figures(run: EstimateRun, folder: Path) -> None:
+    """``estimate.png`` (per joint: the error against the truth with +-2 sigma, or the
+    estimate beside the encoder) and ``nis.png``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    log, est = run.log, run.estimate
+    n = log.u.shape[1]
+    fig, axes = plt.subplots(n, 1, figsize=(8, 2.4 * n + 0.6), sharex=True, squeeze=False)
+    for j in range(n):
+        ax = axes[j, 0]
+        if log.truth is not None:
+            ax.plot(log.t, log.truth[:, j] - est.x_hat[:, j], lw=0.8, label="error q - q_hat")
+            sd = np.sqrt(np.maximum(est.P_diag[:, j], 0))
+            ax.fill_between(log.t, -2 * sd, 2 * sd, alpha=0.2, label="+-2 sigma")
+            ax.set_ylabel(f"q{j + 1} error [rad]")
+        else:
+            ax.plot(log.t, est.x_hat[:, j], lw=0.8, label="q_hat (link)")
+            ax.plot(log.t, log.z[:, j], lw=0.6, label="qm (encoder)")
+            ax.set_ylabel(f"joint {j + 1} [rad]")
+        for fr in log.frames:
+            ax.axvline(fr.delivery_step * log.T, color="k", lw=0.2, alpha=0.2)
+        ax.legend(loc="upper right", fontsize=7)
+    axes[-1, 0].set_xlabel("t [s] (thin lines: camera frames' arrivals)")
+    fig.suptitle(f"{run.scenario.estimator} on {log.path.name}")
+    fig.tight_layout()
+    fig.savefig(folder / "estimate.png", dpi=110)
+    plt.close(fig)
+    _nis_figure(run, folder)
+
+
+def _nis_figure(run: EstimateRun, folder: Path) -> None:
+    """``nis.png``: NIS of the encoder updates and of the camera frames over time, with
+    their chi-square 95 % bands (nothing drawn where the replay recorded no NIS)."""
+    import matplotlib.pyplot as plt
+
+    log, est = run.log, run.estimate
+    rep = nis_report(run)
+    if not rep:
+        return
+    fig, axes = plt.subplots(len(rep), 1, figsize=(8, 2.6 * len(rep) + 0.6), squeeze=False)
+    for ax, (what, r) in zip(axes[:, 0], rep.items(), strict=True):
+        if what == "encoders":
+            t, v = log.t, np.asarray(getattr(est, "encoder_nis", None), dtype=np.float64)
+            ax.plot(t, v, lw=0.3, alpha=0.5, label="encoder update")
+            w = max(1, len(v) // 100)  # its running mean over 1 % of the log
+            ok = np.isfinite(v)
+            mean = np.convolve(np.where(ok, v, 0), np.ones(w), "same") / np.maximum(
+                np.convolve(ok, np.ones(w), "same"), 1
+            )
+            ax.plot(t, mean, lw=1.0, color="k", label=f"running mean ({w} ticks)")
+        else:
+            arrival, v = _frame_nis(est) or (np.zeros(0), np.zeros(0))
+            ax.plot(arrival * log.T, v, ".", ms=3, label="camera frame (at its arrival)")
+        lo, hi = r["band_95"]
+        ax.axhspan(lo, hi, color="g", alpha=0.12, label=f"chi2({r['dof']}) 95 % band")
+        ax.axhline(r["dof"], color="g", lw=0.6)
+        ax.set_yscale("log")
+        ax.set_ylabel(f"NIS {what}")
+        ax.legend(loc="upper right", fontsize=7)
+    axes[-1, 0].set_xlabel("t [s]")
+    fig.suptitle(f"consistency without truth: NIS on {log.path.name}")
+    fig.tight_layout()
+    fig.savefig(folder / "nis.png", dpi=110)
+    plt.close(fig)

@@ -1,0 +1,157 @@
+"""The effort, the camera frames and the truth of a log on its tick grid (docs/logs.md,
+"Timing"): the effort held by stamp (zero-order hold to the nearest tick), each frame at its
+exposure step and its arrival tick, the truth at its log time; every message not used is
+counted by reason in its role's :class:`~amsfe_sym.logs.grid.RoleUse`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amsfe_sym.core.camera_frame import CameraFrame
+from amsfe_sym.logs.grid import ClockOffset, RoleUse, TickGrid, count_skip
+from amsfe_sym.logs.plan import JOINT_STATE, LogPlan, joint_columns, refuse
+from amsfe_sym.logs.spec import LogSpec
+
+__all__ = ["camera_frames", "held_effort", "truth_on_grid"]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+
+def held_effort(
+    path: Path,
+    plan: LogPlan,
+    spec: LogSpec,
+    times: dict[str, IntArray],
+    decoded: dict[str, Any],
+    grid: TickGrid,
+    clock: ClockOffset,
+    K: int,
+    use: RoleUse,
+    n: int,
+) -> tuple[FloatArray, int]:
+    """The effort held by stamp on the K ticks (zero-order hold to the nearest tick: the last
+    effort stamped before t_k + T/2) [N m], (K, n), NaN before the first effort sample, and
+    the first tick that has one.
+
+    Raises:
+        LogError: no effort sample with n finite values, or none before the last tick.
+    """
+    topic = plan.roles["effort"]
+    where = f"log {path}: {topic} (effort)"
+    d = decoded[topic]
+    if plan.topics[topic].msgtype == JOINT_STATE:
+        cols = joint_columns(d, plan.names, where)
+        rows = np.arange(len(d.stamp_ns))[:, None]
+        width = np.array([len(ns) for ns in d.names])[d.names_index]
+        values = d.effort[rows, cols]
+        shaped = d.counts[:, 2] == width
+        stamps = d.stamp_ns
+    else:  # Float64MultiArray: no header, stamped by its arrival (on the stamp clock)
+        values = d.values[:, :n] if d.values.shape[1] >= n else np.full((len(d.counts), n), np.nan)
+        shaped = d.counts == n
+        stamps = times[topic] - round(clock.median * 1e9)
+    count_skip(use, "not one value per joint", int((~shaped).sum()))
+    finite = shaped & np.isfinite(values).all(axis=1)
+    count_skip(use, "a non-finite value", int((shaped & ~finite).sum()))
+    # zero-order hold by stamp: u(k) = the last effort stamped before t_k + T/2 (an effort
+    # stamped off the encoder grid, or late by a receive latency, goes to its nearest tick)
+    t_rel = (stamps.astype(np.int64) - grid.t0) * 1e-9 / grid.T
+    far = finite & ((t_rel < -1e6) | (t_rel > K + 1e6))
+    count_skip(use, "stamp far outside the log", int(far.sum()))
+    good = np.flatnonzero(finite & ~far)
+    if good.size == 0:
+        raise refuse(
+            where,
+            f"effort samples with {n} finite values",
+            f"none of {len(finite)}",
+            'fix the topic, name another ([topics] effort), or say [effort] kind = "none"',
+        )
+    order = good[np.argsort(t_rel[good], kind="stable")]
+    ts = t_rel[order]
+    last = np.searchsorted(ts, np.arange(K) + 0.5, side="left") - 1
+    if last[-1] < 0:
+        raise refuse(
+            where,
+            "effort samples over the encoders' ticks",
+            f"the first effort {ts[0] * grid.T:.4f} s after the first encoder tick, past the last",
+            'fix the effort\'s stamps, or say [effort] kind = "none"',
+        )
+    out = np.asarray(values[order[np.maximum(last, 0)]], dtype=np.float64)
+    out[last < 0] = np.nan  # before the first effort sample: the caller starts the log later
+    used = np.unique(last[last >= 0])
+    use.used = int(used.size)
+    count_skip(use, "superseded before a tick (a later one was held)", int(order.size - used.size))
+    return out, int(np.argmax(last >= 0))
+
+
+def camera_frames(
+    plan: LogPlan,
+    times: dict[str, IntArray],
+    decoded: dict[str, Any],
+    grid: TickGrid,
+    clock: ClockOffset,
+    K: int,
+    use: RoleUse,
+) -> list[CameraFrame]:
+    topic = plan.roles["camera"]
+    pts = decoded[topic]
+    log_ns = times[topic] - round(clock.median * 1e9)
+    kappa, on = grid.steps(pts.stamp_ns)
+    arrive = grid.arrivals(log_ns)
+    frames: list[CameraFrame] = []
+    seen: set[int] = set()
+    for i in np.argsort(log_ns, kind="stable"):
+        pix = pts.xyz[i, :2].astype(np.float64)
+        kp, ar = int(kappa[i]), int(arrive[i])
+        if not on[i]:
+            count_skip(use, "exposure off the tick grid")
+        elif not np.isfinite(pix).all():
+            count_skip(use, "with a non-finite pixel")
+        elif kp in seen:
+            count_skip(use, "duplicated (an exposure already seen)")
+        elif kp < 0:
+            count_skip(use, "exposed before the first encoder sample")
+        elif ar < kp:
+            count_skip(use, "arrived before its exposure")
+        elif ar >= K:
+            count_skip(use, "arrived after the last tick")
+        else:
+            seen.add(kp)
+            frames.append(CameraFrame(kp, pix, ar))
+    use.used = len(frames)
+    return frames
+
+
+def truth_on_grid(
+    path: Path,
+    plan: LogPlan,
+    times: dict[str, IntArray],
+    decoded: dict[str, Any],
+    grid: TickGrid,
+    clock: ClockOffset,
+    K: int,
+    N: int,
+    use: RoleUse,
+) -> FloatArray:
+    topic = plan.roles["truth"]
+    arr = decoded[topic]
+    wrong = np.flatnonzero(arr.counts != N)
+    if wrong.size:
+        raise refuse(
+            f"log {path}: {topic} (truth)",
+            f"the true state of the robot: N = {N} values [q, qd, qm, qmd, theta]",
+            f"{int(arr.counts[wrong[0]])} values in {wrong.size} of {arr.counts.size} messages",
+            "estimate with the robot the log was recorded for (--robot / the scenario's robot)",
+        )
+    truth = np.full((K, N), np.nan)
+    k, on = grid.steps(times[topic] - round(clock.median * 1e9))
+    inside = on & (k >= 0) & (k < K)
+    count_skip(use, "off the tick grid or outside the log", int((~inside).sum()))
+    truth[k[inside]] = arr.values[inside, :N]
+    use.used = int(inside.sum())
+    return truth
