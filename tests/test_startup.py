@@ -81,8 +81,8 @@ def test_the_consistency_test_waits_for_the_mean_nis(
     ready = _ticks(ctrl, lib, nis)
     assert ready.index(True) == 9  # the 10th NIS value (k = 9): the first full window
     np.testing.assert_allclose(ctrl._nis_mean, np.mean(nis[:10]), rtol=1e-14)
-    # without the test (the default, or a caller that gives no NIS) it trusts at once
-    ctrl, _ = build_controller(_with(sc, "amsfe", ()), lib)
+    # without the test (ready_nis = inf, or a caller that gives no NIS) it trusts at once
+    ctrl, _ = build_controller(_with(sc, "amsfe", ("ready_nis=inf",)), lib)
     assert _ticks(ctrl, lib, high)[0]
     ctrl, _ = build_controller(_with(sc, "amsfe", sets), lib)
     assert _ticks(ctrl, lib, [None] * 5)[0]

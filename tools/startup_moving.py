@@ -6,10 +6,10 @@ Three studies, each over a block of seeds (pick one disjoint from the tuning see
 ``grid``: per seed one moving start drawn from the seed: the plant within 0.5 rad of the path
 (each joint uniform in [-0.5, 0.5] rad off q_d(0)), moving at a rate vector of length uniform
 in [0, pi] rad/s in a uniform direction (the path moves at (pi, 0) rad/s at t = 0); the
-estimate 0.4 rad off in angle in a uniform direction and off in rate by a vector of length uniform in [0, pi] rad/s in a uniform direction.  Run with ``amsfe`` (and its
-estimator) and with the oracle ``truth`` (the same law and start-up on the true state) from
-the same plant start and seed, 3 s.  The criterion: no ``amsfe`` run diverges where the
-oracle does not.
+estimate 0.4 rad off in angle in a uniform direction and off in rate by a vector of length
+uniform in [0, pi] rad/s in a uniform direction.  Run with ``amsfe`` (and its estimator) and
+with the oracle ``truth`` (the same law and start-up on the true state) from the same plant
+start and seed, 3 s.  The criterion: no ``amsfe`` run diverges where the oracle does not.
 
 ``seeds``: paper-sim as shipped (the paper's start), 10 s: divergence, the largest tracking
 error after 1.5 s (criterion: below 0.1 rad on every seed), joint-2 RMSE over the last 80 %.

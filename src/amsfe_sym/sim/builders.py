@@ -185,9 +185,10 @@ def build_estimator(
     """
     n, p = lib.n, lib.p
     f = sc.filter
-    model = CompiledTransition(
-        lib, noise_covariance(lib, f.link_torque_std, f.motor_torque_std, f.theta_rate_std)
-    )
+    link_std, motor_std = f.link_torque_std, f.motor_torque_std
+    if lib.manifest.integrator == "paper" and f.paper_torque_std > 0:
+        link_std = motor_std = f.paper_torque_std  # the explicit map's model error
+    model = CompiledTransition(lib, noise_covariance(lib, link_std, motor_std, f.theta_rate_std))
     enc_var = sensors.encoders.variance
     encoder_model = EncoderMeasurement(
         lib,
