@@ -272,13 +272,16 @@ class _Cascade(_SlidingBase):
     #: Meanwhile the motor is held (``hold``): ``"reference"`` tracks the reference's motor
     #: trajectory offset to where the motor was at the first tick; ``"motor"`` starts from
     #: the motor's own angle and rate (the encoders need no convergence) and joins the
-    #: reference's motor trajectory within the blend's budget.  Then the filter starts at rest
-    #: on the first trusted command, as it would with the true state.
+    #: reference's motor trajectory within the blend's budget; ``"auto"``: ``"motor"`` when
+    #: the estimator's model is the paper's (``integrator = "paper"``, whose filter takes
+    #: ~0.3 s to pass the rate test), else ``"reference"`` (docs/control.md measures both).
+    #: Then the filter starts at rest on the first trusted command, as it would with the
+    #: true state.
     #: With ``blend_accel`` [rad/s^2] finite, the reference then starts from the state the law
     #: acts on and joins q_d within that offset acceleration, and within ``blend_accel *
     #: blend_rate`` of jerk and ``* blend_rate^2`` of snap (:mod:`amsfe_sym.control.blend`).
     STARTUPS: ClassVar[tuple[str, ...]] = ("first", "converged")
-    HOLDS: ClassVar[tuple[str, ...]] = ("reference", "motor")
+    HOLDS: ClassVar[tuple[str, ...]] = ("reference", "motor", "auto")
 
     def _extra_gains(self) -> tuple[str, ...]:
         return ("wm", "tau_max", "wf", "vmax")
@@ -319,6 +322,8 @@ class _Cascade(_SlidingBase):
                 )
             )
         self._mref = lib.function("control_motor_reference")
+        if self.gains["hold"] == "auto":  # the motor hold for the paper's model (long waits)
+            self.gains["hold"] = "motor" if lib.manifest.integrator == "paper" else "reference"
         self._blend_accel = self._scalar("blend_accel")
         self._blend_rate = self._scalar("blend_rate")
         self._blend: tuple[int, float, FloatArray, FloatArray] | None = None  # k0, Tb, d0, d1
