@@ -185,3 +185,18 @@ def test_the_c_api_refuses_bad_startup_parameters(
     ):
         with pytest.raises(ConfigError):
             CompiledController(str(lib.library_path), bad, lib.n)
+
+
+def test_hold_auto_follows_the_estimators_model(
+    paper_sim: tuple[Scenario, ModelLibrary], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``hold = "auto"`` is the reference hold with the rk4 model and the motor hold with the
+    paper's (eqs. 1a-1d), and the C parameter block says which."""
+    sc, lib = paper_sim
+    ctrl, _ = build_controller(_with(sc, "amsfe", ("hold=auto",)), lib)
+    assert ctrl.gains["hold"] == "reference"
+    assert ctrl.c_parameters()["hold_motor"] is False
+    monkeypatch.setattr(lib, "manifest", replace(lib.manifest, integrator="paper"))
+    ctrl, _ = build_controller(_with(sc, "amsfe", ("hold=auto",)), lib)
+    assert ctrl.gains["hold"] == "motor"
+    assert ctrl.c_parameters()["hold_motor"] is True
