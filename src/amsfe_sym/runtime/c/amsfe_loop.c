@@ -127,7 +127,8 @@ static int ctrl_params_ok(const amsfe_ctrl_params *p) {
   if (p->startup_converged && (isnan(p->ready_q_std) || !(p->ready_q_std > 0) ||
                                isnan(p->ready_qd_std) || !(p->ready_qd_std > 0) ||
                                !(p->blend_accel > 0) || !(p->blend_rate > 0) ||
-                               !(p->ready_nis > 0) || !(p->ready_nis_window > 0)))
+                               !(p->ready_nis >= 0) ||
+                               (p->ready_nis > 0 && !(p->ready_nis_window > 0))))
     return 0;
   if (p->controller == AMSFE_CTRL_TRUTH_CT)
     return isfinite(p->link_bandwidth) && p->link_bandwidth > 0 &&
@@ -223,13 +224,13 @@ void amsfe_ctrl_observe(amsfe_ctrl *c, const double *P) {
     c->ready = 1;
     return;
   }
-  if (isfinite(nis)) { /* the running mean, then the exponential window */
+  if (isfinite(nis) && c->par.ready_nis_window > 0) { /* running, then exponential mean */
     c->nis_count += 1;
     double w = (double)c->nis_count < c->par.ready_nis_window ? (double)c->nis_count
                                                                : c->par.ready_nis_window;
     c->nis_mean += (nis - c->nis_mean) / w;
   }
-  int consistent = isinf(c->par.ready_nis) || c->nis_count == 0 ||
+  int consistent = isinf(c->par.ready_nis) || c->par.ready_nis == 0.0 || c->nis_count == 0 ||
                    ((double)c->nis_count >= c->par.ready_nis_window &&
                     c->nis_mean <= c->par.ready_nis);
   long n = c->d.n, N = c->d.N;

@@ -70,12 +70,14 @@ typedef struct {
   double blend_accel, blend_rate;
   /* with startup_converged, the filter's consistency too: the mean NIS of the encoder
    * innovations (amsfe_ctrl_observe_nis) over the last ready_nis_window ticks (a running
-   * mean, then an exponential window of that many ticks) at most ready_nis (INFINITY = not
-   * tested; a controller never given a NIS is not tested either) */
+   * mean, then an exponential window of that many ticks) at most ready_nis (INFINITY or 0,
+   * the value of a zeroed block, = not tested; a controller never given a NIS is not tested
+   * either) */
   double ready_nis, ready_nis_window;
-  /* the hold while waiting: 0 = the reference's motor trajectory offset to where the motor
-   * was at the first tick; 1 = from the motor's own angle and rate (the encoders), joining
-   * the reference's motor trajectory within the blend's budget (control/blend.py) */
+  /* the hold while waiting: 0 (a zeroed block) = the reference's motor trajectory offset to
+   * where the motor was at the first tick; 1 = from the motor's own angle and rate (the
+   * encoders), joining the reference's motor trajectory within the blend's budget
+   * (control/blend.py) */
   int hold_motor;
 } amsfe_ctrl_params;
 
