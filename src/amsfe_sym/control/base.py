@@ -30,6 +30,9 @@ class LawInputs(NamedTuple):
         z_enc: The encoder sample [qm, qmd] + noise (eq. 5) taken at t_k, shape (2n,).
         P_diag: The diagonal of the estimate's covariance P(k|k), shape (N,), or None (an
             estimate taken as converged): the cascades' start-up waits for it.
+        encoder_nis: The NIS of this tick's encoder innovation (the estimator's
+            ``StepReport.encoder_nis``), or None (no sample, or not measured): the cascades'
+            start-up tests the filter's consistency on it (``ready_nis``).
     """
 
     k: int
@@ -39,6 +42,7 @@ class LawInputs(NamedTuple):
     x_hat: FloatArray
     z_enc: FloatArray
     P_diag: FloatArray | None = None
+    encoder_nis: float | None = None
 
 
 class Controller(ABC):

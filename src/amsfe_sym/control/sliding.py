@@ -25,6 +25,7 @@ actuator limit).  They are inputs of the generated code: changing one never reco
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
@@ -255,20 +256,32 @@ class _Cascade(_SlidingBase):
         "startup": "converged",
         "ready_q_std": 0.03,
         "ready_qd_std": float("inf"),
+        "ready_nis": float("inf"),
+        "ready_nis_window": 50.0,
+        "hold": "reference",
         "blend_accel": float("inf"),
         "blend_rate": float("inf"),
     }
     #: The start-ups (docs/control.md, "Start-up"): ``"first"`` starts the command filter at
     #: rest on the first command, whatever the estimate (the form the paper's laws imply);
-    #: ``"converged"`` waits until every link angle's and rate's posterior standard deviation
-    #: is below ``ready_q_std`` [rad] and ``ready_qd_std`` [rad/s]: meanwhile the motor tracks
-    #: the reference's motor trajectory offset to where the motor was at the first tick (the
-    #: filter held, no rate or acceleration feedforward from an unconverged command), then the
-    #: filter starts at rest on the first trusted command, as it would with the true state.
+    #: ``"converged"`` waits until the estimate is fit for the law: every link angle's and
+    #: rate's posterior standard deviation below ``ready_q_std`` [rad] and ``ready_qd_std``
+    #: [rad/s], and the filter consistent: the mean NIS of the encoder innovations over the
+    #: last ``ready_nis_window`` ticks (a running mean, then an exponential window of that
+    #: many ticks) at most ``ready_nis`` (its expected value is 2n, the encoders' dimension).
+    #: Meanwhile the motor is held (``hold``): ``"reference"`` tracks the reference's motor
+    #: trajectory offset to where the motor was at the first tick; ``"motor"`` starts from
+    #: the motor's own angle and rate (the encoders need no convergence) and joins the
+    #: reference's motor trajectory within the blend's budget; ``"auto"``: ``"motor"`` when
+    #: the estimator's model is the paper's (``integrator = "paper"``, whose filter takes
+    #: ~0.3 s to pass the rate test), else ``"reference"`` (docs/control.md measures both).
+    #: Then the filter starts at rest on the first trusted command, as it would with the
+    #: true state.
     #: With ``blend_accel`` [rad/s^2] finite, the reference then starts from the state the law
     #: acts on and joins q_d within that offset acceleration, and within ``blend_accel *
     #: blend_rate`` of jerk and ``* blend_rate^2`` of snap (:mod:`amsfe_sym.control.blend`).
     STARTUPS: ClassVar[tuple[str, ...]] = ("first", "converged")
+    HOLDS: ClassVar[tuple[str, ...]] = ("reference", "motor", "auto")
 
     def _extra_gains(self) -> tuple[str, ...]:
         return ("wm", "tau_max", "wf", "vmax")
@@ -281,6 +294,7 @@ class _Cascade(_SlidingBase):
         self._started = False
         self._ready = False
         self._c_hold: FloatArray | None = None
+        self._m_hold: tuple[int, float, FloatArray, FloatArray] | None = None
         self._hold, self._run = np.ones(lib.n), np.zeros(lib.n)  # the law's ``hold`` input
         if self.gains["startup"] not in self.STARTUPS:
             raise ConfigError(
@@ -295,6 +309,21 @@ class _Cascade(_SlidingBase):
             self._scalar("ready_q_std"),
             self._scalar("ready_qd_std"),
         )
+        self._ready_nis = self._scalar("ready_nis")
+        self._nis_window = self._scalar("ready_nis_window")
+        self._nis_mean, self._nis_count = 0.0, 0
+        if self.gains["hold"] not in self.HOLDS:
+            raise ConfigError(
+                describe(
+                    f"controller {self.name!r} gain hold",
+                    f"one of {list(self.HOLDS)}",
+                    repr(self.gains["hold"]),
+                    "see docs/control.md, Start-up",
+                )
+            )
+        self._mref = lib.function("control_motor_reference")
+        if self.gains["hold"] == "auto":  # the motor hold for the paper's model (long waits)
+            self.gains["hold"] = "motor" if lib.manifest.integrator == "paper" else "reference"
         self._blend_accel = self._scalar("blend_accel")
         self._blend_rate = self._scalar("blend_rate")
         self._blend: tuple[int, float, FloatArray, FloatArray] | None = None  # k0, Tb, d0, d1
@@ -312,18 +341,31 @@ class _Cascade(_SlidingBase):
         assert own is not None
         own["startup_converged"] = self.gains["startup"] == "converged"
         own["ready_q_std"], own["ready_qd_std"] = self._ready_std
+        own["ready_nis"], own["ready_nis_window"] = self._ready_nis, self._nis_window
+        own["hold_motor"] = self.gains["hold"] == "motor"
         own["blend_accel"] = self._blend_accel
         own["blend_rate"] = self._blend_rate
         return own
 
-    def _converged(self, P_diag: FloatArray | None) -> bool:
+    def _converged(self, P_diag: FloatArray | None, nis: float | None = None) -> bool:
         """The start-up's test: every link angle's and rate's posterior std below its bound
-        (latched: once trusted, the estimate stays trusted)."""
+        and the encoders' mean NIS at most ``ready_nis`` (latched: once trusted, the estimate
+        stays trusted).  ``nis``: this tick's encoder NIS (None or NaN: no sample; a caller
+        that never gives one is not tested for consistency)."""
         if not self._ready:
             n = self.n
+            if nis is not None and math.isfinite(nis):
+                self._nis_count += 1
+                self._nis_mean += (nis - self._nis_mean) / min(self._nis_count, self._nis_window)
+            consistent = math.isinf(self._ready_nis) or self._nis_count == 0
+            if not consistent:
+                consistent = (
+                    self._nis_count >= self._nis_window and self._nis_mean <= self._ready_nis
+                )
             self._ready = P_diag is None or bool(
                 np.all(np.sqrt(P_diag[:n]) <= self._ready_std[0])
                 and np.all(np.sqrt(P_diag[n : 2 * n]) <= self._ready_std[1])
+                and consistent
             )
         return self._ready
 
@@ -360,13 +402,26 @@ class _Cascade(_SlidingBase):
         lead = self._law_inputs(x_true, theta_true, x_hat, z_enc)
         ref = self._ref_at(k, t)
         gains = self._gain_args()
-        if self.gains["startup"] == "converged" and not self._converged(tick.P_diag):
-            # wait: the filter held where the motor is (as an offset from the reference's
-            # motor trajectory, fixed at the first tick), no rate or acceleration command
-            if self._c_hold is None:
-                probe = self._law.call_into(*lead, ref, self._cf, *gains, self._hold)
-                self._c_hold = z_enc[:n] - (probe[3] - probe[7])  # qm - qm_r
-            self._cf[:n], self._cf[n:] = self._c_hold, 0.0
+        if self.gains["startup"] == "converged" and not self._converged(
+            tick.P_diag, tick.encoder_nis
+        ):
+            # wait: the command filter held (no acceleration command from an untrusted
+            # estimate); the motor joins the reference's motor trajectory qm_r from its own
+            # angle and rate ("motor"), or keeps the offset from qm_r it had ("reference")
+            if self.gains["hold"] == "motor":
+                if self._m_hold is None:
+                    qm_r, qmd_r, _ = self._mref.call_into(ref, lead[0][4 * n :])
+                    d0, d1 = z_enc[:n] - qm_r, z_enc[n : 2 * n] - qmd_r
+                    tb = blend_time(d0, d1, self._blend_accel, self._blend_rate)
+                    self._m_hold = (k, tb, d0.copy(), d1.copy())
+                k0, tb, d0, d1 = self._m_hold
+                off = blend_offsets((k - k0) * self.lib.T, tb, d0, d1)
+                self._cf[:] = off[: 2 * n]
+            else:
+                if self._c_hold is None:
+                    probe = self._law.call_into(*lead, ref, self._cf, *gains, self._hold)
+                    self._c_hold = z_enc[:n] - (probe[3] - probe[7])  # qm - qm_r
+                self._cf[:n], self._cf[n:] = self._c_hold, 0.0
             out = self._law.call_into(*lead, ref, self._cf, *gains, self._hold)
         else:
             if not self._started and self.gains["startup"] == "converged":
@@ -411,7 +466,7 @@ class Truth(_Cascade):
     ) -> list[FloatArray]:
         return [np.concatenate([x_true[: 4 * self.n], theta_true])]
 
-    def _converged(self, P_diag: FloatArray | None) -> bool:
+    def _converged(self, P_diag: FloatArray | None, nis: float | None = None) -> bool:
         return True  # the true state needs no convergence
 
 
@@ -433,7 +488,7 @@ class Dtsmc(_Cascade):
     ) -> list[FloatArray]:
         return [z_enc, self.lib.theta_initial]
 
-    def _converged(self, P_diag: FloatArray | None) -> bool:
+    def _converged(self, P_diag: FloatArray | None, nis: float | None = None) -> bool:
         return True  # it acts on the encoders, not on an estimate
 
 

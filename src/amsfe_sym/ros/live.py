@@ -288,7 +288,8 @@ class LiveLoop:
         t = float(self.k) * self.T
         u = None
         if self.ctrl is not None:
-            law = LawInputs(self.k, t, self._nan, self._nan[: self.lib.p], x, z, P_diag)
+            nis = None if report is None else report.encoder_nis  # the start-up's consistency
+            law = LawInputs(self.k, t, self._nan, self._nan[: self.lib.p], x, z, P_diag, nis)
             u, _ = self.ctrl.saturate(self.ctrl.torque(law))
             self._cmds[self.k] = np.array(u, dtype=float)
         return TickOut(self.k, t, stamp_ns, np.array(x, dtype=float), P_diag, u, report, gap)

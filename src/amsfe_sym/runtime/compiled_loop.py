@@ -89,6 +89,9 @@ class ControllerParams:
     ready_qd_std: float = float("inf")
     blend_accel: float = float("inf")
     blend_rate: float = float("inf")
+    ready_nis: float = float("inf")
+    ready_nis_window: float = 50.0
+    hold_motor: bool = False
     _keep: list[Any] = field(default_factory=list, repr=False)
 
     def struct(self) -> ctypes.Structure:
@@ -132,6 +135,9 @@ class ControllerParams:
             float(self.ready_qd_std),
             float(self.blend_accel),
             float(self.blend_rate),
+            float(self.ready_nis),
+            float(self.ready_nis_window),
+            int(self.hold_motor),
         )
 
 
@@ -186,9 +192,13 @@ class CompiledController:
         z: FloatArray | None,
         x_true: FloatArray | None = None,
         P: FloatArray | None = None,
+        encoder_nis: float | None = None,
     ) -> FloatArray:
         """u(k) [N m] after the actuator limit (``s``, ``bound``, ``saturated`` updated);
-        ``P`` (N x N, the estimate's covariance) for the start-up's test (None: converged)."""
+        ``P`` (N x N, the estimate's covariance) and ``encoder_nis`` (this tick's encoder
+        NIS) for the start-up's test (None: converged; no NIS: consistency not tested)."""
+        if encoder_nis is not None:
+            self._c["amsfe_ctrl_observe_nis"](self.handle, float(encoder_nis))
         if P is not None:
             Pc = np.ascontiguousarray(P, dtype=np.float64)
             self._c["amsfe_ctrl_observe"](self.handle, Pc.ctypes.data)
@@ -403,7 +413,8 @@ def write_loop_log(
         f"{int(params.qmd_next_hold)} {int(params.state_true)} "
         f"{params.link_bandwidth!r} {params.motor_bandwidth!r} "
         f"{int(params.startup_converged)} {params.ready_q_std!r} {params.ready_qd_std!r} "
-        f"{params.blend_accel!r} {params.blend_rate!r}"
+        f"{params.blend_accel!r} {params.blend_rate!r} "
+        f"{params.ready_nis!r} {params.ready_nis_window!r} {int(params.hold_motor)}"
     )
     n = params.u_max.size
     for key in ("h", "lam", "Lt", "eps", "phi", "wm", "tau_max", "wf", "vmax"):

@@ -81,6 +81,7 @@ def bind_loop(cdll: ctypes.CDLL) -> dict[str, Any]:
         "amsfe_ctrl_init": (ctypes.c_int, [_P, _P, _P, ctypes.c_size_t]),
         "amsfe_ctrl_reset": (None, [_P]),
         "amsfe_ctrl_observe": (None, [_P, _P]),
+        "amsfe_ctrl_observe_nis": (None, [_P, ctypes.c_double]),
         "amsfe_ctrl_torque": (ctypes.c_int, [_P, ctypes.c_long, _P, _P, _P, _P, _P, _P]),
         "amsfe_sim_memory_size": (ctypes.c_size_t, [_P]),
         "amsfe_sim_init": (ctypes.c_int, [_P, _P, _P, _P, _P, ctypes.c_size_t]),

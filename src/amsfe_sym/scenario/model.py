@@ -78,6 +78,11 @@ class FilterSettings:
         link_torque_std, motor_torque_std: Q of eq. (3) as torque standard deviations
             [N m] held over one step (w = sigma T).
         theta_rate_std: Random-walk intensity of theta [unit/s] (theta+ = theta + T w).
+        paper_torque_std: With the paper's discrete model (the library's integrator
+            ``"paper"``, eqs. (1a)-(1d)): the link and motor torque standard deviations [N m]
+            the filter assumes instead (0: the two above).  The explicit map's systematic
+            T^2/2 acceleration error per step is model error the plant's white torques do
+            not cover (docs/control.md, "The paper's integrator in the loop").
         encoder_q_std, encoder_qd_std, camera_pixel_std: R [rad, rad/s, px]; 0 means
             "the sensor's true noise, including quantization and rounding".
         gate_probability: Chi-square gate on camera innovations (0 disables).
@@ -90,6 +95,7 @@ class FilterSettings:
     link_torque_std: float = 0.1
     motor_torque_std: float = 0.1
     theta_rate_std: float = 0.05
+    paper_torque_std: float = 0.0
     encoder_q_std: float = 0.0
     encoder_qd_std: float = 0.0
     camera_pixel_std: float = 0.0

@@ -273,6 +273,7 @@ def validate(sc: Scenario, where: str = "scenario") -> None:
     positive(f.link_torque_std, "[filter] link_torque_std")
     positive(f.motor_torque_std, "[filter] motor_torque_std")
     positive(f.theta_rate_std, "[filter] theta_rate_std", allow_zero=True)
+    positive(f.paper_torque_std, "[filter] paper_torque_std", allow_zero=True)
     if f.backward_map not in BACKWARD_MAPS:
         raise ConfigError(
             describe(

@@ -217,14 +217,17 @@ def build_estimator(
     n, p = lib.n, lib.p
     f = sc.filter
     effort = effort or EffortSpec()
+    link_std, motor_std0 = f.link_torque_std, f.motor_torque_std
+    if lib.manifest.integrator == "paper" and f.paper_torque_std > 0:
+        link_std = motor_std0 = f.paper_torque_std  # the explicit map's model error
     enc_var = sensors.encoders.variance
     q_var = f.encoder_q_std**2 if f.encoder_q_std else enc_var[:n]
     qd_var = f.encoder_qd_std**2 if f.encoder_qd_std else enc_var[n:]
     motor = motor_params(lib)
     extra = input_noise_std(effort, motor, np.sqrt(qd_var))
-    motor_std = np.sqrt(np.asarray(f.motor_torque_std, dtype=float) ** 2 + extra**2)
+    motor_std = np.sqrt(np.asarray(motor_std0, dtype=float) ** 2 + extra**2)
     compiled_model = CompiledTransition(
-        lib, noise_covariance(lib, f.link_torque_std, motor_std, f.theta_rate_std)
+        lib, noise_covariance(lib, link_std, motor_std, f.theta_rate_std)
     )
     if compiled and effort.kind != "applied":
         raise ConfigError(

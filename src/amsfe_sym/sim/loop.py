@@ -130,12 +130,15 @@ def run(
         for fr in delivered:
             frames_rec.append((fr.exposure_step, k, float(fr.z[0]), float(fr.z[1])))
         # 2. estimator k-1 -> k
+        nis: float | None = None
         if k > 0:
-            count_decisions(counters, est.step(u, z, delivered))
+            rep = est.step(u, z, delivered)
+            count_decisions(counters, rep)
+            nis = rep.encoder_nis
         xh, P = est.x, est.P
         # 3. controller, then the actuator limit
         u, saturated[k] = ctrl.saturate(
-            ctrl.torque(LawInputs(k, float(t[k]), xp, theta_true, xh, z, np.diag(P)))
+            ctrl.torque(LawInputs(k, float(t[k]), xp, theta_true, xh, z, np.diag(P), nis))
         )
         # record
         x_true[k] = x_t

@@ -23,11 +23,13 @@ DECLARE(plant_step)
 DECLARE(camera_measure)
 DECLARE(mass_matrix)
 DECLARE(bias)
+DECLARE(control_motor_reference)
 
 static const cwork WORKS[] = {control_amsfe_work,       control_dtsmc_work,
                               control_amsfe_paper_work, control_dtsmc_paper_work,
                               plant_step_work,          camera_measure_work,
-                              mass_matrix_work,         bias_work};
+                              mass_matrix_work,         bias_work,
+                              control_motor_reference_work};
 
 /* ================================================================== controller */
 struct amsfe_ctrl {
@@ -52,6 +54,13 @@ struct amsfe_ctrl {
   long blend_k0;   /* cascade: the blended start's first tick (control/blend.py) */
   double blend_tb; /* its duration [s] */
   double *blend_d0, *blend_d1, *refb; /* its offsets [n], [n]; the blended reference [5n] */
+  double nis_mean; /* cascade: the encoders' mean NIS (running, then exponential window) */
+  long nis_count;  /* NIS values taken into it */
+  double nis_tick; /* this tick's NIS (amsfe_ctrl_observe_nis), NaN: none */
+  long mhold_k0;   /* hold_motor: its first tick, duration [s], offsets [n], [n] */
+  double mhold_tb;
+  int have_mhold;
+  double *mhold_d0, *mhold_d1, *mr[3]; /* ...; control_motor_reference's outputs [n] x 3 */
   double *vt_prev; /* printed laws: v_t(k-1) */
   int have_vt;
   double *prev_qm_d, *prev_qmd_d; /* truth-ct: the previous motor set point and rate */
@@ -73,7 +82,8 @@ static int ctrl_layout(amsfe_ctrl *c, char *base) {
                      &c->tau_max, &c->wf, &c->vmax, &c->u_max, &c->Mm, &c->Fm,
                      &c->Ks, &c->zeros, &c->u_prev, &c->vt_prev, &c->prev_qm_d,
                      &c->prev_qmd_d, &c->qmd_next, &c->Ksv, &c->b, &c->acc,
-                     &c->c_hold, &c->hold1, &c->hold0, &c->blend_d0, &c->blend_d1};
+                     &c->c_hold, &c->hold1, &c->hold0, &c->blend_d0, &c->blend_d1,
+                     &c->mhold_d0, &c->mhold_d1, &c->mr[0], &c->mr[1], &c->mr[2]};
   for (size_t i = 0; i < sizeof(vecs) / sizeof(vecs[0]); ++i) *vecs[i] = DBL(&cv, n);
   c->refb = DBL(&cv, 5 * n);
   c->theta0 = DBL(&cv, d.N - 4 * n + 1);
@@ -116,7 +126,9 @@ static int ctrl_params_ok(const amsfe_ctrl_params *p) {
     if (p->ks_theta[j] < -1 || p->ks_theta[j] >= d.N - 4 * d.n) return 0;
   if (p->startup_converged && (isnan(p->ready_q_std) || !(p->ready_q_std > 0) ||
                                isnan(p->ready_qd_std) || !(p->ready_qd_std > 0) ||
-                               !(p->blend_accel > 0) || !(p->blend_rate > 0)))
+                               !(p->blend_accel > 0) || !(p->blend_rate > 0) ||
+                               !(p->ready_nis >= 0) ||
+                               (p->ready_nis > 0 && !(p->ready_nis_window > 0))))
     return 0;
   if (p->controller == AMSFE_CTRL_TRUTH_CT)
     return isfinite(p->link_bandwidth) && p->link_bandwidth > 0 &&
@@ -150,6 +162,10 @@ void amsfe_ctrl_reset(amsfe_ctrl *c) {
   c->started = 0;
   c->ready = 0;
   c->have_hold = 0;
+  c->have_mhold = 0;
+  c->nis_mean = 0.0;
+  c->nis_count = 0;
+  c->nis_tick = NAN;
   c->have_vt = 0;
   c->have_prev = 0;
   c->prev_k = 0;
@@ -195,22 +211,35 @@ static void stiffness(const amsfe_ctrl *c, const double *theta, double *Ks) {
   for (int j = 0; j < c->d.n; ++j) Ks[j] = c->ks_theta[j] >= 0 ? theta[c->ks_theta[j]] : c->Ks[j];
 }
 
+void amsfe_ctrl_observe_nis(amsfe_ctrl *c, double nis) { c->nis_tick = nis; }
+
 void amsfe_ctrl_observe(amsfe_ctrl *c, const double *P) {
   /* _Cascade._converged: latched; the oracles and the encoder-only law need no estimate */
   int ctl = c->par.controller;
+  double nis = c->nis_tick;
+  c->nis_tick = NAN;
   c->observed = 1;
   if (c->ready) return;
   if (!P || ctl == AMSFE_CTRL_TRUTH || ctl == AMSFE_CTRL_DTSMC) {
     c->ready = 1;
     return;
   }
+  if (isfinite(nis) && c->par.ready_nis_window > 0) { /* running, then exponential mean */
+    c->nis_count += 1;
+    double w = (double)c->nis_count < c->par.ready_nis_window ? (double)c->nis_count
+                                                               : c->par.ready_nis_window;
+    c->nis_mean += (nis - c->nis_mean) / w;
+  }
+  int consistent = isinf(c->par.ready_nis) || c->par.ready_nis == 0.0 || c->nis_count == 0 ||
+                   ((double)c->nis_count >= c->par.ready_nis_window &&
+                    c->nis_mean <= c->par.ready_nis);
   long n = c->d.n, N = c->d.N;
   int ok = 1;
   for (long j = 0; j < n; ++j) {
     ok &= sqrt(P[j * N + j]) <= c->par.ready_q_std;
     ok &= sqrt(P[(n + j) * N + n + j]) <= c->par.ready_qd_std;
   }
-  c->ready = ok;
+  c->ready = ok && consistent;
 }
 
 /* control/blend.py: the r-th derivative of sum b_i s^i at s, Horner from the top. */
@@ -268,6 +297,21 @@ static double blend_time(const double *d0, const double *d1, long n, double acce
   return tb;
 }
 
+/* blend_offsets(s, Tb, d0, d1)[: orders n] into out (zero once s >= Tb) */
+static void blend_offsets_into(double s, double tb, const double *d0, const double *d1, long n,
+                               int orders, double *out) {
+  if (!(s < tb)) {
+    memset(out, 0, sizeof(double) * (size_t)(orders * n));
+    return;
+  }
+  double tau = s / tb, scale = 1.0;
+  for (int r = 0; r < orders; ++r) {
+    double p0 = blend_poly(BLEND_B0, r, tau), p1 = blend_poly(BLEND_B1, r, tau);
+    for (long j = 0; j < n; ++j) out[r * n + j] = (d0[j] * p0 + d1[j] * tb * p1) / scale;
+    scale *= tb;
+  }
+}
+
 /* ref + blend_offsets(s, Tb, d0, d1) into c->refb */
 static const double *blended(amsfe_ctrl *c, long k, const double *ref) {
   long n = c->d.n;
@@ -305,13 +349,30 @@ static int cascade(amsfe_ctrl *c, long k, const double *lead0, const double *lea
   if (c->par.startup_converged && !c->ready) {
     /* wait: the filter held where the motor is (an offset from qm_r fixed at the first tick) */
     *hold = c->hold1;
-    if (!c->have_hold) {
-      if (gcall(&c->g, f, in, m, c->o, 8)) return AMSFE_ERR_NONFINITE;
-      for (long j = 0; j < n; ++j) c->c_hold[j] = z[j] - (c->o[3][j] - c->o[7][j]);
-      c->have_hold = 1;
+    if (c->par.hold_motor) { /* from the motor's own angle and rate onto qm_r */
+      if (!c->have_mhold) {
+        const double *min[2] = {ref, lead0 + 4 * n};
+        if (gcall(&c->g, control_motor_reference, min, 2, c->mr, 3)) return AMSFE_ERR_NONFINITE;
+        for (long j = 0; j < n; ++j) {
+          c->mhold_d0[j] = z[j] - c->mr[0][j];
+          c->mhold_d1[j] = z[n + j] - c->mr[1][j];
+        }
+        c->mhold_k0 = k;
+        c->mhold_tb =
+            blend_time(c->mhold_d0, c->mhold_d1, n, c->par.blend_accel, c->par.blend_rate);
+        c->have_mhold = 1;
+      }
+      blend_offsets_into((double)(k - c->mhold_k0) * c->par.T, c->mhold_tb, c->mhold_d0,
+                         c->mhold_d1, n, 2, c->cf);
+    } else {
+      if (!c->have_hold) {
+        if (gcall(&c->g, f, in, m, c->o, 8)) return AMSFE_ERR_NONFINITE;
+        for (long j = 0; j < n; ++j) c->c_hold[j] = z[j] - (c->o[3][j] - c->o[7][j]);
+        c->have_hold = 1;
+      }
+      memcpy(c->cf, c->c_hold, sizeof(double) * (size_t)n);
+      memset(c->cf + n, 0, sizeof(double) * (size_t)n);
     }
-    memcpy(c->cf, c->c_hold, sizeof(double) * (size_t)n);
-    memset(c->cf + n, 0, sizeof(double) * (size_t)n);
     if (gcall(&c->g, f, in, m, c->o, 8)) return AMSFE_ERR_NONFINITE;
   } else {
     *hold = c->hold0;
@@ -497,6 +558,9 @@ int amsfe_loop_tick(amsfe_est *est, amsfe_ctrl *ctrl, const double *z, amsfe_fra
   if (ctrl->ticks > 0) {
     int st = amsfe_est_tick(est, z, ctrl->u_prev);
     if (st < 0) return st;
+    amsfe_diag diag;
+    amsfe_est_diagnostics(est, &diag);
+    amsfe_ctrl_observe_nis(ctrl, diag.encoder_nis); /* the start-up's consistency test */
     sort_frames(frames, n_frames);
     for (int i = 0; i < n_frames; ++i) {
       double nis;

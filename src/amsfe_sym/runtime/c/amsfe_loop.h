@@ -59,8 +59,8 @@ typedef struct {
   const double *theta_initial; /* [p] (the encoder-only laws use it) */
   /* the cascades' start-up (docs/control.md, "Start-up"): 0 = the filter starts at rest on
    * the first command; 1 = wait until every link angle's and rate's posterior standard
-   * deviation (amsfe_ctrl_observe) is below these, the motor held on the reference's motor
-   * trajectory where it was at the first tick, then start at rest on the first trusted command */
+   * deviation (amsfe_ctrl_observe) is below these (and the filter consistent: ready_nis), the
+   * motor held meanwhile (hold_motor), then start at rest on the first trusted command */
   int startup_converged;
   double ready_q_std, ready_qd_std; /* [rad], [rad/s] */
   /* with startup_converged: the reference starts from the state the law acts on and joins
@@ -68,6 +68,17 @@ typedef struct {
    * no blend; its jerk and snap stay below blend_accel * blend_rate and * blend_rate^2
    * [rad/s]; INFINITY = no bound */
   double blend_accel, blend_rate;
+  /* with startup_converged, the filter's consistency too: the mean NIS of the encoder
+   * innovations (amsfe_ctrl_observe_nis) over the last ready_nis_window ticks (a running
+   * mean, then an exponential window of that many ticks) at most ready_nis (INFINITY or 0,
+   * the value of a zeroed block, = not tested; a controller never given a NIS is not tested
+   * either) */
+  double ready_nis, ready_nis_window;
+  /* the hold while waiting: 0 (a zeroed block) = the reference's motor trajectory offset to
+   * where the motor was at the first tick; 1 = from the motor's own angle and rate (the
+   * encoders), joining the reference's motor trajectory within the blend's budget
+   * (control/blend.py) */
+  int hold_motor;
 } amsfe_ctrl_params;
 
 /* What a tick computed besides the torque. */
@@ -87,6 +98,9 @@ void amsfe_ctrl_reset(amsfe_ctrl *ctrl);
 /* The estimate's covariance P(k|k) [N x N] for the start-up's test (before amsfe_ctrl_torque
  * of the same tick; amsfe_loop_tick calls it).  NULL: the estimate is taken as converged. */
 void amsfe_ctrl_observe(amsfe_ctrl *ctrl, const double *P);
+/* This tick's encoder NIS for the start-up's consistency test (before amsfe_ctrl_observe of
+ * the same tick; amsfe_loop_tick calls it after each estimator step).  NaN: no sample. */
+void amsfe_ctrl_observe_nis(amsfe_ctrl *ctrl, double nis);
 
 /* u(k) [n] (limited), from the reference ref [5n] = [q_d, qd_d, qdd_d, jerk_d, snap_d] at t_k,
  * the estimate x_hat [N], the encoder sample z [2n] at t_k and, for the oracles only, the true
