@@ -1,14 +1,16 @@
 """Controllers, selectable by name (``amsfe simulate --controller NAME``).
 
 ``amsfe``, ``dtsmc``, ``amsfe-paper``, ``dtsmc-paper`` and ``truth`` are the paper's discrete
-terminal sliding mode laws on generated code (:mod:`amsfe_sym.control.sliding`, derived in
-docs/control.md); ``truth-ct`` is a cascaded computed-torque law on the true state.
+terminal sliding mode laws on generated code (:mod:`amsfe_sym.control.sliding`; the laws as
+printed in :mod:`amsfe_sym.control.printed`; derived in docs/control.md); ``truth-ct`` is a
+cascaded computed-torque law on the true state.
 
 May import: errors, runtime (the library's laws and manifest), signals.trajectory.
 """
 
 from amsfe_sym.control.base import CONTROLLERS, Controller, LawInputs, make_controller
-from amsfe_sym.control.sliding import Amsfe, AmsfePaper, Dtsmc, DtsmcPaper, Truth
+from amsfe_sym.control.printed import AmsfePaper, DtsmcPaper
+from amsfe_sym.control.sliding import Amsfe, Dtsmc, Truth
 from amsfe_sym.control.truth import TruthComputedTorque
 
 __all__ = [
