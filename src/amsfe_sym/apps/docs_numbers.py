@@ -327,8 +327,9 @@ def compare(reg: Registry, source: str, fresh: Any) -> list[Moved]:
 
 
 def _claims_block(b: Block, old: Any, new: Any) -> list[Moved]:
-    """Claim tables: divergences equal, every median's and p90's 95 % interval overlapping
-    the stored one, every paired effect's verdict (when stored) unchanged."""
+    """Claim tables: divergences equal; every median's and p90's 95 % interval, and every
+    paired effect's, overlapping the stored one; every stated claim (an effect found on both
+    stored blocks) found again, not "indistinguishable" nor reversed."""
     out: list[Moved] = []
     for key, row in old["rows"].items():
         fresh = new["rows"].get(key)
@@ -347,15 +348,32 @@ def _claims_block(b: Block, old: Any, new: Any) -> list[Moved]:
                               f"{1e3 * f[stat]:.3f}", f"[{1e3 * lo:.3f}, {1e3 * hi:.3f}]")
                     )  # fmt: skip
     fresh_pairs = {p["label"]: p for p in new.get("pairs", [])}
+    stated = {(e["label"], e["joint"]): e["stated"] for e in old.get("effects", [])}
     for p in old.get("pairs", []):
         q = fresh_pairs.get(p["label"])
         if q is None:
             continue
         for j, (s, f) in enumerate(zip(p["joints"], q["joints"], strict=True)):
-            if "verdict" in s and "verdict" in f and s["verdict"] != f["verdict"]:
-                out.append(Moved(b.doc, f"{p['label']} joint {j + 1} verdict", s["verdict"],
-                                 f["verdict"], "the same verdict"))  # fmt: skip
+            if "difference_ci95" not in s or "difference_ci95" not in f:
+                continue
+            where = f"{p['label']} joint {j + 1} a - b [mrad]"
+            lo, hi = s["difference_ci95"]
+            if _disjoint(f["difference_ci95"], (lo, hi), 0.0):
+                out.append(Moved(b.doc, where, _ci(s["difference_ci95"]),
+                                 _ci(f["difference_ci95"]), "overlapping intervals"))  # fmt: skip
+            claim = stated.get((p["label"], j + 1))
+            if claim in _OPPOSITE and f["verdict"] in (_OPPOSITE[claim], "indistinguishable"):
+                out.append(Moved(b.doc, where.replace("a - b [mrad]", "stated claim"), claim,
+                                 f["verdict"], claim))  # fmt: skip
     return out
+
+
+def _ci(ci: Any) -> str:
+    return f"[{1e3 * ci[0]:+.3f}, {1e3 * ci[1]:+.3f}]"
+
+
+#: A stated claim is contradicted by a fresh block that finds the opposite or no effect.
+_OPPOSITE = {"a lower": "a higher", "a higher": "a lower"}
 
 
 _CHECKS = {"claims": _claims_block}
