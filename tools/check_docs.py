@@ -41,12 +41,12 @@ def _rerun(src: Source, first_seed: int | None, seeds: int | None, workers: int)
     with tempfile.TemporaryDirectory(prefix="check-docs-") as tmp:
         out = Path(tmp) / "out"
         cmd = src.command_for(
-            src.first_seed if first_seed is None else first_seed,
+            src.first_seed if first_seed is None or src.fixed_seed else first_seed,
             src.seeds if seeds is None else seeds,
             str(out),
         )
         argv = _argv(cmd)
-        if "--workers" not in argv and argv[1:3] == ["-m", "amsfe_sym"]:
+        if "--workers" not in argv and argv[1:4] == ["-m", "amsfe_sym", "study"]:
             argv += ["--workers", str(workers)]
         print(f"running: {cmd}", flush=True)
         subprocess.run(argv, cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
@@ -77,6 +77,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"check_docs: unknown source {unknown}; known: {sorted(reg.sources)}")
         return 2
     moved: list[Moved] = check_text(reg)
+    for m in moved:
+        print(m.line(), flush=True)
     if not args.stored:
         names = args.sources or [s.name for s in reg.sources.values() if args.all or not s.costly]
         if args.fresh is not None and len(names) != 1:
@@ -89,10 +91,10 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 fresh = _rerun(src, args.first_seed, args.seeds, args.workers)
             found = compare(reg, name, fresh)
-            print(f"{name}: {len(found)} moved")
+            print(f"{name}: {len(found)} moved", flush=True)
+            for m in found:
+                print(f"  {m.line()}", flush=True)
             moved += found
-    for m in moved:
-        print(m.line())
     total = len(reg.numbers) + len(reg.blocks)
     print(f"{total} registered entries, {len(moved)} outside their interval or missing")
     return 1 if moved else 0

@@ -23,7 +23,8 @@ Registry format (TOML)::
     output = "claims.json"        # the file the command writes inside {out}
     first_seed = 1000
     seeds = 200
-    costly = false                # costly sources re-run only when named
+    costly = false                # costly sources re-run only when named (or with --all)
+    fixed_seed = false            # true: one documented seed, re-run on it whatever the block
 
     [[block]]
     doc = "docs/reproduction.md"
@@ -82,6 +83,7 @@ class Source:
     first_seed: int = 0
     seeds: int = 0
     costly: bool = False
+    fixed_seed: bool = False
 
     def command_for(self, first_seed: int, seeds: int, out: str) -> str:
         """The command on seeds ``first_seed ..`` (``seeds`` of them), writing to ``out``."""
