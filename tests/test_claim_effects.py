@@ -71,3 +71,24 @@ def test_the_stored_claim_table_is_its_own_per_seed_rmse_retabulated() -> None:
             lo, hi = s["difference_ci95"]
             assert lo <= s["median_difference"] <= hi
     assert "a lower" in format_claims(t)
+
+
+def test_the_claims_command_with_a_second_block_writes_the_effects(tmp_path: Path) -> None:
+    """``amsfe study --claims --second-block``: both blocks run, ``claims.json`` holds the
+    second block and the effects, ``claims.md`` the effect table, and the stored output
+    re-tabulates to itself (short runs: 2 s, 10 + 6 seeds)."""
+    from amsfe_sym.apps.cli import main
+
+    out = tmp_path / "c"
+    argv = ["study", "paper-exp", "--claims", "--first-seed", "5000", "--seeds", "10"]
+    argv += ["--second-block", "5100", "--second-seeds", "6", "--duration", "2"]
+    assert main([*argv, "--workers", "1", "--out", str(out)]) == 0
+    doc = json.loads((out / "claims.json").read_text())
+    assert doc["second_block"]["seeds"] == [5100, 5105]
+    assert len(doc["effects"]) == len(doc["pairs"])  # one joint on paper-exp
+    for e in doc["effects"]:
+        same = e["first"]["verdict"] == e["second"]["verdict"]
+        assert e["stated"] == (e["first"]["verdict"] if same else "not reproduced")
+    assert "Claims as effect sizes: paper-exp" in (out / "claims.md").read_text()
+    again = table_from_doc(doc)
+    assert again.second is not None and again.pairs == doc["pairs"]
