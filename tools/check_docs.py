@@ -49,6 +49,8 @@ def _rerun(src: Source, first_seed: int | None, seeds: int | None, workers: int)
         if "--workers" not in argv and argv[1:4] == ["-m", "amsfe_sym", "study"]:
             argv += ["--workers", str(workers)]
         print(f"running: {cmd}", flush=True)
+        if src.output == "-":  # the output is the command's standard output
+            return subprocess.run(argv, cwd=ROOT, check=True, capture_output=True, text=True).stdout
         subprocess.run(argv, cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
         return json.loads((out / src.output if src.output else out).read_text())
 
@@ -87,7 +89,8 @@ def main(argv: list[str] | None = None) -> int:
         for name in names:
             src = reg.sources[name]
             if args.fresh is not None:
-                fresh = json.loads(args.fresh.read_text())
+                text = args.fresh.read_text()
+                fresh = text if src.output == "-" else json.loads(text)
             else:
                 fresh = _rerun(src, args.first_seed, args.seeds, args.workers)
             found = compare(reg, name, fresh)

@@ -112,6 +112,7 @@ class Block:
     source: str
     stored: str
     check: str = ""
+    skip: tuple[str, ...] = ()  # regexes of stored lines the doc leaves out (text outputs)
 
 
 @dataclass
@@ -173,7 +174,7 @@ def load_registry(root: Path, path: Path | None = None) -> Registry:
             )
         )
     for b in doc.get("block", []):
-        reg.blocks.append(Block(**b))
+        reg.blocks.append(Block(**{**b, "skip": tuple(b.get("skip", ()))}))
     items: list[Number | Block] = [*reg.numbers, *reg.blocks]
     for item in items:
         if item.source not in reg.sources:
@@ -229,9 +230,13 @@ def _flat(text: str) -> str:
     return re.sub(r"\s+", " ", text).strip()
 
 
-def _tables(text: str) -> list[str]:
+def _tables(text: str, skip: tuple[str, ...] = ()) -> list[str]:
     """The tables of a stored Markdown output, each flattened (captions may be reworded in
-    a doc)."""
+    a doc); a plain-text output (no Markdown table) is one block of its lines but those
+    matching a ``skip`` regex."""
+    if not any(ln.lstrip().startswith("|") for ln in text.splitlines()):
+        keep = [ln for ln in text.splitlines() if not any(re.match(r, ln) for r in skip)]
+        return [_flat("\n".join(keep))]
     out: list[list[str]] = []
     prev = False
     for ln in text.splitlines():
@@ -262,6 +267,16 @@ def number_text(n: Number, output: Any) -> str:
     return parts[0] + "".join(v + rest for v, rest in zip(shown, parts[1:], strict=True))
 
 
+def _read_output(path: Path) -> Any:
+    """A stored output: JSON, or the text of a command's standard output (``.txt``)."""
+    if path.suffix == ".txt":
+        try:
+            return path.read_text()
+        except OSError as e:
+            raise _bad(str(path), "a stored text output", str(e), "re-run its command") from e
+    return _read_json(path)
+
+
 def _read_json(path: Path) -> Any:
     try:
         return json.loads(path.read_text())
@@ -273,7 +288,7 @@ def check_text(reg: Registry, docs: set[str] | None = None) -> list[Moved]:
     """Every registered number and block, from its stored output, found in its document."""
     flat: dict[str, str] = {}
     out: list[Moved] = []
-    stored = {s.name: _read_json(reg.root / s.stored) for s in reg.sources.values()}
+    stored = {s.name: _read_output(reg.root / s.stored) for s in reg.sources.values()}
     for n in reg.numbers:
         if docs is not None and n.doc not in docs:
             continue
@@ -285,7 +300,7 @@ def check_text(reg: Registry, docs: set[str] | None = None) -> list[Moved]:
         if docs is not None and b.doc not in docs:
             continue
         text = flat.setdefault(b.doc, _flat((reg.root / b.doc).read_text()))
-        for k, want in enumerate(_tables((reg.root / b.stored).read_text())):
+        for k, want in enumerate(_tables((reg.root / b.stored).read_text(), b.skip)):
             if want not in text:
                 out.append(
                     Moved(b.doc, f"table {k + 1} of {b.stored}", "verbatim", "not in the text",
@@ -323,7 +338,7 @@ def compare(reg: Registry, source: str, fresh: Any) -> list[Moved]:
     """The numbers of ``source`` in a fresh output that moved: where an interval is
     registered, the fresh block's 95 % interval and the stored one do not overlap (widened
     by ``atol``); elsewhere the value moved by more than ``atol`` [display units]."""
-    old = _read_json(reg.root / reg.sources[source].stored)
+    old = _read_output(reg.root / reg.sources[source].stored)
     out: list[Moved] = []
     for n in reg.numbers:
         if n.source != source:
@@ -401,4 +416,25 @@ def _ci(ci: Any) -> str:
 _OPPOSITE = {"a lower": "a higher", "a higher": "a lower"}
 
 
-_CHECKS = {"claims": _claims_block}
+def _check_block(b: Block, old: Any, new: Any) -> list[Moved]:
+    """``amsfe check`` output: the same functions, every one still passing its tolerance."""
+
+    def rows(text: str) -> dict[str, str]:
+        return {
+            ln.split()[0]: ln.split()[-1]
+            for ln in text.splitlines()
+            if ln.rstrip().endswith(("pass", "FAIL", "fail"))
+            and not ln.startswith(("all ", "function"))
+        }
+
+    was, now = rows(old), rows(new)
+    out = [
+        Moved(b.doc, f"amsfe check {name}", was.get(name, "absent"), now.get(name, "absent"),
+              "pass")
+        for name in sorted(set(was) | set(now))
+        if now.get(name) != "pass"
+    ]  # fmt: skip
+    return out
+
+
+_CHECKS = {"claims": _claims_block, "check": _check_block}
