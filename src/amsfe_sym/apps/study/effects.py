@@ -128,12 +128,15 @@ def _block(doc: dict[str, Any]) -> str:
     return f"seeds {s[0]}-{s[-1]}"
 
 
-def format_effects(first: dict[str, Any], second: dict[str, Any]) -> str:
-    """The effect-size table (Markdown, differences in mrad) of two claims documents."""
+def format_effects(
+    first: dict[str, Any], second: dict[str, Any], what: str = "tracking RMSE"
+) -> str:
+    """The effect-size table (Markdown, differences in mrad) of two claims documents;
+    ``what`` names the per-seed quantity compared."""
     b1, b2 = _block(first), _block(second)
     head = (
         f"Claims as effect sizes: {first['scenario']}, {b1} and {b2}; median over seeds of the "
-        "paired difference of tracking RMSE a - b [mrad] with its bootstrap 95 % interval "
+        f"paired difference of {what} a - b [mrad] with its bootstrap 95 % interval "
         f"({N_BOOT} resamples), a diverged run counted as +inf (never dropped); stated only "
         "where both blocks agree, indistinguishable where the interval spans zero.\n\n"
         f"| claim (a vs b) | joint | {b1}: a - b [95% CI] | diverged a / b | a better on "
