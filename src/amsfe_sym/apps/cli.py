@@ -420,6 +420,15 @@ def _study(args: argparse.Namespace) -> int:
         t = run_claims(
             args.scenario, args.first_seed, args.seeds, args.duration, args.workers, args.set
         )
+        if args.second_block is not None:
+            t.second = run_claims(
+                args.scenario,
+                args.second_block,
+                args.second_seeds or args.seeds,
+                args.duration,
+                args.workers,
+                args.set,
+            )
         print(format_claims(t))
         if args.out:
             write_claims(t, Path(args.out), force=args.force)

@@ -134,6 +134,20 @@ def add_study_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     p.add_argument("--claims", action="store_true", help="the claim table of docs/reproduction.md")
     p.add_argument(
+        "--second-block",
+        type=SEED,
+        default=None,
+        metavar="FIRST_SEED",
+        help="with --claims: the same table on a second seed block from FIRST_SEED, and the "
+        "claims as effect sizes stated where both blocks agree",
+    )
+    p.add_argument(
+        "--second-seeds",
+        type=COUNT,
+        default=None,
+        help="seeds of the second block (default --seeds)",
+    )
+    p.add_argument(
         "--runtime",
         choices=("compiled", "python"),
         default="compiled",

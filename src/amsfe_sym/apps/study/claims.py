@@ -6,9 +6,14 @@ rest on, over any seed range, on the compiled loop, with their spread and paired
 99th percentiles and worst seed of the tracking RMSE over the last 80 % of each run, with
 bootstrap 95 % intervals of the median and the 90th percentile.  A diverged run counts as
 the worst value (+inf), never dropped.  Pairs (same seeds): camera vs encoders alone under
-``amsfe``, ``amsfe`` vs ``dtsmc-ekf`` with the camera, the estimate vs the true state: how
-many seeds the first is better on, the median of the paired differences and the Wilcoxon
-signed-rank p-value (diverged seeds excluded from the test only, counted).
+``amsfe``, ``amsfe`` vs ``dtsmc-ekf`` with the camera, the estimate vs the true state: the
+effect size (median over seeds of the paired difference a - b with its bootstrap 95 %
+interval, a diverged run +inf; :mod:`amsfe_sym.apps.study.effects`), its verdict on these
+seeds, how many seeds a is better on, and (JSON only) the Wilcoxon signed-rank p-value.
+
+``--second-block FIRST`` runs the same table on a second, disjoint block of seeds and adds
+the claims as effect sizes on both blocks, stated only where the two agree
+(``second_block`` and ``effects`` in ``claims.json``; the last table of ``claims.md``).
 """
 
 from __future__ import annotations
@@ -32,6 +37,8 @@ __all__ = [
     "format_claims",
     "is_claims_folder",
     "run_claims",
+    "table_from_doc",
+    "tabulate",
     "write_claims",
 ]
 
@@ -62,6 +69,7 @@ class ClaimTable:
     rows: dict[str, dict[str, Any]] = field(default_factory=dict)
     pairs: list[dict[str, Any]] = field(default_factory=list)
     rmse: dict[str, list[list[float]]] = field(default_factory=dict)
+    second: ClaimTable | None = None
 
 
 def _key(row: tuple[str, str]) -> str:
@@ -111,8 +119,6 @@ def run_claims(
 ) -> ClaimTable:
     """Run ``rows`` (default every row of :data:`CLAIM_ROWS`) on seeds ``first_seed ..``
     (compiled loop); the pairs of :data:`CLAIM_PAIRS` whose rows both ran are compared."""
-    from scipy.stats import wilcoxon
-
     seed_list = list(range(first_seed, first_seed + seeds))
     jobs = [(scenario, s, c, e, duration, tuple(sets)) for (c, e) in rows for s in seed_list]
     if workers > 1:
@@ -120,15 +126,30 @@ def run_claims(
             out = list(ex.map(_one, jobs, chunksize=4))
     else:
         out = [_one(j) for j in jobs]
-    table = ClaimTable(scenario, seed_list, duration)
+    rmse = {_key(row): out[i * seeds : (i + 1) * seeds] for i, row in enumerate(rows)}
+    return tabulate(scenario, seed_list, duration, rmse)
+
+
+def tabulate(
+    scenario: str, seeds: list[int], duration: float | None, rmse: dict[str, list[list[float]]]
+) -> ClaimTable:
+    """The claim table of per-seed tracking RMSE [rad] (``rmse[row][seed][joint]``, inf =
+    diverged): each row's spread, each pair's paired effect
+    (:func:`amsfe_sym.apps.study.effects.paired_effect`) and Wilcoxon p-value."""
+    from scipy.stats import wilcoxon
+
+    from amsfe_sym.apps.study.effects import paired_effect
+
+    table = ClaimTable(scenario, list(seeds), duration)
     rng = np.random.default_rng(0)
-    for i, row in enumerate(rows):
-        r = np.array(out[i * seeds : (i + 1) * seeds])
-        table.rmse[_key(row)] = r.tolist()
-        table.rows[_key(row)] = {
+    for key, values in rmse.items():
+        r = np.array(values, dtype=float)
+        table.rmse[key] = r.tolist()
+        table.rows[key] = {
             "diverged": int(np.isinf(r[:, 0]).sum()),
             "joints": [_spread(r[:, j], rng) for j in range(r.shape[1])],
         }
+    prng = np.random.default_rng(0)
     for label, a, b in CLAIM_PAIRS:
         if _key(a) not in table.rmse or _key(b) not in table.rmse:
             continue
@@ -138,21 +159,33 @@ def run_claims(
             x, y = ra[:, j], rb[:, j]
             fin = np.isfinite(x) & np.isfinite(y)
             p = float(wilcoxon(x[fin], y[fin]).pvalue) if fin.sum() >= 10 else None
-            joints.append(
-                {
-                    "a_better_seeds": int((x < y).sum()),
-                    "median_difference": float(np.median(x[fin] - y[fin])) if fin.any() else None,
-                    "p90_a": float(np.percentile(x, 90, method="lower")),
-                    "p90_b": float(np.percentile(y, 90, method="lower")),
-                    "wilcoxon_p": p,
-                }
+            effect = paired_effect(x, y, prng)
+            effect.update(
+                p90_a=float(np.percentile(x, 90, method="lower")),
+                p90_b=float(np.percentile(y, 90, method="lower")),
+                wilcoxon_p=p,
             )
+            joints.append(effect)
         table.pairs.append({"label": label, "a": _key(a), "b": _key(b), "joints": joints})
     return table
 
 
+def table_from_doc(doc: dict[str, Any]) -> ClaimTable:
+    """A claim table again from a stored ``claims.json`` (its per-seed RMSE), with today's
+    statistics."""
+    first, last = doc["seeds"]
+    t = tabulate(doc["scenario"], list(range(first, last + 1)), doc["duration"], doc["rmse"])
+    if "second_block" in doc:
+        t.second = table_from_doc(doc["second_block"])
+    return t
+
+
 def _mrad(v: float) -> str:
     return "inf" if not np.isfinite(v) else f"{1e3 * v:.2f}"
+
+
+def _diff(v: float) -> str:
+    return ("+inf" if v > 0 else "-inf") if not np.isfinite(v) else f"{1e3 * v:+.3f}"
 
 
 def format_claims(t: ClaimTable) -> str:
@@ -178,20 +211,25 @@ def format_claims(t: ClaimTable) -> str:
         lines.append(f"| {key} | {row['diverged']} / {len(t.seeds)} | " + " | ".join(cells) + " |")
     pairs = [
         "",
-        "| paired comparison (a vs b) | joint | a better on | median a - b [mrad] "
-        "| p90 a / b | Wilcoxon p |",
-        "|---|---|---|---|---|---|",
+        "| paired comparison (a vs b) | joint | a better on | diverged a / b "
+        "| median a - b [mrad] [95% CI] | on these seeds | p90 a / b |",
+        "|---|---|---|---|---|---|---|",
     ]
     for p in t.pairs:
         for j, s in enumerate(p["joints"]):
-            md = s["median_difference"]
-            pv = s["wilcoxon_p"]
+            lo, hi = s["difference_ci95"]
             pairs.append(
                 f"| {p['label']} | {j + 1} | {s['a_better_seeds']} / {len(t.seeds)} | "
-                f"{'-' if md is None else f'{1e3 * md:+.3f}'} | {_mrad(s['p90_a'])} / "
-                f"{_mrad(s['p90_b'])} | {'-' if pv is None else f'{pv:.2g}'} |"
+                f"{s['diverged_a']} / {s['diverged_b']} | {_diff(s['median_difference'])} "
+                f"[{_diff(lo)}, {_diff(hi)}] | {s['verdict']} | {_mrad(s['p90_a'])} / "
+                f"{_mrad(s['p90_b'])} |"
             )
-    return head + "\n".join(lines) + "\n" + "\n".join(pairs) + "\n"
+    text = head + "\n".join(lines) + "\n" + "\n".join(pairs) + "\n"
+    if t.second is not None:
+        from amsfe_sym.apps.study.effects import format_effects
+
+        text += "\n" + format_effects(_doc(t), _doc(t.second))
+    return text
 
 
 def is_claims_folder(path: Path) -> bool:
@@ -208,11 +246,8 @@ def is_claims_folder(path: Path) -> bool:
     return isinstance(doc, dict) and {"rows", "pairs"} <= set(doc)
 
 
-def write_claims(t: ClaimTable, out: Path, force: bool = False) -> None:
-    """``claims.json`` and ``claims.md`` as the folder ``out``, complete or absent (an
-    existing ``out`` is replaced only with ``force``; the caller checks it with
-    :func:`amsfe_sym.core.outputs.check_output` before the runs)."""
-    doc = {
+def _doc(t: ClaimTable) -> dict[str, Any]:
+    return {
         "scenario": t.scenario,
         "seeds": [t.seeds[0], t.seeds[-1]],
         "duration": t.duration,
@@ -220,6 +255,18 @@ def write_claims(t: ClaimTable, out: Path, force: bool = False) -> None:
         "pairs": t.pairs,
         "rmse": t.rmse,
     }
+
+
+def write_claims(t: ClaimTable, out: Path, force: bool = False) -> None:
+    """``claims.json`` and ``claims.md`` as the folder ``out``, complete or absent (an
+    existing ``out`` is replaced only with ``force``; the caller checks it with
+    :func:`amsfe_sym.core.outputs.check_output` before the runs)."""
+    doc = _doc(t)
+    if t.second is not None:
+        from amsfe_sym.apps.study.effects import combine
+
+        doc["second_block"] = _doc(t.second)
+        doc["effects"] = combine(doc, doc["second_block"])
 
     def fill(tmp: Path) -> None:
         write_json(tmp / "claims.json", doc, indent=1)

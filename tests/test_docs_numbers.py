@@ -1,0 +1,80 @@
+"""The documented numbers (docs/data/claims-registry.toml) against their stored outputs.
+
+Every number registered for README.md and docs/*.md, formatted from the output its command
+wrote under docs/data/, must stand in the text, and every registered table verbatim: a doc
+edited by hand, or an output re-measured without pasting it, fails here. The re-run check
+(``tools/check_docs.py`` on a fresh seed block) is exercised on a stored output moved
+beyond its interval. No run, well under a second.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import pytest
+
+from amsfe_sym.apps.docs_numbers import check_text, compare, json_path, load_registry
+from amsfe_sym.errors import ConfigError
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_every_registered_number_stands_in_its_doc() -> None:
+    reg = load_registry(ROOT)
+    assert reg.numbers and reg.blocks
+    assert {"README.md", "docs/reproduction.md"} <= {n.doc for n in reg.numbers}
+    moved = check_text(reg)
+    assert not moved, "\n".join(m.line() for m in moved)
+
+
+def _mini(tmp_path: Path, doc_text: str) -> Path:
+    (tmp_path / "docs" / "data").mkdir(parents=True)
+    out = {"rows": {"a/b": {"joints": [{"median": 0.00139, "median_ci95": [0.00135, 0.00142]}]}}}
+    (tmp_path / "docs" / "data" / "out.json").write_text(json.dumps(out))
+    (tmp_path / "doc.md").write_text(doc_text)
+    (tmp_path / "docs" / "data" / "claims-registry.toml").write_text(
+        '[source.s]\nstored = "docs/data/out.json"\ncommand = "amsfe study --out {out}"\n'
+        '[[number]]\ndoc = "doc.md"\nsource = "s"\ntext = "tracks to {} mrad"\n'
+        'values = ["rows.a/b.joints.0.median"]\nintervals = ["rows.a/b.joints.0.median_ci95"]\n'
+        'fmt = "{:.2f}"\nscale = 1000.0\n'
+    )
+    return tmp_path
+
+
+def test_a_number_edited_by_hand_is_found(tmp_path: Path) -> None:
+    good = load_registry(_mini(tmp_path / "good", "It tracks\nto 1.39 mrad."))
+    assert check_text(good) == []
+    bad = load_registry(_mini(tmp_path / "bad", "It tracks to 1.40 mrad."))
+    (moved,) = check_text(bad)
+    assert moved.stored == "tracks to 1.39 mrad"
+
+
+def test_a_remeasured_interval_disjoint_from_the_stored_one_is_reported(tmp_path: Path) -> None:
+    reg = load_registry(_mini(tmp_path, "tracks to 1.39 mrad"))
+    stored = json.loads((tmp_path / "docs/data/out.json").read_text())
+    inside = copy.deepcopy(stored)
+    inside["rows"]["a/b"]["joints"][0].update(median=0.00145, median_ci95=[0.00142, 0.00148])
+    assert compare(reg, "s", inside) == []
+    outside = copy.deepcopy(stored)
+    outside["rows"]["a/b"]["joints"][0].update(median=0.00146, median_ci95=[0.00143, 0.00149])
+    (moved,) = compare(reg, "s", outside)
+    assert moved.found == "1.46"
+
+
+def test_the_claim_tables_rerun_check_uses_the_stored_intervals() -> None:
+    reg = load_registry(ROOT)
+    stored = json.loads((ROOT / reg.sources["claims-paper-sim"].stored).read_text())
+    assert compare(reg, "claims-paper-sim", stored) == []
+    moved = copy.deepcopy(stored)
+    j = moved["rows"]["amsfe/oosm"]["joints"][1]
+    width = j["median_ci95"][1] - j["median_ci95"][0]
+    j["median_ci95"] = [j["median_ci95"][1] + 0.1 * width, j["median_ci95"][1] + width]
+    found = compare(reg, "claims-paper-sim", moved)
+    assert any("amsfe/oosm joint 2 median" in m.where for m in found)
+
+
+def test_a_bad_registry_path_is_one_clear_error() -> None:
+    with pytest.raises(ConfigError, match="Fix:"):
+        json_path({"rows": {}}, "rows.amsfe/oosm.joints")
