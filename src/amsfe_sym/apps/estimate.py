@@ -94,7 +94,7 @@ HELD_THETA_STD = 1e-6
 
 def default_scenario(robot: str) -> Scenario:
     """The settings ``amsfe estimate LOG --robot ROBOT`` runs with: the scenario defaults
-    (``[filter]``: process noise 0.1 N m, buffer 1000 steps; ``[encoders]`` and
+    (``[filter]``: process noise :data:`ROBOT_TORQUE_STD`, buffer 1000 steps; ``[encoders]`` and
     ``[camera]``: the sensor noise the filter's R is built from; docs/scenarios.md), the
     ``oosm`` estimator, and the estimate's start replaced by the log's first sample
     (:func:`_start_from_log`).  No plant or trajectory is used."""
@@ -104,6 +104,12 @@ def default_scenario(robot: str) -> Scenario:
     spec = load_spec(robot)
     n = len(modelled_joints(spec) or ())
     zeros = [0.0] * n
+    filt: dict[str, float | int] = {
+        "link_torque_std": ROBOT_TORQUE_STD,
+        "motor_torque_std": ROBOT_TORQUE_STD,
+    }
+    if spec.camera.delay + 1 > 1000:
+        filt["buffer_steps"] = 2 * spec.camera.delay + 1
     data = {
         "name": f"estimate-{spec.name}",
         "robot": str(spec.spec_path or spec.urdf) if Path(robot).exists() else robot,
@@ -111,14 +117,8 @@ def default_scenario(robot: str) -> Scenario:
         "trajectory": {"kind": "constant", "q": zeros},
         "plant": {"q0": zeros, "qd0": zeros},
         "estimate0": {"q": zeros, "qd": zeros, "motor": "encoders"},
+        "filter": filt,
     }
-    data["filter"] = {
-        "link_torque_std": ROBOT_TORQUE_STD,
-        "motor_torque_std": ROBOT_TORQUE_STD,
-    }
-
-    if spec.camera.delay + 1 > 1000:
-        data["filter"]["buffer_steps"] = 2 * spec.camera.delay + 1
     return parse_scenario(data, Path(f"--robot {robot}"))
 
 
