@@ -120,3 +120,39 @@ def test_the_cli_reports_nees_for_a_joint_torque_log(
     text = capsys.readouterr().out
     assert code == 0
     assert "kind joint_torque" in text and f"(N = {res.lib.N}) against the log's truth" in text
+
+
+@pytest.mark.slow  # generates paper_2link at T = 2 ms when not cached (4 s)
+def test_theta_is_held_only_on_a_log_slower_than_the_robots_t(
+    runs: dict[str, RunResult], tmp_path: Path
+) -> None:
+    """``estimate --robot`` on a log read at a period longer than T (a library generated
+    with ``--period``) holds theta at the spec's initial value (no random walk, 1-sigma
+    ``HELD_THETA_STD``: docs/logs.md, "A real Panda recording, worked"); at the robot's own
+    T theta is estimated with the scenario defaults."""
+    from amsfe_sym.apps.estimate import HELD_THETA_STD
+    from amsfe_sym.codegen import library_at_period
+    from amsfe_sym.scenario.model import FilterSettings
+    from tests.test_log_reader import _enc_events, write_log
+
+    res = runs["paper_2link"]
+    T, N, p = res.lib.T, res.lib.N, res.lib.p
+    assert p > 0
+    spec = tmp_path / "spec.toml"
+    spec.write_text('[effort]\nkind = "none"\n')
+    ev = _enc_events(res, [1.0 + k * T for k in range(len(res.t))])
+    library_at_period("paper_2link", 2 * T)
+    got = {}
+    for name, events in (("fast", ev), ("slow", ev[::2])):
+        log = write_log(tmp_path / f"{name}.bag", events, "bag")
+        opts = EstimateOptions(robot="paper_2link", log_spec=str(spec), plots=False)
+        got[name] = estimate_command(log, tmp_path / name, opts)
+    theta = slice(N - p, N)
+    slow, fast = got["slow"], got["fast"]
+    assert abs(slow.log.T - 2 * T) < 1e-12 and abs(fast.log.T - T) < 1e-12
+    assert slow.scenario.filter.theta_rate_std == 0.0
+    assert dict(slow.scenario.estimate0.std)["theta"] == HELD_THETA_STD
+    assert np.allclose(slow.estimate.P_diag[:, theta], HELD_THETA_STD**2, rtol=1e-6)
+    assert np.allclose(slow.estimate.x_hat[:, theta], res.lib.theta_initial, atol=1e-6)
+    assert fast.scenario.filter.theta_rate_std == FilterSettings().theta_rate_std
+    assert np.ptp(fast.estimate.x_hat[:, theta]) > 1e-3  # estimated: it moves
