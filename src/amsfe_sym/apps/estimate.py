@@ -273,7 +273,7 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
     from amsfe_sym.codegen import library_for
 
     lib = library_for(sc, robot=derived)
-    est, feed = _estimator(sc, lib, log, options)
+    est, feed = _estimator(sc, lib, log, options, spec.positions)
     t1 = time.perf_counter()
     from amsfe_sym.logs.replay import estimate_log
 
@@ -284,10 +284,13 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
     return run
 
 
-def _estimator(sc: Scenario, lib: Any, log: RobotLog, options: EstimateOptions) -> Any:
+def _estimator(
+    sc: Scenario, lib: Any, log: RobotLog, options: EstimateOptions, positions: str = "motor"
+) -> Any:
     """The estimator and the log it is fed: for an effort of kind ``joint_torque`` or
     ``none``, :func:`~amsfe_sym.sim.effort.effort_estimator`'s (the Python estimators; the
-    input and encoder measurements derived from the log, docs/effort.md)."""
+    input and encoder measurements derived from the log, docs/effort.md; ``positions`` the
+    log spec's ``[joints] positions``)."""
     from amsfe_sym.estimation.effort import EffortSpec
     from amsfe_sym.sim.builders import build_estimator, build_sensors, scenario_timing
     from amsfe_sym.sim.effort import effort_estimator
@@ -296,7 +299,7 @@ def _estimator(sc: Scenario, lib: Any, log: RobotLog, options: EstimateOptions) 
     if log.effort_kind == "applied":
         compiled = options.runtime == "compiled"
         return build_estimator(sc, lib, sensors, log.z[0], compiled=compiled), log
-    spec = EffortSpec(kind=log.effort_kind)
+    spec = EffortSpec(kind=log.effort_kind, positions=positions)
     built = effort_estimator(sc, lib, sensors, log.z, log.effort, spec, compiled=False)
     return built.estimator, replace(log, u=built.inputs.u, z=built.inputs.z_encoder)
 

@@ -55,6 +55,10 @@ class TopicSpec:
         explicit: The roles whose topic the spec file set (the others are defaults: a log
             reader may find them by message type and joint names instead).
         joint_names: JointState names in the robot's q order (None: the robot's joints).
+        positions: What the encoder positions are: ``"motor"``, the motor angle qm of eq. (2)
+            (amsfe's own logs), or ``"link"``, the link angle q (franka_ros' ``/joint_states``:
+            libfranka's ``q``); with a joint torque the estimator is given
+            ``qm = q + tau_J / Ks`` (docs/effort.md).
         effort_kind: What the effort is (None: the default for the message's shape, decided
             by the reader: docs/topics.md).
         grid_tolerance: How far a stamp may be from the tick grid [T].
@@ -77,6 +81,7 @@ class TopicSpec:
     clock: str = ROLES["clock"].topic
     explicit: frozenset[str] = frozenset()
     joint_names: tuple[str, ...] | None = None
+    positions: Literal["motor", "link"] = "motor"
     effort_kind: EffortKind | None = None
     grid_tolerance: float = 0.25
     max_gap_steps: int = 5
@@ -103,7 +108,7 @@ class TopicSpec:
 
 _SECTIONS = {
     "topics": _TOPIC_KEYS + tuple(_ALIASES),
-    "joints": ("names",),
+    "joints": ("names", "positions"),
     "effort": ("kind",),
     "timing": ("grid_tolerance", "max_gap_steps"),
     "qos": ("reliability", "depth"),
@@ -166,6 +171,17 @@ def parse_topic_spec(data: dict[str, Any], where: str = "topic spec") -> TopicSp
                         describe(at, "each joint name once", f"{twice} repeated", "fix the list")
                     )
                 out["joint_names"] = tuple(value)
+            elif key == "positions":
+                if value not in ("motor", "link"):
+                    raise ConfigError(
+                        describe(
+                            at,
+                            "'motor' (the motor angle qm) or 'link' (the link angle q)",
+                            repr(value),
+                            'say positions = "link" for a Franka\'s /joint_states',
+                        )
+                    )
+                out[key] = value
             elif key == "kind":
                 if value not in EFFORT_KINDS:
                     raise ConfigError(
