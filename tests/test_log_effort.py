@@ -210,3 +210,41 @@ def test_a_bad_positions_value_is_refused_in_one_line() -> None:
     msg = str(info.value)
     assert "[joints] positions" in msg and "'joint'" in msg and "Fix: " in msg
     assert "\n" not in msg
+
+
+def test_the_log_specs_effort_noise_reaches_the_estimator(
+    runs: dict[str, RunResult], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``[effort] input_rate_std`` (and the other noise keys of docs/effort.md) are the
+    estimator's: the same log with another random walk gives other estimates, equal to
+    those of an estimator built with that EffortSpec; a bad value is one line, nothing
+    written."""
+    from amsfe_sym.apps.estimate import _estimator
+    from amsfe_sym.estimation.effort import EffortSpec
+    from amsfe_sym.logs.replay import estimate_log
+
+    res = runs["panda"]
+    log = _log(res, "none", tmp_path)
+    got = {}
+    for rate in (100.0, 30.0):
+        spec = tmp_path / f"spec{rate:g}.toml"
+        spec.write_text(f'[effort]\nkind = "none"\ninput_rate_std = {rate}\n')
+        opts = EstimateOptions(robot="panda", log_spec=str(spec), plots=False)
+        got[rate] = estimate_command(log, tmp_path / f"est{rate:g}", opts)
+    assert not np.allclose(got[100.0].estimate.x_hat, got[30.0].estimate.x_hat)
+    # the reference: the estimator built directly with that EffortSpec, over the same log
+    run30 = got[30.0]
+    lib = library_for(run30.scenario)
+    eff = EffortSpec(kind="none", input_rate_std=30.0)
+    est, feed = _estimator(run30.scenario, lib, run30.log, EstimateOptions(), eff)
+    ref = estimate_log(feed, est, states=lib.N)
+    assert np.max(np.abs(ref.x_hat - run30.estimate.x_hat)) <= 1e-12
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[effort]\nkind = "none"\ninput_rate_std = -1\n')
+    out = tmp_path / "bad_out"
+    code = main(
+        ["estimate", str(log), "--robot", "panda", "--log-spec", str(bad), "--out", str(out)]
+    )
+    err = capsys.readouterr().err.strip()
+    assert code != 0 and "\n" not in err and "input_rate_std" in err and "Fix: " in err
+    assert not out.exists()

@@ -240,6 +240,7 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
         inputs.append(log_path.parent)  # the .mcap of a bag folder: the folder is the log
     check_output(out, option="--out", force=options.force, inputs=inputs)
     spec = read_log_spec(options.log_spec)
+    effort = _effort_options(spec, options.log_spec)  # checked before anything is read
     t0 = time.perf_counter()
     topics = log_topics(log_path)
     config = read_config(log_path, spec, topics)
@@ -273,7 +274,7 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
     from amsfe_sym.codegen import library_for
 
     lib = library_for(sc, robot=derived)
-    est, feed = _estimator(sc, lib, log, options, spec.positions)
+    est, feed = _estimator(sc, lib, log, options, replace(effort, positions=spec.positions))
     t1 = time.perf_counter()
     from amsfe_sym.logs.replay import estimate_log
 
@@ -284,13 +285,22 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
     return run
 
 
+def _effort_options(spec: Any, path: str | None) -> Any:
+    """The :class:`~amsfe_sym.estimation.effort.EffortSpec` of the log spec's ``[effort]``
+    noise keys (its kind is the log's, set later); a bad value is one ConfigError line."""
+    from amsfe_sym.estimation.effort import effort_spec
+
+    return effort_spec(dict(spec.effort_options), f"{path or 'log spec'} [effort]")
+
+
 def _estimator(
-    sc: Scenario, lib: Any, log: RobotLog, options: EstimateOptions, positions: str = "motor"
+    sc: Scenario, lib: Any, log: RobotLog, options: EstimateOptions, effort: Any = None
 ) -> Any:
     """The estimator and the log it is fed: for an effort of kind ``joint_torque`` or
     ``none``, :func:`~amsfe_sym.sim.effort.effort_estimator`'s (the Python estimators; the
-    input and encoder measurements derived from the log, docs/effort.md; ``positions`` the
-    log spec's ``[joints] positions``)."""
+    input and encoder measurements derived from the log, docs/effort.md).  ``effort``: the
+    log spec's ``[effort]`` noise keys and ``[joints] positions`` as an ``EffortSpec``
+    (None: the defaults); its kind is replaced by the log's."""
     from amsfe_sym.estimation.effort import EffortSpec
     from amsfe_sym.sim.builders import build_estimator, build_sensors, scenario_timing
     from amsfe_sym.sim.effort import effort_estimator
@@ -299,7 +309,7 @@ def _estimator(
     if log.effort_kind == "applied":
         compiled = options.runtime == "compiled"
         return build_estimator(sc, lib, sensors, log.z[0], compiled=compiled), log
-    spec = EffortSpec(kind=log.effort_kind, positions=positions)
+    spec = replace(effort or EffortSpec(), kind=log.effort_kind)
     built = effort_estimator(sc, lib, sensors, log.z, log.effort, spec, compiled=False)
     return built.estimator, replace(log, u=built.inputs.u, z=built.inputs.z_encoder)
 

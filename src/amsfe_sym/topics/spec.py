@@ -61,6 +61,9 @@ class TopicSpec:
             ``qm = q + tau_J / Ks`` (docs/effort.md).
         effort_kind: What the effort is (None: the default for the message's shape, decided
             by the reader: docs/topics.md).
+        effort_options: The other ``[effort]`` keys as written (``joint_torque_std``,
+            ``input_model``, ``input_rate_std``, ``input_std0``), checked by the estimator's
+            ``effort_spec`` (docs/effort.md).
         grid_tolerance: How far a stamp may be from the tick grid [T].
         max_gap_steps: Missing encoder samples in a row the estimator predicts through.
         reliability: QoS reliability of live topics: ``reliable`` or ``best_effort``.
@@ -83,6 +86,7 @@ class TopicSpec:
     joint_names: tuple[str, ...] | None = None
     positions: Literal["motor", "link"] = "motor"
     effort_kind: EffortKind | None = None
+    effort_options: tuple[tuple[str, Any], ...] = ()
     grid_tolerance: float = 0.25
     max_gap_steps: int = 5
     reliability: Literal["reliable", "best_effort"] = "reliable"
@@ -106,10 +110,14 @@ class TopicSpec:
         return self.effort
 
 
+#: ``[effort]`` keys passed on to the estimator's effort model (``estimation.effort``'s
+#: ``effort_spec`` checks their values; docs/effort.md): noise and input model.
+_EFFORT_NOISE_KEYS = ("joint_torque_std", "input_model", "input_rate_std", "input_std0")
+
 _SECTIONS = {
     "topics": _TOPIC_KEYS + tuple(_ALIASES),
     "joints": ("names", "positions"),
-    "effort": ("kind",),
+    "effort": ("kind", *_EFFORT_NOISE_KEYS),
     "timing": ("grid_tolerance", "max_gap_steps"),
     "qos": ("reliability", "depth"),
 }
@@ -188,6 +196,8 @@ def parse_topic_spec(data: dict[str, Any], where: str = "topic spec") -> TopicSp
                         describe(at, f"one of {list(EFFORT_KINDS)}", repr(value), "fix it")
                     )
                 out["effort_kind"] = value
+            elif key in _EFFORT_NOISE_KEYS:
+                out["effort_options"] = (*out.get("effort_options", ()), (key, value))
             elif key == "grid_tolerance":
                 out[key] = _number(at, value, 0.0, 0.5)
             elif key == "max_gap_steps":
