@@ -80,7 +80,8 @@ class EstimateOptions:
     verbose: bool = False
 
 
-#: ``[filter] link_torque_std`` and ``motor_torque_std`` [N m] of ``estimate --robot``: the
+#: ``[filter] link_torque_std`` and ``motor_torque_std`` [N m] of ``estimate --robot`` on a
+#: log without the applied torque or slower than T (:func:`_start_from_log`): the
 #: torque a real arm's model misses (a URDF's end effector, torque sensor offsets); the
 #: scenario default 0.1 N m is for amsfe's own exact simulations.  The real Panda log of
 #: docs/logs.md ("A real Panda recording, worked") misses up to 4.2 N m of gravity torque;
@@ -94,7 +95,8 @@ HELD_THETA_STD = 1e-6
 
 def default_scenario(robot: str) -> Scenario:
     """The settings ``amsfe estimate LOG --robot ROBOT`` runs with: the scenario defaults
-    (``[filter]``: process noise :data:`ROBOT_TORQUE_STD`, buffer 1000 steps; ``[encoders]`` and
+    (``[filter]``: process noise 0.1 N m, :data:`ROBOT_TORQUE_STD` once the log is read
+    (:func:`_start_from_log`), buffer 1000 steps; ``[encoders]`` and
     ``[camera]``: the sensor noise the filter's R is built from; docs/scenarios.md), the
     ``oosm`` estimator, and the estimate's start replaced by the log's first sample
     (:func:`_start_from_log`).  No plant or trajectory is used."""
@@ -104,10 +106,7 @@ def default_scenario(robot: str) -> Scenario:
     spec = load_spec(robot)
     n = len(modelled_joints(spec) or ())
     zeros = [0.0] * n
-    filt: dict[str, float | int] = {
-        "link_torque_std": ROBOT_TORQUE_STD,
-        "motor_torque_std": ROBOT_TORQUE_STD,
-    }
+    filt: dict[str, float | int] = {}
     if spec.camera.delay + 1 > 1000:
         filt["buffer_steps"] = 2 * spec.camera.delay + 1
     data = {
@@ -126,6 +125,12 @@ def _start_from_log(sc: Scenario, log: RobotLog, hold_theta: bool = False) -> Sc
     """``[estimate0]`` from the log's first encoder sample: link angles = the measured
     positions, link rates = the measured velocities (motor states: the sample itself).
 
+    The process torque (``[filter] link_torque_std``, ``motor_torque_std``) is
+    :data:`ROBOT_TORQUE_STD` when the applied torque is not logged (effort kind
+    ``joint_torque`` or ``none``) or with ``hold_theta``; with the applied torque at the
+    robot's T it stays 0.1 N m (at 5 N m oosm's A1 update refuses every frame of a
+    paper_2link driver log as indefinite).
+
     ``hold_theta`` (a log read at a period longer than the robot's T, its library built with
     model substeps): theta is held at the spec's initial value (``[filter]
     theta_rate_std = 0``, 1-sigma :data:`HELD_THETA_STD`).  At such a period the joint
@@ -137,10 +142,13 @@ def _start_from_log(sc: Scenario, log: RobotLog, hold_theta: bool = False) -> Sc
     n = log.u.shape[1]
     z0 = log.z[0]
     e0 = replace(sc.estimate0, q=tuple(map(float, z0[:n])), qd=tuple(map(float, z0[n:])))
+    f = sc.filter
+    if hold_theta or log.effort_kind != "applied":
+        f = replace(f, link_torque_std=ROBOT_TORQUE_STD, motor_torque_std=ROBOT_TORQUE_STD)
     if hold_theta:
         e0 = replace(e0, std={**dict(e0.std), "theta": HELD_THETA_STD})
-        return replace(sc, estimate0=e0, filter=replace(sc.filter, theta_rate_std=0.0))
-    return replace(sc, estimate0=e0)
+        f = replace(f, theta_rate_std=0.0)
+    return replace(sc, estimate0=e0, filter=f)
 
 
 def _robot_of(scenario_robot: str) -> tuple[str, list[str], float, int]:
