@@ -80,9 +80,23 @@ class EstimateOptions:
     verbose: bool = False
 
 
+#: ``[filter] link_torque_std`` and ``motor_torque_std`` [N m] of ``estimate --robot`` on a
+#: log without the applied torque or slower than T (:func:`_start_from_log`): the
+#: torque a real arm's model misses (a URDF's end effector, torque sensor offsets); the
+#: scenario default 0.1 N m is for amsfe's own exact simulations.  The real Panda log of
+#: docs/logs.md ("A real Panda recording, worked") misses up to 4.2 N m of gravity torque;
+#: with 0.1 N m every estimator diverges on it.
+ROBOT_TORQUE_STD = 5.0
+
+#: 1-sigma [unit] of theta(0|0) when ``estimate --robot`` holds theta at the spec's
+#: initial value (a log slower than the robot's T, :func:`_start_from_log`).
+HELD_THETA_STD = 1e-6
+
+
 def default_scenario(robot: str) -> Scenario:
     """The settings ``amsfe estimate LOG --robot ROBOT`` runs with: the scenario defaults
-    (``[filter]``: process noise 0.1 N m, buffer 1000 steps; ``[encoders]`` and
+    (``[filter]``: process noise 0.1 N m, :data:`ROBOT_TORQUE_STD` once the log is read
+    (:func:`_start_from_log`), buffer 1000 steps; ``[encoders]`` and
     ``[camera]``: the sensor noise the filter's R is built from; docs/scenarios.md), the
     ``oosm`` estimator, and the estimate's start replaced by the log's first sample
     (:func:`_start_from_log`).  No plant or trajectory is used."""
@@ -92,6 +106,9 @@ def default_scenario(robot: str) -> Scenario:
     spec = load_spec(robot)
     n = len(modelled_joints(spec) or ())
     zeros = [0.0] * n
+    filt: dict[str, float | int] = {}
+    if spec.camera.delay + 1 > 1000:
+        filt["buffer_steps"] = 2 * spec.camera.delay + 1
     data = {
         "name": f"estimate-{spec.name}",
         "robot": str(spec.spec_path or spec.urdf) if Path(robot).exists() else robot,
@@ -99,19 +116,39 @@ def default_scenario(robot: str) -> Scenario:
         "trajectory": {"kind": "constant", "q": zeros},
         "plant": {"q0": zeros, "qd0": zeros},
         "estimate0": {"q": zeros, "qd": zeros, "motor": "encoders"},
+        "filter": filt,
     }
-    if spec.camera.delay + 1 > 1000:
-        data["filter"] = {"buffer_steps": 2 * spec.camera.delay + 1}
     return parse_scenario(data, Path(f"--robot {robot}"))
 
 
-def _start_from_log(sc: Scenario, log: RobotLog) -> Scenario:
+def _start_from_log(sc: Scenario, log: RobotLog, hold_theta: bool = False) -> Scenario:
     """``[estimate0]`` from the log's first encoder sample: link angles = the measured
-    positions, link rates = the measured velocities (motor states: the sample itself)."""
+    positions, link rates = the measured velocities (motor states: the sample itself).
+
+    The process torque (``[filter] link_torque_std``, ``motor_torque_std``) is
+    :data:`ROBOT_TORQUE_STD` when the applied torque is not logged (effort kind
+    ``joint_torque`` or ``none``) or with ``hold_theta``; with the applied torque at the
+    robot's T it stays 0.1 N m (at 5 N m oosm's A1 update refuses every frame of a
+    paper_2link driver log as indefinite).
+
+    ``hold_theta`` (a log read at a period longer than the robot's T, its library built with
+    model substeps): theta is held at the spec's initial value (``[filter]
+    theta_rate_std = 0``, 1-sigma :data:`HELD_THETA_STD`).  At such a period the joint
+    modes turn by many radians a step (w T = 26 for the Panda at 1/30 s) and the model has
+    no spring damping: the one-step sensitivity of the link angles to theta (eqs. 1a, 4)
+    follows the aliased phase of an undamped oscillation, not the static deflection the
+    data show, and on the real Panda log the payload ran from 0 to 21 kg in 90 steps before
+    every estimator diverged (docs/logs.md, "A real Panda recording, worked")."""
     n = log.u.shape[1]
     z0 = log.z[0]
     e0 = replace(sc.estimate0, q=tuple(map(float, z0[:n])), qd=tuple(map(float, z0[n:])))
-    return replace(sc, estimate0=e0)
+    f = sc.filter
+    if hold_theta or log.effort_kind != "applied":
+        f = replace(f, link_torque_std=ROBOT_TORQUE_STD, motor_torque_std=ROBOT_TORQUE_STD)
+    if hold_theta:
+        e0 = replace(e0, std={**dict(e0.std), "theta": HELD_THETA_STD})
+        f = replace(f, theta_rate_std=0.0)
+    return replace(sc, estimate0=e0, filter=f)
 
 
 def _robot_of(scenario_robot: str) -> tuple[str, list[str], float, int]:
@@ -211,6 +248,7 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
         inputs.append(log_path.parent)  # the .mcap of a bag folder: the folder is the log
     check_output(out, option="--out", force=options.force, inputs=inputs)
     spec = read_log_spec(options.log_spec)
+    effort = _effort_options(spec, options.log_spec)  # checked before anything is read
     t0 = time.perf_counter()
     topics = log_topics(log_path)
     config = read_config(log_path, spec, topics)
@@ -232,7 +270,8 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
         log = read_log(log_path, spec, joints, derived.model.T, N, plan, robot=name)
     log.config = config
     if options.scenario is None and (options.robot is not None or config is None):
-        sc = _start_from_log(sc, log)  # --robot: the defaults, started from the log
+        # --robot: the defaults, started from the log (theta held at a slower period)
+        sc = _start_from_log(sc, log, hold_theta=derived is not None)
     read_s = time.perf_counter() - t0
     if options.verbose:
         c = log.clock
@@ -243,21 +282,33 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
     from amsfe_sym.codegen import library_for
 
     lib = library_for(sc, robot=derived)
-    est, feed = _estimator(sc, lib, log, options)
+    est, feed = _estimator(sc, lib, log, options, replace(effort, positions=spec.positions))
     t1 = time.perf_counter()
     from amsfe_sym.logs.replay import estimate_log
 
-    result = estimate_log(feed, est)
+    result = estimate_log(feed, est, states=lib.N)
     estimate_s = time.perf_counter() - t1
     run = EstimateRun(log, result, sc, out, read_s, estimate_s)
     _write(run, lib.manifest.joints, options)
     return run
 
 
-def _estimator(sc: Scenario, lib: Any, log: RobotLog, options: EstimateOptions) -> Any:
+def _effort_options(spec: Any, path: str | None) -> Any:
+    """The :class:`~amsfe_sym.estimation.effort.EffortSpec` of the log spec's ``[effort]``
+    noise keys (its kind is the log's, set later); a bad value is one ConfigError line."""
+    from amsfe_sym.estimation.effort import effort_spec
+
+    return effort_spec(dict(spec.effort_options), f"{path or 'log spec'} [effort]")
+
+
+def _estimator(
+    sc: Scenario, lib: Any, log: RobotLog, options: EstimateOptions, effort: Any = None
+) -> Any:
     """The estimator and the log it is fed: for an effort of kind ``joint_torque`` or
     ``none``, :func:`~amsfe_sym.sim.effort.effort_estimator`'s (the Python estimators; the
-    input and encoder measurements derived from the log, docs/effort.md)."""
+    input and encoder measurements derived from the log, docs/effort.md).  ``effort``: the
+    log spec's ``[effort]`` noise keys and ``[joints] positions`` as an ``EffortSpec``
+    (None: the defaults); its kind is replaced by the log's."""
     from amsfe_sym.estimation.effort import EffortSpec
     from amsfe_sym.sim.builders import build_estimator, build_sensors, scenario_timing
     from amsfe_sym.sim.effort import effort_estimator
@@ -266,7 +317,7 @@ def _estimator(sc: Scenario, lib: Any, log: RobotLog, options: EstimateOptions) 
     if log.effort_kind == "applied":
         compiled = options.runtime == "compiled"
         return build_estimator(sc, lib, sensors, log.z[0], compiled=compiled), log
-    spec = EffortSpec(kind=log.effort_kind)
+    spec = replace(effort or EffortSpec(), kind=log.effort_kind)
     built = effort_estimator(sc, lib, sensors, log.z, log.effort, spec, compiled=False)
     return built.estimator, replace(log, u=built.inputs.u, z=built.inputs.z_encoder)
 

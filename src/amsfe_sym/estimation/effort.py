@@ -97,6 +97,12 @@ class EffortSpec:
         input_std0: ``"state"``: 1-sigma of the initial input [N m].
         scale: The logged effort times ``scale`` is the effort in N m (a UR logs motor
             currents [A]: ``scale`` is the torque constant times the gear ratio [N m/A]).
+        positions: What the logged positions are: ``"motor"`` (qm of eq. (2)) or ``"link"``
+            (q, as franka_ros logs libfranka's ``q``).  ``"link"`` with ``joint_torque``:
+            the encoder angle given to the estimator is ``qm = q + tau_J / Ks`` (eq. (1b)'s
+            spring, Ks the spec's value); the rates are taken as they are (the spring's rate
+            ``d tau_J / dt / Ks`` is not added).  With the other kinds qm cannot be formed
+            and the positions are used as they are.
     """
 
     kind: str = "applied"
@@ -105,6 +111,7 @@ class EffortSpec:
     input_rate_std: float = DEFAULT_INPUT_RATE_STD
     input_std0: float = DEFAULT_INPUT_STD0
     scale: float = 1.0
+    positions: str = "motor"
 
     @property
     def input_as_state(self) -> bool:
@@ -129,6 +136,15 @@ class EffortSpec:
                     f"one of {list(INPUT_MODELS)}",
                     repr(self.input_model),
                     '"state" (the default) or "reconstruct"',
+                )
+            )
+        if self.positions not in ("motor", "link"):
+            raise ConfigError(
+                describe(
+                    "positions",
+                    "'motor' (the motor angle qm) or 'link' (the link angle q)",
+                    repr(self.positions),
+                    '"link" for a Franka\'s /joint_states, else leave it out',
                 )
             )
         for name in ("input_rate_std", "input_std0", "scale"):
@@ -396,6 +412,9 @@ def estimator_inputs(
         )
     if spec.kind == "applied":
         return EstimatorInputs(spec.kind, e, z_arr, std)
+    if spec.positions == "link":  # qm = q + tau_J / Ks: the motor angle the model measures
+        z_arr = z_arr.copy()
+        z_arr[:, :n] += e / motor.Ks
     z_aug = np.hstack([z_arr, e])
     if spec.input_as_state:
         return EstimatorInputs(spec.kind, np.zeros((K, n)), z_aug, np.zeros(n))

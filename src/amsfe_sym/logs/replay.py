@@ -107,7 +107,12 @@ def _progress(log: RobotLog, est: Estimator, show: bool | None) -> Any:
 
 
 def estimate_log(
-    log: RobotLog, est: Estimator, *, batch: bool = True, progress: bool | None = None
+    log: RobotLog,
+    est: Estimator,
+    *,
+    batch: bool = True,
+    progress: bool | None = None,
+    states: int | None = None,
 ) -> LogEstimate:
     """Run ``est`` (at x(0|0), P(0|0) for tick 0) over ``log``.
 
@@ -118,6 +123,9 @@ def estimate_log(
             step it from Python tick by tick (the reference the batch is tested against).
         progress: Show a progress bar; None: for logs of at least
             :data:`PROGRESS_MIN_TICKS` ticks.
+        states: The robot's state size N (eq. 2) when ``est`` carries more (the input
+            states of an effort of kind ``joint_torque`` or ``none``, docs/effort.md): the
+            estimates, their variances and the NEES are of the first N; None: all of them.
     """
     bar = _progress(log, est, progress)
     try:
@@ -125,7 +133,7 @@ def estimate_log(
         if batch and _batch_ok(log, est):
             result = _batch(log, est, update)
         else:
-            result = _per_tick(log, est, update)
+            result = _per_tick(log, est, update, states)
     finally:
         if bar is not None:
             bar.close()
@@ -146,8 +154,13 @@ def _batch_ok(log: RobotLog, est: Estimator) -> bool:
     return all(fr.exposure_step <= fr.delivery_step for fr in log.frames)
 
 
-def _per_tick(log: RobotLog, est: Estimator, progress: Callable[[int], None] | None) -> LogEstimate:
-    K, N = log.K, est.nx
+def _per_tick(
+    log: RobotLog,
+    est: Estimator,
+    progress: Callable[[int], None] | None,
+    states: int | None = None,
+) -> LogEstimate:
+    K, N = log.K, est.nx if states is None else states
     x_hat, P_diag = np.zeros((K, N)), np.zeros((K, N))
     nees = None if log.truth is None else np.full(K, np.nan)
     enc_nis = np.full(K, np.nan)
@@ -166,7 +179,7 @@ def _per_tick(log: RobotLog, est: Estimator, progress: Callable[[int], None] | N
             if rep.encoder_nis is not None:
                 enc_nis[k] = rep.encoder_nis
             rows.extend(_frame_rows(rep, frames, k))
-        x, P = est.x, est.P
+        x, P = est.x[:N], est.P[:N, :N]  # the input states, if any, left out
         x_hat[k], P_diag[k] = x, np.diag(P)
         if nees is not None and log.truth is not None and np.isfinite(log.truth[k]).all():
             e = log.truth[k] - x

@@ -106,8 +106,11 @@ def effort_estimator(
         compiled: The library's C estimator (``applied`` only; the others raise
             :class:`~amsfe_sym.errors.ConfigError`) instead of the Python reference.
     """
-    est = build_estimator(sc, lib, sensors, z[0], compiled=compiled, effort=spec)
     n = lib.n
+    z0 = np.array(z[0], dtype=float)
+    if spec.positions == "link" and spec.kind == "joint_torque" and effort is not None:
+        z0[:n] += np.asarray(effort[0], dtype=float) * spec.scale / motor_params(lib).Ks
+    est = build_estimator(sc, lib, sensors, z0, compiled=compiled, effort=spec)
     qd_std = np.sqrt(np.diag(est.R_encoder)[n : 2 * n])
     inputs = estimator_inputs(spec, z, effort, motor_params(lib), qd_std)
     return EffortEstimator(est, inputs, lib.N)

@@ -55,8 +55,15 @@ class TopicSpec:
         explicit: The roles whose topic the spec file set (the others are defaults: a log
             reader may find them by message type and joint names instead).
         joint_names: JointState names in the robot's q order (None: the robot's joints).
+        positions: What the encoder positions are: ``"motor"``, the motor angle qm of eq. (2)
+            (amsfe's own logs), or ``"link"``, the link angle q (franka_ros' ``/joint_states``:
+            libfranka's ``q``); with a joint torque the estimator is given
+            ``qm = q + tau_J / Ks`` (docs/effort.md).
         effort_kind: What the effort is (None: the default for the message's shape, decided
             by the reader: docs/topics.md).
+        effort_options: The other ``[effort]`` keys as written (``joint_torque_std``,
+            ``input_model``, ``input_rate_std``, ``input_std0``), checked by the estimator's
+            ``effort_spec`` (docs/effort.md).
         grid_tolerance: How far a stamp may be from the tick grid [T].
         max_gap_steps: Missing encoder samples in a row the estimator predicts through.
         reliability: QoS reliability of live topics: ``reliable`` or ``best_effort``.
@@ -77,7 +84,9 @@ class TopicSpec:
     clock: str = ROLES["clock"].topic
     explicit: frozenset[str] = frozenset()
     joint_names: tuple[str, ...] | None = None
+    positions: Literal["motor", "link"] = "motor"
     effort_kind: EffortKind | None = None
+    effort_options: tuple[tuple[str, Any], ...] = ()
     grid_tolerance: float = 0.25
     max_gap_steps: int = 5
     reliability: Literal["reliable", "best_effort"] = "reliable"
@@ -101,10 +110,14 @@ class TopicSpec:
         return self.effort
 
 
+#: ``[effort]`` keys passed on to the estimator's effort model (``estimation.effort``'s
+#: ``effort_spec`` checks their values; docs/effort.md): noise and input model.
+_EFFORT_NOISE_KEYS = ("joint_torque_std", "input_model", "input_rate_std", "input_std0")
+
 _SECTIONS = {
     "topics": _TOPIC_KEYS + tuple(_ALIASES),
-    "joints": ("names",),
-    "effort": ("kind",),
+    "joints": ("names", "positions"),
+    "effort": ("kind", *_EFFORT_NOISE_KEYS),
     "timing": ("grid_tolerance", "max_gap_steps"),
     "qos": ("reliability", "depth"),
 }
@@ -166,12 +179,25 @@ def parse_topic_spec(data: dict[str, Any], where: str = "topic spec") -> TopicSp
                         describe(at, "each joint name once", f"{twice} repeated", "fix the list")
                     )
                 out["joint_names"] = tuple(value)
+            elif key == "positions":
+                if value not in ("motor", "link"):
+                    raise ConfigError(
+                        describe(
+                            at,
+                            "'motor' (the motor angle qm) or 'link' (the link angle q)",
+                            repr(value),
+                            'say positions = "link" for a Franka\'s /joint_states',
+                        )
+                    )
+                out[key] = value
             elif key == "kind":
                 if value not in EFFORT_KINDS:
                     raise ConfigError(
                         describe(at, f"one of {list(EFFORT_KINDS)}", repr(value), "fix it")
                     )
                 out["effort_kind"] = value
+            elif key in _EFFORT_NOISE_KEYS:
+                out["effort_options"] = (*out.get("effort_options", ()), (key, value))
             elif key == "grid_tolerance":
                 out[key] = _number(at, value, 0.0, 0.5)
             elif key == "max_gap_steps":
