@@ -237,3 +237,15 @@ def test_al1_is_one_lumped_rts_step() -> None:
     np.testing.assert_allclose(retro.M, a1.M, rtol=0, atol=1e-12)
     np.testing.assert_allclose(retro.C, a1.C, rtol=0, atol=1e-12)
     np.testing.assert_allclose(retro.x_shift, a1.x_shift, rtol=0, atol=1e-12)
+
+
+def test_chi2_ppf_equals_scipy_stats() -> None:
+    """The gate's chi-square quantile from scipy.special equals scipy.stats.chi2.ppf exactly
+    (the gates, NEES bands and NIS bands of every run use it)."""
+    from scipy.stats import chi2
+
+    from amsfe_sym.estimation.ekf import chi2_ppf
+
+    for dof in (1, 2, 3, 4, 9, 14, 21, 29, 1800):
+        for p in (1e-9, 0.025, 0.5, 0.95, 0.975, 0.9999, 1 - 1e-9):
+            assert float(chi2_ppf(p, dof)) == float(chi2.ppf(p, dof)), (p, dof)

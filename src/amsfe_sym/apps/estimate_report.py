@@ -60,9 +60,9 @@ def _field(record: Any, name: str, index: int) -> Any:
 
 
 def _nis_stats(values: np.ndarray, dof: int) -> dict[str, Any]:
-    from scipy.stats import chi2
+    from amsfe_sym.estimation.ekf import chi2_ppf
 
-    lo, hi = (float(v) for v in chi2.ppf([0.025, 0.975], dof))
+    lo, hi = (float(v) for v in chi2_ppf([0.025, 0.975], dof))
     v = values[np.isfinite(values)]
     inside = float(np.mean((v >= lo) & (v <= hi))) if v.size else math.nan
     return {

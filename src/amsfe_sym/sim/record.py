@@ -42,7 +42,7 @@ def nees_band(dof: int, seeds: int, probability: float = 0.95) -> tuple[float, f
     the average lies in ``[chi2.ppf(a/2, N M) / M, chi2.ppf(1 - a/2, N M) / M]`` with
     probability ``1 - a``.
     """
-    from scipy.stats import chi2
+    from amsfe_sym.estimation.ekf import chi2_ppf
 
     if dof < 1 or seeds < 1 or not (0.0 < probability < 1.0):
         raise ConfigError(
@@ -50,8 +50,8 @@ def nees_band(dof: int, seeds: int, probability: float = 0.95) -> tuple[float, f
         )
     a = 1.0 - probability
     return (
-        float(chi2.ppf(a / 2, dof * seeds) / seeds),
-        float(chi2.ppf(1 - a / 2, dof * seeds) / seeds),
+        float(chi2_ppf(a / 2, dof * seeds) / seeds),
+        float(chi2_ppf(1 - a / 2, dof * seeds) / seeds),
     )
 
 
