@@ -161,6 +161,11 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
             pub_truth.publish(m.float64_array(s.x_true))
             for fr in s.frames:
                 pub_cam.publish(m.point_stamped(fr.exposure_step * T_ns, fr.z[0], fr.z[1]))
+            if options.lockstep and s.frames and not _acked(pub_cam, options.command_timeout):
+                node.get_logger().warning(
+                    f"tick {k}: a camera frame not acknowledged within "
+                    f"{options.command_timeout:g} s: the node may fuse it a tick late"
+                )
             sent_at[k] = time.time_ns()
             pub_enc.publish(m.joint_state(ns, names, s.z[:n], s.z[n:]))
             if k and k % round(1.0 / lib.T) == 0:
@@ -211,10 +216,11 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         stop(ctx, *([node] if node is not None else []))
 
 
-def _acked(pub: object, timeout: float) -> None:
+def _acked(pub: object, timeout: float) -> bool:
+    """Wait until every reader of ``pub`` (reliable) acknowledged its messages [s]."""
     from rclpy.duration import Duration
 
-    pub.wait_for_all_acked(Duration(nanoseconds=int(timeout * 1e9)))  # type: ignore[attr-defined]
+    return bool(pub.wait_for_all_acked(Duration(nanoseconds=int(timeout * 1e9))))  # type: ignore[attr-defined]
 
 
 def _wait_peers(ex: object, pub: object, sub: object | None, timeout: float) -> None:
