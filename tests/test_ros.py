@@ -157,6 +157,35 @@ def test_live_loop_refuses_a_frame_older_than_its_history(paper: Any) -> None:
     assert loop.counters["refused_too_late"] == loop.counters["frames_rejected"] == 1
 
 
+def test_record_has_the_tf_of_simulate_bag(paper: Any, tmp_path: Path) -> None:
+    """The node's record carries ``/tf`` as ``simulate --bag`` writes it: the same ticks,
+    links and poses (true arm and ``est/``) for the same run."""
+    from amsfe_sym.logs.write import write_run_bag
+    from amsfe_sym.ros.record import NodeRecord
+    from amsfe_sym.topics import TopicSpec
+
+    sc, lib = paper
+    res = run(sc.with_overrides(duration=0.1), lib, runtime="compiled")
+    urdf = Path(lib.manifest.urdf).read_text()
+    ref = _bag(write_run_bag(res, tmp_path / "sim", urdf_text=urdf))["/tf"]
+    rec = NodeRecord(sc, lib, TopicSpec(), lib.manifest.joints)
+    for k, t in enumerate(res.t):
+        ns = round(float(t) * 1e9)
+        rec.truth(ns, res.x_true[k])
+        rec.outputs(ns, res.x_hat[k], np.zeros(lib.N), res.x_hat[k, 4 * lib.n :], res.u[k])
+    got = _bag(rec.write(tmp_path / "rec"))["/tf"]
+    assert len(got) == len(ref) > 1
+
+    def poses(msgs: list[Any]) -> list[tuple[Any, ...]]:
+        return [
+            (tr.header.stamp.sec, tr.header.stamp.nanosec, tr.child_frame_id,
+             tr.transform.translation.x, tr.transform.translation.z, tr.transform.rotation.w)
+            for m in msgs for tr in m.transforms
+        ]  # fmt: skip
+
+    assert poses(got) == poses(ref)
+
+
 def test_cli_starts_without_rclpy(tmp_path: Path) -> None:
     """``amsfe --help`` works without the [ros] extra; ``amsfe node`` then says in one line
     how to install it (exit 2)."""
