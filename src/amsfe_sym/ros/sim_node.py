@@ -9,9 +9,11 @@ topic spec (ROS parameters override it).
 ``lockstep``: tick k waits for the k-th command received (commands carry no stamp: a node
 answers each encoder sample with one command), so a run is deterministic and as fast as DDS
 allows; the frames of a tick are acknowledged by every reader (reliable QoS) before its
-encoder sample goes out, so a node has them when the sample arrives.  Without it the plant
-runs on the wall clock (one tick every T) and applies the latest command it has when a tick
-ends (real latency, real drops).
+encoder sample goes out, so a node has them when the sample arrives (DDS does not order
+deliveries across topics; the writers' heartbeat period is 1 ms in lockstep,
+:func:`~amsfe_sym.ros.middleware.use_lockstep_profile`, or each wait takes seconds).
+Without it the plant runs on the wall clock (one tick every T) and applies the latest
+command it has when a tick ends (real latency, real drops).
 """
 
 from __future__ import annotations
@@ -25,7 +27,14 @@ from numpy.typing import NDArray
 
 from amsfe_sym.errors import RosError, describe
 from amsfe_sym.ros.arm import SimArm
-from amsfe_sym.ros.middleware import executor, qos_profile, spec_parameters, start, stop
+from amsfe_sym.ros.middleware import (
+    executor,
+    qos_profile,
+    spec_parameters,
+    start,
+    stop,
+    use_lockstep_profile,
+)
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.topics import TopicSpec
@@ -108,6 +117,8 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
             within ``command_timeout``; rclpy missing.
     """
     arm = SimArm(sc, lib)
+    if options.lockstep:  # the frames' acknowledgement within ms (docs/ros.md)
+        use_lockstep_profile()
     ctx = start(list(options.ros_args), options.domain_id)
     from amsfe_sym.ros import messages as m
 
