@@ -157,9 +157,14 @@ def play_log(path: Path, options: PlayOptions) -> PlayReport:
                     )
                 )
             time.sleep(0.02)
-        grace = time.monotonic() + 1.0  # the node's other subscriptions match about together
-        while time.monotonic() < grace and any(
-            p.get_subscription_count() < 1 for p in pubs.values()
+        # the node's other subscriptions: every one discovery knows of matched (a frame
+        # published to a reader not yet matched is lost: volatile), and for 1 s at least any
+        # the graph does not show yet, as long as a topic has no subscriber at all
+        grace = time.monotonic() + 1.0
+        while time.monotonic() < deadline and any(
+            p.get_subscription_count() < max(node.count_subscribers(p.topic_name), 1)
+            and (time.monotonic() < grace or node.count_subscribers(p.topic_name) > 0)
+            for p in pubs.values()
         ):
             time.sleep(0.02)
         counts = dict.fromkeys(topics, 0)
