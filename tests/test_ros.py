@@ -421,7 +421,7 @@ def test_play_into_node_is_estimate(paper: Any, tmp_path: Path) -> None:
     try:
         procs.append(_start(env, "node", "paper-sim", "--duration", "2", "--record", str(rec),
                             *PATIENT_NODE, *depth))  # fmt: skip
-        procs.append(_start(env, "play", str(bag), "--start-timeout", "60", *depth))
+        procs.append(_start(env, "play", str(bag), "--start-timeout", "60", "--ordered", *depth))
     finally:
         results = _finish(procs, 120.0)
     for code, text in results:
