@@ -186,6 +186,11 @@ def add_play_arguments(p: argparse.ArgumentParser) -> None:
         "--topic-spec", default=None, metavar="FILE", help="topics, joints, QoS (docs/topics.md)"
     )
     p.add_argument("--start-timeout", type=SECONDS, default=30.0, help="wait for a node [s]")
+    p.add_argument(
+        "--ordered",
+        action="store_true",
+        help="a log time's messages acknowledged before its encoder sample (slower, exact)",
+    )
     p.add_argument("--ros-args", nargs=argparse.REMAINDER, default=[], help="the rest: ROS 2")
 
 
@@ -200,6 +205,7 @@ def play_from_args(args: argparse.Namespace) -> int:
         start_timeout=args.start_timeout,
         ros_args=tuple(args.ros_args),
         domain_id=_domain(),
+        ordered=args.ordered,
     )
     rep = play_log(Path(args.log), opts)
     sent = ", ".join(f"{t} {c}" for t, c in rep.messages.items())

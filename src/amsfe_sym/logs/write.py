@@ -24,6 +24,7 @@ from amsfe_sym.core.jsonfile import to_json
 from amsfe_sym.core.toml import dump_toml
 from amsfe_sym.logs.source import typestore
 from amsfe_sym.logs.spec import LogSpec
+from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.sim.result import RunResult
 
 __all__ = [
@@ -31,6 +32,7 @@ __all__ = [
     "bag_job",
     "joint_state",
     "run_bag_filler",
+    "tf_builder",
     "write_estimate_bag",
     "write_run_bag",
 ]
@@ -46,8 +48,11 @@ def _ns(seconds: float) -> int:
 
 
 def _header(t: float, frame: str = "") -> Any:
+    return _header_ns(_ns(t), frame)
+
+
+def _header_ns(ns: int, frame: str = "") -> Any:
     ts = typestore().types
-    ns = _ns(t)
     stamp = ts["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
     return ts["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
 
@@ -198,42 +203,55 @@ def _tf_frames(res: RunResult, urdf_text: str | None) -> dict[int, Any] | None:
     and of the estimated one (``est/``), by Pinocchio's forward kinematics."""
     if urdf_text is None:
         return None
+    lib = res.lib
+    tf = tf_builder(lib)
+    every = max(1, round(1.0 / (TF_RATE_HZ * lib.T)))
+    n = lib.n
+    return {
+        k: tf(_ns(float(res.t[k])), [("", res.x_true[k, :n]), ("est/", res.x_hat[k, :n])])
+        for k in range(0, len(res.t), every)
+    }
+
+
+def tf_builder(lib: ModelLibrary) -> Callable[[int, Sequence[tuple[str, FloatArray]]], Any]:
+    """``tf(stamp_ns, arms)``: the ``tf2_msgs/TFMessage`` (rosbags type) of world -> each
+    link of every arm ``(prefix, q [rad])`` stamped ``stamp_ns`` [ns], by Pinocchio's forward
+    kinematics of ``lib``'s robot (loaded once, here)."""
     import pinocchio as pin
 
     from amsfe_sym.load import load_robot
     from amsfe_sym.load.spec import load_spec
 
-    lib = res.lib
     spec = load_spec(lib.manifest.spec or lib.manifest.urdf)
     robot = load_robot(spec.with_locked(dict(lib.manifest.raw.get("locked", {}))))
     model = robot.model
     data = model.createData()
     ts = typestore().types
-    every = max(1, round(1.0 / (TF_RATE_HZ * lib.T)))
-    n = lib.n
-    out = {}
-    for k in range(0, len(res.t), every):
+    bodies = [
+        (f, frame.name) for f, frame in enumerate(model.frames) if frame.type == pin.FrameType.BODY
+    ]
+
+    def tf(stamp_ns: int, arms: Sequence[tuple[str, FloatArray]]) -> Any:
         transforms = []
-        for prefix, x in (("", res.x_true[k]), ("est/", res.x_hat[k])):
-            pin.framesForwardKinematics(model, data, robot.to_pin_q(x[:n]))
-            for f, frame in enumerate(model.frames):
-                if frame.type != pin.FrameType.BODY:
-                    continue
+        for prefix, q in arms:
+            pin.framesForwardKinematics(model, data, robot.to_pin_q(q))
+            for f, name in bodies:
                 M = data.oMf[f]
                 qx, qy, qz, qw = pin.Quaternion(M.rotation).coeffs()
                 p = M.translation
                 transforms.append(
                     ts["geometry_msgs/msg/TransformStamped"](
-                        header=_header(float(res.t[k]), "world"),
-                        child_frame_id=prefix + frame.name,
+                        header=_header_ns(stamp_ns, "world"),
+                        child_frame_id=prefix + name,
                         transform=ts["geometry_msgs/msg/Transform"](
                             translation=ts["geometry_msgs/msg/Vector3"](x=p[0], y=p[1], z=p[2]),
                             rotation=ts["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw),
                         ),
                     )
                 )
-        out[k] = ts["tf2_msgs/msg/TFMessage"](transforms=transforms)
-    return out
+        return ts["tf2_msgs/msg/TFMessage"](transforms=transforms)
+
+    return tf
 
 
 def write_estimate_bag(

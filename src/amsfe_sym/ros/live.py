@@ -141,6 +141,8 @@ class LiveLoop:
         self._cmds: dict[int, FloatArray] = {}
         self._sent: int | None = None
         self._early: list[tuple[int, FloatArray]] = []
+        self._early_frames: list[tuple[int, FloatArray, int | None]] = []
+        self._sent0: int | None = None  # the first encoder sample's source timestamp [ns]
         self.counters: dict[str, int] = dict.fromkeys(DECISION_COUNTERS, 0)
         self.skipped: dict[str, int] = {}
         self._nan = np.full(4 * lib.n, np.nan)
@@ -161,8 +163,17 @@ class LiveLoop:
         """A camera frame arrived: pixel ``z`` [px], exposed at ``exposure_ns`` [ns], sent
         by its publisher at ``sent_ns`` (its source timestamp; None: unknown); it is fused at
         the first encoder sample sent at or after it (the next one when either is unknown),
-        or skipped, counted by reason."""
+        or skipped, counted by reason.
+
+        A frame sent before the first encoder sample is skipped (the loop fuses no frame at
+        tick 0) whichever callback the middleware ran first: DDS does not order callbacks
+        across topics, so a frame that arrives before the first sample waits for it (as an
+        early torque sample does, :meth:`applied`) and is then judged by its source
+        timestamp (unknown: skipped, it came first)."""
         if self.k < 0:
+            self._early_frames.append((exposure_ns, np.array(z, dtype=float), sent_ns))
+            return
+        if sent_ns is not None and self._sent0 is not None and sent_ns <= self._sent0:
             self._skip("frame exposed before the first encoder sample")
             return
         kappa = self.tick_of(exposure_ns)
@@ -226,13 +237,19 @@ class LiveLoop:
         z = np.array(z, dtype=float)
         self._sent = sent_ns
         if self.est is None:
-            self.t0_ns, self.k = stamp_ns, 0
+            self.t0_ns, self.k, self._sent0 = stamp_ns, 0, sent_ns
             self.est = build_estimator(self.sc, self.lib, self._sensors, z, compiled=self._compiled)
             self._frames.pending.clear()  # the loop uses no frame at tick 0
             self._frames.sent.clear()
             for early in self._early:
                 self.applied(*early)
             self._early.clear()
+            for exposure_ns, zf, sent in self._early_frames:
+                if sent is None or sent_ns is None:
+                    self._skip("frame exposed before the first encoder sample")
+                else:
+                    self.frame(exposure_ns, zf, sent)
+            self._early_frames.clear()
             return self._control(stamp_ns, z, None, 0)
         k = self.tick_of(stamp_ns)
         if k is None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+from pathlib import Path
 from types import ModuleType
 from typing import Any
 
@@ -18,10 +19,12 @@ from amsfe_sym.topics import TopicSpec
 
 __all__ = [
     "DEFAULT_RMW",
+    "LOCKSTEP_PROFILE",
     "load_rclpy",
     "ns_to_stamp",
     "qos_profile",
     "stamp_to_ns",
+    "use_lockstep_profile",
 ]
 
 #: The ROS middleware the ``[ros]`` extra installs (the one used unless
@@ -48,6 +51,25 @@ def load_rclpy() -> ModuleType:
             )
         ) from exc
     return rclpy
+
+
+#: The Fast DDS profile of ``sim-node --lockstep`` (a 1 ms reliable heartbeat period).
+LOCKSTEP_PROFILE = Path(__file__).with_name("fastdds_lockstep.xml")
+
+
+def use_lockstep_profile() -> bool:
+    """Make this process's Fast DDS writers send a heartbeat every 1 ms
+    (:data:`LOCKSTEP_PROFILE`, through ``FASTDDS_DEFAULT_PROFILES_FILE``; before
+    :func:`start`), so that waiting for the readers' acknowledgement takes milliseconds
+    instead of up to Fast DDS's default 3 s heartbeat period.  Not done (False) when the user
+    set a profile file or another middleware: theirs is kept.
+    """
+    if os.environ.get("RMW_IMPLEMENTATION", DEFAULT_RMW) != DEFAULT_RMW:
+        return False
+    if os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE"):
+        return False
+    os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = str(LOCKSTEP_PROFILE)
+    return True
 
 
 def qos_profile(spec: TopicSpec, *, latched: bool = False, depth: int | None = None) -> Any:

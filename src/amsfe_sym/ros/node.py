@@ -179,7 +179,7 @@ class _Node:
         pixel = np.array([msg.point.x, msg.point.y])
         sent = int(info["source_timestamp"])
         self.live.frame(ns, pixel, sent)
-        if self.record is not None and self.live.k >= 0:
+        if self.record is not None:  # before the first sample too: see LiveLoop.frame
             self._rx_frames.append((ns, pixel, sent))
 
     def on_truth(self, msg: Any) -> None:
@@ -266,6 +266,8 @@ class _Node:
         ns = out.stamp_ns
         rec.encoders(ns, z)
         keep = []
+        if out.k == 0:  # sent before the first sample: skipped by the loop, not recorded
+            self._rx_frames = [f for f in self._rx_frames if f[2] > sent]
         for exposure_ns, pixel, frame_sent in self._rx_frames:  # logged at their arrival
             if frame_sent <= sent:
                 rec.frame(ns, exposure_ns, pixel)

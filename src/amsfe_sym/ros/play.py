@@ -5,7 +5,12 @@ ROS tool for this, ``ros2 bag play``, is not installable from the package index)
 The topics are the input roles of the topic spec (encoders, effort, camera, truth) that the
 log holds; each message goes out as the bytes it was recorded as (CDR).  Messages of one log
 time are published together, the encoder sample last, so that a node has the frames that
-arrived at a tick and the torque of the tick before when its sample arrives.
+arrived at a tick and the torque of the tick before when its sample arrives.  DDS does not
+order deliveries across topics, so with ``ordered`` a group's camera and effort messages
+are acknowledged by every reader (reliable QoS) before its encoder sample goes out, the
+writers heartbeating every 1 ms (:func:`~amsfe_sym.ros.middleware.use_lockstep_profile`):
+a node then has them when the sample arrives, at the cost of the recorded pace
+(docs/ros.md).
 """
 
 from __future__ import annotations
@@ -18,7 +23,13 @@ from pathlib import Path
 from typing import Any
 
 from amsfe_sym.errors import LogError, RosError, describe
-from amsfe_sym.ros.middleware import qos_profile, spec_parameters, start, stop
+from amsfe_sym.ros.middleware import (
+    qos_profile,
+    spec_parameters,
+    start,
+    stop,
+    use_lockstep_profile,
+)
 from amsfe_sym.topics import TopicSpec
 
 __all__ = ["PLAYED_ROLES", "PlayOptions", "PlayReport", "play_log"]
@@ -37,6 +48,9 @@ class PlayOptions:
         start_timeout: Longest wait for a subscriber of the encoders [s, wall].
         ros_args: ``--ros-args`` for rclpy.
         domain_id: ROS_DOMAIN_ID (None: the environment's).
+        ordered: Wait for every reader's acknowledgement of a log time's messages before
+            its encoder sample (module docstring).
+        ack_timeout: ``ordered``: longest wait for one acknowledgement [s, wall].
     """
 
     rate: float = 1.0
@@ -44,6 +58,8 @@ class PlayOptions:
     start_timeout: float = 30.0
     ros_args: tuple[str, ...] = ()
     domain_id: int | None = None
+    ordered: bool = False
+    ack_timeout: float = 10.0
 
 
 @dataclass(frozen=True)
@@ -132,6 +148,8 @@ def play_log(path: Path, options: PlayOptions) -> PlayReport:
     """
     if not options.rate > 0:
         raise RosError(describe("play --rate", "a factor > 0", repr(options.rate), "e.g. 1"))
+    if options.ordered:
+        use_lockstep_profile()
     ctx = start(list(options.ros_args), options.domain_id)
     import rclpy
     from rclpy.duration import Duration
@@ -157,12 +175,18 @@ def play_log(path: Path, options: PlayOptions) -> PlayReport:
                     )
                 )
             time.sleep(0.02)
-        grace = time.monotonic() + 1.0  # the node's other subscriptions match about together
-        while time.monotonic() < grace and any(
-            p.get_subscription_count() < 1 for p in pubs.values()
+        # the node's other subscriptions: every one discovery knows of matched (a frame
+        # published to a reader not yet matched is lost: volatile), and for 1 s at least any
+        # the graph does not show yet, as long as a topic has no subscriber at all
+        grace = time.monotonic() + 1.0
+        while time.monotonic() < deadline and any(
+            p.get_subscription_count() < max(node.count_subscribers(p.topic_name), 1)
+            and (time.monotonic() < grace or node.count_subscribers(p.topic_name) > 0)
+            for p in pubs.values()
         ):
             time.sleep(0.02)
         counts = dict.fromkeys(topics, 0)
+        feeds = {spec.camera, spec.effort} - {spec.encoders}  # what the estimator reads
         t0_log: int | None = None
         t_log = 0
         t0 = time.perf_counter()
@@ -174,6 +198,8 @@ def play_log(path: Path, options: PlayOptions) -> PlayReport:
                 time.sleep(wait)
             clock.publish(msgs.clock(t_log))
             for topic, raw in group:
+                if options.ordered and topic == spec.encoders:
+                    _acked(pubs, group, feeds, options.ack_timeout)
                 pubs[topic].publish(raw)
                 counts[topic] += 1
         wall = time.perf_counter() - t0
@@ -182,3 +208,23 @@ def play_log(path: Path, options: PlayOptions) -> PlayReport:
         return PlayReport(counts, (t_log - (t0_log or 0)) * 1e-9, wall)
     finally:
         stop(ctx, node)
+
+
+def _acked(
+    pubs: dict[str, Any], group: list[tuple[str, bytes]], feeds: set[str], timeout: float
+) -> None:
+    """Wait (up to ``timeout`` [s] each) until every reader acknowledged the messages of
+    ``group`` on the topics ``feeds`` (the camera and the effort: the truth is not waited for,
+    it feeds no estimate)."""
+    from rclpy.duration import Duration
+
+    for topic in dict.fromkeys(t for t, _ in group if t in feeds):
+        if not pubs[topic].wait_for_all_acked(Duration(nanoseconds=int(timeout * 1e9))):
+            raise RosError(
+                describe(
+                    f"amsfe play --ordered: {topic}",
+                    f"every reader's acknowledgement within {timeout:g} s",
+                    "none",
+                    "check the node is running (or play without --ordered)",
+                )
+            )

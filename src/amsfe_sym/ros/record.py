@@ -7,9 +7,12 @@ its arrival): the encoders, camera frames (stamp = exposure), the applied torque
 effort: the effort topic's, or the node's command), the truth and ``/joint_states`` (true q,
 qd) when a simulated arm sends it, ``/amsfe/config`` (robot, scenario, estimator: what
 ``amsfe estimate`` needs), ``/robot_description`` (the URDF), and the outputs: estimate,
-estimate_std, theta, diagnostics, commands (the hold command last).  Not written:
-``/tf`` (``simulate --bag`` draws it with Pinocchio after the run).  Kept in memory,
-written when the node stops (complete or absent: :func:`amsfe_sym.core.folders.write_folder`).
+estimate_std, theta, diagnostics, commands (the hold command last), and ``/tf`` as
+``simulate --bag`` has it (world -> every link of the estimated arm, ``est/``-prefixed, and
+of the true one when a simulated arm sends its truth; at
+:data:`~amsfe_sym.logs.write.TF_RATE_HZ`, by Pinocchio when the record is written, with a
+URDF).  Kept in memory, written when the node stops (complete or absent:
+:func:`amsfe_sym.core.folders.write_folder`).
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from numpy.typing import NDArray
 
 from amsfe_sym.core.folders import write_folder
 from amsfe_sym.core.toml import dump_toml
+from amsfe_sym.logs.write import TF_RATE_HZ
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.topics import TopicSpec
@@ -36,6 +40,7 @@ JS = "sensor_msgs/msg/JointState"
 F64 = "std_msgs/msg/Float64MultiArray"
 PS = "geometry_msgs/msg/PointStamped"
 STR = "std_msgs/msg/String"
+TF = "tf2_msgs/msg/TFMessage"
 
 
 class NodeRecord:
@@ -51,7 +56,10 @@ class NodeRecord:
     def __init__(
         self, sc: Scenario, lib: ModelLibrary, spec: TopicSpec, names: Sequence[str]
     ) -> None:
-        self.spec, self.names, self.n = spec, list(names), lib.n
+        self.spec, self.names, self.n, self.lib = spec, list(names), lib.n, lib
+        self._tf_every = max(1, round(1.0 / (TF_RATE_HZ * lib.T)))
+        self._ticks = 0
+        self._truth: tuple[int, FloatArray] | None = None  # the last truth: (ns, q)
         urdf = Path(lib.manifest.urdf) if lib.manifest.urdf else None
         self.urdf = urdf.read_text() if urdf is not None and urdf.is_file() else None
         self._rows: list[tuple[str, str, int, tuple[Any, ...]]] = []
@@ -84,6 +92,7 @@ class NodeRecord:
         """The true state [q, qd, qm, qmd, theta] at the tick ``ns`` (and, as
         ``amsfe simulate --bag`` has it, the true q, qd on ``/joint_states``)."""
         n = self.n
+        self._truth = (ns, np.array(x[:n], dtype=float))
         self._add(self.spec.truth, F64, ns, np.array(x, dtype=float))
         self._add("/joint_states", JS, ns, ns, None, x[:n], x[n : 2 * n], None)
 
@@ -97,6 +106,12 @@ class NodeRecord:
         self._add(self.spec.theta, F64, ns, np.array(theta, dtype=float))
         if u is not None:
             self._add(self.spec.commands, F64, ns, np.array(u, dtype=float))
+        if self.urdf is not None and self._ticks % self._tf_every == 0:
+            arms = [("est/", np.array(x_hat[:n], dtype=float))]
+            if self._truth is not None and self._truth[0] == ns:
+                arms.insert(0, ("", self._truth[1]))
+            self._add("/tf", TF, ns, ns, arms)  # drawn when written
+        self._ticks += 1
 
     def diagnostics(self, ns: int, text: str) -> None:
         """A diagnostics JSON the node published at the tick ``ns``."""
@@ -124,6 +139,11 @@ class NodeRecord:
             return ts["std_msgs/msg/Header"](stamp=t, frame_id=frame)
 
         empty = np.zeros(0)
+        tf = None
+        if any(r[1] == TF for r in self._rows):
+            from amsfe_sym.logs.write import tf_builder
+
+            tf = tf_builder(self.lib)
         layout = ts["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0)
 
         def message(msgtype: str, data: tuple[Any, ...]) -> Any:
@@ -142,6 +162,8 @@ class NodeRecord:
                 return ts[PS](header=header(ns, "camera"), point=point)
             if msgtype == F64:
                 return ts[F64](layout=layout, data=np.asarray(data[0], dtype=np.float64))
+            if msgtype == TF and tf is not None:
+                return tf(*data)
             return ts[STR](data=data[0])
 
         def inner(tmp: Path) -> None:

@@ -9,9 +9,11 @@ topic spec (ROS parameters override it).
 ``lockstep``: tick k waits for the k-th command received (commands carry no stamp: a node
 answers each encoder sample with one command), so a run is deterministic and as fast as DDS
 allows; the frames of a tick are acknowledged by every reader (reliable QoS) before its
-encoder sample goes out, so a node has them when the sample arrives.  Without it the plant
-runs on the wall clock (one tick every T) and applies the latest command it has when a tick
-ends (real latency, real drops).
+encoder sample goes out, so a node has them when the sample arrives (DDS does not order
+deliveries across topics; the writers' heartbeat period is 1 ms in lockstep,
+:func:`~amsfe_sym.ros.middleware.use_lockstep_profile`, or each wait takes seconds).
+Without it the plant runs on the wall clock (one tick every T) and applies the latest
+command it has when a tick ends (real latency, real drops).
 """
 
 from __future__ import annotations
@@ -25,7 +27,14 @@ from numpy.typing import NDArray
 
 from amsfe_sym.errors import RosError, describe
 from amsfe_sym.ros.arm import SimArm
-from amsfe_sym.ros.middleware import executor, qos_profile, spec_parameters, start, stop
+from amsfe_sym.ros.middleware import (
+    executor,
+    qos_profile,
+    spec_parameters,
+    start,
+    stop,
+    use_lockstep_profile,
+)
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.topics import TopicSpec
@@ -108,6 +117,8 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
             within ``command_timeout``; rclpy missing.
     """
     arm = SimArm(sc, lib)
+    if options.lockstep:  # the frames' acknowledgement within ms (docs/ros.md)
+        use_lockstep_profile()
     ctx = start(list(options.ros_args), options.domain_id)
     from amsfe_sym.ros import messages as m
 
@@ -161,6 +172,11 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
             pub_truth.publish(m.float64_array(s.x_true))
             for fr in s.frames:
                 pub_cam.publish(m.point_stamped(fr.exposure_step * T_ns, fr.z[0], fr.z[1]))
+            if options.lockstep and s.frames and not _acked(pub_cam, options.command_timeout):
+                node.get_logger().warning(
+                    f"tick {k}: a camera frame not acknowledged within "
+                    f"{options.command_timeout:g} s: the node may fuse it a tick late"
+                )
             sent_at[k] = time.time_ns()
             pub_enc.publish(m.joint_state(ns, names, s.z[:n], s.z[n:]))
             if k and k % round(1.0 / lib.T) == 0:
@@ -211,10 +227,11 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         stop(ctx, *([node] if node is not None else []))
 
 
-def _acked(pub: object, timeout: float) -> None:
+def _acked(pub: object, timeout: float) -> bool:
+    """Wait until every reader of ``pub`` (reliable) acknowledged its messages [s]."""
     from rclpy.duration import Duration
 
-    pub.wait_for_all_acked(Duration(nanoseconds=int(timeout * 1e9)))  # type: ignore[attr-defined]
+    return bool(pub.wait_for_all_acked(Duration(nanoseconds=int(timeout * 1e9))))  # type: ignore[attr-defined]
 
 
 def _wait_peers(ex: object, pub: object, sub: object | None, timeout: float) -> None:
