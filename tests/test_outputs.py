@@ -666,7 +666,8 @@ def test_a_nan_metric_is_null_with_its_reason_in_summary_json(
 @pytest.mark.slow
 @pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
 def test_a_real_signal_during_simulate_bag_leaves_nothing(tmp_path: Path, sig: str) -> None:
-    """The same as a process: the signal mid-run (Python loop, 60 s of simulated time) ends
+    """The same as a process: the signal mid-run (Python loop, 300 s of simulated time, a
+    minute or more of wall time here: still running when the signal comes at 6 s) ends
     it with 130 / 143, one line naming the run folder and the bag as not written, and
     nothing left (no run folder without its bag, no hidden temporary)."""
     import signal
@@ -681,7 +682,7 @@ def test_a_real_signal_during_simulate_bag_leaves_nothing(tmp_path: Path, sig: s
             "amsfe_sym",
             *SIM[:3],
             "--duration",
-            "60",
+            "300",
             "--runtime",
             "python",
             "--no-plots",
