@@ -215,3 +215,43 @@ def test_sqlite3_storage_and_a_frame_older_than_the_history(sim, tmp_path) -> No
     assert np.max(np.abs(got.estimate.x_hat - _direct(res, expected))) <= 1e-12
     c = got.estimate.counters
     assert c["refused_too_late"] == 1 and c["frames_applied"] == len(frames) - 1
+
+
+def _raw(bag: Path) -> dict[str, list[tuple[int, bytes]]]:
+    """(log time [ns], payload) per topic, as rosbags' reader gives them."""
+    from rosbags.rosbag2 import Reader
+
+    out: dict[str, list[tuple[int, bytes]]] = defaultdict(list)
+    with Reader(bag) as r:
+        for conn, t, raw in r.messages():
+            out[conn.topic].append((t, bytes(raw)))
+    return out
+
+
+def test_joint_state_topics_equal_rosbags_one_by_one(sim) -> None:
+    """The bag's JointState topics (serialized in bulk, logs/encode.py) hold the bytes and log
+    times of the message-by-message writer: rosbags' serialize_cdr of joint_state(...)."""
+    res, bag = sim["oosm"]
+    ts, n = typestore(), res.lib.n
+    joints = list(res.lib.manifest.joints)
+    raw = _raw(bag)
+
+    def ref(t: float, **fields) -> tuple[int, bytes]:
+        msg = joint_state(t, joints, **fields)
+        return round(t * 1e9), bytes(ts.serialize_cdr(msg, "sensor_msgs/msg/JointState"))
+
+    z, x, xh = res.z_enc, res.x_true, res.x_hat
+    want = {
+        "/motor_encoders": [
+            ref(t, position=z[k, :n], velocity=z[k, n:]) for k, t in enumerate(res.t)
+        ],
+        "/motor_torque": [ref(t, effort=res.u[k]) for k, t in enumerate(res.t)],
+        "/joint_states": [
+            ref(t, position=x[k, :n], velocity=x[k, n : 2 * n]) for k, t in enumerate(res.t)
+        ],
+        "/amsfe/estimate": [
+            ref(t, position=xh[k, :n], velocity=xh[k, n : 2 * n]) for k, t in enumerate(res.t)
+        ],
+    }
+    for topic, messages in want.items():
+        assert raw[topic] == messages, topic

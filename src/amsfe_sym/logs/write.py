@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from amsfe_sym.core.folders import FolderJob, write_folders
 from amsfe_sym.core.jsonfile import to_json
 from amsfe_sym.core.toml import dump_toml
+from amsfe_sym.logs.encode import JOINT_STATE, encode_joint_states
 from amsfe_sym.logs.source import typestore
 from amsfe_sym.logs.spec import LogSpec
 from amsfe_sym.runtime.library import ModelLibrary
@@ -86,10 +87,13 @@ class _Bag:
         self.conns: dict[str, Any] = {}
 
     def write(self, topic: str, msgtype: str, t: float, msg: Any) -> None:
-        ts = typestore()
+        self.write_raw(topic, msgtype, _ns(t), typestore().serialize_cdr(msg, msgtype))
+
+    def write_raw(self, topic: str, msgtype: str, log_ns: int, payload: bytes) -> None:
+        """One payload already serialized (CDR) at log time ``log_ns`` [ns]."""
         if topic not in self.conns:
-            self.conns[topic] = self.writer.add_connection(topic, msgtype, typestore=ts)
-        self.writer.write(self.conns[topic], _ns(t), ts.serialize_cdr(msg, msgtype))
+            self.conns[topic] = self.writer.add_connection(topic, msgtype, typestore=typestore())
+        self.writer.write(self.conns[topic], log_ns, payload)
 
     def close(self) -> None:
         self.writer.close()
@@ -145,6 +149,13 @@ def run_bag_filler(res: RunResult, urdf_text: str | None = None) -> Callable[[Pa
     }
     frames = sorted(res.frames.tolist(), key=lambda f: (f[1], f[0]))
     tf = _tf_frames(res, urdf_text)
+    # the JointState topics, serialized in bulk (logs/encode.py: the same bytes as rosbags)
+    stamps = [_ns(float(t)) for t in res.t]
+    z, x_true, x_hat = (np.asarray(a, dtype=np.float64) for a in (res.z_enc, res.x_true, res.x_hat))
+    enc = encode_joint_states(stamps, joints, z[:, :n], z[:, n:])
+    torque = encode_joint_states(stamps, joints, effort=np.asarray(res.u, dtype=np.float64))
+    true = encode_joint_states(stamps, joints, x_true[:, :n], x_true[:, n : 2 * n])
+    est = encode_joint_states(stamps, joints, x_hat[:, :n], x_hat[:, n : 2 * n])
 
     def fill(path: Path) -> None:
         bag = _Bag(path)
@@ -159,9 +170,8 @@ def run_bag_filler(res: RunResult, urdf_text: str | None = None) -> Callable[[Pa
                 bag.write("/robot_description", "std_msgs/msg/String", 0.0, String(data=urdf_text))
             fi = 0
             for k, t in enumerate(res.t):
-                z, x, xh = res.z_enc[k], res.x_true[k], res.x_hat[k]
-                enc = joint_state(t, joints, z[:n], z[n:])
-                bag.write(spec.encoders, "sensor_msgs/msg/JointState", t, enc)
+                ns = stamps[k]
+                bag.write_raw(spec.encoders, JOINT_STATE, ns, enc[k])
                 while fi < len(frames) and frames[fi][1] <= k:
                     kappa, _, pu, pv = frames[fi]
                     pt = ts["geometry_msgs/msg/PointStamped"](
@@ -170,24 +180,10 @@ def run_bag_filler(res: RunResult, urdf_text: str | None = None) -> Callable[[Pa
                     )
                     bag.write(spec.camera, "geometry_msgs/msg/PointStamped", t, pt)
                     fi += 1
-                bag.write(
-                    spec.torque,
-                    "sensor_msgs/msg/JointState",
-                    t,
-                    joint_state(t, joints, effort=res.u[k]),
-                )
-                bag.write(
-                    "/joint_states",
-                    "sensor_msgs/msg/JointState",
-                    t,
-                    joint_state(t, joints, x[:n], x[n : 2 * n]),
-                )
-                bag.write(
-                    "/amsfe/estimate",
-                    "sensor_msgs/msg/JointState",
-                    t,
-                    joint_state(t, joints, xh[:n], xh[n : 2 * n]),
-                )
+                bag.write_raw(spec.torque, JOINT_STATE, ns, torque[k])
+                bag.write_raw("/joint_states", JOINT_STATE, ns, true[k])
+                bag.write_raw("/amsfe/estimate", JOINT_STATE, ns, est[k])
+                x = res.x_true[k]
                 truth = F64(layout=layout, data=np.asarray(x[:N], dtype=np.float64))
                 bag.write(spec.truth, "std_msgs/msg/Float64MultiArray", t, truth)
                 if tf is not None and k in tf:
@@ -261,25 +257,18 @@ def write_estimate_bag(
     (JointState q, qd of x(k|k)) and ``/amsfe/estimate_std`` (JointState position/velocity =
     the standard deviations of q, qd)."""
     n = len(names)
+    stamps = [_ns(t0 + float(tk)) for tk in t]
+    x = np.asarray(x_hat, dtype=np.float64)
+    s = np.sqrt(np.maximum(np.asarray(P_diag, dtype=np.float64), 0.0))
+    est = encode_joint_states(stamps, names, x[:, :n], x[:, n : 2 * n])
+    std = encode_joint_states(stamps, names, s[:, :n], s[:, n : 2 * n])
 
     def fill(path: Path) -> None:
         bag = _Bag(path)
         try:
-            for k, tk in enumerate(t):
-                tt = t0 + float(tk)
-                x, s = x_hat[k], np.sqrt(np.maximum(P_diag[k], 0.0))
-                bag.write(
-                    "/amsfe/estimate",
-                    "sensor_msgs/msg/JointState",
-                    tt,
-                    joint_state(tt, names, x[:n], x[n : 2 * n]),
-                )
-                bag.write(
-                    "/amsfe/estimate_std",
-                    "sensor_msgs/msg/JointState",
-                    tt,
-                    joint_state(tt, names, s[:n], s[n : 2 * n]),
-                )
+            for ns, e, d in zip(stamps, est, std, strict=True):
+                bag.write_raw("/amsfe/estimate", JOINT_STATE, ns, e)
+                bag.write_raw("/amsfe/estimate_std", JOINT_STATE, ns, d)
         finally:
             bag.close()
 
