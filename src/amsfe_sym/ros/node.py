@@ -19,6 +19,7 @@ command and returns 0.  A record (``--record``) is written on every one of these
 
 from __future__ import annotations
 
+import contextlib
 import json
 import time
 from collections.abc import Callable
@@ -29,7 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.errors import AmsfeError
+from amsfe_sym.errors import AmsfeError, ConfigError, describe
 from amsfe_sym.ros.live import HoldKind, LiveLoop, TickOut
 from amsfe_sym.ros.middleware import executor, qos_profile, spec_parameters, start, stop
 from amsfe_sym.ros.record import NodeRecord
@@ -37,12 +38,16 @@ from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.topics import TopicSpec, joint_order
 
-__all__ = ["EXIT_HOLD", "NodeOptions", "NodeReport", "run_node"]
+__all__ = ["DEFAULT_STD_EVERY", "EXIT_HOLD", "NodeOptions", "NodeReport", "run_node", "std_due"]
 
 FloatArray = NDArray[np.float64]
 
 #: Exit code of a fail-safe stop (encoder silence, non-finite estimate, estimator failure).
 EXIT_HOLD = 3
+
+#: Default of :attr:`NodeOptions.std_every`: ``estimate_std`` and ``theta`` at 1/10 of the
+#: encoder rate (100 Hz at 1 kHz), which takes two of the four publishes off most ticks.
+DEFAULT_STD_EVERY = 10
 
 
 @dataclass(frozen=True)
@@ -64,6 +69,11 @@ class NodeOptions:
         managed: A lifecycle node: it reads the spec and builds the estimator on
             ``configure``, processes samples only while ``active``, holds on ``deactivate``
             and stops on ``shutdown`` (docs/ros.md, "Managed node").
+        std_every: Publish ``estimate_std`` and ``theta`` at every ``std_every``-th tick
+            (tick 0, k % std_every == 0, the last tick of ``duration``, and the last
+            estimate when the node stops); the estimate and the command go out at every
+            tick, and a record has all three at every tick (ROS parameter
+            ``publish.std_every`` overrides it; 1: every tick).
     """
 
     controller: bool = False
@@ -77,6 +87,13 @@ class NodeOptions:
     domain_id: int | None = None
     subscriber_wait: float = 5.0
     managed: bool = False
+    std_every: int = DEFAULT_STD_EVERY
+
+
+def std_due(k: int, every: int, end_k: int | None) -> bool:
+    """Whether tick ``k`` publishes ``estimate_std`` and ``theta``
+    (:attr:`NodeOptions.std_every`)."""
+    return k % every == 0 or (end_k is not None and k >= end_k)
 
 
 @dataclass(frozen=True)
@@ -130,6 +147,7 @@ class _Node:
             max_gap_steps=spec.max_gap_steps,
         )
         self.n = lib.n
+        self.std_every = _std_every(node, options.std_every)
         self.record = None if options.record is None else NodeRecord(sc, lib, spec, self.names)
         self.last: TickOut | None = None
         self.last_rx: float | None = None
@@ -139,6 +157,13 @@ class _Node:
         self._truth: FloatArray | None = None
         self._first_command = True
         self._rx_frames: list[tuple[int, FloatArray, int]] = []
+        # one message object a topic, filled in each tick (publish serializes at once)
+        self._msg_est = m.joint_state(0, self.names)
+        self._msg_std = m.joint_state(0, self.names)
+        self._msg_theta = m.Float64MultiArray()
+        self._msg_cmd = m.Float64MultiArray()
+        self._theta = lib.layout["theta"]
+        self._std_k = -1  # the last tick whose estimate_std and theta went out
         #: Samples are processed only while active (a managed node: between activate and
         #: deactivate; an unmanaged one: always).
         self.active = not options.managed
@@ -243,12 +268,15 @@ class _Node:
         if out.u is not None and self.pub_cmd is not None:  # first: the arm waits for it
             if self._first_command:
                 self._wait_subscriber()
-            self.pub_cmd.publish(m.float64_array(out.u))
-        x, std = out.x_hat, np.sqrt(np.maximum(out.P_diag, 0.0))
-        L = self.lib.layout
-        self.pub_est.publish(m.joint_state(ns, self.names, x[:n], x[n : 2 * n]))
-        self.pub_std.publish(m.joint_state(ns, self.names, std[:n], std[n : 2 * n]))
-        self.pub_theta.publish(m.float64_array(x[L["theta"]]))
+            self._msg_cmd.data = m.doubles(out.u)
+            self.pub_cmd.publish(self._msg_cmd)
+        x = out.x_hat
+        est = self._msg_est
+        est.header.stamp.sec, est.header.stamp.nanosec = divmod(ns, 1_000_000_000)
+        est.position, est.velocity = m.doubles(x[:n]), m.doubles(x[n : 2 * n])
+        self.pub_est.publish(est)
+        if std_due(out.k, self.std_every, self.end_k):
+            self._publish_std(out)
         rep = out.report
         if out.k == 0 or (rep is not None and (rep.frames_applied or rep.frames_rejected)):
             text = json.dumps(self.diagnostics(out))
@@ -259,6 +287,25 @@ class _Node:
             self._record(out, z, sent)
         if self.end_k is not None and out.k >= self.end_k:
             self.stop = _Stop(f"done: {out.k + 1} ticks ({out.t:.3f} s of samples)", 0)
+
+    def _publish_std(self, out: TickOut) -> None:
+        """``estimate_std`` and ``theta`` of ``out`` (:attr:`NodeOptions.std_every`)."""
+        m, n = self.m, self.n
+        std = np.sqrt(np.maximum(out.P_diag, 0.0))
+        msg = self._msg_std
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(out.stamp_ns, 1_000_000_000)
+        msg.position, msg.velocity = m.doubles(std[:n]), m.doubles(std[n : 2 * n])
+        self.pub_std.publish(msg)
+        self._msg_theta.data = m.doubles(out.x_hat[self._theta])
+        self.pub_theta.publish(self._msg_theta)
+        self._std_k = out.k
+
+    def publish_last_std(self) -> None:
+        """``estimate_std`` and ``theta`` of the last estimate, if not out yet (on a stop)."""
+        if self.last is None or self._std_k == self.last.k:
+            return
+        with contextlib.suppress(Exception):  # a context already down cannot publish
+            self._publish_std(self.last)
 
     def _record(self, out: TickOut, z: FloatArray, sent: int) -> None:
         rec = self.record
@@ -311,7 +358,9 @@ class _Node:
         return d
 
     def hold(self) -> FloatArray | None:
-        """Publish the hold command (with a controller): returns it."""
+        """Publish the last estimate's ``estimate_std`` and ``theta`` if they are not out
+        yet, then the hold command (with a controller): returns it."""
+        self.publish_last_std()
         if self.pub_cmd is None:
             return None
         u = self.live.hold_command(self.options.hold, self.last)
@@ -397,6 +446,21 @@ def run_node(
         raise state.stop.error
     counters = {**state.live.counters, **state.live.skipped}
     return NodeReport(state.live.k + 1, reason, code, hold, counters, options.record)
+
+
+def _std_every(node: Any, default: int) -> int:
+    """The ROS parameter ``publish.std_every`` (default ``default``), checked."""
+    value = node.declare_parameter("publish.std_every", default).value
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ConfigError(
+            describe(
+                f"ROS parameter publish.std_every of {node.get_name()}",
+                "an integer >= 1 (ticks between estimate_std / theta messages)",
+                repr(value),
+                "-p publish.std_every:=10 (1: every tick), or amsfe node --std-every 10",
+            )
+        )
+    return int(value)
 
 
 def _held(hold: FloatArray | None) -> str:
