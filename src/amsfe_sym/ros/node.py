@@ -32,7 +32,14 @@ from numpy.typing import NDArray
 
 from amsfe_sym.errors import AmsfeError, ConfigError, describe
 from amsfe_sym.ros.live import HoldKind, LiveLoop, TickOut
-from amsfe_sym.ros.middleware import executor, qos_profile, spec_parameters, start, stop
+from amsfe_sym.ros.middleware import (
+    executor,
+    lean_events,
+    qos_profile,
+    spec_parameters,
+    start,
+    stop,
+)
 from amsfe_sym.ros.record import NodeRecord
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
@@ -168,23 +175,33 @@ class _Node:
         #: deactivate; an unmanaged one: always).
         self.active = not options.managed
         qos = qos_profile(spec)
+        sub_events, pub_events = lean_events(node)
         # the camera is subscribed first: a frame and a sample ready at once, the frame first
-        node.create_subscription(m.PointStamped, spec.camera, self.on_frame, qos)
+        node.create_subscription(
+            m.PointStamped, spec.camera, self.on_frame, qos, event_callbacks=sub_events
+        )
         if self.record is not None:  # the truth only goes into a record (for its NEES)
-            node.create_subscription(m.Float64MultiArray, spec.truth, self.on_truth, qos)
+            node.create_subscription(
+                m.Float64MultiArray, spec.truth, self.on_truth, qos, event_callbacks=sub_events
+            )
         self.effort_kind = spec.effort_kind or "applied"
         use_effort = self.effort_kind == "applied"
         self.use_effort = use_effort
         if use_effort and spec.effort != spec.encoders:
-            node.create_subscription(m.JointState, spec.effort, self.on_effort, qos)
+            node.create_subscription(
+                m.JointState, spec.effort, self.on_effort, qos, event_callbacks=sub_events
+            )
         self.effort_in_encoders = use_effort and spec.effort == spec.encoders
-        node.create_subscription(m.JointState, spec.encoders, self.on_encoders, qos)
-        self.pub_est = node.create_publisher(m.JointState, spec.estimate, qos)
-        self.pub_std = node.create_publisher(m.JointState, spec.estimate_std, qos)
-        self.pub_theta = node.create_publisher(m.Float64MultiArray, spec.theta, qos)
-        self.pub_diag = node.create_publisher(m.String, spec.diagnostics, qos)
+        node.create_subscription(
+            m.JointState, spec.encoders, self.on_encoders, qos, event_callbacks=sub_events
+        )
+        ev = {"event_callbacks": pub_events}
+        self.pub_est = node.create_publisher(m.JointState, spec.estimate, qos, **ev)
+        self.pub_std = node.create_publisher(m.JointState, spec.estimate_std, qos, **ev)
+        self.pub_theta = node.create_publisher(m.Float64MultiArray, spec.theta, qos, **ev)
+        self.pub_diag = node.create_publisher(m.String, spec.diagnostics, qos, **ev)
         self.pub_cmd = (
-            node.create_publisher(m.Float64MultiArray, spec.commands, qos)
+            node.create_publisher(m.Float64MultiArray, spec.commands, qos, **ev)
             if options.controller
             else None
         )
