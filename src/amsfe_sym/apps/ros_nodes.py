@@ -154,7 +154,8 @@ def node_from_args(args: argparse.Namespace) -> int:
     """``amsfe node`` from its parsed options."""
     from amsfe_sym.codegen import library_for
     from amsfe_sym.core.outputs import check_output
-    from amsfe_sym.ros.node import DEFAULT_STD_EVERY, NodeOptions, run_node
+    from amsfe_sym.ros.node import NodeOptions, run_node
+    from amsfe_sym.ros.outputs import DEFAULT_STD_EVERY
     from amsfe_sym.topics import read_topic_spec
 
     if args.std_every is not None and args.std_every < 1:

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.errors import AmsfeError, ConfigError, describe
+from amsfe_sym.errors import AmsfeError
 from amsfe_sym.ros.live import HoldKind, LiveLoop, TickOut
 from amsfe_sym.ros.middleware import (
     executor,
@@ -40,21 +40,23 @@ from amsfe_sym.ros.middleware import (
     start,
     stop,
 )
+from amsfe_sym.ros.outputs import (
+    DEFAULT_STD_EVERY,
+    StdPublisher,
+    std_due,
+    std_every_parameter,
+)
 from amsfe_sym.ros.record import NodeRecord
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.topics import TopicSpec, joint_order
 
-__all__ = ["DEFAULT_STD_EVERY", "EXIT_HOLD", "NodeOptions", "NodeReport", "run_node", "std_due"]
+__all__ = ["EXIT_HOLD", "NodeOptions", "NodeReport", "run_node"]
 
 FloatArray = NDArray[np.float64]
 
 #: Exit code of a fail-safe stop (encoder silence, non-finite estimate, estimator failure).
 EXIT_HOLD = 3
-
-#: Default of :attr:`NodeOptions.std_every`: ``estimate_std`` and ``theta`` at 1/10 of the
-#: encoder rate (100 Hz at 1 kHz), which takes two of the four publishes off most ticks.
-DEFAULT_STD_EVERY = 10
 
 
 @dataclass(frozen=True)
@@ -95,12 +97,6 @@ class NodeOptions:
     subscriber_wait: float = 5.0
     managed: bool = False
     std_every: int = DEFAULT_STD_EVERY
-
-
-def std_due(k: int, every: int, end_k: int | None) -> bool:
-    """Whether tick ``k`` publishes ``estimate_std`` and ``theta``
-    (:attr:`NodeOptions.std_every`)."""
-    return k % every == 0 or (end_k is not None and k >= end_k)
 
 
 @dataclass(frozen=True)
@@ -154,7 +150,7 @@ class _Node:
             max_gap_steps=spec.max_gap_steps,
         )
         self.n = lib.n
-        self.std_every = _std_every(node, options.std_every)
+        self.std_every = std_every_parameter(node, options.std_every)
         self.record = None if options.record is None else NodeRecord(sc, lib, spec, self.names)
         self.last: TickOut | None = None
         self.last_rx: float | None = None
@@ -166,11 +162,7 @@ class _Node:
         self._rx_frames: list[tuple[int, FloatArray, int]] = []
         # one message object a topic, filled in each tick (publish serializes at once)
         self._msg_est = m.joint_state(0, self.names)
-        self._msg_std = m.joint_state(0, self.names)
-        self._msg_theta = m.Float64MultiArray()
         self._msg_cmd = m.Float64MultiArray()
-        self._theta = lib.layout["theta"]
-        self._std_k = -1  # the last tick whose estimate_std and theta went out
         #: Samples are processed only while active (a managed node: between activate and
         #: deactivate; an unmanaged one: always).
         self.active = not options.managed
@@ -197,8 +189,14 @@ class _Node:
         )
         ev = {"event_callbacks": pub_events}
         self.pub_est = node.create_publisher(m.JointState, spec.estimate, qos, **ev)
-        self.pub_std = node.create_publisher(m.JointState, spec.estimate_std, qos, **ev)
-        self.pub_theta = node.create_publisher(m.Float64MultiArray, spec.theta, qos, **ev)
+        self.std = StdPublisher(
+            m,
+            node.create_publisher(m.JointState, spec.estimate_std, qos, **ev),
+            node.create_publisher(m.Float64MultiArray, spec.theta, qos, **ev),
+            self.names,
+            self.n,
+            lib.layout["theta"],
+        )
         self.pub_diag = node.create_publisher(m.String, spec.diagnostics, qos, **ev)
         self.pub_cmd = (
             node.create_publisher(m.Float64MultiArray, spec.commands, qos, **ev)
@@ -293,7 +291,7 @@ class _Node:
         est.position, est.velocity = m.doubles(x[:n]), m.doubles(x[n : 2 * n])
         self.pub_est.publish(est)
         if std_due(out.k, self.std_every, self.end_k):
-            self._publish_std(out)
+            self.std.publish(out)
         rep = out.report
         if out.k == 0 or (rep is not None and (rep.frames_applied or rep.frames_rejected)):
             text = json.dumps(self.diagnostics(out))
@@ -305,24 +303,12 @@ class _Node:
         if self.end_k is not None and out.k >= self.end_k:
             self.stop = _Stop(f"done: {out.k + 1} ticks ({out.t:.3f} s of samples)", 0)
 
-    def _publish_std(self, out: TickOut) -> None:
-        """``estimate_std`` and ``theta`` of ``out`` (:attr:`NodeOptions.std_every`)."""
-        m, n = self.m, self.n
-        std = np.sqrt(np.maximum(out.P_diag, 0.0))
-        msg = self._msg_std
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(out.stamp_ns, 1_000_000_000)
-        msg.position, msg.velocity = m.doubles(std[:n]), m.doubles(std[n : 2 * n])
-        self.pub_std.publish(msg)
-        self._msg_theta.data = m.doubles(out.x_hat[self._theta])
-        self.pub_theta.publish(self._msg_theta)
-        self._std_k = out.k
-
     def publish_last_std(self) -> None:
         """``estimate_std`` and ``theta`` of the last estimate, if not out yet (on a stop)."""
-        if self.last is None or self._std_k == self.last.k:
+        if self.last is None or self.std.k == self.last.k:
             return
         with contextlib.suppress(Exception):  # a context already down cannot publish
-            self._publish_std(self.last)
+            self.std.publish(self.last)
 
     def _record(self, out: TickOut, z: FloatArray, sent: int) -> None:
         rec = self.record
@@ -463,21 +449,6 @@ def run_node(
         raise state.stop.error
     counters = {**state.live.counters, **state.live.skipped}
     return NodeReport(state.live.k + 1, reason, code, hold, counters, options.record)
-
-
-def _std_every(node: Any, default: int) -> int:
-    """The ROS parameter ``publish.std_every`` (default ``default``), checked."""
-    value = node.declare_parameter("publish.std_every", default).value
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ConfigError(
-            describe(
-                f"ROS parameter publish.std_every of {node.get_name()}",
-                "an integer >= 1 (ticks between estimate_std / theta messages)",
-                repr(value),
-                "-p publish.std_every:=10 (1: every tick), or amsfe node --std-every 10",
-            )
-        )
-    return int(value)
 
 
 def _held(hold: FloatArray | None) -> str:
