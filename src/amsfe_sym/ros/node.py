@@ -20,6 +20,7 @@ command and returns 0.  A record (``--record``) is written on every one of these
 from __future__ import annotations
 
 import contextlib
+import gc
 import json
 import time
 from collections.abc import Callable
@@ -408,6 +409,8 @@ def run_node(
             holder.append(_Node(ctx, sc, lib, options, node))
         ex = executor(ctx)
         ex.add_node(node)
+        gc.collect()
+        gc.freeze()  # the startup's objects (rclpy, numpy, the library): never rescanned
         while ctx.ok() and not down and (not holder or holder[-1].stop is None):
             ex.spin_once(timeout_sec=0.05)
             state = holder[-1] if holder else None
