@@ -304,13 +304,6 @@ class _Node:
         if self.end_k is not None and out.k >= self.end_k:
             self.stop = _Stop(f"done: {out.k + 1} ticks ({out.t:.3f} s of samples)", 0)
 
-    def publish_last_std(self) -> None:
-        """``estimate_std`` and ``theta`` of the last estimate, if not out yet (on a stop)."""
-        if self.last is None or self.std.k == self.last.k:
-            return
-        with contextlib.suppress(Exception):  # a context already down cannot publish
-            self.std.publish(self.last)
-
     def _record(self, out: TickOut, z: FloatArray, sent: int) -> None:
         rec = self.record
         assert rec is not None
@@ -364,7 +357,9 @@ class _Node:
     def hold(self) -> FloatArray | None:
         """Publish the last estimate's ``estimate_std`` and ``theta`` if they are not out
         yet, then the hold command (with a controller): returns it."""
-        self.publish_last_std()
+        if self.last is not None and self.std.k != self.last.k:
+            with contextlib.suppress(Exception):  # a context already down cannot publish
+                self.std.publish(self.last)
         if self.pub_cmd is None:
             return None
         u = self.live.hold_command(self.options.hold, self.last)
