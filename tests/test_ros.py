@@ -205,6 +205,31 @@ def test_cli_starts_without_rclpy(tmp_path: Path) -> None:
     assert len(lines) == 1 and ".[ros]" in lines[0], node.stderr
 
 
+def test_std_every_bad_value_is_one_line(tmp_path: Path) -> None:
+    """``amsfe node --std-every 0`` is refused in one line (exit 2) before rclpy starts."""
+    block = "import sys; sys.modules['rclpy'] = None; from amsfe_sym.apps.cli import main; "
+    env = {**os.environ, "PYTHONPATH": str(SRC)}
+    node = subprocess.run(
+        [sys.executable, "-c", block + "sys.exit(main(['node', 'paper-sim', '--std-every', '0']))"],
+        env=env, capture_output=True, text=True, timeout=120, cwd=tmp_path,
+    )  # fmt: skip
+    assert node.returncode == 2, node.stderr
+    lines = [x for x in node.stderr.splitlines() if x.startswith("error:")]
+    assert len(lines) == 1 and "--std-every" in lines[0] and "Fix" in lines[0], node.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(("every", "end_k"), [(1, 5), (10, 2000), (7, 20), (3, None)])
+def test_std_due_ticks(every: int, end_k: int | None) -> None:
+    """estimate_std / theta go out at tick 0, every ``every``-th tick and the last one."""
+    from amsfe_sym.ros.outputs import std_due
+
+    last = 50 if end_k is None else end_k
+    got = [k for k in range(last + 1) if std_due(k, every, end_k)]
+    want = sorted({*range(0, last + 1, every), *([] if end_k is None else [end_k])})
+    assert got == want
+
+
 ROS_PACKAGES = (
     "rclpy",
     "builtin_interfaces",

@@ -130,6 +130,14 @@ def add_node_arguments(p: argparse.ArgumentParser) -> None:
         "--encoder-timeout", type=SECONDS, default=0.5, help="encoder silence -> hold [s]"
     )
     p.add_argument(
+        "--std-every",
+        type=int,
+        default=None,
+        metavar="N",
+        help="publish estimate_std and theta every N-th tick and on the last "
+        "(default 10; 1: every tick; the record has every tick)",
+    )
+    p.add_argument(
         "--managed",
         action="store_true",
         help="a lifecycle node: configure, then activate before it processes samples",
@@ -147,8 +155,13 @@ def node_from_args(args: argparse.Namespace) -> int:
     from amsfe_sym.codegen import library_for
     from amsfe_sym.core.outputs import check_output
     from amsfe_sym.ros.node import NodeOptions, run_node
+    from amsfe_sym.ros.outputs import DEFAULT_STD_EVERY
     from amsfe_sym.topics import read_topic_spec
 
+    if args.std_every is not None and args.std_every < 1:
+        raise ConfigError(
+            describe("--std-every", "an integer >= 1", str(args.std_every), "--std-every 10")
+        )
     sc = _scenario(args, estimator=args.estimator, controller=args.controller or None)
     record = None if args.record is None else Path(args.record)
     if record is not None:
@@ -164,6 +177,7 @@ def node_from_args(args: argparse.Namespace) -> int:
         encoder_timeout=args.encoder_timeout,
         hold=args.hold,
         managed=args.managed,
+        std_every=DEFAULT_STD_EVERY if args.std_every is None else args.std_every,
         duration=args.duration,
         record=record,
         ros_args=tuple(args.ros_args),

@@ -19,6 +19,8 @@ command and returns 0.  A record (``--record``) is written on every one of these
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import json
 import time
 from collections.abc import Callable
@@ -31,7 +33,20 @@ from numpy.typing import NDArray
 
 from amsfe_sym.errors import AmsfeError
 from amsfe_sym.ros.live import HoldKind, LiveLoop, TickOut
-from amsfe_sym.ros.middleware import executor, qos_profile, spec_parameters, start, stop
+from amsfe_sym.ros.middleware import (
+    executor,
+    lean_events,
+    qos_profile,
+    spec_parameters,
+    start,
+    stop,
+)
+from amsfe_sym.ros.outputs import (
+    DEFAULT_STD_EVERY,
+    StdPublisher,
+    std_due,
+    std_every_parameter,
+)
 from amsfe_sym.ros.record import NodeRecord
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
@@ -64,6 +79,11 @@ class NodeOptions:
         managed: A lifecycle node: it reads the spec and builds the estimator on
             ``configure``, processes samples only while ``active``, holds on ``deactivate``
             and stops on ``shutdown`` (docs/ros.md, "Managed node").
+        std_every: Publish ``estimate_std`` and ``theta`` at every ``std_every``-th tick
+            (tick 0, k % std_every == 0, the last tick of ``duration``, and the last
+            estimate when the node stops); the estimate and the command go out at every
+            tick, and a record has all three at every tick (ROS parameter
+            ``publish.std_every`` overrides it; 1: every tick).
     """
 
     controller: bool = False
@@ -77,6 +97,7 @@ class NodeOptions:
     domain_id: int | None = None
     subscriber_wait: float = 5.0
     managed: bool = False
+    std_every: int = DEFAULT_STD_EVERY
 
 
 @dataclass(frozen=True)
@@ -130,6 +151,7 @@ class _Node:
             max_gap_steps=spec.max_gap_steps,
         )
         self.n = lib.n
+        self.std_every = std_every_parameter(node, options.std_every)
         self.record = None if options.record is None else NodeRecord(sc, lib, spec, self.names)
         self.last: TickOut | None = None
         self.last_rx: float | None = None
@@ -139,27 +161,46 @@ class _Node:
         self._truth: FloatArray | None = None
         self._first_command = True
         self._rx_frames: list[tuple[int, FloatArray, int]] = []
+        # one message object a topic, filled in each tick (publish serializes at once)
+        self._msg_est = m.joint_state(0, self.names)
+        self._msg_cmd = m.Float64MultiArray()
         #: Samples are processed only while active (a managed node: between activate and
         #: deactivate; an unmanaged one: always).
         self.active = not options.managed
         qos = qos_profile(spec)
+        sub_events, pub_events = lean_events(node)
         # the camera is subscribed first: a frame and a sample ready at once, the frame first
-        node.create_subscription(m.PointStamped, spec.camera, self.on_frame, qos)
+        node.create_subscription(
+            m.PointStamped, spec.camera, self.on_frame, qos, event_callbacks=sub_events
+        )
         if self.record is not None:  # the truth only goes into a record (for its NEES)
-            node.create_subscription(m.Float64MultiArray, spec.truth, self.on_truth, qos)
+            node.create_subscription(
+                m.Float64MultiArray, spec.truth, self.on_truth, qos, event_callbacks=sub_events
+            )
         self.effort_kind = spec.effort_kind or "applied"
         use_effort = self.effort_kind == "applied"
         self.use_effort = use_effort
         if use_effort and spec.effort != spec.encoders:
-            node.create_subscription(m.JointState, spec.effort, self.on_effort, qos)
+            node.create_subscription(
+                m.JointState, spec.effort, self.on_effort, qos, event_callbacks=sub_events
+            )
         self.effort_in_encoders = use_effort and spec.effort == spec.encoders
-        node.create_subscription(m.JointState, spec.encoders, self.on_encoders, qos)
-        self.pub_est = node.create_publisher(m.JointState, spec.estimate, qos)
-        self.pub_std = node.create_publisher(m.JointState, spec.estimate_std, qos)
-        self.pub_theta = node.create_publisher(m.Float64MultiArray, spec.theta, qos)
-        self.pub_diag = node.create_publisher(m.String, spec.diagnostics, qos)
+        node.create_subscription(
+            m.JointState, spec.encoders, self.on_encoders, qos, event_callbacks=sub_events
+        )
+        ev = {"event_callbacks": pub_events}
+        self.pub_est = node.create_publisher(m.JointState, spec.estimate, qos, **ev)
+        self.std = StdPublisher(
+            m,
+            node.create_publisher(m.JointState, spec.estimate_std, qos, **ev),
+            node.create_publisher(m.Float64MultiArray, spec.theta, qos, **ev),
+            self.names,
+            self.n,
+            lib.layout["theta"],
+        )
+        self.pub_diag = node.create_publisher(m.String, spec.diagnostics, qos, **ev)
         self.pub_cmd = (
-            node.create_publisher(m.Float64MultiArray, spec.commands, qos)
+            node.create_publisher(m.Float64MultiArray, spec.commands, qos, **ev)
             if options.controller
             else None
         )
@@ -243,12 +284,15 @@ class _Node:
         if out.u is not None and self.pub_cmd is not None:  # first: the arm waits for it
             if self._first_command:
                 self._wait_subscriber()
-            self.pub_cmd.publish(m.float64_array(out.u))
-        x, std = out.x_hat, np.sqrt(np.maximum(out.P_diag, 0.0))
-        L = self.lib.layout
-        self.pub_est.publish(m.joint_state(ns, self.names, x[:n], x[n : 2 * n]))
-        self.pub_std.publish(m.joint_state(ns, self.names, std[:n], std[n : 2 * n]))
-        self.pub_theta.publish(m.float64_array(x[L["theta"]]))
+            self._msg_cmd.data = m.doubles(out.u)
+            self.pub_cmd.publish(self._msg_cmd)
+        x = out.x_hat
+        est = self._msg_est
+        est.header.stamp.sec, est.header.stamp.nanosec = divmod(ns, 1_000_000_000)
+        est.position, est.velocity = m.doubles(x[:n]), m.doubles(x[n : 2 * n])
+        self.pub_est.publish(est)
+        if std_due(out.k, self.std_every, self.end_k):
+            self.std.publish(out)
         rep = out.report
         if out.k == 0 or (rep is not None and (rep.frames_applied or rep.frames_rejected)):
             text = json.dumps(self.diagnostics(out))
@@ -311,7 +355,11 @@ class _Node:
         return d
 
     def hold(self) -> FloatArray | None:
-        """Publish the hold command (with a controller): returns it."""
+        """Publish the last estimate's ``estimate_std`` and ``theta`` if they are not out
+        yet, then the hold command (with a controller): returns it."""
+        if self.last is not None and self.std.k != self.last.k:
+            with contextlib.suppress(Exception):  # a context already down cannot publish
+                self.std.publish(self.last)
         if self.pub_cmd is None:
             return None
         u = self.live.hold_command(self.options.hold, self.last)
@@ -356,6 +404,8 @@ def run_node(
             holder.append(_Node(ctx, sc, lib, options, node))
         ex = executor(ctx)
         ex.add_node(node)
+        gc.collect()
+        gc.freeze()  # the startup's objects (rclpy, numpy, the library): never rescanned
         while ctx.ok() and not down and (not holder or holder[-1].stop is None):
             ex.spin_once(timeout_sec=0.05)
             state = holder[-1] if holder else None
