@@ -112,3 +112,24 @@ class _Libraries:
 def libraries() -> _Libraries:
     """Session-wide access to generated libraries: ``libraries.get(name) -> (robot, lib)``."""
     return _Libraries()
+
+
+@pytest.fixture(scope="session")
+def one_chord_2link(tmp_path_factory: pytest.TempPathFactory) -> ModelLibrary:
+    """paper_2link with one chord step in its inverse transition (``inverse_iterations = 1``:
+    residuals ~1e-6..1e-4, an inverse that does not converge), compiled once per session at
+    -O0 for the tests of a non-converged inverse (test_compiled_estimator.py,
+    test_compiled_backward_map.py)."""
+    import shutil
+
+    folder = tmp_path_factory.mktemp("inv1") / "paper_2link_inv1"
+    folder.mkdir()
+    src = robots_dir() / "paper_2link"
+    shutil.copy(src / "paper_2link.urdf", folder)
+    spec = (src / "robot.toml").read_text()
+    spec = spec.replace('name = "paper_2link"', 'name = "paper_2link_inv1"')
+    spec = spec.replace("inverse_iterations = 6 ", "inverse_iterations = 1 ")
+    assert "inverse_iterations = 1 " in spec
+    (folder / "robot.toml").write_text(spec)
+    gen = generate(folder / "robot.toml", extra_cflags=["-O0"], out=folder.parent / "gen")
+    return ModelLibrary(gen.out_dir)

@@ -21,11 +21,12 @@ from amsfe_sym.runtime.compiled_estimator import (
     estimator_log_lines,
     make_compiled_estimator,
 )
+from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.runtime.models import CompiledTransition
 from amsfe_sym.scenario import apply_sets, load_scenario
 from amsfe_sym.sim.builders import filter_config, scenario_timing
 from amsfe_sym.sim.result import refusal_kind
-from tests.test_compiled_estimator import Recording, decisions, record
+from tests.test_compiled_estimator import Recording, decisions, on_library, record
 
 #: The brief's bound for the two paths over a run (absolute; entries are O(1e-6 .. 1)).
 TOL = 1e-9
@@ -156,40 +157,15 @@ def test_inverse_map_closed_loop_same_on_both_runtimes() -> None:
 
 @pytest.mark.slow
 def test_a_real_non_converged_inverse_is_refused_on_both_paths(
-    paper_sim: Recording, tmp_path_factory: pytest.TempPathFactory
+    paper_sim: Recording, one_chord_2link: ModelLibrary
 ) -> None:
     """A model whose generated inverse really does not converge: the paper_2link arm with its
     ``paper`` integrator and one chord step (``inverse_iterations = 1``: residuals ~1e-6..1e-4,
     as in test_compiled_estimator.py's issue-18 test).  With ``backward_map = "inverse"``
     every late frame is refused as ``no_convergence`` on both paths, same decisions and
     estimates; the linearised map applies the same frames."""
-    import shutil
-
-    from amsfe_sym.codegen import generate
-    from amsfe_sym.load.spec import robots_dir
-    from amsfe_sym.runtime.library import ModelLibrary
-    from amsfe_sym.runtime.models import CameraMeasurement, EncoderMeasurement
-
-    folder = tmp_path_factory.mktemp("inv1") / "paper_2link_inv1b"
-    folder.mkdir()
-    src = robots_dir() / "paper_2link"
-    shutil.copy(src / "paper_2link.urdf", folder)
-    spec = (src / "robot.toml").read_text()
-    spec = spec.replace('name = "paper_2link"', 'name = "paper_2link_inv1b"')
-    spec = spec.replace("inverse_iterations = 6 ", "inverse_iterations = 1 ")
-    assert "inverse_iterations = 1 " in spec
-    (folder / "robot.toml").write_text(spec)
-    lib = ModelLibrary(
-        generate(folder / "robot.toml", extra_cflags=["-O0"], out=folder.parent / "gen").out_dir
-    )
-    kwargs = with_map(paper_sim, "inverse")
-    old = kwargs["model"], kwargs["encoder"], kwargs["camera"]
-    assert isinstance(old[0], CompiledTransition) and isinstance(old[1], EncoderMeasurement)
-    assert isinstance(old[2], CameraMeasurement)
-    kwargs["model"] = CompiledTransition(lib, old[0].Qw)
-    kwargs["encoder"] = EncoderMeasurement(lib, np.diag(old[1].R)[:2], np.diag(old[1].R)[2:])
-    kwargs["camera"] = CameraMeasurement(lib, np.diag(old[2].R))
-    rec = dataclasses.replace(paper_sim, lib=lib)
+    kwargs = on_library(with_map(paper_sim, "inverse"), one_chord_2link)
+    rec = dataclasses.replace(paper_sim, lib=one_chord_2link)
     worst = run_both(rec, kwargs, 2000)
     assert worst["applied"] == 0 and worst["no_convergence"] >= 10
     linear = dict(kwargs, config=dataclasses.replace(kwargs["config"], backward_map="linearised"))

@@ -164,9 +164,23 @@ def test_compiled_equals_python_on_the_6dof_ur5(name: str) -> None:
     assert worst["updated"] > 20
 
 
+def on_library(kwargs: dict, lib: ModelLibrary) -> dict:
+    """An estimator's keyword arguments with its model, encoder and camera models on ``lib``
+    (the same noise: Qw, the encoders' and the camera's R)."""
+    old = kwargs["model"], kwargs["encoder"], kwargs["camera"]
+    assert isinstance(old[0], CompiledTransition) and isinstance(old[1], EncoderMeasurement)
+    assert isinstance(old[2], CameraMeasurement)
+    return dict(
+        kwargs,
+        model=CompiledTransition(lib, old[0].Qw),
+        encoder=EncoderMeasurement(lib, np.diag(old[1].R)[:2], np.diag(old[1].R)[2:]),
+        camera=CameraMeasurement(lib, np.diag(old[2].R)),
+    )
+
+
 @pytest.mark.slow
 def test_a_non_converged_inverse_does_not_refuse_frames(
-    paper_sim: Recording, tmp_path_factory: pytest.TempPathFactory
+    paper_sim: Recording, one_chord_2link: ModelLibrary
 ) -> None:
     """An inverse transition that does not converge no longer matters to oosm's default
     backward map (issue 18): it is linearised about the stored forward pass on both paths
@@ -176,30 +190,9 @@ def test_a_non_converged_inverse_does_not_refuse_frames(
     (``inverse_iterations = 1``: residuals ~1e-6..1e-4, which refused every late frame of
     oosm on both paths under issue 10's check): the frames are applied, with the same
     decisions and estimates on both paths."""
-    import shutil
-
-    from amsfe_sym.codegen import generate
-    from amsfe_sym.load.spec import robots_dir
     from amsfe_sym.sim.result import refusal_kind
 
-    folder = tmp_path_factory.mktemp("inv1") / "paper_2link_inv1"
-    folder.mkdir()
-    src = robots_dir() / "paper_2link"
-    shutil.copy(src / "paper_2link.urdf", folder)
-    spec = (src / "robot.toml").read_text()
-    spec = spec.replace('name = "paper_2link"', 'name = "paper_2link_inv1"')
-    spec = spec.replace("inverse_iterations = 6 ", "inverse_iterations = 1 ")
-    assert "inverse_iterations = 1 " in spec
-    (folder / "robot.toml").write_text(spec)
-    gen = generate(folder / "robot.toml", extra_cflags=["-O0"], out=folder.parent / "gen")
-    lib = ModelLibrary(gen.out_dir)
-    kwargs = dict(paper_sim.kwargs)
-    old = kwargs["model"], kwargs["encoder"], kwargs["camera"]
-    assert isinstance(old[0], CompiledTransition) and isinstance(old[1], EncoderMeasurement)
-    assert isinstance(old[2], CameraMeasurement)
-    kwargs["model"] = CompiledTransition(lib, old[0].Qw)
-    kwargs["encoder"] = EncoderMeasurement(lib, np.diag(old[1].R)[:2], np.diag(old[1].R)[2:])
-    kwargs["camera"] = CameraMeasurement(lib, np.diag(old[2].R))
+    kwargs = on_library(dict(paper_sim.kwargs), one_chord_2link)
     py: Estimator = make_estimator("oosm", **kwargs)  # type: ignore[arg-type]
     c = make_compiled_estimator("oosm", **kwargs)
     refused = 0
