@@ -65,7 +65,7 @@ from amsfe_sym.logs.plan import (
     read_config,
     refuse,
 )
-from amsfe_sym.logs.sensors import camera_frames, held_effort, truth_on_grid
+from amsfe_sym.logs.sensors import OnGrid, camera_frames, held_effort, truth_on_grid
 from amsfe_sym.logs.spec import LogSpec
 from amsfe_sym.topics.roles import EffortKind
 
@@ -318,9 +318,8 @@ def read_log(
         eu = usage["effort"]
         count_skip(eu, "not used: effort kind none (say [effort] kind to use it)", eu.messages)
     elif "effort" in present:
-        effort, first = held_effort(
-            path, plan, spec, times, decoded, grid, clock, K, usage["effort"], n
-        )
+        on_grid = OnGrid(path, plan, times, decoded, grid, clock, K)
+        effort, first = held_effort(on_grid, spec, usage["effort"], n)
         if first > 0:  # the effort starts later than the encoders: so does the log
             finite = np.flatnonzero(np.isfinite(z).all(axis=1))
             later = finite[finite >= first]
@@ -346,14 +345,15 @@ def read_log(
         skipped["encoder samples missing (predicted through)"] = missing
 
     # ------------------------------------------------------------------ camera frames
+    on_grid = OnGrid(path, plan, times, decoded, grid, clock, K)  # (the grid the log starts on)
     frames: list[CameraFrame] = []
     if "camera" in present:
-        frames = camera_frames(plan, times, decoded, grid, clock, K, usage["camera"])
+        frames = camera_frames(on_grid, usage["camera"])
 
     # ------------------------------------------------------------------ truth
     truth = None
     if "truth" in present:
-        truth = truth_on_grid(path, plan, times, decoded, grid, clock, K, N, usage["truth"])
+        truth = truth_on_grid(on_grid, N, usage["truth"])
 
     for r, ru in usage.items():
         for reason, c in ru.skipped.items():

@@ -5,6 +5,7 @@ counted by reason in its role's :class:`~amsfe_sym.logs.grid.RoleUse`."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -16,24 +17,42 @@ from amsfe_sym.logs.grid import ClockOffset, RoleUse, TickGrid, count_skip
 from amsfe_sym.logs.plan import JOINT_STATE, LogPlan, joint_columns, refuse
 from amsfe_sym.logs.spec import LogSpec
 
-__all__ = ["camera_frames", "held_effort", "truth_on_grid"]
+__all__ = ["OnGrid", "camera_frames", "held_effort", "truth_on_grid"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 
-def held_effort(
-    path: Path,
-    plan: LogPlan,
-    spec: LogSpec,
-    times: dict[str, IntArray],
-    decoded: dict[str, Any],
-    grid: TickGrid,
-    clock: ClockOffset,
-    K: int,
-    use: RoleUse,
-    n: int,
-) -> tuple[FloatArray, int]:
+@dataclass(frozen=True)
+class OnGrid:
+    """A log's decoded topics and the tick grid they are put on.
+
+    Attributes:
+        path: The log (for messages).
+        plan: Which topic plays which role.
+        times: Each topic's log times [ns].
+        decoded: Each topic's decoded columns (:mod:`amsfe_sym.logs.decode`).
+        grid: The encoders' tick grid.
+        clock: Log time minus header stamp over the encoder samples.
+        K: Ticks on the grid.
+    """
+
+    path: Path
+    plan: LogPlan
+    times: dict[str, IntArray]
+    decoded: dict[str, Any]
+    grid: TickGrid
+    clock: ClockOffset
+    K: int
+
+    def on_stamp_clock(self, topic: str) -> IntArray:
+        """``topic``'s log times moved onto the header stamps' clock [ns] (its arrivals, as
+        the encoders' stamps count time)."""
+        out: IntArray = self.times[topic] - round(self.clock.median * 1e9)
+        return out
+
+
+def held_effort(log: OnGrid, spec: LogSpec, use: RoleUse, n: int) -> tuple[FloatArray, int]:
     """The effort held by stamp on the K ticks (zero-order hold to the nearest tick: the last
     effort stamped before t_k + T/2) [N m], (K, n), NaN before the first effort sample, and
     the first tick that has one.
@@ -41,9 +60,10 @@ def held_effort(
     Raises:
         LogError: no effort sample with n finite values, or none before the last tick.
     """
+    plan, grid, K = log.plan, log.grid, log.K
     topic = plan.roles["effort"]
-    where = f"log {path}: {topic} (effort)"
-    d = decoded[topic]
+    where = f"log {log.path}: {topic} (effort)"
+    d = log.decoded[topic]
     if plan.topics[topic].msgtype == JOINT_STATE:
         cols = joint_columns(d, plan.names, where)
         rows = np.arange(len(d.stamp_ns))[:, None]
@@ -54,7 +74,7 @@ def held_effort(
     else:  # Float64MultiArray: no header, stamped by its arrival (on the stamp clock)
         values = d.values[:, :n] if d.values.shape[1] >= n else np.full((len(d.counts), n), np.nan)
         shaped = d.counts == n
-        stamps = times[topic] - round(clock.median * 1e9)
+        stamps = log.on_stamp_clock(topic)
     count_skip(use, "not one value per joint", int((~shaped).sum()))
     finite = shaped & np.isfinite(values).all(axis=1)
     count_skip(use, "a non-finite value", int((shaped & ~finite).sum()))
@@ -89,20 +109,14 @@ def held_effort(
     return out, int(np.argmax(last >= 0))
 
 
-def camera_frames(
-    plan: LogPlan,
-    times: dict[str, IntArray],
-    decoded: dict[str, Any],
-    grid: TickGrid,
-    clock: ClockOffset,
-    K: int,
-    use: RoleUse,
-) -> list[CameraFrame]:
-    topic = plan.roles["camera"]
-    pts = decoded[topic]
-    log_ns = times[topic] - round(clock.median * 1e9)
-    kappa, on = grid.steps(pts.stamp_ns)
-    arrive = grid.arrivals(log_ns)
+def camera_frames(log: OnGrid, use: RoleUse) -> list[CameraFrame]:
+    """Each camera frame at its exposure step and its arrival tick, in arrival order; the
+    frames not used counted by reason."""
+    topic = log.plan.roles["camera"]
+    pts = log.decoded[topic]
+    log_ns = log.on_stamp_clock(topic)
+    kappa, on = log.grid.steps(pts.stamp_ns)
+    arrive = log.grid.arrivals(log_ns)
     frames: list[CameraFrame] = []
     seen: set[int] = set()
     for i in np.argsort(log_ns, kind="stable"):
@@ -118,7 +132,7 @@ def camera_frames(
             count_skip(use, "exposed before the first encoder sample")
         elif ar < kp:
             count_skip(use, "arrived before its exposure")
-        elif ar >= K:
+        elif ar >= log.K:
             count_skip(use, "arrived after the last tick")
         else:
             seen.add(kp)
@@ -127,29 +141,25 @@ def camera_frames(
     return frames
 
 
-def truth_on_grid(
-    path: Path,
-    plan: LogPlan,
-    times: dict[str, IntArray],
-    decoded: dict[str, Any],
-    grid: TickGrid,
-    clock: ClockOffset,
-    K: int,
-    N: int,
-    use: RoleUse,
-) -> FloatArray:
-    topic = plan.roles["truth"]
-    arr = decoded[topic]
+def truth_on_grid(log: OnGrid, N: int, use: RoleUse) -> FloatArray:
+    """The true state at each tick (NaN where the log has none), (K, N).
+
+    Raises:
+        LogError: the truth does not have the robot's N values.
+    """
+    K = log.K
+    topic = log.plan.roles["truth"]
+    arr = log.decoded[topic]
     wrong = np.flatnonzero(arr.counts != N)
     if wrong.size:
         raise refuse(
-            f"log {path}: {topic} (truth)",
+            f"log {log.path}: {topic} (truth)",
             f"the true state of the robot: N = {N} values [q, qd, qm, qmd, theta]",
             f"{int(arr.counts[wrong[0]])} values in {wrong.size} of {arr.counts.size} messages",
             "estimate with the robot the log was recorded for (--robot / the scenario's robot)",
         )
     truth = np.full((K, N), np.nan)
-    k, on = grid.steps(times[topic] - round(clock.median * 1e9))
+    k, on = log.grid.steps(log.on_stamp_clock(topic))
     inside = on & (k >= 0) & (k < K)
     count_skip(use, "off the tick grid or outside the log", int((~inside).sum()))
     truth[k[inside]] = arr.values[inside, :N]
