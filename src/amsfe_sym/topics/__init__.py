@@ -14,8 +14,6 @@ May import: errors, core.  Nothing here reads a log or talks to a middleware; no
 
 from amsfe_sym.topics.roles import (
     EFFORT_KINDS,
-    INPUT_ROLES,
-    OUTPUT_ROLES,
     ROLES,
     EffortKind,
     Role,
@@ -25,8 +23,6 @@ from amsfe_sym.topics.spec import TopicSpec, read_topic_spec
 
 __all__ = [
     "EFFORT_KINDS",
-    "INPUT_ROLES",
-    "OUTPUT_ROLES",
     "ROLES",
     "EffortKind",
     "Role",

@@ -23,8 +23,6 @@ from amsfe_sym.errors import ConfigError, describe
 
 __all__ = [
     "EFFORT_KINDS",
-    "INPUT_ROLES",
-    "OUTPUT_ROLES",
     "ROLES",
     "EffortKind",
     "Role",
@@ -144,10 +142,6 @@ ROLES: dict[str, Role] = {
         Role("clock", "/clock", (CLOCK,), "arrival", "out", False, "sim time"),
     )
 }
-
-#: The roles amsfe consumes, and those it publishes.
-INPUT_ROLES: tuple[str, ...] = tuple(r.name for r in ROLES.values() if r.direction == "in")
-OUTPUT_ROLES: tuple[str, ...] = tuple(r.name for r in ROLES.values() if r.direction == "out")
 
 
 def joint_order(names: Sequence[str], joints: Sequence[str], where: str) -> list[int]:

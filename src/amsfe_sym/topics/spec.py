@@ -30,7 +30,7 @@ The key ``[topics] torque`` of older log specs is read as ``effort``.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -38,7 +38,7 @@ from amsfe_sym.core.toml import read_toml
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.topics.roles import EFFORT_KINDS, ROLES, EffortKind
 
-__all__ = ["FIELDS", "TopicSpec", "parse_topic_spec", "read_topic_spec"]
+__all__ = ["TopicSpec", "parse_topic_spec", "read_topic_spec"]
 
 _TOPIC_KEYS = tuple(ROLES)
 _ALIASES = {"torque": "effort"}
@@ -223,7 +223,3 @@ def read_topic_spec(path: str | os.PathLike[str] | None) -> TopicSpec:
         return TopicSpec()
     p = Path(path)
     return replace(parse_topic_spec(read_toml(p, ConfigError), str(p)), source=p)
-
-
-#: Field names of the spec (for tools that list or override them).
-FIELDS = tuple(f.name for f in fields(TopicSpec))
