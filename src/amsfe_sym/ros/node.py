@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from amsfe_sym.core.interrupts import DeferredSignals
 from amsfe_sym.errors import AmsfeError
 from amsfe_sym.ros.live import HoldKind, LiveLoop, TickOut
 from amsfe_sym.ros.middleware import (
@@ -406,16 +407,19 @@ def run_node(
         ex.add_node(node)
         gc.collect()
         gc.freeze()  # the startup's objects (rclpy, numpy, the library): never rescanned
-        while ctx.ok() and not down and (not holder or holder[-1].stop is None):
-            ex.spin_once(timeout_sec=0.05)
-            state = holder[-1] if holder else None
-            last = None if state is None or not state.active else state.last_rx
-            if state and last is not None and time.monotonic() - last > options.encoder_timeout:
-                state.stop = _Stop(
-                    f"hold: no encoder sample on {state.spec.encoders} for "
-                    f"{options.encoder_timeout:g} s (last tick {state.live.k})",
-                    EXIT_HOLD,
-                )
+        wait = options.encoder_timeout  # signals raised between spins, not inside rclpy's C++
+        with DeferredSignals() as signals:
+            while ctx.ok() and not down and (not holder or holder[-1].stop is None):
+                ex.spin_once(timeout_sec=0.05)
+                signals.check()
+                state = holder[-1] if holder else None
+                last = None if state is None or not state.active else state.last_rx
+                if state and last is not None and time.monotonic() - last > wait:
+                    state.stop = _Stop(
+                        f"hold: no encoder sample on {state.spec.encoders} for {wait:g} s "
+                        f"(last tick {state.live.k})",
+                        EXIT_HOLD,
+                    )
         state = holder[-1] if holder else None
         if state is None:  # a managed node shut down before it was configured
             say("node: shut down before it was configured")

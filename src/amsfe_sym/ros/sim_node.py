@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from amsfe_sym.core.interrupts import DeferredSignals
 from amsfe_sym.errors import RosError, describe
 from amsfe_sym.ros.arm import SimArm
 from amsfe_sym.ros.middleware import (
@@ -165,53 +166,57 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         u = np.zeros(n)
         late = stale = 0
         t0 = time.perf_counter()
-        for k in range(arm.K):
-            s = arm.sense()
-            ns = k * T_ns
-            pub_clock.publish(m.clock(ns))
-            pub_truth.publish(m.float64_array(s.x_true))
-            for fr in s.frames:
-                pub_cam.publish(m.point_stamped(fr.exposure_step * T_ns, fr.z[0], fr.z[1]))
-            if options.lockstep and s.frames and not _acked(pub_cam, options.command_timeout):
-                node.get_logger().warning(
-                    f"tick {k}: a camera frame not acknowledged within "
-                    f"{options.command_timeout:g} s: the node may fuse it a tick late"
-                )
-            sent_at[k] = time.time_ns()
-            pub_enc.publish(m.joint_state(ns, names, s.z[:n], s.z[n:]))
-            if k and k % round(1.0 / lib.T) == 0:
-                print(f"sim-node: t = {k * lib.T:.1f} s", flush=True)
-            if options.lockstep or k == 0:  # free running starts on the first command
-                deadline = time.monotonic() + options.command_timeout
-                while len(commands) <= k:
-                    left = deadline - time.monotonic()
-                    if left <= 0:
-                        raise RosError(
-                            describe(
-                                f"sim-node tick {k} (t = {k * lib.T:.3f} s)",
-                                f"its command on {spec.commands}",
-                                f"none within {options.command_timeout:g} s",
-                                "start `amsfe node SCENARIO --controller amsfe` on the same "
-                                "ROS_DOMAIN_ID, or run without --lockstep",
+        with DeferredSignals() as signals:  # Ctrl-C / SIGTERM raised here, not in rclpy's C++
+            for k in range(arm.K):
+                s = arm.sense()
+                ns = k * T_ns
+                pub_clock.publish(m.clock(ns))
+                pub_truth.publish(m.float64_array(s.x_true))
+                for fr in s.frames:
+                    pub_cam.publish(m.point_stamped(fr.exposure_step * T_ns, fr.z[0], fr.z[1]))
+                if options.lockstep and s.frames and not _acked(pub_cam, options.command_timeout):
+                    node.get_logger().warning(
+                        f"tick {k}: a camera frame not acknowledged within "
+                        f"{options.command_timeout:g} s: the node may fuse it a tick late"
+                    )
+                sent_at[k] = time.time_ns()
+                pub_enc.publish(m.joint_state(ns, names, s.z[:n], s.z[n:]))
+                if k and k % round(1.0 / lib.T) == 0:
+                    print(f"sim-node: t = {k * lib.T:.1f} s", flush=True)
+                if options.lockstep or k == 0:  # free running starts on the first command
+                    deadline = time.monotonic() + options.command_timeout
+                    while len(commands) <= k:
+                        left = deadline - time.monotonic()
+                        if left <= 0:
+                            raise RosError(
+                                describe(
+                                    f"sim-node tick {k} (t = {k * lib.T:.3f} s)",
+                                    f"its command on {spec.commands}",
+                                    f"none within {options.command_timeout:g} s",
+                                    "start `amsfe node SCENARIO --controller amsfe` on the same "
+                                    "ROS_DOMAIN_ID, or run without --lockstep",
+                                )
                             )
-                        )
-                    ex.spin_once(timeout_sec=min(left, 0.05))
-                u = commands[k]
-                t0 = time.perf_counter() - lib.T / options.rate if k == 0 else t0
-            else:
-                before = len(commands)
-                end = t0 + (k + 1) * lib.T / options.rate
-                if time.perf_counter() > end:
-                    late += 1
-                while (left := end - time.perf_counter()) > 0:
-                    ex.spin_once(timeout_sec=left)
-                ex.spin_once(timeout_sec=0.0)
-                stale += int(len(commands) == before)
-                if commands:
-                    u = commands[-1]
-            pub_eff.publish(m.joint_state(ns, names, effort=u))
-            if k + 1 < arm.K:
-                arm.advance(u)
+                        ex.spin_once(timeout_sec=min(left, 0.05))
+                        signals.check()
+                    u = commands[k]
+                    t0 = time.perf_counter() - lib.T / options.rate if k == 0 else t0
+                else:
+                    before = len(commands)
+                    end = t0 + (k + 1) * lib.T / options.rate
+                    if time.perf_counter() > end:
+                        late += 1
+                    while (left := end - time.perf_counter()) > 0:
+                        ex.spin_once(timeout_sec=left)
+                        signals.check()
+                    ex.spin_once(timeout_sec=0.0)
+                    signals.check()
+                    stale += int(len(commands) == before)
+                    if commands:
+                        u = commands[-1]
+                pub_eff.publish(m.joint_state(ns, names, effort=u))
+                if k + 1 < arm.K:
+                    arm.advance(u)
         wall = time.perf_counter() - t0
         _acked(pub_eff, 1.0)
         ex.spin_once(timeout_sec=0.05)  # the last tick's estimate
