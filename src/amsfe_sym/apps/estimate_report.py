@@ -93,10 +93,6 @@ def nis_report(run: EstimateRun) -> dict[str, Any]:
     frames = _frame_nis(est)
     if frames is not None:
         out["camera"] = _nis_stats(frames[1], 2)
-    for what, r in out.items():
-        advice = nis_advice(what, r, run.scenario, log.effort_kind)
-        if advice:
-            r["advice"] = advice
     return out
 
 
@@ -150,7 +146,7 @@ def summary(run: EstimateRun) -> dict[str, Any]:
         "log_period_s": _finite(log.period_s),
         "clock_offset_s": _finite(log.clock.median),
         "clock_offset_spread_s": _finite(log.clock.spread),
-        "nis": nis_report(run),
+        "nis": _with_advice(nis_report(run), run),
         "encoder_noise_from_log": _noise_dict(run.noise),
         "read_s": round(run.read_s, 4),
         "estimate_s": round(run.estimate_s, 4),
@@ -167,6 +163,16 @@ def summary(run: EstimateRun) -> dict[str, Any]:
         out["nees_dof"] = int(est.x_hat.shape[1])
     out["provenance"] = provenance()
     return out
+
+
+def _with_advice(nis: dict[str, Any], run: EstimateRun) -> dict[str, Any]:
+    """Each NIS channel of :func:`nis_report` with its ``advice`` (:func:`nis_advice`)
+    where its mean is outside the band."""
+    for what, r in nis.items():
+        advice = nis_advice(what, r, run.scenario, run.log.effort_kind)
+        if advice:
+            r["advice"] = advice
+    return nis
 
 
 def _noise_dict(noise: EncoderNoise | None) -> dict[str, Any] | None:
