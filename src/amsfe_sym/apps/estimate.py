@@ -85,9 +85,9 @@ class EstimateOptions:
 
 def default_scenario(robot: str) -> Scenario:
     """The settings ``amsfe estimate LOG --robot ROBOT`` runs with: the scenario defaults
-    (``[filter]``: process noise 0.1 N m, :data:`ROBOT_TORQUE_STD` and the encoder noise
-    measured from the log once it is read (:func:`~amsfe_sym.apps.estimate_filter.
-    filter_for_log`), buffer 1000 steps; ``[encoders]`` and
+    (``[filter]``: process noise 0.1 N m, :data:`ROBOT_TORQUE_STD` once the log is read,
+    then the log spec's ``[filter]``: :func:`~amsfe_sym.apps.estimate_filter.filter_for_log`;
+    buffer 1000 steps; ``[encoders]`` and
     ``[camera]``: the sensor noise the filter's R is built from; docs/scenarios.md), the
     ``oosm`` estimator, and the estimate's start replaced by the log's first sample
     (:func:`_start_from_log`).  No plant or trajectory is used."""
