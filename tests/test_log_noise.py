@@ -292,6 +292,25 @@ def test_estimate_with_a_filter_table(
     assert ("advice" in nis) == (not lo <= nis["mean"] <= hi)
 
 
+def test_a_pessimistic_filter_gets_the_advice(
+    quiet_log: tuple[Path, RunResult], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """R 1 rad, 10 rad/s on a log with 1e-5 rad, 5e-4 rad/s: the mean NIS is below its band
+    and the printout and summary.json say so, with the log's noise and the "log" keys."""
+    log, _ = quiet_log
+    spec = tmp_path / "spec.toml"
+    spec.write_text(
+        '[effort]\nkind = "applied"\n[filter]\nencoder_q_std = 1\nencoder_qd_std = 10\n'
+    )
+    out = tmp_path / "est"
+    args = ["estimate", str(log), "--robot", "paper_2link", "--log-spec", str(spec)]
+    assert main([*args, "--out", str(out), "--no-plots"]) == 0
+    printed = capsys.readouterr().out
+    advice = json.loads((out / "summary.json").read_text())["nis"]["encoders"]["advice"]
+    assert "pessimistic" in advice and 'encoder_q_std = "log"' in advice
+    assert f"    {advice}" in printed.splitlines()
+
+
 def test_a_bad_filter_key_is_refused_before_reading(
     quiet_log: tuple[Path, RunResult], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -332,3 +351,17 @@ def test_a_long_log_is_measured_on_blocks() -> None:
         assert got == pytest.approx(every, rel=0.05)
     assert short.q_std == pytest.approx(1e-4, rel=0.05)
     assert short.qd_std == pytest.approx(1e-3, rel=0.05)
+
+
+def test_the_advice_names_the_measured_noise_when_r_is_off() -> None:
+    """With the log's noise 500x below R the pessimistic advice adds it and the "log" keys;
+    with R at the log's noise it does not; optimistic with R 10x below the noise: added."""
+    sc = default_scenario("paper_2link")  # R 1e-3 rad, 1e-2 rad/s
+    quiet = encoder_noise(_moving_z(4000, 2, 2e-6, 6e-4), 2)
+    low = nis_advice("encoders", _stats(0.16, 4), sc, "applied", quiet)
+    assert low is not None and 'encoder_q_std = "log"' in low and f"q {quiet.q_std:.1e} rad" in low
+    loud = encoder_noise(_moving_z(4000, 2, 1e-3, 1e-2), 2)
+    assert "the log's" not in (nis_advice("encoders", _stats(0.16, 4), sc, "applied", loud) or "")
+    noisy = encoder_noise(_moving_z(4000, 2, 1e-2, 1e-1), 2)
+    high = nis_advice("encoders", _stats(900.0, 4), sc, "applied", noisy)
+    assert high is not None and "optimistic" in high and "the log's encoder noise" in high

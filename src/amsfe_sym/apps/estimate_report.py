@@ -96,19 +96,28 @@ def nis_report(run: EstimateRun) -> dict[str, Any]:
     return out
 
 
-def nis_advice(what: str, r: dict[str, Any], sc: Scenario, effort_kind: str) -> str | None:
+def nis_advice(
+    what: str,
+    r: dict[str, Any],
+    sc: Scenario,
+    effort_kind: str,
+    noise: EncoderNoise | None = None,
+) -> str | None:
     """One line when the mean NIS of channel ``what`` (``encoders``, ``camera``; ``r`` from
     :func:`nis_report`) is outside its 95 % band: which way the filter is off and which R
     and Q keys to change (the log spec's or a scenario's ``[filter]``, ``[effort]``), with
-    their present values; None inside the band or without samples."""
+    their present values; for the encoders, when the encoder noise measured from the log
+    (``noise``) is more than 2x from the filter's R the way the advice goes, that noise and
+    the keys that use it.  None inside the band or without samples."""
     mean, (lo, hi) = r.get("mean"), r["band_95"]
     if mean is None or lo <= mean <= hi:
         return None
     f = sc.filter
     q_keys = f"link_torque_std, motor_torque_std (now {f.link_torque_std:g}, "
     q_keys += f"{f.motor_torque_std:g} N m)"
-    if effort_kind != "applied":
-        q_keys += "; [effort] input_rate_std" if effort_kind == "none" else ""
+    if effort_kind == "none":
+        q_keys += "; [effort] input_rate_std"
+    measured = ""
     if what == "camera":
         px = f.camera_pixel_std or sc.camera.pixel_std
         r_keys = f"[filter] camera_pixel_std (now {px:g} px)"
@@ -118,15 +127,30 @@ def nis_advice(what: str, r: dict[str, Any], sc: Scenario, effort_kind: str) -> 
         r_keys = f"[filter] encoder_q_std, encoder_qd_std (now {q_std:.2g} rad, {qd_std:.2g} rad/s)"
         if effort_kind == "joint_torque":
             r_keys += ", [effort] joint_torque_std"
+        measured = _measured_hint(noise, (q_std, qd_std), lower=mean < lo)
     if mean < lo:
         return (
             f"NIS {what} mean {mean:.3g} below its band: the filter is pessimistic (it claims "
-            f"more noise than the data show): lower R {r_keys} or Q [filter] {q_keys}"
+            f"more noise than the data show): lower R {r_keys} or Q [filter] {q_keys}" + measured
         )
     return (
         f"NIS {what} mean {mean:.3g} above its band: the filter is optimistic (the data "
         f"vary more than it allows, or the model misses something): raise Q [filter] "
-        f"{q_keys} or R {r_keys}"
+        f"{q_keys} or R {r_keys}" + measured
+    )
+
+
+def _measured_hint(noise: EncoderNoise | None, r: tuple[float, float], lower: bool) -> str:
+    """``; the log's encoder noise ...`` when a measured median is more than 2x below
+    (``lower``) or above the filter's R [rad, rad/s], else empty."""
+    if noise is None or noise.q_std is None or noise.qd_std is None:
+        return ""
+    ratios = (r[0] / noise.q_std, r[1] / noise.qd_std) if noise.q_std and noise.qd_std else ()
+    if not any((x > 2.0) if lower else (x < 0.5) for x in ratios):
+        return ""
+    return (
+        f"; the log's encoder noise is q {noise.q_std:.1e} rad, qd {noise.qd_std:.1e} rad/s: "
+        'encoder_q_std = "log", encoder_qd_std = "log" use it'
     )
 
 
@@ -169,7 +193,7 @@ def _with_advice(nis: dict[str, Any], run: EstimateRun) -> dict[str, Any]:
     """Each NIS channel of :func:`nis_report` with its ``advice`` (:func:`nis_advice`)
     where its mean is outside the band."""
     for what, r in nis.items():
-        advice = nis_advice(what, r, run.scenario, run.log.effort_kind)
+        advice = nis_advice(what, r, run.scenario, run.log.effort_kind, run.noise)
         if advice:
             r["advice"] = advice
     return nis
