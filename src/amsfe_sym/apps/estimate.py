@@ -321,7 +321,10 @@ def add_arguments(e: argparse.ArgumentParser) -> None:
     )
     e.add_argument("--scenario", default=None, help="robot + filter settings, to tune the filter")
     e.add_argument(
-        "--log-spec", default=None, metavar="FILE", help="topics, joint names, effort kind (TOML)"
+        "--log-spec",
+        default=None,
+        metavar="FILE",
+        help="topics, joint names, effort kind, the filter's R and Q ([filter]) (TOML)",
     )
     e.add_argument("--estimator", default=None, help="estimator name (default the scenario's)")
     e.add_argument(
