@@ -113,11 +113,38 @@ def _balance(torque: Torque, Ks: FloatArray, qm: FloatArray) -> Torque:
     return r
 
 
+def _newton(r: Torque, q0: FloatArray, settle_shift: float | None = None) -> FloatArray | None:
+    """A root of ``r`` from ``q0`` (steps clipped to :data:`MAX_STEP`), or None.
+
+    ``settle_shift``: the modified Newton of a minimization instead: the symmetric part of
+    the jacobian shifted until its smallest eigenvalue is ``settle_shift`` > 0, so every step
+    goes down the arm's potential (``r`` is its gradient when the rates are zero) and the
+    iteration settles on a stable balance, as a released link would."""
+    q = np.array(q0, dtype=float)
+    for _ in range(MAX_ITER):
+        res = r(q)
+        if not np.all(np.isfinite(res)):
+            return None
+        if np.max(np.abs(res)) < BALANCE_TOL:
+            return q
+        H = _jacobian(r, q)
+        if settle_shift is not None:
+            lam = float(np.min(np.linalg.eigvalsh(0.5 * (H + H.T))))
+            H = H + max(0.0, settle_shift - lam) * np.eye(q.size)
+        try:
+            dq = np.linalg.solve(H, -res)
+        except np.linalg.LinAlgError:
+            return None
+        q = q + dq * min(1.0, MAX_STEP / max(np.max(np.abs(dq)), 1e-300))
+    return None
+
+
 def balance_candidates(
     torque: Torque, Ks: FloatArray, qm: FloatArray, seeds: Sequence[FloatArray]
 ) -> list[FloatArray]:
-    """The distinct solutions of ``tau(q) = Ks (qm - q)`` that Newton reaches from ``seeds``
-    (steps clipped to :data:`MAX_STEP` per joint), in the order of their seeds.
+    """The distinct solutions of ``tau(q) = Ks (qm - q)`` that Newton reaches from ``seeds``,
+    then the stable one a settling iteration reaches from the first seed (:func:`_newton`),
+    in that order.
 
     Args:
         torque: ``tau(q)`` [N m] (gravity, and Coriolis at the measured rates).
@@ -126,22 +153,14 @@ def balance_candidates(
         seeds: Where Newton starts [rad].
     """
     r = _balance(torque, Ks, qm)
+    shift = 0.1 * float(np.min(Ks))
+    tries = [_newton(r, s) for s in seeds]
+    if seeds:
+        tries.append(_newton(r, seeds[0], settle_shift=shift))
     found: list[FloatArray] = []
-    for seed in seeds:
-        q = np.array(seed, dtype=float)
-        for _ in range(MAX_ITER):
-            res = r(q)
-            if not np.all(np.isfinite(res)):
-                break
-            if np.max(np.abs(res)) < BALANCE_TOL:
-                if not any(np.max(np.abs(q - c)) < 1e-6 for c in found):
-                    found.append(q)
-                break
-            try:
-                dq = np.linalg.solve(_jacobian(r, q), -res)
-            except np.linalg.LinAlgError:
-                break
-            q = q + dq * min(1.0, MAX_STEP / max(np.max(np.abs(dq)), 1e-300))
+    for q in tries:
+        if q is not None and not any(np.max(np.abs(q - c)) < 1e-6 for c in found):
+            found.append(q)
     return found
 
 
