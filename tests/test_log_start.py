@@ -16,10 +16,12 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from scipy.optimize import brentq
 
 import amsfe_sym.apps.estimate as estimate_app
+from amsfe_sym.apps.cli import main
 from amsfe_sym.apps.estimate import EstimateOptions, estimate_command
 from amsfe_sym.apps.estimate_start import log_link_start
 from amsfe_sym.codegen import library_for
@@ -166,23 +168,32 @@ def _estimate(bag: Path, out: Path, start_at: np.ndarray | None = None):
         estimate_app._link_start = orig
 
 
-def test_the_none_bag_is_tracked_from_the_springs_balance(arm_bag, tmp_path):
+def test_the_none_bag_is_tracked_from_the_springs_balance(arm_bag, tmp_path, capsys):
     """Started at the springs' balance (not at the motor angles, 1.45 rad off), the replay
     estimator fuses every camera frame, keeps a positive definite P to the last tick, and
     from the first frame's delivery on its link angles are those of the same filter started
     at the true state to within half its own 1-sigma: the start costs nothing once the first
     frame is in.  The link error against the truth is inside 4.5 of the filter's own sigma
     from the second frame on (a consistent filter crosses 4.5 sigma with probability 6.8e-6
-    per sample: below 5 % over the 2 n K samples by the union bound)."""
+    per sample: below 5 % over the 2 n K samples by the union bound).  The command says
+    where it started."""
     res, bag = arm_bag
     n = res.lib.n
     q_true = res.x_true[:, :n]
-    got = _estimate(bag, tmp_path / "balance")
+    out = tmp_path / "balance"
+    args = ["estimate", str(bag), "--robot", "paper_2link", "--estimator", "replay"]
+    code = main([*args, "--out", str(out), "--no-plots"])
+    printed = capsys.readouterr().out
+    assert code == 0
+    assert "start: link angles from the springs' balance" in printed, printed
+    assert "chosen by the first camera frame" in printed, printed
     ref = _estimate(bag, tmp_path / "truth", start_at=q_true[0])
-    s = json.loads((tmp_path / "balance" / "summary.json").read_text())
-    frames = got.log.frames
+    s = json.loads((out / "summary.json").read_text())
+    est = pd.read_parquet(out / "estimates.parquet")
+    frames = ref.log.frames
     K = q_true.shape[0]
-    x, P = got.estimate.x_hat, got.estimate.P_diag
+    x = est[[f"est_{i}" for i in range(res.lib.N)]].to_numpy()
+    P = est[[f"var_{i}" for i in range(res.lib.N)]].to_numpy()
     assert x.shape[0] == K and np.isfinite(x).all() and (P[-1] > 0).all()
     assert s["frames_fused"] == len(frames) == len(res.frames), s["frames_fused"]
     # the start: within its own 1-sigma of the truth (was 1.45 rad = 3 sigma of P(0|0))

@@ -27,7 +27,7 @@ from amsfe_sym.apps.estimate_report import (
     print_summary,
     summary,
 )
-from amsfe_sym.apps.estimate_start import LogLinkStart, log_link_start
+from amsfe_sym.apps.estimate_start import LogLinkStart, scenario_start
 from amsfe_sym.core.folders import write_folder
 from amsfe_sym.core.jsonfile import write_json
 from amsfe_sym.core.outputs import check_output
@@ -123,26 +123,10 @@ def default_scenario(robot: str) -> Scenario:
 
 
 def _link_start(sc: Scenario, log: RobotLog, lib: Any, effort: Any) -> LogLinkStart:
-    """The link angles of the log's first sample by its effort kind
-    (:func:`~amsfe_sym.apps.estimate_start.log_link_start`; docs/logs.md, "Where the estimate
-    starts"): the torque a balance misses is :data:`ROBOT_TORQUE_STD`, the motor angles'
-    1-sigma ``[estimate0] std qm``, the pixel's the filter's."""
-    e0, f = sc.estimate0, sc.filter
-    theta = np.array(e0.theta, dtype=float) if e0.theta else lib.theta_initial
-    cam = sc.camera
-    rounding = 1 / 12 if cam.round_to_pixel else 0.0  # as the filter's R (signals.camera)
-    px = f.camera_pixel_std
-    pixel_var = px**2 if px else cam.pixel_std**2 + rounding
-    return log_link_start(
-        log,
-        lib,
-        theta,
-        positions=effort.positions,
-        scale=effort.scale,
-        tau_std=ROBOT_TORQUE_STD,
-        qm_std=float(dict(e0.std).get("qm", 0.01)),
-        pixel_var=pixel_var,
-    )
+    """The link angles of the log's first sample by its effort kind, a balance missing
+    :data:`ROBOT_TORQUE_STD` of torque (:func:`~amsfe_sym.apps.estimate_start.scenario_start`;
+    docs/effort.md, "Where the estimate starts")."""
+    return scenario_start(sc, log, lib, effort, ROBOT_TORQUE_STD)
 
 
 def _start_from_log(

@@ -27,10 +27,12 @@ from numpy.typing import NDArray
 from amsfe_sym.estimation.static_start import FirstFrame, static_link_start
 
 if TYPE_CHECKING:
+    from amsfe_sym.estimation.effort import EffortSpec
     from amsfe_sym.logs.read import RobotLog
     from amsfe_sym.runtime.library import ModelLibrary
+    from amsfe_sym.scenario import Scenario
 
-__all__ = ["LogLinkStart", "log_link_start"]
+__all__ = ["LogLinkStart", "log_link_start", "scenario_start"]
 
 FloatArray = NDArray[np.float64]
 
@@ -95,6 +97,30 @@ def log_link_start(
     how = f"the springs' balance at the first sample ({len(start.candidates)} found"
     how += ", chosen by the first camera frame)" if start.frame_nis else ")"
     return LogLinkStart(start.q, float(np.max(start.std)), how)
+
+
+def scenario_start(
+    sc: Scenario, log: RobotLog, lib: ModelLibrary, effort: EffortSpec, tau_std: float
+) -> LogLinkStart:
+    """:func:`log_link_start` with the scenario's numbers: theta ``[estimate0] theta`` (or
+    the robot's initial), the motor angles' 1-sigma ``[estimate0] std qm``, the pixel
+    variance of the filter's camera R (``[filter] camera_pixel_std``, else ``[camera]
+    pixel_std`` with the rounding's 1/12 px^2), the effort's ``positions`` and ``scale``;
+    ``tau_std`` [N m] the torque a balance misses."""
+    e0, cam = sc.estimate0, sc.camera
+    theta = np.array(e0.theta, dtype=float) if e0.theta else lib.theta_initial
+    rounding = 1 / 12 if cam.round_to_pixel else 0.0  # as the filter's R (signals.camera)
+    px = sc.filter.camera_pixel_std
+    return log_link_start(
+        log,
+        lib,
+        theta,
+        positions=effort.positions,
+        scale=effort.scale,
+        tau_std=tau_std,
+        qm_std=float(dict(e0.std).get("qm", 0.01)),
+        pixel_var=px**2 if px else cam.pixel_std**2 + rounding,
+    )
 
 
 def _first_frame(
