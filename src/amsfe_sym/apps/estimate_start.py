@@ -126,13 +126,15 @@ def scenario_start(
 def _first_frame(
     log: RobotLog, lib: ModelLibrary, theta: FloatArray, pixel_var: float
 ) -> FirstFrame | None:
-    """The log's earliest exposed camera frame with an encoder sample at its exposure, or
-    None."""
+    """The log's earliest camera frame exposed within the robot's first camera period (l
+    steps: later, the deflection held since the start would be a guess) with an encoder
+    sample at its exposure, or None."""
     n, K = lib.n, log.z.shape[0]
+    last = min(K - 1, max(lib.manifest.camera.period, 1))
     usable = [
         f
         for f in log.frames
-        if 0 <= f.exposure_step < K and np.isfinite(log.z[f.exposure_step]).all()
+        if 0 <= f.exposure_step <= last and np.isfinite(log.z[f.exposure_step]).all()
     ]
     if not usable:
         return None
