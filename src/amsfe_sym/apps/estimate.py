@@ -27,6 +27,7 @@ from amsfe_sym.apps.estimate_report import (
     print_summary,
     summary,
 )
+from amsfe_sym.apps.estimate_start import LogLinkStart, scenario_start
 from amsfe_sym.core.folders import write_folder
 from amsfe_sym.core.jsonfile import write_json
 from amsfe_sym.core.outputs import check_output
@@ -121,9 +122,19 @@ def default_scenario(robot: str) -> Scenario:
     return parse_scenario(data, Path(f"--robot {robot}"))
 
 
-def _start_from_log(sc: Scenario, log: RobotLog, hold_theta: bool = False) -> Scenario:
-    """``[estimate0]`` from the log's first encoder sample: link angles = the measured
-    positions, link rates = the measured velocities (motor states: the sample itself).
+def _link_start(sc: Scenario, log: RobotLog, lib: Any, effort: Any) -> LogLinkStart:
+    """The link angles of the log's first sample by its effort kind, a balance missing
+    :data:`ROBOT_TORQUE_STD` of torque (:func:`~amsfe_sym.apps.estimate_start.scenario_start`;
+    docs/effort.md, "Where the estimate starts")."""
+    return scenario_start(sc, log, lib, effort, ROBOT_TORQUE_STD)
+
+
+def _start_from_log(
+    sc: Scenario, log: RobotLog, start: LogLinkStart, hold_theta: bool = False
+) -> Scenario:
+    """``[estimate0]`` from the log's first encoder sample: link angles ``start`` (by the
+    effort's kind, :func:`_link_start`; its 1-sigma when it has one), link rates = the
+    measured velocities (motor states: the sample itself).
 
     The process torque (``[filter] link_torque_std``, ``motor_torque_std``) is
     :data:`ROBOT_TORQUE_STD` when the applied torque is not logged (effort kind
@@ -141,7 +152,9 @@ def _start_from_log(sc: Scenario, log: RobotLog, hold_theta: bool = False) -> Sc
     every estimator diverged (docs/logs.md, "A real Panda recording, worked")."""
     n = log.u.shape[1]
     z0 = log.z[0]
-    e0 = replace(sc.estimate0, q=tuple(map(float, z0[:n])), qd=tuple(map(float, z0[n:])))
+    e0 = replace(sc.estimate0, q=tuple(map(float, start.q)), qd=tuple(map(float, z0[n:])))
+    if start.std is not None:
+        e0 = replace(e0, std={**dict(e0.std), "q": start.std})
     f = sc.filter
     if hold_theta or log.effort_kind != "applied":
         f = replace(f, link_torque_std=ROBOT_TORQUE_STD, motor_torque_std=ROBOT_TORQUE_STD)
@@ -269,9 +282,6 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
             print(f"  the log's period {exc.period:g} s: library {derived.name} (cached)")
         log = read_log(log_path, spec, joints, derived.model.T, N, plan, robot=name)
     log.config = config
-    if options.scenario is None and (options.robot is not None or config is None):
-        # --robot: the defaults, started from the log (theta held at a slower period)
-        sc = _start_from_log(sc, log, hold_theta=derived is not None)
     read_s = time.perf_counter() - t0
     if options.verbose:
         c = log.clock
@@ -282,7 +292,14 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
     from amsfe_sym.codegen import library_for
 
     lib = library_for(sc, robot=derived)
-    est, feed = _estimator(sc, lib, log, options, replace(effort, positions=spec.positions))
+    effort = replace(effort, positions=spec.positions)
+    if options.scenario is None and (options.robot is not None or config is None):
+        # --robot: the defaults, started from the log (theta held at a slower period)
+        start = _link_start(sc, log, lib, effort)
+        sc = _start_from_log(sc, log, start, hold_theta=derived is not None)
+        if options.verbose:
+            print(f"  start: link angles from {start.how}")
+    est, feed = _estimator(sc, lib, log, options, effort)
     t1 = time.perf_counter()
     from amsfe_sym.logs.replay import estimate_log
 
