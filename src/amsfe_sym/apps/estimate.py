@@ -28,6 +28,7 @@ from amsfe_sym.apps.estimate_report import (
     print_summary,
     summary,
 )
+from amsfe_sym.apps.estimate_start import LogLinkStart, scenario_start
 from amsfe_sym.core.folders import write_folder
 from amsfe_sym.core.jsonfile import write_json
 from amsfe_sym.core.outputs import check_output
@@ -112,10 +113,20 @@ def default_scenario(robot: str) -> Scenario:
     return parse_scenario(data, Path(f"--robot {robot}"))
 
 
-def _start_from_log(sc: Scenario, log: RobotLog, hold_theta: bool = False) -> Scenario:
-    """``[estimate0]`` from the log's first encoder sample: link angles = the measured
-    positions, link rates = the measured velocities (motor states: the sample itself).
-    The filter's R and Q: :func:`~amsfe_sym.apps.estimate_filter.filter_for_log`.
+def _link_start(sc: Scenario, log: RobotLog, lib: Any, effort: Any) -> LogLinkStart:
+    """The link angles of the log's first sample by its effort kind, a balance missing
+    :data:`ROBOT_TORQUE_STD` of torque (:func:`~amsfe_sym.apps.estimate_start.scenario_start`;
+    docs/effort.md, "Where the estimate starts")."""
+    return scenario_start(sc, log, lib, effort, ROBOT_TORQUE_STD)
+
+
+def _start_from_log(
+    sc: Scenario, log: RobotLog, start: LogLinkStart, hold_theta: bool = False
+) -> Scenario:
+    """``[estimate0]`` from the log's first encoder sample: link angles ``start`` (by the
+    effort's kind, :func:`_link_start`; its 1-sigma when it has one), link rates = the
+    measured velocities (motor states: the sample itself).  The filter's R and Q:
+    :func:`~amsfe_sym.apps.estimate_filter.filter_for_log`.
 
     ``hold_theta`` (a log read at a period longer than the robot's T, its library built with
     model substeps): theta is held at the spec's initial value (1-sigma
@@ -127,7 +138,9 @@ def _start_from_log(sc: Scenario, log: RobotLog, hold_theta: bool = False) -> Sc
     every estimator diverged (docs/logs.md, "A real Panda recording, worked")."""
     n = log.u.shape[1]
     z0 = log.z[0]
-    e0 = replace(sc.estimate0, q=tuple(map(float, z0[:n])), qd=tuple(map(float, z0[n:])))
+    e0 = replace(sc.estimate0, q=tuple(map(float, start.q)), qd=tuple(map(float, z0[n:])))
+    if start.std is not None:
+        e0 = replace(e0, std={**dict(e0.std), "q": start.std})
     if hold_theta:
         e0 = replace(e0, std={**dict(e0.std), "theta": HELD_THETA_STD})
     return replace(sc, estimate0=e0)
@@ -252,9 +265,6 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
         log = read_log(log_path, spec, joints, derived.model.T, N, plan, robot=name)
     log.config = config
     robot_defaults = options.scenario is None and (options.robot is not None or config is None)
-    if robot_defaults:
-        # --robot: the defaults, started from the log (theta held at a slower period)
-        sc = _start_from_log(sc, log, hold_theta=derived is not None)
     settled = filter_for_log(
         sc, log, spec, robot_defaults=robot_defaults, hold_theta=derived is not None
     )
@@ -271,7 +281,14 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
     from amsfe_sym.codegen import library_for
 
     lib = library_for(sc, robot=derived)
-    est, feed = _estimator(sc, lib, log, options, replace(effort, positions=spec.positions))
+    effort = replace(effort, positions=spec.positions)
+    if robot_defaults:
+        # --robot: the defaults, started from the log (theta held at a slower period)
+        start = _link_start(sc, log, lib, effort)
+        sc = _start_from_log(sc, log, start, hold_theta=derived is not None)
+        if options.verbose:
+            print(f"  start: link angles from {start.how}")
+    est, feed = _estimator(sc, lib, log, options, effort)
     t1 = time.perf_counter()
     from amsfe_sym.logs.replay import estimate_log
 
