@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["ORDERS", "ChannelNoise", "EncoderNoise", "channel_noise", "encoder_noise"]
+__all__ = ["MAX_ROWS", "ORDERS", "ChannelNoise", "EncoderNoise", "channel_noise", "encoder_noise"]
 
 #: The difference orders tried: 1 (white noise on a channel at rest) to 6 (a moving arm
 #: sampled at 30 Hz: a 0.5 Hz motion's 6th difference is (pi / 30)^6 = 1.3e-6 of its
