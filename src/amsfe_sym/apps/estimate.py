@@ -13,6 +13,7 @@ the robot's library is generated or loaded.
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -21,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from amsfe_sym.apps.estimate_report import (
+    CommandTiming,
     EstimateRun,
     figures,
     nis_report,
@@ -50,6 +52,7 @@ __all__ = [
     "from_args",
     "nis_report",
     "print_summary",
+    "process_age_s",
     "summary",
 ]
 
@@ -231,29 +234,36 @@ def _with_modes_fix(exc: LogRateError, robot: str) -> LogRateError:
     return LogRateError(f"{head}. Fix: {fix}, or record at the robot's rate", exc.period)
 
 
-def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> EstimateRun:
+def estimate_command(
+    log_path: Path, out: Path, options: EstimateOptions, startup_s: float | None = None
+) -> EstimateRun:
     """Estimate over ``log_path`` and write the run folder ``out``: ``estimates.parquet``,
     ``summary.json``, ``config.toml``, figures and ``estimates/`` (a rosbag2 in MCAP).
 
     Everything about the log (container, topics, types, joint names, rate, stamps) is
-    checked before the robot's library is generated or loaded.
+    checked before the robot's library is generated or loaded.  ``startup_s``: the
+    process's age [s] when the command started (:func:`process_age_s`), for the summary's
+    timing; None from Python.
 
     Raises:
         LogError: the log cannot be used (one line: what, found, fix).
         ConfigError, RunFolderError: bad settings, an existing ``out`` without ``force``, an
             ``out`` that is, holds or lies inside an input (the log), even with ``force``.
     """
+    clock = _Phases()
     inputs = [p for p in (log_path, options.scenario, options.log_spec) if p and Path(p).exists()]
     if log_path.is_file() and (log_path.parent / "metadata.yaml").is_file():
         inputs.append(log_path.parent)  # the .mcap of a bag folder: the folder is the log
     check_output(out, option="--out", force=options.force, inputs=inputs)
     spec = read_log_spec(options.log_spec)
     effort = _effort_options(spec, options.log_spec)  # checked before anything is read
-    t0 = time.perf_counter()
+    clock.lap("setup")
     topics = log_topics(log_path)
     config = read_config(log_path, spec, topics)
+    clock.lap("read")
     sc = _scenario(log_path, config, options)
     name, joints, T, N = _robot_of(sc.robot)
+    clock.lap("setup")
     plan = plan_log(log_path, spec, joints, topics)
     if options.verbose:
         for line in plan.lines():
@@ -262,35 +272,67 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
     try:
         log = read_log(log_path, spec, joints, T, N, plan, robot=name)
     except LogRateError as exc:  # the robot generated at the log's period, if it is cached
+        clock.lap("read")
         derived = _generated_at_period(sc.robot, exc.period)
         if derived is None:
             raise _with_modes_fix(exc, sc.robot) from None
         if options.verbose:
             print(f"  the log's period {exc.period:g} s: library {derived.name} (cached)")
+        clock.lap("library")
         log = read_log(log_path, spec, joints, derived.model.T, N, plan, robot=name)
     log.config = config
-    if options.scenario is None and (options.robot is not None or config is None):
-        # --robot: the defaults, started from the log (theta held at a slower period)
-        sc = _start_from_log(sc, log, hold_theta=derived is not None)
-    read_s = time.perf_counter() - t0
     if options.verbose:
         c = log.clock
         print(
             f"  clock: log time - header stamp = {c.median:+.6f} s (spread {c.spread:.2e} s); "
             "log times moved onto the stamp clock"
         )
+    clock.lap("read")
+    if options.scenario is None and (options.robot is not None or config is None):
+        # --robot: the defaults, started from the log (theta held at a slower period)
+        sc = _start_from_log(sc, log, hold_theta=derived is not None)
     from amsfe_sym.codegen import library_for
 
+    clock.lap("setup")
     lib = library_for(sc, robot=derived)
+    clock.lap("library")
     est, feed = _estimator(sc, lib, log, options, replace(effort, positions=spec.positions))
-    t1 = time.perf_counter()
     from amsfe_sym.logs.replay import estimate_log
 
+    clock.lap("setup")
     result = estimate_log(feed, est, states=lib.N)
-    estimate_s = time.perf_counter() - t1
-    run = EstimateRun(log, result, sc, out, read_s, estimate_s)
-    _write(run, lib.manifest.joints, options)
+    clock.lap("estimate")
+    run = EstimateRun(log, result, sc, out, clock.spent["read"], clock.spent["estimate"])
+    _write(run, lib.manifest.joints, options, clock, startup_s)
     return run
+
+
+class _Phases:
+    """Wall time [s] spent in each phase of the command, added up lap by lap
+    (:func:`time.perf_counter`)."""
+
+    def __init__(self) -> None:
+        self.start = self.last = time.perf_counter()
+        self.spent: dict[str, float] = {}
+
+    def lap(self, phase: str) -> float:
+        """Add the time since the last lap to ``phase``; the time since the start."""
+        now = time.perf_counter()
+        self.spent[phase] = self.spent.get(phase, 0.0) + now - self.last
+        self.last = now
+        return now - self.start
+
+
+def process_age_s() -> float | None:
+    """Seconds since this process started (Linux ``/proc/self/stat``, 10 ms resolution):
+    the interpreter's start, the imports and argument parsing before a command; None
+    where it cannot be read."""
+    try:
+        fields = Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()
+        started = int(fields[19]) / os.sysconf("SC_CLK_TCK")  # field 22: starttime
+        return max(time.clock_gettime(time.CLOCK_BOOTTIME) - started, 0.0)
+    except (OSError, ValueError, IndexError, AttributeError):
+        return None
 
 
 def _effort_options(spec: Any, path: str | None) -> Any:
@@ -352,6 +394,7 @@ def add_arguments(e: argparse.ArgumentParser) -> None:
 
 def from_args(args: argparse.Namespace) -> int:
     """``amsfe estimate LOG`` from its parsed options (:func:`add_arguments`)."""
+    startup_s = process_age_s()
     log = Path(args.log)
     out = Path(args.out) if args.out else default_out(log)
     opts = EstimateOptions(
@@ -364,16 +407,24 @@ def from_args(args: argparse.Namespace) -> int:
         robot=args.robot,
         verbose=True,
     )
-    print_summary(summary(estimate_command(log, out, opts)), out)
+    print_summary(summary(estimate_command(log, out, opts, startup_s)), out)
     return 0
 
 
-def _write(run: EstimateRun, joints: tuple[str, ...] | list[str], options: EstimateOptions) -> None:
-    import pandas as pd
-
+def _write(
+    run: EstimateRun,
+    joints: tuple[str, ...] | list[str],
+    options: EstimateOptions,
+    clock: _Phases | None = None,
+    startup_s: float | None = None,
+) -> None:
+    """The run folder; ``summary.json`` last, with the time the rest took (``clock``: the
+    command's phases so far, :attr:`EstimateRun.timing` is set from it)."""
     log, est = run.log, run.estimate
 
     def fill(tmp: Path) -> None:
+        import pyarrow.parquet as pq
+
         N = est.x_hat.shape[1]
         cols: dict[str, Any] = {"t": log.t}
         for i in range(N):
@@ -382,8 +433,7 @@ def _write(run: EstimateRun, joints: tuple[str, ...] | list[str], options: Estim
             cols[f"var_{i}"] = est.P_diag[:, i]
         if est.nees is not None:
             cols["nees"] = est.nees
-        pd.DataFrame(cols).to_parquet(tmp / "estimates.parquet")
-        write_json(tmp / "summary.json", summary(run))
+        pq.write_table(_arrow_table(cols), tmp / "estimates.parquet")
         (tmp / "config.toml").write_text(
             f"# the scenario amsfe estimate used on {log.path}\n"
             + dump_toml(run.scenario.to_dict())
@@ -396,8 +446,33 @@ def _write(run: EstimateRun, joints: tuple[str, ...] | list[str], options: Estim
         write_estimate_bag(tmp / "estimates", start, log.t, joints, est.x_hat, est.P_diag)
         if options.plots:
             figures(run, tmp)
+        if clock is not None:
+            wall = clock.lap("write")
+            p = clock.spent
+            run.timing = CommandTiming(
+                startup_s, p.get("setup", 0.0), p.get("library", 0.0), p["write"], wall
+            )
+        write_json(tmp / "summary.json", summary(run))
 
     write_folder(run.out, fill, replace=options.force)
+
+
+def _arrow_table(cols: dict[str, Any]) -> Any:
+    """float64 columns as a ``pyarrow`` table, NaN as null (what ``pandas``' ``to_parquet``
+    wrote: the same table, without its index metadata), built from the arrays' buffers:
+    ``pa.array`` and ``pa.table`` import ``pandas`` to test their input (0.4-0.6 s)."""
+    import pyarrow as pa
+
+    arrays = []
+    for v in cols.values():
+        a = np.ascontiguousarray(v, dtype=np.float64)
+        nan = np.isnan(a)
+        nulls = int(nan.sum())
+        valid = pa.py_buffer(np.packbits(~nan, bitorder="little")) if nulls else None
+        arrays.append(
+            pa.Array.from_buffers(pa.float64(), a.size, [valid, pa.py_buffer(a)], null_count=nulls)
+        )
+    return pa.Table.from_arrays(arrays, names=list(cols))
 
 
 def default_out(log_path: Path) -> Path:
