@@ -18,8 +18,16 @@ against ``rosbags``' bag reader + the reference decoding, CPU time.
 Peak RSS is measured in a fresh process per (log, path): ``before`` = read_log + per-tick,
 ``after`` = read_topics + grid + batch.
 
+``--command BEFORE AFTER`` (two source trees, each ``TREE:GENERATED_DIR``) times the command
+itself instead, ``amsfe estimate LOG --no-plots`` in a fresh process per run, the two trees
+interleaved (their order alternating by round), with a bare ``python -c pass`` per round:
+the process's wall time seen from outside, what the command printed (read + estimate) and,
+where the tree reports them, its phases (``summary.json`` ``timing``); medians and the
+before / after ratio (docs/logs.md, "Speed").
+
     .venv/bin/python tools/log_speed.py            # writes the logs into /tmp/amsfe-log-speed
     .venv/bin/python tools/log_speed.py --repeat 5 --out DIR
+    .venv/bin/python tools/log_speed.py --command OLD/src:OLD_GEN NEW/src:NEW_GEN --repeat 5
 """
 
 from __future__ import annotations
@@ -292,15 +300,97 @@ def ros1_bag(out: Path, count: int = 60_000) -> dict[str, float]:
     return {"messages": count, "mb": path.stat().st_size / 1e6, "bulk_cpu": bulk, "ref_cpu": ref}
 
 
+def _tree_env(tree: str) -> dict[str, str]:
+    """The environment of a ``TREE_SRC:GENERATED_DIR`` tree's processes."""
+    import os
+
+    src, _, gen = tree.partition(":")
+    return {**os.environ, "PYTHONPATH": src, "AMSFE_GENERATED_DIR": gen}
+
+
+def _outer(cmd: list[str], env: dict[str, str]) -> float:
+    t0 = time.perf_counter()
+    subprocess.run(cmd, env=env, check=True, stdout=subprocess.DEVNULL)
+    return time.perf_counter() - t0
+
+
+def command_runs(trees: list[str], bags: dict[str, Path], out: Path, repeat: int) -> None:
+    """``amsfe estimate LOG --no-plots`` of each tree in fresh processes, interleaved."""
+    import os
+
+    envs = [_tree_env(t) for t in trees]
+    load0 = os.getloadavg()
+    rows: dict[tuple[str, int], list[dict[str, Any]]] = {}
+    bare: list[float] = []
+    for r in range(repeat):
+        bare.append(_outer([sys.executable, "-c", "pass"], envs[0]))
+        for name, bag in bags.items():
+            order = range(len(trees)) if r % 2 == 0 else reversed(range(len(trees)))
+            for i in order:
+                folder = out / f"command-{i}"
+                cmd = [sys.executable, "-m", "amsfe_sym", "estimate", str(bag), "--out",
+                       str(folder), "--no-plots", "--force"]  # fmt: skip
+                wall = _outer(cmd, envs[i])
+                s = json.loads((folder / "summary.json").read_text())
+                rows.setdefault((name, i), []).append({"process_s": wall, **s})
+    load1 = os.getloadavg()
+    py = statistics.median(bare)
+    print(
+        f"\namsfe estimate LOG --no-plots, fresh processes, median of {repeat} interleaved "
+        f"runs; python -c pass {py:.3f} s; load average {load0[0]:.2f} -> {load1[0]:.2f}"
+    )
+    for name in bags:
+        print(f"\n{name}:")
+        meds = []
+        for i, tree in enumerate(trees):
+            runs = rows[(name, i)]
+            d = runs[0]["duration_s"]
+            keys = ("process_s", "read_s", "estimate_s")
+            m = {k: statistics.median(x[k] for x in runs) for k in keys}
+            phases = ""
+            if all("timing" in x for x in runs):
+                phase_keys = ("startup_s", "setup_s", "library_s", "write_s", "wall_s")
+                t = {k: statistics.median(x["timing"][k] or 0.0 for x in runs) for k in phase_keys}
+                phases = (
+                    f"; start-up {t['startup_s']:.3f}, setup {t['setup_s']:.3f}, library "
+                    f"{t['library_s']:.3f}, writing {t['write_s']:.3f}, command wall "
+                    f"{t['wall_s']:.3f} s = {d / t['wall_s']:.0f}x"
+                )
+            le = m["read_s"] + m["estimate_s"]
+            print(
+                f"  {tree}: process {m['process_s']:.3f} s = {d / m['process_s']:.1f}x real "
+                f"time ({d / (m['process_s'] - py):.1f}x without python's start + exit); read "
+                f"{m['read_s']:.3f} + estimate {m['estimate_s']:.3f} = {le:.3f} s = "
+                f"{d / le:.0f}x{phases}"
+            )
+            meds.append(m)
+        if len(meds) == 2:
+            a, b = meds
+            le_a, le_b = a["read_s"] + a["estimate_s"], b["read_s"] + b["estimate_s"]
+            print(
+                f"  before / after: process {a['process_s'] / b['process_s']:.2f}x faster, "
+                f"read + estimate {le_a / le_b:.2f}x"
+            )
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--out", default="/tmp/amsfe-log-speed", help="where the logs are written")
     p.add_argument("--repeat", type=int, default=3, choices=range(1, 50), metavar="N")
     p.add_argument("--rss", nargs=2, metavar=("BAG", "PATH"), help=argparse.SUPPRESS)
+    p.add_argument(
+        "--command",
+        nargs=2,
+        metavar=("BEFORE", "AFTER"),
+        help="time amsfe estimate of two trees, each TREE_SRC:GENERATED_DIR",
+    )
     args = p.parse_args()
     logging.getLogger("amsfe_sym").setLevel(logging.ERROR)
     if args.rss:
         print(json.dumps(peak_rss(Path(args.rss[0]), args.rss[1])))
+        return
+    if args.command:
+        command_runs(list(args.command), write_logs(Path(args.out)), Path(args.out), args.repeat)
         return
     r1 = ros1_bag(Path(args.out))
     print(
