@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pyarrow.parquet as pq
 import pytest
 
 from amsfe_sym.apps.estimate import EstimateOptions, _arrow_table, estimate_command
@@ -55,6 +56,12 @@ def test_phases_add_up_to_the_wall_time(
             d / (startup + t["wall_s"]), rel=1e-2
         )
     assert summary(got)["timing"] == t  # what is printed is what was written
+    table = pq.read_table(out / "estimates.parquet")
+    est = got.estimate
+    assert np.array_equal(table.column("t").to_numpy(), got.log.t)
+    for i in range(est.x_hat.shape[1]):
+        assert np.array_equal(table.column(f"est_{i}").to_numpy(), est.x_hat[:, i])
+        assert np.array_equal(table.column(f"var_{i}").to_numpy(), est.P_diag[:, i])
     print_summary(s, out)
     line = next(ln for ln in capsys.readouterr().out.splitlines() if "speed:" in ln)
     assert f"read {s['read_s']:.3f} s + estimated {s['estimate_s']:.3f} s" in line

@@ -433,7 +433,9 @@ def _write(
             cols[f"var_{i}"] = est.P_diag[:, i]
         if est.nees is not None:
             cols["nees"] = est.nees
-        pq.write_table(_arrow_table(cols), tmp / "estimates.parquet")
+        # no dictionary encoding: float columns have no repeats to find (0.42 -> 0.06 s and
+        # 20 % smaller for 60 s of a Panda; the same values read back)
+        pq.write_table(_arrow_table(cols), tmp / "estimates.parquet", use_dictionary=False)
         (tmp / "config.toml").write_text(
             f"# the scenario amsfe estimate used on {log.path}\n"
             + dump_toml(run.scenario.to_dict())
