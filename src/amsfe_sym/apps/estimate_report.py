@@ -272,8 +272,10 @@ def figures(run: EstimateRun, folder: Path) -> None:
             ax.plot(log.t, est.x_hat[:, j], lw=0.8, label="q_hat (link)")
             ax.plot(log.t, log.z[:, j], lw=0.6, label="qm (encoder)")
             ax.set_ylabel(f"joint {j + 1} [rad]")
-        for fr in log.frames:
-            ax.axvline(fr.delivery_step * log.T, color="k", lw=0.2, alpha=0.2)
+        if log.frames:  # one collection: an axvline each took 12 of 15 s for 1818 frames x 7
+            arrivals = [fr.delivery_step * log.T for fr in log.frames]
+            x_data = ax.get_xaxis_transform()  # x in data, y in axes coordinates
+            ax.vlines(arrivals, 0, 1, transform=x_data, color="k", lw=0.2, alpha=0.2)
         ax.legend(loc="upper right", fontsize=7)
     axes[-1, 0].set_xlabel("t [s] (thin lines: camera frames' arrivals)")
     fig.suptitle(f"{run.scenario.estimator} on {log.path.name}")
