@@ -99,6 +99,7 @@ def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path
     m, f = log["median"], log["real_time_factor"]
     assert f["log"] == pytest.approx(0.301 / (m["read_s"] + m["estimate_s"]), rel=0.02)
     assert f["process"] == pytest.approx(0.301 / m["process_s"], rel=0.02)
+    assert f["process_cpu"] == pytest.approx(0.301 / m["process_cpu_s"], rel=0.02)
     assert m["startup_s"] + m["wall_s"] <= m["process_s"] + 0.02  # (start: 10 ms ticks)
 
 

@@ -308,14 +308,23 @@ def _tree_env(tree: str) -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": src, "AMSFE_GENERATED_DIR": gen}
 
 
-def _outer(cmd: list[str], env: dict[str, str]) -> float:
+def _outer(cmd: list[str], env: dict[str, str]) -> tuple[float, float]:
+    """Wall and CPU (user + system) time [s] of a child process."""
+    import resource
+
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     subprocess.run(cmd, env=env, check=True, stdout=subprocess.DEVNULL)
-    return time.perf_counter() - t0
+    wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
 
 
-def command_runs(trees: list[str], bags: dict[str, Path], out: Path, repeat: int) -> None:
-    """``amsfe estimate LOG --no-plots`` of each tree in fresh processes, interleaved."""
+def command_runs(
+    trees: list[str], bags: dict[str, Path], out: Path, repeat: int, plots: bool = False
+) -> None:
+    """``amsfe estimate LOG --no-plots`` (``plots``: with its figures) of each tree in fresh
+    processes, interleaved."""
     import os
 
     envs = [_tree_env(t) for t in trees]
@@ -323,20 +332,21 @@ def command_runs(trees: list[str], bags: dict[str, Path], out: Path, repeat: int
     rows: dict[tuple[str, int], list[dict[str, Any]]] = {}
     bare: list[float] = []
     for r in range(repeat):
-        bare.append(_outer([sys.executable, "-c", "pass"], envs[0]))
+        bare.append(_outer([sys.executable, "-c", "pass"], envs[0])[0])
         for name, bag in bags.items():
             order = range(len(trees)) if r % 2 == 0 else reversed(range(len(trees)))
             for i in order:
                 folder = out / f"command-{i}"
                 cmd = [sys.executable, "-m", "amsfe_sym", "estimate", str(bag), "--out",
-                       str(folder), "--no-plots", "--force"]  # fmt: skip
-                wall = _outer(cmd, envs[i])
+                       str(folder), "--force"] + ([] if plots else ["--no-plots"])  # fmt: skip
+                wall, cpu = _outer(cmd, envs[i])
                 s = json.loads((folder / "summary.json").read_text())
-                rows.setdefault((name, i), []).append({"process_s": wall, **s})
+                rows.setdefault((name, i), []).append({"process_s": wall, "cpu_s": cpu, **s})
     load1 = os.getloadavg()
     py = statistics.median(bare)
     print(
-        f"\namsfe estimate LOG --no-plots, fresh processes, median of {repeat} interleaved "
+        f"\namsfe estimate LOG{'' if plots else ' --no-plots'}, fresh processes, median of "
+        f"{repeat} interleaved "
         f"runs; python -c pass {py:.3f} s; load average {load0[0]:.2f} -> {load1[0]:.2f}"
     )
     for name in bags:
@@ -345,7 +355,7 @@ def command_runs(trees: list[str], bags: dict[str, Path], out: Path, repeat: int
         for i, tree in enumerate(trees):
             runs = rows[(name, i)]
             d = runs[0]["duration_s"]
-            keys = ("process_s", "read_s", "estimate_s")
+            keys = ("process_s", "cpu_s", "read_s", "estimate_s")
             m = {k: statistics.median(x[k] for x in runs) for k in keys}
             phases = ""
             if all("timing" in x for x in runs):
@@ -359,7 +369,8 @@ def command_runs(trees: list[str], bags: dict[str, Path], out: Path, repeat: int
             le = m["read_s"] + m["estimate_s"]
             print(
                 f"  {tree}: process {m['process_s']:.3f} s = {d / m['process_s']:.1f}x real "
-                f"time ({d / (m['process_s'] - py):.1f}x without python's start + exit); read "
+                f"time ({d / (m['process_s'] - py):.1f}x without python's start + exit; CPU "
+                f"{m['cpu_s']:.3f} s = {d / m['cpu_s']:.1f}x); read "
                 f"{m['read_s']:.3f} + estimate {m['estimate_s']:.3f} = {le:.3f} s = "
                 f"{d / le:.0f}x{phases}"
             )
@@ -368,8 +379,8 @@ def command_runs(trees: list[str], bags: dict[str, Path], out: Path, repeat: int
             a, b = meds
             le_a, le_b = a["read_s"] + a["estimate_s"], b["read_s"] + b["estimate_s"]
             print(
-                f"  before / after: process {a['process_s'] / b['process_s']:.2f}x faster, "
-                f"read + estimate {le_a / le_b:.2f}x"
+                f"  before / after: process {a['process_s'] / b['process_s']:.2f}x faster (CPU "
+                f"{a['cpu_s'] / b['cpu_s']:.2f}x), read + estimate {le_a / le_b:.2f}x"
             )
 
 
@@ -378,6 +389,7 @@ def main() -> None:
     p.add_argument("--out", default="/tmp/amsfe-log-speed", help="where the logs are written")
     p.add_argument("--repeat", type=int, default=3, choices=range(1, 50), metavar="N")
     p.add_argument("--rss", nargs=2, metavar=("BAG", "PATH"), help=argparse.SUPPRESS)
+    p.add_argument("--plots", action="store_true", help="--command: with the figures")
     p.add_argument(
         "--command",
         nargs=2,
@@ -390,7 +402,8 @@ def main() -> None:
         print(json.dumps(peak_rss(Path(args.rss[0]), args.rss[1])))
         return
     if args.command:
-        command_runs(list(args.command), write_logs(Path(args.out)), Path(args.out), args.repeat)
+        bags = write_logs(Path(args.out))
+        command_runs(list(args.command), bags, Path(args.out), args.repeat, args.plots)
         return
     r1 = ros1_bag(Path(args.out))
     print(

@@ -13,6 +13,7 @@ Real-time factors: the log's duration over
 - ``log``: read + estimate (the log's own cost; the first figure ``amsfe estimate`` prints);
 - ``command``: the command's wall time once started (setup, library, read, estimate, write);
 - ``process``: the whole process seen from outside (interpreter, imports, command, exit);
+- ``process_cpu``: its CPU time (user + system), which a loaded machine inflates less;
 - ``no_interpreter``: the process less a bare interpreter's start and exit.
 """
 
@@ -76,15 +77,21 @@ def log_case(text: str) -> LogCase:
     return LogCase(name, duration)
 
 
-def _process(cmd: list[str], env: dict[str, str]) -> float:
-    """Wall time [s] of ``cmd`` from spawn to exit (its output discarded).
+def _process(cmd: list[str], env: dict[str, str]) -> tuple[float, float]:
+    """Wall and CPU (user + system) time [s] of ``cmd`` from spawn to exit (its output
+    discarded).
 
     Raises:
         subprocess.CalledProcessError: it failed (its stderr kept).
     """
+    import resource
+
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     subprocess.run(cmd, env=env, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    return time.perf_counter() - t0
+    wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
 
 
 def _write_log(case: LogCase, folder: Path, env: dict[str, str]) -> Path:
@@ -111,8 +118,9 @@ def bench_log_estimate(
 
     Returns:
         ``{"log", "scenario", "duration_s", "ticks", "frames", "rounds", "median": {phase:
-        seconds, "process_s", "interpreter_s"}, "real_time_factor": {"log", "command",
-        "process", "no_interpreter"}}``, or ``{"log", "error"}`` when a process failed.
+        seconds, "process_s", "process_cpu_s", "interpreter_s"}, "real_time_factor":
+        {"log", "command", "process", "process_cpu", "no_interpreter"}}``, or ``{"log",
+        "error"}`` when a process failed.
     """
     env = dict(os.environ)
     if generated is not None:
@@ -122,17 +130,18 @@ def bench_log_estimate(
         bag = _write_log(case, folder / "log", env)
         runs = []
         for r in range(rounds):
-            bare = _process([sys.executable, "-c", "pass"], env)
+            bare = _process([sys.executable, "-c", "pass"], env)[0]
             run = folder / f"estimate-{r}"
             cmd = [sys.executable, "-m", "amsfe_sym", "estimate", str(bag), "--out", str(run)]
-            wall = _process([*cmd, "--no-plots", "--force"], env)
-            runs.append((bare, wall, json.loads((run / "summary.json").read_text())))
+            wall, cpu = _process([*cmd, "--no-plots", "--force"], env)
+            runs.append((bare, wall, json.loads((run / "summary.json").read_text()), cpu))
     except subprocess.CalledProcessError as exc:
         lines = (exc.stderr or b"").decode(errors="replace").strip().splitlines()
         return {**out, "error": lines[-1] if lines else f"exit status {exc.returncode}"}
     s = runs[-1][2]
     med = {k: statistics.median(float(r[2]["timing"][k] or 0.0) for r in runs) for k in PHASES}
     med["process_s"] = statistics.median(r[1] for r in runs)
+    med["process_cpu_s"] = statistics.median(r[3] for r in runs)
     med["interpreter_s"] = statistics.median(r[0] for r in runs)
     d = float(s["duration_s"])
 
@@ -150,6 +159,7 @@ def bench_log_estimate(
             "log": factor(med["read_s"] + med["estimate_s"]),
             "command": factor(med["wall_s"]),
             "process": factor(med["process_s"]),
+            "process_cpu": factor(med["process_cpu_s"]),
             "no_interpreter": factor(med["process_s"] - med["interpreter_s"]),
         },
     }
@@ -177,7 +187,8 @@ def log_lines(rows: list[dict[str, Any]]) -> list[str]:
         lines.append(
             f"   {'':<22}phases: start-up {m['startup_s']:.3f}, setup {m['setup_s']:.3f}, "
             f"library {m['library_s']:.3f}, read {m['read_s']:.3f}, estimate "
-            f"{m['estimate_s']:.3f}, writing {m['write_s']:.3f}; python -c pass "
+            f"{m['estimate_s']:.3f}, writing {m['write_s']:.3f}; process CPU "
+            f"{m['process_cpu_s']:.3f} s = {f['process_cpu']:.0f}x; python -c pass "
             f"{m['interpreter_s']:.3f} ({r['ticks']} ticks, {r['frames']} frames, "
             f"median of {r['rounds']})"
         )
