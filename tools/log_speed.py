@@ -18,6 +18,10 @@ against ``rosbags``' bag reader + the reference decoding, CPU time.
 Peak RSS is measured in a fresh process per (log, path): ``before`` = read_log + per-tick,
 ``after`` = read_topics + grid + batch.
 
+``--imports BEFORE AFTER`` (the same trees) sums ``python -X importtime``'s self times of
+``amsfe estimate LOG --no-plots`` by top-level package (numpy, scipy, pandas, ...), median of
+``--repeat`` interleaved runs on the 10 s paper-sim log.
+
 ``--command BEFORE AFTER`` (two source trees, each ``TREE:GENERATED_DIR``) times the command
 itself instead, ``amsfe estimate LOG --no-plots`` in a fresh process per run, the two trees
 interleaved (their order alternating by round), with a bare ``python -c pass`` per round:
@@ -384,12 +388,43 @@ def command_runs(
             )
 
 
+def import_costs(trees: list[str], bag: Path, out: Path, repeat: int) -> None:
+    """``-X importtime`` self times of ``amsfe estimate`` by top-level package, per tree."""
+    import collections
+    import os
+
+    envs = [_tree_env(t) for t in trees]
+    runs: list[list[collections.Counter[str]]] = [[] for _ in trees]
+    for r in range(repeat):
+        for i in range(len(trees)) if r % 2 == 0 else reversed(range(len(trees))):
+            cmd = [sys.executable, "-X", "importtime", "-m", "amsfe_sym", "estimate", str(bag),
+                   "--out", str(out / f"imports-{i}"), "--no-plots", "--force"]  # fmt: skip
+            err = subprocess.run(cmd, env=envs[i], capture_output=True, text=True).stderr
+            by: collections.Counter[str] = collections.Counter()
+            for line in err.splitlines():
+                cells = line.removeprefix("import time:").split("|")
+                if line.startswith("import time:") and cells[0].strip().isdigit():
+                    by[cells[2].strip().split(".")[0]] += int(cells[0])
+            runs[i].append(by)
+
+    def med(i: int, k: str | None) -> float:
+        return statistics.median((sum(b.values()) if k is None else b[k]) for b in runs[i]) / 1e3
+
+    names = {k for rs in runs for b in rs for k in b}
+    top = sorted(names, key=lambda k: -sum(med(i, k) for i in range(len(trees))))[:14]
+    print(f"\n-X importtime self times by package [ms], median of {repeat}, load average "
+          f"{os.getloadavg()[0]:.2f}: " + " | ".join(trees))  # fmt: skip
+    for k in [*top, None]:
+        print(f"  {k or 'all':20s}" + "".join(f"{med(i, k):10.0f}" for i in range(len(trees))))
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--out", default="/tmp/amsfe-log-speed", help="where the logs are written")
     p.add_argument("--repeat", type=int, default=3, choices=range(1, 50), metavar="N")
     p.add_argument("--rss", nargs=2, metavar=("BAG", "PATH"), help=argparse.SUPPRESS)
     p.add_argument("--plots", action="store_true", help="--command: with the figures")
+    p.add_argument("--imports", nargs=2, metavar=("BEFORE", "AFTER"), help="import cost by package")
     p.add_argument(
         "--command",
         nargs=2,
@@ -400,6 +435,10 @@ def main() -> None:
     logging.getLogger("amsfe_sym").setLevel(logging.ERROR)
     if args.rss:
         print(json.dumps(peak_rss(Path(args.rss[0]), args.rss[1])))
+        return
+    if args.imports:
+        bag = write_logs(Path(args.out))["paper-sim 10 s"]
+        import_costs(list(args.imports), bag, Path(args.out), args.repeat)
         return
     if args.command:
         bags = write_logs(Path(args.out))
