@@ -97,9 +97,9 @@ def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path
     (log,) = report["logs"]  # section 6: amsfe estimate over a 0.3 s log, 2 fresh processes
     assert (log["log"], log["ticks"], log["rounds"]) == ("paper-sim 0.3 s", 301, 2)
     m, f = log["median"], log["real_time_factor"]
-    assert f["log"] == pytest.approx(0.301 / (m["read_s"] + m["estimate_s"]), rel=0.02)
-    assert f["process"] == pytest.approx(0.301 / m["process_s"], rel=0.02)
-    assert f["process_cpu"] == pytest.approx(0.301 / m["process_cpu_s"], rel=0.02)
+    assert f["log"] == pytest.approx(0.301 / (m["read_s"] + m["estimate_s"]), rel=0.02, abs=0.01)
+    assert f["process"] == pytest.approx(0.301 / m["process_s"], rel=0.02, abs=0.01)
+    assert f["process_cpu"] == pytest.approx(0.301 / m["process_cpu_s"], rel=0.02, abs=0.01)
     assert m["startup_s"] + m["wall_s"] <= m["process_s"] + 0.02  # (start: 10 ms ticks)
 
 

@@ -69,6 +69,22 @@ def test_phases_add_up_to_the_wall_time(
     assert ("start-up" in line) == (startup is not None)
 
 
+def test_no_start_up_when_called_from_python(bag: Path, tmp_path: Path) -> None:
+    """main() called in a process that is not the command (this test): no start-up, not
+    the process's age; the command run as ``python -m amsfe_sym`` has one."""
+    from amsfe_sym.apps.cli import main
+
+    assert main(["estimate", str(bag), "--out", str(tmp_path / "a"), "--no-plots"]) == 0
+    t = json.loads((tmp_path / "a" / "summary.json").read_text())["timing"]
+    assert t["startup_s"] is None and t["real_time_factor_end_to_end"] is None
+    cmd = [sys.executable, "-m", "amsfe_sym", "estimate", str(bag), "--out", str(tmp_path / "b")]
+    t0 = time.perf_counter()
+    subprocess.run([*cmd, "--no-plots"], check=True, capture_output=True)
+    wall = time.perf_counter() - t0
+    t = json.loads((tmp_path / "b" / "summary.json").read_text())["timing"]
+    assert t["startup_s"] > 0 and t["startup_s"] + t["wall_s"] <= wall + 0.02
+
+
 def test_process_age_is_the_time_since_the_process_started() -> None:
     """A child's own age, printed as it ends, lies within the parent's clock around it
     (the age has a 10 ms resolution); it grows with a sleep in the child."""

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -281,16 +282,16 @@ def estimate_command(
         clock.lap("library")
         log = read_log(log_path, spec, joints, derived.model.T, N, plan, robot=name)
     log.config = config
+    if options.scenario is None and (options.robot is not None or config is None):
+        # --robot: the defaults, started from the log (theta held at a slower period)
+        sc = _start_from_log(sc, log, hold_theta=derived is not None)
+    clock.lap("read")
     if options.verbose:
         c = log.clock
         print(
             f"  clock: log time - header stamp = {c.median:+.6f} s (spread {c.spread:.2e} s); "
             "log times moved onto the stamp clock"
         )
-    clock.lap("read")
-    if options.scenario is None and (options.robot is not None or config is None):
-        # --robot: the defaults, started from the log (theta held at a slower period)
-        sc = _start_from_log(sc, log, hold_theta=derived is not None)
     from amsfe_sym.codegen import library_for
 
     clock.lap("setup")
@@ -333,6 +334,16 @@ def process_age_s() -> float | None:
         return max(time.clock_gettime(time.CLOCK_BOOTTIME) - started, 0.0)
     except (OSError, ValueError, IndexError, AttributeError):
         return None
+
+
+def _command_startup_s() -> float | None:
+    """:func:`process_age_s` when this process was started as the command (``python -m
+    amsfe_sym``, the ``amsfe`` script); None when ``main`` is called from Python (a test, a
+    notebook: the process's age is not the command's start-up)."""
+    spec = getattr(sys.modules.get("__main__"), "__spec__", None)
+    if getattr(spec, "name", None) == "amsfe_sym.__main__" or Path(sys.argv[0]).name == "amsfe":
+        return process_age_s()
+    return None
 
 
 def _effort_options(spec: Any, path: str | None) -> Any:
@@ -394,7 +405,7 @@ def add_arguments(e: argparse.ArgumentParser) -> None:
 
 def from_args(args: argparse.Namespace) -> int:
     """``amsfe estimate LOG`` from its parsed options (:func:`add_arguments`)."""
-    startup_s = process_age_s()
+    startup_s = _command_startup_s()
     log = Path(args.log)
     out = Path(args.out) if args.out else default_out(log)
     opts = EstimateOptions(

@@ -146,7 +146,7 @@ def bench_log_estimate(
     d = float(s["duration_s"])
 
     def factor(seconds: float) -> float:
-        return round(d / max(seconds, 1e-9), 1)
+        return round(d / max(seconds, 1e-9), 2)
 
     return {
         **out,
