@@ -7,8 +7,8 @@ a log topic by topic, without ROS), ``decode`` and ``layout`` (a topic's payload
 in bulk), ``stream`` (a log's topics decoded in bounded memory: MCAP and ROS 1 bags chunk by
 chunk; docs/logs.md, "Speed"), ``chunks`` (an MCAP's chunks cut with numpy), ``firsts`` (the
 first messages of a few topics, for the topic search), ``plan`` (which topic plays which
-role, from the metadata and first messages), ``grid`` (the tick grid, the clock offset, each role's usage), ``sensors``
-(effort, camera frames and truth on the grid), ``read`` (a log -> the estimator's inputs,
+role, from the metadata and first messages), ``grid`` (the tick grid, the clock offset,
+each role's usage), ``sensors`` (effort, camera frames and truth on the grid), ``read`` (a log -> the estimator's inputs,
 every skipped message counted by reason), ``replay`` (an estimator over a read log),
 ``write`` (a simulated run -> a rosbag2 in MCAP), ``bulk_write`` (many messages into
 ``rosbags``' MCAP writer at once), ``encode`` (JointState payloads in bulk).
