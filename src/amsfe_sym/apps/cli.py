@@ -351,6 +351,7 @@ def _input_files(*names: str | None) -> tuple[Path, ...]:
 
 def _bench(args: argparse.Namespace) -> int:
     from amsfe_sym.apps.bench import BenchOptions, run_bench
+    from amsfe_sym.apps.bench.logs import log_case
 
     if args.out:
         check_output(args.out, option="--out", kind="parent")
@@ -383,6 +384,7 @@ def _bench(args: argparse.Namespace) -> int:
             loop_scenarios=tuple(args.loop_scenarios.split(",")) if args.loop_scenarios else None,
             scaling_panda=not args.no_panda,
             scaling_loop_duration=args.scaling_loop_duration,
+            logs=tuple(log_case(x) for x in args.logs) if args.logs else None,
         )
     )
 

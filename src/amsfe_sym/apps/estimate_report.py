@@ -5,7 +5,7 @@ and skipped, the clock offset, NIS), the printed headline and the figures (``est
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -19,13 +19,48 @@ if TYPE_CHECKING:  # the estimators (scipy) are imported when a log is estimated
     from amsfe_sym.logs.noise import EncoderNoise
     from amsfe_sym.logs.replay import LogEstimate
 
-__all__ = ["EstimateRun", "figures", "nis_advice", "nis_report", "print_summary", "summary"]
+__all__ = [
+    "CommandTiming",
+    "EstimateRun",
+    "figures",
+    "nis_advice",
+    "nis_report",
+    "print_summary",
+    "summary",
+]
+
+
+@dataclass(frozen=True)
+class CommandTiming:
+    """Wall time [s] of the phases of ``amsfe estimate`` other than reading and estimating
+    (docs/logs.md, "Speed"); each phase includes the imports made in it.
+
+    Attributes:
+        startup_s: From the process's start to the command's: the interpreter, the
+            command line's imports, argument parsing.  None when not measured (called from
+            Python, or no ``/proc/self/stat``).
+        setup_s: The log spec checked, the scenario and the robot's spec, the start from the
+            log, the estimator built.
+        library_s: The robot's library found in the cache and loaded (or generated).
+        write_s: The run folder: ``estimates.parquet``, ``config.toml``, the estimates bag,
+            the figures.
+        wall_s: From the command's start to its summary: setup + library + read + estimate
+            + write (start-up not included).
+    """
+
+    startup_s: float | None = None
+    setup_s: float = 0.0
+    library_s: float = 0.0
+    write_s: float = 0.0
+    wall_s: float = 0.0
 
 
 @dataclass
 class EstimateRun:
     """What ``amsfe estimate`` did: the read log, the estimates, the folder and the timing
-    (``noise``: the encoder noise measured from the log, when it was)."""
+    (``read_s``: the log read, topic search included; ``estimate_s``: the estimator over
+    it; ``timing``: the other phases, set once the folder is written; ``noise``: the encoder
+    noise measured from the log, when it was)."""
 
     log: RobotLog
     estimate: LogEstimate
@@ -33,6 +68,7 @@ class EstimateRun:
     out: Path
     read_s: float
     estimate_s: float
+    timing: CommandTiming = field(default_factory=CommandTiming)
     noise: EncoderNoise | None = None
 
 
@@ -175,6 +211,7 @@ def summary(run: EstimateRun) -> dict[str, Any]:
         "read_s": round(run.read_s, 4),
         "estimate_s": round(run.estimate_s, 4),
         "real_time_factor": round(log.K * log.T / max(run.read_s + run.estimate_s, 1e-9), 2),
+        "timing": _timing(run),
     }
     if log.truth is not None and est.nees is not None:
         w = slice(int(0.2 * log.K), log.K)
@@ -212,15 +249,64 @@ def _noise_dict(noise: EncoderNoise | None) -> dict[str, Any] | None:
     }
 
 
+def _timing(run: EstimateRun) -> dict[str, float | None]:
+    """The command's phases [s] and its real-time factors: the log's duration over the
+    command's wall time (``real_time_factor_command``) and over start-up + wall time
+    (``real_time_factor_end_to_end``, null when start-up was not measured); docs/logs.md,
+    "Speed"."""
+    t, d = run.timing, run.log.K * run.log.T
+    whole = None if t.startup_s is None else t.startup_s + t.wall_s
+
+    def r(x: float | None) -> float | None:
+        return None if x is None else round(x, 4)
+
+    return {
+        "startup_s": r(t.startup_s),
+        "setup_s": r(t.setup_s),
+        "library_s": r(t.library_s),
+        "read_s": r(run.read_s),
+        "estimate_s": r(run.estimate_s),
+        "write_s": r(t.write_s),
+        "wall_s": r(t.wall_s),
+        "end_to_end_s": r(whole),
+        "real_time_factor_command": round(d / t.wall_s, 2) if t.wall_s > 0 else None,
+        "real_time_factor_end_to_end": round(d / whole, 2) if whole else None,
+    }
+
+
+def _speed_line(s: dict[str, Any]) -> str:
+    """What the run's speed was: reading + estimating, then the whole command by phase."""
+    line = (
+        f"  speed: read {s['read_s']:.3f} s + estimated {s['estimate_s']:.3f} s = "
+        f"{s['real_time_factor']:.0f}x real time"
+    )
+    t = s.get("timing") or {}
+    if not t.get("wall_s"):
+        return line
+    phases = {
+        "start-up": t.get("startup_s"),
+        "setup": t["setup_s"],
+        "library": t["library_s"],
+        "read + estimate": s["read_s"] + s["estimate_s"],
+        "writing": t["write_s"],
+    }
+    parts = [f"{name} {v:.2f}" for name, v in phases.items() if v is not None]
+    if t.get("end_to_end_s") is not None:
+        whole = f"command {t['end_to_end_s']:.2f} s = {t['real_time_factor_end_to_end']:.0f}x"
+        after = f"; {t['real_time_factor_command']:.0f}x after start-up"
+    else:
+        whole = f"command {t['wall_s']:.2f} s = {t['real_time_factor_command']:.0f}x"
+        after = ""
+    return f"{line}; {whole} ({', '.join(parts)}{after})"
+
+
 def print_summary(s: dict[str, Any], out: Path) -> None:
     """The headline of an estimate run: ticks, frames fused, each role's messages used and
     skipped, speed, NIS and NEES."""
     c = s["counters"]
     print(f"run folder: {out} ({s['ticks']} ticks, {s['duration_s']:.2f} s of log)")
-    print(
-        f"  {s['estimator']}: {s['frames_fused']} camera frames fused; read {s['read_s']:.2f} s, "
-        f"estimated {s['estimate_s']:.2f} s ({s['real_time_factor']:.0f}x real time)"
-    )
+    print(f"  {s['estimator']}: {s['frames_fused']} camera frames fused")
+    print(_speed_line(s))
     for role, u in s.get("topics", {}).items():
         if u["topic"] is None:
             other = u.get("topics_of_this_type_not_used")
@@ -274,8 +360,10 @@ def figures(run: EstimateRun, folder: Path) -> None:
             ax.plot(log.t, est.x_hat[:, j], lw=0.8, label="q_hat (link)")
             ax.plot(log.t, log.z[:, j], lw=0.6, label="qm (encoder)")
             ax.set_ylabel(f"joint {j + 1} [rad]")
-        for fr in log.frames:
-            ax.axvline(fr.delivery_step * log.T, color="k", lw=0.2, alpha=0.2)
+        if log.frames:  # one collection: an axvline each took 12 of 15 s for 1818 frames x 7
+            arrivals = [fr.delivery_step * log.T for fr in log.frames]
+            x_data = ax.get_xaxis_transform()  # x in data, y in axes coordinates
+            ax.vlines(arrivals, 0, 1, transform=x_data, color="k", lw=0.2, alpha=0.2)
         ax.legend(loc="upper right", fontsize=7)
     axes[-1, 0].set_xlabel("t [s] (thin lines: camera frames' arrivals)")
     fig.suptitle(f"{run.scenario.estimator} on {log.path.name}")
