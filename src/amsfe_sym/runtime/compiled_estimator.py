@@ -29,7 +29,7 @@ from amsfe_sym.errors import ConfigError, EstimatorError, describe, unknown_name
 from amsfe_sym.estimation.base import Estimator, StepInputs, StepReport
 from amsfe_sym.estimation.models import CameraFrame
 from amsfe_sym.runtime.cheader import c_struct, header_fields
-from amsfe_sym.runtime.effort_params import _diagonal, effort_parts
+from amsfe_sym.runtime.effort_params import EffortParts, _diagonal, effort_parts
 from amsfe_sym.runtime.models import inverse_not_converged
 from amsfe_sym.runtime.stability import NUMERICAL_FAILURES, covariance_hint
 
@@ -137,8 +137,8 @@ class CompiledEstimator(Estimator):
         self.effort = parts
         model = parts.model
         cfg = self.config
-        if parts.input_states or parts.joint_torque:
-            self._refuse_with_effort(parts.input_states > 0)
+        if parts.effort:
+            self._refuse_with_effort(parts)
         lib = model.lib
         self.lib = lib
         cdll = ctypes.CDLL(str(lib.library_path))
@@ -169,10 +169,11 @@ class CompiledEstimator(Estimator):
             self.k,
             BACKWARD_MAPS.index(cfg.backward_map),
             parts.input_states,
-            parts.input_gain.ctypes.data if parts.input_states else None,
+            parts.input_gain.ctypes.data if parts.input_gain.size else None,
             int(parts.joint_torque),
-            parts.ks.ctypes.data if parts.joint_torque else None,
-            parts.ks_theta.ctypes.data if parts.joint_torque else None,
+            parts.ks.ctypes.data if parts.ks.size else None,
+            parts.ks_theta.ctypes.data if parts.ks_theta.size else None,
+            int(parts.net_torque),
         )
         size = self._c["amsfe_est_memory_size"](ctypes.byref(self._params))
         if size == 0:
@@ -215,13 +216,13 @@ class CompiledEstimator(Estimator):
         self._diag = RuntimeDiagnostics()
         self._fetch()
 
-    def _refuse_with_effort(self, inputs: bool) -> None:
-        """What the C runtime does not compute with input states or joint torques, refused
-        in one line naming what works."""
+    def _refuse_with_effort(self, parts: EffortParts) -> None:
+        """What the C runtime does not compute with input states, joint torques or a net
+        torque input, refused in one line naming what works."""
         bad = None
-        if self.name == "cloning":
+        if self.name == "cloning" and (parts.input_states or parts.joint_torque):
             bad = "cloning"
-        elif inputs and self.config.backward_map != "linearised":
+        elif (parts.input_states or parts.net_torque) and self.config.backward_map != "linearised":
             bad = f"oosm with backward_map {self.config.backward_map!r}"
         if bad is not None:
             raise ConfigError(
@@ -374,7 +375,7 @@ def log_numbers(values: Any) -> str:
 def estimator_log_lines(est: CompiledEstimator) -> list[str]:
     """The estimator block of a log (its parameter block as built at construction)."""
     p = est._params
-    if p.input_states or p.joint_torque:
+    if p.input_states or p.joint_torque or p.net_torque:
         raise ConfigError(
             describe(
                 "the estimator of a C log (examples/estimate_from_log.c)",

@@ -9,7 +9,10 @@ models as fields of its parameter block (``amsfe_params`` of ``runtime/c/amsfe_r
   trapezoid gain ``T / (2 Mm)`` per joint, ``qw`` extended by the walk's variance per step
   ``input_rate_std^2 T``;
 - the joint torque sensors (:class:`~amsfe_sym.estimation.effort_models.SpringTorqueMeasurement`):
-  ``joint_torque = 1``, ``Ks`` and the theta index of each joint's stiffness.
+  ``joint_torque = 1``, ``Ks`` and the theta index of each joint's stiffness;
+- the reconstructed net motor torque of ``none``
+  (:class:`~amsfe_sym.estimation.effort_models.NetTorqueTransition`): ``net_torque = 1``, the
+  trapezoid gain, ``Ks`` and the theta index of each joint's stiffness.
 
 :func:`effort_parts` reads them off the models, or refuses in one line what the C runtime does
 not compute (then the Python estimator, ``compiled = False``, does).
@@ -24,8 +27,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.estimation.effort import MotorParams
 from amsfe_sym.estimation.effort_models import (
     InputStateTransition,
+    NetTorqueTransition,
     PaddedMeasurement,
     SpringTorqueMeasurement,
 )
@@ -49,8 +54,9 @@ class EffortParts:
         input_gain: ``T / (2 Mm)`` per joint [s / (kg m^2)] (``trapezoid_input_gain``), or
             empty.
         joint_torque: The encoder sample is ``[qm, qmd, tau_J]``.
-        ks: The spec's stiffness per joint [N m/rad] (joint_torque), or empty.
+        ks: The spec's stiffness per joint [N m/rad] (joint_torque, net_torque), or empty.
         ks_theta: Theta index of each joint's stiffness, or -1 (int32), or empty.
+        net_torque: The input is the net motor torque (``NetTorqueTransition``).
     """
 
     model: CompiledTransition
@@ -61,6 +67,12 @@ class EffortParts:
     joint_torque: bool
     ks: FloatArray
     ks_theta: NDArray[np.int32]
+    net_torque: bool = False
+
+    @property
+    def effort(self) -> bool:
+        """Whether any effort field is set (else the applied torque, as before)."""
+        return bool(self.input_states or self.joint_torque or self.net_torque)
 
 
 def _refuse(found: str) -> ConfigError:
@@ -92,6 +104,23 @@ def _diagonal(name: str, M: Any) -> FloatArray:
     return d
 
 
+def _trapezoid(outer: InputStateTransition | NetTorqueTransition, names: str) -> FloatArray:
+    """``T / (2 Mm)`` of the wrapper's motor, as trapezoid_input_gain scales B; refused for
+    another input gain."""
+    gain = getattr(outer.input_gain, "__qualname__", "")
+    if not gain.startswith("trapezoid_input_gain"):
+        raise _refuse(f"{names} with the input gain {gain or outer.input_gain!r}")
+    m: MotorParams = outer.motor
+    return np.asarray(m.T / 2 / m.Mm, dtype=np.float64)
+
+
+def _stiffness(motor: MotorParams) -> tuple[FloatArray, NDArray[np.int32]]:
+    return (
+        np.asarray(motor.Ks, dtype=np.float64).copy(),
+        np.asarray(motor.stiffness_theta, dtype=np.int32).copy(),
+    )
+
+
 def effort_parts(model: Any, encoder: Any, camera: Any) -> EffortParts:
     """The robot's models under the effort wrappers and the effort fields of ``amsfe_params``.
 
@@ -102,13 +131,16 @@ def effort_parts(model: Any, encoder: Any, camera: Any) -> EffortParts:
     """
     names = f"{type(model).__name__}, {type(encoder).__name__}, {type(camera).__name__}"
     outer = model if isinstance(model, InputStateTransition) else None
+    net = model if isinstance(model, NetTorqueTransition) else None
+    gain = np.zeros(0)
     if outer is not None:
-        gain = getattr(outer.input_gain, "__qualname__", "")
-        if not gain.startswith("trapezoid_input_gain"):
-            raise _refuse(f"{names} with the input gain {gain or outer.input_gain!r}")
+        gain = _trapezoid(outer, names)
         if not (isinstance(encoder, PaddedMeasurement) and isinstance(camera, PaddedMeasurement)):
             raise _refuse(names)
         model, encoder, camera = outer.inner, encoder.inner, camera.inner
+    if net is not None:
+        gain = _trapezoid(net, names)
+        model = net.inner
     if not (
         isinstance(model, CompiledTransition)
         and isinstance(encoder, EncoderMeasurement | SpringTorqueMeasurement)
@@ -117,14 +149,17 @@ def effort_parts(model: Any, encoder: Any, camera: Any) -> EffortParts:
         raise _refuse(names)
     qw = _diagonal("Qw", model.Qw)
     n = int(model.lib.n)
-    gain = np.zeros(0)
     if outer is not None:
-        m = outer.motor
         qw = np.concatenate([qw, np.diag(outer.input_variance)])
-        gain = np.asarray(m.T / 2 / m.Mm, dtype=np.float64)  # as trapezoid_input_gain scales B
     ks, ks_theta = np.zeros(0), np.zeros(0, np.int32)
     torque = isinstance(encoder, SpringTorqueMeasurement)
     if isinstance(encoder, SpringTorqueMeasurement):
-        ks = np.asarray(encoder.motor.Ks, dtype=np.float64).copy()
-        ks_theta = np.asarray(encoder.motor.stiffness_theta, dtype=np.int32).copy()
-    return EffortParts(model, camera, qw, n if outer else 0, gain, torque, ks, ks_theta)
+        ks, ks_theta = _stiffness(encoder.motor)
+    if net is not None:
+        ks_n, kst_n = _stiffness(net.motor)
+        if torque and not (np.array_equal(ks, ks_n) and np.array_equal(ks_theta, kst_n)):
+            raise _refuse(f"{names} with two different stiffness models")
+        ks, ks_theta = ks_n, kst_n
+    return EffortParts(
+        model, camera, qw, n if outer else 0, gain, torque, ks, ks_theta, net is not None
+    )

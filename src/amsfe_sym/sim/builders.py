@@ -212,8 +212,9 @@ def build_estimator(
 
     Raises:
         ConfigError: an unknown estimator, a singular camera R, bad initial values, or the
-            compiled estimator asked for what it does not compute (``cloning`` without the
-            applied torque, ``none`` with ``input_model = "reconstruct"``; docs/effort.md).
+            compiled estimator asked for what it does not compute (``cloning`` with input
+            states or joint torques, oosm's inverse backward map without the applied torque;
+            docs/effort.md).
     """
     n, p = lib.n, lib.p
     f = sc.filter
@@ -230,16 +231,6 @@ def build_estimator(
     compiled_model = CompiledTransition(
         lib, noise_covariance(lib, link_std, motor_std, f.theta_rate_std)
     )
-    if compiled and effort.kind == "none" and not effort.input_as_state:
-        raise ConfigError(
-            describe(
-                "effort kind 'none' with input_model 'reconstruct'",
-                "input_model 'state' for the C estimators (the net-torque transition is "
-                "Python only)",
-                "compiled = True",
-                'use input_model = "state" (the default), or the Python estimator',
-            )
-        )
     encoder_model: EncoderMeasurement | SpringTorqueMeasurement
     if effort.kind == "joint_torque":
         encoder_model = SpringTorqueMeasurement(motor, q_var, qd_var, effort.joint_torque_std**2)

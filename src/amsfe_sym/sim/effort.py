@@ -104,8 +104,9 @@ def effort_estimator(
         effort: The logged effort [N m], (K, n), or ``None`` (``none``).
         spec: What the effort is.
         compiled: The library's C estimator instead of the Python reference (not
-            ``cloning`` without the applied torque, nor ``none`` with ``input_model =
-            "reconstruct"``: :class:`~amsfe_sym.errors.ConfigError`; docs/effort.md).
+            ``cloning`` with input states or joint torques, nor oosm's inverse backward map
+            without the applied torque: :class:`~amsfe_sym.errors.ConfigError`;
+            docs/effort.md).
     """
     n = lib.n
     z0 = np.array(z[0], dtype=float)

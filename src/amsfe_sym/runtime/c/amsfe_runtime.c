@@ -54,7 +54,8 @@ static const cwork WORKS[] = {est_camera_update_work, est_oosm_correct_work, est
 struct amsfe_est {
   amsfe_params par; /* pointers in it point into this block */
   amsfe_dims d;     /* the filter's: N = M (the model's N + input_states), nw and ne with them */
-  int Nm, ni, jt;   /* the model's N, input states, joint torque sensors (docs/effort.md) */
+  int Nm, ni, jt, net; /* the model's N, input states, joint torque sensors, net torque input
+                          (docs/effort.md) */
   int B, R, F, S, max_delay; /* oosm ring B, replay ring R = B + 1, frames per step, slots */
   long k;
   int failed, last_error;
@@ -85,6 +86,7 @@ struct amsfe_est {
   int *kst;
   int *ehrow, *ehcol, *chrow, *chcol; /* nonzeros of the encoder and the camera H by rows */
   double *ehval, *last_hval, *hz, *chval, *cy, *cnu, *cJ, *OW, *RH;
+  double *ut, *Bn; /* net torque: the model's input, its gain B (N x n) */
   gwork g; /* work of the generated functions */
   double inv_tol, inv_residual, inv_limit; /* the inverse's convergence check */
 };
@@ -213,9 +215,13 @@ static size_t layout(amsfe_est *e, const amsfe_params *p, char *base) {
     e->cJ = DBL(&c, 4 * n + 2); /* J dense, depth, J's nonzeros */
     if (est == AMSFE_OOSM) e->OW = DBL(&c, 8 * N + 8);
   }
+  e->ut = e->Bn = NULL;
+  if (p->net_torque) e->ut = DBL(&c, n), e->Bn = DBL(&c, N * n), e->gain = DBL(&c, n);
+  if (p->joint_torque || p->net_torque) {
+    e->ks = DBL(&c, n), e->kst = (int *)carve(&c, sizeof(int) * (size_t)n);
+  }
   if (p->joint_torque) {
     int nnz = torque_nnz(p, (int)n);
-    e->ks = DBL(&c, n), e->kst = (int *)carve(&c, sizeof(int) * (size_t)n);
     e->ehrow = (int *)carve(&c, sizeof(int) * (size_t)(d.ne + 1));
     e->ehcol = (int *)carve(&c, sizeof(int) * (size_t)nnz);
     e->ehval = DBL(&c, nnz), e->last_hval = DBL(&c, nnz), e->hz = DBL(&c, d.ne);
@@ -235,7 +241,7 @@ static size_t layout(amsfe_est *e, const amsfe_params *p, char *base) {
   }
   carve_work(&c, WORKS, sizeof(WORKS) / sizeof(WORKS[0]), &e->g);
   e->d = d;
-  e->Nm = Nm, e->ni = p->input_states, e->jt = p->joint_torque;
+  e->Nm = Nm, e->ni = p->input_states, e->jt = p->joint_torque, e->net = p->net_torque;
   return c.off + 16;
 }
 
@@ -249,9 +255,14 @@ static int params_ok(const amsfe_params *p) {
     if (!p->input_gain || !all_finite(p->input_gain, d.n)) return 0;
     if (p->estimator == AMSFE_CLONING || p->backward_map != AMSFE_BACKWARD_LINEARISED) return 0;
   }
-  if (p->joint_torque) {
+  if (p->net_torque != 0 && p->net_torque != 1) return 0;
+  if (p->net_torque) {
+    if (p->input_states || !p->input_gain || !all_finite(p->input_gain, d.n)) return 0;
+    if (p->backward_map != AMSFE_BACKWARD_LINEARISED) return 0;
+  }
+  if (p->joint_torque && p->estimator == AMSFE_CLONING) return 0;
+  if (p->joint_torque || p->net_torque) {
     if (!p->ks || !p->ks_theta || !all_finite(p->ks, d.n)) return 0;
-    if (p->estimator == AMSFE_CLONING) return 0;
     for (int j = 0; j < d.n; ++j)
       if (p->ks_theta[j] < -1 || p->ks_theta[j] >= d.N - 4 * d.n) return 0;
   }
@@ -390,11 +401,14 @@ int amsfe_est_init(amsfe_est **out, const amsfe_params *p, void *memory, size_t 
     for (int r = 0; r < 2; ++r)
       for (int j = 0; j < d.n; ++j) e->chcol[r * d.n + j] = j; /* the camera sees q */
   }
-  if (e->jt) {
+  if (e->jt || e->net) {
     copy(e->ks, p->ks, d.n);
-    int v = 0;
     for (int j = 0; j < d.n; ++j) e->kst[j] = p->ks_theta[j];
     e->par.ks = e->ks, e->par.ks_theta = e->kst;
+  }
+  if (e->net) copy(e->gain, p->input_gain, d.n), e->par.input_gain = e->gain;
+  if (e->jt) {
+    int v = 0;
     for (int a = 0; a < 2 * d.n; ++a) e->ehrow[a] = v, e->ehcol[v++] = 2 * d.n + a;
     for (int j = 0; j < d.n; ++j) {
       e->ehrow[2 * d.n + j] = v;
@@ -475,14 +489,49 @@ static int predict_inputs(amsfe_est *e, double *A, double *G) {
   return AMSFE_OK;
 }
 
+/* NetTorqueTransition.spring: ut <- u + Ks (qm - q) (the model's input for a net torque u) */
+static void net_input(amsfe_est *e, const double *u) {
+  int n = e->d.n;
+  for (int j = 0; j < n; ++j) {
+    double Ks = e->kst[j] >= 0 ? e->x[4 * n + e->kst[j]] : e->ks[j];
+    e->ut[j] = u[j] + Ks * (e->x[2 * n + j] - e->x[j]);
+  }
+}
+
+/* NetTorqueTransition.step's jacobian: A <- A + B ds/dx, B = (A[:, qmd] + e_qmd) T / (2 Mm)
+ * (trapezoid_input_gain, of the model's A), ds/dx: -Ks at q_j, Ks at qm_j, qm_j - q_j at
+ * theta's stiffness entry */
+static void net_jacobian(amsfe_est *e, double *A) {
+  long N = e->d.N;
+  int n = e->d.n;
+  for (int j = 0; j < n; ++j) {
+    const double *Am = A + (long)(3 * n + j) * N;
+    double *B = e->Bn + (long)j * N, g = e->gain[j];
+    for (long i = 0; i < N; ++i) B[i] = (i == 3 * n + j ? Am[i] + 1.0 : Am[i]) * g;
+  }
+  for (int j = 0; j < n; ++j) {
+    const double *B = e->Bn + (long)j * N;
+    double Ks = e->kst[j] >= 0 ? e->x[4 * n + e->kst[j]] : e->ks[j];
+    double delta = e->x[2 * n + j] - e->x[j];
+    double *Aq = A + (long)j * N, *Aqm = A + (long)(2 * n + j) * N;
+    for (long i = 0; i < N; ++i) Aq[i] += B[i] * -Ks, Aqm[i] += B[i] * Ks;
+    if (e->kst[j] >= 0) {
+      double *At = A + (long)(4 * n + e->kst[j]) * N;
+      for (long i = 0; i < N; ++i) At[i] += B[i] * delta;
+    }
+  }
+}
+
 /* ekf.predict on (x, P) with u; A and Gamma written to A, G (N x N, N x nw) */
 static int predict(amsfe_est *e, const double *u, double *A, double *G) {
   if (e->ni) return predict_inputs(e, A, G);
   int N = e->d.N;
+  if (e->net) net_input(e, u), u = e->ut;
   const double *in[2] = {e->x, u};
   double *out[3] = {e->x1, A, G};
   gcall(&e->g, STEP, in, 2, out, 3); /* x+, A, Gamma (eqs. 13, 4) */
   if (!all_finite(e->x1, N) || !all_finite(A, (long)N * N)) return AMSFE_ERR_NONFINITE;
+  if (e->net) net_jacobian(e, A); /* at x, before x moves */
   if (!e->lp_ok && !pd_state(e)) return AMSFE_ERR_NOT_PD; /* P = LP LP^T */
   amsfe_predict_cov(N, e->d.nw, A, e->LP, G, e->qw, e->P1, e->T1); /* eq. (14) */
   copy(e->x, e->x1, N);

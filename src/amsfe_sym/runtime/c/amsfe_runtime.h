@@ -104,13 +104,18 @@ typedef struct {
    * step, input_rate_std^2 T); the u given to amsfe_est_tick is ignored.  Estimators
    * encoders, naive, oosm (backward_map linearised) and replay; cloning is refused. */
   int input_states;          /* 0 or n */
-  const double *input_gain;  /* [n] T / (2 Mm) [s / (kg m^2)] (input_states only) */
+  const double *input_gain;  /* [n] T / (2 Mm) [s / (kg m^2)] (input_states, net_torque) */
   /* joint_torque = 1: the encoder sample is [qm, qmd, tau_J] (ne = 3n, r_encoder [3n]),
    * tau_J = Ks (qm - q) with Ks[j] = theta[ks_theta[j]] where ks_theta[j] >= 0
    * (effort_models.SpringTorqueMeasurement, its exact jacobian) */
   int joint_torque;
-  const double *ks;          /* [n] the spec's Ks [N m/rad] (joint_torque only) */
+  const double *ks;          /* [n] the spec's Ks [N m/rad] (joint_torque, net_torque) */
   const int *ks_theta;       /* [n] theta index of each joint's stiffness, or -1 */
+  /* net_torque = 1 (effort kind none, its input reconstructed): u is the net motor torque
+   * u - Ks (qm - q) (effort_models.NetTorqueTransition): the step runs F(x, u + Ks (qm - q)),
+   * its jacobian A + B d(Ks (qm - q))/dx with B of input_gain; not with input_states, nor
+   * with oosm's inverse backward map */
+  int net_torque;
 } amsfe_params;
 
 /* Counters and the outcome of the last calls. */
