@@ -13,8 +13,10 @@ counted).  ``--kinds none`` reads the same log as encoders-only.
 ``--applied-ratio OTHER_SRC``: the applied path's speed against another tree (e.g. the
 commit before this work): ``run_log`` of the compiled estimator on the same run logged with
 its applied torque (``amsfe simulate --bag``'s log), in fresh processes of each tree,
-interleaved, ``--repeat`` times each; prints the median of each and their ratio.  The other
-tree compiles its own library (``AMSFE_GENERATED_DIR`` of that process: ``--other-gen``).
+interleaved, ``--repeat`` times each (after one warm-up round each); prints the median of each,
+their ratio, and whether both trees gave the same x_hat and diag P bit for bit (a sha256).
+The other tree compiles its own library (``AMSFE_GENERATED_DIR`` of that process:
+``--other-gen``).
 
     PYTHONPATH=src AMSFE_GENERATED_DIR=... .venv/bin/python tools/effort_speed.py \\
         [--out /tmp/amsfe-effort-speed] [--estimators replay oosm] [--kinds joint_torque] \\
@@ -103,7 +105,12 @@ fr = sorted(log.frames, key=lambda f: (f.delivery_step, f.exposure_step))
 kap = np.array([f.exposure_step for f in fr], np.int64)
 arr = np.array([f.delivery_step for f in fr], np.int64)
 fz = np.array([f.z for f in fr], float).reshape(-1, 2)
-t0 = time.perf_counter(); run_log(est, log.u, log.z, kap, arr, fz); print(time.perf_counter() - t0)
+t0 = time.perf_counter()
+res = run_log(est, log.u, log.z, kap, arr, fz)
+dt = time.perf_counter() - t0
+import hashlib
+print(hashlib.sha256(res.x_hat.tobytes() + res.P_diag.tobytes()).hexdigest())
+print(dt)
 """
 
 
@@ -115,6 +122,7 @@ def applied_ratio(bag: Path, other_src: str, other_gen: str, repeat: int) -> dic
         "other": (other_src, other_gen),
     }
     times: dict[str, list[float]] = {"this": [], "other": []}
+    digests: dict[str, set[str]] = {"this": set(), "other": set()}
     for _ in range(repeat + 1):  # the first round compiles and warms: not counted
         for name, (src, gen) in trees.items():
             env = {**os.environ, "PYTHONPATH": src}
@@ -127,15 +135,23 @@ def applied_ratio(bag: Path, other_src: str, other_gen: str, repeat: int) -> dic
                 capture_output=True,
                 text=True,
             )
-            times[name].append(float(out.stdout.strip().splitlines()[-1]))
+            lines = out.stdout.strip().splitlines()
+            digests[name].add(lines[-2])
+            times[name].append(float(lines[-1]))
     med = {k: statistics.median(v[1:]) for k, v in times.items()}
-    return {"times": times, "median": med, "this/other": med["this"] / med["other"]}
+    same = len(digests["this"] | digests["other"]) == 1
+    return {
+        "times": times,
+        "median": med,
+        "this/other": med["this"] / med["other"],
+        "x_hat_and_P_diag_bit_identical": same,
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default="/tmp/amsfe-effort-speed")
-    ap.add_argument("--estimators", nargs="+", default=["replay", "oosm"])
+    ap.add_argument("--estimators", nargs="*", default=["replay", "oosm"])
     ap.add_argument("--kinds", nargs="+", default=["joint_torque"])
     ap.add_argument("--repeat", type=int, default=3, help="C runs per case (median)")
     ap.add_argument("--python-repeat", type=int, default=1, help="Python runs per case")
@@ -165,7 +181,8 @@ def main(argv: list[str] | None = None) -> int:
         med = report["applied"]["median"]
         print(
             f"applied run_log: this {med['this']:.3f} s, other {med['other']:.3f} s, "
-            f"ratio {report['applied']['this/other']:.3f}"
+            f"ratio {report['applied']['this/other']:.3f}; x_hat and diag P bit-identical: "
+            f"{report['applied']['x_hat_and_P_diag_bit_identical']}"
         )
     (out / "effort-speed.json").write_text(json.dumps(report, indent=1))
     return 0
