@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from amsfe_sym.apps.estimate_filter import HELD_THETA_STD, ROBOT_TORQUE_STD, filter_for_log
 from amsfe_sym.apps.estimate_report import (
     EstimateRun,
     figures,
@@ -27,6 +28,7 @@ from amsfe_sym.apps.estimate_report import (
     print_summary,
     summary,
 )
+from amsfe_sym.apps.estimate_start import LogLinkStart, scenario_start
 from amsfe_sym.core.folders import write_folder
 from amsfe_sym.core.jsonfile import write_json
 from amsfe_sym.core.outputs import check_output
@@ -41,6 +43,8 @@ if TYPE_CHECKING:  # the spec module is imported when a log's rate needs it, not
     from amsfe_sym.load.spec import RobotSpec
 
 __all__ = [
+    "HELD_THETA_STD",
+    "ROBOT_TORQUE_STD",
     "EstimateOptions",
     "EstimateRun",
     "add_arguments",
@@ -80,23 +84,11 @@ class EstimateOptions:
     verbose: bool = False
 
 
-#: ``[filter] link_torque_std`` and ``motor_torque_std`` [N m] of ``estimate --robot`` on a
-#: log without the applied torque or slower than T (:func:`_start_from_log`): the
-#: torque a real arm's model misses (a URDF's end effector, torque sensor offsets); the
-#: scenario default 0.1 N m is for amsfe's own exact simulations.  The real Panda log of
-#: docs/logs.md ("A real Panda recording, worked") misses up to 4.2 N m of gravity torque;
-#: with 0.1 N m every estimator diverges on it.
-ROBOT_TORQUE_STD = 5.0
-
-#: 1-sigma [unit] of theta(0|0) when ``estimate --robot`` holds theta at the spec's
-#: initial value (a log slower than the robot's T, :func:`_start_from_log`).
-HELD_THETA_STD = 1e-6
-
-
 def default_scenario(robot: str) -> Scenario:
     """The settings ``amsfe estimate LOG --robot ROBOT`` runs with: the scenario defaults
-    (``[filter]``: process noise 0.1 N m, :data:`ROBOT_TORQUE_STD` once the log is read
-    (:func:`_start_from_log`), buffer 1000 steps; ``[encoders]`` and
+    (``[filter]``: process noise 0.1 N m, :data:`ROBOT_TORQUE_STD` once the log is read,
+    then the log spec's ``[filter]``: :func:`~amsfe_sym.apps.estimate_filter.filter_for_log`;
+    buffer 1000 steps; ``[encoders]`` and
     ``[camera]``: the sensor noise the filter's R is built from; docs/scenarios.md), the
     ``oosm`` estimator, and the estimate's start replaced by the log's first sample
     (:func:`_start_from_log`).  No plant or trajectory is used."""
@@ -121,19 +113,24 @@ def default_scenario(robot: str) -> Scenario:
     return parse_scenario(data, Path(f"--robot {robot}"))
 
 
-def _start_from_log(sc: Scenario, log: RobotLog, hold_theta: bool = False) -> Scenario:
-    """``[estimate0]`` from the log's first encoder sample: link angles = the measured
-    positions, link rates = the measured velocities (motor states: the sample itself).
+def _link_start(sc: Scenario, log: RobotLog, lib: Any, effort: Any) -> LogLinkStart:
+    """The link angles of the log's first sample by its effort kind, a balance missing
+    :data:`ROBOT_TORQUE_STD` of torque (:func:`~amsfe_sym.apps.estimate_start.scenario_start`;
+    docs/effort.md, "Where the estimate starts")."""
+    return scenario_start(sc, log, lib, effort, ROBOT_TORQUE_STD)
 
-    The process torque (``[filter] link_torque_std``, ``motor_torque_std``) is
-    :data:`ROBOT_TORQUE_STD` when the applied torque is not logged (effort kind
-    ``joint_torque`` or ``none``) or with ``hold_theta``; with the applied torque at the
-    robot's T it stays 0.1 N m (at 5 N m oosm's A1 update refuses every frame of a
-    paper_2link driver log as indefinite).
+
+def _start_from_log(
+    sc: Scenario, log: RobotLog, start: LogLinkStart, hold_theta: bool = False
+) -> Scenario:
+    """``[estimate0]`` from the log's first encoder sample: link angles ``start`` (by the
+    effort's kind, :func:`_link_start`; its 1-sigma when it has one), link rates = the
+    measured velocities (motor states: the sample itself).  The filter's R and Q:
+    :func:`~amsfe_sym.apps.estimate_filter.filter_for_log`.
 
     ``hold_theta`` (a log read at a period longer than the robot's T, its library built with
-    model substeps): theta is held at the spec's initial value (``[filter]
-    theta_rate_std = 0``, 1-sigma :data:`HELD_THETA_STD`).  At such a period the joint
+    model substeps): theta is held at the spec's initial value (1-sigma
+    :data:`HELD_THETA_STD`; ``[filter] theta_rate_std = 0`` there).  At such a period the joint
     modes turn by many radians a step (w T = 26 for the Panda at 1/30 s) and the model has
     no spring damping: the one-step sensitivity of the link angles to theta (eqs. 1a, 4)
     follows the aliased phase of an undamped oscillation, not the static deflection the
@@ -141,14 +138,12 @@ def _start_from_log(sc: Scenario, log: RobotLog, hold_theta: bool = False) -> Sc
     every estimator diverged (docs/logs.md, "A real Panda recording, worked")."""
     n = log.u.shape[1]
     z0 = log.z[0]
-    e0 = replace(sc.estimate0, q=tuple(map(float, z0[:n])), qd=tuple(map(float, z0[n:])))
-    f = sc.filter
-    if hold_theta or log.effort_kind != "applied":
-        f = replace(f, link_torque_std=ROBOT_TORQUE_STD, motor_torque_std=ROBOT_TORQUE_STD)
+    e0 = replace(sc.estimate0, q=tuple(map(float, start.q)), qd=tuple(map(float, z0[n:])))
+    if start.std is not None:
+        e0 = replace(e0, std={**dict(e0.std), "q": start.std})
     if hold_theta:
         e0 = replace(e0, std={**dict(e0.std), "theta": HELD_THETA_STD})
-        f = replace(f, theta_rate_std=0.0)
-    return replace(sc, estimate0=e0, filter=f)
+    return replace(sc, estimate0=e0)
 
 
 def _robot_of(scenario_robot: str) -> tuple[str, list[str], float, int]:
@@ -269,9 +264,11 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
             print(f"  the log's period {exc.period:g} s: library {derived.name} (cached)")
         log = read_log(log_path, spec, joints, derived.model.T, N, plan, robot=name)
     log.config = config
-    if options.scenario is None and (options.robot is not None or config is None):
-        # --robot: the defaults, started from the log (theta held at a slower period)
-        sc = _start_from_log(sc, log, hold_theta=derived is not None)
+    robot_defaults = options.scenario is None and (options.robot is not None or config is None)
+    settled = filter_for_log(
+        sc, log, spec, robot_defaults=robot_defaults, hold_theta=derived is not None
+    )
+    sc = settled.scenario
     read_s = time.perf_counter() - t0
     if options.verbose:
         c = log.clock
@@ -279,16 +276,25 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
             f"  clock: log time - header stamp = {c.median:+.6f} s (spread {c.spread:.2e} s); "
             "log times moved onto the stamp clock"
         )
+        for line in settled.lines:
+            print(f"  {line}")
     from amsfe_sym.codegen import library_for
 
     lib = library_for(sc, robot=derived)
-    est, feed = _estimator(sc, lib, log, options, replace(effort, positions=spec.positions))
+    effort = replace(effort, positions=spec.positions)
+    if robot_defaults:
+        # --robot: the defaults, started from the log (theta held at a slower period)
+        start = _link_start(sc, log, lib, effort)
+        sc = _start_from_log(sc, log, start, hold_theta=derived is not None)
+        if options.verbose:
+            print(f"  start: link angles from {start.how}")
+    est, feed = _estimator(sc, lib, log, options, effort)
     t1 = time.perf_counter()
     from amsfe_sym.logs.replay import estimate_log
 
     result = estimate_log(feed, est, states=lib.N)
     estimate_s = time.perf_counter() - t1
-    run = EstimateRun(log, result, sc, out, read_s, estimate_s)
+    run = EstimateRun(log, result, sc, out, read_s, estimate_s, noise=settled.noise)
     _write(run, lib.manifest.joints, options)
     return run
 
@@ -334,7 +340,10 @@ def add_arguments(e: argparse.ArgumentParser) -> None:
     )
     e.add_argument("--scenario", default=None, help="robot + filter settings, to tune the filter")
     e.add_argument(
-        "--log-spec", default=None, metavar="FILE", help="topics, joint names, effort kind (TOML)"
+        "--log-spec",
+        default=None,
+        metavar="FILE",
+        help="topics, joint names, effort kind, the filter's R and Q ([filter]) (TOML)",
     )
     e.add_argument("--estimator", default=None, help="estimator name (default the scenario's)")
     e.add_argument(

@@ -16,14 +16,16 @@ from amsfe_sym.logs.read import RobotLog
 from amsfe_sym.scenario import Scenario
 
 if TYPE_CHECKING:  # the estimators (scipy) are imported when a log is estimated
+    from amsfe_sym.logs.noise import EncoderNoise
     from amsfe_sym.logs.replay import LogEstimate
 
-__all__ = ["EstimateRun", "figures", "nis_report", "print_summary", "summary"]
+__all__ = ["EstimateRun", "figures", "nis_advice", "nis_report", "print_summary", "summary"]
 
 
 @dataclass
 class EstimateRun:
-    """What ``amsfe estimate`` did: the read log, the estimates, the folder and the timing."""
+    """What ``amsfe estimate`` did: the read log, the estimates, the folder and the timing
+    (``noise``: the encoder noise measured from the log, when it was)."""
 
     log: RobotLog
     estimate: LogEstimate
@@ -31,6 +33,7 @@ class EstimateRun:
     out: Path
     read_s: float
     estimate_s: float
+    noise: EncoderNoise | None = None
 
 
 def _finite(x: float) -> float | None:
@@ -93,6 +96,64 @@ def nis_report(run: EstimateRun) -> dict[str, Any]:
     return out
 
 
+def nis_advice(
+    what: str,
+    r: dict[str, Any],
+    sc: Scenario,
+    effort_kind: str,
+    noise: EncoderNoise | None = None,
+) -> str | None:
+    """One line when the mean NIS of channel ``what`` (``encoders``, ``camera``; ``r`` from
+    :func:`nis_report`) is outside its 95 % band: which way the filter is off and which R
+    and Q keys to change (the log spec's or a scenario's ``[filter]``, ``[effort]``), with
+    their present values; for the encoders, when the encoder noise measured from the log
+    (``noise``) is more than 2x from the filter's R the way the advice goes, that noise and
+    the keys that use it.  None inside the band or without samples."""
+    mean, (lo, hi) = r.get("mean"), r["band_95"]
+    if mean is None or lo <= mean <= hi:
+        return None
+    f = sc.filter
+    q_keys = f"link_torque_std, motor_torque_std (now {f.link_torque_std:g}, "
+    q_keys += f"{f.motor_torque_std:g} N m)"
+    if effort_kind == "none":
+        q_keys += "; [effort] input_rate_std"
+    measured = ""
+    if what == "camera":
+        px = f.camera_pixel_std or sc.camera.pixel_std
+        r_keys = f"[filter] camera_pixel_std (now {px:g} px)"
+    else:
+        q_std = f.encoder_q_std or sc.encoders.q_std
+        qd_std = f.encoder_qd_std or sc.encoders.qd_std
+        r_keys = f"[filter] encoder_q_std, encoder_qd_std (now {q_std:.2g} rad, {qd_std:.2g} rad/s)"
+        if effort_kind == "joint_torque":
+            r_keys += ", [effort] joint_torque_std"
+        measured = _measured_hint(noise, (q_std, qd_std), lower=mean < lo)
+    if mean < lo:
+        return (
+            f"NIS {what} mean {mean:.3g} below its band: the filter is pessimistic (it claims "
+            f"more noise than the data show): lower R {r_keys} or Q [filter] {q_keys}" + measured
+        )
+    return (
+        f"NIS {what} mean {mean:.3g} above its band: the filter is optimistic (the data "
+        f"vary more than it allows, or the model misses something): raise Q [filter] "
+        f"{q_keys} or R {r_keys}" + measured
+    )
+
+
+def _measured_hint(noise: EncoderNoise | None, r: tuple[float, float], lower: bool) -> str:
+    """``; the log's encoder noise ...`` when a measured median is more than 2x below
+    (``lower``) or above the filter's R [rad, rad/s], else empty."""
+    if noise is None or noise.q_std is None or noise.qd_std is None:
+        return ""
+    ratios = (r[0] / noise.q_std, r[1] / noise.qd_std) if noise.q_std and noise.qd_std else ()
+    if not any((x > 2.0) if lower else (x < 0.5) for x in ratios):
+        return ""
+    return (
+        f"; the log's encoder noise is q {noise.q_std:.1e} rad, qd {noise.qd_std:.1e} rad/s: "
+        'encoder_q_std = "log", encoder_qd_std = "log" use it'
+    )
+
+
 def summary(run: EstimateRun) -> dict[str, Any]:
     """The ``summary.json`` of an estimate run (every number finite or null)."""
     log, est = run.log, run.estimate
@@ -109,7 +170,8 @@ def summary(run: EstimateRun) -> dict[str, Any]:
         "log_period_s": _finite(log.period_s),
         "clock_offset_s": _finite(log.clock.median),
         "clock_offset_spread_s": _finite(log.clock.spread),
-        "nis": nis_report(run),
+        "nis": _with_advice(nis_report(run), run),
+        "encoder_noise_from_log": _noise_dict(run.noise),
         "read_s": round(run.read_s, 4),
         "estimate_s": round(run.estimate_s, 4),
         "real_time_factor": round(log.K * log.T / max(run.read_s + run.estimate_s, 1e-9), 2),
@@ -125,6 +187,29 @@ def summary(run: EstimateRun) -> dict[str, Any]:
         out["nees_dof"] = int(est.x_hat.shape[1])
     out["provenance"] = provenance()
     return out
+
+
+def _with_advice(nis: dict[str, Any], run: EstimateRun) -> dict[str, Any]:
+    """Each NIS channel of :func:`nis_report` with its ``advice`` (:func:`nis_advice`)
+    where its mean is outside the band."""
+    for what, r in nis.items():
+        advice = nis_advice(what, r, run.scenario, run.log.effort_kind, run.noise)
+        if advice:
+            r["advice"] = advice
+    return nis
+
+
+def _noise_dict(noise: EncoderNoise | None) -> dict[str, Any] | None:
+    """The measured encoder noise for ``summary.json`` (None: not measured)."""
+    if noise is None:
+        return None
+    return {
+        "q_std_median": noise.q_std,
+        "qd_std_median": noise.qd_std,
+        "q_std": [c.std for c in noise.q],
+        "qd_std": [c.std for c in noise.qd],
+        "repeated_rows": noise.repeated,
+    }
 
 
 def print_summary(s: dict[str, Any], out: Path) -> None:
@@ -161,6 +246,8 @@ def print_summary(s: dict[str, Any], out: Path) -> None:
             f"{100 * (r['inside_95'] or 0):.1f} % of {r['samples']} inside the 95 % band "
             f"[{lo:.2f}, {hi:.2f}]"
         )
+        if r.get("advice"):
+            print(f"    {r['advice']}")
     if s.get("nees_mean") is not None:
         print(f"  mean NEES {s['nees_mean']:.2f} (N = {s['nees_dof']}) against the log's truth")
 
