@@ -53,8 +53,11 @@ def paper(libraries):  # type: ignore[no-untyped-def]
     return sc, lib, run(sc, lib, runtime="compiled")
 
 
-def _pair(paper: Any, kind: str, input_model: str, estimator: str) -> tuple[Any, Any, Any]:
-    """The Python and the C estimator of one log, its effort, and the frames by delivery."""
+def _pair(
+    paper: Any, kind: str, input_model: str, estimator: str, holes: bool = False
+) -> tuple[Any, Any, Any]:
+    """The Python and the C estimator of one log, its effort, and the frames by delivery;
+    ``holes``: encoder gaps (NaN rows) and torque samples lost (NaN) in the log."""
     from amsfe_sym.sim.builders import build_run
     from amsfe_sym.sim.effort import effort_estimator, frames_by_delivery, simulated_effort
 
@@ -62,9 +65,14 @@ def _pair(paper: Any, kind: str, input_model: str, estimator: str) -> tuple[Any,
     sc = sc.with_overrides(estimator=estimator)
     sensors = build_run(sc, lib).sensors
     effort = simulated_effort(res, kind, np.random.default_rng(3), 0.05)
+    z = res.z_enc.copy()
+    if holes:
+        z[[50, 51, 52, 300]] = np.nan
+        if effort is not None:
+            effort[[120, 126, 400]] = np.nan
     spec = EffortSpec(kind, input_model=input_model)
-    py = effort_estimator(sc, lib, sensors, res.z_enc, effort, spec)
-    c = effort_estimator(sc, lib, sensors, res.z_enc, effort, spec, compiled=True)
+    py = effort_estimator(sc, lib, sensors, z, effort, spec)
+    c = effort_estimator(sc, lib, sensors, z, effort, spec, compiled=True)
     return py, c, frames_by_delivery(res.frames, len(res.t))
 
 
@@ -138,6 +146,33 @@ def test_a_stiffness_parameter_enters_the_torque_jacobian(
     theta0 = float(py.estimator.x[paper[1].N - 1])
     _tick_by_tick(py, c, frames, estimator)
     assert abs(float(py.estimator.x[paper[1].N - 1]) - theta0) > 1.0  # the sensor moved it
+
+
+@pytest.mark.parametrize("estimator", ["oosm", "replay"])
+@pytest.mark.parametrize("kind", ["joint_torque", "none"])
+def test_gaps_and_lost_torques_match(paper: Any, kind: str, estimator: str) -> None:
+    """Encoder gaps and lost torque samples (a ``[qm, qmd, tau_J]`` row holding NaN is
+    dropped whole, docs/effort.md section 6): the same steps, tick by tick and in the batch."""
+    from amsfe_sym.runtime.estimator_batch import run_log
+
+    py, c, frames = _pair(paper, kind, "state", estimator, holes=True)
+    missing = ~np.isfinite(py.inputs.z_encoder).all(axis=1)
+    assert missing.sum() == (7 if kind == "joint_torque" else 4)
+    _tick_by_tick(py, c, frames, estimator)
+    _, c2, _ = _pair(paper, kind, "state", estimator, holes=True)
+    rows = sorted((fr.exposure_step, k, *fr.z) for k in range(len(frames)) for fr in frames[k])
+    fr = np.array(sorted(rows, key=lambda r: (r[1], r[0])), dtype=float).reshape(-1, 4)
+    res = run_log(
+        c2.estimator,
+        c2.inputs.u,
+        c2.inputs.z_encoder,
+        fr[:, 0].astype(np.int64),
+        fr[:, 1].astype(np.int64),
+        fr[:, 2:],
+    )
+    N = py.N
+    _close("x_hat[-1]", res.x_hat[-1], py.estimator.x[:N], RTOL)
+    assert np.isnan(res.encoder_nis[missing]).all()
 
 
 def _decisions(py: Any, frames: list[list[Any]]) -> tuple[Any, ...]:
