@@ -18,9 +18,15 @@ their ratio, and whether both trees gave the same x_hat and diag P bit for bit (
 The other tree compiles its own library (``AMSFE_GENERATED_DIR`` of that process:
 ``--other-gen``).
 
+``--real BAG``: the real franka_ros recording of docs/logs.md ("A real Panda recording,
+worked"; its library generated first with ``amsfe generate panda --period 0.0333333``), with
+that section's ``jt-tuned`` and ``none-tuned`` log specs and ``replay``, through both
+runtimes: their times and how far apart their x, diag P and encoder NIS are.
+
     PYTHONPATH=src AMSFE_GENERATED_DIR=... .venv/bin/python tools/effort_speed.py \\
         [--out /tmp/amsfe-effort-speed] [--estimators replay oosm] [--kinds joint_torque] \\
         [--repeat 3] [--python-repeat 1] [--applied-ratio ../main/src --other-gen DIR]
+        [--real joint_states.bag]
 """
 
 from __future__ import annotations
@@ -148,6 +154,55 @@ def applied_ratio(bag: Path, other_src: str, other_gen: str, repeat: int) -> dic
     }
 
 
+_TUNED = (
+    '[filter]\nencoder_q_std = "log"\nencoder_qd_std = "log"\nlink_torque_std = 0.7\n'
+    "motor_torque_std = 0.7\n"
+)
+REAL_SPECS = {
+    "jt-tuned": '[joints]\npositions = "link"\n[effort]\nkind = "joint_torque"\n' + _TUNED,
+    "none-tuned": _TUNED,
+}
+
+
+def real_recording(bag: Path, out: Path) -> dict[str, Any]:
+    """docs/logs.md's real Panda bag with each spec of REAL_SPECS, C and Python."""
+    import numpy as np
+
+    from amsfe_sym.apps.estimate import EstimateOptions, estimate_command
+
+    report: dict[str, Any] = {}
+    for name, text in REAL_SPECS.items():
+        spec = out / f"{name}.toml"
+        spec.write_text(text)
+        got = {}
+        for runtime in ("compiled", "python"):
+            opts = EstimateOptions(
+                robot="panda", log_spec=str(spec), estimator="replay", plots=False, force=True
+            )
+            run = estimate_command(
+                bag, out / f"real-{name}-{runtime}", dataclasses.replace(opts, runtime=runtime)
+            )
+            got[runtime] = run
+        c, p = got["compiled"].estimate, got["python"].estimate
+
+        def rel(a: Any, b: Any) -> float:
+            return float(np.max(np.abs(a - b)) / np.max(np.abs(b)))
+
+        nis = np.isfinite(p.encoder_nis)
+        report[name] = {
+            "ticks": int(c.x_hat.shape[0]),
+            **{f"{r}_read_s": got[r].read_s for r in got},
+            **{f"{r}_estimate_s": got[r].estimate_s for r in got},
+            "x_rel": rel(c.x_hat, p.x_hat),
+            "P_diag_rel": rel(c.P_diag, p.P_diag),
+            "encoder_nis_rel": float(
+                np.max(np.abs(c.encoder_nis[nis] - p.encoder_nis[nis]) / p.encoder_nis[nis])
+            ),
+        }
+        print(name, json.dumps(report[name]), flush=True)
+    return report
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default="/tmp/amsfe-effort-speed")
@@ -157,11 +212,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--python-repeat", type=int, default=1, help="Python runs per case")
     ap.add_argument("--applied-ratio", default=None, metavar="OTHER_SRC")
     ap.add_argument("--other-gen", default="", help="AMSFE_GENERATED_DIR of the other tree")
+    ap.add_argument("--real", default=None, metavar="BAG", help="docs/logs.md's Panda bag")
     a = ap.parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
+    report: dict[str, Any] = {"cases": {}}
+    if a.real:
+        report["real"] = real_recording(Path(a.real), out)
+    if not (a.estimators or a.applied_ratio):
+        (out / "effort-speed.json").write_text(json.dumps(report, indent=1))
+        return 0
     bag, applied = write_logs(out)
-    report: dict[str, Any] = {"log": str(bag), "cases": {}}
+    report["log"] = str(bag)
     for kind in a.kinds:
         for est in a.estimators:
             for runtime, reps in (("compiled", a.repeat), ("python", a.python_repeat)):
