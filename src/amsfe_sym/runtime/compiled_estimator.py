@@ -230,7 +230,8 @@ class CompiledEstimator(Estimator):
                     f"compiled {bad} on a log without the applied torque",
                     "encoders, naive, oosm (backward_map 'linearised') or replay",
                     bad,
-                    "use 'replay' (docs/effort.md), or the Python estimator (compiled = False)",
+                    "use 'replay' (docs/effort.md), or the Python estimator (amsfe estimate "
+                    "--runtime python; compiled = False)",
                 )
             )
 
