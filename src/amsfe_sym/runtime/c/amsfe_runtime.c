@@ -166,7 +166,7 @@ static int filter_dims(const amsfe_params *p, amsfe_dims *d) {
 }
 
 /* Nonzeros of the encoder H with joint torques (rows qm, qmd: one each; row tau_j: q_j, qm_j
- * and theta's stiffness entry if any) and of the camera H (row r: the q columns) */
+ * and theta's stiffness entry if any) */
 static int torque_nnz(const amsfe_params *p, int n) {
   int v = 5 * n;
   for (int j = 0; j < n; ++j) v += p->ks_theta[j] >= 0;
