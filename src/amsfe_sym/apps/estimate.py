@@ -313,8 +313,8 @@ def _estimator(
     """The estimator and the log it is fed: for an effort of kind ``joint_torque`` or
     ``none``, :func:`~amsfe_sym.sim.effort.effort_estimator`'s (the input and encoder
     measurements derived from the log, docs/effort.md), the library's C estimator with
-    ``--runtime compiled`` (the default; ``cloning`` with the input as states or joint
-    torques is refused there in one line: docs/effort.md, "Compiled").  ``effort``:
+    ``--runtime compiled`` (the default; oosm's inverse backward map with the input as states
+    is refused there in one line: docs/effort.md, "Compiled").  ``effort``:
     the log spec's ``[effort]`` noise keys and ``[joints] positions`` as an ``EffortSpec``
     (None: the defaults); its kind is replaced by the log's."""
     from amsfe_sym.estimation.effort import EffortSpec

@@ -121,8 +121,8 @@ class CompiledEstimator(Estimator):
     Raises:
         ConfigError: Other model types, a non-diagonal covariance, or a configuration the
             runtime refuses (e.g. ``cloning`` with more clones in flight than the library's
-            clone slots), or ``cloning`` (or oosm's ``backward_map = "inverse"``) with input
-            states or joint torques.
+            clone slots), or oosm's ``backward_map = "inverse"`` with input states or a net
+            torque input.
     """
 
     code: ClassVar[int]
@@ -219,16 +219,13 @@ class CompiledEstimator(Estimator):
     def _refuse_with_effort(self, parts: EffortParts) -> None:
         """What the C runtime does not compute with input states, joint torques or a net
         torque input, refused in one line naming what works."""
-        bad = None
-        if self.name == "cloning" and (parts.input_states or parts.joint_torque):
-            bad = "cloning"
-        elif (parts.input_states or parts.net_torque) and self.config.backward_map != "linearised":
+        inverse = self.name == "oosm" and self.config.backward_map != "linearised"
+        if inverse and (parts.input_states or parts.net_torque):
             bad = f"oosm with backward_map {self.config.backward_map!r}"
-        if bad is not None:
             raise ConfigError(
                 describe(
                     f"compiled {bad} on a log without the applied torque",
-                    "encoders, naive, oosm (backward_map 'linearised') or replay",
+                    "oosm with backward_map 'linearised', or another estimator",
                     bad,
                     "use 'replay' (docs/effort.md), or the Python estimator (amsfe estimate "
                     "--runtime python; compiled = False)",

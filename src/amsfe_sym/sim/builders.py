@@ -212,9 +212,8 @@ def build_estimator(
 
     Raises:
         ConfigError: an unknown estimator, a singular camera R, bad initial values, or the
-            compiled estimator asked for what it does not compute (``cloning`` with input
-            states or joint torques, oosm's inverse backward map without the applied torque;
-            docs/effort.md).
+            compiled estimator asked for what it does not compute (oosm's inverse backward
+            map with input states or a net torque input; docs/effort.md).
     """
     n, p = lib.n, lib.p
     f = sc.filter

@@ -85,6 +85,7 @@ struct amsfe_est {
   double *gain, *ks, *An, *Gn; /* T / (2 Mm), Ks; the model's A and Gamma (input states) */
   int *kst;
   int *ehrow, *ehcol, *chrow, *chcol; /* nonzeros of the encoder and the camera H by rows */
+  int *ccol;                          /* cloning: the camera H's columns at a clone */
   double *ehval, *last_hval, *hz, *chval, *cy, *cnu, *cJ, *OW, *RH;
   double *ut, *Bn; /* net torque: the model's input, its gain B (N x n) */
   gwork g; /* work of the generated functions */
@@ -205,12 +206,13 @@ static size_t layout(amsfe_est *e, const amsfe_params *p, char *base) {
     e->RW = DBL(&c, AMSFE_RETRO_WORK(N, d.ne));
   }
   e->gain = e->ks = e->An = e->Gn = NULL;
-  e->kst = e->ehrow = e->ehcol = e->chrow = e->chcol = NULL;
+  e->kst = e->ehrow = e->ehcol = e->chrow = e->chcol = e->ccol = NULL;
   e->ehval = e->last_hval = e->hz = e->chval = e->cy = e->cnu = e->cJ = e->OW = e->RH = NULL;
   if (p->input_states) {
     e->gain = DBL(&c, n);
     e->An = DBL(&c, (long)Nm * Nm), e->Gn = DBL(&c, (long)Nm * (d.nw - n));
     e->chrow = (int *)carve(&c, sizeof(int) * 3), e->chcol = (int *)carve(&c, sizeof(int) * 2 * n);
+    e->ccol = (int *)carve(&c, sizeof(int) * 2 * n);
     e->chval = DBL(&c, 2 * n), e->cy = DBL(&c, 2), e->cnu = DBL(&c, 2);
     e->cJ = DBL(&c, 4 * n + 2); /* J dense, depth, J's nonzeros */
     if (est == AMSFE_OOSM) e->OW = DBL(&c, 8 * N + 8);
@@ -251,16 +253,15 @@ static int params_ok(const amsfe_params *p) {
   model_dims(&d);
   if (p->input_states != 0 && p->input_states != d.n) return 0;
   if (p->joint_torque != 0 && p->joint_torque != 1) return 0;
-  if (p->input_states) { /* the trapezoid gain; cloning and the inverse map are not here */
+  if (p->input_states) { /* the trapezoid gain; oosm's inverse map is not here */
     if (!p->input_gain || !all_finite(p->input_gain, d.n)) return 0;
-    if (p->estimator == AMSFE_CLONING || p->backward_map != AMSFE_BACKWARD_LINEARISED) return 0;
+    if (p->estimator == AMSFE_OOSM && p->backward_map != AMSFE_BACKWARD_LINEARISED) return 0;
   }
   if (p->net_torque != 0 && p->net_torque != 1) return 0;
   if (p->net_torque) {
     if (p->input_states || !p->input_gain || !all_finite(p->input_gain, d.n)) return 0;
-    if (p->backward_map != AMSFE_BACKWARD_LINEARISED) return 0;
+    if (p->estimator == AMSFE_OOSM && p->backward_map != AMSFE_BACKWARD_LINEARISED) return 0;
   }
-  if (p->joint_torque && p->estimator == AMSFE_CLONING) return 0;
   if (p->joint_torque || p->net_torque) {
     if (!p->ks || !p->ks_theta || !all_finite(p->ks, d.n)) return 0;
     for (int j = 0; j < d.n; ++j)
@@ -701,9 +702,19 @@ int amsfe_est_tick(amsfe_est *e, const double *z_encoder, const double *u) {
       e->diag.encoder_accepted = 0, e->diag.encoder_nis = NAN;
       st = AMSFE_OK;
       if (z) {
-        /* the encoder update on the augmented state (H selects qm, qmd of the state block) */
-        if (!amsfe_joseph_select(Na, e->d.ne, e->enc_rows, e->re, e->xa, e->Pa, z, e->xa2, e->Pa2,
-                                 &e->nis, e->last_nu, e->JW)) {
+        /* the encoder update on the augmented state (H selects qm, qmd of the state block;
+         * with joint torques, its nonzeros, in the state block's columns) */
+        int ok;
+        if (e->jt) {
+          torque_h(e, e->xa, e->hz, e->ehval);
+          for (int a = 0; a < e->d.ne; ++a) e->last_nu[a] = z[a] - e->hz[a];
+          ok = amsfe_joseph_rows(Na, e->d.ne, e->ehrow, e->ehcol, e->ehval, e->re, e->xa, e->Pa,
+                                 e->last_nu, e->xa2, e->Pa2, &e->nis, e->JW);
+        } else {
+          ok = amsfe_joseph_select(Na, e->d.ne, e->enc_rows, e->re, e->xa, e->Pa, z, e->xa2,
+                                   e->Pa2, &e->nis, e->last_nu, e->JW);
+        }
+        if (!ok) {
           st = AMSFE_ERR_S_NOT_PD;
           break;
         }
@@ -961,13 +972,25 @@ static int cloning_frame(amsfe_est *e, const double *z, long kappa, double *nis)
   for (int s = 0; s < S; ++s)
     if (e->clone_on[s] && e->clone_k[s] == kappa) slot = s;
   if (slot < 0) return scheduled(e, kappa) ? AMSFE_REFUSED_NO_CLONE_LEFT : AMSFE_REFUSED_NO_CLONE;
-  for (int s = 0; s < S; ++s) e->sel[s] = s == slot ? 1.0 : 0.0;
-  copy(e->cl, e->xa + N * (1 + slot), N);
-  const double *in[6] = {e->xa, e->Pa, e->cl, e->sel, z, e->rc};
-  double *out[5] = {e->xa2, e->Pa2, &e->nis, &e->s_ok, &e->chk};
-  gcall(&e->g, est_clone_camera, in, 6, out, 5);
-  if (!isfinite(e->chk)) return AMSFE_ERR_NONFINITE;
-  if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
+  if (e->ni) { /* the generated update is the model's N: the clone's padded H, in C */
+    int n = e->d.n, o = N * (1 + slot);
+    if (!camera_h(e, e->xa + o)) return AMSFE_ERR_NONFINITE;
+    for (int r = 0; r < 2; ++r) {
+      e->cnu[r] = z[r] - e->cy[r];
+      for (int j = 0; j < n; ++j) e->ccol[r * n + j] = o + j; /* the clone's q */
+    }
+    if (!amsfe_joseph_rows(Na, 2, e->chrow, e->ccol, e->chval, e->rc, e->xa, e->Pa, e->cnu,
+                           e->xa2, e->Pa2, &e->nis, e->JW))
+      return AMSFE_ERR_S_NOT_PD;
+  } else {
+    for (int s = 0; s < S; ++s) e->sel[s] = s == slot ? 1.0 : 0.0;
+    copy(e->cl, e->xa + N * (1 + slot), N);
+    const double *in[6] = {e->xa, e->Pa, e->cl, e->sel, z, e->rc};
+    double *out[5] = {e->xa2, e->Pa2, &e->nis, &e->s_ok, &e->chk};
+    gcall(&e->g, est_clone_camera, in, 6, out, 5);
+    if (!isfinite(e->chk)) return AMSFE_ERR_NONFINITE;
+    if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
+  }
   if (nis) *nis = e->nis;
   int st = e->nis <= e->par.gate_camera ? AMSFE_OK : AMSFE_GATED;
   if (st == AMSFE_OK) {

@@ -101,8 +101,8 @@ typedef struct {
    * (effort_models.InputStateTransition): the state is [x, u] of M = N + n entries (x0 [M],
    * P0 [M*M]), the transition [F(x, u), u] with jacobian [[A, B], [0, I]], B = (A[:, qmd] +
    * e_qmd) input_gain (the trapezoid rule), qw [nw + n] (the last n: the walk's variance per
-   * step, input_rate_std^2 T); the u given to amsfe_est_tick is ignored.  Estimators
-   * encoders, naive, oosm (backward_map linearised) and replay; cloning is refused. */
+   * step, input_rate_std^2 T); the u given to amsfe_est_tick is ignored.  Every estimator
+   * (oosm with backward_map linearised only; cloning clones the M states). */
   int input_states;          /* 0 or n */
   const double *input_gain;  /* [n] T / (2 Mm) [s / (kg m^2)] (input_states, net_torque) */
   /* joint_torque = 1: the encoder sample is [qm, qmd, tau_J] (ne = 3n, r_encoder [3n]),
@@ -114,7 +114,7 @@ typedef struct {
   /* net_torque = 1 (effort kind none, its input reconstructed): u is the net motor torque
    * u - Ks (qm - q) (effort_models.NetTorqueTransition): the step runs F(x, u + Ks (qm - q)),
    * its jacobian A + B d(Ks (qm - q))/dx with B of input_gain; not with input_states, nor
-   * with oosm's inverse backward map */
+   * with oosm's inverse backward map (AMSFE_ERR_CONFIG) */
   int net_torque;
 } amsfe_params;
 
