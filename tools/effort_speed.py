@@ -13,8 +13,9 @@ counted).  ``--kinds none`` reads the same log as encoders-only.
 ``--applied-ratio OTHER_SRC``: the applied path's speed against another tree (e.g. the
 commit before this work): ``run_log`` of the compiled estimator on the same run logged with
 its applied torque (``amsfe simulate --bag``'s log), in fresh processes of each tree,
-interleaved, ``--repeat`` times each (after one warm-up round each); prints the median of each,
-their ratio, and whether both trees gave the same x_hat and diag P bit for bit (a sha256).
+interleaved, ``--repeat`` times each (after one warm-up round each); prints the median wall
+time of each, their ratio (and of the CPU times), and whether both trees gave the same x_hat
+and diag P bit for bit (a sha256).  The order alternates between rounds.
 The other tree compiles its own library (``AMSFE_GENERATED_DIR`` of that process:
 ``--other-gen``).
 
@@ -111,11 +112,12 @@ fr = sorted(log.frames, key=lambda f: (f.delivery_step, f.exposure_step))
 kap = np.array([f.exposure_step for f in fr], np.int64)
 arr = np.array([f.delivery_step for f in fr], np.int64)
 fz = np.array([f.z for f in fr], float).reshape(-1, 2)
-t0 = time.perf_counter()
+t0, c0 = time.perf_counter(), time.process_time()
 res = run_log(est, log.u, log.z, kap, arr, fz)
-dt = time.perf_counter() - t0
+dt, dc = time.perf_counter() - t0, time.process_time() - c0
 import hashlib
 print(hashlib.sha256(res.x_hat.tobytes() + res.P_diag.tobytes()).hexdigest())
+print(dc)
 print(dt)
 """
 
@@ -128,9 +130,11 @@ def applied_ratio(bag: Path, other_src: str, other_gen: str, repeat: int) -> dic
         "other": (other_src, other_gen),
     }
     times: dict[str, list[float]] = {"this": [], "other": []}
+    cpu: dict[str, list[float]] = {"this": [], "other": []}
     digests: dict[str, set[str]] = {"this": set(), "other": set()}
-    for _ in range(repeat + 1):  # the first round compiles and warms: not counted
-        for name, (src, gen) in trees.items():
+    for i in range(repeat + 1):  # the first round compiles and warms: not counted
+        for name in ("this", "other") if i % 2 else ("other", "this"):
+            src, gen = trees[name]
             env = {**os.environ, "PYTHONPATH": src}
             if gen:
                 env["AMSFE_GENERATED_DIR"] = gen
@@ -142,14 +146,19 @@ def applied_ratio(bag: Path, other_src: str, other_gen: str, repeat: int) -> dic
                 text=True,
             )
             lines = out.stdout.strip().splitlines()
-            digests[name].add(lines[-2])
+            digests[name].add(lines[-3])
+            cpu[name].append(float(lines[-2]))
             times[name].append(float(lines[-1]))
     med = {k: statistics.median(v[1:]) for k, v in times.items()}
+    med_cpu = {k: statistics.median(v[1:]) for k, v in cpu.items()}
     same = len(digests["this"] | digests["other"]) == 1
     return {
         "times": times,
+        "cpu": cpu,
         "median": med,
+        "median_cpu": med_cpu,
         "this/other": med["this"] / med["other"],
+        "this/other_cpu": med_cpu["this"] / med_cpu["other"],
         "x_hat_and_P_diag_bit_identical": same,
     }
 
@@ -243,7 +252,8 @@ def main(argv: list[str] | None = None) -> int:
         med = report["applied"]["median"]
         print(
             f"applied run_log: this {med['this']:.3f} s, other {med['other']:.3f} s, "
-            f"ratio {report['applied']['this/other']:.3f}; x_hat and diag P bit-identical: "
+            f"ratio {report['applied']['this/other']:.3f} (CPU time: "
+            f"{report['applied']['this/other_cpu']:.3f}); x_hat and diag P bit-identical: "
             f"{report['applied']['x_hat_and_P_diag_bit_identical']}"
         )
     (out / "effort-speed.json").write_text(json.dumps(report, indent=1))

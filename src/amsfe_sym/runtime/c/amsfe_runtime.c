@@ -27,6 +27,13 @@
 #include "amsfe_internal.h"
 
 #define AMSFE_MAX_ENCODERS 256 /* 2n: up to 128 joints */
+/* The effort paths (docs/effort.md section 7) stay out of line: the applied path's tick is
+ * compiled as before (the same inlining), whatever they add. */
+#if defined(__GNUC__)
+#define EFFORT_PATH __attribute__((noinline))
+#else
+#define EFFORT_PATH
+#endif
 DECLARE(est_predict)
 DECLARE(est_camera_update)
 DECLARE(est_oosm_correct)
@@ -108,7 +115,7 @@ static int fail(amsfe_est *e, int status) {
 /* SpringTorqueMeasurement.predict: h(x) = [qm, qmd, Ks (qm - q)] into h [3n] and the values
  * of its jacobian's nonzeros (the pattern ehrow/ehcol of init) into hv; Ks[j] is theta's
  * entry where the joint's stiffness is a parameter (then d/dtheta = qm - q: exact). */
-static void torque_h(const amsfe_est *e, const double *x, double *h, double *hv) {
+EFFORT_PATH static void torque_h(const amsfe_est *e, const double *x, double *h, double *hv) {
   int n = e->d.n, v = 0;
   for (int a = 0; a < 2 * n; ++a) h[a] = x[2 * n + a], hv[v++] = 1.0;
   for (int j = 0; j < n; ++j) {
@@ -122,14 +129,17 @@ static void torque_h(const amsfe_est *e, const double *x, double *h, double *hv)
 
 /* ekf.joseph_update with the encoders' H: a selection of qm and qmd (eq. 5; enc_rows), or
  * with the joint torques [qm, qmd, Ks (qm - q)] (its nonzeros by rows) */
-static int encoder_kernel(amsfe_est *e, const double *z) {
-  if (!e->jt)
-    return amsfe_joseph_select(e->d.N, e->d.ne, e->enc_rows, e->re, e->x, e->P, z, e->x2, e->P2,
-                               &e->nis, e->last_nu, e->JW);
+EFFORT_PATH static int encoder_kernel_torque(amsfe_est *e, const double *z) {
   torque_h(e, e->x, e->hz, e->ehval);
   for (int a = 0; a < e->d.ne; ++a) e->last_nu[a] = z[a] - e->hz[a];
   return amsfe_joseph_rows(e->d.N, e->d.ne, e->ehrow, e->ehcol, e->ehval, e->re, e->x, e->P,
                            e->last_nu, e->x2, e->P2, &e->nis, e->JW);
+}
+
+static int encoder_kernel(amsfe_est *e, const double *z) {
+  if (e->jt) return encoder_kernel_torque(e, z);
+  return amsfe_joseph_select(e->d.N, e->d.ne, e->enc_rows, e->re, e->x, e->P, z, e->x2, e->P2,
+                             &e->nis, e->last_nu, e->JW);
 }
 
 /* P <- src; the Cholesky factor LP of P is stale until the next pd_state. */
@@ -465,7 +475,7 @@ const double *amsfe_est_factor(amsfe_est *e) {
 /* InputStateTransition.step: the model's step from x[:Nm] with the input states x[Nm:] as u,
  * A = [[A_m, B], [0, I]] with B = (A_m[:, qmd] + e_qmd) T / (2 Mm) (trapezoid_input_gain),
  * Gamma = blockdiag(Gamma_m, I) (qw's last n entries: the walk's variance per step) */
-static int predict_inputs(amsfe_est *e, double *A, double *G) {
+EFFORT_PATH static int predict_inputs(amsfe_est *e, double *A, double *G) {
   int M = e->d.N, N = e->Nm, n = e->d.n, nw = e->d.nw - n;
   const double *in[2] = {e->x, e->x + N};
   double *out[3] = {e->x1, e->An, e->Gn};
@@ -491,7 +501,7 @@ static int predict_inputs(amsfe_est *e, double *A, double *G) {
 }
 
 /* NetTorqueTransition.spring: ut <- u + Ks (qm - q) (the model's input for a net torque u) */
-static void net_input(amsfe_est *e, const double *u) {
+EFFORT_PATH static void net_input(amsfe_est *e, const double *u) {
   int n = e->d.n;
   for (int j = 0; j < n; ++j) {
     double Ks = e->kst[j] >= 0 ? e->x[4 * n + e->kst[j]] : e->ks[j];
@@ -502,7 +512,7 @@ static void net_input(amsfe_est *e, const double *u) {
 /* NetTorqueTransition.step's jacobian: A <- A + B ds/dx, B = (A[:, qmd] + e_qmd) T / (2 Mm)
  * (trapezoid_input_gain, of the model's A), ds/dx: -Ks at q_j, Ks at qm_j, qm_j - q_j at
  * theta's stiffness entry */
-static void net_jacobian(amsfe_est *e, double *A) {
+EFFORT_PATH static void net_jacobian(amsfe_est *e, double *A) {
   long N = e->d.N;
   int n = e->d.n;
   for (int j = 0; j < n; ++j) {
@@ -567,7 +577,7 @@ static int encoder_update(amsfe_est *e, const double *z, int report) {
 
 /* CameraMeasurement.predict for a state with input states: y = I_k(q) into cy and the values
  * of H's nonzeros (the q columns, row by row) into chval; 0 when they are not finite */
-static int camera_h(amsfe_est *e, const double *x) {
+EFFORT_PATH static int camera_h(amsfe_est *e, const double *x) {
   int n = e->d.n;
   const double *in[2] = {x, x + 4 * n};
   double *out[3] = {e->cy, e->cJ + 2 * n + 1, e->cJ + 2 * n};
@@ -591,7 +601,7 @@ static int camera_h(amsfe_est *e, const double *x) {
 
 /* Estimator._frame_update_now on a state with input states (the generated camera update is
  * the model's N): the iterated EKF with the camera's H padded with zero columns */
-static int frame_now_inputs(amsfe_est *e, const double *z, double *nis) {
+EFFORT_PATH static int frame_now_inputs(amsfe_est *e, const double *z, double *nis) {
   int M = e->d.N, n = e->d.n;
   if (!camera_h(e, e->x)) return AMSFE_ERR_NONFINITE;
   for (int r = 0; r < 2; ++r) e->cnu[r] = z[r] - e->cy[r];
@@ -796,7 +806,7 @@ static int oosm_backward_inverse(amsfe_est *e, long kappa) {
 
 /* oosm.a1_retrodict with the last update's joint-torque H (its nonzeros last_hval):
  * Q H^T, P_prior H^T and S = sym(H P_prior H^T) + R, then the kernel */
-static int retrodict_torque(amsfe_est *e) {
+EFFORT_PATH static int retrodict_torque(amsfe_est *e) {
   int M = e->d.N, m = e->d.ne;
   double *QHt = e->RH, *PHt = QHt + (long)M * m, *S = PHt + (long)M * m, *T = S + m * m;
   for (int a = 0; a < m; ++a) {
@@ -824,7 +834,7 @@ static int retrodict_torque(amsfe_est *e) {
 
 /* oosm.a1_correct on a state with input states (est_oosm_correct is the model's N): G = Hc
  * Phi^-1 at x_r = xr, Szz = sym(G M G^T) + R, W = C G^T Szz^-1, P+ = sym(P - W (C G^T)^T) */
-static int oosm_correct_inputs(amsfe_est *e, const double *z, double *nis) {
+EFFORT_PATH static int oosm_correct_inputs(amsfe_est *e, const double *z, double *nis) {
   long M = e->d.N;
   int n = e->d.n;
   double *G = e->OW, *GM = G + 2 * M, *Pxz = GM + 2 * M, *W = Pxz + 2 * M;
@@ -1066,7 +1076,8 @@ void amsfe_est_inverse_residual(const amsfe_est *e, double *residual, double *li
 /* ------------------------------------------------------------------ a whole log */
 /* NEES of the robot's Nm states against a truth row [Nm] (input states left out: their
  * marginal covariance P[:Nm, :Nm]); scratch A1, L1, x1, x2 (free between ticks) */
-static void nees_inputs(amsfe_est *e, const amsfe_est_log *log, long k, amsfe_est_log_out *out) {
+EFFORT_PATH static void nees_inputs(amsfe_est *e, const amsfe_est_log *log, long k,
+                                    amsfe_est_log_out *out) {
   long M = e->d.N, N = e->Nm;
   const double *t = log->truth ? log->truth + k * N : NULL;
   if (!t || !all_finite(t, N)) return;
