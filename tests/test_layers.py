@@ -93,6 +93,8 @@ ALLOWED: dict[str, set[str]] = {
         "core.values",
     },
     "runtime.compiled_loop": {"errors", "runtime", "estimation", "core.camera_frame"},
+    # the compiled estimators' parameters for a log's effort, read off estimation's models
+    "runtime.effort_params": {"errors", "runtime", "estimation"},
     # core.values: the named settings shared with the scenario (BACKWARD_MAPS)
     "estimation": {"errors", "core.camera_frame", "core.values"},
     "control": {"errors", "runtime", "signals.trajectory"},

@@ -326,20 +326,22 @@ def _estimator(
     sc: Scenario, lib: Any, log: RobotLog, options: EstimateOptions, effort: Any = None
 ) -> Any:
     """The estimator and the log it is fed: for an effort of kind ``joint_torque`` or
-    ``none``, :func:`~amsfe_sym.sim.effort.effort_estimator`'s (the Python estimators; the
-    input and encoder measurements derived from the log, docs/effort.md).  ``effort``: the
-    log spec's ``[effort]`` noise keys and ``[joints] positions`` as an ``EffortSpec``
+    ``none``, :func:`~amsfe_sym.sim.effort.effort_estimator`'s (the input and encoder
+    measurements derived from the log, docs/effort.md), the library's C estimator with
+    ``--runtime compiled`` (the default; oosm's inverse backward map with the input as states
+    is refused there in one line: docs/effort.md, "Compiled").  ``effort``:
+    the log spec's ``[effort]`` noise keys and ``[joints] positions`` as an ``EffortSpec``
     (None: the defaults); its kind is replaced by the log's."""
     from amsfe_sym.estimation.effort import EffortSpec
     from amsfe_sym.sim.builders import build_estimator, build_sensors, scenario_timing
     from amsfe_sym.sim.effort import effort_estimator
 
     sensors = build_sensors(sc, lib, np.random.default_rng(sc.seed), scenario_timing(sc, lib))
+    compiled = options.runtime == "compiled"
     if log.effort_kind == "applied":
-        compiled = options.runtime == "compiled"
         return build_estimator(sc, lib, sensors, log.z[0], compiled=compiled), log
     spec = replace(effort or EffortSpec(), kind=log.effort_kind)
-    built = effort_estimator(sc, lib, sensors, log.z, log.effort, spec, compiled=False)
+    built = effort_estimator(sc, lib, sensors, log.z, log.effort, spec, compiled=compiled)
     return built.estimator, replace(log, u=built.inputs.u, z=built.inputs.z_encoder)
 
 
