@@ -181,14 +181,16 @@ def test_the_none_bag_is_tracked_from_the_springs_balance(arm_bag, tmp_path, cap
     n = res.lib.n
     q_true = res.x_true[:, :n]
     out = tmp_path / "balance"
-    args = ["estimate", str(bag), "--robot", "paper_2link", "--estimator", "replay"]
+    args = ["estimate", str(bag), "--robot", "paper_2link"]  # replay: the default for none
     code = main([*args, "--out", str(out), "--no-plots"])
     printed = capsys.readouterr().out
     assert code == 0
+    assert "estimator replay: the default for effort kind 'none'" in printed, printed
     assert "start: link angles from the springs' balance" in printed, printed
     assert "chosen by the first camera frame" in printed, printed
     ref = _estimate(bag, tmp_path / "truth", start_at=q_true[0])
     s = json.loads((out / "summary.json").read_text())
+    assert s["estimator"] == "replay"
     est = pd.read_parquet(out / "estimates.parquet")
     frames = ref.log.frames
     K = q_true.shape[0]

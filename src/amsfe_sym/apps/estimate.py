@@ -45,6 +45,7 @@ if TYPE_CHECKING:  # the spec module is imported when a log's rate needs it, not
 
 __all__ = [
     "HELD_THETA_STD",
+    "INPUT_UNKNOWN_ESTIMATOR",
     "ROBOT_TORQUE_STD",
     "EstimateOptions",
     "EstimateRun",
@@ -85,13 +86,21 @@ class EstimateOptions:
     verbose: bool = False
 
 
+#: The estimator of ``--robot`` for a log whose applied torque is not logged (effort kind
+#: ``joint_torque`` or ``none``): with the input as states oosm's A1 update finds its
+#: retrodicted covariance indefinite and refuses every camera frame; replay's exact
+#: re-filtering fuses them (docs/effort.md sections 2-3).
+INPUT_UNKNOWN_ESTIMATOR = "replay"
+
+
 def default_scenario(robot: str) -> Scenario:
     """The settings ``amsfe estimate LOG --robot ROBOT`` runs with: the scenario defaults
     (``[filter]``: process noise 0.1 N m, :data:`ROBOT_TORQUE_STD` once the log is read,
     then the log spec's ``[filter]``: :func:`~amsfe_sym.apps.estimate_filter.filter_for_log`;
     buffer 1000 steps; ``[encoders]`` and
     ``[camera]``: the sensor noise the filter's R is built from; docs/scenarios.md), the
-    ``oosm`` estimator, and the estimate's start replaced by the log's first sample
+    ``oosm`` estimator (:data:`INPUT_UNKNOWN_ESTIMATOR` once the log shows no applied
+    torque), and the estimate's start replaced by the log's first sample
     (:func:`_start_from_log`).  No plant or trajectory is used."""
     from amsfe_sym.codegen.preflight import modelled_joints
     from amsfe_sym.load.spec import load_spec
@@ -281,6 +290,13 @@ def estimate_command(
         sc, log, spec, robot_defaults=robot_defaults, hold_theta=derived is not None
     )
     sc = settled.scenario
+    if robot_defaults and options.estimator is None and log.effort_kind != "applied":
+        sc = sc.with_overrides(estimator=INPUT_UNKNOWN_ESTIMATOR)
+        print(
+            f"  estimator {INPUT_UNKNOWN_ESTIMATOR}: the default for effort kind "
+            f"{log.effort_kind!r} (oosm's single-lag update refuses camera frames when the input "
+            "is estimated; docs/effort.md section 2); --estimator to choose"
+        )
     if options.verbose:
         c = log.clock
         print(
