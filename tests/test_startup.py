@@ -142,7 +142,7 @@ def test_the_blend_schedules_the_command_filter(
     for s, expected in ((0.0, 20.0), (0.3, 50.0 + (20.0 - 50.0) * b0(0.3 / tb)), (tb, 50.0)):
         got = ctrl._blend_gains(gains, s, tb)[i]
         np.testing.assert_allclose(got, expected, rtol=1e-12)
-    off, _ = build_controller(_with(sc, "amsfe", ("wf=50",)), lib)
+    off, _ = build_controller(_with(sc, "amsfe", ("wf=50", "blend_wf=inf")), lib)
     np.testing.assert_array_equal(off._blend_gains(gains, 0.0, tb)[i], 50.0)
 
 
