@@ -276,7 +276,7 @@ def test_a_repeated_frame_is_not_fused_twice(paper_sim: Recording, name: str) ->
 def test_an_outlier_fused_with_the_gate_off_is_named_on_both_paths(paper_sim: Recording) -> None:
     """Gate off (gate_probability = 0) and one frame 1e6 px off: the linearised update moves
     the state (and the payload) hundreds of standard deviations, outside where the EKF holds,
-    and the filter breaks down steps later.  Both paths stop at the same step with one line
+    and the filter breaks down steps later.  Both paths stop there (within 2 steps) with one line
     naming that frame, its NIS and the fix (not a bare covariance or Cholesky error)."""
     import dataclasses
 
@@ -297,5 +297,9 @@ def test_an_outlier_fused_with_the_gate_off_is_named_on_both_paths(paper_sim: Re
         messages.append(str(info.value))
         assert f"camera frame kappa={kappa} was fused with NIS" in str(info.value)
         assert "gate is off" in str(info.value) and "\n" not in str(info.value)
-    # the same step on both paths
-    assert messages[0].split(":")[0] == messages[1].split(":")[0], messages
+    # the breakdown on both paths, steps after the frame: where the covariance first fails
+    # its check once the state is hundreds of sigma off is a knife edge that the paths'
+    # 1e-12 rounding differences can move by a step (502 / 501 on the recording of
+    # paper-sim's issue-28 blend), so within 2 steps of each other, both after the frame
+    steps = [int(m.split(":")[0].rsplit(" ", 1)[1]) for m in messages]
+    assert all(s_ > bad for s_ in steps) and abs(steps[0] - steps[1]) <= 2, messages
