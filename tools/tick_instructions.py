@@ -83,7 +83,9 @@ def callgrind(
 
 
 def write_report(out: Path, stem: str, report: dict[str, Any], text: str) -> None:
-    """``<stem>.json`` and ``<stem>.md`` in ``out``; the markdown printed too."""
+    """``<stem>.json`` and ``<stem>.md`` in ``out`` (made if missing, as
+    tools/check_docs.py's temporary output folder is); the markdown printed too."""
+    out.mkdir(parents=True, exist_ok=True)
     (out / f"{stem}.json").write_text(json.dumps(report, indent=2) + "\n")
     (out / f"{stem}.md").write_text(text)
     print(text)
