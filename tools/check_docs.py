@@ -59,6 +59,10 @@ def _rerun(
                 (out / "stdout.txt").write_text(text)
             return text
         subprocess.run(argv, cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
+        if src.post:
+            post = src.post.format(out=str(out))
+            print(f"then: {post}", flush=True)
+            subprocess.run(_argv(post), cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
         return json.loads((out / src.output if src.output else out).read_text())
 
 

@@ -28,7 +28,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from amsfe_sym.apps.study.effects import combine, format_effects
+from amsfe_sym.apps.study.effects import combine, format_effects, pair_effects
 from amsfe_sym.apps.study.records import study_runs
 
 #: (a, b): "a lower" means a estimates q better than b.
@@ -80,13 +80,13 @@ def as_claims(
     studies: list[dict[str, Any]], name: str, pairs: list[tuple[str, str]] | None, variant: str
 ) -> dict[str, Any]:
     """A block as a claims document: the rows and the pairs that ran (``pairs`` given), or
-    one variant's estimators as :data:`PAIRS`."""
+    one variant's estimators as :data:`PAIRS` (``variant`` "all": every row)."""
     seeds, rows = rows_of(studies, name)
     if pairs is None:
         rows = {k.split("/", 1)[1]: v for k, v in rows.items() if k.split("/", 1)[0] == variant}
         pairs = [(a, b) for a, b in PAIRS]
     have = [(a, b) for a, b in pairs if a in rows and b in rows]
-    scenario = studies[0]["scenario"] + (f" {variant}" if variant else "")
+    scenario = studies[0]["scenario"] + (f" {variant}" if variant != "all" else "")
     return {"scenario": scenario, "seeds": [seeds[0], seeds[-1]], "rmse": rows,
             "pairs": [{"label": f"{a} vs {b}", "a": a, "b": b} for a, b in have]}  # fmt: skip
 
@@ -98,38 +98,42 @@ def main() -> None:
                     help="the second block's (default: the last positional file)")  # fmt: skip
     ap.add_argument("--metric", choices=sorted(METRICS), default="q")
     ap.add_argument("--pair", nargs=2, action="append", default=None, metavar=("A", "B"))
+    ap.add_argument("--one-block", action="store_true",
+                    help="all files are one block: its effects only")  # fmt: skip
     ap.add_argument("--out", type=Path, required=True, help="folder for effects.json / .md")
     args = ap.parse_args()
-    files = args.first if args.second else args.first[:-1]
-    second = args.second or args.first[-1:]
-    if not files or len(files) != len(second):
-        ap.error("give the same number of study.json files for each block")
+    if args.one_block:
+        files, second = args.first, []
+    else:
+        files = args.first if args.second else args.first[:-1]
+        second = args.second or args.first[-1:]
+        if not files or len(files) != len(second):
+            ap.error("give the same number of study.json files for each block")
     one = [json.loads(p.read_text()) for p in files]
     two = [json.loads(p.read_text()) for p in second]
     what, unit, scale = METRICS[args.metric]
-    pairs = [tuple(p) for p in args.pair] if args.pair else None
-    doc: dict[str, Any] = {
-        "first": [s["command"] for s in one],
-        "second": [s["command"] for s in two],
-        "metric": args.metric,
-    }
+    pairs = [(a, b) for a, b in args.pair] if args.pair else None
+    variants = list(one[0]["aggregate"]) if pairs is None else ["all"]
+    doc: dict[str, Any] = {"first": [s["command"] for s in one], "metric": args.metric}
+    doc["pairs"] = {v: pair_effects(as_claims(one, args.metric, pairs, v)) for v in variants}
     text = []
-    if pairs is None:
-        doc["variants"] = {}
-        for variant in one[0]["aggregate"]:
-            a, b = (as_claims(x, args.metric, None, variant) for x in (one, two))
-            doc["variants"][variant] = combine(a, b)
+    if two:
+        doc["second"] = [s["command"] for s in two]
+        key = "variants" if pairs is None else "claims"
+        doc[key] = {}
+        for v in variants:
+            a, b = (as_claims(x, args.metric, pairs, v) for x in (one, two))
+            doc[key][v] = combine(a, b)
             text.append(format_effects(a, b, what=what, unit=unit, scale=scale))
-    else:
-        a, b = (as_claims(x, args.metric, pairs, "") for x in (one, two))  # type: ignore[arg-type]
-        doc["claims"] = combine(a, b)
-        text.append(format_effects(a, b, what=what, unit=unit, scale=scale))
-    if len(one) == 1 and pairs is None:  # the format docs/estimation.md section 6 reads
-        doc["first"], doc["second"] = doc["first"][0], doc["second"][0]
+        if pairs is not None:
+            doc["claims"] = doc["claims"]["all"]
+        if len(one) == 1 and pairs is None:  # the format docs/estimation.md section 6 reads
+            doc["first"], doc["second"] = doc["first"][0], doc["second"][0]
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "effects.json").write_text(json.dumps(doc, indent=1) + "\n")
-    (args.out / "effects.md").write_text("\n".join(text))
-    print("\n".join(text))
+    if text:
+        (args.out / "effects.md").write_text("\n".join(text))
+    print("\n".join(text) or json.dumps(doc["pairs"], indent=1))
 
 
 if __name__ == "__main__":

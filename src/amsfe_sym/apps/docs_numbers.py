@@ -25,6 +25,8 @@ Registry format (TOML)::
     seeds = 200
     costly = false                # costly sources re-run only when named (or with --all)
     fixed_seed = false            # true: one documented seed, re-run on it whatever the block
+    post = ""                     # optional: a command run on {out} after it (its output is
+                                  # then ``output``, e.g. "effects/effects.json")
 
     [[block]]
     doc = "docs/reproduction.md"
@@ -41,6 +43,8 @@ Registry format (TOML)::
     fmt = "{:.2f}"
     scale = 1000.0
     atol = 0.0
+    per_block = false             # true: a value quoted for its named seed block only (one
+                                  # trajectory, no interval): in the text, never re-compared
 
 A JSON path is dot-separated: object keys, or list indices as integers.
 """
@@ -84,6 +88,7 @@ class Source:
     seeds: int = 0
     costly: bool = False
     fixed_seed: bool = False
+    post: str = ""  # a command run on {out} after ``command`` (e.g. the effects of a study)
 
     def command_for(self, first_seed: int, seeds: int, out: str) -> str:
         """The command on seeds ``first_seed ..`` (``seeds`` of them), writing to ``out``."""
@@ -102,6 +107,7 @@ class Number:
     scale: tuple[float, ...]
     intervals: tuple[str, ...] = ()
     atol: float = 0.0
+    per_block: bool = False  # quoted for its named seed block only: never re-run elsewhere
 
 
 @dataclass(frozen=True)
@@ -171,6 +177,7 @@ def load_registry(root: Path, path: Path | None = None) -> Registry:
                 scale=_scales(n.get("scale", 1.0), len(values)),
                 intervals=tuple(n.get("intervals", ())),
                 atol=float(n.get("atol", 0.0)),
+                per_block=bool(n.get("per_block", False)),
             )
         )
     for b in doc.get("block", []):
@@ -341,7 +348,7 @@ def compare(reg: Registry, source: str, fresh: Any) -> list[Moved]:
     old = _read_output(reg.root / reg.sources[source].stored)
     out: list[Moved] = []
     for n in reg.numbers:
-        if n.source != source:
+        if n.source != source or n.per_block:
             continue
         for i, p in enumerate(n.values):
             if not _has(fresh, p):
@@ -408,6 +415,36 @@ def _claims_block(b: Block, old: Any, new: Any) -> list[Moved]:
     return out
 
 
+def _effects_block(b: Block, old: Any, new: Any) -> list[Moved]:
+    """Effect tables (tools/estimator_effects.py, tools/nees_run_length.py): every stated
+    claim (the same verdict on both stored blocks) found again on the fresh block's
+    ``pairs``, not "indistinguishable" nor reversed; divergences as stored."""
+    if "variants" in old:  # per variant: {variant: [claim rows]}, fresh {variant: [pairs]}
+        stored = [(v, r) for v, rs in old["variants"].items() for r in rs]
+        fresh = {(v, p["label"]): p for v, ps in new.get("pairs", {}).items() for p in ps}
+    else:  # one list of claim rows; fresh pairs a list or {"all": [...]}
+        stored = [("", r) for r in old.get("claims", [])]
+        ps = new.get("pairs", [])
+        fresh = {("", p["label"]): p for p in (ps if isinstance(ps, list) else ps.get("all", []))}
+    out: list[Moved] = []
+    for v, r in stored:
+        q = fresh.get((v, r["label"]))
+        if q is None:
+            continue
+        f, s = q["joints"][r["joint"] - 1], r["first"]
+        where = f"{v + ': ' if v else ''}{r['label']} joint {r['joint']}"
+        was = f"{s['diverged_a']} / {s['diverged_b']}"
+        now = f"{f['diverged_a']} / {f['diverged_b']}"
+        if was != now:
+            out.append(Moved(b.doc, f"{where} diverged a / b", was, now, "equal"))
+        claim = r["stated"]
+        if claim in _OPPOSITE and f["verdict"] in (_OPPOSITE[claim], "indistinguishable"):
+            lo, hi = f["difference_ci95"]
+            found = f"{f['verdict']} [{lo:+.4g}, {hi:+.4g}]"
+            out.append(Moved(b.doc, f"{where} stated claim", claim, found, claim))
+    return out
+
+
 def _ci(ci: Any) -> str:
     return f"[{1e3 * ci[0]:+.3f}, {1e3 * ci[1]:+.3f}]"
 
@@ -437,4 +474,4 @@ def _check_block(b: Block, old: Any, new: Any) -> list[Moved]:
     return out
 
 
-_CHECKS = {"claims": _claims_block, "check": _check_block}
+_CHECKS = {"claims": _claims_block, "check": _check_block, "effects": _effects_block}
