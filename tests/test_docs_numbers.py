@@ -106,3 +106,11 @@ def test_a_per_block_number_is_not_compared_on_another_block(tmp_path: Path) -> 
     far = {"rows": {"a/b": {"joints": [{"median": 0.009, "median_ci95": [0.008, 0.01]}]}}}
     assert compare(reg, "s", far) == []
     assert check_text(reg) == []
+
+
+def test_a_key_with_dots_is_matched_whole() -> None:
+    doc = {"theta_mean_at": {"0.5": [0.149], "10": [0.15]}}
+    assert json_path(doc, "theta_mean_at.0.5.0") == 0.149
+    assert json_path(doc, "theta_mean_at.10.0") == 0.15
+    with pytest.raises(ConfigError, match="no '0'"):
+        json_path(doc, "theta_mean_at.0.7.0")

@@ -25,6 +25,7 @@ import tempfile
 from pathlib import Path
 
 from amsfe_sym.apps.docs_numbers import Moved, Source, check_text, compare, load_registry
+from amsfe_sym.errors import AmsfeError
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -116,4 +117,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    try:
+        raise SystemExit(main())
+    except AmsfeError as e:  # a bad registry entry or stored output: one line, exit 2
+        print(f"check_docs: {e}", file=sys.stderr)
+        raise SystemExit(2) from None

@@ -10,7 +10,8 @@ Reads ``amsfe study`` outputs of the same commands on two seed blocks (the full
 ``study.json``, with its per-run records) and compares rows seed by seed: the median over
 seeds of the paired difference a - b with its bootstrap 95 % interval, a failed run counted
 as +inf (never dropped), and the verdict stated only where both blocks agree
-(amsfe_sym.apps.study.effects). Writes ``effects.json`` and ``effects.md``.
+(amsfe_sym.apps.study.effects). Writes ``effects.json`` (with each block's studies' aggregates, ``aggregates``) and
+``effects.md``.
 
 A row is ``VARIANT/ESTIMATOR`` (the variant is ``base`` without ``--variant``), prefixed by
 the run length (``3s base/replay``) when a block is more than one study. Without ``--pair``
@@ -115,6 +116,7 @@ def main() -> None:
     pairs = [(a, b) for a, b in args.pair] if args.pair else None
     variants = list(one[0]["aggregate"]) if pairs is None else ["all"]
     doc: dict[str, Any] = {"first": [s["command"] for s in one], "metric": args.metric}
+    doc["aggregates"] = [[s["aggregate"] for s in block] for block in (one, two) if block]
     doc["pairs"] = {v: pair_effects(as_claims(one, args.metric, pairs, v)) for v in variants}
     text = []
     if two:

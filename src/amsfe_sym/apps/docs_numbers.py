@@ -218,9 +218,18 @@ def _scales(scale: float | list[float], n: int) -> tuple[float, ...]:
 
 
 def json_path(doc: Any, path: str) -> Any:
-    """The value at a dot-separated ``path`` (keys, or integer list indices)."""
+    """The value at a dot-separated ``path`` (keys, or integer list indices; a key that
+    itself holds dots, such as ``theta_mean_at``'s ``"0.5"``, is matched whole)."""
     cur = doc
-    for part in path.split("."):
+    parts = path.split(".")
+    i = 0
+    while i < len(parts):
+        part = parts[i]
+        if isinstance(cur, dict) and part not in cur:
+            for j in range(i + 2, len(parts) + 1):
+                if ".".join(parts[i:j]) in cur:
+                    part, i = ".".join(parts[i:j]), j - 1
+                    break
         try:
             cur = cur[int(part)] if isinstance(cur, list) else cur[part]
         except (KeyError, IndexError, ValueError, TypeError) as e:
@@ -230,6 +239,7 @@ def json_path(doc: Any, path: str) -> Any:
                 f"no {part!r}",
                 "fix the registry entry",
             ) from e
+        i += 1
     return cur
 
 
