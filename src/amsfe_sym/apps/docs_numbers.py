@@ -366,8 +366,8 @@ def compare(reg: Registry, source: str, fresh: Any) -> list[Moved]:
             k = n.scale[i]
             x, x0 = _value(json_path(fresh, p), k), _value(json_path(old, p), k)
             if n.intervals:
-                lo, hi = (_value(v, k) for v in json_path(old, n.intervals[i]))
-                flo, fhi = (_value(v, k) for v in json_path(fresh, n.intervals[i]))
+                lo, hi = sorted(_value(v, k) for v in json_path(old, n.intervals[i]))  # k < 0 flips
+                flo, fhi = sorted(_value(v, k) for v in json_path(fresh, n.intervals[i]))
                 moved = _disjoint((flo, fhi), (lo, hi), n.atol)
             else:
                 lo = hi = x0
