@@ -11,7 +11,8 @@ writes the divergences (how many runs, and the range of their times) and, per jo
 (43a), (43b), the gain bound (38) and the sampling bound (39) hold, and the median of (38)'s
 bound [rad/s^2]) as the median over seeds with its bootstrap 95 % interval (2000 resamples,
 amsfe_sym.apps.study.effects' convention), and the smallest and largest seed's value.
-Diverged runs are counted and their conditions (up to the divergence) kept, never dropped.
+Diverged runs are counted (a study records a stopped loop as an error with its time), never
+dropped; their conditions are not recorded.
 Writes ``conditions.json`` and ``conditions.md``.
 """
 
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +51,20 @@ def summary(x: np.ndarray, rng: np.random.Generator) -> dict[str, Any]:
     }  # fmt: skip
 
 
+def diverged_at(run: dict[str, Any]) -> float | None:
+    """When a run diverged [s]: its summary's ``diverged_at_s``, or the time in the error a
+    study records for a loop that stopped on divergence; None otherwise."""
+    if run.get("diverged_at_s") is not None:
+        return float(run["diverged_at_s"])
+    m = re.search(r"diverged at t = ([0-9.]+) s", str(run.get("error", "")))
+    return float(m.group(1)) if m else None
+
+
+def key_controller(variant: str) -> str:
+    """A study's failed run records no controller: the variant names it here."""
+    return variant
+
+
 def block(doc: dict[str, Any], variant: str | None, estimator: str | None) -> dict[str, Any]:
     """One block's rows: per (variant, estimator), divergences and condition summaries."""
     rng = np.random.default_rng(0)
@@ -59,16 +75,17 @@ def block(doc: dict[str, Any], variant: str | None, estimator: str | None) -> di
         if (variant and v != variant) or (estimator and e != estimator):
             continue
         rs = [r for r in runs if r.get("variant", "base") == v and r["estimator"] == e]
-        div = [r["diverged_at_s"] for r in rs if r.get("diverged_at_s") is not None]
+        div = [diverged_at(r) for r in rs if diverged_at(r) is not None]
+        ok = [r for r in rs if "sliding_conditions" in r]
         row: dict[str, Any] = {
-            "controller": rs[0].get("controller"),
+            "controller": rs[0].get("controller", key_controller(v)),
             "runs": len(rs),
             "diverged": len(div),
             "diverged_at_s": [min(div), max(div)] if div else None,
             "conditions": {},
         }
-        for name, _, _ in FIELDS:
-            vals = np.array([r["sliding_conditions"][name] for r in rs], float)
+        for name, _, _ in FIELDS if ok else ():
+            vals = np.array([r["sliding_conditions"][name] for r in ok], float)
             row["conditions"][name] = [summary(vals[:, j], rng) for j in range(vals.shape[1])]
         out["rows"][f"{v}/{e}"] = row
     return out
@@ -84,7 +101,7 @@ def table(blocks: list[dict[str, Any]]) -> str:
             if r["diverged_at_s"]:
                 div += f" ({r['diverged_at_s'][0]:.3f}-{r['diverged_at_s'][1]:.3f} s)"
             cells = []
-            for name, _, k in FIELDS:
+            for name, _, k in FIELDS if r["conditions"] else ():
                 fmt = "{:.0f}" if k == 100.0 or name.startswith("gain_38_eps") else "{:.2f}"
                 cells.append(" / ".join(
                     f"{fmt.format(k * j['median'])} [{fmt.format(k * j['median_ci95'][0])}, "
@@ -93,6 +110,7 @@ def table(blocks: list[dict[str, Any]]) -> str:
                     for j in r["conditions"][name]
                 ))  # fmt: skip
             s = b["seeds"]
+            cells = cells or ["-"] * len(FIELDS)
             lines.append(f"| {s[0]}-{s[1]} | {key} ({r['controller']}) | {div} | "
                          + " | ".join(cells) + " |")  # fmt: skip
     return "\n".join(lines) + "\n"
@@ -109,8 +127,8 @@ def main() -> None:
     blocks = [block(d, args.variant, args.estimator) for d in docs]
     caption = (
         "Per seed block: divergences, and per joint each condition's median over seeds "
-        f"[bootstrap 95 % interval, {N_BOOT} resamples] (smallest-largest seed); a diverged "
-        "run's conditions are those up to its divergence.\n\n"
+        f"[bootstrap 95 % interval, {N_BOOT} resamples] (smallest-largest seed) over the runs "
+        "that did not diverge (a diverged run is counted, with its time, never dropped).\n\n"
     )
     md = caption + table(blocks)
     args.out.mkdir(parents=True, exist_ok=True)
