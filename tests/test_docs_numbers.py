@@ -114,3 +114,18 @@ def test_a_key_with_dots_is_matched_whole() -> None:
     assert json_path(doc, "theta_mean_at.10.0") == 0.15
     with pytest.raises(ConfigError, match="no '0'"):
         json_path(doc, "theta_mean_at.0.7.0")
+
+
+def test_a_restated_statistic_is_not_reported_but_its_verdict_still_is() -> None:
+    """The UR5 table's joint-6 effect is stated by its sign only (its size moved between
+    blocks): a fresh interval far from the stored one is not reported, a reversed verdict
+    is."""
+    reg = load_registry(ROOT)
+    stored = json.loads((ROOT / reg.sources["claims-ur5-control"].stored).read_text())
+    fresh = copy.deepcopy(stored)
+    pair = next(p for p in fresh["pairs"] if p["label"] == "amsfe vs dtsmc-ekf (camera fused)")
+    pair["joints"][5].update(difference_ci95=[-0.9e-3, -0.8e-3], verdict="a lower")
+    assert compare(reg, "claims-ur5-control", fresh) == []
+    pair["joints"][5].update(difference_ci95=[0.8e-3, 0.9e-3], verdict="a higher")
+    (moved,) = compare(reg, "claims-ur5-control", fresh)
+    assert moved.where == "amsfe vs dtsmc-ekf (camera fused) joint 6 stated claim"
