@@ -35,7 +35,7 @@ def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path
     out_json = tmp_path / "bench.json"
     argv = ["bench", "--repeat", "200", "--rounds", "2", "--duration", "0.2", "--joints", "1"]
     argv += ["--no-panda", "--scaling-loop-duration", "0.2"]
-    argv += ["--loop-duration", "0.3", "--loop-scenarios", "paper-sim"]
+    argv += ["--loop-duration", "0.3", "--loop-scenarios", "paper-sim", "--logs", "paper-sim:0.3"]
     assert main([*argv, "--json", str(out_json)]) == 0
     out = capsys.readouterr().out
     for section in (
@@ -45,6 +45,7 @@ def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path
         "4. one est",
         "5. sc",
         "closed loop: paper-sim",
+        "6. amsfe estimate",
     ):
         assert section in out
     for row in ("cold (force", "cached (second", *CALL_FUNCTIONS, "ekf_predict"):
@@ -93,6 +94,13 @@ def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path
     tick = report["tick_compiled_us"]
     assert set(tick) == {"plant_step", "transition_step", "mass_matrix", "bias", "total"}
     assert tick["total"] == pytest.approx(sum(v for k, v in tick.items() if k != "total"))
+    (log,) = report["logs"]  # section 6: amsfe estimate over a 0.3 s log, 2 fresh processes
+    assert (log["log"], log["ticks"], log["rounds"]) == ("paper-sim 0.3 s", 301, 2)
+    m, f = log["median"], log["real_time_factor"]
+    assert f["log"] == pytest.approx(0.301 / (m["read_s"] + m["estimate_s"]), rel=0.02, abs=0.01)
+    assert f["process"] == pytest.approx(0.301 / m["process_s"], rel=0.02, abs=0.01)
+    assert f["process_cpu"] == pytest.approx(0.301 / m["process_cpu_s"], rel=0.02, abs=0.01)
+    assert m["startup_s"] + m["wall_s"] <= m["process_s"] + 0.02  # (start: 10 ms ticks)
 
 
 def test_binding_matches_casadi_external(libraries) -> None:
@@ -154,3 +162,14 @@ def test_time_calls_sizes_rounds_by_budget() -> None:
     t = time_calls(lambda: None, (), repeat=50, rounds=3)
     assert isinstance(t, Timing) and t.calls == 50 and t.rounds == 3
     assert 0 < t.min_us <= t.median_us
+
+
+@pytest.mark.parametrize("text", ["paper-sim", "paper-sim:0", "paper-sim:x", ":10", "a:inf"])
+def test_a_bad_log_case_is_one_line(text: str) -> None:
+    from amsfe_sym.apps.bench.logs import log_case
+    from amsfe_sym.errors import ConfigError
+
+    with pytest.raises(ConfigError) as exc:
+        log_case(text)
+    assert "\n" not in str(exc.value) and "paper-sim:10" in str(exc.value)
+    assert log_case("panda-control:60").duration == 60.0

@@ -110,3 +110,37 @@ def test_an_interrupt_while_the_command_line_loads_is_one_line(
     assert entry.run() == 130
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "Ctrl-C" in err[0] and "nothing was written" in err[0]
+
+
+def test_a_closed_stdout_is_one_line_and_exit_141(libraries) -> None:
+    """``amsfe ... | head``: the reader closes the pipe before the command writes (here
+    ``generate``, cached, whose lines reach the pipe at exit's flush); the command ends with
+    one line on stderr and 128 + SIGPIPE, no traceback, nothing at exit."""
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "amsfe_sym", "generate"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert proc.stdout is not None
+    proc.stdout.close()  # before the interpreter has even loaded the command line
+    _, err = proc.communicate(timeout=120)
+    text = err.decode()
+    assert proc.returncode == 141, text
+    assert "broken pipe" in text and "Traceback" not in text and "Exception ignored" not in text
+    assert len(text.strip().splitlines()) == 1
+
+
+def test_a_pipe_closed_under_a_command_says_what_was_kept(monkeypatch, capsys) -> None:
+    from amsfe_sym.apps import cli
+
+    def closed(args: object) -> int:
+        raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(cli, "_generate", closed)
+    assert main(["generate"]) == cli.BROKEN_PIPE
+    err = capsys.readouterr().err
+    assert err.startswith("stopped: amsfe generate's output was closed (broken pipe)")
+    assert "nothing half-written was kept" in err

@@ -298,3 +298,70 @@ def test_damaged_ros1_bytes_give_columns_or_one_line(tmp_path: Path, compression
             read_topics(path, TOPICS | {"/joint_states"}, progress=False)
         except LogError as exc:
             assert "\n" not in str(exc)
+
+
+def _first_by_reference(messages: Any, count: int) -> dict[str, tuple[list[int], list[bytes]]]:
+    """The first ``count`` (log time, payload) of each topic of a message stream."""
+    out: dict[str, tuple[list[int], list[bytes]]] = {}
+    for topic, t, raw in messages:
+        times, raws = out.setdefault(topic, ([], []))
+        if len(times) < count:
+            times.append(t)
+            raws.append(raw)
+    return out
+
+
+@pytest.mark.parametrize("count", [1, 3, 400])
+def test_first_payloads_of_a_folder_equal_rosbags(bag: Path, count: int) -> None:
+    """A rosbag2 folder of one MCAP: its topics and first payloads, read with mcap and cut
+    with numpy, are rosbags' AnyReader's (the reader the folder went through before)."""
+    from amsfe_sym.logs import source
+    from amsfe_sym.logs.firsts import first_payloads
+
+    assert source.log_topics(bag) == source._rosbags_topics(bag, "rosbag2")
+    ref = _first_by_reference(source._rosbags_payloads(bag, TOPICS), count)
+    got = first_payloads(bag, TOPICS, count=count)
+    assert set(got) == TOPICS and set(ref) == TOPICS
+    for topic, (times, raws) in ref.items():
+        assert got[topic].log_time_ns.tolist() == times and got[topic].raws == raws, topic
+
+
+@pytest.mark.parametrize("count", [1, 5, 250])
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"compression": "ZSTD", "chunk_size": 4096},
+        {"compression": "LZ4", "chunk_size": 20000},
+        {"use_chunking": False},
+        {"index_types": "NONE", "chunk_size": 8192},
+        {"compression": "ZSTD", "chunk_size": 3000, "shuffle": True},
+    ],
+    ids=["zstd-small", "lz4", "unchunked", "no-index", "shuffled"],
+)
+def test_first_messages_equal_mcaps_reader(
+    bag: Path, tmp_path: Path, options: dict[str, Any], count: int
+) -> None:
+    """first_messages (the fewest chunks, cut with numpy) against mcap's own reader in
+    log-time order, on small chunks, out-of-order files; None without indexes."""
+    from mcap.writer import CompressionType, IndexType
+
+    from amsfe_sym.logs import source
+    from amsfe_sym.logs.firsts import first_messages, first_payloads
+
+    opts = dict(options)
+    shuffle = bool(opts.pop("shuffle", False))
+    if "compression" in opts:
+        opts["compression"] = CompressionType[opts["compression"]]
+    if "index_types" in opts:
+        opts["index_types"] = IndexType[opts["index_types"]]
+    path = _rewrite(next(bag.glob("*.mcap")), tmp_path / "log.mcap", shuffle, **opts)
+    ref = _first_by_reference(source._mcap_payloads(path, TOPICS), count)
+    got = first_messages(path, TOPICS, count)
+    if "index_types" in opts or "use_chunking" in opts:
+        assert got is None  # the caller reads message by message
+    else:
+        assert got == ref
+    via = first_payloads(path, TOPICS, count=count)
+    slow = source.first_payloads(path, TOPICS, count=count)
+    assert {t: (d.log_time_ns.tolist(), d.raws) for t, d in via.items()} == ref
+    assert {t: (d.log_time_ns.tolist(), d.raws) for t, d in slow.items()} == ref

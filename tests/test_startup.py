@@ -23,8 +23,16 @@ from amsfe_sym.sim.builders import build_controller
 from amsfe_sym.sim.loop import run
 from tests.test_compiled_loop import assert_same_run
 
-#: The start-up of issue 28: wait for the rates and for consistency, the motor-side hold.
-STARTUP = ("ready_qd_std=0.3", "ready_nis=6.0", "ready_nis_window=50", "hold=motor")
+#: The start-up of issue 28: wait for the rates and for consistency, the motor-side hold, the
+#: command filter's bandwidth scheduled along the blend.
+STARTUP = (
+    "ready_qd_std=0.3",
+    "ready_nis=6.0",
+    "ready_nis_window=50",
+    "hold=motor",
+    "blend_rate=5",
+    "blend_wf=20",
+)
 
 
 @pytest.fixture(scope="module")
@@ -113,20 +121,46 @@ def test_the_exponential_window(paper_sim: tuple[Scenario, ModelLibrary]) -> Non
 
 def test_bad_startup_gains_are_refused(paper_sim: tuple[Scenario, ModelLibrary]) -> None:
     sc, lib = paper_sim
-    for sets in (("hold=brake",), ("ready_nis=0",), ("ready_nis_window=-1",)):
+    for sets in (("hold=brake",), ("ready_nis=0",), ("ready_nis_window=-1",), ("blend_wf=0",)):
         with pytest.raises(ConfigError):
             build_controller(_with(sc, "amsfe", sets), lib)
 
 
-@pytest.mark.parametrize("hold", ["reference", "motor"])
-def test_compiled_startup_tick_by_tick(paper_sim: tuple[Scenario, ModelLibrary], hold: str) -> None:
+def test_the_blend_schedules_the_command_filter(
+    paper_sim: tuple[Scenario, ModelLibrary],
+) -> None:
+    """``blend_wf``: the command filter's bandwidth is blend_wf at the trusted tick, wf once
+    the blend is over, and in between wf + (blend_wf - wf) b0(s / Tb), b0 evaluated here
+    independently (numpy's polynomial of the blend's conditions); off (inf) it is wf."""
+    sc, lib = paper_sim
+    ctrl, _ = build_controller(_with(sc, "amsfe", ("wf=50", "blend_wf=20")), lib)
+    gains = ctrl._gain_args()
+    i = [np.array_equal(g, np.full(lib.n, 50.0)) for g in gains].index(True)
+    b0 = np.polynomial.Polynomial([1, 0, 0, 0, 0, -126, 420, -540, 315, -70])
+    assert b0(1.0) == pytest.approx(0.0, abs=1e-12) and b0.deriv(4)(1.0) == pytest.approx(0.0)
+    tb = 0.8
+    for s, expected in ((0.0, 20.0), (0.3, 50.0 + (20.0 - 50.0) * b0(0.3 / tb)), (tb, 50.0)):
+        got = ctrl._blend_gains(gains, s, tb)[i]
+        np.testing.assert_allclose(got, expected, rtol=1e-12)
+    off, _ = build_controller(_with(sc, "amsfe", ("wf=50", "blend_wf=inf")), lib)
+    np.testing.assert_array_equal(off._blend_gains(gains, 0.0, tb)[i], 50.0)
+
+
+@pytest.mark.parametrize(
+    ("hold", "blend_wf"), [("reference", "inf"), ("motor", "inf"), ("reference", "20")]
+)
+def test_compiled_startup_tick_by_tick(
+    paper_sim: tuple[Scenario, ModelLibrary], hold: str, blend_wf: str
+) -> None:
     """amsfe_ctrl fed the Python controller's inputs (a covariance that converges, NIS values
-    that fall) gives its torques to 1e-12 through the wait, the hold and the start."""
+    that fall) gives its torques to 1e-12 through the wait, the hold, the start and the blend
+    (with the command filter's bandwidth scheduled, ``blend_wf``)."""
     from amsfe_sym.runtime.compiled_loop import CompiledController
     from amsfe_sym.sim.compiled import controller_params
 
     sc, lib = paper_sim
     sets = ("ready_qd_std=0.05", "ready_nis=6.0", "ready_nis_window=8", f"hold={hold}")
+    sets = (*sets, f"blend_wf={blend_wf}")
     ctrl, traj = build_controller(_with(sc, "amsfe", sets), lib)
     cc = CompiledController(str(lib.library_path), controller_params(ctrl, lib), lib.n)
     rng = np.random.default_rng(1)
@@ -182,6 +216,8 @@ def test_the_c_api_refuses_bad_startup_parameters(
         replace(good, ready_nis=float("nan")),
         replace(good, ready_nis=-1.0),
         replace(good, ready_nis=6.0, ready_nis_window=0.0),
+        replace(good, blend_wf=-1.0),
+        replace(good, blend_wf=float("nan")),
     ):
         with pytest.raises(ConfigError):
             CompiledController(str(lib.library_path), bad, lib.n)

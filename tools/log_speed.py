@@ -18,8 +18,20 @@ against ``rosbags``' bag reader + the reference decoding, CPU time.
 Peak RSS is measured in a fresh process per (log, path): ``before`` = read_log + per-tick,
 ``after`` = read_topics + grid + batch.
 
+``--imports BEFORE AFTER`` (the same trees) sums ``python -X importtime``'s self times of
+``amsfe estimate LOG --no-plots`` by top-level package (numpy, scipy, pandas, ...), median of
+``--repeat`` interleaved runs on the 10 s paper-sim log.
+
+``--command BEFORE AFTER`` (two source trees, each ``TREE:GENERATED_DIR``) times the command
+itself instead, ``amsfe estimate LOG --no-plots`` in a fresh process per run, the two trees
+interleaved (their order alternating by round), with a bare ``python -c pass`` per round:
+the process's wall time seen from outside, what the command printed (read + estimate) and,
+where the tree reports them, its phases (``summary.json`` ``timing``); medians and the
+before / after ratio (docs/logs.md, "Speed").
+
     .venv/bin/python tools/log_speed.py            # writes the logs into /tmp/amsfe-log-speed
     .venv/bin/python tools/log_speed.py --repeat 5 --out DIR
+    .venv/bin/python tools/log_speed.py --command OLD/src:OLD_GEN NEW/src:NEW_GEN --repeat 5
 """
 
 from __future__ import annotations
@@ -292,15 +304,145 @@ def ros1_bag(out: Path, count: int = 60_000) -> dict[str, float]:
     return {"messages": count, "mb": path.stat().st_size / 1e6, "bulk_cpu": bulk, "ref_cpu": ref}
 
 
+def _tree_env(tree: str) -> dict[str, str]:
+    """The environment of a ``TREE_SRC:GENERATED_DIR`` tree's processes."""
+    import os
+
+    src, _, gen = tree.partition(":")
+    return {**os.environ, "PYTHONPATH": src, "AMSFE_GENERATED_DIR": gen}
+
+
+def _outer(cmd: list[str], env: dict[str, str]) -> tuple[float, float]:
+    """Wall and CPU (user + system) time [s] of a child process."""
+    import resource
+
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    subprocess.run(cmd, env=env, check=True, stdout=subprocess.DEVNULL)
+    wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+
+
+def command_runs(
+    trees: list[str], bags: dict[str, Path], out: Path, repeat: int, plots: bool = False
+) -> None:
+    """``amsfe estimate LOG --no-plots`` (``plots``: with its figures) of each tree in fresh
+    processes, interleaved."""
+    import os
+
+    envs = [_tree_env(t) for t in trees]
+    load0 = os.getloadavg()
+    rows: dict[tuple[str, int], list[dict[str, Any]]] = {}
+    bare: list[float] = []
+    for r in range(repeat):
+        bare.append(_outer([sys.executable, "-c", "pass"], envs[0])[0])
+        for name, bag in bags.items():
+            order = range(len(trees)) if r % 2 == 0 else reversed(range(len(trees)))
+            for i in order:
+                folder = out / f"command-{i}"
+                cmd = [sys.executable, "-m", "amsfe_sym", "estimate", str(bag), "--out",
+                       str(folder), "--force"] + ([] if plots else ["--no-plots"])  # fmt: skip
+                wall, cpu = _outer(cmd, envs[i])
+                s = json.loads((folder / "summary.json").read_text())
+                rows.setdefault((name, i), []).append({"process_s": wall, "cpu_s": cpu, **s})
+    load1 = os.getloadavg()
+    py = statistics.median(bare)
+    print(
+        f"\namsfe estimate LOG{'' if plots else ' --no-plots'}, fresh processes, median of "
+        f"{repeat} interleaved "
+        f"runs; python -c pass {py:.3f} s; load average {load0[0]:.2f} -> {load1[0]:.2f}"
+    )
+    for name in bags:
+        print(f"\n{name}:")
+        meds = []
+        for i, tree in enumerate(trees):
+            runs = rows[(name, i)]
+            d = runs[0]["duration_s"]
+            keys = ("process_s", "cpu_s", "read_s", "estimate_s")
+            m = {k: statistics.median(x[k] for x in runs) for k in keys}
+            phases = ""
+            if all("timing" in x for x in runs):
+                phase_keys = ("startup_s", "setup_s", "library_s", "write_s", "wall_s")
+                t = {k: statistics.median(x["timing"][k] or 0.0 for x in runs) for k in phase_keys}
+                phases = (
+                    f"; start-up {t['startup_s']:.3f}, setup {t['setup_s']:.3f}, library "
+                    f"{t['library_s']:.3f}, writing {t['write_s']:.3f}, command wall "
+                    f"{t['wall_s']:.3f} s = {d / t['wall_s']:.0f}x"
+                )
+            le = m["read_s"] + m["estimate_s"]
+            print(
+                f"  {tree}: process {m['process_s']:.3f} s = {d / m['process_s']:.1f}x real "
+                f"time ({d / (m['process_s'] - py):.1f}x without python's start + exit; CPU "
+                f"{m['cpu_s']:.3f} s = {d / m['cpu_s']:.1f}x); read "
+                f"{m['read_s']:.3f} + estimate {m['estimate_s']:.3f} = {le:.3f} s = "
+                f"{d / le:.0f}x{phases}"
+            )
+            meds.append(m)
+        if len(meds) == 2:
+            a, b = meds
+            le_a, le_b = a["read_s"] + a["estimate_s"], b["read_s"] + b["estimate_s"]
+            print(
+                f"  before / after: process {a['process_s'] / b['process_s']:.2f}x faster (CPU "
+                f"{a['cpu_s'] / b['cpu_s']:.2f}x), read + estimate {le_a / le_b:.2f}x"
+            )
+
+
+def import_costs(trees: list[str], bag: Path, out: Path, repeat: int) -> None:
+    """``-X importtime`` self times of ``amsfe estimate`` by top-level package, per tree."""
+    import collections
+    import os
+
+    envs = [_tree_env(t) for t in trees]
+    runs: list[list[collections.Counter[str]]] = [[] for _ in trees]
+    for r in range(repeat):
+        for i in range(len(trees)) if r % 2 == 0 else reversed(range(len(trees))):
+            cmd = [sys.executable, "-X", "importtime", "-m", "amsfe_sym", "estimate", str(bag),
+                   "--out", str(out / f"imports-{i}"), "--no-plots", "--force"]  # fmt: skip
+            err = subprocess.run(cmd, env=envs[i], capture_output=True, text=True).stderr
+            by: collections.Counter[str] = collections.Counter()
+            for line in err.splitlines():
+                cells = line.removeprefix("import time:").split("|")
+                if line.startswith("import time:") and cells[0].strip().isdigit():
+                    by[cells[2].strip().split(".")[0]] += int(cells[0])
+            runs[i].append(by)
+
+    def med(i: int, k: str | None) -> float:
+        return statistics.median((sum(b.values()) if k is None else b[k]) for b in runs[i]) / 1e3
+
+    names = {k for rs in runs for b in rs for k in b}
+    top = sorted(names, key=lambda k: -sum(med(i, k) for i in range(len(trees))))[:14]
+    print(f"\n-X importtime self times by package [ms], median of {repeat}, load average "
+          f"{os.getloadavg()[0]:.2f}: " + " | ".join(trees))  # fmt: skip
+    for k in [*top, None]:
+        print(f"  {k or 'all':20s}" + "".join(f"{med(i, k):10.0f}" for i in range(len(trees))))
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--out", default="/tmp/amsfe-log-speed", help="where the logs are written")
     p.add_argument("--repeat", type=int, default=3, choices=range(1, 50), metavar="N")
     p.add_argument("--rss", nargs=2, metavar=("BAG", "PATH"), help=argparse.SUPPRESS)
+    p.add_argument("--plots", action="store_true", help="--command: with the figures")
+    p.add_argument("--imports", nargs=2, metavar=("BEFORE", "AFTER"), help="import cost by package")
+    p.add_argument(
+        "--command",
+        nargs=2,
+        metavar=("BEFORE", "AFTER"),
+        help="time amsfe estimate of two trees, each TREE_SRC:GENERATED_DIR",
+    )
     args = p.parse_args()
     logging.getLogger("amsfe_sym").setLevel(logging.ERROR)
     if args.rss:
         print(json.dumps(peak_rss(Path(args.rss[0]), args.rss[1])))
+        return
+    if args.imports:
+        bag = write_logs(Path(args.out))["paper-sim 10 s"]
+        import_costs(list(args.imports), bag, Path(args.out), args.repeat)
+        return
+    if args.command:
+        bags = write_logs(Path(args.out))
+        command_runs(list(args.command), bags, Path(args.out), args.repeat, args.plots)
         return
     r1 = ros1_bag(Path(args.out))
     print(

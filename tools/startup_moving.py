@@ -21,7 +21,7 @@ Every run also records when the start-up trusted the estimate (``ready_s``) and 
 link-angle and -rate errors of the estimate then.  Diverged runs count as +inf in every
 statistic, never dropped::
 
-    .venv/bin/python tools/startup_moving.py grid --first-seed 6000 --seeds 200 \\
+    .venv/bin/python tools/startup_moving.py grid --first-seed 12000 --seeds 200 \\
         --out docs/data/startup-moving-grid.json
 """
 

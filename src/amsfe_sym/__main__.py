@@ -2,8 +2,10 @@
 
 Loading the command line's modules takes seconds on a busy machine; a Ctrl-C or SIGTERM in
 that time is one line and exit 130 / 143 too, as in the command (whose handler replaces the
-one installed here)."""
+one installed here). A stdout closed under the command (``amsfe estimate LOG | head``) is
+one line on stderr and exit 141, not a traceback."""
 
+import os
 import signal
 import sys
 
@@ -20,7 +22,7 @@ def run() -> int:
     """Install the start-up handlers, load the command line, run it; the exit status."""
     signal.signal(signal.SIGTERM, _stopped)
     try:
-        from amsfe_sym.apps.cli import main
+        from amsfe_sym.apps.cli import BROKEN_PIPE, main
     except KeyboardInterrupt as exc:
         how, code = ("SIGTERM", 143) if isinstance(exc, _Stopped) else ("Ctrl-C", 130)
         print(
@@ -28,7 +30,15 @@ def run() -> int:
             file=sys.stderr,
         )
         return code
-    return main()
+    try:
+        code = main()
+        sys.stdout.flush()  # a pipe's buffer is written here: a closed reader fails here
+    except BrokenPipeError:
+        print("stopped: amsfe's output was closed (broken pipe)", file=sys.stderr)
+        code = BROKEN_PIPE
+    if code == BROKEN_PIPE:  # nothing more to this stdout, and no error at exit's flush
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    return code
 
 
 if __name__ == "__main__":

@@ -249,18 +249,6 @@ def test_refilter_applied_reproduces_the_runs_estimator(paper) -> None:  # type:
     assert r.frames_applied > 0
 
 
-def test_compiled_estimator_refuses_other_kinds(paper) -> None:  # type: ignore[no-untyped-def]
-    from amsfe_sym.sim.builders import build_estimator, build_run
-
-    sc, lib = paper
-    parts = build_run(sc, lib)
-    for kind in ("joint_torque", "none"):
-        with pytest.raises(ConfigError, match="Python estimator"):
-            build_estimator(
-                sc, lib, parts.sensors, parts.z0, compiled=True, effort=EffortSpec(kind)
-            )
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("kind", "input_model"),

@@ -36,7 +36,7 @@ from amsfe_sym.apps.sweep.command import from_args as sweep_from_args
 from amsfe_sym.core.outputs import check_output, interrupted_note, ledger
 from amsfe_sym.errors import AmsfeError, ConfigError, SpecError, describe
 
-__all__ = ["get_argument_parser", "main"]
+__all__ = ["BROKEN_PIPE", "get_argument_parser", "main"]
 
 
 def get_argument_parser() -> argparse.ArgumentParser:
@@ -180,6 +180,11 @@ def _terminated(signum: int, frame: object) -> None:
     raise Terminated
 
 
+#: The exit status of a command whose stdout was closed under it (``amsfe ... | head``):
+#: 128 + SIGPIPE, as a shell reports a process its broken pipe killed.
+BROKEN_PIPE = 141
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``amsfe`` with ``argv`` (default: ``sys.argv[1:]``); returns the exit code.
     SIGTERM is handled like Ctrl-C while it runs (exit 143, nothing half-written kept)."""
@@ -224,6 +229,13 @@ def _main(argv: Sequence[str] | None) -> int:
                 file=sys.stderr,
             )
             return 143 if isinstance(exc, Terminated) else 130
+        except BrokenPipeError:  # the reader of stdout went away (``amsfe ... | head``)
+            print(
+                f"stopped: amsfe {args.command}'s output was closed (broken pipe); "
+                f"{interrupted_note(book)}",
+                file=sys.stderr,
+            )
+            return BROKEN_PIPE
     raise SpecError(
         describe(
             "command",
@@ -351,6 +363,7 @@ def _input_files(*names: str | None) -> tuple[Path, ...]:
 
 def _bench(args: argparse.Namespace) -> int:
     from amsfe_sym.apps.bench import BenchOptions, run_bench
+    from amsfe_sym.apps.bench.logs import log_case
 
     if args.out:
         check_output(args.out, option="--out", kind="parent")
@@ -383,6 +396,7 @@ def _bench(args: argparse.Namespace) -> int:
             loop_scenarios=tuple(args.loop_scenarios.split(",")) if args.loop_scenarios else None,
             scaling_panda=not args.no_panda,
             scaling_loop_duration=args.scaling_loop_duration,
+            logs=tuple(log_case(x) for x in args.logs) if args.logs else None,
         )
     )
 

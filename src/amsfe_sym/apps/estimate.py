@@ -13,20 +13,23 @@ the robot's library is generated or loaded.
 from __future__ import annotations
 
 import argparse
-import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from amsfe_sym.apps.estimate_filter import HELD_THETA_STD, ROBOT_TORQUE_STD, filter_for_log
 from amsfe_sym.apps.estimate_report import (
+    CommandTiming,
     EstimateRun,
     figures,
     nis_report,
     print_summary,
     summary,
 )
+from amsfe_sym.apps.estimate_start import LogLinkStart, scenario_start
+from amsfe_sym.apps.phases import Phases, command_startup_s
 from amsfe_sym.core.folders import write_folder
 from amsfe_sym.core.jsonfile import write_json
 from amsfe_sym.core.outputs import check_output
@@ -41,6 +44,9 @@ if TYPE_CHECKING:  # the spec module is imported when a log's rate needs it, not
     from amsfe_sym.load.spec import RobotSpec
 
 __all__ = [
+    "HELD_THETA_STD",
+    "INPUT_UNKNOWN_ESTIMATOR",
+    "ROBOT_TORQUE_STD",
     "EstimateOptions",
     "EstimateRun",
     "add_arguments",
@@ -80,25 +86,21 @@ class EstimateOptions:
     verbose: bool = False
 
 
-#: ``[filter] link_torque_std`` and ``motor_torque_std`` [N m] of ``estimate --robot`` on a
-#: log without the applied torque or slower than T (:func:`_start_from_log`): the
-#: torque a real arm's model misses (a URDF's end effector, torque sensor offsets); the
-#: scenario default 0.1 N m is for amsfe's own exact simulations.  The real Panda log of
-#: docs/logs.md ("A real Panda recording, worked") misses up to 4.2 N m of gravity torque;
-#: with 0.1 N m every estimator diverges on it.
-ROBOT_TORQUE_STD = 5.0
-
-#: 1-sigma [unit] of theta(0|0) when ``estimate --robot`` holds theta at the spec's
-#: initial value (a log slower than the robot's T, :func:`_start_from_log`).
-HELD_THETA_STD = 1e-6
+#: The estimator of ``--robot`` for a log whose applied torque is not logged (effort kind
+#: ``joint_torque`` or ``none``): with the input as states oosm's A1 update finds its
+#: retrodicted covariance indefinite and refuses every camera frame; replay's exact
+#: re-filtering fuses them (docs/effort.md sections 2-3).
+INPUT_UNKNOWN_ESTIMATOR = "replay"
 
 
 def default_scenario(robot: str) -> Scenario:
     """The settings ``amsfe estimate LOG --robot ROBOT`` runs with: the scenario defaults
-    (``[filter]``: process noise 0.1 N m, :data:`ROBOT_TORQUE_STD` once the log is read
-    (:func:`_start_from_log`), buffer 1000 steps; ``[encoders]`` and
+    (``[filter]``: process noise 0.1 N m, :data:`ROBOT_TORQUE_STD` once the log is read,
+    then the log spec's ``[filter]``: :func:`~amsfe_sym.apps.estimate_filter.filter_for_log`;
+    buffer 1000 steps; ``[encoders]`` and
     ``[camera]``: the sensor noise the filter's R is built from; docs/scenarios.md), the
-    ``oosm`` estimator, and the estimate's start replaced by the log's first sample
+    ``oosm`` estimator (:data:`INPUT_UNKNOWN_ESTIMATOR` once the log shows no applied
+    torque), and the estimate's start replaced by the log's first sample
     (:func:`_start_from_log`).  No plant or trajectory is used."""
     from amsfe_sym.codegen.preflight import modelled_joints
     from amsfe_sym.load.spec import load_spec
@@ -121,19 +123,24 @@ def default_scenario(robot: str) -> Scenario:
     return parse_scenario(data, Path(f"--robot {robot}"))
 
 
-def _start_from_log(sc: Scenario, log: RobotLog, hold_theta: bool = False) -> Scenario:
-    """``[estimate0]`` from the log's first encoder sample: link angles = the measured
-    positions, link rates = the measured velocities (motor states: the sample itself).
+def _link_start(sc: Scenario, log: RobotLog, lib: Any, effort: Any) -> LogLinkStart:
+    """The link angles of the log's first sample by its effort kind, a balance missing
+    :data:`ROBOT_TORQUE_STD` of torque (:func:`~amsfe_sym.apps.estimate_start.scenario_start`;
+    docs/effort.md, "Where the estimate starts")."""
+    return scenario_start(sc, log, lib, effort, ROBOT_TORQUE_STD)
 
-    The process torque (``[filter] link_torque_std``, ``motor_torque_std``) is
-    :data:`ROBOT_TORQUE_STD` when the applied torque is not logged (effort kind
-    ``joint_torque`` or ``none``) or with ``hold_theta``; with the applied torque at the
-    robot's T it stays 0.1 N m (at 5 N m oosm's A1 update refuses every frame of a
-    paper_2link driver log as indefinite).
+
+def _start_from_log(
+    sc: Scenario, log: RobotLog, start: LogLinkStart, hold_theta: bool = False
+) -> Scenario:
+    """``[estimate0]`` from the log's first encoder sample: link angles ``start`` (by the
+    effort's kind, :func:`_link_start`; its 1-sigma when it has one), link rates = the
+    measured velocities (motor states: the sample itself).  The filter's R and Q:
+    :func:`~amsfe_sym.apps.estimate_filter.filter_for_log`.
 
     ``hold_theta`` (a log read at a period longer than the robot's T, its library built with
-    model substeps): theta is held at the spec's initial value (``[filter]
-    theta_rate_std = 0``, 1-sigma :data:`HELD_THETA_STD`).  At such a period the joint
+    model substeps): theta is held at the spec's initial value (1-sigma
+    :data:`HELD_THETA_STD`; ``[filter] theta_rate_std = 0`` there).  At such a period the joint
     modes turn by many radians a step (w T = 26 for the Panda at 1/30 s) and the model has
     no spring damping: the one-step sensitivity of the link angles to theta (eqs. 1a, 4)
     follows the aliased phase of an undamped oscillation, not the static deflection the
@@ -141,14 +148,12 @@ def _start_from_log(sc: Scenario, log: RobotLog, hold_theta: bool = False) -> Sc
     every estimator diverged (docs/logs.md, "A real Panda recording, worked")."""
     n = log.u.shape[1]
     z0 = log.z[0]
-    e0 = replace(sc.estimate0, q=tuple(map(float, z0[:n])), qd=tuple(map(float, z0[n:])))
-    f = sc.filter
-    if hold_theta or log.effort_kind != "applied":
-        f = replace(f, link_torque_std=ROBOT_TORQUE_STD, motor_torque_std=ROBOT_TORQUE_STD)
+    e0 = replace(sc.estimate0, q=tuple(map(float, start.q)), qd=tuple(map(float, z0[n:])))
+    if start.std is not None:
+        e0 = replace(e0, std={**dict(e0.std), "q": start.std})
     if hold_theta:
         e0 = replace(e0, std={**dict(e0.std), "theta": HELD_THETA_STD})
-        f = replace(f, theta_rate_std=0.0)
-    return replace(sc, estimate0=e0, filter=f)
+    return replace(sc, estimate0=e0)
 
 
 def _robot_of(scenario_robot: str) -> tuple[str, list[str], float, int]:
@@ -231,29 +236,37 @@ def _with_modes_fix(exc: LogRateError, robot: str) -> LogRateError:
     return LogRateError(f"{head}. Fix: {fix}, or record at the robot's rate", exc.period)
 
 
-def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> EstimateRun:
+def estimate_command(
+    log_path: Path, out: Path, options: EstimateOptions, startup_s: float | None = None
+) -> EstimateRun:
     """Estimate over ``log_path`` and write the run folder ``out``: ``estimates.parquet``,
     ``summary.json``, ``config.toml``, figures and ``estimates/`` (a rosbag2 in MCAP).
 
     Everything about the log (container, topics, types, joint names, rate, stamps) is
-    checked before the robot's library is generated or loaded.
+    checked before the robot's library is generated or loaded.  ``startup_s``: the
+    process's age [s] when the command started
+    (:func:`~amsfe_sym.apps.phases.process_age_s`), for the summary's timing; None from
+    Python.
 
     Raises:
         LogError: the log cannot be used (one line: what, found, fix).
         ConfigError, RunFolderError: bad settings, an existing ``out`` without ``force``, an
             ``out`` that is, holds or lies inside an input (the log), even with ``force``.
     """
+    clock = Phases()
     inputs = [p for p in (log_path, options.scenario, options.log_spec) if p and Path(p).exists()]
     if log_path.is_file() and (log_path.parent / "metadata.yaml").is_file():
         inputs.append(log_path.parent)  # the .mcap of a bag folder: the folder is the log
     check_output(out, option="--out", force=options.force, inputs=inputs)
     spec = read_log_spec(options.log_spec)
     effort = _effort_options(spec, options.log_spec)  # checked before anything is read
-    t0 = time.perf_counter()
+    clock.lap("setup")
     topics = log_topics(log_path)
     config = read_config(log_path, spec, topics)
+    clock.lap("read")
     sc = _scenario(log_path, config, options)
     name, joints, T, N = _robot_of(sc.robot)
+    clock.lap("setup")
     plan = plan_log(log_path, spec, joints, topics)
     if options.verbose:
         for line in plan.lines():
@@ -262,34 +275,58 @@ def estimate_command(log_path: Path, out: Path, options: EstimateOptions) -> Est
     try:
         log = read_log(log_path, spec, joints, T, N, plan, robot=name)
     except LogRateError as exc:  # the robot generated at the log's period, if it is cached
+        clock.lap("read")
         derived = _generated_at_period(sc.robot, exc.period)
         if derived is None:
             raise _with_modes_fix(exc, sc.robot) from None
         if options.verbose:
             print(f"  the log's period {exc.period:g} s: library {derived.name} (cached)")
+        clock.lap("library")
         log = read_log(log_path, spec, joints, derived.model.T, N, plan, robot=name)
     log.config = config
-    if options.scenario is None and (options.robot is not None or config is None):
-        # --robot: the defaults, started from the log (theta held at a slower period)
-        sc = _start_from_log(sc, log, hold_theta=derived is not None)
-    read_s = time.perf_counter() - t0
+    clock.lap("read")
+    robot_defaults = options.scenario is None and (options.robot is not None or config is None)
+    settled = filter_for_log(
+        sc, log, spec, robot_defaults=robot_defaults, hold_theta=derived is not None
+    )
+    sc = settled.scenario
+    if robot_defaults and options.estimator is None and log.effort_kind != "applied":
+        sc = sc.with_overrides(estimator=INPUT_UNKNOWN_ESTIMATOR)
+        print(
+            f"  estimator {INPUT_UNKNOWN_ESTIMATOR}: the default for effort kind "
+            f"{log.effort_kind!r} (oosm's single-lag update refuses camera frames when the input "
+            "is estimated; docs/effort.md section 2); --estimator to choose"
+        )
     if options.verbose:
         c = log.clock
         print(
             f"  clock: log time - header stamp = {c.median:+.6f} s (spread {c.spread:.2e} s); "
             "log times moved onto the stamp clock"
         )
+        for line in settled.lines:
+            print(f"  {line}")
     from amsfe_sym.codegen import library_for
 
+    clock.lap("setup")
     lib = library_for(sc, robot=derived)
-    est, feed = _estimator(sc, lib, log, options, replace(effort, positions=spec.positions))
-    t1 = time.perf_counter()
+    clock.lap("library")
+    effort = replace(effort, positions=spec.positions)
+    if robot_defaults:
+        # --robot: the defaults, started from the log (theta held at a slower period)
+        start = _link_start(sc, log, lib, effort)
+        sc = _start_from_log(sc, log, start, hold_theta=derived is not None)
+        if options.verbose:
+            print(f"  start: link angles from {start.how}")
+    est, feed = _estimator(sc, lib, log, options, effort)
     from amsfe_sym.logs.replay import estimate_log
 
+    clock.lap("setup")
     result = estimate_log(feed, est, states=lib.N)
-    estimate_s = time.perf_counter() - t1
-    run = EstimateRun(log, result, sc, out, read_s, estimate_s)
-    _write(run, lib.manifest.joints, options)
+    clock.lap("estimate")
+    run = EstimateRun(
+        log, result, sc, out, clock.spent["read"], clock.spent["estimate"], noise=settled.noise
+    )
+    _write(run, lib.manifest.joints, options, clock, startup_s)
     return run
 
 
@@ -305,20 +342,22 @@ def _estimator(
     sc: Scenario, lib: Any, log: RobotLog, options: EstimateOptions, effort: Any = None
 ) -> Any:
     """The estimator and the log it is fed: for an effort of kind ``joint_torque`` or
-    ``none``, :func:`~amsfe_sym.sim.effort.effort_estimator`'s (the Python estimators; the
-    input and encoder measurements derived from the log, docs/effort.md).  ``effort``: the
-    log spec's ``[effort]`` noise keys and ``[joints] positions`` as an ``EffortSpec``
+    ``none``, :func:`~amsfe_sym.sim.effort.effort_estimator`'s (the input and encoder
+    measurements derived from the log, docs/effort.md), the library's C estimator with
+    ``--runtime compiled`` (the default; oosm's inverse backward map with the input as states
+    is refused there in one line: docs/effort.md, "Compiled").  ``effort``:
+    the log spec's ``[effort]`` noise keys and ``[joints] positions`` as an ``EffortSpec``
     (None: the defaults); its kind is replaced by the log's."""
     from amsfe_sym.estimation.effort import EffortSpec
     from amsfe_sym.sim.builders import build_estimator, build_sensors, scenario_timing
     from amsfe_sym.sim.effort import effort_estimator
 
     sensors = build_sensors(sc, lib, np.random.default_rng(sc.seed), scenario_timing(sc, lib))
+    compiled = options.runtime == "compiled"
     if log.effort_kind == "applied":
-        compiled = options.runtime == "compiled"
         return build_estimator(sc, lib, sensors, log.z[0], compiled=compiled), log
     spec = replace(effort or EffortSpec(), kind=log.effort_kind)
-    built = effort_estimator(sc, lib, sensors, log.z, log.effort, spec, compiled=False)
+    built = effort_estimator(sc, lib, sensors, log.z, log.effort, spec, compiled=compiled)
     return built.estimator, replace(log, u=built.inputs.u, z=built.inputs.z_encoder)
 
 
@@ -332,7 +371,10 @@ def add_arguments(e: argparse.ArgumentParser) -> None:
     )
     e.add_argument("--scenario", default=None, help="robot + filter settings, to tune the filter")
     e.add_argument(
-        "--log-spec", default=None, metavar="FILE", help="topics, joint names, effort kind (TOML)"
+        "--log-spec",
+        default=None,
+        metavar="FILE",
+        help="topics, joint names, effort kind, the filter's R and Q ([filter]) (TOML)",
     )
     e.add_argument("--estimator", default=None, help="estimator name (default the scenario's)")
     e.add_argument(
@@ -352,6 +394,7 @@ def add_arguments(e: argparse.ArgumentParser) -> None:
 
 def from_args(args: argparse.Namespace) -> int:
     """``amsfe estimate LOG`` from its parsed options (:func:`add_arguments`)."""
+    startup_s = command_startup_s()
     log = Path(args.log)
     out = Path(args.out) if args.out else default_out(log)
     opts = EstimateOptions(
@@ -364,16 +407,24 @@ def from_args(args: argparse.Namespace) -> int:
         robot=args.robot,
         verbose=True,
     )
-    print_summary(summary(estimate_command(log, out, opts)), out)
+    print_summary(summary(estimate_command(log, out, opts, startup_s)), out)
     return 0
 
 
-def _write(run: EstimateRun, joints: tuple[str, ...] | list[str], options: EstimateOptions) -> None:
-    import pandas as pd
-
+def _write(
+    run: EstimateRun,
+    joints: tuple[str, ...] | list[str],
+    options: EstimateOptions,
+    clock: Phases | None = None,
+    startup_s: float | None = None,
+) -> None:
+    """The run folder; ``summary.json`` last, with the time the rest took (``clock``: the
+    command's phases so far, :attr:`EstimateRun.timing` is set from it)."""
     log, est = run.log, run.estimate
 
     def fill(tmp: Path) -> None:
+        import pyarrow.parquet as pq
+
         N = est.x_hat.shape[1]
         cols: dict[str, Any] = {"t": log.t}
         for i in range(N):
@@ -382,8 +433,9 @@ def _write(run: EstimateRun, joints: tuple[str, ...] | list[str], options: Estim
             cols[f"var_{i}"] = est.P_diag[:, i]
         if est.nees is not None:
             cols["nees"] = est.nees
-        pd.DataFrame(cols).to_parquet(tmp / "estimates.parquet")
-        write_json(tmp / "summary.json", summary(run))
+        # no dictionary encoding: float columns have no repeats to find (0.42 -> 0.06 s and
+        # 20 % smaller for 60 s of a Panda; the same values read back)
+        pq.write_table(_arrow_table(cols), tmp / "estimates.parquet", use_dictionary=False)
         (tmp / "config.toml").write_text(
             f"# the scenario amsfe estimate used on {log.path}\n"
             + dump_toml(run.scenario.to_dict())
@@ -396,8 +448,33 @@ def _write(run: EstimateRun, joints: tuple[str, ...] | list[str], options: Estim
         write_estimate_bag(tmp / "estimates", start, log.t, joints, est.x_hat, est.P_diag)
         if options.plots:
             figures(run, tmp)
+        if clock is not None:
+            wall = clock.lap("write")
+            p = clock.spent
+            run.timing = CommandTiming(
+                startup_s, p.get("setup", 0.0), p.get("library", 0.0), p["write"], wall
+            )
+        write_json(tmp / "summary.json", summary(run))
 
     write_folder(run.out, fill, replace=options.force)
+
+
+def _arrow_table(cols: dict[str, Any]) -> Any:
+    """float64 columns as a ``pyarrow`` table, NaN as null (what ``pandas``' ``to_parquet``
+    wrote: the same table, without its index metadata), built from the arrays' buffers:
+    ``pa.array`` and ``pa.table`` import ``pandas`` to test their input (0.4-0.6 s)."""
+    import pyarrow as pa
+
+    arrays = []
+    for v in cols.values():
+        a = np.ascontiguousarray(v, dtype=np.float64)
+        nan = np.isnan(a)
+        nulls = int(nan.sum())
+        valid = pa.py_buffer(np.packbits(~nan, bitorder="little")) if nulls else None
+        arrays.append(
+            pa.Array.from_buffers(pa.float64(), a.size, [valid, pa.py_buffer(a)], null_count=nulls)
+        )
+    return pa.Table.from_arrays(arrays, names=list(cols))
 
 
 def default_out(log_path: Path) -> Path:

@@ -5,7 +5,7 @@ and skipped, the clock offset, NIS), the printed headline and the figures (``est
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -16,14 +16,51 @@ from amsfe_sym.logs.read import RobotLog
 from amsfe_sym.scenario import Scenario
 
 if TYPE_CHECKING:  # the estimators (scipy) are imported when a log is estimated
+    from amsfe_sym.logs.noise import EncoderNoise
     from amsfe_sym.logs.replay import LogEstimate
 
-__all__ = ["EstimateRun", "figures", "nis_report", "print_summary", "summary"]
+__all__ = [
+    "CommandTiming",
+    "EstimateRun",
+    "figures",
+    "nis_advice",
+    "nis_report",
+    "print_summary",
+    "summary",
+]
+
+
+@dataclass(frozen=True)
+class CommandTiming:
+    """Wall time [s] of the phases of ``amsfe estimate`` other than reading and estimating
+    (docs/logs.md, "Speed"); each phase includes the imports made in it.
+
+    Attributes:
+        startup_s: From the process's start to the command's: the interpreter, the
+            command line's imports, argument parsing.  None when not measured (called from
+            Python, or no ``/proc/self/stat``).
+        setup_s: The log spec checked, the scenario and the robot's spec, the start from the
+            log, the estimator built.
+        library_s: The robot's library found in the cache and loaded (or generated).
+        write_s: The run folder: ``estimates.parquet``, ``config.toml``, the estimates bag,
+            the figures.
+        wall_s: From the command's start to its summary: setup + library + read + estimate
+            + write (start-up not included).
+    """
+
+    startup_s: float | None = None
+    setup_s: float = 0.0
+    library_s: float = 0.0
+    write_s: float = 0.0
+    wall_s: float = 0.0
 
 
 @dataclass
 class EstimateRun:
-    """What ``amsfe estimate`` did: the read log, the estimates, the folder and the timing."""
+    """What ``amsfe estimate`` did: the read log, the estimates, the folder and the timing
+    (``read_s``: the log read, topic search included; ``estimate_s``: the estimator over
+    it; ``timing``: the other phases, set once the folder is written; ``noise``: the encoder
+    noise measured from the log, when it was)."""
 
     log: RobotLog
     estimate: LogEstimate
@@ -31,6 +68,8 @@ class EstimateRun:
     out: Path
     read_s: float
     estimate_s: float
+    timing: CommandTiming = field(default_factory=CommandTiming)
+    noise: EncoderNoise | None = None
 
 
 def _finite(x: float) -> float | None:
@@ -93,6 +132,64 @@ def nis_report(run: EstimateRun) -> dict[str, Any]:
     return out
 
 
+def nis_advice(
+    what: str,
+    r: dict[str, Any],
+    sc: Scenario,
+    effort_kind: str,
+    noise: EncoderNoise | None = None,
+) -> str | None:
+    """One line when the mean NIS of channel ``what`` (``encoders``, ``camera``; ``r`` from
+    :func:`nis_report`) is outside its 95 % band: which way the filter is off and which R
+    and Q keys to change (the log spec's or a scenario's ``[filter]``, ``[effort]``), with
+    their present values; for the encoders, when the encoder noise measured from the log
+    (``noise``) is more than 2x from the filter's R the way the advice goes, that noise and
+    the keys that use it.  None inside the band or without samples."""
+    mean, (lo, hi) = r.get("mean"), r["band_95"]
+    if mean is None or lo <= mean <= hi:
+        return None
+    f = sc.filter
+    q_keys = f"link_torque_std, motor_torque_std (now {f.link_torque_std:g}, "
+    q_keys += f"{f.motor_torque_std:g} N m)"
+    if effort_kind == "none":
+        q_keys += "; [effort] input_rate_std"
+    measured = ""
+    if what == "camera":
+        px = f.camera_pixel_std or sc.camera.pixel_std
+        r_keys = f"[filter] camera_pixel_std (now {px:g} px)"
+    else:
+        q_std = f.encoder_q_std or sc.encoders.q_std
+        qd_std = f.encoder_qd_std or sc.encoders.qd_std
+        r_keys = f"[filter] encoder_q_std, encoder_qd_std (now {q_std:.2g} rad, {qd_std:.2g} rad/s)"
+        if effort_kind == "joint_torque":
+            r_keys += ", [effort] joint_torque_std"
+        measured = _measured_hint(noise, (q_std, qd_std), lower=mean < lo)
+    if mean < lo:
+        return (
+            f"NIS {what} mean {mean:.3g} below its band: the filter is pessimistic (it claims "
+            f"more noise than the data show): lower R {r_keys} or Q [filter] {q_keys}" + measured
+        )
+    return (
+        f"NIS {what} mean {mean:.3g} above its band: the filter is optimistic (the data "
+        f"vary more than it allows, or the model misses something): raise Q [filter] "
+        f"{q_keys} or R {r_keys}" + measured
+    )
+
+
+def _measured_hint(noise: EncoderNoise | None, r: tuple[float, float], lower: bool) -> str:
+    """``; the log's encoder noise ...`` when a measured median is more than 2x below
+    (``lower``) or above the filter's R [rad, rad/s], else empty."""
+    if noise is None or noise.q_std is None or noise.qd_std is None:
+        return ""
+    ratios = (r[0] / noise.q_std, r[1] / noise.qd_std) if noise.q_std and noise.qd_std else ()
+    if not any((x > 2.0) if lower else (x < 0.5) for x in ratios):
+        return ""
+    return (
+        f"; the log's encoder noise is q {noise.q_std:.1e} rad, qd {noise.qd_std:.1e} rad/s: "
+        'encoder_q_std = "log", encoder_qd_std = "log" use it'
+    )
+
+
 def summary(run: EstimateRun) -> dict[str, Any]:
     """The ``summary.json`` of an estimate run (every number finite or null)."""
     log, est = run.log, run.estimate
@@ -109,10 +206,12 @@ def summary(run: EstimateRun) -> dict[str, Any]:
         "log_period_s": _finite(log.period_s),
         "clock_offset_s": _finite(log.clock.median),
         "clock_offset_spread_s": _finite(log.clock.spread),
-        "nis": nis_report(run),
+        "nis": _with_advice(nis_report(run), run),
+        "encoder_noise_from_log": _noise_dict(run.noise),
         "read_s": round(run.read_s, 4),
         "estimate_s": round(run.estimate_s, 4),
         "real_time_factor": round(log.K * log.T / max(run.read_s + run.estimate_s, 1e-9), 2),
+        "timing": _timing(run),
     }
     if log.truth is not None and est.nees is not None:
         w = slice(int(0.2 * log.K), log.K)
@@ -127,15 +226,87 @@ def summary(run: EstimateRun) -> dict[str, Any]:
     return out
 
 
+def _with_advice(nis: dict[str, Any], run: EstimateRun) -> dict[str, Any]:
+    """Each NIS channel of :func:`nis_report` with its ``advice`` (:func:`nis_advice`)
+    where its mean is outside the band."""
+    for what, r in nis.items():
+        advice = nis_advice(what, r, run.scenario, run.log.effort_kind, run.noise)
+        if advice:
+            r["advice"] = advice
+    return nis
+
+
+def _noise_dict(noise: EncoderNoise | None) -> dict[str, Any] | None:
+    """The measured encoder noise for ``summary.json`` (None: not measured)."""
+    if noise is None:
+        return None
+    return {
+        "q_std_median": noise.q_std,
+        "qd_std_median": noise.qd_std,
+        "q_std": [c.std for c in noise.q],
+        "qd_std": [c.std for c in noise.qd],
+        "repeated_rows": noise.repeated,
+    }
+
+
+def _timing(run: EstimateRun) -> dict[str, float | None]:
+    """The command's phases [s] and its real-time factors: the log's duration over the
+    command's wall time (``real_time_factor_command``) and over start-up + wall time
+    (``real_time_factor_end_to_end``, null when start-up was not measured); docs/logs.md,
+    "Speed"."""
+    t, d = run.timing, run.log.K * run.log.T
+    whole = None if t.startup_s is None else t.startup_s + t.wall_s
+
+    def r(x: float | None) -> float | None:
+        return None if x is None else round(x, 4)
+
+    return {
+        "startup_s": r(t.startup_s),
+        "setup_s": r(t.setup_s),
+        "library_s": r(t.library_s),
+        "read_s": r(run.read_s),
+        "estimate_s": r(run.estimate_s),
+        "write_s": r(t.write_s),
+        "wall_s": r(t.wall_s),
+        "end_to_end_s": r(whole),
+        "real_time_factor_command": round(d / t.wall_s, 2) if t.wall_s > 0 else None,
+        "real_time_factor_end_to_end": round(d / whole, 2) if whole else None,
+    }
+
+
+def _speed_line(s: dict[str, Any]) -> str:
+    """What the run's speed was: reading + estimating, then the whole command by phase."""
+    line = (
+        f"  speed: read {s['read_s']:.3f} s + estimated {s['estimate_s']:.3f} s = "
+        f"{s['real_time_factor']:.0f}x real time"
+    )
+    t = s.get("timing") or {}
+    if not t.get("wall_s"):
+        return line
+    phases = {
+        "start-up": t.get("startup_s"),
+        "setup": t["setup_s"],
+        "library": t["library_s"],
+        "read + estimate": s["read_s"] + s["estimate_s"],
+        "writing": t["write_s"],
+    }
+    parts = [f"{name} {v:.2f}" for name, v in phases.items() if v is not None]
+    if t.get("end_to_end_s") is not None:
+        whole = f"command {t['end_to_end_s']:.2f} s = {t['real_time_factor_end_to_end']:.0f}x"
+        after = f"; {t['real_time_factor_command']:.0f}x after start-up"
+    else:
+        whole = f"command {t['wall_s']:.2f} s = {t['real_time_factor_command']:.0f}x"
+        after = ""
+    return f"{line}; {whole} ({', '.join(parts)}{after})"
+
+
 def print_summary(s: dict[str, Any], out: Path) -> None:
     """The headline of an estimate run: ticks, frames fused, each role's messages used and
     skipped, speed, NIS and NEES."""
     c = s["counters"]
     print(f"run folder: {out} ({s['ticks']} ticks, {s['duration_s']:.2f} s of log)")
-    print(
-        f"  {s['estimator']}: {s['frames_fused']} camera frames fused; read {s['read_s']:.2f} s, "
-        f"estimated {s['estimate_s']:.2f} s ({s['real_time_factor']:.0f}x real time)"
-    )
+    print(f"  {s['estimator']}: {s['frames_fused']} camera frames fused")
+    print(_speed_line(s))
     for role, u in s.get("topics", {}).items():
         if u["topic"] is None:
             other = u.get("topics_of_this_type_not_used")
@@ -161,6 +332,8 @@ def print_summary(s: dict[str, Any], out: Path) -> None:
             f"{100 * (r['inside_95'] or 0):.1f} % of {r['samples']} inside the 95 % band "
             f"[{lo:.2f}, {hi:.2f}]"
         )
+        if r.get("advice"):
+            print(f"    {r['advice']}")
     if s.get("nees_mean") is not None:
         print(f"  mean NEES {s['nees_mean']:.2f} (N = {s['nees_dof']}) against the log's truth")
 
@@ -187,8 +360,10 @@ def figures(run: EstimateRun, folder: Path) -> None:
             ax.plot(log.t, est.x_hat[:, j], lw=0.8, label="q_hat (link)")
             ax.plot(log.t, log.z[:, j], lw=0.6, label="qm (encoder)")
             ax.set_ylabel(f"joint {j + 1} [rad]")
-        for fr in log.frames:
-            ax.axvline(fr.delivery_step * log.T, color="k", lw=0.2, alpha=0.2)
+        if log.frames:  # one collection: an axvline each took 12 of 15 s for 1818 frames x 7
+            arrivals = [fr.delivery_step * log.T for fr in log.frames]
+            x_data = ax.get_xaxis_transform()  # x in data, y in axes coordinates
+            ax.vlines(arrivals, 0, 1, transform=x_data, color="k", lw=0.2, alpha=0.2)
         ax.legend(loc="upper right", fontsize=7)
     axes[-1, 0].set_xlabel("t [s] (thin lines: camera frames' arrivals)")
     fig.suptitle(f"{run.scenario.estimator} on {log.path.name}")

@@ -50,7 +50,7 @@ def add_bench_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--skip",
         nargs="+",
-        choices=["generation", "calls", "estimators", "tick", "loop", "scaling"],
+        choices=["generation", "calls", "estimators", "tick", "loop", "scaling", "logs"],
         default=[],
         help="sections to leave out",
     )
@@ -102,6 +102,14 @@ def add_bench_arguments(p: argparse.ArgumentParser) -> None:
         "-march=native' (no value: -O0..-O3, -Os, -O1 -march=native)",
     )
     p.add_argument("--compile-repeat", type=COUNT, default=1, help="builds per flag set (min)")
+    p.add_argument(
+        "--logs",
+        nargs="+",
+        default=None,
+        metavar="SCENARIO:SECONDS",
+        help="logs amsfe estimate is timed on, simulated with --bag (default paper-sim:10 "
+        "panda-control:60)",
+    )
 
 
 def add_study_arguments(p: argparse.ArgumentParser) -> None:

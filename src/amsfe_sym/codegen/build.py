@@ -27,8 +27,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import casadi as ca
-
 from amsfe_sym.codegen.cache import (
     ALL_PARTS,
     MANIFEST,
@@ -252,6 +250,8 @@ def _build(
     try:
         t = time.perf_counter()
         cname = f"{spec.name}.c"
+        import casadi as ca  # here, not at import: a cache hit (amsfe estimate) needs none
+
         gen = ca.CodeGenerator(cname, {"with_header": True, "with_mem": False})
         for f in model.internal.values():  # first: the contract's MX graphs call them
             gen.add(f)

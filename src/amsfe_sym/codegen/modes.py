@@ -28,15 +28,13 @@ import math
 import os
 import sys
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pinocchio as pin
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import SpecError, describe
 from amsfe_sym.load.spec import INTEGRATORS, RobotSpec, load_spec, robots_dir
-from amsfe_sym.load.types import Robot
 from amsfe_sym.runtime.stability import (
     DEFAULT_MARGIN,
     STABILITY_MARGIN,
@@ -49,6 +47,9 @@ from amsfe_sym.runtime.stability import (
     stiffness_fix,
     substeps_for,
 )
+
+if TYPE_CHECKING:  # (Pinocchio's types: imported when modes are computed)
+    from amsfe_sym.load.types import Robot
 
 __all__ = [
     "DEFAULT_SAMPLES",
@@ -105,6 +106,8 @@ def modes_at(robot: Robot, qs: NDArray[np.float64], theta: NDArray[np.float64]) 
     """The elastic modes at each configuration of ``qs`` [rad] ``(S, n)`` with parameters
     ``theta`` (module docstring: generalized eigenproblem, strain-energy mapping, modal
     damping)."""
+    import pinocchio as pin  # here, not at import: reading a cached library needs none
+
     n = robot.n
     model = robot.pin_model_at(theta)
     data = model.createData()

@@ -29,7 +29,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["A0", "A1", "B0", "B1", "blend_offsets", "blend_time"]
+__all__ = ["A0", "A1", "B0", "B1", "blend_offsets", "blend_time", "blend_weight"]
 
 FloatArray = NDArray[np.float64]
 
@@ -101,6 +101,12 @@ def _poly(c: tuple[float, ...], r: int, s: float) -> float:
             f *= m
         acc = acc * s + c[i] * f
     return acc
+
+
+def blend_weight(tau: float) -> float:
+    """b0(tau), 1 at the blend's start and 0 at its end (tau = s / Tb in [0, 1]): the weight
+    of a start-up value that hands over to the steady one as the offset does."""
+    return _poly(B0, 0, tau)
 
 
 def blend_offsets(s: float, tb: float, d0: FloatArray, d1: FloatArray) -> FloatArray:

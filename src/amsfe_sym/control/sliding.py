@@ -32,7 +32,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from amsfe_sym.control.base import Controller, FloatArray, LawInputs, register
-from amsfe_sym.control.blend import blend_offsets, blend_time
+from amsfe_sym.control.blend import blend_offsets, blend_time, blend_weight
 from amsfe_sym.errors import ConfigError, check_known_keys, describe
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.signals.trajectory import Trajectory
@@ -156,6 +156,7 @@ class _Cascade(_SlidingBase):
         "hold": "reference",
         "blend_accel": float("inf"),
         "blend_rate": float("inf"),
+        "blend_wf": float("inf"),
     }
     #: The start-ups (docs/control.md, "Start-up"): ``"first"`` starts the command filter at
     #: rest on the first command, whatever the estimate (the form the paper's laws imply);
@@ -175,6 +176,10 @@ class _Cascade(_SlidingBase):
     #: With ``blend_accel`` [rad/s^2] finite, the reference then starts from the state the law
     #: acts on and joins q_d within that offset acceleration, and within ``blend_accel *
     #: blend_rate`` of jerk and ``* blend_rate^2`` of snap (:mod:`amsfe_sym.control.blend`).
+    #: With ``blend_wf`` [rad/s] below ``wf``, the command filter's bandwidth is ``blend_wf``
+    #: at the trusted tick and returns to ``wf`` along the blend (``wf + (blend_wf - wf)
+    #: b0(s / Tb)``, b0 the blend's polynomial): the law's first commands, computed from a
+    #: rate estimate still ~0.3 rad/s off, reach the motor smoothed (issue 28).
     STARTUPS: ClassVar[tuple[str, ...]] = ("first", "converged")
     HOLDS: ClassVar[tuple[str, ...]] = ("reference", "motor", "auto")
 
@@ -221,13 +226,30 @@ class _Cascade(_SlidingBase):
             self.gains["hold"] = "motor" if lib.manifest.integrator == "paper" else "reference"
         self._blend_accel = self._scalar("blend_accel")
         self._blend_rate = self._scalar("blend_rate")
+        self._blend_wf = self._scalar("blend_wf")
         self._blend: tuple[int, float, FloatArray, FloatArray] | None = None  # k0, Tb, d0, d1
+
+    def _blend_gains(self, gains: list[FloatArray], s: float, tb: float) -> list[FloatArray]:
+        """``gains`` with the command filter's bandwidth ``wf + (blend_wf - wf) b0(s / Tb)``
+        (at most ``wf``) while the blend runs, ``s`` [s] after it started (the C the same)."""
+        if not s < tb or math.isinf(self._blend_wf):
+            return gains
+        w = blend_weight(s / tb)
+        wf = self._g["wf"]
+        out = list(gains)
+        out[len(out) - 2] = np.minimum(wf, w * self._blend_wf + (1.0 - w) * wf)
+        return out
 
     def _scalar(self, key: str) -> float:
         v = self.gains[key]
         if isinstance(v, bool) or not isinstance(v, int | float) or not v > 0 or v != v:
             raise ConfigError(
-                describe(f"controller {self.name!r} gain {key}", "a number > 0", repr(v), "")
+                describe(
+                    f"controller {self.name!r} gain {key}",
+                    "a number > 0 (inf: off)",
+                    repr(v),
+                    "see docs/control.md, Start-up",
+                )
             )
         return float(v)
 
@@ -240,6 +262,7 @@ class _Cascade(_SlidingBase):
         own["hold_motor"] = self.gains["hold"] == "motor"
         own["blend_accel"] = self._blend_accel
         own["blend_rate"] = self._blend_rate
+        own["blend_wf"] = self._blend_wf
         return own
 
     def _converged(self, P_diag: FloatArray | None, nis: float | None = None) -> bool:
@@ -326,7 +349,9 @@ class _Cascade(_SlidingBase):
                 self._blend = (k, tb, d0.copy(), d1.copy())
             if self._blend is not None:
                 k0, tb, d0, d1 = self._blend
-                ref = ref + blend_offsets((k - k0) * self.lib.T, tb, d0, d1)
+                sb = (k - k0) * self.lib.T
+                ref = ref + blend_offsets(sb, tb, d0, d1)
+                gains = self._blend_gains(gains, sb, tb)
             out = self._law.call_into(*lead, ref, self._cf, *gains, self._run)
             if not self._started:  # start at rest on the first trusted command
                 self._cf[:n], self._cf[n:] = out[7], 0.0

@@ -226,6 +226,11 @@ class InputStateTransition:
         self._A[N:, N:] = np.eye(n)
         self._Q = np.zeros((N + n, N + n))
 
+    @property
+    def input_variance(self) -> FloatArray:
+        """The random walk's process noise per step, ``input_rate_std^2 T I`` [N^2 m^2]."""
+        return self._Qu.copy()
+
     def step(self, x: FloatArray, u: FloatArray) -> tuple[FloatArray, FloatArray]:
         """``([F(x, u_s), u_s], [[A, B], [0, I]])`` with ``u_s`` the input states."""
         N = self.motor.N

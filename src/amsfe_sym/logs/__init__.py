@@ -5,14 +5,17 @@ and estimation on recorded logs: ROS 1 ``.bag``, rosbag2 (MCAP or sqlite3), ``.m
 Modules: ``spec`` (the log spec is the topic spec of ``topics``), ``source`` (the payloads of
 a log topic by topic, without ROS), ``decode`` and ``layout`` (a topic's payloads -> columns,
 in bulk), ``stream`` (a log's topics decoded in bounded memory: MCAP and ROS 1 bags chunk by
-chunk; docs/logs.md, "Speed"), ``plan`` (which topic plays which role, from the metadata and
-first messages), ``grid`` (the tick grid, the clock offset, each role's usage), ``sensors``
-(effort, camera frames and truth on the grid), ``read`` (a log -> the estimator's inputs,
-every skipped message counted by reason), ``replay`` (an estimator over a read log),
-``write`` (a simulated run -> a rosbag2 in MCAP).
+chunk; docs/logs.md, "Speed"), ``chunks`` (an MCAP's chunks cut with numpy), ``firsts`` (the
+first messages of a few topics, for the topic search), ``plan`` (which topic plays which
+role, from the metadata and first messages), ``grid`` (the tick grid, the clock offset,
+each role's usage), ``sensors`` (effort, camera frames and truth on the grid), ``read`` (a
+log -> the estimator's inputs, every skipped message counted by reason), ``replay`` (an
+estimator over a read log),
+``write`` (a simulated run -> a rosbag2 in MCAP), ``bulk_write`` (many messages into
+``rosbags``' MCAP writer at once), ``encode`` (JointState payloads in bulk).
 
 May import: errors, core, load (the spec; Pinocchio only to draw ``/tf``), scenario, runtime,
 estimation, sim (the run's result and its estimator builder), topics (the roles and the
-topic spec).  Reading uses ``rosbags`` (and
-``mcap`` for plain MCAP files); neither needs a ROS installation.
+topic spec).  Reading uses ``rosbags`` (and ``mcap`` for MCAP files: a plain one, or a
+rosbag2 folder of one); neither needs a ROS installation.
 """

@@ -23,7 +23,8 @@ from numpy.typing import NDArray
 
 from amsfe_sym.errors import AmsfeError, LogError, describe
 from amsfe_sym.logs.decode import JointStates, decode_joint_states, decode_strings
-from amsfe_sym.logs.source import TopicInfo, first_payloads, log_topics
+from amsfe_sym.logs.firsts import first_payloads
+from amsfe_sym.logs.source import TopicInfo, log_topics
 from amsfe_sym.logs.spec import LogSpec
 from amsfe_sym.topics.roles import ROLES, EffortKind, joint_order
 

@@ -29,6 +29,7 @@ __all__ = [
     "Message",
     "TopicData",
     "TopicInfo",
+    "direct_mcap",
     "first_payloads",
     "iter_messages",
     "log_topics",
@@ -185,37 +186,86 @@ def log_topics(path: Path) -> dict[str, TopicInfo]:
     try:
         if kind == "mcap":
             return _mcap_topics(path)
-        from rosbags.highlevel import AnyReader
-
-        with AnyReader([path]) as reader:
-            out: dict[str, TopicInfo] = {}
-            enc = "ros1" if kind == "bag" else "cdr"
-            for c in reader.connections:
-                prev = out.get(c.topic)
-                count = int(c.msgcount) + (prev.count or 0 if prev else 0)
-                out[c.topic] = TopicInfo(c.topic, str(c.msgtype), enc, count)
-            return out
+        direct = _direct_mcap(path, kind)
+        if direct is not None:
+            found = _summary_topics(direct, rosbag2=True)
+            if found is not None:
+                return found
+        return _rosbags_topics(path, kind)
     except LogError:
         raise
     except Exception as exc:  # rosbags / mcap raise their own and OS errors: one line
         raise _unreadable(path, exc) from exc
 
 
+def direct_mcap(path: Path) -> Path | None:
+    """The one MCAP file a log is (a ``.mcap``, or a rosbag2 folder holding exactly one and
+    no sqlite3 database), read with ``mcap`` and :mod:`amsfe_sym.logs.stream`; else None."""
+    kind = _kind(path)
+    return path if kind == "mcap" else _direct_mcap(path, kind)
+
+
+def _direct_mcap(path: Path, kind: str) -> Path | None:
+    """The MCAP file of a rosbag2 folder that holds exactly one (and no sqlite3 database),
+    read with ``mcap`` as a plain ``.mcap``: opening the folder with ``rosbags``'
+    AnyReader (its import, ``metadata.yaml`` and every connection) took 40-150 ms each time
+    the topics or a first message were looked up (docs/logs.md, "Speed").  None otherwise
+    (``rosbags`` reads it, as before)."""
+    if kind != "rosbag2" or any(path.glob("*.db3")):
+        return None
+    files = list(path.glob("*.mcap"))
+    return files[0] if len(files) == 1 else None
+
+
+def _rosbags_topics(path: Path, kind: str) -> dict[str, TopicInfo]:
+    """:func:`log_topics` through ``rosbags``' AnyReader (ROS 1 bags, sqlite3 and split
+    rosbag2 folders, an MCAP without a summary)."""
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([path]) as reader:
+        out: dict[str, TopicInfo] = {}
+        enc = "ros1" if kind == "bag" else "cdr"
+        for c in reader.connections:
+            prev = out.get(c.topic)
+            count = int(c.msgcount) + (prev.count or 0 if prev else 0)
+            out[c.topic] = TopicInfo(c.topic, str(c.msgtype), enc, count)
+        return out
+
+
 def _mcap_topics(path: Path) -> dict[str, TopicInfo]:
+    """The topics of a plain ``.mcap`` from its summary (refused without one)."""
+    found = _summary_topics(path, rosbag2=False)
+    if found is None:
+        raise _unreadable(path, ValueError("no summary section"))
+    return found
+
+
+def _summary_topics(path: Path, rosbag2: bool) -> dict[str, TopicInfo] | None:
+    """The topics of an MCAP file from its summary, None without one.  ``rosbag2``: the
+    file of a rosbag2 folder, described as ``rosbags`` does (every payload CDR, a channel
+    without messages counted 0, the channels of one topic added up)."""
     from mcap.reader import make_reader
 
     with path.open("rb") as fh:
         reader = make_reader(fh)
         summary = reader.get_summary()
         if summary is None:
-            raise _unreadable(path, ValueError("no summary section"))
-        counts = summary.statistics.channel_message_counts if summary.statistics else {}
+            return None
+        stats = summary.statistics
+        counts = stats.channel_message_counts if stats else {}
         out: dict[str, TopicInfo] = {}
         for cid, ch in summary.channels.items():
             schema = summary.schemas.get(ch.schema_id)
-            name = schema.name if schema is not None else ""
-            enc = str(ch.message_encoding)
-            out[ch.topic] = TopicInfo(ch.topic, _ros2_name(name), enc, counts.get(cid))
+            name = _ros2_name(schema.name if schema is not None else "")
+            if not rosbag2:
+                enc = str(ch.message_encoding)
+                out[ch.topic] = TopicInfo(ch.topic, name, enc, counts.get(cid))
+                continue
+            prev = out.get(ch.topic)
+            count = None if stats is None else counts.get(cid, 0)
+            if prev is not None and count is not None:
+                count += prev.count or 0
+            out[ch.topic] = TopicInfo(ch.topic, name, "cdr", count)
         return out
 
 
@@ -231,33 +281,44 @@ def _payloads(path: Path, topics: set[str]) -> Iterator[tuple[str, int, bytes]]:
     if not topics:
         return
     try:
-        if kind == "mcap":
-            from mcap.reader import make_reader
-
-            with path.open("rb") as fh:
-                mreader = make_reader(fh)
-                for _s, channel, message in mreader.iter_messages(topics=sorted(topics)):
-                    yield channel.topic, int(message.log_time), bytes(message.data)
-            return
-        from rosbags.highlevel import AnyReader
-
-        with AnyReader([path]) as reader:
-            conns = [c for c in reader.connections if c.topic in topics]
-            if not conns:  # (rosbags reads every connection when given none)
-                return
-            for conn, t, raw in reader.messages(connections=conns):
-                yield conn.topic, int(t), bytes(raw)
+        direct = path if kind == "mcap" else _direct_mcap(path, kind)
+        if direct is not None:
+            yield from _mcap_payloads(direct, topics)
+        else:
+            yield from _rosbags_payloads(path, topics)
     except LogError:
         raise
     except Exception as exc:
         raise _unreadable(path, exc) from exc
 
 
+def _mcap_payloads(path: Path, topics: set[str]) -> Iterator[tuple[str, int, bytes]]:
+    """:func:`_payloads` of one MCAP file through ``mcap``'s reader."""
+    from mcap.reader import make_reader
+
+    with path.open("rb") as fh:
+        for _s, channel, message in make_reader(fh).iter_messages(topics=sorted(topics)):
+            yield channel.topic, int(message.log_time), bytes(message.data)
+
+
+def _rosbags_payloads(path: Path, topics: set[str]) -> Iterator[tuple[str, int, bytes]]:
+    """:func:`_payloads` through ``rosbags``' AnyReader."""
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([path]) as reader:
+        conns = [c for c in reader.connections if c.topic in topics]
+        if not conns:  # (rosbags reads every connection when given none)
+            return
+        for conn, t, raw in reader.messages(connections=conns):
+            yield conn.topic, int(t), bytes(raw)
+
+
 def first_payloads(
     path: Path, topics: set[str], infos: dict[str, TopicInfo] | None = None, count: int = 1
 ) -> dict[str, TopicData]:
     """The first ``count`` payloads of each of ``topics`` (stops reading once every topic
-    has them, or at the end of the log)."""
+    has them, or at the end of the log), message by message
+    (:func:`amsfe_sym.logs.stream.first_payloads` cuts an indexed MCAP's with numpy)."""
     infos = infos if infos is not None else log_topics(path)
     wanted = {t for t in topics if t in infos}
     raws: dict[str, list[bytes]] = {t: [] for t in wanted}

@@ -32,6 +32,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import LogError, describe
+from amsfe_sym.logs.chunks import (
+    NotIndexed,
+    checked_chunks,
+    cut,
+    summary_of,
+    unreadable,
+)
 from amsfe_sym.logs.decode import (
     Encoding,
     Float64Arrays,
@@ -43,7 +50,12 @@ from amsfe_sym.logs.decode import (
     decode_payloads,
 )
 
-__all__ = ["PROGRESS_MIN_S", "SLICE", "Topic", "read_topics"]
+__all__ = [
+    "PROGRESS_MIN_S",
+    "SLICE",
+    "Topic",
+    "read_topics",
+]
 
 IntArray = NDArray[np.int64]
 Decoded = JointStates | Points | Float64Arrays | Strings
@@ -185,7 +197,7 @@ def read_topics(
         try:
             _read_bag(path, wanted, parts_bag, _callback(progress, bar))
             return {name: t for name, p in parts_bag.items() if (t := p.topic()).count}
-        except _NotIndexed:
+        except NotIndexed:
             pass
         finally:
             bar.close()
@@ -198,7 +210,7 @@ def read_topics(
                 _read_mcap(f, wanted, parts, _callback(progress, bar), auto=progress is None)
             out = {name: p.topic() for name, p in parts.items()}
             return {name: t for name, t in out.items() if t.count}
-        except _NotIndexed:
+        except NotIndexed:
             pass
         finally:
             bar.close()
@@ -213,10 +225,6 @@ def _callback(progress: Progress | bool | None, bar: _Bar) -> Progress | None:
     if progress is None or progress is True:
         return bar
     return progress or None
-
-
-class _NotIndexed(Exception):  # noqa: N818 - a signal to take the other path, not an error
-    """The MCAP has no summary with chunk and message indexes."""
 
 
 def _mcap_files(path: Path) -> list[Path] | None:
@@ -256,58 +264,6 @@ def _read_messages(path: Path, wanted: set[str], progress: Progress | None) -> d
 
 
 # ---------------------------------------------------------------------- MCAP, chunk by chunk
-_MESSAGE_HEADER = 1 + 8 + 2 + 4 + 8 + 8  # opcode, length, channel, sequence, two times
-#: The largest decompressed chunk taken [bytes] (recorders write ~1-10 MB; a larger figure in
-#: a summary is damage, not a chunk to allocate).
-_MAX_CHUNK = 1 << 31
-
-
-def _unreadable(path: Path, exc: BaseException) -> LogError:
-    return LogError(
-        describe(
-            f"log {path}",
-            "a complete MCAP file",
-            f"{type(exc).__name__}: {exc}",
-            "re-record it, or check that the file was copied whole (a recorder killed "
-            "mid-write leaves an MCAP without its summary section)",
-        )
-    )
-
-
-def _summary(path: Path) -> Any:
-    from mcap.reader import make_reader
-
-    try:
-        with path.open("rb") as fh:
-            summary = make_reader(fh).get_summary()
-    except Exception as exc:  # mcap raises its own and OS errors: one line either way
-        raise _unreadable(path, exc) from exc
-    if summary is None or (not summary.chunk_indexes and summary.channels):
-        raise _NotIndexed
-    return summary
-
-
-def _decompress(path: Path, compression: str, data: bytes, size: int) -> bytes:
-    try:
-        if compression == "":
-            return data
-        if compression == "zstd":
-            import zstandard
-
-            return bytes(zstandard.ZstdDecompressor().decompress(data, max_output_size=size))
-        if compression == "lz4":
-            import lz4.frame  # type: ignore[import-untyped]
-
-            return bytes(lz4.frame.decompress(data))
-    except Exception as exc:
-        raise _unreadable(path, exc) from exc
-    raise _unreadable(path, ValueError(f"chunk compression {compression!r}"))
-
-
-def _u64(buf: bytes, at: int) -> int:
-    return int.from_bytes(buf[at : at + 8], "little")
-
-
 def _read_mcap(
     path: Path,
     wanted: set[str],
@@ -315,7 +271,7 @@ def _read_mcap(
     progress: Progress | None,
     auto: bool = False,
 ) -> None:
-    summary = _summary(path)
+    summary = summary_of(path)
     stats = summary.statistics
     span = 0.0 if stats is None else (stats.message_end_time - stats.message_start_time) * 1e-9
     if auto and span < PROGRESS_MIN_S:
@@ -326,25 +282,13 @@ def _read_mcap(
         if ch.topic in wanted and ch.message_encoding == "cdr"
     }
     if len(channels) < sum(1 for ch in summary.channels.values() if ch.topic in wanted):
-        raise _NotIndexed  # another message encoding: the message path decides
+        raise NotIndexed  # another message encoding: the message path decides
     for ch in channels.values():
         schema = summary.schemas.get(ch.schema_id)
         name = schema.name if schema is not None else ""
         if ch.topic not in parts:
             parts[ch.topic] = _Parts(ch.topic, name, "cdr")
-    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
-    if any(not c.message_index_offsets for c in chunks if c.uncompressed_size):
-        raise _NotIndexed
-    size = path.stat().st_size
-    for c in chunks:  # the summary's numbers decide what is read: check them first
-        end = c.chunk_start_offset + c.chunk_length
-        index_end = end + c.message_index_length
-        if not (
-            0 < c.chunk_start_offset < end <= index_end <= size
-            and all(end <= off < index_end for off in c.message_index_offsets.values())
-            and 0 <= c.uncompressed_size <= _MAX_CHUNK
-        ):
-            raise _unreadable(path, ValueError(f"a chunk index out of the file: {c}"))
+    chunks = checked_chunks(path, summary)
     total = sum(c.chunk_length for c in chunks)
     done = 0
     with path.open("rb") as fh:
@@ -368,43 +312,9 @@ def _chunk(
     parts: dict[str, _Parts],
 ) -> None:
     """One chunk record (and its message indexes after it): each wanted channel's payloads."""
-    try:
-        at = 1 + 8 + 8 + 8 + 8 + 4  # opcode, length, start, end, uncompressed size, crc
-        n = int.from_bytes(record[at : at + 4], "little")
-        compression = record[at + 4 : at + 4 + n].decode()
-        at += 4 + n
-        size = _u64(record, at)
-        data = _decompress(path, compression, record[at + 8 : at + 8 + size], c.uncompressed_size)
-        buf = np.frombuffer(data, dtype=np.uint8)
-        for cid, index_at in sorted(mine.items()):
-            rel = index_at - c.chunk_start_offset
-            if record[rel] != 0x07:
-                raise ValueError(f"no message index at {index_at}")
-            count = int.from_bytes(record[rel + 11 : rel + 15], "little")
-            pairs = np.frombuffer(record, dtype="<u8", count=count // 8, offset=rel + 15)
-            times = pairs[0::2].astype(np.int64)
-            offsets = pairs[1::2].astype(np.int64)
-            if offsets.size and (offsets.min() < 0 or offsets.max() + _MESSAGE_HEADER > buf.size):
-                raise ValueError("a message index points past its chunk")
-            lengths = _gather_u64(buf, offsets + 1) - (_MESSAGE_HEADER - 9)
-            if np.any(buf[offsets] != 0x05) or np.any(lengths < 0):
-                raise ValueError("a message index points at no message")
-            if np.any(offsets + _MESSAGE_HEADER + lengths > buf.size):
-                raise ValueError("a message runs past its chunk")
-            order = np.argsort(times, kind="stable")
-            payloads = Payloads(buf, offsets[order] + _MESSAGE_HEADER, lengths[order])
-            topic = channels[cid].topic
-            parts[topic].add(times[order], payloads, f"topic {topic}")
-    except LogError:
-        raise
-    except Exception as exc:
-        raise _unreadable(path, exc) from exc
-
-
-def _gather_u64(buf: NDArray[np.uint8], at: IntArray) -> IntArray:
-    """Little-endian uint64 at each offset ``at`` of ``buf``."""
-    idx = at[:, None] + np.arange(8)
-    return np.ascontiguousarray(buf[idx]).view("<u8")[:, 0].astype(np.int64)
+    for cid, times, payloads in cut(path, c, record, mine):
+        topic = channels[cid].topic
+        parts[topic].add(times, payloads, f"topic {topic}")
 
 
 # ---------------------------------------------------------------------- ROS 1 .bag
@@ -440,7 +350,7 @@ def _read_bag(
             if c.topic not in parts:
                 parts[c.topic] = _Parts(c.topic, c.msgtype, "ros1")
             elif parts[c.topic].msgtype != c.msgtype:
-                raise _NotIndexed  # two types on one topic: the message path refuses it
+                raise NotIndexed  # two types on one topic: the message path refuses it
             for e in reader.indexes.get(cid, []):
                 by_chunk.setdefault(e.chunk_pos, {}).setdefault(cid, []).append((e.time, e.offset))
         total = sum(reader.chunks[pos].datasize for pos in by_chunk) or 1
@@ -452,7 +362,7 @@ def _read_bag(
                 try:
                     data = bytes(chunk.decompressor(fh.read(chunk.datasize)))
                 except Exception as exc:
-                    raise _unreadable(path, exc) from exc
+                    raise unreadable(path, exc) from exc
                 buf = np.frombuffer(data, dtype=np.uint8)
                 for cid, entries in sorted(by_chunk[pos].items()):
                     _bag_messages(path, data, buf, entries, parts[conns[cid].topic])
@@ -477,15 +387,15 @@ def _bag_messages(
     if offsets.size == 0:
         return
     if offsets.max() + 4 > buf.size:
-        raise _unreadable(path, ValueError("an index entry points past its chunk"))
+        raise unreadable(path, ValueError("an index entry points past its chunk"))
     header = _gather_u32(buf, offsets)
     if np.any(offsets + 8 + header > buf.size):
-        raise _unreadable(path, ValueError("a record runs past its chunk"))
+        raise unreadable(path, ValueError("a record runs past its chunk"))
     for off, n in zip(offsets.tolist(), header.tolist(), strict=True):
         if data.find(b"op=\x02", off + 4, off + 4 + n) < 0:
-            raise _NotIndexed  # a connection record first, or worse: the message path decides
+            raise NotIndexed  # a connection record first, or worse: the message path decides
     length = _gather_u32(buf, offsets + 4 + header)
     start = offsets + 8 + header
     if np.any(start + length > buf.size):
-        raise _unreadable(path, ValueError("a message runs past its chunk"))
+        raise unreadable(path, ValueError("a message runs past its chunk"))
     part.add(times, Payloads(buf, start, length), f"topic {part.name}")

@@ -95,6 +95,30 @@ class _Bag:
             self.conns[topic] = self.writer.add_connection(topic, msgtype, typestore=typestore())
         self.writer.write(self.conns[topic], log_ns, payload)
 
+    def write_many(
+        self,
+        topics: Sequence[str],
+        msgtype: str,
+        stamps: Sequence[int],
+        payloads: Sequence[list[bytes]],
+    ) -> None:
+        """``payloads[j][k]`` on ``topics[j]`` at log time ``stamps[k]`` [ns], k then j (as
+        :meth:`write_raw` in that loop, the connections added first): in bulk
+        (:func:`~amsfe_sym.logs.bulk_write.write_many`) where ``rosbags``' writer allows."""
+        from amsfe_sym.logs.bulk_write import write_many
+
+        for topic in topics:
+            if topic not in self.conns:
+                self.conns[topic] = self.writer.add_connection(
+                    topic, msgtype, typestore=typestore()
+                )
+        conns = [self.conns[t] for t in topics]
+        if write_many(self.writer, conns, np.asarray(stamps, dtype=np.int64), payloads):
+            return
+        for k, ns in enumerate(stamps):
+            for j, c in enumerate(conns):
+                self.writer.write(c, ns, payloads[j][k])
+
     def close(self) -> None:
         self.writer.close()
 
@@ -266,9 +290,8 @@ def write_estimate_bag(
     def fill(path: Path) -> None:
         bag = _Bag(path)
         try:
-            for ns, e, d in zip(stamps, est, std, strict=True):
-                bag.write_raw("/amsfe/estimate", JOINT_STATE, ns, e)
-                bag.write_raw("/amsfe/estimate_std", JOINT_STATE, ns, d)
+            topics = ["/amsfe/estimate", "/amsfe/estimate_std"]
+            bag.write_many(topics, JOINT_STATE, stamps, [est, std])
         finally:
             bag.close()
 

@@ -29,12 +29,8 @@ from amsfe_sym.errors import ConfigError, EstimatorError, describe, unknown_name
 from amsfe_sym.estimation.base import Estimator, StepInputs, StepReport
 from amsfe_sym.estimation.models import CameraFrame
 from amsfe_sym.runtime.cheader import c_struct, header_fields
-from amsfe_sym.runtime.models import (
-    CameraMeasurement,
-    CompiledTransition,
-    EncoderMeasurement,
-    inverse_not_converged,
-)
+from amsfe_sym.runtime.effort_params import EffortParts, _diagonal, effort_parts
+from amsfe_sym.runtime.models import inverse_not_converged
 from amsfe_sym.runtime.stability import NUMERICAL_FAILURES, covariance_hint
 
 __all__ = [
@@ -107,35 +103,26 @@ def _bind(cdll: ctypes.CDLL) -> dict[str, Any]:
     return out
 
 
-def _diagonal(name: str, M: Any) -> FloatArray:
-    arr = np.asarray(M, dtype=np.float64)
-    d = np.diag(arr).copy()
-    if not np.array_equal(arr, np.diag(d)):
-        raise ConfigError(
-            describe(
-                name,
-                "a diagonal matrix (the C runtime takes its diagonal as a tuning input)",
-                "off-diagonal entries",
-                "use a diagonal covariance, or the Python estimator",
-            )
-        )
-    return d
-
-
 class CompiledEstimator(Estimator):
     """An estimator computed by the library's C runtime (see the module docstring).
 
     Args:
-        model: A :class:`~amsfe_sym.runtime.models.CompiledTransition` (its diagonal ``Qw``).
-        encoder: An :class:`~amsfe_sym.runtime.models.EncoderMeasurement` of the same library.
-        camera: A :class:`~amsfe_sym.runtime.models.CameraMeasurement` of the same library.
+        model: A :class:`~amsfe_sym.runtime.models.CompiledTransition` (its diagonal ``Qw``),
+            or an :class:`~amsfe_sym.estimation.effort_models.InputStateTransition` around
+            one (a log without the applied torque: the input as states, docs/effort.md).
+        encoder: An :class:`~amsfe_sym.runtime.models.EncoderMeasurement` of the same library,
+            or a :class:`~amsfe_sym.estimation.effort_models.SpringTorqueMeasurement`
+            (``joint_torque``); padded with input states.
+        camera: A :class:`~amsfe_sym.runtime.models.CameraMeasurement` of the same library
+            (padded with input states).
         x0, P0, config, k0: As for :class:`~amsfe_sym.estimation.base.Estimator`.
         max_frames_per_step: ``replay``: frames stored per step.
 
     Raises:
         ConfigError: Other model types, a non-diagonal covariance, or a configuration the
             runtime refuses (e.g. ``cloning`` with more clones in flight than the library's
-            clone slots).
+            clone slots), or oosm's ``backward_map = "inverse"`` with input states or a net
+            torque input.
     """
 
     code: ClassVar[int]
@@ -145,20 +132,13 @@ class CompiledEstimator(Estimator):
         super().__init__(*args, **kwargs)
 
     def _setup(self) -> None:
-        model, enc, cam = self.model, self.encoder, self.camera
-        if not (
-            isinstance(model, CompiledTransition)
-            and isinstance(enc, EncoderMeasurement)
-            and isinstance(cam, CameraMeasurement)
-        ):
-            raise ConfigError(
-                describe(
-                    "models of a compiled estimator",
-                    "CompiledTransition, EncoderMeasurement, CameraMeasurement",
-                    f"{type(model).__name__}, {type(enc).__name__}, {type(cam).__name__}",
-                    "build them from the generated library (amsfe_sym.runtime.models)",
-                )
-            )
+        enc = self.encoder
+        parts = effort_parts(self.model, enc, self.camera)
+        self.effort = parts
+        model = parts.model
+        cfg = self.config
+        if parts.effort:
+            self._refuse_with_effort(parts)
         lib = model.lib
         self.lib = lib
         cdll = ctypes.CDLL(str(lib.library_path))
@@ -166,9 +146,8 @@ class CompiledEstimator(Estimator):
         dims = _Dims()
         self._c["amsfe_dims_get"](ctypes.byref(dims))
         self.dims = dims
-        cfg = self.config
         self._arrays = [
-            _diagonal("Qw", model.Qw),
+            parts.qw,
             _diagonal("encoder R", self.R_encoder),
             _diagonal("camera R", self.R_camera),
             self.x.copy(),
@@ -189,6 +168,12 @@ class CompiledEstimator(Estimator):
             *ptr,
             self.k,
             BACKWARD_MAPS.index(cfg.backward_map),
+            parts.input_states,
+            parts.input_gain.ctypes.data if parts.input_gain.size else None,
+            int(parts.joint_torque),
+            parts.ks.ctypes.data if parts.ks.size else None,
+            parts.ks_theta.ctypes.data if parts.ks_theta.size else None,
+            int(parts.net_torque),
         )
         size = self._c["amsfe_est_memory_size"](ctypes.byref(self._params))
         if size == 0:
@@ -230,6 +215,22 @@ class CompiledEstimator(Estimator):
         self._nis = ctypes.c_double()
         self._diag = RuntimeDiagnostics()
         self._fetch()
+
+    def _refuse_with_effort(self, parts: EffortParts) -> None:
+        """What the C runtime does not compute with input states, joint torques or a net
+        torque input, refused in one line naming what works."""
+        inverse = self.name == "oosm" and self.config.backward_map != "linearised"
+        if inverse and (parts.input_states or parts.net_torque):
+            bad = f"oosm with backward_map {self.config.backward_map!r}"
+            raise ConfigError(
+                describe(
+                    f"compiled {bad} on a log without the applied torque",
+                    "oosm with backward_map 'linearised', or another estimator",
+                    bad,
+                    "use 'replay' (docs/effort.md), or the Python estimator (amsfe estimate "
+                    "--runtime python; compiled = False)",
+                )
+            )
 
     # ------------------------------------------------------------------ C calls
     def status_string(self, status: int) -> str:
@@ -372,6 +373,15 @@ def log_numbers(values: Any) -> str:
 def estimator_log_lines(est: CompiledEstimator) -> list[str]:
     """The estimator block of a log (its parameter block as built at construction)."""
     p = est._params
+    if p.input_states or p.joint_torque or p.net_torque:
+        raise ConfigError(
+            describe(
+                "the estimator of a C log (examples/estimate_from_log.c)",
+                "an estimator of the applied torque (the log format has no effort fields)",
+                "input states or joint torques",
+                "write logs of estimators built with the applied torque",
+            )
+        )
     if p.backward_map != 0:  # the log's params line has no field for it
         raise ConfigError(
             describe(

@@ -92,6 +92,7 @@ class ControllerParams:
     ready_nis: float = float("inf")
     ready_nis_window: float = 50.0
     hold_motor: bool = False
+    blend_wf: float = float("inf")
     _keep: list[Any] = field(default_factory=list, repr=False)
 
     def struct(self) -> ctypes.Structure:
@@ -138,6 +139,7 @@ class ControllerParams:
             float(self.ready_nis),
             float(self.ready_nis_window),
             int(self.hold_motor),
+            float(self.blend_wf),
         )
 
 
@@ -414,7 +416,8 @@ def write_loop_log(
         f"{params.link_bandwidth!r} {params.motor_bandwidth!r} "
         f"{int(params.startup_converged)} {params.ready_q_std!r} {params.ready_qd_std!r} "
         f"{params.blend_accel!r} {params.blend_rate!r} "
-        f"{params.ready_nis!r} {params.ready_nis_window!r} {int(params.hold_motor)}"
+        f"{params.ready_nis!r} {params.ready_nis_window!r} {int(params.hold_motor)} "
+        f"{params.blend_wf!r}"
     )
     n = params.u_max.size
     for key in ("h", "lam", "Lt", "eps", "phi", "wm", "tau_max", "wf", "vmax"):

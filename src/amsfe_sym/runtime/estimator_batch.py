@@ -30,7 +30,8 @@ class BatchResult:
     """What :func:`run_log` computed (K ticks, F frames).
 
     Attributes:
-        x_hat: x(k|k) per tick, (K, N).
+        x_hat: x(k|k) per tick, (K, N) (the robot's states; input states, if any, in
+            ``input_hat``).
         P_diag: The diagonal of P(k|k), (K, N).
         encoder_nis: NIS of each tick's encoder innovation (eqs. 15-17), (K,); NaN where no
             sample reached the update (a gated one keeps its NIS).
@@ -47,6 +48,8 @@ class BatchResult:
     nees: FloatArray | None
     frame_nis: FloatArray
     frame_status: NDArray[np.int32]
+    input_hat: FloatArray | None = None
+    """The input states' estimate [N m], (K, n), with the input carried as states."""
 
 
 def run_log(
@@ -69,11 +72,12 @@ def run_log(
     Args:
         est: A compiled estimator (its C object runs the log; this module is its friend
             and reads its handle).
-        u: (K, n) input over [k, k+1] [N m].
-        z: (K, 2n) encoder samples [rad, rad/s]; a row holding NaN: none.
+        u: (K, n) input over [k, k+1] [N m] (ignored with the input carried as states).
+        z: (K, 2n) encoder samples [rad, rad/s], (K, 3n) ``[qm, qmd, tau_J]`` [.., N m] with
+            joint torque sensors; a row holding NaN: none.
         frame_exposure, frame_arrival: (F,) exposure and arrival ticks, arrival sorted.
         frame_z: (F, 2) pixels [px].
-        truth: (K, N) true state for the NEES, or None.
+        truth: (K, N) true robot state for the NEES (of the N robot states), or None.
         progress: Called with the ticks done after each ``chunk`` of them.
         chunk: Ticks per C call.
 
@@ -92,11 +96,12 @@ def run_log(
             )
         )
     u, z = np.asarray(u, dtype=np.float64), np.asarray(z, dtype=np.float64)
-    K, N, n = int(u.shape[0]) if u.ndim else 0, est.nx, int(est.dims.n)
+    K, M, n = int(u.shape[0]) if u.ndim else 0, est.nx, int(est.dims.n)
+    N, ne = int(est.dims.N), int(est.R_encoder.shape[0])
     F = int(np.size(frame_arrival))
     shapes = {
         "u": (u.shape, (K, n)),
-        "z": (z.shape, (K, 2 * n)),
+        "z": (z.shape, (K, ne)),
         "frame_exposure": (np.shape(frame_exposure), (F,)),
         "frame_z": (np.shape(frame_z), (F, 2)),
     }
@@ -122,8 +127,8 @@ def run_log(
     ]
     tr = None if truth is None else np.ascontiguousarray(truth, dtype=np.float64)
     out = BatchResult(
-        np.zeros((K, N)),
-        np.zeros((K, N)),
+        np.zeros((K, M)),
+        np.zeros((K, M)),
         np.full(K, np.nan),
         np.zeros(K, dtype=np.bool_),
         None if tr is None else np.full(K, np.nan),
@@ -156,6 +161,9 @@ def run_log(
         if progress is not None:
             progress(end - start)
     out.encoder_accepted = acc.astype(np.bool_)
+    if M > N:  # the input states: out of the robot's state
+        out.input_hat = out.x_hat[:, N:].copy()
+        out.x_hat, out.P_diag = out.x_hat[:, :N].copy(), out.P_diag[:, :N].copy()
     est.k = est.k0 + max(K - 1, 0)
     used = (out.frame_status == STATUS["ok"]) | (out.frame_status == STATUS["gated"])
     est._seen.update(int(s) for s in keep[2][used])

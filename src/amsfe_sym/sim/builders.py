@@ -205,14 +205,15 @@ def build_estimator(
         effort: What the log's effort is (docs/effort.md); ``None``: the applied torque.
             ``joint_torque``: the encoder model is
             :class:`~amsfe_sym.estimation.effort.SpringTorqueMeasurement` (``z = [qm, qmd,
-            tau_J]``, Python estimators only); ``joint_torque`` and ``none`` add the input's
+            tau_J]``); ``joint_torque`` and ``none`` add the input's
             :func:`~amsfe_sym.estimation.effort.input_noise_std` to ``[filter]
             motor_torque_std`` in quadrature.  Feed the estimator with
             :func:`~amsfe_sym.estimation.effort.estimator_inputs`.
 
     Raises:
         ConfigError: an unknown estimator, a singular camera R, bad initial values, or the
-            compiled estimator asked for ``joint_torque``.
+            compiled estimator asked for what it does not compute (oosm's inverse backward
+            map with input states or a net torque input; docs/effort.md).
     """
     n, p = lib.n, lib.p
     f = sc.filter
@@ -229,15 +230,6 @@ def build_estimator(
     compiled_model = CompiledTransition(
         lib, noise_covariance(lib, link_std, motor_std, f.theta_rate_std)
     )
-    if compiled and effort.kind != "applied":
-        raise ConfigError(
-            describe(
-                f"effort kind {effort.kind!r}",
-                "the Python estimators (the C estimators take the applied torque only)",
-                "compiled = True",
-                "use the Python estimator (compiled = False) for this log",
-            )
-        )
     encoder_model: EncoderMeasurement | SpringTorqueMeasurement
     if effort.kind == "joint_torque":
         encoder_model = SpringTorqueMeasurement(motor, q_var, qd_var, effort.joint_torque_std**2)

@@ -103,8 +103,9 @@ def effort_estimator(
         z: Encoder samples ``[qm, qmd]`` per step, (K, 2n) (NaN rows: no sample).
         effort: The logged effort [N m], (K, n), or ``None`` (``none``).
         spec: What the effort is.
-        compiled: The library's C estimator (``applied`` only; the others raise
-            :class:`~amsfe_sym.errors.ConfigError`) instead of the Python reference.
+        compiled: The library's C estimator instead of the Python reference (not oosm's
+            inverse backward map with input states or a net torque input:
+            :class:`~amsfe_sym.errors.ConfigError`; docs/effort.md).
     """
     n = lib.n
     z0 = np.array(z[0], dtype=float)

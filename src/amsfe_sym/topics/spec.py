@@ -15,6 +15,10 @@ names = ["joint1", "joint2"]      # JointState names in the robot's q order (def
 [effort]
 kind = "joint_torque"             # "applied" | "joint_torque" | "none" (default: by shape)
 
+[filter]                          # the filter's R and Q: the scenario's [filter] keys and units
+encoder_q_std = 1e-5              # [rad]; "log": measured from the log (docs/logs.md)
+link_torque_std = 0.5             # [N m]; over estimate --robot's defaults and a scenario's
+
 [timing]
 grid_tolerance = 0.25             # |stamp - k T| allowed for a sample on the tick grid [T]
 max_gap_steps = 5                 # missing encoder samples predicted through; more: refused
@@ -35,10 +39,11 @@ from pathlib import Path
 from typing import Any, Literal
 
 from amsfe_sym.core.toml import read_toml
+from amsfe_sym.core.values import BACKWARD_MAPS, read_int, read_number
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.topics.roles import EFFORT_KINDS, ROLES, EffortKind
 
-__all__ = ["TopicSpec", "parse_topic_spec", "read_topic_spec"]
+__all__ = ["FILTER_KEYS", "FROM_LOG", "TopicSpec", "parse_topic_spec", "read_topic_spec"]
 
 _TOPIC_KEYS = tuple(ROLES)
 _ALIASES = {"torque": "effort"}
@@ -64,6 +69,11 @@ class TopicSpec:
         effort_options: The other ``[effort]`` keys as written (``joint_torque_std``,
             ``input_model``, ``input_rate_std``, ``input_std0``), checked by the estimator's
             ``effort_spec`` (docs/effort.md).
+        filter_options: The ``[filter]`` keys as written, type-checked (:data:`FILTER_KEYS`:
+            the scenario's ``[filter]``, docs/scenarios.md); ``amsfe estimate`` applies them
+            over ``--robot``'s defaults and over a scenario's ``[filter]`` (the log spec wins,
+            key by key) and the scenario's own checks judge the result.  ``encoder_q_std``
+            and ``encoder_qd_std`` may be :data:`FROM_LOG`: measured from the log.
         grid_tolerance: How far a stamp may be from the tick grid [T].
         max_gap_steps: Missing encoder samples in a row the estimator predicts through.
         reliability: QoS reliability of live topics: ``reliable`` or ``best_effort``.
@@ -87,6 +97,7 @@ class TopicSpec:
     positions: Literal["motor", "link"] = "motor"
     effort_kind: EffortKind | None = None
     effort_options: tuple[tuple[str, Any], ...] = ()
+    filter_options: tuple[tuple[str, Any], ...] = ()
     grid_tolerance: float = 0.25
     max_gap_steps: int = 5
     reliability: Literal["reliable", "best_effort"] = "reliable"
@@ -114,10 +125,31 @@ class TopicSpec:
 #: ``effort_spec`` checks their values; docs/effort.md): noise and input model.
 _EFFORT_NOISE_KEYS = ("joint_torque_std", "input_model", "input_rate_std", "input_std0")
 
+#: The ``[filter]`` keys: the scenario's (``scenario.model.FilterSettings``' fields, same
+#: names and units; tests/test_log_noise.py holds the two lists equal), by value type.
+_FILTER_NUMBERS = (
+    "link_torque_std",  # [N m] held over one step (Q of eq. (3))
+    "motor_torque_std",  # [N m]
+    "theta_rate_std",  # [unit/s]
+    "paper_torque_std",  # [N m]
+    "encoder_q_std",  # [rad] (R)
+    "encoder_qd_std",  # [rad/s]
+    "camera_pixel_std",  # [px]
+    "gate_probability",
+)
+_FILTER_INTS = ("camera_iterations", "buffer_steps")
+FILTER_KEYS = (*_FILTER_NUMBERS, *_FILTER_INTS, "backward_map")
+
+#: The value of ``[filter] encoder_q_std`` / ``encoder_qd_std`` that asks for the noise
+#: measured from the log (:mod:`amsfe_sym.logs.noise`).
+FROM_LOG = "log"
+_FROM_LOG_KEYS = ("encoder_q_std", "encoder_qd_std")
+
 _SECTIONS = {
     "topics": _TOPIC_KEYS + tuple(_ALIASES),
     "joints": ("names", "positions"),
     "effort": ("kind", *_EFFORT_NOISE_KEYS),
+    "filter": FILTER_KEYS,
     "timing": ("grid_tolerance", "max_gap_steps"),
     "qos": ("reliability", "depth"),
 }
@@ -133,6 +165,31 @@ def _count(where: str, value: Any, lo: int) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or value < lo:
         raise ConfigError(describe(where, f"an integer >= {lo}", repr(value), "fix it"))
     return int(value)
+
+
+def _filter_value(at: str, key: str, value: Any) -> Any:
+    """A ``[filter]`` value of the type of the scenario's key (ranges: the scenario's
+    checks, once applied)."""
+    if key in _FROM_LOG_KEYS and value == FROM_LOG:
+        return value
+    if key in _FILTER_NUMBERS:
+        if isinstance(value, str) and key in _FROM_LOG_KEYS:
+            raise ConfigError(
+                describe(
+                    at,
+                    f'a noise std >= 0 or "{FROM_LOG}" (measured from the log)',
+                    repr(value),
+                    f'write {key} = 1e-5 or {key} = "{FROM_LOG}"',
+                )
+            )
+        return read_number(value, at, ConfigError, low=0.0)
+    if key in _FILTER_INTS:
+        return read_int(value, at, ConfigError, 1)
+    if value not in BACKWARD_MAPS:  # backward_map
+        raise ConfigError(
+            describe(at, f"one of {list(BACKWARD_MAPS)}", repr(value), 'write "linearised"')
+        )
+    return value
 
 
 def parse_topic_spec(data: dict[str, Any], where: str = "topic spec") -> TopicSpec:
@@ -155,8 +212,11 @@ def parse_topic_spec(data: dict[str, Any], where: str = "topic spec") -> TopicSp
             raise ConfigError(describe(f"{where} [{section}]", "a table", repr(table), "fix it"))
         bad = sorted(set(table) - set(keys))
         if bad:
+            fix = "drop them"
+            if section == "filter":
+                fix = "rename or drop them (the scenario's [filter] keys: docs/scenarios.md)"
             raise ConfigError(
-                describe(f"{where} [{section}]", f"keys among {list(keys)}", str(bad), "drop them")
+                describe(f"{where} [{section}]", f"keys among {list(keys)}", str(bad), fix)
             )
         for key, value in table.items():
             at = f"{where} [{section}] {key}"
@@ -198,6 +258,9 @@ def parse_topic_spec(data: dict[str, Any], where: str = "topic spec") -> TopicSp
                 out["effort_kind"] = value
             elif key in _EFFORT_NOISE_KEYS:
                 out["effort_options"] = (*out.get("effort_options", ()), (key, value))
+            elif section == "filter":
+                item = (key, _filter_value(at, key, value))
+                out["filter_options"] = (*out.get("filter_options", ()), item)
             elif key == "grid_tolerance":
                 out[key] = _number(at, value, 0.0, 0.5)
             elif key == "max_gap_steps":

@@ -8,6 +8,7 @@ from typing import Any
 
 from amsfe_sym.apps.bench.calls import CallRow, bench_calls, bench_cflags, tick_compiled_us
 from amsfe_sym.apps.bench.generation import bench_generation
+from amsfe_sym.apps.bench.logs import DEFAULT_LOGS, LogCase, bench_log_estimate, log_lines
 from amsfe_sym.apps.bench.loop import bench_closed_loop
 from amsfe_sym.apps.bench.scaling import bench_scaling
 from amsfe_sym.apps.bench.tick import bench_tick
@@ -122,6 +123,8 @@ def format_report(report: dict[str, Any]) -> str:
                 f"{tick['total']:.2f} us"
             )
     lines += _tick_lines(report)
+    if report.get("logs"):
+        lines += log_lines(report["logs"])
     flags = report.get("cflags")
     if flags:
         lines += [
@@ -257,7 +260,8 @@ class BenchOptions:
         repeat: Upper bound on calls per timing round.
         rounds: Timing rounds (the median is reported).
         json: Also write the report there.
-        skip: Sections left out: ``generation``, ``calls``, ``estimators``.
+        skip: Sections left out: ``generation``, ``calls``, ``estimators``, ``tick``,
+            ``loop``, ``scaling``, ``logs``.
         duration: Simulated time per estimator [s].
         scenario: Scenario of the estimator section (None: see :func:`timing_scenario`).
         estimators: Estimators to time (None: all registered).
@@ -270,6 +274,9 @@ class BenchOptions:
             scenario, and ur5-control and panda-control for the 2-link arm).
         scaling_panda: Add the shipped Panda to the scaling table.
         scaling_loop_duration: Simulated time of each scaling row's closed loop [s].
+        logs: The logs ``amsfe estimate`` is timed on (section 6; None:
+            :data:`~amsfe_sym.apps.bench.logs.DEFAULT_LOGS`, a 10 s paper-sim and a 60 s
+            panda-control log).
     """
 
     robot: str = "paper_2link"
@@ -288,6 +295,7 @@ class BenchOptions:
     loop_scenarios: tuple[str, ...] | None = None
     scaling_panda: bool = True
     scaling_loop_duration: float = 2.0
+    logs: tuple[LogCase, ...] | None = None
 
 
 def run_bench(opts: BenchOptions) -> int:
@@ -374,6 +382,14 @@ def run_bench(opts: BenchOptions) -> int:
             loop_duration=opts.scaling_loop_duration,
             rounds=rounds,
         )
+    if "logs" not in opts.skip:  # amsfe estimate over a log, fresh processes
+        import tempfile
+
+        with tempfile.TemporaryDirectory(prefix="amsfe-bench-logs-") as tmp:
+            report["logs"] = [
+                bench_log_estimate(case, min(rounds, 3), Path(tmp) / f"log{i}", opts.out)
+                for i, case in enumerate(opts.logs or DEFAULT_LOGS)
+            ]
     if opts.compare_cflags is not None:
         report["cflags"] = bench_cflags(
             lib,

@@ -105,6 +105,18 @@ AMSFE_HIDDEN int amsfe_lu_solve(int N, double *A, double *b);
 AMSFE_HIDDEN int amsfe_joseph_select(int M, int m, const int *rows, const double *r,
                                      const double *x, const double *P, const double *z,
                                      double *x2, double *P2, double *nis, double *nu, double *w);
+/* amsfe_joseph_select for an H given by its rows' nonzeros (hrow [m + 1], hcol, hval) and a
+ * given innovation nu [m]; 0 when S is not PD.  w: AMSFE_JOSEPH_WORK(M, m) doubles. */
+AMSFE_HIDDEN int amsfe_joseph_rows(int M, int m, const int *hrow, const int *hcol,
+                                   const double *hval, const double *r, const double *x,
+                                   const double *P, const double *nu, double *x2, double *P2,
+                                   double *nis, double *w);
+/* amsfe_a1_retrodict for any encoder H: QHt = Q H^T, PpHt = P_prior H^T (M x m), S =
+ * sym(H P_prior H^T) + diag(r); 0 when S is not PD.  w: AMSFE_RETRO_WORK(M, m) doubles. */
+AMSFE_HIDDEN int amsfe_a1_retrodict_cols(int M, int m, const double *S, const double *QHt,
+                                         const double *PpHt, const double *x, const double *P,
+                                         const double *Q, const double *nu, double *xs,
+                                         double *Mo, double *C, double *w);
 /* oosm.a1_retrodict with the encoders' H = I[rows, :] (x_shift, M, C); 0 when S is not PD. */
 AMSFE_HIDDEN int amsfe_a1_retrodict(int M, int m, const int *rows, const double *r,
                                     const double *x, const double *P, const double *Q,

@@ -402,3 +402,123 @@ KERNEL_CLONES int amsfe_a1_retrodict(int M, int m, const int *restrict rows,
   tiles(M, M, 0, 0, 0, 0, m, Pr, Wt, M, 1, D, C); /* C = D + P_prior H^T Wt^T */
   return 1;
 }
+
+/* The Joseph-form update of amsfe_joseph_select for a measurement whose jacobian H (m x M) is
+ * given by its rows' nonzeros: row a holds hval[e] at column hcol[e], hrow[a] <= e <
+ * hrow[a + 1] (ekf.joseph_update with that H; the joint torque sensors' Ks (qm - q) and the
+ * camera of a state with input states, docs/effort.md).  The innovation nu [m] is given:
+ * PHt = P H^T, S = sym(H PHt) + diag(r), x+ = x + PHt S^-1 nu, P+ the Joseph form evaluated as
+ * amsfe_joseph_select does.  Returns 0 when S is not positive definite.  w:
+ * AMSFE_JOSEPH_WORK(M, m) doubles. */
+KERNEL_CLONES int amsfe_joseph_rows(int M, int m, const int *restrict hrow,
+                                    const int *restrict hcol, const double *restrict hval,
+                                    const double *restrict r, const double *restrict x,
+                                    const double *restrict P, const double *restrict nu,
+                                    double *restrict x2, double *restrict P2,
+                                    double *restrict nis, double *restrict w) {
+  double *restrict V = w, *restrict K = w + (long)M * m, *restrict V2 = K + (long)M * m;
+  double *restrict Pn = V2 + (long)M * m, *restrict S = Pn + (long)M * m;
+  double *restrict Sh = S + m * m, *restrict Ls = Sh + m * m, *restrict sn = Ls + m * m;
+  for (int a = 0; a < m; ++a) { /* Pn = -P H^T, column a from the nonzeros of row a */
+    double *restrict na = Pn + (long)a * M;
+    for (int i = 0; i < M; ++i) na[i] = 0.0;
+    for (int e = hrow[a]; e < hrow[a + 1]; ++e) {
+      const double *restrict pc = P + (long)hcol[e] * M;
+      double v = hval[e];
+      for (int i = 0; i < M; ++i) na[i] += pc[i] * v;
+    }
+    for (int i = 0; i < M; ++i) na[i] = -na[i];
+  }
+  double *restrict T = Sh; /* T = H P H^T (Sh is written after S is used) */
+  for (int b = 0; b < m; ++b)
+    for (int a = 0; a < m; ++a) {
+      double v = 0.0;
+      for (int e = hrow[a]; e < hrow[a + 1]; ++e) v -= hval[e] * Pn[hcol[e] + (long)b * M];
+      AT(T, a, b, m) = v;
+    }
+  for (int b = 0; b < m; ++b) /* S = sym(H P H^T) + R, as the reference symmetrises it */
+    for (int a = 0; a < m; ++a)
+      AT(S, a, b, m) = 0.5 * (AT(T, a, b, m) + AT(T, b, a, m)) + (a == b ? r[a] : 0.0);
+  if (!amsfe_cholesky(m, S, Ls)) return 0;
+  for (int a = 0; a < m; ++a) sn[a] = nu[a];
+  amsfe_chol_solve(m, Ls, sn);
+  double s = 0.0;
+  for (int a = 0; a < m; ++a) s += nu[a] * sn[a];
+  *nis = s;
+  for (int i = 0; i < M; ++i) x2[i] = x[i]; /* x+ = x + P H^T S^-1 nu */
+  for (int a = 0; a < m; ++a) {
+    const double *restrict na = Pn + (long)a * M;
+    double f = sn[a];
+    for (int i = 0; i < M; ++i) x2[i] -= na[i] * f;
+  }
+  double *restrict Li = V, *restrict Si = V2; /* as amsfe_joseph_select */
+  amsfe_tri_inverse(m, Ls, Li);
+  for (int b = 0; b < m; ++b)
+    for (int a = b; a < m; ++a) {
+      double v = 0.0;
+      for (int k = a; k < m; ++k) v += AT(Li, k, a, m) * AT(Li, k, b, m);
+      AT(Si, a, b, m) = v, AT(Si, b, a, m) = v;
+    }
+  tiles_sub(M, m, 0, 0, 0, 0, m, Pn, Si, 1, m, NULL, K); /* K = -(-P H^T) S^-1 */
+  for (int i = 0; i < m * m; ++i) Sh[i] = 0.5 * S[i];
+  tiles(M, m, 0, 0, 0, 0, m, K, Sh, 1, m, Pn, V); /* V = K S / 2 - P H^T */
+  memcpy(V2, V, sizeof(double) * (size_t)M * (size_t)m);
+  tiles(M, M, 0, 1, 0, 0, 2 * m, V, K, M, 1, P, P2); /* lower of P + [V K] [K V]^T */
+  amsfe_mirror_lower(M, P2);
+  return 1;
+}
+
+/* amsfe_a1_retrodict for any encoder H, given through QHt = Q H^T, PpHt = P_prior H^T (M x m
+ * each) and S = sym(H P_prior H^T) + diag(r) (m x m): the same formulas.  Returns 0 when S is
+ * not positive definite.  w: AMSFE_RETRO_WORK(M, m) doubles. */
+KERNEL_CLONES int amsfe_a1_retrodict_cols(int M, int m, const double *restrict S,
+                                          const double *restrict QHt,
+                                          const double *restrict PpHt,
+                                          const double *restrict x, const double *restrict P,
+                                          const double *restrict Q,
+                                          const double *restrict nu, double *restrict xs,
+                                          double *restrict Mo, double *restrict C,
+                                          double *restrict w) {
+  double *U = w, *Wt = w + (long)M * m, *U2 = Wt + (long)M * m;
+  double *restrict D = U2 + (long)M * m, *restrict Ls = D + (long)M * M;
+  if (!amsfe_cholesky(m, S, Ls)) return 0;
+  for (long c = 0; c < m; ++c) { /* Wt = Q H^T S^-1 */
+    double *wc = Wt + c * M;
+    const double *restrict qc = QHt + c * M;
+    for (int i = 0; i < M; ++i) wc[i] = qc[i];
+    for (long a = 0; a < c; ++a) {
+      const double *wa = Wt + a * M;
+      double f = AT(Ls, c, a, m);
+      for (int i = 0; i < M; ++i) wc[i] -= wa[i] * f;
+    }
+    double d = AT(Ls, c, c, m);
+    for (int i = 0; i < M; ++i) wc[i] /= d;
+  }
+  for (long c = m - 1; c >= 0; --c) {
+    double *wc = Wt + c * M;
+    for (long a = c + 1; a < m; ++a) {
+      const double *wa = Wt + a * M;
+      double f = AT(Ls, a, c, m);
+      for (int i = 0; i < M; ++i) wc[i] -= wa[i] * f;
+    }
+    double d = AT(Ls, c, c, m);
+    for (int i = 0; i < M; ++i) wc[i] /= d;
+  }
+  for (int i = 0; i < M; ++i) xs[i] = x[i]; /* x_shift = x - Wt nu */
+  for (int a = 0; a < m; ++a) {
+    const double *restrict wa = Wt + (long)a * M;
+    const double *restrict pa = PpHt + (long)a * M, *restrict qa = QHt + (long)a * M;
+    double *restrict ua = U + (long)a * M;
+    double f = nu[a];
+    for (int i = 0; i < M; ++i) {
+      xs[i] -= wa[i] * f;
+      ua[i] = pa[i] - 0.5 * qa[i];
+    }
+  }
+  memcpy(U2, U, sizeof(double) * (size_t)M * (size_t)m);
+  for (long i = 0; i < (long)M * M; ++i) D[i] = P[i] - Q[i];
+  tiles(M, M, 0, 1, 0, 0, 2 * m, U, Wt, M, 1, D, Mo); /* lower of D + [U Wt] [Wt U]^T */
+  amsfe_mirror_lower(M, Mo);
+  tiles(M, M, 0, 0, 0, 0, m, PpHt, Wt, M, 1, D, C); /* C = D + P_prior H^T Wt^T */
+  return 1;
+}

@@ -54,6 +54,7 @@ struct amsfe_ctrl {
   long blend_k0;   /* cascade: the blended start's first tick (control/blend.py) */
   double blend_tb; /* its duration [s] */
   double *blend_d0, *blend_d1, *refb; /* its offsets [n], [n]; the blended reference [5n] */
+  double *wfb;     /* the command filter's bandwidth while the blend runs (blend_wf) [n] */
   double nis_mean; /* cascade: the encoders' mean NIS (running, then exponential window) */
   long nis_count;  /* NIS values taken into it */
   double nis_tick; /* this tick's NIS (amsfe_ctrl_observe_nis), NaN: none */
@@ -83,7 +84,8 @@ static int ctrl_layout(amsfe_ctrl *c, char *base) {
                      &c->Ks, &c->zeros, &c->u_prev, &c->vt_prev, &c->prev_qm_d,
                      &c->prev_qmd_d, &c->qmd_next, &c->Ksv, &c->b, &c->acc,
                      &c->c_hold, &c->hold1, &c->hold0, &c->blend_d0, &c->blend_d1,
-                     &c->mhold_d0, &c->mhold_d1, &c->mr[0], &c->mr[1], &c->mr[2]};
+                     &c->mhold_d0, &c->mhold_d1, &c->mr[0], &c->mr[1], &c->mr[2],
+                     &c->wfb};
   for (size_t i = 0; i < sizeof(vecs) / sizeof(vecs[0]); ++i) *vecs[i] = DBL(&cv, n);
   c->refb = DBL(&cv, 5 * n);
   c->theta0 = DBL(&cv, d.N - 4 * n + 1);
@@ -127,7 +129,7 @@ static int ctrl_params_ok(const amsfe_ctrl_params *p) {
   if (p->startup_converged && (isnan(p->ready_q_std) || !(p->ready_q_std > 0) ||
                                isnan(p->ready_qd_std) || !(p->ready_qd_std > 0) ||
                                !(p->blend_accel > 0) || !(p->blend_rate > 0) ||
-                               !(p->ready_nis >= 0) ||
+                               !(p->ready_nis >= 0) || !(p->blend_wf >= 0) ||
                                (p->ready_nis > 0 && !(p->ready_nis_window > 0))))
     return 0;
   if (p->controller == AMSFE_CTRL_TRUTH_CT)
@@ -328,6 +330,16 @@ static const double *blended(amsfe_ctrl *c, long k, const double *ref) {
   return c->refb;
 }
 
+/* _Cascade._blend_gains: wf + (blend_wf - wf) b0(s / Tb), at most wf, while the blend runs */
+static const double *blend_bandwidth(amsfe_ctrl *c, long k) {
+  long n = c->d.n;
+  double s = (double)(k - c->blend_k0) * c->par.T, tb = c->blend_tb, bwf = c->par.blend_wf;
+  if (!(s < tb) || !(bwf > 0) || isinf(bwf)) return c->wf;
+  double w = blend_poly(BLEND_B0, 0, s / tb);
+  for (long j = 0; j < n; ++j) c->wfb[j] = fmin(c->wf[j], w * bwf + (1.0 - w) * c->wf[j]);
+  return c->wfb;
+}
+
 /* _Cascade.torque: control_amsfe / control_dtsmc, with the start-up. */
 static int cascade(amsfe_ctrl *c, long k, const double *lead0, const double *lead1,
                    const double *ref, const double *z, double *u, amsfe_ctrl_out *out) {
@@ -341,7 +353,9 @@ static int cascade(amsfe_ctrl *c, long k, const double *lead0, const double *lea
   in[m++] = ref, in[m++] = c->cf, in[m++] = c->h, in[m++] = c->lam;
   if (!dtsmc) in[m++] = lt;
   in[m++] = c->eps, in[m++] = &c->pp, in[m++] = c->phi, in[m++] = c->wm;
-  in[m++] = c->tau_max, in[m++] = c->wf, in[m++] = c->vmax;
+  in[m++] = c->tau_max;
+  const double **wf_in = &in[m];
+  in[m++] = c->wf, in[m++] = c->vmax;
   cfun f = dtsmc ? control_dtsmc : control_amsfe;
   const double **hold = &in[m++];
   if (!c->observed) c->ready = 1; /* no covariance given: the estimate is taken as converged */
@@ -386,7 +400,10 @@ static int cascade(amsfe_ctrl *c, long k, const double *lead0, const double *lea
       c->blend_tb =
           blend_time(c->blend_d0, c->blend_d1, n, c->par.blend_accel, c->par.blend_rate);
     }
-    if (c->par.startup_converged) in[dtsmc ? 2 : 1] = blended(c, k, ref); /* once started */
+    if (c->par.startup_converged) { /* once started */
+      in[dtsmc ? 2 : 1] = blended(c, k, ref);
+      *wf_in = blend_bandwidth(c, k);
+    }
     if (gcall(&c->g, f, in, m, c->o, 8)) return AMSFE_ERR_NONFINITE;
     if (!c->started) { /* start at rest on the first trusted command */
       memcpy(c->cf, c->o[7], sizeof(double) * (size_t)n);

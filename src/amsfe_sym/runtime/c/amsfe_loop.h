@@ -79,6 +79,10 @@ typedef struct {
    * encoders), joining the reference's motor trajectory within the blend's budget
    * (control/blend.py) */
   int hold_motor;
+  /* with startup_converged and a blend: the command filter's bandwidth at the trusted tick
+   * [rad/s], returning to wf along the blend (wf + (blend_wf - wf) b0(s / Tb), at most wf;
+   * control/sliding.py); 0 (a zeroed block) or INFINITY = wf throughout */
+  double blend_wf;
 } amsfe_ctrl_params;
 
 /* What a tick computed besides the torque. */

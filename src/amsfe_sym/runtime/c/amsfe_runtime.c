@@ -27,12 +27,21 @@
 #include "amsfe_internal.h"
 
 #define AMSFE_MAX_ENCODERS 256 /* 2n: up to 128 joints */
+/* The effort paths (docs/effort.md section 7) stay out of line: the applied path's tick is
+ * compiled as before (the same inlining), whatever they add. */
+#if defined(__GNUC__)
+#define EFFORT_PATH __attribute__((noinline))
+#else
+#define EFFORT_PATH
+#endif
 DECLARE(est_predict)
 DECLARE(est_camera_update)
 DECLARE(est_oosm_correct)
 DECLARE(est_clone_camera)
 DECLARE(transition_step)
 DECLARE(transition_inverse)
+DECLARE(camera_measure)
+const cint *camera_measure_sparsity_out(cint i);
 
 #include "amsfe_model_config.h"
 #if AMSFE_MODEL_CHAIN
@@ -47,11 +56,13 @@ DECLARE(transition_step_chain)
 #endif
 
 static const cwork WORKS[] = {est_camera_update_work, est_oosm_correct_work, est_clone_camera_work,
-                              STEP_WORK, transition_inverse_work};
+                              STEP_WORK, transition_inverse_work, camera_measure_work};
 
 struct amsfe_est {
   amsfe_params par; /* pointers in it point into this block */
-  amsfe_dims d;
+  amsfe_dims d;     /* the filter's: N = M (the model's N + input_states), nw and ne with them */
+  int Nm, ni, jt, net; /* the model's N, input states, joint torque sensors, net torque input
+                          (docs/effort.md) */
   int B, R, F, S, max_delay; /* oosm ring B, replay ring R = B + 1, frames per step, slots */
   long k;
   int failed, last_error;
@@ -77,6 +88,13 @@ struct amsfe_est {
   double *xa, *Pa, *xa2, *Pa2, *sel, *cl;
   long *clone_k;
   int *clone_on;
+  /* input states and joint torques (amsfe_params.input_states, joint_torque) */
+  double *gain, *ks, *An, *Gn; /* T / (2 Mm), Ks; the model's A and Gamma (input states) */
+  int *kst;
+  int *ehrow, *ehcol, *chrow, *chcol; /* nonzeros of the encoder and the camera H by rows */
+  int *ccol;                          /* cloning: the camera H's columns at a clone */
+  double *ehval, *last_hval, *hz, *chval, *cy, *cnu, *cJ, *OW, *RH;
+  double *ut, *Bn; /* net torque: the model's input, its gain B (N x n) */
   gwork g; /* work of the generated functions */
   double inv_tol, inv_residual, inv_limit; /* the inverse's convergence check */
 };
@@ -94,8 +112,32 @@ static int fail(amsfe_est *e, int status) {
   return status;
 }
 
-/* ekf.joseph_update with the encoders' H, a selection of qm and qmd (eq. 5; enc_rows). */
+/* SpringTorqueMeasurement.predict: h(x) = [qm, qmd, Ks (qm - q)] into h [3n] and the values
+ * of its jacobian's nonzeros (the pattern ehrow/ehcol of init) into hv; Ks[j] is theta's
+ * entry where the joint's stiffness is a parameter (then d/dtheta = qm - q: exact). */
+EFFORT_PATH static void torque_h(const amsfe_est *e, const double *x, double *h, double *hv) {
+  int n = e->d.n, v = 0;
+  for (int a = 0; a < 2 * n; ++a) h[a] = x[2 * n + a], hv[v++] = 1.0;
+  for (int j = 0; j < n; ++j) {
+    double Ks = e->kst[j] >= 0 ? x[4 * n + e->kst[j]] : e->ks[j];
+    double delta = x[2 * n + j] - x[j];
+    h[2 * n + j] = Ks * delta;
+    hv[v++] = -Ks, hv[v++] = Ks;
+    if (e->kst[j] >= 0) hv[v++] = delta;
+  }
+}
+
+/* ekf.joseph_update with the encoders' H: a selection of qm and qmd (eq. 5; enc_rows), or
+ * with the joint torques [qm, qmd, Ks (qm - q)] (its nonzeros by rows) */
+EFFORT_PATH static int encoder_kernel_torque(amsfe_est *e, const double *z) {
+  torque_h(e, e->x, e->hz, e->ehval);
+  for (int a = 0; a < e->d.ne; ++a) e->last_nu[a] = z[a] - e->hz[a];
+  return amsfe_joseph_rows(e->d.N, e->d.ne, e->ehrow, e->ehcol, e->ehval, e->re, e->x, e->P,
+                           e->last_nu, e->x2, e->P2, &e->nis, e->JW);
+}
+
 static int encoder_kernel(amsfe_est *e, const double *z) {
+  if (e->jt) return encoder_kernel_torque(e, z);
   return amsfe_joseph_select(e->d.N, e->d.ne, e->enc_rows, e->re, e->x, e->P, z, e->x2, e->P2,
                              &e->nis, e->last_nu, e->JW);
 }
@@ -124,10 +166,28 @@ static void model_dims(amsfe_dims *d) {
 
 void amsfe_dims_get(amsfe_dims *dims) { model_dims(dims); }
 
+/* The filter's dims for p (the model's, grown by the input states and the torque sensors);
+ * returns the model's N. */
+static int filter_dims(const amsfe_params *p, amsfe_dims *d) {
+  model_dims(d);
+  int Nm = d->N;
+  d->N += p->input_states, d->nw += p->input_states;
+  if (p->joint_torque) d->ne = 3 * d->n;
+  return Nm;
+}
+
+/* Nonzeros of the encoder H with joint torques (rows qm, qmd: one each; row tau_j: q_j, qm_j
+ * and theta's stiffness entry if any) */
+static int torque_nnz(const amsfe_params *p, int n) {
+  int v = 5 * n;
+  for (int j = 0; j < n; ++j) v += p->ks_theta[j] >= 0;
+  return v;
+}
+
 /* Lay the object out in `base` (NULL: only measure); returns the bytes needed. */
 static size_t layout(amsfe_est *e, const amsfe_params *p, char *base) {
   amsfe_dims d;
-  model_dims(&d);
+  int Nm = filter_dims(p, &d);
   long N = d.N, NN = (long)d.N * d.N, n = d.n;
   long B = p->buffer_steps, R = B + 1, F = p->max_frames_per_step;
   long S = d.clone_slots, Na = (1 + S) * N;
@@ -155,6 +215,30 @@ static size_t layout(amsfe_est *e, const amsfe_params *p, char *base) {
     e->xpost_buf = DBL(&c, B * N), e->xprior_buf = DBL(&c, B * N);
     e->RW = DBL(&c, AMSFE_RETRO_WORK(N, d.ne));
   }
+  e->gain = e->ks = e->An = e->Gn = NULL;
+  e->kst = e->ehrow = e->ehcol = e->chrow = e->chcol = e->ccol = NULL;
+  e->ehval = e->last_hval = e->hz = e->chval = e->cy = e->cnu = e->cJ = e->OW = e->RH = NULL;
+  if (p->input_states) {
+    e->gain = DBL(&c, n);
+    e->An = DBL(&c, (long)Nm * Nm), e->Gn = DBL(&c, (long)Nm * (d.nw - n));
+    e->chrow = (int *)carve(&c, sizeof(int) * 3), e->chcol = (int *)carve(&c, sizeof(int) * 2 * n);
+    e->ccol = (int *)carve(&c, sizeof(int) * 2 * n);
+    e->chval = DBL(&c, 2 * n), e->cy = DBL(&c, 2), e->cnu = DBL(&c, 2);
+    e->cJ = DBL(&c, 4 * n + 2); /* J dense, depth, J's nonzeros */
+    if (est == AMSFE_OOSM) e->OW = DBL(&c, 8 * N + 8);
+  }
+  e->ut = e->Bn = NULL;
+  if (p->net_torque) e->ut = DBL(&c, n), e->Bn = DBL(&c, N * n), e->gain = DBL(&c, n);
+  if (p->joint_torque || p->net_torque) {
+    e->ks = DBL(&c, n), e->kst = (int *)carve(&c, sizeof(int) * (size_t)n);
+  }
+  if (p->joint_torque) {
+    int nnz = torque_nnz(p, (int)n);
+    e->ehrow = (int *)carve(&c, sizeof(int) * (size_t)(d.ne + 1));
+    e->ehcol = (int *)carve(&c, sizeof(int) * (size_t)nnz);
+    e->ehval = DBL(&c, nnz), e->last_hval = DBL(&c, nnz), e->hz = DBL(&c, d.ne);
+    if (est == AMSFE_OOSM) e->RH = DBL(&c, 2 * N * d.ne + 2L * d.ne * d.ne);
+  }
   if (est == AMSFE_REPLAY) {
     e->r_x = DBL(&c, R * N), e->r_P = DBL(&c, R * NN), e->r_u = DBL(&c, R * n);
     e->r_z = DBL(&c, R * d.ne), e->r_fz = DBL(&c, R * F * d.nc);
@@ -169,13 +253,32 @@ static size_t layout(amsfe_est *e, const amsfe_params *p, char *base) {
   }
   carve_work(&c, WORKS, sizeof(WORKS) / sizeof(WORKS[0]), &e->g);
   e->d = d;
+  e->Nm = Nm, e->ni = p->input_states, e->jt = p->joint_torque, e->net = p->net_torque;
   return c.off + 16;
 }
 
 static int params_ok(const amsfe_params *p) {
   amsfe_dims d;
+  if (!p) return 0;
   model_dims(&d);
-  if (!p || !p->qw || !p->r_encoder || !p->r_camera || !p->x0 || !p->P0) return 0;
+  if (p->input_states != 0 && p->input_states != d.n) return 0;
+  if (p->joint_torque != 0 && p->joint_torque != 1) return 0;
+  if (p->input_states) { /* the trapezoid gain; oosm's inverse map is not here */
+    if (!p->input_gain || !all_finite(p->input_gain, d.n)) return 0;
+    if (p->estimator == AMSFE_OOSM && p->backward_map != AMSFE_BACKWARD_LINEARISED) return 0;
+  }
+  if (p->net_torque != 0 && p->net_torque != 1) return 0;
+  if (p->net_torque) {
+    if (p->input_states || !p->input_gain || !all_finite(p->input_gain, d.n)) return 0;
+    if (p->estimator == AMSFE_OOSM && p->backward_map != AMSFE_BACKWARD_LINEARISED) return 0;
+  }
+  if (p->joint_torque || p->net_torque) {
+    if (!p->ks || !p->ks_theta || !all_finite(p->ks, d.n)) return 0;
+    for (int j = 0; j < d.n; ++j)
+      if (p->ks_theta[j] < -1 || p->ks_theta[j] >= d.N - 4 * d.n) return 0;
+  }
+  filter_dims(p, &d);
+  if (!p->qw || !p->r_encoder || !p->r_camera || !p->x0 || !p->P0) return 0;
   if (d.ne > AMSFE_MAX_ENCODERS) return 0;
   if (p->estimator < AMSFE_ENCODERS || p->estimator > AMSFE_CLONING) return 0;
   if (p->buffer_steps < 1 || p->camera_iterations < 1 || p->max_frames_per_step < 1) return 0;
@@ -301,7 +404,30 @@ int amsfe_est_init(amsfe_est **out, const amsfe_params *p, void *memory, size_t 
                        ? p->buffer_steps
                        : p->camera_max_delay;
   e->inv_tol = AMSFE_INVERSE_TOL;
-  for (int r = 0; r < d.ne; ++r) e->enc_rows[r] = r < d.n ? 2 * d.n + r : 3 * d.n + (r - d.n);
+  for (int r = 0; r < 2 * d.n; ++r) e->enc_rows[r] = r < d.n ? 2 * d.n + r : 3 * d.n + (r - d.n);
+  if (e->ni) {
+    copy(e->gain, p->input_gain, d.n);
+    e->par.input_gain = e->gain;
+    e->chrow[0] = 0, e->chrow[1] = d.n, e->chrow[2] = 2 * d.n;
+    for (int r = 0; r < 2; ++r)
+      for (int j = 0; j < d.n; ++j) e->chcol[r * d.n + j] = j; /* the camera sees q */
+  }
+  if (e->jt || e->net) {
+    copy(e->ks, p->ks, d.n);
+    for (int j = 0; j < d.n; ++j) e->kst[j] = p->ks_theta[j];
+    e->par.ks = e->ks, e->par.ks_theta = e->kst;
+  }
+  if (e->net) copy(e->gain, p->input_gain, d.n), e->par.input_gain = e->gain;
+  if (e->jt) {
+    int v = 0;
+    for (int a = 0; a < 2 * d.n; ++a) e->ehrow[a] = v, e->ehcol[v++] = 2 * d.n + a;
+    for (int j = 0; j < d.n; ++j) {
+      e->ehrow[2 * d.n + j] = v;
+      e->ehcol[v++] = j, e->ehcol[v++] = 2 * d.n + j;
+      if (e->kst[j] >= 0) e->ehcol[v++] = 4 * d.n + e->kst[j];
+    }
+    e->ehrow[3 * d.n] = v;
+  }
   e->inv_residual = NAN, e->inv_limit = NAN;
   copy(e->x0, p->x0, d.N);
   copy(e->P0, p->P0, (long)d.N * d.N);
@@ -346,13 +472,77 @@ const double *amsfe_est_factor(amsfe_est *e) {
 }
 
 /* ------------------------------------------------------------------ EKF steps */
+/* InputStateTransition.step: the model's step from x[:Nm] with the input states x[Nm:] as u,
+ * A = [[A_m, B], [0, I]] with B = (A_m[:, qmd] + e_qmd) T / (2 Mm) (trapezoid_input_gain),
+ * Gamma = blockdiag(Gamma_m, I) (qw's last n entries: the walk's variance per step) */
+EFFORT_PATH static int predict_inputs(amsfe_est *e, double *A, double *G) {
+  int M = e->d.N, N = e->Nm, n = e->d.n, nw = e->d.nw - n;
+  const double *in[2] = {e->x, e->x + N};
+  double *out[3] = {e->x1, e->An, e->Gn};
+  gcall(&e->g, STEP, in, 2, out, 3); /* x+, A, Gamma (eqs. 13, 4) */
+  if (!all_finite(e->x1, N) || !all_finite(e->An, (long)N * N)) return AMSFE_ERR_NONFINITE;
+  for (int i = N; i < M; ++i) e->x1[i] = e->x[i];
+  memset(A, 0, sizeof(double) * (size_t)M * (size_t)M);
+  memset(G, 0, sizeof(double) * (size_t)M * (size_t)e->d.nw);
+  for (long c = 0; c < N; ++c) copy(A + c * M, e->An + c * N, N);
+  for (int j = 0; j < n; ++j) {
+    double *Aj = A + (long)(N + j) * M, g = e->gain[j];
+    const double *Am = e->An + (long)(3 * n + j) * N;
+    for (int i = 0; i < N; ++i) Aj[i] = (i == 3 * n + j ? Am[i] + 1.0 : Am[i]) * g;
+    Aj[N + j] = 1.0;
+  }
+  for (long c = 0; c < nw; ++c) copy(G + c * M, e->Gn + c * N, N);
+  for (int j = 0; j < n; ++j) G[(N + j) + (long)(nw + j) * M] = 1.0;
+  if (!e->lp_ok && !pd_state(e)) return AMSFE_ERR_NOT_PD; /* P = LP LP^T */
+  amsfe_predict_cov(M, e->d.nw, A, e->LP, G, e->qw, e->P1, e->T1); /* eq. (14) */
+  copy(e->x, e->x1, M);
+  swap_P(e, &e->P1);
+  return AMSFE_OK;
+}
+
+/* NetTorqueTransition.spring: ut <- u + Ks (qm - q) (the model's input for a net torque u) */
+EFFORT_PATH static void net_input(amsfe_est *e, const double *u) {
+  int n = e->d.n;
+  for (int j = 0; j < n; ++j) {
+    double Ks = e->kst[j] >= 0 ? e->x[4 * n + e->kst[j]] : e->ks[j];
+    e->ut[j] = u[j] + Ks * (e->x[2 * n + j] - e->x[j]);
+  }
+}
+
+/* NetTorqueTransition.step's jacobian: A <- A + B ds/dx, B = (A[:, qmd] + e_qmd) T / (2 Mm)
+ * (trapezoid_input_gain, of the model's A), ds/dx: -Ks at q_j, Ks at qm_j, qm_j - q_j at
+ * theta's stiffness entry */
+EFFORT_PATH static void net_jacobian(amsfe_est *e, double *A) {
+  long N = e->d.N;
+  int n = e->d.n;
+  for (int j = 0; j < n; ++j) {
+    const double *Am = A + (long)(3 * n + j) * N;
+    double *B = e->Bn + (long)j * N, g = e->gain[j];
+    for (long i = 0; i < N; ++i) B[i] = (i == 3 * n + j ? Am[i] + 1.0 : Am[i]) * g;
+  }
+  for (int j = 0; j < n; ++j) {
+    const double *B = e->Bn + (long)j * N;
+    double Ks = e->kst[j] >= 0 ? e->x[4 * n + e->kst[j]] : e->ks[j];
+    double delta = e->x[2 * n + j] - e->x[j];
+    double *Aq = A + (long)j * N, *Aqm = A + (long)(2 * n + j) * N;
+    for (long i = 0; i < N; ++i) Aq[i] += B[i] * -Ks, Aqm[i] += B[i] * Ks;
+    if (e->kst[j] >= 0) {
+      double *At = A + (long)(4 * n + e->kst[j]) * N;
+      for (long i = 0; i < N; ++i) At[i] += B[i] * delta;
+    }
+  }
+}
+
 /* ekf.predict on (x, P) with u; A and Gamma written to A, G (N x N, N x nw) */
 static int predict(amsfe_est *e, const double *u, double *A, double *G) {
+  if (e->ni) return predict_inputs(e, A, G);
   int N = e->d.N;
+  if (e->net) net_input(e, u), u = e->ut;
   const double *in[2] = {e->x, u};
   double *out[3] = {e->x1, A, G};
   gcall(&e->g, STEP, in, 2, out, 3); /* x+, A, Gamma (eqs. 13, 4) */
   if (!all_finite(e->x1, N) || !all_finite(A, (long)N * N)) return AMSFE_ERR_NONFINITE;
+  if (e->net) net_jacobian(e, A); /* at x, before x moves */
   if (!e->lp_ok && !pd_state(e)) return AMSFE_ERR_NOT_PD; /* P = LP LP^T */
   amsfe_predict_cov(N, e->d.nw, A, e->LP, G, e->qw, e->P1, e->T1); /* eq. (14) */
   copy(e->x, e->x1, N);
@@ -380,12 +570,67 @@ static int encoder_update(amsfe_est *e, const double *z, int report) {
     e->lp_ok = 0;
     copy(e->x, e->x2, N);
     e->has_last = 1.0;
+    if (e->jt) copy(e->last_hval, e->ehval, e->ehrow[e->d.ne]); /* its H, for oosm's A1 */
   }
+  return AMSFE_OK;
+}
+
+/* CameraMeasurement.predict for a state with input states: y = I_k(q) into cy and the values
+ * of H's nonzeros (the q columns, row by row) into chval; 0 when they are not finite */
+EFFORT_PATH static int camera_h(amsfe_est *e, const double *x) {
+  int n = e->d.n;
+  const double *in[2] = {x, x + 4 * n};
+  double *out[3] = {e->cy, e->cJ + 2 * n + 1, e->cJ + 2 * n};
+  gcall(&e->g, camera_measure, in, 2, out, 3);
+  /* J's nonzeros (CasADi's compressed columns) to dense 2 x n, column-major */
+  const cint *sp = camera_measure_sparsity_out(1);
+  const double *nz = e->cJ + 2 * n + 1;
+  double *J = e->cJ;
+  if (sp[2] == 1 && sp[1] > 0) {
+    for (int i = 0; i < 2 * n; ++i) J[i] = nz[i];
+  } else {
+    for (int i = 0; i < 2 * n; ++i) J[i] = 0.0;
+    for (cint j = 0; j < sp[1]; ++j)
+      for (cint v = sp[2 + j]; v < sp[3 + j]; ++v) J[sp[3 + sp[1] + v] + 2 * j] = nz[v];
+  }
+  if (!all_finite(e->cy, 2) || !all_finite(J, 2 * n)) return 0;
+  for (int r = 0; r < 2; ++r)
+    for (int j = 0; j < n; ++j) e->chval[r * n + j] = J[r + 2 * j];
+  return 1;
+}
+
+/* Estimator._frame_update_now on a state with input states (the generated camera update is
+ * the model's N): the iterated EKF with the camera's H padded with zero columns */
+EFFORT_PATH static int frame_now_inputs(amsfe_est *e, const double *z, double *nis) {
+  int M = e->d.N, n = e->d.n;
+  if (!camera_h(e, e->x)) return AMSFE_ERR_NONFINITE;
+  for (int r = 0; r < 2; ++r) e->cnu[r] = z[r] - e->cy[r];
+  if (!amsfe_joseph_rows(M, 2, e->chrow, e->chcol, e->chval, e->rc, e->x, e->P, e->cnu, e->x1,
+                         e->P1, &e->nis, e->JW))
+    return AMSFE_ERR_S_NOT_PD;
+  double first = e->nis;
+  if (nis) *nis = first;
+  if (!(first <= e->par.gate_camera)) return AMSFE_GATED;
+  for (int it = 1; it < e->par.camera_iterations; ++it) {
+    copy(e->x2, e->x1, M); /* x_i */
+    if (!camera_h(e, e->x2)) return AMSFE_ERR_NONFINITE;
+    for (int r = 0; r < 2; ++r) { /* z - h(x_i) - H_i (x- - x_i) */
+      double hx = 0.0;
+      for (int j = 0; j < n; ++j) hx += e->chval[r * n + j] * (e->x[j] - e->x2[j]);
+      e->cnu[r] = z[r] - e->cy[r] - hx;
+    }
+    if (!amsfe_joseph_rows(M, 2, e->chrow, e->chcol, e->chval, e->rc, e->x, e->P, e->cnu, e->x1,
+                           e->P1, &e->nis, e->JW))
+      return AMSFE_ERR_S_NOT_PD;
+  }
+  copy(e->x, e->x1, M);
+  swap_P(e, &e->P1);
   return AMSFE_OK;
 }
 
 /* Estimator._frame_update_now: iterated EKF camera update of (x, P) */
 static int frame_now(amsfe_est *e, const double *z, double *nis) {
+  if (e->ni) return frame_now_inputs(e, z, nis);
   int N = e->d.N;
   const double *in[5] = {e->x, e->P, e->x, z, e->rc};
   double *out[5] = {e->x1, e->P1, &e->nis, &e->s_ok, &e->chk};
@@ -467,9 +712,19 @@ int amsfe_est_tick(amsfe_est *e, const double *z_encoder, const double *u) {
       e->diag.encoder_accepted = 0, e->diag.encoder_nis = NAN;
       st = AMSFE_OK;
       if (z) {
-        /* the encoder update on the augmented state (H selects qm, qmd of the state block) */
-        if (!amsfe_joseph_select(Na, e->d.ne, e->enc_rows, e->re, e->xa, e->Pa, z, e->xa2, e->Pa2,
-                                 &e->nis, e->last_nu, e->JW)) {
+        /* the encoder update on the augmented state (H selects qm, qmd of the state block;
+         * with joint torques, its nonzeros, in the state block's columns) */
+        int ok;
+        if (e->jt) {
+          torque_h(e, e->xa, e->hz, e->ehval);
+          for (int a = 0; a < e->d.ne; ++a) e->last_nu[a] = z[a] - e->hz[a];
+          ok = amsfe_joseph_rows(Na, e->d.ne, e->ehrow, e->ehcol, e->ehval, e->re, e->xa, e->Pa,
+                                 e->last_nu, e->xa2, e->Pa2, &e->nis, e->JW);
+        } else {
+          ok = amsfe_joseph_select(Na, e->d.ne, e->enc_rows, e->re, e->xa, e->Pa, z, e->xa2,
+                                   e->Pa2, &e->nis, e->last_nu, e->JW);
+        }
+        if (!ok) {
           st = AMSFE_ERR_S_NOT_PD;
           break;
         }
@@ -549,6 +804,94 @@ static int oosm_backward_inverse(amsfe_est *e, long kappa) {
   return AMSFE_OK;
 }
 
+/* oosm.a1_retrodict with the last update's joint-torque H (its nonzeros last_hval):
+ * Q H^T, P_prior H^T and S = sym(H P_prior H^T) + R, then the kernel */
+EFFORT_PATH static int retrodict_torque(amsfe_est *e) {
+  int M = e->d.N, m = e->d.ne;
+  double *QHt = e->RH, *PHt = QHt + (long)M * m, *S = PHt + (long)M * m, *T = S + m * m;
+  for (int a = 0; a < m; ++a) {
+    double *qa = QHt + (long)a * M, *pa = PHt + (long)a * M;
+    for (int i = 0; i < M; ++i) qa[i] = pa[i] = 0.0;
+    for (int v = e->ehrow[a]; v < e->ehrow[a + 1]; ++v) {
+      const double *qc = e->Q + (long)e->ehcol[v] * M, *pc = e->last_Pprior + (long)e->ehcol[v] * M;
+      double h = e->last_hval[v];
+      for (int i = 0; i < M; ++i) qa[i] += qc[i] * h, pa[i] += pc[i] * h;
+    }
+  }
+  for (int b = 0; b < m; ++b)
+    for (int a = 0; a < m; ++a) {
+      double t = 0.0;
+      for (int v = e->ehrow[a]; v < e->ehrow[a + 1]; ++v)
+        t += e->last_hval[v] * PHt[e->ehcol[v] + (long)b * M];
+      T[a + b * m] = t;
+    }
+  for (int b = 0; b < m; ++b)
+    for (int a = 0; a < m; ++a)
+      S[a + b * m] = 0.5 * (T[a + b * m] + T[b + a * m]) + (a == b ? e->re[a] : 0.0);
+  return amsfe_a1_retrodict_cols(M, m, S, QHt, PHt, e->x, e->P, e->Q, e->last_nu, e->xs, e->M,
+                                 e->C, e->RW);
+}
+
+/* oosm.a1_correct on a state with input states (est_oosm_correct is the model's N): G = Hc
+ * Phi^-1 at x_r = xr, Szz = sym(G M G^T) + R, W = C G^T Szz^-1, P+ = sym(P - W (C G^T)^T) */
+EFFORT_PATH static int oosm_correct_inputs(amsfe_est *e, const double *z, double *nis) {
+  long M = e->d.N;
+  int n = e->d.n;
+  double *G = e->OW, *GM = G + 2 * M, *Pxz = GM + 2 * M, *W = Pxz + 2 * M;
+  /* scratch: Phi2 (Phi^T), A1 (P - W Pxz^T; oosm's predictions keep theirs in A_buf) */
+  double Szz[4], Ls[4], nu[2], sn[2];
+  if (!camera_h(e, e->xr)) return AMSFE_ERR_NONFINITE;
+  for (int r = 0; r < 2; ++r) { /* row r of G: Phi^T g = Hc[r, :]^T */
+    double *g = G + r * M;
+    for (long i = 0; i < M; ++i) g[i] = 0.0;
+    for (int j = 0; j < n; ++j) g[e->chcol[r * n + j]] = e->chval[r * n + j];
+    for (long j = 0; j < M; ++j)
+      for (long i = 0; i < M; ++i) e->Phi2[i + j * M] = e->Phi[j + i * M];
+    if (!amsfe_lu_solve((int)M, e->Phi2, g)) return AMSFE_ERR_NONFINITE;
+  }
+  if (!all_finite(G, 2 * M)) return AMSFE_ERR_NONFINITE;
+  for (int r = 0; r < 2; ++r) /* G M and C G^T (M, C: M x M) */
+    for (long i = 0; i < M; ++i) {
+      double gm = 0.0, pz = 0.0;
+      for (long l = 0; l < M; ++l) {
+        gm += G[r * M + l] * e->M[l + i * M];
+        pz += e->C[i + l * M] * G[r * M + l];
+      }
+      GM[r * M + i] = gm, Pxz[i + r * M] = pz;
+    }
+  double T[4];
+  for (int a = 0; a < 2; ++a)
+    for (int b = 0; b < 2; ++b) {
+      double t = 0.0;
+      for (long i = 0; i < M; ++i) t += GM[a * M + i] * G[b * M + i];
+      T[a + 2 * b] = t;
+    }
+  for (int a = 0; a < 2; ++a)
+    for (int b = 0; b < 2; ++b)
+      Szz[a + 2 * b] = 0.5 * (T[a + 2 * b] + T[b + 2 * a]) + (a == b ? e->rc[a] : 0.0);
+  if (!amsfe_cholesky(2, Szz, Ls)) return AMSFE_REFUSED_INDEFINITE;
+  for (int r = 0; r < 2; ++r) nu[r] = z[r] - e->cy[r], sn[r] = nu[r];
+  amsfe_chol_solve(2, Ls, sn);
+  e->nis = nu[0] * sn[0] + nu[1] * sn[1];
+  if (nis) *nis = e->nis;
+  if (!(e->nis <= e->par.gate_camera)) return AMSFE_GATED;
+  for (long i = 0; i < M; ++i) { /* row i of W = Pxz Szz^-1 */
+    double w2[2] = {Pxz[i], Pxz[i + M]};
+    amsfe_chol_solve(2, Ls, w2);
+    W[i] = w2[0], W[i + M] = w2[1];
+  }
+  for (long j = 0; j < M; ++j)
+    for (long i = 0; i < M; ++i)
+      e->A1[i + j * M] = e->P[i + j * M] - (W[i] * Pxz[j] + W[i + M] * Pxz[j + M]);
+  for (long j = 0; j < M; ++j)
+    for (long i = 0; i < M; ++i)
+      e->P1[i + j * M] = 0.5 * (e->A1[i + j * M] + e->A1[j + i * M]);
+  if (!amsfe_cholesky((int)M, e->P1, e->L1)) return AMSFE_REFUSED_INDEFINITE; /* P(k|kappa+) */
+  for (long i = 0; i < M; ++i) e->x[i] += W[i] * nu[0] + W[i + M] * nu[1];
+  swap_P(e, &e->P1);
+  return AMSFE_OK;
+}
+
 /* OosmEstimator._late_frame (A1 over the lag) */
 static int oosm_late(amsfe_est *e, const double *z, long kappa, double *nis) {
   long N = e->d.N, NN = N * N, k = e->k;
@@ -575,7 +918,9 @@ static int oosm_late(amsfe_est *e, const double *z, long kappa, double *nis) {
     }
     copy(e->sv, e->xr, N);
   }
-  if (e->has_last > 0.5) { /* oosm.a1_retrodict (eqs. 24-27 corrected) */
+  if (e->has_last > 0.5 && e->jt) { /* the same with the joint torques' H */
+    if (!retrodict_torque(e)) return AMSFE_ERR_S_NOT_PD;
+  } else if (e->has_last > 0.5) { /* oosm.a1_retrodict (eqs. 24-27 corrected) */
     if (!amsfe_a1_retrodict((int)N, e->d.ne, e->enc_rows, e->re, e->x, e->P, e->Q, e->last_nu,
                             e->last_Pprior, e->xs, e->M, e->C, e->RW))
       return AMSFE_ERR_S_NOT_PD;
@@ -596,6 +941,7 @@ static int oosm_late(amsfe_est *e, const double *z, long kappa, double *nis) {
     for (long i = 0; i < N; ++i) e->xr[i] += post_kappa[i];
   }
   if (!all_finite(e->xr, N)) return AMSFE_ERR_NONFINITE;
+  if (e->ni) return oosm_correct_inputs(e, z, nis);
   const double *in[8] = {e->x, e->P, e->xr, e->M, e->C, e->Phi, z, e->rc};
   double *out[5] = {e->x1, e->P1, &e->nis, &e->s_ok, &e->chk};
   gcall(&e->g, est_oosm_correct, in, 8, out, 5);
@@ -636,13 +982,25 @@ static int cloning_frame(amsfe_est *e, const double *z, long kappa, double *nis)
   for (int s = 0; s < S; ++s)
     if (e->clone_on[s] && e->clone_k[s] == kappa) slot = s;
   if (slot < 0) return scheduled(e, kappa) ? AMSFE_REFUSED_NO_CLONE_LEFT : AMSFE_REFUSED_NO_CLONE;
-  for (int s = 0; s < S; ++s) e->sel[s] = s == slot ? 1.0 : 0.0;
-  copy(e->cl, e->xa + N * (1 + slot), N);
-  const double *in[6] = {e->xa, e->Pa, e->cl, e->sel, z, e->rc};
-  double *out[5] = {e->xa2, e->Pa2, &e->nis, &e->s_ok, &e->chk};
-  gcall(&e->g, est_clone_camera, in, 6, out, 5);
-  if (!isfinite(e->chk)) return AMSFE_ERR_NONFINITE;
-  if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
+  if (e->ni) { /* the generated update is the model's N: the clone's padded H, in C */
+    int n = e->d.n, o = N * (1 + slot);
+    if (!camera_h(e, e->xa + o)) return AMSFE_ERR_NONFINITE;
+    for (int r = 0; r < 2; ++r) {
+      e->cnu[r] = z[r] - e->cy[r];
+      for (int j = 0; j < n; ++j) e->ccol[r * n + j] = o + j; /* the clone's q */
+    }
+    if (!amsfe_joseph_rows(Na, 2, e->chrow, e->ccol, e->chval, e->rc, e->xa, e->Pa, e->cnu,
+                           e->xa2, e->Pa2, &e->nis, e->JW))
+      return AMSFE_ERR_S_NOT_PD;
+  } else {
+    for (int s = 0; s < S; ++s) e->sel[s] = s == slot ? 1.0 : 0.0;
+    copy(e->cl, e->xa + N * (1 + slot), N);
+    const double *in[6] = {e->xa, e->Pa, e->cl, e->sel, z, e->rc};
+    double *out[5] = {e->xa2, e->Pa2, &e->nis, &e->s_ok, &e->chk};
+    gcall(&e->g, est_clone_camera, in, 6, out, 5);
+    if (!isfinite(e->chk)) return AMSFE_ERR_NONFINITE;
+    if (!(e->s_ok > 0.5)) return AMSFE_ERR_S_NOT_PD;
+  }
   if (nis) *nis = e->nis;
   int st = e->nis <= e->par.gate_camera ? AMSFE_OK : AMSFE_GATED;
   if (st == AMSFE_OK) {
@@ -716,12 +1074,32 @@ void amsfe_est_inverse_residual(const amsfe_est *e, double *residual, double *li
 }
 
 /* ------------------------------------------------------------------ a whole log */
+/* NEES of the robot's Nm states against a truth row [Nm] (input states left out: their
+ * marginal covariance P[:Nm, :Nm]); scratch A1, L1, x1, x2 (free between ticks) */
+EFFORT_PATH static void nees_inputs(amsfe_est *e, const amsfe_est_log *log, long k,
+                                    amsfe_est_log_out *out) {
+  long M = e->d.N, N = e->Nm;
+  const double *t = log->truth ? log->truth + k * N : NULL;
+  if (!t || !all_finite(t, N)) return;
+  for (long j = 0; j < N; ++j) copy(e->A1 + j * N, e->P + j * M, N);
+  if (!amsfe_cholesky((int)N, e->A1, e->L1)) return;
+  double *err = e->x1, *w = e->x2, acc = 0.0;
+  for (long i = 0; i < N; ++i) err[i] = t[i] - e->x[i], w[i] = err[i];
+  amsfe_chol_solve((int)N, e->L1, w);
+  for (long i = 0; i < N; ++i) acc += err[i] * w[i];
+  out->nees[k] = acc;
+}
+
 static void record_row(amsfe_est *e, const amsfe_est_log *log, long k, amsfe_est_log_out *out) {
   long N = e->d.N;
   copy(out->x_hat + k * N, e->x, N);
   for (long i = 0; i < N; ++i) out->P_diag[k * N + i] = e->P[i + i * N];
   if (!out->nees) return;
   out->nees[k] = NAN;
+  if (e->ni) { /* the truth is the robot's state: NEES of P's N x N block */
+    nees_inputs(e, log, k, out);
+    return;
+  }
   const double *t = log->truth ? log->truth + k * N : NULL;
   const double *L = t && all_finite(t, N) ? amsfe_est_factor(e) : NULL;
   if (!L) return;

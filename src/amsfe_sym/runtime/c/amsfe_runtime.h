@@ -96,6 +96,26 @@ typedef struct {
   long k0;                /* step index of x0 */
   int backward_map;       /* oosm's backward map of eq. 24: enum amsfe_backward_map (0, the
                              zero of a memset block, is the linearised one) */
+  /* ---- a log without the applied torque (docs/effort.md; every field 0/NULL: the applied
+   * torque, as before).  input_states = n: the unknown input carried as n random-walk states
+   * (effort_models.InputStateTransition): the state is [x, u] of M = N + n entries (x0 [M],
+   * P0 [M*M]), the transition [F(x, u), u] with jacobian [[A, B], [0, I]], B = (A[:, qmd] +
+   * e_qmd) input_gain (the trapezoid rule), qw [nw + n] (the last n: the walk's variance per
+   * step, input_rate_std^2 T); the u given to amsfe_est_tick is ignored.  Every estimator
+   * (oosm with backward_map linearised only; cloning clones the M states). */
+  int input_states;          /* 0 or n */
+  const double *input_gain;  /* [n] T / (2 Mm) [s / (kg m^2)] (input_states, net_torque) */
+  /* joint_torque = 1: the encoder sample is [qm, qmd, tau_J] (ne = 3n, r_encoder [3n]),
+   * tau_J = Ks (qm - q) with Ks[j] = theta[ks_theta[j]] where ks_theta[j] >= 0
+   * (effort_models.SpringTorqueMeasurement, its exact jacobian) */
+  int joint_torque;
+  const double *ks;          /* [n] the spec's Ks [N m/rad] (joint_torque, net_torque) */
+  const int *ks_theta;       /* [n] theta index of each joint's stiffness, or -1 */
+  /* net_torque = 1 (effort kind none, its input reconstructed): u is the net motor torque
+   * u - Ks (qm - q) (effort_models.NetTorqueTransition): the step runs F(x, u + Ks (qm - q)),
+   * its jacobian A + B d(Ks (qm - q))/dx with B of input_gain; not with input_states, nor
+   * with oosm's inverse backward map (AMSFE_ERR_CONFIG) */
+  int net_torque;
 } amsfe_params;
 
 /* Counters and the outcome of the last calls. */
@@ -140,7 +160,7 @@ int amsfe_est_tick(amsfe_est *est, const double *z_encoder, const double *u);
  * *nis (may be NULL) receives its NIS, or NaN when it did not reach the update. */
 int amsfe_est_camera_frame(amsfe_est *est, const double *z, long exposure_step, double *nis);
 
-/* Copy out x(k|k) [N] and P(k|k) [N*N] (either may be NULL). */
+/* Copy out x(k|k) [M] and P(k|k) [M*M] (either may be NULL; M = N + input_states). */
 void amsfe_est_state(const amsfe_est *est, double *x, double *P);
 void amsfe_est_diagnostics(const amsfe_est *est, amsfe_diag *diag);
 
@@ -160,7 +180,8 @@ void amsfe_est_inverse_residual(const amsfe_est *est, double *residual, double *
 typedef struct {
   long K;                     /* ticks t_0 .. t_{K-1} */
   const double *u;            /* [K x n] u(k) applied over [k, k+1] [N m] (row K-1 unused) */
-  const double *z;            /* [K x ne] encoder sample at k; a row holding NaN: none (a gap) */
+  const double *z;            /* [K x ne] encoder sample at k; a row holding NaN: none (a gap);
+                                 ne = 3n with joint_torque */
   const double *truth;        /* [K x N] true state (NEES), or NULL; a row holding NaN: none */
   long n_frames;              /* camera frames, sorted by arrival tick (non-decreasing) */
   const long *frame_exposure; /* [n_frames] exposure step kappa */
@@ -170,10 +191,11 @@ typedef struct {
 
 /* Where amsfe_est_run writes (row-major, one row per tick; nees may be NULL). */
 typedef struct {
-  double *x_hat, *P_diag;          /* [K x N] x(k|k) and the diagonal of P(k|k) */
+  double *x_hat, *P_diag;          /* [K x M] x(k|k) and the diagonal of P(k|k) */
   double *encoder_nis;             /* [K] NIS of the encoder update; NaN where none */
   unsigned char *encoder_accepted; /* [K] the encoder update was applied */
-  double *nees;                    /* [K] e^T P^-1 e against truth (NaN where none) */
+  double *nees;                    /* [K] e^T P^-1 e against truth (NaN where none); with
+                                      input states, of the N robot states (P's N x N block) */
   double *frame_nis;               /* [n_frames] NIS of a frame that reached its update, NaN */
   int *frame_status;               /* [n_frames] its status, the screening's included */
   long failed_step;                /* the tick whose call returned an error status, else -1 */

@@ -33,6 +33,13 @@ typedef struct {
   const double *qw, *r_encoder, *r_camera, *x0, *P0;
   long k0;
   int backward_map; /* amsfe_params.backward_map: 0, the linearised map */
+  /* amsfe_params' effort fields (docs/effort.md section 7): all 0, the applied torque */
+  int input_states;
+  const double *input_gain;
+  int joint_torque;
+  const double *ks;
+  const int *ks_theta;
+  int net_torque;
 } params_t;
 
 static void *sym(void *h, const char *name) {
@@ -88,6 +95,7 @@ int main(int argc, char **argv) {
     return 2;
   }
   params_t p;
+  memset(&p, 0, sizeof(p)); /* the fields not read below: 0 (the applied torque) */
   p.estimator = hdr[0], p.buffer_steps = hdr[1], p.camera_iterations = hdr[2];
   p.camera_period = hdr[3], p.camera_phase = hdr[4], p.camera_max_delay = hdr[5];
   p.max_frames_per_step = hdr[6];
