@@ -78,3 +78,54 @@ def test_the_claim_tables_rerun_check_uses_the_stored_intervals() -> None:
 def test_a_bad_registry_path_is_one_clear_error() -> None:
     with pytest.raises(ConfigError, match="Fix:"):
         json_path({"rows": {}}, "rows.amsfe/oosm.joints")
+
+
+def test_an_effect_claim_lost_on_a_fresh_block_is_reported() -> None:
+    """The estimators' effect tables: the stored first block re-checked as if fresh finds
+    nothing; the same with a stated claim's interval moved across zero, or a divergence
+    more, is reported (tools/check_docs.py runs the study and its one-block effects)."""
+    reg = load_registry(ROOT)
+    stored = json.loads((ROOT / reg.sources["estimators-paper-sim"].stored).read_text())
+    fresh = {"pairs": copy.deepcopy(stored["pairs"])}
+    assert compare(reg, "estimators-paper-sim", fresh) == []
+    row = next(r for r in stored["variants"]["base"] if r["stated"] == "a lower")
+    pair = next(p for p in fresh["pairs"]["base"] if p["label"] == row["label"])
+    eff = pair["joints"][row["joint"] - 1]
+    eff.update(difference_ci95=[-1e-6, 1e-6], verdict="indistinguishable", diverged_a=1)
+    found = compare(reg, "estimators-paper-sim", fresh)
+    wheres = [m.where for m in found]
+    assert f"base: {row['label']} joint {row['joint']} stated claim" in wheres
+    assert f"base: {row['label']} joint {row['joint']} diverged a / b" in wheres
+
+
+def test_a_per_block_number_is_not_compared_on_another_block(tmp_path: Path) -> None:
+    root = _mini(tmp_path, "tracks to 1.39 mrad")
+    reg_file = root / "docs" / "data" / "claims-registry.toml"
+    reg_file.write_text(reg_file.read_text() + "per_block = true\n")
+    reg = load_registry(root)
+    far = {"rows": {"a/b": {"joints": [{"median": 0.009, "median_ci95": [0.008, 0.01]}]}}}
+    assert compare(reg, "s", far) == []
+    assert check_text(reg) == []
+
+
+def test_a_key_with_dots_is_matched_whole() -> None:
+    doc = {"theta_mean_at": {"0.5": [0.149], "10": [0.15]}}
+    assert json_path(doc, "theta_mean_at.0.5.0") == 0.149
+    assert json_path(doc, "theta_mean_at.10.0") == 0.15
+    with pytest.raises(ConfigError, match="no '0'"):
+        json_path(doc, "theta_mean_at.0.7.0")
+
+
+def test_a_restated_statistic_is_not_reported_but_its_verdict_still_is() -> None:
+    """The UR5 table's joint-6 effect is stated by its sign only (its size moved between
+    blocks): a fresh interval far from the stored one is not reported, a reversed verdict
+    is."""
+    reg = load_registry(ROOT)
+    stored = json.loads((ROOT / reg.sources["claims-ur5-control"].stored).read_text())
+    fresh = copy.deepcopy(stored)
+    pair = next(p for p in fresh["pairs"] if p["label"] == "amsfe vs dtsmc-ekf (camera fused)")
+    pair["joints"][5].update(difference_ci95=[-0.9e-3, -0.8e-3], verdict="a lower")
+    assert compare(reg, "claims-ur5-control", fresh) == []
+    pair["joints"][5].update(difference_ci95=[0.8e-3, 0.9e-3], verdict="a higher")
+    (moved,) = compare(reg, "claims-ur5-control", fresh)
+    assert moved.where == "amsfe vs dtsmc-ekf (camera fused) joint 6 stated claim"

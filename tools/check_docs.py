@@ -4,6 +4,7 @@
     .venv/bin/python tools/check_docs.py claims-paper-sim --first-seed 5200
     .venv/bin/python tools/check_docs.py --all --first-seed 5200 --seeds 100
     .venv/bin/python tools/check_docs.py claims-paper-sim --fresh /tmp/out/claims.json
+    .venv/bin/python tools/check_docs.py --first-seed 13000 --keep /tmp/b13000  # keep outputs
 
 Without ``--stored`` it re-runs the named sources' commands (default: every source not
 marked costly; ``--all`` adds the costly ones) on the seed block ``--first-seed`` (default:
@@ -24,6 +25,7 @@ import tempfile
 from pathlib import Path
 
 from amsfe_sym.apps.docs_numbers import Moved, Source, check_text, compare, load_registry
+from amsfe_sym.errors import AmsfeError
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -37,9 +39,11 @@ def _argv(command: str) -> list[str]:
     return words
 
 
-def _rerun(src: Source, first_seed: int | None, seeds: int | None, workers: int) -> object:
+def _rerun(
+    src: Source, first_seed: int | None, seeds: int | None, workers: int, keep: Path | None
+) -> object:
     with tempfile.TemporaryDirectory(prefix="check-docs-") as tmp:
-        out = Path(tmp) / "out"
+        out = (keep / src.name) if keep is not None else Path(tmp) / "out"
         cmd = src.command_for(
             src.first_seed if first_seed is None or src.fixed_seed else first_seed,
             src.seeds if seeds is None else seeds,
@@ -50,8 +54,16 @@ def _rerun(src: Source, first_seed: int | None, seeds: int | None, workers: int)
             argv += ["--workers", str(workers)]
         print(f"running: {cmd}", flush=True)
         if src.output == "-":  # the output is the command's standard output
-            return subprocess.run(argv, cwd=ROOT, check=True, capture_output=True, text=True).stdout
+            text = subprocess.run(argv, cwd=ROOT, check=True, capture_output=True, text=True).stdout
+            if keep is not None:
+                out.mkdir(parents=True, exist_ok=True)
+                (out / "stdout.txt").write_text(text)
+            return text
         subprocess.run(argv, cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
+        if src.post:
+            post = src.post.format(out=str(out))
+            print(f"then: {post}", flush=True)
+            subprocess.run(_argv(post), cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
         return json.loads((out / src.output if src.output else out).read_text())
 
 
@@ -64,6 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=None, help="how many seeds (default: stored)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--fresh", type=Path, default=None, help="an output to compare, not run")
+    ap.add_argument("--keep", type=Path, default=None, help="keep each fresh output in KEEP/SOURCE")
     ap.add_argument("--list", action="store_true", help="print the sources and their commands")
     args = ap.parse_args(argv)
     reg = load_registry(ROOT)
@@ -92,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
                 text = args.fresh.read_text()
                 fresh = text if src.output == "-" else json.loads(text)
             else:
-                fresh = _rerun(src, args.first_seed, args.seeds, args.workers)
+                fresh = _rerun(src, args.first_seed, args.seeds, args.workers, args.keep)
             found = compare(reg, name, fresh)
             print(f"{name}: {len(found)} moved", flush=True)
             for m in found:
@@ -104,4 +117,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    try:
+        raise SystemExit(main())
+    except AmsfeError as e:  # a bad registry entry or stored output: one line, exit 2
+        print(f"check_docs: {e}", file=sys.stderr)
+        raise SystemExit(2) from None

@@ -25,12 +25,15 @@ Registry format (TOML)::
     seeds = 200
     costly = false                # costly sources re-run only when named (or with --all)
     fixed_seed = false            # true: one documented seed, re-run on it whatever the block
+    post = ""                     # optional: a command run on {out} after it (its output is
+                                  # then ``output``, e.g. "effects/effects.json")
 
     [[block]]
     doc = "docs/reproduction.md"
     source = "claims-paper-sim"
     stored = "docs/data/claims-paper-sim/claims.md"
     check = "claims"              # re-run: medians and p90s within their stored 95 % intervals
+    restated = ["truth/oosm joint 6 median"]  # optional: stated per block only (say why)
 
     [[number]]
     doc = "README.md"
@@ -41,6 +44,8 @@ Registry format (TOML)::
     fmt = "{:.2f}"
     scale = 1000.0
     atol = 0.0
+    per_block = false             # true: a value quoted for its named seed block only (one
+                                  # trajectory, no interval): in the text, never re-compared
 
 A JSON path is dot-separated: object keys, or list indices as integers.
 """
@@ -84,6 +89,7 @@ class Source:
     seeds: int = 0
     costly: bool = False
     fixed_seed: bool = False
+    post: str = ""  # a command run on {out} after ``command`` (e.g. the effects of a study)
 
     def command_for(self, first_seed: int, seeds: int, out: str) -> str:
         """The command on seeds ``first_seed ..`` (``seeds`` of them), writing to ``out``."""
@@ -102,6 +108,7 @@ class Number:
     scale: tuple[float, ...]
     intervals: tuple[str, ...] = ()
     atol: float = 0.0
+    per_block: bool = False  # quoted for its named seed block only: never re-run elsewhere
 
 
 @dataclass(frozen=True)
@@ -113,6 +120,9 @@ class Block:
     stored: str
     check: str = ""
     skip: tuple[str, ...] = ()  # regexes of stored lines the doc leaves out (text outputs)
+    # statistics of the table the doc states per block only (a re-run may move them; the
+    # registry says why): findings whose place starts with one of these are not reported
+    restated: tuple[str, ...] = ()
 
 
 @dataclass
@@ -171,10 +181,15 @@ def load_registry(root: Path, path: Path | None = None) -> Registry:
                 scale=_scales(n.get("scale", 1.0), len(values)),
                 intervals=tuple(n.get("intervals", ())),
                 atol=float(n.get("atol", 0.0)),
+                per_block=bool(n.get("per_block", False)),
             )
         )
     for b in doc.get("block", []):
-        reg.blocks.append(Block(**{**b, "skip": tuple(b.get("skip", ()))}))
+        reg.blocks.append(
+            Block(
+                **{**b, "skip": tuple(b.get("skip", ())), "restated": tuple(b.get("restated", ()))}
+            )
+        )
     items: list[Number | Block] = [*reg.numbers, *reg.blocks]
     for item in items:
         if item.source not in reg.sources:
@@ -211,9 +226,18 @@ def _scales(scale: float | list[float], n: int) -> tuple[float, ...]:
 
 
 def json_path(doc: Any, path: str) -> Any:
-    """The value at a dot-separated ``path`` (keys, or integer list indices)."""
+    """The value at a dot-separated ``path`` (keys, or integer list indices; a key that
+    itself holds dots, such as ``theta_mean_at``'s ``"0.5"``, is matched whole)."""
     cur = doc
-    for part in path.split("."):
+    parts = path.split(".")
+    i = 0
+    while i < len(parts):
+        part = parts[i]
+        if isinstance(cur, dict) and part not in cur:
+            for j in range(i + 2, len(parts) + 1):
+                if ".".join(parts[i:j]) in cur:
+                    part, i = ".".join(parts[i:j]), j - 1
+                    break
         try:
             cur = cur[int(part)] if isinstance(cur, list) else cur[part]
         except (KeyError, IndexError, ValueError, TypeError) as e:
@@ -223,6 +247,7 @@ def json_path(doc: Any, path: str) -> Any:
                 f"no {part!r}",
                 "fix the registry entry",
             ) from e
+        i += 1
     return cur
 
 
@@ -341,7 +366,7 @@ def compare(reg: Registry, source: str, fresh: Any) -> list[Moved]:
     old = _read_output(reg.root / reg.sources[source].stored)
     out: list[Moved] = []
     for n in reg.numbers:
-        if n.source != source:
+        if n.source != source or n.per_block:
             continue
         for i, p in enumerate(n.values):
             if not _has(fresh, p):
@@ -349,8 +374,8 @@ def compare(reg: Registry, source: str, fresh: Any) -> list[Moved]:
             k = n.scale[i]
             x, x0 = _value(json_path(fresh, p), k), _value(json_path(old, p), k)
             if n.intervals:
-                lo, hi = (_value(v, k) for v in json_path(old, n.intervals[i]))
-                flo, fhi = (_value(v, k) for v in json_path(fresh, n.intervals[i]))
+                lo, hi = sorted(_value(v, k) for v in json_path(old, n.intervals[i]))  # k < 0 flips
+                flo, fhi = sorted(_value(v, k) for v in json_path(fresh, n.intervals[i]))
                 moved = _disjoint((flo, fhi), (lo, hi), n.atol)
             else:
                 lo = hi = x0
@@ -362,7 +387,8 @@ def compare(reg: Registry, source: str, fresh: Any) -> list[Moved]:
                 )  # fmt: skip
     for b in reg.blocks:
         if b.source == source and b.check:
-            out.extend(_CHECKS[b.check](b, old, fresh))
+            found = _CHECKS[b.check](b, old, fresh)
+            out.extend(m for m in found if not m.where.startswith(b.restated or ("\0",)))
     return out
 
 
@@ -408,6 +434,36 @@ def _claims_block(b: Block, old: Any, new: Any) -> list[Moved]:
     return out
 
 
+def _effects_block(b: Block, old: Any, new: Any) -> list[Moved]:
+    """Effect tables (tools/estimator_effects.py, tools/nees_run_length.py): every stated
+    claim (the same verdict on both stored blocks) found again on the fresh block's
+    ``pairs``, not "indistinguishable" nor reversed; divergences as stored."""
+    if "variants" in old:  # per variant: {variant: [claim rows]}, fresh {variant: [pairs]}
+        stored = [(v, r) for v, rs in old["variants"].items() for r in rs]
+        fresh = {(v, p["label"]): p for v, ps in new.get("pairs", {}).items() for p in ps}
+    else:  # one list of claim rows; fresh pairs a list or {"all": [...]}
+        stored = [("", r) for r in old.get("claims", [])]
+        ps = new.get("pairs", [])
+        fresh = {("", p["label"]): p for p in (ps if isinstance(ps, list) else ps.get("all", []))}
+    out: list[Moved] = []
+    for v, r in stored:
+        q = fresh.get((v, r["label"]))
+        if q is None:
+            continue
+        f, s = q["joints"][r["joint"] - 1], r["first"]
+        where = f"{v + ': ' if v else ''}{r['label']} joint {r['joint']}"
+        was = f"{s['diverged_a']} / {s['diverged_b']}"
+        now = f"{f['diverged_a']} / {f['diverged_b']}"
+        if was != now:
+            out.append(Moved(b.doc, f"{where} diverged a / b", was, now, "equal"))
+        claim = r["stated"]
+        if claim in _OPPOSITE and f["verdict"] in (_OPPOSITE[claim], "indistinguishable"):
+            lo, hi = f["difference_ci95"]
+            found = f"{f['verdict']} [{lo:+.4g}, {hi:+.4g}]"
+            out.append(Moved(b.doc, f"{where} stated claim", claim, found, claim))
+    return out
+
+
 def _ci(ci: Any) -> str:
     return f"[{1e3 * ci[0]:+.3f}, {1e3 * ci[1]:+.3f}]"
 
@@ -437,4 +493,4 @@ def _check_block(b: Block, old: Any, new: Any) -> list[Moved]:
     return out
 
 
-_CHECKS = {"claims": _claims_block, "check": _check_block}
+_CHECKS = {"claims": _claims_block, "check": _check_block, "effects": _effects_block}

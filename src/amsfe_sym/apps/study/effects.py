@@ -102,14 +102,14 @@ def combine(first: dict[str, Any], second: dict[str, Any]) -> list[dict[str, Any
     return rows
 
 
-def _mrad(v: float) -> str:
-    return ("+inf" if v > 0 else "-inf") if np.isinf(v) else f"{1e3 * v:+.3f}"
+def _show(v: float, scale: float) -> str:
+    return ("+inf" if v > 0 else "-inf") if np.isinf(v) else f"{scale * v:+.3f}"
 
 
-def _cell(e: dict[str, Any]) -> str:
+def _cell(e: dict[str, Any], scale: float = 1e3) -> str:
     lo, hi = e["difference_ci95"]
     return (
-        f"{_mrad(e['median_difference'])} [{_mrad(lo)}, {_mrad(hi)}] | "
+        f"{_show(e['median_difference'], scale)} [{_show(lo, scale)}, {_show(hi, scale)}] | "
         f"{e['diverged_a']} / {e['diverged_b']} | {e['a_better_seeds']} / {e['seeds']}"
     )
 
@@ -129,14 +129,19 @@ def _block(doc: dict[str, Any]) -> str:
 
 
 def format_effects(
-    first: dict[str, Any], second: dict[str, Any], what: str = "tracking RMSE"
+    first: dict[str, Any],
+    second: dict[str, Any],
+    what: str = "tracking RMSE",
+    unit: str = "mrad",
+    scale: float = 1e3,
 ) -> str:
-    """The effect-size table (Markdown, differences in mrad) of two claims documents;
-    ``what`` names the per-seed quantity compared."""
+    """The effect-size table (Markdown) of two claims documents; ``what`` names the per-seed
+    quantity compared, ``unit`` its display unit and ``scale`` the factor from the stored
+    value to it (default: [rad] shown in [mrad])."""
     b1, b2 = _block(first), _block(second)
     head = (
         f"Claims as effect sizes: {first['scenario']}, {b1} and {b2}; median over seeds of the "
-        f"paired difference of {what} a - b [mrad] with its bootstrap 95 % interval "
+        f"paired difference of {what} a - b [{unit}] with its bootstrap 95 % interval "
         f"({N_BOOT} resamples), a diverged run counted as +inf (never dropped); stated only "
         "where both blocks agree, indistinguishable where the interval spans zero.\n\n"
         f"| claim (a vs b) | joint | {b1}: a - b [95% CI] | diverged a / b | a better on "
@@ -144,7 +149,8 @@ def format_effects(
         "|---|---|---|---|---|---|---|---|---|\n"
     )
     lines = [
-        f"| {r['label']} | {r['joint']} | {_cell(r['first'])} | {_cell(r['second'])} | "
+        f"| {r['label']} | {r['joint']} | {_cell(r['first'], scale)} | "
+        f"{_cell(r['second'], scale)} | "
         f"{_stated(r)} |"
         for r in combine(first, second)
     ]

@@ -23,9 +23,9 @@ from amsfe_sym.apps.study.metrics import (
     format_block_table,
     format_table,
 )
+from amsfe_sym.apps.study.records import study_json_text
 from amsfe_sym.apps.study.workers import Task, progress_bar, run_tasks
 from amsfe_sym.core.folders import write_folder
-from amsfe_sym.core.jsonfile import write_json
 from amsfe_sym.core.outputs import check_output
 from amsfe_sym.core.provenance import provenance
 from amsfe_sym.errors import ConfigError, describe
@@ -272,9 +272,9 @@ def run_study(
             },
             "window": "last 80 % of the run",
             "aggregate": agg,
-            "runs": [r["summary"] for r in done],
         }
-        write_json(tmp / "study.json", doc, indent=1, default=str)
+        runs = [r["summary"] for r in done]
+        (tmp / "study.json").write_text(study_json_text(doc, runs))  # runs: records.py
         written.update(agg=agg, md=md, figs=[folder / f.relative_to(tmp) for f in figs])
 
     write_folder(folder, fill, replace=force, own=is_study_folder)
