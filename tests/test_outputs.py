@@ -293,7 +293,7 @@ def _sweep_in_own_folder(tmp: Path) -> list[str]:
     return ["sweep", str(spec), "--out", str(sw), "--workers", "0", "--no-plots", "--force"]
 
 
-BENCH = ["bench", "--skip", "generation", "calls", "estimators", "tick", "loop", "scaling"]
+BENCH = ["bench", "--skip", "generation", "calls", "estimators", "tick", "loop", "scaling", "logs"]
 
 CASES: dict[tuple[str, str], Case] = {
     ("simulate", "--out"): Case(
