@@ -157,6 +157,83 @@ def test_live_loop_refuses_a_frame_older_than_its_history(paper: Any) -> None:
     assert loop.counters["refused_too_late"] == loop.counters["frames_rejected"] == 1
 
 
+#: Noise of the simulated joint torque sensor [N m] (tests/test_log_effort.py's).
+TORQUE_STD = 0.05
+
+
+def _effort_log(
+    sc: Any, lib: Any, kind: str, folder: Path, positions: str = "motor"
+) -> tuple[Any, Path, Path]:
+    """A simulated run, its bag with the torque topic holding what an arm with effort
+    ``kind`` logs (``joint_torque``: the true spring torque plus sensor noise) and, with
+    ``positions = "link"``, the link angle (plus the encoder's noise) as the encoders'
+    position (a Franka's), and a topic spec saying so."""
+    import dataclasses
+
+    from amsfe_sym.logs.write import write_run_bag
+    from amsfe_sym.sim.effort import simulated_effort
+
+    res = run(sc, lib, runtime="compiled")
+    tau = simulated_effort(res, kind, np.random.default_rng(1), TORQUE_STD)
+    logged = res if tau is None else dataclasses.replace(res, u=tau)
+    if positions == "link":
+        n, lay = lib.n, lib.layout
+        link = res.z_enc[:, :n] - res.x_true[:, lay["qm"]] + res.x_true[:, lay["q"]]
+        logged = dataclasses.replace(logged, z_enc=np.hstack([link, res.z_enc[:, n:]]))
+    folder.mkdir(parents=True, exist_ok=True)
+    spec = folder / "spec.toml"
+    spec.write_text(f'[joints]\npositions = "{positions}"\n[effort]\nkind = "{kind}"\n')
+    return logged, write_run_bag(logged, folder / "bag"), spec
+
+
+def _estimate_with(bag: Path, spec: Path, out: Path) -> Any:
+    """``amsfe estimate BAG --log-spec SPEC --estimator replay`` (the estimator ``--robot``
+    picks for an effort that is not the applied torque)."""
+    from amsfe_sym.apps.estimate import EstimateOptions, estimate_command
+
+    opts = EstimateOptions(log_spec=str(spec), estimator="replay", plots=False)
+    return estimate_command(bag, out, opts).estimate
+
+
+@pytest.mark.parametrize(
+    ("kind", "positions"), [("joint_torque", "motor"), ("joint_torque", "link"), ("none", "motor")]
+)
+def test_live_loop_with_a_joint_torque_is_estimate(
+    paper: Any, tmp_path: Path, kind: str, positions: str
+) -> None:
+    """The live loop given a log's effort of kind ``joint_torque`` (fused with the encoders,
+    the input as states; link-side positions turned into motor angles) or ``none``, sample
+    by sample, equals ``amsfe estimate`` of that log (the in-process half of
+    ``test_play_into_node_with_a_joint_torque_is_estimate``)."""
+    from amsfe_sym.estimation.effort import EffortSpec
+
+    sc, lib = paper
+    sc = sc.with_overrides(duration=0.5)
+    res, bag, spec = _effort_log(sc, lib, kind, tmp_path, positions)
+    ref = _estimate_with(bag, spec, tmp_path / "est")
+    loop = LiveLoop(
+        sc.with_overrides(estimator="replay"),
+        lib,
+        controller=False,
+        effort=EffortSpec(kind, positions=positions),
+    )
+    T = round(lib.T * 1e9)
+    frames: dict[int, list[Any]] = {}
+    for kappa, k, u, v in res.frames:
+        frames.setdefault(int(k), []).append((int(kappa), np.array([u, v])))
+    x = []
+    for k in range(res.t.size):
+        for kappa, z in frames.get(k, []):
+            loop.frame(kappa * T, z)
+        loop.effort(k * T, res.u[k])  # kind none: counted, never read
+        out = loop.encoders(k * T, res.z_enc[k])
+        assert out is not None
+        x.append(out.x_hat)
+    assert np.shape(x) == ref.x_hat.shape == (res.t.size, lib.N)
+    np.testing.assert_allclose(np.array(x), ref.x_hat, rtol=0, atol=1e-9)
+    assert loop.counters["frames_applied"] > 0
+
+
 def test_record_has_the_tf_of_simulate_bag(paper: Any, tmp_path: Path) -> None:
     """The node's record carries ``/tf`` as ``simulate --bag`` writes it: the same ticks,
     links and poses (true arm and ``est/``) for the same run."""
