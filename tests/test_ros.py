@@ -538,6 +538,42 @@ def test_play_into_node_is_estimate(paper: Any, tmp_path: Path) -> None:
 
 @pytest.mark.ros
 @pytest.mark.slow
+@pytest.mark.parametrize("kind", ["joint_torque", "none"])
+def test_play_into_node_with_a_joint_torque_is_estimate(
+    paper: Any, tmp_path: Path, kind: str
+) -> None:
+    """A simulated bag whose torque topic holds the measured joint torque (a Franka's
+    tau_J; or no effort read, ``none``), played by ``amsfe play`` into ``amsfe node
+    --topic-spec`` saying ``effort.kind``, gives the estimates of ``amsfe estimate`` on
+    that bag with that spec (the joint torque fused, the input carried as states)."""
+    sc, lib = paper
+    _, bag, spec = _effort_log(sc, lib, kind, tmp_path)
+    ref = _estimate_with(bag, spec, tmp_path / "est")
+    env = _ros_env(tmp_path)
+    rec = tmp_path / "rec"
+    depth = ["--ros-args", "-p", "qos.depth:=5000"]  # no sample lost on a loaded machine
+    procs = []
+    try:
+        procs.append(_start(env, "node", "paper-sim", "--duration", "2", "--record", str(rec),
+                            "--topic-spec", str(spec), "--estimator", "replay",
+                            *PATIENT_NODE, *depth))  # fmt: skip
+        procs.append(_start(env, "play", str(bag), "--start-timeout", "60", "--ordered",
+                            "--topic-spec", str(spec), *depth))  # fmt: skip
+    finally:
+        results = _finish(procs, 120.0)
+    for code, text in results:
+        assert code == 0, text
+    n = lib.n
+    got = _bag(rec)
+    est = np.array([np.r_[m.position, m.velocity] for m in got["/amsfe/estimate"]])
+    assert est.shape == (ref.x_hat.shape[0], 2 * n)
+    np.testing.assert_allclose(est, ref.x_hat[:, : 2 * n], rtol=0, atol=1e-9)
+    theta = np.array([m.data for m in got["/amsfe/theta"]])
+    np.testing.assert_allclose(theta, ref.x_hat[:, 4 * n :], rtol=0, atol=1e-9)
+
+
+@pytest.mark.ros
+@pytest.mark.slow
 def test_free_running_tracks(tmp_path: Path) -> None:
     """The loop over DDS on the wall clock (at a quarter of the robot's rate: this 2-core
     machine is shared) tracks and estimates within 2x the in-process loop's RMSE; the
