@@ -234,6 +234,28 @@ def test_live_loop_with_a_joint_torque_is_estimate(
     assert loop.counters["frames_applied"] > 0
 
 
+def test_live_reconstruct_is_refused_in_one_line() -> None:
+    """``input_model = "reconstruct"`` needs the next sample's rate: a live node refuses it
+    in one line with the fix; the other kinds' specs carry the spec's keys."""
+    from amsfe_sym.ros.effort import live_effort
+    from amsfe_sym.topics import TopicSpec
+
+    opts = (("input_model", "reconstruct"),)
+    with pytest.raises(ConfigError, match=r"input_model of a live node.*Fix: leave") as err:
+        live_effort(TopicSpec(effort_kind="joint_torque", effort_options=opts))
+    assert "\n" not in str(err.value)
+    assert live_effort(TopicSpec(effort_kind="applied")) is None
+    got = live_effort(
+        TopicSpec(
+            effort_kind="joint_torque",
+            positions="link",
+            effort_options=(("joint_torque_std", 0.2),),
+        )
+    )
+    assert got is not None
+    assert (got.kind, got.positions, got.joint_torque_std) == ("joint_torque", "link", 0.2)
+
+
 def test_record_has_the_tf_of_simulate_bag(paper: Any, tmp_path: Path) -> None:
     """The node's record carries ``/tf`` as ``simulate --bag`` writes it: the same ticks,
     links and poses (true arm and ``est/``) for the same run."""
@@ -545,7 +567,8 @@ def test_play_into_node_with_a_joint_torque_is_estimate(
     """A simulated bag whose torque topic holds the measured joint torque (a Franka's
     tau_J; or no effort read, ``none``), played by ``amsfe play`` into ``amsfe node
     --topic-spec`` saying ``effort.kind``, gives the estimates of ``amsfe estimate`` on
-    that bag with that spec (the joint torque fused, the input carried as states)."""
+    that bag with that spec (the joint torque fused, the input carried as states); the
+    node's record, estimated again with that spec, gives them too."""
     sc, lib = paper
     _, bag, spec = _effort_log(sc, lib, kind, tmp_path)
     ref = _estimate_with(bag, spec, tmp_path / "est")
@@ -570,6 +593,8 @@ def test_play_into_node_with_a_joint_torque_is_estimate(
     np.testing.assert_allclose(est, ref.x_hat[:, : 2 * n], rtol=0, atol=1e-9)
     theta = np.array([m.data for m in got["/amsfe/theta"]])
     np.testing.assert_allclose(theta, ref.x_hat[:, 4 * n :], rtol=0, atol=1e-9)
+    again = _estimate_with(rec, spec, tmp_path / "est2")  # the record: the joint torque logged
+    np.testing.assert_allclose(again.x_hat, ref.x_hat, rtol=0, atol=1e-9)
 
 
 @pytest.mark.ros
