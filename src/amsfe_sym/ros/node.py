@@ -266,7 +266,8 @@ class _Node:
             return
         if out is None:
             return
-        if self.effort_in_encoders and self.effort_kind == "applied":  # over the next tick
+        applied = self.effort_in_encoders and self.effort_kind == "applied"
+        if applied and len(msg.effort) > 0:  # the torque over the next tick
             self._effort(ns, effort_values(self.m, msg, idx, self.n))
         self._publish(out, z, int(info["source_timestamp"]))
         self.last_rx = time.monotonic()  # after the work: a slow first tick is no silence
