@@ -162,12 +162,13 @@ TORQUE_STD = 0.05
 
 
 def _effort_log(
-    sc: Any, lib: Any, kind: str, folder: Path, positions: str = "motor"
+    sc: Any, lib: Any, kind: str, folder: Path, positions: str = "motor", shared: bool = False
 ) -> tuple[Any, Path, Path]:
     """A simulated run, its bag with the torque topic holding what an arm with effort
     ``kind`` logs (``joint_torque``: the true spring torque plus sensor noise) and, with
     ``positions = "link"``, the link angle (plus the encoder's noise) as the encoders'
-    position (a Franka's), and a topic spec saying so."""
+    position (a Franka's), and a topic spec saying so; ``shared``: the effort in the
+    encoders' JointState, no torque topic (a driver's ``/joint_states``)."""
     import dataclasses
 
     from amsfe_sym.logs.write import write_run_bag
@@ -182,8 +183,37 @@ def _effort_log(
         logged = dataclasses.replace(logged, z_enc=np.hstack([link, res.z_enc[:, n:]]))
     folder.mkdir(parents=True, exist_ok=True)
     spec = folder / "spec.toml"
-    spec.write_text(f'[joints]\npositions = "{positions}"\n[effort]\nkind = "{kind}"\n')
-    return logged, write_run_bag(logged, folder / "bag"), spec
+    text = f'[joints]\npositions = "{positions}"\n[effort]\nkind = "{kind}"\n'
+    spec.write_text(('[topics]\neffort = "/motor_encoders"\n' if shared else "") + text)
+    bag = write_run_bag(logged, folder / "run-bag" if shared else folder / "bag")
+    return logged, _shared(bag, folder / "bag", logged) if shared else bag, spec
+
+
+def _shared(bag: Path, out: Path, res: Any) -> Path:
+    """``bag`` with the torque in the encoders' JointState (position, velocity, effort of
+    each sample, its stamp kept) and no torque topic."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    from amsfe_sym.logs.encode import encode_joint_states
+    from amsfe_sym.logs.source import typestore
+
+    n, names = res.lib.n, list(res.lib.manifest.joints)
+    with AnyReader([bag], default_typestore=typestore()) as r:
+        msgs = [(c, t, bytes(raw)) for c, t, raw in r.messages()]
+        enc = [r.deserialize(raw, c.msgtype) for c, _, raw in msgs if c.topic == "/motor_encoders"]
+    stamps = [m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in enc]
+    z = res.z_enc
+    rows = iter(encode_joint_states(stamps, names, z[:, :n], z[:, n:], np.asarray(res.u)))
+    with Writer(out, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conns: dict[str, Any] = {}
+        for c, t, raw in msgs:
+            if c.topic == "/motor_torque":
+                continue
+            if c.topic not in conns:
+                conns[c.topic] = w.add_connection(c.topic, c.msgtype, typestore=typestore())
+            w.write(conns[c.topic], t, next(rows) if c.topic == "/motor_encoders" else raw)
+    return out
 
 
 def _estimate_with(bag: Path, spec: Path, out: Path) -> Any:
@@ -560,17 +590,22 @@ def test_play_into_node_is_estimate(paper: Any, tmp_path: Path) -> None:
 
 @pytest.mark.ros
 @pytest.mark.slow
-@pytest.mark.parametrize("kind", ["joint_torque", "none"])
+@pytest.mark.parametrize(
+    ("kind", "positions", "shared"),
+    [("joint_torque", "motor", False), ("joint_torque", "link", True), ("none", "motor", False)],
+)
 def test_play_into_node_with_a_joint_torque_is_estimate(
-    paper: Any, tmp_path: Path, kind: str
+    paper: Any, tmp_path: Path, kind: str, positions: str, shared: bool
 ) -> None:
     """A simulated bag whose torque topic holds the measured joint torque (a Franka's
     tau_J; or no effort read, ``none``), played by ``amsfe play`` into ``amsfe node
     --topic-spec`` saying ``effort.kind``, gives the estimates of ``amsfe estimate`` on
     that bag with that spec (the joint torque fused, the input carried as states); the
-    node's record, estimated again with that spec, gives them too."""
+    node's record, estimated again with that spec, gives them too.  ``shared``: a Franka's
+    ``/joint_states``: link angles, rates and tau_J in one JointState (the record is not
+    estimated again: it logs the effort as a JointState of its own on that topic)."""
     sc, lib = paper
-    _, bag, spec = _effort_log(sc, lib, kind, tmp_path)
+    _, bag, spec = _effort_log(sc, lib, kind, tmp_path, positions, shared)
     ref = _estimate_with(bag, spec, tmp_path / "est")
     env = _ros_env(tmp_path)
     rec = tmp_path / "rec"
@@ -593,8 +628,9 @@ def test_play_into_node_with_a_joint_torque_is_estimate(
     np.testing.assert_allclose(est, ref.x_hat[:, : 2 * n], rtol=0, atol=1e-9)
     theta = np.array([m.data for m in got["/amsfe/theta"]])
     np.testing.assert_allclose(theta, ref.x_hat[:, 4 * n :], rtol=0, atol=1e-9)
-    again = _estimate_with(rec, spec, tmp_path / "est2")  # the record: the joint torque logged
-    np.testing.assert_allclose(again.x_hat, ref.x_hat, rtol=0, atol=1e-9)
+    if not shared:
+        again = _estimate_with(rec, spec, tmp_path / "est2")  # the record: the effort logged
+        np.testing.assert_allclose(again.x_hat, ref.x_hat, rtol=0, atol=1e-9)
 
 
 @pytest.mark.ros
