@@ -58,6 +58,7 @@ __all__ = [
     "MotorParams",
     "effort_spec",
     "encoder_dim",
+    "encoder_row",
     "estimator_inputs",
     "input_noise_std",
     "reconstruct_input",
@@ -359,6 +360,47 @@ class EstimatorInputs:
     input_std: FloatArray
 
 
+def encoder_row(
+    spec: EffortSpec, z: ArrayLike, effort: ArrayLike | None, motor: MotorParams
+) -> FloatArray:
+    """The encoder measurement the estimator is given for one sample (or a stack of them):
+    what a log's rows (:func:`estimator_inputs`) and a live node's samples
+    (:class:`amsfe_sym.ros.live.LiveLoop`) both go through.
+
+    Args:
+        spec: What the effort is.
+        z: The sample ``[position, velocity]`` [rad, rad/s], (2n,) or (K, 2n).
+        effort: The effort of the same tick as logged (times ``spec.scale``: N m), (n,) or
+            (K, n); used for ``joint_torque`` only (else may be None).
+        motor: The robot's actuators (``Ks`` for ``positions = "link"``).
+
+    Returns:
+        ``[qm, qmd]`` for ``applied`` and ``none`` (the sample as it is);
+        ``[qm, qmd, tau_J]`` for ``joint_torque``, with ``qm = q + tau_J / Ks`` (eq. (1b)'s
+        spring) when ``spec.positions == "link"``.  A new array.
+
+    Raises:
+        ShapeError: ``joint_torque`` without an effort.
+    """
+    n = motor.n
+    z_arr = np.array(z, dtype=float)
+    if spec.kind != "joint_torque":
+        return z_arr
+    if effort is None:
+        raise ShapeError(
+            describe(
+                "effort of kind 'joint_torque'",
+                f"{n} joint torques per sample",
+                "none",
+                'log the effort, or say [effort] kind = "none"',
+            )
+        )
+    e = np.asarray(effort, dtype=float) * spec.scale
+    if spec.positions == "link":  # qm = q + tau_J / Ks: the motor angle the model measures
+        z_arr[..., :n] += e / motor.Ks
+    return np.concatenate([z_arr, e], axis=-1)
+
+
 def estimator_inputs(
     spec: EffortSpec,
     z: ArrayLike,
@@ -412,10 +454,8 @@ def estimator_inputs(
         )
     if spec.kind == "applied":
         return EstimatorInputs(spec.kind, e, z_arr, std)
-    if spec.positions == "link":  # qm = q + tau_J / Ks: the motor angle the model measures
-        z_arr = z_arr.copy()
-        z_arr[:, :n] += e / motor.Ks
-    z_aug = np.hstack([z_arr, e])
+    z_aug = encoder_row(spec, z_arr, effort, motor)
+    z_arr = z_aug[:, : 2 * n]
     if spec.input_as_state:
         return EstimatorInputs(spec.kind, np.zeros((K, n)), z_aug, np.zeros(n))
     u = reconstruct_input(z_arr[:, n:], e, motor)

@@ -28,9 +28,17 @@ from amsfe_sym.core.camera_frame import CameraFrame
 from amsfe_sym.errors import ConfigError, EstimatorError, describe
 from amsfe_sym.estimation import Estimator
 from amsfe_sym.estimation.base import StepReport
+from amsfe_sym.estimation.effort import EffortSpec, encoder_row
+from amsfe_sym.ros.effort import TorqueHold
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario, run_ticks
-from amsfe_sym.sim.builders import build_controller, build_estimator, build_sensors, scenario_timing
+from amsfe_sym.sim.builders import (
+    build_controller,
+    build_estimator,
+    build_sensors,
+    motor_params,
+    scenario_timing,
+)
 from amsfe_sym.sim.result import DECISION_COUNTERS, count_decisions
 
 __all__ = ["ORACLES", "HoldKind", "LiveLoop", "TickOut", "hold_command"]
@@ -89,6 +97,11 @@ class LiveLoop:
         compiled: The library's C estimator (else the Python reference).
         grid_tolerance: How far a stamp may be from the tick grid [T].
         max_gap_steps: Missing encoder samples in a row predicted through.
+        effort: What the effort topic is when it is not the applied torque (kinds
+            ``joint_torque``, ``none``: :func:`amsfe_sym.ros.effort.live_effort`): the
+            estimator is ``amsfe estimate``'s for a log of that kind (the input as states,
+            each sample's row :func:`~amsfe_sym.estimation.effort.encoder_row` of the sample
+            and the joint torque held at its tick, :meth:`joint_torque`); None: ``applied``.
 
     Raises:
         ConfigError: an oracle controller (it reads the true state), or what the builders
@@ -104,12 +117,16 @@ class LiveLoop:
         compiled: bool = True,
         grid_tolerance: float = 0.25,
         max_gap_steps: int = 5,
+        effort: EffortSpec | None = None,
     ) -> None:
         self.sc, self.lib = sc, lib
         self.n, self.N, self.T = lib.n, lib.N, lib.T
         self._T_ns = round(lib.T * 1e9)
         self._tol, self._max_gap = grid_tolerance, max_gap_steps
         self._compiled = compiled
+        self.effort_spec = None if effort is None or effort.kind == "applied" else effort
+        self._motor = motor_params(lib)
+        self._torque = TorqueHold(self._T_ns)
         # the sensors only for R (their noise, quantization): no random number is drawn
         self._sensors = build_sensors(
             sc, lib, np.random.default_rng(sc.seed), scenario_timing(sc, lib)
@@ -130,7 +147,9 @@ class LiveLoop:
             self.ctrl.prepare(np.arange(K, dtype=float) * lib.T)  # the loop's grid
         # built once now (imports, the library's C estimator loaded: ~1 s the first time) and
         # again at the first sample, which then takes ~1 ms instead of holding the samples up
-        build_estimator(sc, lib, self._sensors, np.zeros(2 * lib.n), compiled=compiled)
+        build_estimator(
+            sc, lib, self._sensors, np.zeros(2 * lib.n), compiled=compiled, effort=self.effort_spec
+        )
         self.est: Estimator | None = None
         self.k = -1
         self.t0_ns = 0
@@ -209,10 +228,40 @@ class LiveLoop:
         else:
             self._effort[j] = np.array(u, dtype=float)
 
+    def effort(self, stamp_ns: int, values: FloatArray) -> None:
+        """An effort sample stamped ``stamp_ns`` [ns]: :meth:`joint_torque` for kind
+        ``joint_torque``, ignored (counted) for ``none``, else :meth:`applied`."""
+        kind = "applied" if self.effort_spec is None else self.effort_spec.kind
+        if kind == "joint_torque":
+            self.joint_torque(stamp_ns, values)
+        elif kind == "none":  # the log reader's reason
+            self._skip("not used: effort kind none (say [effort] kind to use it)")
+        else:
+            self.applied(stamp_ns, values)
+
+    def joint_torque(self, stamp_ns: int, tau: FloatArray) -> None:
+        """A measured joint torque [as logged] stamped ``stamp_ns`` (effort kind
+        ``joint_torque``): fused with the encoder samples of the ticks it is held at
+        (:class:`~amsfe_sym.ros.effort.TorqueHold`)."""
+        if np.size(tau) != self.n or not np.all(np.isfinite(tau)):
+            self._skip("joint torque sample not n finite values")
+        else:
+            self._torque.add(stamp_ns, np.asarray(tau, dtype=float))
+
+    def _row(self, z: FloatArray, k: int, t0_ns: int) -> FloatArray | None:
+        """The estimator's encoder row of sample ``z`` at tick ``k``
+        (:func:`~amsfe_sym.estimation.effort.encoder_row`); None: no joint torque yet."""
+        if self.effort_spec is None or self.effort_spec.kind != "joint_torque":
+            return z
+        tau = self._torque.at(t0_ns, k)
+        return None if tau is None else encoder_row(self.effort_spec, z, tau, self._motor)
+
     def _u_for(self, j: int) -> FloatArray:
         """The torque over [t_j, t_j+1]: the effort topic's of tick j (what the arm says it
         applied), else the controller's command of tick j, else the previous one (held and
         counted)."""
+        if self.effort_spec is not None:  # the input is estimated (states): none given
+            return np.zeros(self.n)
         if j in self._effort:
             self.u = self._effort.pop(j)
         elif j in self._cmds:
@@ -237,8 +286,19 @@ class LiveLoop:
         z = np.array(z, dtype=float)
         self._sent = sent_ns
         if self.est is None:
+            row = self._row(z, 0, stamp_ns)
+            if row is None:  # a log starts at its first effort sample too
+                self._skip("encoder sample before the first joint torque sample")
+                return None
             self.t0_ns, self.k, self._sent0 = stamp_ns, 0, sent_ns
-            self.est = build_estimator(self.sc, self.lib, self._sensors, z, compiled=self._compiled)
+            self.est = build_estimator(
+                self.sc,
+                self.lib,
+                self._sensors,
+                row[: 2 * self.n],
+                compiled=self._compiled,
+                effort=self.effort_spec,
+            )
             self._frames.pending.clear()  # the loop uses no frame at tick 0
             self._frames.sent.clear()
             for early in self._early:
@@ -250,7 +310,7 @@ class LiveLoop:
                 else:
                     self.frame(exposure_ns, zf, sent)
             self._early_frames.clear()
-            return self._control(stamp_ns, z, None, 0)
+            return self._control(stamp_ns, row[: 2 * self.n], None, 0)
         k = self.tick_of(stamp_ns)
         if k is None:
             self._skip("encoder sample off the tick grid")
@@ -277,10 +337,12 @@ class LiveLoop:
         if gap:
             self._skip("encoder samples missing (predicted through)", gap)
         self.k = k
-        zk = z if np.all(np.isfinite(z)) else None
+        row = self._row(z, k, self.t0_ns)
+        assert row is not None  # the first sample had a torque: it is held from then on
+        zk = row if np.all(np.isfinite(row)) else None
         report = self.est.step(self._u_for(k - 1), zk, self._due())
         count_decisions(self.counters, report)
-        return self._control(stamp_ns, z, report, gap)
+        return self._control(stamp_ns, row[: 2 * self.n], report, gap)
 
     def _due(self) -> list[CameraFrame]:
         """The pending frames exposed at or before the current tick and sent before its
@@ -300,15 +362,17 @@ class LiveLoop:
         self, stamp_ns: int, z: FloatArray, report: StepReport | None, gap: int
     ) -> TickOut:
         assert self.est is not None
-        x, P = self.est.x, self.est.P
-        P_diag = np.diag(P).copy()
+        N = self.N  # the robot's states (the input states, if any, follow)
+        x, P = self.est.x[:N], self.est.P
+        P_diag = np.diag(P)[:N].copy()
         t = float(self.k) * self.T
         u = None
         if self.ctrl is not None:
             nis = None if report is None else report.encoder_nis  # the start-up's consistency
             law = LawInputs(self.k, t, self._nan, self._nan[: self.lib.p], x, z, P_diag, nis)
             u, _ = self.ctrl.saturate(self.ctrl.torque(law))
-            self._cmds[self.k] = np.array(u, dtype=float)
+            if self.effort_spec is None:  # else no command is the estimator's input
+                self._cmds[self.k] = np.array(u, dtype=float)
         return TickOut(self.k, t, stamp_ns, np.array(x, dtype=float), P_diag, u, report, gap)
 
     def hold_command(self, kind: HoldKind, last: TickOut | None) -> FloatArray:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import os
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -197,8 +198,9 @@ def lean_events(node: Any) -> tuple[Any, Any]:
 
 def spec_parameters(node: Any, spec: TopicSpec, joints: tuple[str, ...]) -> TopicSpec:
     """The topic spec as ROS parameters of ``node`` (declared with ``spec``'s values as
-    defaults: ``topics.<role>``, ``joints.names``, ``effort.kind``, ``timing.*``,
-    ``qos.reliability``, ``qos.depth``), read back and checked as a spec file is.
+    defaults: ``topics.<role>``, ``joints.names``, ``joints.positions``, ``effort.kind``,
+    ``timing.*``, ``qos.reliability``, ``qos.depth``; the ``[effort]`` noise keys are the
+    spec's), read back and checked as a spec file is.
 
     Raises:
         ConfigError: a parameter the spec refuses (a topic without '/', an unknown kind...).
@@ -212,8 +214,10 @@ def spec_parameters(node: Any, spec: TopicSpec, joints: tuple[str, ...]) -> Topi
         data["topics"][role] = node.declare_parameter(f"topics.{role}", spec.topic(role)).value
     names = list(spec.joint_names or joints)
     data["joints"]["names"] = list(node.declare_parameter("joints.names", names).value)
+    positions = node.declare_parameter("joints.positions", spec.positions).value
+    data["joints"]["positions"] = positions
     kind = node.declare_parameter("effort.kind", spec.effort_kind or "applied").value
-    data["effort"]["kind"] = kind
+    data["effort"] = {**dict(spec.effort_options), "kind": kind}  # the noise keys: the file's
     data["timing"]["grid_tolerance"] = node.declare_parameter(
         "timing.grid_tolerance", spec.grid_tolerance
     ).value
@@ -222,4 +226,5 @@ def spec_parameters(node: Any, spec: TopicSpec, joints: tuple[str, ...]) -> Topi
     ).value
     data["qos"]["reliability"] = node.declare_parameter("qos.reliability", spec.reliability).value
     data["qos"]["depth"] = node.declare_parameter("qos.depth", spec.depth).value
-    return parse_topic_spec(data, f"ROS parameters of {node.get_name()}")
+    parsed = parse_topic_spec(data, f"ROS parameters of {node.get_name()}")
+    return replace(parsed, source=spec.source)

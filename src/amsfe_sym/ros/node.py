@@ -1,9 +1,9 @@
 """``amsfe node``: the generated estimator (and controller) of a scenario as the ROS 2 node
 ``amsfe_node`` (docs/ros.md).
 
-It subscribes the encoders, the camera, the effort (kind ``applied``: the torque the arm
-applied, which drives the estimator) and, when it records, the truth of a simulated arm, on
-the topics of the topic spec (ROS parameters override it); each
+It subscribes the encoders, the camera, the effort (its kind: :mod:`amsfe_sym.ros.effort`)
+and, when it records, the truth of a simulated arm, on the topics of the topic spec (ROS
+parameters override it); each
 encoder sample goes through :class:`amsfe_sym.ros.live.LiveLoop` by its header stamp, and
 the node publishes the estimate (JointState q, qd), its standard deviations, theta, the
 command (with a controller; Float64MultiArray for a ros2_control forward command
@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 
 from amsfe_sym.core.interrupts import DeferredSignals
 from amsfe_sym.errors import AmsfeError
+from amsfe_sym.ros.effort import effort_values, live_effort
 from amsfe_sym.ros.live import HoldKind, LiveLoop, TickOut
 from amsfe_sym.ros.middleware import (
     executor,
@@ -143,6 +144,7 @@ class _Node:
         spec = spec_parameters(node, options.spec, tuple(lib.manifest.joints))
         self.spec = spec
         self.names = tuple(spec.joint_names or lib.manifest.joints)
+        self.effort_kind = spec.effort_kind or "applied"
         self.live = LiveLoop(
             sc,
             lib,
@@ -150,6 +152,7 @@ class _Node:
             compiled=options.compiled,
             grid_tolerance=spec.grid_tolerance,
             max_gap_steps=spec.max_gap_steps,
+            effort=live_effort(spec),
         )
         self.n = lib.n
         self.std_every = std_every_parameter(node, options.std_every)
@@ -178,14 +181,12 @@ class _Node:
             node.create_subscription(
                 m.Float64MultiArray, spec.truth, self.on_truth, qos, event_callbacks=sub_events
             )
-        self.effort_kind = spec.effort_kind or "applied"
-        use_effort = self.effort_kind == "applied"
-        self.use_effort = use_effort
-        if use_effort and spec.effort != spec.encoders:
+        read = self.effort_kind != "none"
+        if read and spec.effort != spec.encoders:
             node.create_subscription(
                 m.JointState, spec.effort, self.on_effort, qos, event_callbacks=sub_events
             )
-        self.effort_in_encoders = use_effort and spec.effort == spec.encoders
+        self.effort_in_encoders = read and spec.effort == spec.encoders
         node.create_subscription(
             m.JointState, spec.encoders, self.on_encoders, qos, event_callbacks=sub_events
         )
@@ -207,11 +208,16 @@ class _Node:
         )
 
     # ---------------------------------------------------------------- callbacks
-    def _order(self, names: Any) -> list[int]:
+    def _order(self, names: Any) -> list[int] | None:
+        """The robot's joints' indices in ``names`` (None: one is missing; the node stops)."""
         key = tuple(names)
         if key not in self._orders:
             where = f"{self.spec.encoders} JointState names"
-            self._orders[key] = joint_order(key, self.names, where)
+            try:
+                self._orders[key] = joint_order(key, self.names, where)
+            except AmsfeError as exc:  # the robot's joints are not all in the message
+                self.stop = _Stop(str(exc), 2, exc)
+                return None
         return self._orders[key]
 
     def on_frame(self, msg: Any, info: Any) -> None:
@@ -230,25 +236,20 @@ class _Node:
     def on_effort(self, msg: Any) -> None:
         if self.stop is not None or not self.active:
             return
-        try:
-            idx = self._order(msg.name)
-        except AmsfeError as exc:
-            self.stop = _Stop(str(exc), 2, exc)
+        if (idx := self._order(msg.name)) is None:
             return
-        eff = self.m.values(msg.effort)
-        u = eff[idx] if eff.size == len(msg.name) else np.full(self.n, np.nan)
-        ns = self.m.stamp_ns(msg.header.stamp)
-        self.live.applied(ns, u)
+        self._effort(self.m.stamp_ns(msg.header.stamp), effort_values(self.m, msg, idx, self.n))
+
+    def _effort(self, ns: int, eff: FloatArray) -> None:
+        """An effort sample [as logged] to the loop by its kind, and to the record."""
+        self.live.effort(ns, eff)
         if self.record is not None:
-            self.record.applied(ns, u)
+            self.record.applied(ns, eff)
 
     def on_encoders(self, msg: Any, info: Any) -> None:
         if self.stop is not None or not self.active:
             return
-        try:
-            idx = self._order(msg.name)
-        except AmsfeError as exc:  # the robot's joints are not all in the message
-            self.stop = _Stop(str(exc), 2, exc)
+        if (idx := self._order(msg.name)) is None:
             return
         try:
             pos, vel = self.m.values(msg.position), self.m.values(msg.velocity)
@@ -257,18 +258,17 @@ class _Node:
             else:
                 z = np.concatenate([pos[idx], vel[idx]])
             ns = self.m.stamp_ns(msg.header.stamp)
+            if self.effort_in_encoders and self.effort_kind == "joint_torque":
+                self._effort(ns, effort_values(self.m, msg, idx, self.n))  # of this sample
             out = self.live.encoders(ns, z, int(info["source_timestamp"]))
         except AmsfeError as exc:
             self.stop = _Stop(f"hold: the estimator stopped: {exc}", EXIT_HOLD)
             return
         if out is None:
             return
-        if self.effort_in_encoders:
-            eff = self.m.values(msg.effort)
-            if eff.size == len(msg.name):
-                self.live.applied(ns, eff[idx])
-                if self.record is not None:
-                    self.record.applied(ns, eff[idx])
+        applied = self.effort_in_encoders and self.effort_kind == "applied"
+        if applied and len(msg.effort) > 0:  # the torque over the next tick
+            self._effort(ns, effort_values(self.m, msg, idx, self.n))
         self._publish(out, z, int(info["source_timestamp"]))
         self.last_rx = time.monotonic()  # after the work: a slow first tick is no silence
 
@@ -324,7 +324,7 @@ class _Node:
         L = self.lib.layout
         std = np.sqrt(np.maximum(out.P_diag, 0.0))
         rec.outputs(ns, out.x_hat, std, out.x_hat[L["theta"]], out.u)
-        if out.u is not None and not self.use_effort:  # its own command is the applied one
+        if out.u is not None and self.effort_kind == "none":  # its command is the applied one
             rec.applied(ns, out.u)
 
     def _wait_subscriber(self) -> None:

@@ -17,7 +17,12 @@ from numpy.typing import NDArray
 
 from amsfe_sym.core.camera_frame import CameraFrame
 from amsfe_sym.estimation import Estimator
-from amsfe_sym.estimation.effort import EffortSpec, EstimatorInputs, estimator_inputs
+from amsfe_sym.estimation.effort import (
+    EffortSpec,
+    EstimatorInputs,
+    encoder_row,
+    estimator_inputs,
+)
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.sim.builders import Sensors, build_estimator, build_run, motor_params
@@ -108,9 +113,8 @@ def effort_estimator(
             :class:`~amsfe_sym.errors.ConfigError`; docs/effort.md).
     """
     n = lib.n
-    z0 = np.array(z[0], dtype=float)
-    if spec.positions == "link" and spec.kind == "joint_torque" and effort is not None:
-        z0[:n] += np.asarray(effort[0], dtype=float) * spec.scale / motor_params(lib).Ks
+    e0 = None if effort is None or spec.kind != "joint_torque" else effort[0]
+    z0 = encoder_row(spec, z[0], e0, motor_params(lib))[: 2 * n]
     est = build_estimator(sc, lib, sensors, z0, compiled=compiled, effort=spec)
     qd_std = np.sqrt(np.diag(est.R_encoder)[n : 2 * n])
     inputs = estimator_inputs(spec, z, effort, motor_params(lib), qd_std)
