@@ -3,11 +3,10 @@
 
 It subscribes the encoders, the camera, the effort (its kind: :mod:`amsfe_sym.ros.effort`)
 and, when it records, the truth of a simulated arm, on the topics of the topic spec (ROS
-parameters override it); each
-encoder sample goes through :class:`amsfe_sym.ros.live.LiveLoop` by its header stamp, and
-the node publishes the estimate (JointState q, qd), its standard deviations, theta, the
-command (with a controller; Float64MultiArray for a ros2_control forward command
-controller) and diagnostics (JSON: frames fused, refused and skipped by reason, NIS).
+parameters override it; its ``[filter]``: :mod:`amsfe_sym.ros.spec_filter`); each encoder
+sample goes through :class:`amsfe_sym.ros.live.LiveLoop` by its header stamp; the node
+publishes the estimate (JointState q, qd), its standard deviations, theta, the command (with
+a controller; Float64MultiArray) and diagnostics (JSON: frames fused, refused, skipped, NIS).
 
 Fail-safe (docs/ros.md, "Hold"): on encoder silence longer than ``encoder_timeout`` (after
 the first sample), a non-finite estimate or an estimator failure it publishes the hold
@@ -50,6 +49,7 @@ from amsfe_sym.ros.outputs import (
     std_every_parameter,
 )
 from amsfe_sym.ros.record import NodeRecord
+from amsfe_sym.ros.spec_filter import live_filter
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.topics import TopicSpec, joint_order
@@ -141,8 +141,8 @@ class _Node:
         from amsfe_sym.ros import messages as m
 
         self.m, self.node, self.lib, self.options = m, node, lib, options
-        spec = spec_parameters(node, options.spec, tuple(lib.manifest.joints))
-        self.spec = spec
+        self.spec = spec = spec_parameters(node, options.spec, tuple(lib.manifest.joints))
+        sc = live_filter(sc, spec)  # the spec's [filter] over the scenario's, as on a log
         self.names = tuple(spec.joint_names or lib.manifest.joints)
         self.effort_kind = spec.effort_kind or "applied"
         self.live = LiveLoop(
