@@ -52,6 +52,7 @@ A JSON path is dot-separated: object keys, or list indices as integers.
 
 from __future__ import annotations
 
+import gzip
 import json
 import math
 import re
@@ -303,7 +304,12 @@ def _read_output(path: Path) -> Any:
 
 
 def _read_json(path: Path) -> Any:
+    """A stored JSON output, gzip-compressed when its name ends in ``.gz`` (a large output
+    stored whole: ``gzip -9 -n`` of what the command wrote)."""
     try:
+        if path.suffix == ".gz":
+            with gzip.open(path, "rt", encoding="utf-8") as f:
+                return json.loads(f.read())
         return json.loads(path.read_text())
     except (OSError, ValueError) as e:
         raise _bad(str(path), "a stored JSON output", str(e), "re-run its command") from e
