@@ -304,13 +304,10 @@ def _read_output(path: Path) -> Any:
 
 
 def _read_json(path: Path) -> Any:
-    """A stored JSON output, gzip-compressed when its name ends in ``.gz`` (a large output
-    stored whole: ``gzip -9 -n`` of what the command wrote)."""
+    """A stored JSON output; ``.gz``: a large one stored whole, ``gzip -9 -n``'d."""
     try:
-        if path.suffix == ".gz":
-            with gzip.open(path, "rt", encoding="utf-8") as f:
-                return json.loads(f.read())
-        return json.loads(path.read_text())
+        with (gzip.open if path.suffix == ".gz" else open)(path, "rt", encoding="utf-8") as f:
+            return json.load(f)
     except (OSError, ValueError) as e:
         raise _bad(str(path), "a stored JSON output", str(e), "re-run its command") from e
 
