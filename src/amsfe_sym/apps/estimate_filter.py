@@ -10,7 +10,7 @@ from typing import Any
 
 from amsfe_sym.logs.noise import EncoderNoise, encoder_noise
 from amsfe_sym.logs.read import RobotLog
-from amsfe_sym.scenario import Scenario, validate
+from amsfe_sym.scenario import Scenario, with_filter
 from amsfe_sym.topics.spec import FROM_LOG, TopicSpec
 
 __all__ = [
@@ -128,9 +128,8 @@ def filter_for_log(
         rest = ", ".join(f"{k} {v}" for k, v in given.items() if not _num(v))
         where = spec.source or "the log spec"
         lines.append(f"[filter] of {where}: " + ", ".join(p for p in (was, rest) if p))
-        f = replace(f, **given)
-    out = replace(sc, filter=f)
-    validate(out, f"{spec.source or 'log spec'} [filter] over the filter's defaults")
+    source = f"{spec.source or 'log spec'} [filter] over the filter's defaults"
+    out = with_filter(replace(sc, filter=f), given, source)
     return LogFilter(out, noise, tuple(lines))
 
 

@@ -1,14 +1,12 @@
 """The topic spec's ``[filter]`` on a live node (docs/ros.md, "Topic spec"): the same keys
-as a scenario's ``[filter]``, applied over the scenario's key by key, as ``amsfe estimate``
-applies a log spec's (apps/estimate_filter.py), so that one spec means one filter on a log
-and live."""
+as a scenario's ``[filter]``, applied over the scenario's key by key by
+:func:`~amsfe_sym.scenario.with_filter`, as ``amsfe estimate`` applies a log spec's, so that
+one spec means one filter on a log and live."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 from amsfe_sym.errors import ConfigError, describe
-from amsfe_sym.scenario import Scenario, validate
+from amsfe_sym.scenario import Scenario, with_filter
 from amsfe_sym.topics.spec import FROM_LOG, TopicSpec
 
 __all__ = ["live_filter"]
@@ -36,6 +34,4 @@ def live_filter(sc: Scenario, spec: TopicSpec) -> Scenario:
                 "('encoder noise from the log: ...')",
             )
         )
-    out = replace(sc, filter=replace(sc.filter, **opts))
-    validate(out, f"{spec.source or 'topic spec'} [filter] over the scenario's")
-    return out
+    return with_filter(sc, opts, f"{spec.source or 'topic spec'} [filter] over the scenario's")

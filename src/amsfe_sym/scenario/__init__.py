@@ -19,7 +19,7 @@ from amsfe_sym.scenario.model import (
     PlantConfig,
     Scenario,
 )
-from amsfe_sym.scenario.overrides import apply_sets
+from amsfe_sym.scenario.overrides import apply_sets, with_filter
 from amsfe_sym.scenario.read import (
     find_scenario,
     load_scenario,
@@ -54,4 +54,5 @@ __all__ = [
     "run_ticks",
     "scenarios_dir",
     "validate",
+    "with_filter",
 ]

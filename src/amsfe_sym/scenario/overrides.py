@@ -158,6 +158,15 @@ def apply_sets(sc: Scenario, sets: Sequence[str]) -> Scenario:
     return sc
 
 
+def with_filter(sc: Scenario, options: Mapping[str, Any], where: str) -> Scenario:
+    """``sc`` with the ``[filter]`` keys of ``options`` over its own, key by key (a topic
+    spec's ``[filter]``, on a log and live), re-validated with the scenario's checks;
+    ``where`` names the source in a refusal."""
+    out = dataclasses.replace(sc, filter=dataclasses.replace(sc.filter, **dict(options)))
+    validate(out, where)
+    return out
+
+
 def _unknown_key(key: str, sc: Scenario) -> ConfigError:
     return ConfigError(
         describe(
