@@ -628,7 +628,12 @@ def test_play_into_node_is_estimate(paper: Any, tmp_path: Path) -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("kind", "positions", "shared"),
-    [("joint_torque", "motor", False), ("joint_torque", "link", True), ("none", "motor", False)],
+    [
+        ("joint_torque", "motor", False),
+        ("joint_torque", "link", True),
+        ("applied", "motor", True),
+        ("none", "motor", False),
+    ],
 )
 def test_play_into_node_with_a_joint_torque_is_estimate(
     paper: Any, tmp_path: Path, kind: str, positions: str, shared: bool
@@ -638,8 +643,8 @@ def test_play_into_node_with_a_joint_torque_is_estimate(
     --topic-spec`` saying ``effort.kind``, gives the estimates of ``amsfe estimate`` on
     that bag with that spec (the joint torque fused, the input carried as states); the
     node's record, estimated again with that spec, gives them too.  ``shared``: a Franka's
-    ``/joint_states``: link angles, rates and tau_J in one JointState (the record is not
-    estimated again: it logs the effort as a JointState of its own on that topic)."""
+    ``/joint_states``: link angles, rates and tau_J (or the applied torque) in one
+    JointState, and the record has them so too (tests/test_node_record.py)."""
     sc, lib = paper
     _, bag, spec = _effort_log(sc, lib, kind, tmp_path, positions, shared)
     ref = _estimate_with(bag, spec, tmp_path / "est")
@@ -664,9 +669,10 @@ def test_play_into_node_with_a_joint_torque_is_estimate(
     np.testing.assert_allclose(est, ref.x_hat[:, : 2 * n], rtol=0, atol=1e-9)
     theta = np.array([m.data for m in got["/amsfe/theta"]])
     np.testing.assert_allclose(theta, ref.x_hat[:, 4 * n :], rtol=0, atol=1e-9)
-    if not shared:
-        again = _estimate_with(rec, spec, tmp_path / "est2")  # the record: the effort logged
-        np.testing.assert_allclose(again.x_hat, ref.x_hat, rtol=0, atol=1e-9)
+    enc = got["/motor_encoders"]
+    assert len(enc) == est.shape[0] and all(m.effort.size == (n if shared else 0) for m in enc)
+    again = _estimate_with(rec, spec, tmp_path / "est2")  # the record: the effort logged
+    np.testing.assert_allclose(again.x_hat, ref.x_hat, rtol=0, atol=1e-9)
 
 
 @pytest.mark.ros

@@ -4,8 +4,10 @@ in the layout of ``amsfe simulate --bag`` (:mod:`amsfe_sym.logs.write`), so that
 
 Topics and times (ns, the samples' own stamps; a frame is logged at the tick that fused it,
 its arrival): the encoders, camera frames (stamp = exposure), the applied torque (JointState
-effort: the effort topic's, or the node's command), the truth and ``/joint_states`` (true q,
-qd) when a simulated arm sends it, ``/amsfe/config`` (robot, scenario, estimator: what
+effort: the effort topic's, or the node's command; with the effort on the encoders' topic, in
+the encoders' JointState of its tick, one message a tick as a driver's ``/joint_states``), the
+truth and ``/joint_states`` (true q, qd; not when that is the encoders' or the effort's topic)
+when a simulated arm sends it, ``/amsfe/config`` (robot, scenario, estimator: what
 ``amsfe estimate`` needs), ``/robot_description`` (the URDF), and the outputs: estimate,
 estimate_std, theta, diagnostics, commands (the hold command last), and ``/tf`` as
 ``simulate --bag`` has it (world -> every link of the estimated arm, ``est/``-prefixed, and
@@ -18,7 +20,7 @@ URDF).  Kept in memory, written when the node stops (complete or absent:
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -90,11 +92,13 @@ class NodeRecord:
 
     def truth(self, ns: int, x: FloatArray) -> None:
         """The true state [q, qd, qm, qmd, theta] at the tick ``ns`` (and, as
-        ``amsfe simulate --bag`` has it, the true q, qd on ``/joint_states``)."""
+        ``amsfe simulate --bag`` has it, the true q, qd on ``/joint_states``, unless the
+        encoders or the effort are on that topic: it is theirs)."""
         n = self.n
         self._truth = (ns, np.array(x[:n], dtype=float))
         self._add(self.spec.truth, F64, ns, np.array(x, dtype=float))
-        self._add("/joint_states", JS, ns, ns, None, x[:n], x[n : 2 * n], None)
+        if "/joint_states" not in (self.spec.encoders, self.spec.effort):
+            self._add("/joint_states", JS, ns, ns, None, x[:n], x[n : 2 * n], None)
 
     def outputs(
         self, ns: int, x_hat: FloatArray, std: FloatArray, theta: FloatArray, u: FloatArray | None
@@ -175,7 +179,7 @@ class NodeRecord:
                 head = [(self.spec.config, STR, start, (json.dumps(self.config),))]
                 if self.urdf is not None:  # Foxglove draws the arm from it
                     head.append(("/robot_description", STR, start, (self.urdf,)))
-                rows = [*head, *self._rows]
+                rows = [*head, *_one_joint_state_a_tick(self._rows, self.spec)]
                 for topic, msgtype, ns, data in rows:
                     if topic not in conns:
                         conns[topic] = writer.add_connection(topic, msgtype, typestore=store)
@@ -188,3 +192,34 @@ class NodeRecord:
             bag_dir.rmdir()
 
         return write_folder(out, inner)
+
+
+def _one_joint_state_a_tick(
+    rows: Sequence[tuple[str, str, int, tuple[Any, ...]]], spec: TopicSpec
+) -> Iterator[tuple[str, str, int, tuple[Any, ...]]]:
+    """``rows`` as written: with the effort on the encoders' topic (``spec.effort ==
+    spec.encoders``, a driver's ``/joint_states``), the effort of a tick goes into the
+    JointState of that tick's encoder sample (position, velocity and effort in one message,
+    as the arm sent it; of two efforts stamped alike, the later, the one the log reader
+    holds); an effort with no sample of its stamp (one the live loop skipped) stays an
+    effort-only JointState.  Separate topics: ``rows`` unchanged."""
+    topic = spec.encoders
+    if spec.effort != topic:
+        yield from rows
+        return
+    effort: dict[int, Any] = {}
+    samples: set[int] = set()
+    for t, msgtype, ns, data in rows:
+        if t == topic and msgtype == JS:
+            if data[2] is None:
+                effort[ns] = data[4]
+            else:
+                samples.add(ns)
+    for row in rows:
+        t, msgtype, ns, data = row
+        if t == topic and msgtype == JS:
+            if data[2] is None and ns in samples:
+                continue  # in its sample's message
+            if data[2] is not None and ns in effort:
+                row = (t, msgtype, ns, (*data[:4], effort[ns]))
+        yield row
