@@ -1,7 +1,7 @@
-"""Saturation-aware gains of the cascades (``headroom_tau``, docs/control.md "Start-up";
-issue 28): the share of the last demand the actuators could apply scales h, eps, wm and wf,
-drops at once and recovers with its time constant; the C controller does the same tick by
-tick, and the whole loop equals the Python one.
+"""The saturation-aware hand-over of the cascades (``headroom_tau``, docs/control.md
+"Start-up"; issue 28): while the blend runs, the share of the last demand the actuators could
+apply scales h, eps, wm and wf, drops at once and recovers with its time constant; the C
+controller does the same tick by tick, and the whole loop equals the Python one.
 
 The studies that chose it (moving starts, fresh seeds) live in tools/startup_moving.py.
 """
@@ -57,7 +57,9 @@ def test_headroom_scales_the_loop_gains(paper_sim: tuple[Scenario, ModelLibrary]
     ctrl._u_demand = np.array([0.1, -4.0 * u_max[1]])  # a deeper cut is taken at once
     ctrl._headroom(base)
     assert ctrl._rho == 0.25
-    off, _ = build_controller(sc.with_overrides(controller="dtsmc-ekf"), lib)
+    ctrl._headroom(base, cut=False)  # the blend is over: no cut, whatever the demand
+    assert ctrl._rho == pytest.approx(0.25 + lib.T / TAU * 0.75, rel=1e-15)
+    off, _ = build_controller(_with(sc, "dtsmc-ekf", "headroom_tau=inf"), lib)
     off._u_demand = np.array([1e6, 1e6])
     assert off._headroom(base) is base  # headroom_tau = inf: off
 

@@ -184,13 +184,14 @@ class _Cascade(_SlidingBase):
     #: at the trusted tick and returns to ``wf`` along the blend (``wf + (blend_wf - wf)
     #: b0(s / Tb)``, b0 the blend's polynomial): the law's first commands, computed from a
     #: rate estimate still ~0.3 rad/s off, reach the motor smoothed (issue 28).
-    #: With ``headroom_tau`` [s] finite, the law is saturation-aware once it acts: with
-    #: ``r = min_j min(1, u_max_j / |u_j(k-1)|)`` the share of the last tick's torque demand
-    #: the actuators could apply, ``h``, ``eps``, ``wm`` and ``wf`` are scaled by ``rho``,
-    #: which drops to ``r`` at once and returns towards it with time constant ``headroom_tau``
-    #: (``rho += T / headroom_tau (r - rho)``): a demand the actuators cannot meet lowers the
-    #: loops' bandwidths on every joint alike, so the law asks what they can apply instead of
-    #: winding the flexible mode into a saturated oscillation (issue 28, docs/control.md).
+    #: With ``headroom_tau`` [s] finite, the hand-over is saturation-aware: while the blend
+    #: runs, with ``r = min_j min(1, u_max_j / |u_j(k-1)|)`` the share of the last tick's
+    #: torque demand the actuators could apply (after it, r = 1), ``h``, ``eps``, ``wm`` and
+    #: ``wf`` are scaled by ``rho``, which drops to ``r`` at once and returns towards it with
+    #: time constant ``headroom_tau`` (``rho += T / headroom_tau (r - rho)``): a demand the
+    #: actuators cannot meet lowers the loops' bandwidths on every joint alike, so the law
+    #: asks what they can apply instead of winding the flexible mode into a saturated
+    #: oscillation (issue 28, docs/control.md "Start-up").
     STARTUPS: ClassVar[tuple[str, ...]] = ("first", "converged")
     HOLDS: ClassVar[tuple[str, ...]] = ("reference", "motor", "auto")
 
@@ -255,14 +256,19 @@ class _Cascade(_SlidingBase):
         out[len(out) - 2] = np.minimum(wf, w * self._blend_wf + (1.0 - w) * wf)
         return out
 
-    def _headroom(self, gains: list[FloatArray]) -> list[FloatArray]:
+    def _headroom(self, gains: list[FloatArray], cut: bool = True) -> list[FloatArray]:
         """``gains`` (as :meth:`_gain_args` orders them) with :data:`HEADROOM_GAINS` scaled by
-        ``rho``, after updating ``rho`` from the last tick's demand (the C the same)."""
+        ``rho``, after updating ``rho`` from the last tick's demand (``cut``: the blend runs;
+        else r = 1 and rho only recovers).  The C the same."""
         if math.isinf(self._headroom_tau) or self._u_demand is None:
             return gains
-        demand = np.abs(self._u_demand)
-        r = float(np.min(np.where(demand > self.u_max, self.u_max / demand, 1.0)))
+        r = 1.0
+        if cut:
+            demand = np.abs(self._u_demand)
+            r = float(np.min(np.where(demand > self.u_max, self.u_max / demand, 1.0)))
         rho = self._rho
+        if rho == 1.0 and r == 1.0:
+            return gains
         self._rho = r if r < rho else rho + self.lib.T / self._headroom_tau * (r - rho)
         names = [k for k in (*_LAW_GAINS, *self._extra_gains()) if self.has_lt or k != "Lt"]
         scaled = self.HEADROOM_GAINS
@@ -376,10 +382,10 @@ class _Cascade(_SlidingBase):
                 d0, d1 = lead[0][:n] - ref[:n], lead[0][n : 2 * n] - ref[n : 2 * n]
                 tb = blend_time(d0, d1, self._blend_accel, self._blend_rate)
                 self._blend = (k, tb, d0.copy(), d1.copy())
-            gains = self._headroom(gains)
             if self._blend is not None:
                 k0, tb, d0, d1 = self._blend
                 sb = (k - k0) * self.lib.T
+                gains = self._headroom(gains, sb < tb)
                 ref = ref + blend_offsets(sb, tb, d0, d1)
                 gains = self._blend_gains(gains, sb, tb)
             out = self._law.call_into(*lead, ref, self._cf, *gains, self._run)

@@ -347,14 +347,16 @@ static const double *blend_bandwidth(amsfe_ctrl *c, long k, const double *wf) {
   return c->wfb;
 }
 
-/* _Cascade._headroom: rho from the last tick's demand, and h, eps, wm, wf scaled by it into
- * the law's inputs (in[ih], in[ie], in[iw], *wf); returns the command filter's wf */
-static const double *headroom(amsfe_ctrl *c, const double **in, int ih, int ie, int iw) {
+/* _Cascade._headroom: rho from the last tick's demand (cut: the blend runs; else r = 1), and
+ * h, eps, wm, wf scaled by it into the law's inputs (in[ih], in[ie], in[iw]); returns the
+ * command filter's wf */
+static const double *headroom(amsfe_ctrl *c, const double **in, int ih, int ie, int iw,
+                              int cut) {
   long n = c->d.n;
   double tau = c->par.headroom_tau;
   if (!(tau > 0) || isinf(tau) || !c->have_udem) return c->wf;
   double r = 1.0;
-  for (long j = 0; j < n; ++j) {
+  for (long j = 0; cut && j < n; ++j) {
     double dem = fabs(c->u_dem[j]);
     if (dem > c->u_max[j] && c->u_max[j] / dem < r) r = c->u_max[j] / dem;
   }
@@ -421,8 +423,6 @@ static int cascade(amsfe_ctrl *c, long k, const double *lead0, const double *lea
     if (gcall(&c->g, f, in, m, c->o, 8)) return AMSFE_ERR_NONFINITE;
   } else {
     *hold = c->hold0;
-    const double *wf = headroom(c, in, ih, ie, iw);
-    *wf_in = wf;
     if (!c->started && c->par.startup_converged) {
       /* the blended reference starts from the state the law acts on */
       for (long j = 0; j < n; ++j) {
@@ -434,6 +434,8 @@ static int cascade(amsfe_ctrl *c, long k, const double *lead0, const double *lea
           blend_time(c->blend_d0, c->blend_d1, n, c->par.blend_accel, c->par.blend_rate);
     }
     if (c->par.startup_converged) { /* once started */
+      double sb = (double)(k - c->blend_k0) * c->par.T;
+      const double *wf = headroom(c, in, ih, ie, iw, sb < c->blend_tb);
       in[dtsmc ? 2 : 1] = blended(c, k, ref);
       *wf_in = blend_bandwidth(c, k, wf);
     }
