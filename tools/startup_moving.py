@@ -23,11 +23,14 @@ statistic, never dropped::
 
     .venv/bin/python tools/startup_moving.py grid --first-seed 12000 --seeds 200 \\
         --out docs/data/startup-moving-grid.json
+
+An ``--out`` ending in ``.gz`` is written gzip-compressed (the 1000-seed studies).
 """
 
 from __future__ import annotations
 
 import argparse
+import gzip
 import json
 import sys
 from concurrent.futures import ProcessPoolExecutor
@@ -198,7 +201,12 @@ def main(argv: list[str] | None = None) -> int:
     }
     print(json.dumps(summary, indent=1))
     if args.out:
-        args.out.write_text(json.dumps(doc, indent=1) + "\n")
+        text = json.dumps(doc, indent=1) + "\n"
+        if args.out.suffix == ".gz":  # 1000-seed studies: stored compressed (gzip -9 -n alike)
+            with args.out.open("wb") as f, gzip.GzipFile(fileobj=f, mode="wb", mtime=0) as z:
+                z.write(text.encode())
+        else:
+            args.out.write_text(text)
     return 0
 
 

@@ -157,7 +157,11 @@ class _Cascade(_SlidingBase):
         "blend_accel": float("inf"),
         "blend_rate": float("inf"),
         "blend_wf": float("inf"),
+        "headroom_tau": float("inf"),
     }
+    #: The gains ``headroom_tau`` scales by the actuators' headroom (the loops' bandwidths and
+    #: the reaching law's gains).
+    HEADROOM_GAINS: ClassVar[tuple[str, ...]] = ("h", "eps", "wm", "wf")
     #: The start-ups (docs/control.md, "Start-up"): ``"first"`` starts the command filter at
     #: rest on the first command, whatever the estimate (the form the paper's laws imply);
     #: ``"converged"`` waits until the estimate is fit for the law: every link angle's and
@@ -180,6 +184,14 @@ class _Cascade(_SlidingBase):
     #: at the trusted tick and returns to ``wf`` along the blend (``wf + (blend_wf - wf)
     #: b0(s / Tb)``, b0 the blend's polynomial): the law's first commands, computed from a
     #: rate estimate still ~0.3 rad/s off, reach the motor smoothed (issue 28).
+    #: With ``headroom_tau`` [s] finite, the hand-over is saturation-aware: while the blend
+    #: runs, with ``r = min_j min(1, u_max_j / |u_j(k-1)|)`` the share of the last tick's
+    #: torque demand the actuators could apply (after it, r = 1), ``h``, ``eps``, ``wm`` and
+    #: ``wf`` are scaled by ``rho``, which drops to ``r`` at once and returns towards it with
+    #: time constant ``headroom_tau`` (``rho += T / headroom_tau (r - rho)``): a demand the
+    #: actuators cannot meet lowers the loops' bandwidths on every joint alike, so the law
+    #: asks what they can apply instead of winding the flexible mode into a saturated
+    #: oscillation (issue 28, docs/control.md "Start-up").
     STARTUPS: ClassVar[tuple[str, ...]] = ("first", "converged")
     HOLDS: ClassVar[tuple[str, ...]] = ("reference", "motor", "auto")
 
@@ -228,17 +240,39 @@ class _Cascade(_SlidingBase):
         self._blend_rate = self._scalar("blend_rate")
         self._blend_wf = self._scalar("blend_wf")
         self._blend: tuple[int, float, FloatArray, FloatArray] | None = None  # k0, Tb, d0, d1
+        self._headroom_tau = self._scalar("headroom_tau")
+        self._rho = 1.0  # the headroom scale of the gains (1: unscaled)
+        self._u_demand: FloatArray | None = None  # the law's last torque demand [N m]
 
     def _blend_gains(self, gains: list[FloatArray], s: float, tb: float) -> list[FloatArray]:
         """``gains`` with the command filter's bandwidth ``wf + (blend_wf - wf) b0(s / Tb)``
-        (at most ``wf``) while the blend runs, ``s`` [s] after it started (the C the same)."""
+        (at most ``wf``, as the headroom scaled it) while the blend runs, ``s`` [s] after it
+        started (the C the same)."""
         if not s < tb or math.isinf(self._blend_wf):
             return gains
         w = blend_weight(s / tb)
-        wf = self._g["wf"]
+        wf = gains[len(gains) - 2]  # the headroom's scale included
         out = list(gains)
         out[len(out) - 2] = np.minimum(wf, w * self._blend_wf + (1.0 - w) * wf)
         return out
+
+    def _headroom(self, gains: list[FloatArray], cut: bool = True) -> list[FloatArray]:
+        """``gains`` (as :meth:`_gain_args` orders them) with :data:`HEADROOM_GAINS` scaled by
+        ``rho``, after updating ``rho`` from the last tick's demand (``cut``: the blend runs;
+        else r = 1 and rho only recovers).  The C the same."""
+        if math.isinf(self._headroom_tau) or self._u_demand is None:
+            return gains
+        r = 1.0
+        if cut:
+            demand = np.abs(self._u_demand)
+            r = float(np.min(np.where(demand > self.u_max, self.u_max / demand, 1.0)))
+        rho = self._rho
+        if rho == 1.0 and r == 1.0:
+            return gains
+        self._rho = r if r < rho else rho + self.lib.T / self._headroom_tau * (r - rho)
+        names = [k for k in (*_LAW_GAINS, *self._extra_gains()) if self.has_lt or k != "Lt"]
+        scaled = self.HEADROOM_GAINS
+        return [g * self._rho if k in scaled else g for k, g in zip(names, gains, strict=True)]
 
     def _scalar(self, key: str) -> float:
         v = self.gains[key]
@@ -263,6 +297,7 @@ class _Cascade(_SlidingBase):
         own["blend_accel"] = self._blend_accel
         own["blend_rate"] = self._blend_rate
         own["blend_wf"] = self._blend_wf
+        own["headroom_tau"] = self._headroom_tau
         return own
 
     def _converged(self, P_diag: FloatArray | None, nis: float | None = None) -> bool:
@@ -350,6 +385,7 @@ class _Cascade(_SlidingBase):
             if self._blend is not None:
                 k0, tb, d0, d1 = self._blend
                 sb = (k - k0) * self.lib.T
+                gains = self._headroom(gains, sb < tb)
                 ref = ref + blend_offsets(sb, tb, d0, d1)
                 gains = self._blend_gains(gains, sb, tb)
             out = self._law.call_into(*lead, ref, self._cf, *gains, self._run)
@@ -357,6 +393,7 @@ class _Cascade(_SlidingBase):
                 self._cf[:n], self._cf[n:] = out[7], 0.0
                 self._started = True
                 out = self._law.call_into(*lead, ref, self._cf, *gains, self._run)
+            self._u_demand = out[0].copy()
         u, s, tau_d, _qm_d, _e_next, bound, cf_next = out[:7]
         self._cf = cf_next.copy()
         self.s, self.bound = s.copy(), bound.copy()

@@ -93,6 +93,7 @@ class ControllerParams:
     ready_nis_window: float = 50.0
     hold_motor: bool = False
     blend_wf: float = float("inf")
+    headroom_tau: float = float("inf")
     _keep: list[Any] = field(default_factory=list, repr=False)
 
     def struct(self) -> ctypes.Structure:
@@ -140,6 +141,7 @@ class ControllerParams:
             float(self.ready_nis_window),
             int(self.hold_motor),
             float(self.blend_wf),
+            float(self.headroom_tau),
         )
 
 
@@ -417,7 +419,7 @@ def write_loop_log(
         f"{int(params.startup_converged)} {params.ready_q_std!r} {params.ready_qd_std!r} "
         f"{params.blend_accel!r} {params.blend_rate!r} "
         f"{params.ready_nis!r} {params.ready_nis_window!r} {int(params.hold_motor)} "
-        f"{params.blend_wf!r}"
+        f"{params.blend_wf!r} {params.headroom_tau!r}"
     )
     n = params.u_max.size
     for key in ("h", "lam", "Lt", "eps", "phi", "wm", "tau_max", "wf", "vmax"):

@@ -55,6 +55,9 @@ struct amsfe_ctrl {
   double blend_tb; /* its duration [s] */
   double *blend_d0, *blend_d1, *refb; /* its offsets [n], [n]; the blended reference [5n] */
   double *wfb;     /* the command filter's bandwidth while the blend runs (blend_wf) [n] */
+  double rho;      /* headroom_tau: the gains' scale (1: unscaled) */
+  int have_udem;   /* ... the law's demand u_dem of the last tick it acted is known */
+  double *u_dem, *hs, *epss, *wms, *wfs; /* ... that demand, the scaled h, eps, wm, wf [n] */
   double nis_mean; /* cascade: the encoders' mean NIS (running, then exponential window) */
   long nis_count;  /* NIS values taken into it */
   double nis_tick; /* this tick's NIS (amsfe_ctrl_observe_nis), NaN: none */
@@ -85,7 +88,7 @@ static int ctrl_layout(amsfe_ctrl *c, char *base) {
                      &c->prev_qmd_d, &c->qmd_next, &c->Ksv, &c->b, &c->acc,
                      &c->c_hold, &c->hold1, &c->hold0, &c->blend_d0, &c->blend_d1,
                      &c->mhold_d0, &c->mhold_d1, &c->mr[0], &c->mr[1], &c->mr[2],
-                     &c->wfb};
+                     &c->wfb, &c->u_dem, &c->hs, &c->epss, &c->wms, &c->wfs};
   for (size_t i = 0; i < sizeof(vecs) / sizeof(vecs[0]); ++i) *vecs[i] = DBL(&cv, n);
   c->refb = DBL(&cv, 5 * n);
   c->theta0 = DBL(&cv, d.N - 4 * n + 1);
@@ -130,6 +133,7 @@ static int ctrl_params_ok(const amsfe_ctrl_params *p) {
                                isnan(p->ready_qd_std) || !(p->ready_qd_std > 0) ||
                                !(p->blend_accel > 0) || !(p->blend_rate > 0) ||
                                !(p->ready_nis >= 0) || !(p->blend_wf >= 0) ||
+                               !(p->headroom_tau >= 0) ||
                                (p->ready_nis > 0 && !(p->ready_nis_window > 0))))
     return 0;
   if (p->controller == AMSFE_CTRL_TRUTH_CT)
@@ -165,6 +169,8 @@ void amsfe_ctrl_reset(amsfe_ctrl *c) {
   c->ready = 0;
   c->have_hold = 0;
   c->have_mhold = 0;
+  c->rho = 1.0;
+  c->have_udem = 0;
   c->nis_mean = 0.0;
   c->nis_count = 0;
   c->nis_tick = NAN;
@@ -330,14 +336,38 @@ static const double *blended(amsfe_ctrl *c, long k, const double *ref) {
   return c->refb;
 }
 
-/* _Cascade._blend_gains: wf + (blend_wf - wf) b0(s / Tb), at most wf, while the blend runs */
-static const double *blend_bandwidth(amsfe_ctrl *c, long k) {
+/* _Cascade._blend_gains: wf + (blend_wf - wf) b0(s / Tb), at most wf (as the headroom
+ * scaled it), while the blend runs */
+static const double *blend_bandwidth(amsfe_ctrl *c, long k, const double *wf) {
   long n = c->d.n;
   double s = (double)(k - c->blend_k0) * c->par.T, tb = c->blend_tb, bwf = c->par.blend_wf;
-  if (!(s < tb) || !(bwf > 0) || isinf(bwf)) return c->wf;
+  if (!(s < tb) || !(bwf > 0) || isinf(bwf)) return wf;
   double w = blend_poly(BLEND_B0, 0, s / tb);
-  for (long j = 0; j < n; ++j) c->wfb[j] = fmin(c->wf[j], w * bwf + (1.0 - w) * c->wf[j]);
+  for (long j = 0; j < n; ++j) c->wfb[j] = fmin(wf[j], w * bwf + (1.0 - w) * wf[j]);
   return c->wfb;
+}
+
+/* _Cascade._headroom: rho from the last tick's demand (cut: the blend runs; else r = 1), and
+ * h, eps, wm, wf scaled by it into the law's inputs (in[ih], in[ie], in[iw]); returns the
+ * command filter's wf */
+static const double *headroom(amsfe_ctrl *c, const double **in, int ih, int ie, int iw,
+                              int cut) {
+  long n = c->d.n;
+  double tau = c->par.headroom_tau;
+  if (!(tau > 0) || isinf(tau) || !c->have_udem) return c->wf;
+  double r = 1.0;
+  for (long j = 0; cut && j < n; ++j) {
+    double dem = fabs(c->u_dem[j]);
+    if (dem > c->u_max[j] && c->u_max[j] / dem < r) r = c->u_max[j] / dem;
+  }
+  double rho = c->rho;
+  c->rho = r < rho ? r : rho + c->par.T / tau * (r - rho);
+  for (long j = 0; j < n; ++j) {
+    c->hs[j] = c->h[j] * c->rho, c->epss[j] = c->eps[j] * c->rho;
+    c->wms[j] = c->wm[j] * c->rho, c->wfs[j] = c->wf[j] * c->rho;
+  }
+  in[ih] = c->hs, in[ie] = c->epss, in[iw] = c->wms;
+  return c->wfs;
 }
 
 /* _Cascade.torque: control_amsfe / control_dtsmc, with the start-up. */
@@ -350,9 +380,12 @@ static int cascade(amsfe_ctrl *c, long k, const double *lead0, const double *lea
   int m = 0;
   in[m++] = lead0;
   if (dtsmc) in[m++] = lead1;
-  in[m++] = ref, in[m++] = c->cf, in[m++] = c->h, in[m++] = c->lam;
+  in[m++] = ref, in[m++] = c->cf;
+  int ih = m, ie, iw;
+  in[m++] = c->h, in[m++] = c->lam;
   if (!dtsmc) in[m++] = lt;
-  in[m++] = c->eps, in[m++] = &c->pp, in[m++] = c->phi, in[m++] = c->wm;
+  ie = m, in[m++] = c->eps, in[m++] = &c->pp, in[m++] = c->phi;
+  iw = m, in[m++] = c->wm;
   in[m++] = c->tau_max;
   const double **wf_in = &in[m];
   in[m++] = c->wf, in[m++] = c->vmax;
@@ -401,8 +434,10 @@ static int cascade(amsfe_ctrl *c, long k, const double *lead0, const double *lea
           blend_time(c->blend_d0, c->blend_d1, n, c->par.blend_accel, c->par.blend_rate);
     }
     if (c->par.startup_converged) { /* once started */
+      double sb = (double)(k - c->blend_k0) * c->par.T;
+      const double *wf = headroom(c, in, ih, ie, iw, sb < c->blend_tb);
       in[dtsmc ? 2 : 1] = blended(c, k, ref);
-      *wf_in = blend_bandwidth(c, k);
+      *wf_in = blend_bandwidth(c, k, wf);
     }
     if (gcall(&c->g, f, in, m, c->o, 8)) return AMSFE_ERR_NONFINITE;
     if (!c->started) { /* start at rest on the first trusted command */
@@ -411,6 +446,8 @@ static int cascade(amsfe_ctrl *c, long k, const double *lead0, const double *lea
       c->started = 1;
       if (gcall(&c->g, f, in, m, c->o, 8)) return AMSFE_ERR_NONFINITE;
     }
+    memcpy(c->u_dem, c->o[0], sizeof(double) * (size_t)n);
+    c->have_udem = 1;
   }
   memcpy(c->cf, c->o[6], sizeof(double) * (size_t)(2 * n));
   memcpy(u, c->o[0], sizeof(double) * (size_t)n);
