@@ -30,6 +30,7 @@ from amsfe_sym.ros.arm import SimArm
 from amsfe_sym.ros.live import LiveLoop
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
+from tests.test_node_record import _bag
 
 SRC = Path(__file__).resolve().parent.parent / "src"
 _COUNTER = itertools.count()
@@ -542,18 +543,6 @@ def _finish(procs: list[_Proc], timeout: float) -> list[tuple[int, str]]:
                 os.killpg(p.p.pid, signal.SIGKILL)
                 p.p.wait()
     return out
-
-
-def _bag(path: Path) -> dict[str, list[Any]]:
-    from rosbags.highlevel import AnyReader
-
-    from amsfe_sym.logs.source import typestore
-
-    topics: dict[str, list[Any]] = {}
-    with AnyReader([path], default_typestore=typestore()) as r:
-        for c, _t, raw in r.messages():
-            topics.setdefault(c.topic, []).append(r.deserialize(raw, c.msgtype))
-    return topics
 
 
 @pytest.mark.ros
