@@ -129,3 +129,32 @@ def test_a_restated_statistic_is_not_reported_but_its_verdict_still_is() -> None
     pair["joints"][5].update(difference_ci95=[0.8e-3, 0.9e-3], verdict="a higher")
     (moved,) = compare(reg, "claims-ur5-control", fresh)
     assert moved.where == "amsfe vs dtsmc-ekf (camera fused) joint 6 stated claim"
+
+
+def test_check_docs_skips_a_by_hand_source_and_survives_a_failing_command(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``tools/check_docs.py --all``: a source re-run by hand is named and skipped, a command
+    that fails is one line (not a traceback) and the other sources still run; exit 1."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("check_docs", ROOT / "tools/check_docs.py")
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    (tmp_path / "docs" / "data").mkdir(parents=True)
+    (tmp_path / "docs" / "data" / "out.json").write_text("{}")
+    (tmp_path / "docs" / "data" / "claims-registry.toml").write_text(
+        '[source.hand]\nstored = "docs/data/out.json"\ncommand = "python -c pass"\n'
+        'by_hand = "run it with its twin"\n'
+        '[source.broken]\nstored = "docs/data/out.json"\n'
+        "command = \"python -c 'raise SystemExit(3)'\"\ncostly = true\n"
+        '[source.fine]\nstored = "docs/data/out.json"\ncommand = "python -c pass"\n'
+        'output = "-"\n'
+    )
+    monkeypatch.setattr(mod, "ROOT", tmp_path)
+    assert mod.main(["--all"]) == 1
+    out = capsys.readouterr().out
+    assert "hand: not re-run here: run it with its twin" in out
+    assert "broken: its command failed (exit 3)" in out
+    assert "fine: 0 moved" in out and "1 source(s) whose command failed" in out

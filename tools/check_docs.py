@@ -99,21 +99,34 @@ def main(argv: list[str] | None = None) -> int:
         if args.fresh is not None and len(names) != 1:
             print("check_docs: --fresh compares one source; name it")
             return 2
+        failed = 0
         for name in names:
             src = reg.sources[name]
             if args.fresh is not None:
                 text = args.fresh.read_text()
                 fresh = text if src.output == "-" else json.loads(text)
+            elif src.by_hand:
+                print(f"{name}: not re-run here: {src.by_hand}", flush=True)
+                continue
             else:
-                fresh = _rerun(src, args.first_seed, args.seeds, args.workers, args.keep)
+                try:
+                    fresh = _rerun(src, args.first_seed, args.seeds, args.workers, args.keep)
+                except subprocess.CalledProcessError as e:  # one line; the others still run
+                    print(f"{name}: its command failed (exit {e.returncode}): {e.cmd}")
+                    failed += 1
+                    continue
             found = compare(reg, name, fresh)
             print(f"{name}: {len(found)} moved", flush=True)
             for m in found:
                 print(f"  {m.line()}", flush=True)
             moved += found
+    else:
+        failed = 0
     total = len(reg.numbers) + len(reg.blocks)
     print(f"{total} registered entries, {len(moved)} outside their interval or missing")
-    return 1 if moved else 0
+    if failed:
+        print(f"{failed} source(s) whose command failed: not compared")
+    return 1 if moved or failed else 0
 
 
 if __name__ == "__main__":

@@ -91,6 +91,7 @@ class Source:
     costly: bool = False
     fixed_seed: bool = False
     post: str = ""  # a command run on {out} after ``command`` (e.g. the effects of a study)
+    by_hand: str = ""  # how to re-run it when its command cannot run alone (re-runs skip it)
 
     def command_for(self, first_seed: int, seeds: int, out: str) -> str:
         """The command on seeds ``first_seed ..`` (``seeds`` of them), writing to ``out``."""
