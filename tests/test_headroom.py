@@ -21,6 +21,7 @@ from amsfe_sym.scenario import Scenario, apply_sets, load_scenario
 from amsfe_sym.sim.builders import build_controller
 from amsfe_sym.sim.loop import run
 from tests.test_compiled_loop import assert_same_run
+from tests.test_startup import controller_pair
 
 TAU = 0.05
 
@@ -75,22 +76,18 @@ def test_compiled_headroom_tick_by_tick(paper_sim: tuple[Scenario, ModelLibrary]
     """amsfe_ctrl against the Python controller, fed the same inputs, on a state that asks
     for more than the actuators have, then less: torques equal to 1e-12, and the gains were
     scaled (rho below 1) and recovered."""
-    from amsfe_sym.runtime.compiled_loop import CompiledController
-    from amsfe_sym.sim.compiled import controller_params
-
     sc, lib = paper_sim
-    ctrl, traj = build_controller(_with(sc, "amsfe", f"headroom_tau={TAU}", "blend_wf=20"), lib)
-    cc = CompiledController(str(lib.library_path), controller_params(ctrl, lib), lib.n)
-    rng = np.random.default_rng(3)
-    K = 80
+    K, n = 80, lib.n
+    ctrl, cc, refs = controller_pair(
+        _with(sc, "amsfe", f"headroom_tau={TAU}", "blend_wf=20"), lib, K
+    )
     t = np.arange(K) * lib.T
-    ctrl.prepare(t)
-    q, qd, qdd = traj.evaluate(t)
-    jerk, snap = traj.higher(t)
-    x = np.concatenate([q[0] + 0.4, qd[0] - 3.0, q[0] - 1.0, qd[0] + 5.0, lib.theta_true])
+    rng = np.random.default_rng(3)
+    q0, qd0 = refs[0, :n], refs[0, n : 2 * n]
+    x = np.concatenate([q0 + 0.4, qd0 - 3.0, q0 - 1.0, qd0 + 5.0, lib.theta_true])
     rhos = []
     for k in range(K):
-        ref = np.concatenate([q[k], qd[k], qdd[k], jerk[k], snap[k]])
+        ref = refs[k]
         x_hat = x + 1e-3 * rng.standard_normal(lib.N)
         z = x[2 * lib.n : 4 * lib.n] + 1e-4 * rng.standard_normal(2 * lib.n)
         P = np.diag(np.full(lib.N, 1e-6))
@@ -100,7 +97,8 @@ def test_compiled_headroom_tick_by_tick(paper_sim: tuple[Scenario, ModelLibrary]
         np.testing.assert_allclose(u_c, u_py, rtol=1e-12, atol=1e-12, err_msg=f"k={k}")
         rhos.append(ctrl._rho)
         if k == 20:  # the arm joins the path: the demand falls within the limits
-            x = np.concatenate([q[k], qd[k], q[k] + 0.2, qd[k], lib.theta_true])
+            qk, qdk = refs[k, :n], refs[k, n : 2 * n]
+            x = np.concatenate([qk, qdk, qk + 0.2, qdk, lib.theta_true])
         x[: lib.n] += 1e-3 * np.sin(k)
     assert rhos[0] == 1.0 and min(rhos[:20]) < 0.5  # cut at once on the first demand
     low = int(np.argmin(rhos))

@@ -46,6 +46,20 @@ def _with(sc: Scenario, controller: str, sets: tuple[str, ...]) -> Scenario:
     return apply_sets(sc, [f"controller_gains.{controller}.{s}" for s in sets])
 
 
+def controller_pair(sc: Scenario, lib: ModelLibrary, K: int) -> tuple[Any, Any, np.ndarray]:
+    """The scenario's Python controller, its C twin (amsfe_ctrl) and the reference rows
+    ``[q_d, qd_d, qdd_d, jerk, snap]`` of the first ``K`` ticks, shape (K, 5n)."""
+    from amsfe_sym.runtime.compiled_loop import CompiledController
+    from amsfe_sym.sim.compiled import controller_params
+
+    ctrl, traj = build_controller(sc, lib)
+    cc = CompiledController(str(lib.library_path), controller_params(ctrl, lib), lib.n)
+    t = np.arange(K) * lib.T
+    ctrl.prepare(t)
+    rows = (*traj.evaluate(t), *traj.higher(t))
+    return ctrl, cc, np.hstack([np.asarray(a).reshape(K, -1) for a in rows])
+
+
 def _moving(sc: Scenario) -> Scenario:
     """A moving start: the arm 0.3 rad off the path, moving against it at 2 rad/s; the
     estimate 0.4 rad and 2 rad/s off."""
@@ -155,24 +169,18 @@ def test_compiled_startup_tick_by_tick(
     """amsfe_ctrl fed the Python controller's inputs (a covariance that converges, NIS values
     that fall) gives its torques to 1e-12 through the wait, the hold, the start and the blend
     (with the command filter's bandwidth scheduled, ``blend_wf``)."""
-    from amsfe_sym.runtime.compiled_loop import CompiledController
-    from amsfe_sym.sim.compiled import controller_params
-
     sc, lib = paper_sim
     sets = ("ready_qd_std=0.05", "ready_nis=6.0", "ready_nis_window=8", f"hold={hold}")
     sets = (*sets, f"blend_wf={blend_wf}")
-    ctrl, traj = build_controller(_with(sc, "amsfe", sets), lib)
-    cc = CompiledController(str(lib.library_path), controller_params(ctrl, lib), lib.n)
-    rng = np.random.default_rng(1)
-    K = 60
+    K, n = 60, lib.n
+    ctrl, cc, refs = controller_pair(_with(sc, "amsfe", sets), lib, K)
     t = np.arange(K) * lib.T
-    ctrl.prepare(t)
-    q, qd, qdd = traj.evaluate(t)
-    jerk, snap = traj.higher(t)
-    x = np.concatenate([q[0] + 0.2, qd[0] - 1.0, q[0], qd[0] + 0.5, lib.theta_true])
+    rng = np.random.default_rng(1)
+    q0, qd0 = refs[0, :n], refs[0, n : 2 * n]
+    x = np.concatenate([q0 + 0.2, qd0 - 1.0, q0, qd0 + 0.5, lib.theta_true])
     waited = []
     for k in range(K):
-        ref = np.concatenate([q[k], qd[k], qdd[k], jerk[k], snap[k]])
+        ref = refs[k]
         x_hat = x + 1e-3 * rng.standard_normal(lib.N)
         z = x[2 * lib.n : 4 * lib.n] + 1e-4 * rng.standard_normal(2 * lib.n)
         P = np.diag(np.full(lib.N, (0.3 * np.exp(-k / 4.0)) ** 2))
