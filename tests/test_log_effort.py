@@ -261,3 +261,39 @@ def test_the_log_specs_effort_noise_reaches_the_estimator(
     err = capsys.readouterr().err.strip()
     assert code != 0 and "\n" not in err and "input_rate_std" in err and "Fix: " in err
     assert not out.exists()
+
+
+def test_estimator_note_names_the_estimator_that_fuses_no_frame() -> None:
+    """``oosm`` with the effort not the applied torque fuses no camera frame: one line says
+    so and names the estimator that does; any other pair says nothing."""
+    from amsfe_sym.apps.estimate_filter import INPUT_UNKNOWN_ESTIMATOR, estimator_note
+
+    for kind in ("joint_torque", "none"):
+        note = estimator_note(kind, "oosm")
+        assert note is not None and repr(kind) in note
+        assert f"--estimator {INPUT_UNKNOWN_ESTIMATOR}" in note
+        for other in ("replay", "cloning", "encoders", "naive"):
+            assert estimator_note(kind, other) is None
+    assert estimator_note("applied", "oosm") is None
+
+
+def test_a_scenarios_oosm_on_a_log_without_the_applied_torque_is_named(
+    runs: dict[str, RunResult], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``amsfe estimate LOG --scenario paper-sim`` keeps the scenario's estimator (oosm) on a
+    ``none`` log, and prints the line the live node prints too; with ``--estimator replay``
+    there is no such line.  The oosm run indeed fuses no frame."""
+    from amsfe_sym.apps.estimate_filter import estimator_note
+
+    spec = tmp_path / "spec.toml"
+    spec.write_text('[effort]\nkind = "none"\n')
+    log = _log(runs["paper_2link"], "none", tmp_path)
+    opts = EstimateOptions(scenario="paper-sim", log_spec=str(spec), plots=False)
+    got = estimate_command(log, tmp_path / "oosm", opts)
+    note = estimator_note("none", "oosm")
+    assert note is not None and note in capsys.readouterr().out
+    assert got.scenario.estimator == "oosm"
+    assert got.estimate.counters.get("frames_applied", 0) == 0  # the note is true
+    opts = EstimateOptions(scenario="paper-sim", log_spec=str(spec), estimator="replay")
+    estimate_command(log, tmp_path / "replay", dataclasses.replace(opts, plots=False))
+    assert note not in capsys.readouterr().out

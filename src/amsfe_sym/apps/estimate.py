@@ -19,7 +19,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from amsfe_sym.apps.estimate_filter import HELD_THETA_STD, ROBOT_TORQUE_STD, filter_for_log
+from amsfe_sym.apps.estimate_filter import (
+    HELD_THETA_STD,
+    INPUT_UNKNOWN_ESTIMATOR,
+    ROBOT_TORQUE_STD,
+    estimator_note,
+    filter_for_log,
+)
 from amsfe_sym.apps.estimate_report import (
     CommandTiming,
     EstimateRun,
@@ -84,13 +90,6 @@ class EstimateOptions:
     force: bool = False
     robot: str | None = None
     verbose: bool = False
-
-
-#: The estimator of ``--robot`` for a log whose applied torque is not logged (effort kind
-#: ``joint_torque`` or ``none``): with the input as states oosm's A1 update finds its
-#: retrodicted covariance indefinite and refuses every camera frame; replay's exact
-#: re-filtering fuses them (docs/effort.md sections 2-3).
-INPUT_UNKNOWN_ESTIMATOR = "replay"
 
 
 def default_scenario(robot: str) -> Scenario:
@@ -297,6 +296,8 @@ def estimate_command(
             f"{log.effort_kind!r} (oosm's single-lag update refuses camera frames when the input "
             "is estimated; docs/effort.md section 2); --estimator to choose"
         )
+    elif note := estimator_note(log.effort_kind, sc.estimator):
+        print(f"  {note}")
     if options.verbose:
         c = log.clock
         print(

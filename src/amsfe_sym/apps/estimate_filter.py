@@ -15,11 +15,33 @@ from amsfe_sym.topics.spec import FROM_LOG, TopicSpec
 
 __all__ = [
     "HELD_THETA_STD",
+    "INPUT_UNKNOWN_ESTIMATOR",
     "ROBOT_TORQUE_STD",
     "LogFilter",
     "current_r",
+    "estimator_note",
     "filter_for_log",
 ]
+
+#: The estimator of ``--robot`` for a log whose applied torque is not logged (effort kind
+#: ``joint_torque`` or ``none``): with the input as states oosm's A1 update finds its
+#: retrodicted covariance indefinite and refuses every camera frame; replay's exact
+#: re-filtering fuses them (docs/effort.md sections 2-3).
+INPUT_UNKNOWN_ESTIMATOR = "replay"
+
+
+def estimator_note(effort_kind: str, estimator: str) -> str | None:
+    """One line for a user whose estimator will fuse no camera frame because the effort is
+    not the applied torque (``oosm`` with kind ``joint_torque`` or ``none``), else None.
+    The log path (``amsfe estimate`` with a scenario) and the live node print the same."""
+    if estimator != "oosm" or effort_kind not in ("joint_torque", "none"):
+        return None
+    return (
+        f"estimator oosm with effort kind {effort_kind!r} fuses no camera frame (with the "
+        "input estimated its single-lag update refuses them; docs/effort.md section 2); "
+        f"--estimator {INPUT_UNKNOWN_ESTIMATOR} fuses them"
+    )
+
 
 #: ``[filter] link_torque_std`` and ``motor_torque_std`` [N m] of ``estimate --robot`` on a
 #: log without the applied torque or slower than T (:func:`filter_for_log`): the

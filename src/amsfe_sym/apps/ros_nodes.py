@@ -152,6 +152,7 @@ def add_node_arguments(p: argparse.ArgumentParser) -> None:
 
 def node_from_args(args: argparse.Namespace) -> int:
     """``amsfe node`` from its parsed options."""
+    from amsfe_sym.apps.estimate_filter import estimator_note
     from amsfe_sym.codegen import library_for
     from amsfe_sym.core.outputs import check_output
     from amsfe_sym.ros.node import NodeOptions, run_node
@@ -169,6 +170,9 @@ def node_from_args(args: argparse.Namespace) -> int:
         inputs = [p for p in (args.scenario, args.topic_spec) if p and Path(p).exists()]
         check_output(record, option="--record", kind="folder", inputs=inputs)
     spec = read_topic_spec(args.topic_spec)
+    note = estimator_note(spec.effort_kind or "applied", sc.estimator)
+    if note:
+        print(f"node: {note}", flush=True)
     lib = library_for(sc)
     opts = NodeOptions(
         controller=args.controller is not None,
