@@ -94,12 +94,12 @@ def main(argv: list[str] | None = None) -> int:
     moved: list[Moved] = check_text(reg)
     for m in moved:
         print(m.line(), flush=True)
+    failed = 0
     if not args.stored:
         names = args.sources or [s.name for s in reg.sources.values() if args.all or not s.costly]
         if args.fresh is not None and len(names) != 1:
             print("check_docs: --fresh compares one source; name it")
             return 2
-        failed = 0
         for name in names:
             src = reg.sources[name]
             if args.fresh is not None:
@@ -120,8 +120,6 @@ def main(argv: list[str] | None = None) -> int:
             for m in found:
                 print(f"  {m.line()}", flush=True)
             moved += found
-    else:
-        failed = 0
     total = len(reg.numbers) + len(reg.blocks)
     print(f"{total} registered entries, {len(moved)} outside their interval or missing")
     if failed:

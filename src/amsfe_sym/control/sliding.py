@@ -133,9 +133,12 @@ class _SlidingBase(Controller):
     #: Whether the generated law takes Lt (the baselines fix it to 0: the surface of (54)).
     has_lt: ClassVar[bool] = True
 
+    def _gain_names(self) -> tuple[str, ...]:
+        """The generated law's gain inputs, in its order."""
+        return tuple(k for k in (*_LAW_GAINS, *self._extra_gains()) if self.has_lt or k != "Lt")
+
     def _gain_args(self) -> list[FloatArray]:
-        keys = (*_LAW_GAINS, *self._extra_gains())
-        return [self._g[k] for k in keys if self.has_lt or k != "Lt"]
+        return [self._g[k] for k in self._gain_names()]
 
 
 class _Cascade(_SlidingBase):
@@ -270,8 +273,7 @@ class _Cascade(_SlidingBase):
         if rho == 1.0 and r == 1.0:
             return gains
         self._rho = r if r < rho else rho + self.lib.T / self._headroom_tau * (r - rho)
-        names = [k for k in (*_LAW_GAINS, *self._extra_gains()) if self.has_lt or k != "Lt"]
-        scaled = self.HEADROOM_GAINS
+        scaled, names = self.HEADROOM_GAINS, self._gain_names()
         return [g * self._rho if k in scaled else g for k, g in zip(names, gains, strict=True)]
 
     def _scalar(self, key: str) -> float:

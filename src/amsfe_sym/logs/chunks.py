@@ -41,11 +41,12 @@ MESSAGE_HEADER = 1 + 8 + 2 + 4 + 8 + 8  # opcode, length, channel, sequence, two
 MAX_CHUNK = 1 << 31
 
 
-def unreadable(path: Path, exc: BaseException) -> LogError:
+def unreadable(path: Path, exc: BaseException, expected: str = "a complete MCAP file") -> LogError:
+    """The one error of a log that cannot be read (``expected``: what it should have been)."""
     return LogError(
         describe(
             f"log {path}",
-            "a complete MCAP file",
+            expected,
             f"{type(exc).__name__}: {exc}",
             "re-record it, or check that the file was copied whole (a recorder killed "
             "mid-write leaves an MCAP without its summary section)",

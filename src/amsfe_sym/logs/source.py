@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import LogError, describe
+from amsfe_sym.logs.chunks import unreadable
 from amsfe_sym.logs.decode import Encoding, deserialize, typestore
 
 __all__ = [
@@ -125,15 +126,7 @@ class TopicData:
 
 
 def _unreadable(path: Path, exc: BaseException) -> LogError:
-    return LogError(
-        describe(
-            f"log {path}",
-            "a complete ROS 1 .bag, rosbag2 folder or .mcap file",
-            f"{type(exc).__name__}: {exc}",
-            "re-record it, or check that the file was copied whole (a recorder killed "
-            "mid-write leaves an MCAP without its summary section)",
-        )
-    )
+    return unreadable(path, exc, "a complete ROS 1 .bag, rosbag2 folder or .mcap file")
 
 
 def _kind(path: Path) -> str:
