@@ -153,26 +153,30 @@ def test_a_stiffness_parameter_enters_the_torque_jacobian(
 def test_gaps_and_lost_torques_match(paper: Any, kind: str, estimator: str) -> None:
     """Encoder gaps and lost torque samples (a ``[qm, qmd, tau_J]`` row holding NaN is
     dropped whole, docs/effort.md section 6): the same steps, tick by tick and in the batch."""
-    from amsfe_sym.runtime.estimator_batch import run_log
-
     py, c, frames = _pair(paper, kind, "state", estimator, holes=True)
     missing = ~np.isfinite(py.inputs.z_encoder).all(axis=1)
     assert missing.sum() == (7 if kind == "joint_torque" else 4)
     _tick_by_tick(py, c, frames, estimator)
     _, c2, _ = _pair(paper, kind, "state", estimator, holes=True)
-    rows = sorted((fr.exposure_step, k, *fr.z) for k in range(len(frames)) for fr in frames[k])
-    fr = np.array(sorted(rows, key=lambda r: (r[1], r[0])), dtype=float).reshape(-1, 4)
-    res = run_log(
-        c2.estimator,
-        c2.inputs.u,
-        c2.inputs.z_encoder,
-        fr[:, 0].astype(np.int64),
-        fr[:, 1].astype(np.int64),
-        fr[:, 2:],
-    )
+    res, _ = _batch(c2, frames)
     N = py.N
     _close("x_hat[-1]", res.x_hat[-1], py.estimator.x[:N], RTOL)
     assert np.isnan(res.encoder_nis[missing]).all()
+
+
+def _batch(c: Any, frames: list[list[Any]], **kw: Any) -> tuple[Any, Any]:
+    """``run_log`` (the C batch) over the pair's C side, its frames in delivery order (by
+    delivery tick, then exposure); and those frame rows (exposure, delivery, u, v)."""
+    from amsfe_sym.runtime.estimator_batch import run_log
+
+    rows = [(fr.exposure_step, k, *fr.z) for k in range(len(frames)) for fr in frames[k]]
+    rows.sort(key=lambda r: (r[1], r[0]))
+    fr = np.array(rows, dtype=float).reshape(-1, 4)
+    ticks = fr[:, :2].astype(np.int64)
+    res = run_log(
+        c.estimator, c.inputs.u, c.inputs.z_encoder, ticks[:, 0], ticks[:, 1], fr[:, 2:], **kw
+    )
+    return res, fr
 
 
 def _decisions(py: Any, frames: list[list[Any]]) -> tuple[Any, ...]:
@@ -209,22 +213,9 @@ def test_the_batch_call_matches_python(
 ) -> None:
     """``run_log`` (one C call per chunk of ticks) gives the reference's x, diag P, encoder NIS
     and frame statuses; the robot's N states, the input states apart."""
-    from amsfe_sym.runtime.estimator_batch import run_log
-
     py, c, frames = _pair(paper, kind, input_model, estimator)
     x, Pd, nis, status = _decisions(py, frames)
-    rows = [(fr.exposure_step, k, *fr.z) for k in range(len(frames)) for fr in frames[k]]
-    rows.sort(key=lambda r: (r[1], r[0]))
-    fr = np.array(rows, dtype=float).reshape(-1, 4)
-    res = run_log(
-        c.estimator,
-        c.inputs.u,
-        c.inputs.z_encoder,
-        fr[:, 0].astype(np.int64),
-        fr[:, 1].astype(np.int64),
-        fr[:, 2:],
-        chunk=97,
-    )
+    res, fr = _batch(c, frames, chunk=97)
     assert res.x_hat.shape == x.shape
     assert (res.input_hat is None) == (input_model != "state")
     _close("x_hat", res.x_hat, x, RTOL)

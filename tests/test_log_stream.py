@@ -89,6 +89,20 @@ def test_the_simulated_bag_and_its_mcap_file(bag: Path) -> None:
     _check(next(bag.glob("*.mcap")))
 
 
+def _variant(bag: Path, tmp_path: Path, options: dict[str, Any]) -> Path:
+    """The bag's MCAP rewritten with the writer ``options`` (enum names as strings;
+    ``shuffle``: messages out of log-time order)."""
+    from mcap.writer import CompressionType, IndexType
+
+    opts = dict(options)
+    shuffle = bool(opts.pop("shuffle", False))
+    if "compression" in opts:
+        opts["compression"] = CompressionType[opts["compression"]]
+    if "index_types" in opts:
+        opts["index_types"] = IndexType[opts["index_types"]]
+    return _rewrite(next(bag.glob("*.mcap")), tmp_path / "log.mcap", shuffle, **opts)
+
+
 @pytest.mark.parametrize(
     "options",
     [
@@ -102,15 +116,7 @@ def test_the_simulated_bag_and_its_mcap_file(bag: Path) -> None:
     ids=["zstd-small", "lz4", "none", "unchunked", "no-index", "shuffled"],
 )
 def test_mcap_variants(bag: Path, tmp_path: Path, options: dict[str, Any]) -> None:
-    from mcap.writer import CompressionType, IndexType
-
-    opts = dict(options)
-    shuffle = bool(opts.pop("shuffle", False))
-    if "compression" in opts:
-        opts["compression"] = CompressionType[opts["compression"]]
-    if "index_types" in opts:
-        opts["index_types"] = IndexType[opts["index_types"]]
-    _check(_rewrite(next(bag.glob("*.mcap")), tmp_path / "log.mcap", shuffle, **opts))
+    _check(_variant(bag, tmp_path, options))
 
 
 def test_sqlite3_goes_through_the_messages(bag: Path, tmp_path: Path) -> None:
@@ -343,21 +349,13 @@ def test_first_messages_equal_mcaps_reader(
 ) -> None:
     """first_messages (the fewest chunks, cut with numpy) against mcap's own reader in
     log-time order, on small chunks, out-of-order files; None without indexes."""
-    from mcap.writer import CompressionType, IndexType
-
     from amsfe_sym.logs import source
     from amsfe_sym.logs.firsts import first_messages, first_payloads
 
-    opts = dict(options)
-    shuffle = bool(opts.pop("shuffle", False))
-    if "compression" in opts:
-        opts["compression"] = CompressionType[opts["compression"]]
-    if "index_types" in opts:
-        opts["index_types"] = IndexType[opts["index_types"]]
-    path = _rewrite(next(bag.glob("*.mcap")), tmp_path / "log.mcap", shuffle, **opts)
+    path = _variant(bag, tmp_path, options)
     ref = _first_by_reference(source._mcap_payloads(path, TOPICS), count)
     got = first_messages(path, TOPICS, count)
-    if "index_types" in opts or "use_chunking" in opts:
+    if "index_types" in options or "use_chunking" in options:
         assert got is None  # the caller reads message by message
     else:
         assert got == ref

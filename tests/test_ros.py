@@ -581,6 +581,30 @@ def test_lockstep_reproduces_simulate(paper: Any, tmp_path: Path) -> None:
     assert diag["frames_refused"] == ref.counters["frames_rejected"]
 
 
+def _play_into_recording_node(
+    tmp_path: Path,
+    bag: Path,
+    rec: Path,
+    node_args: tuple[str, ...] = (),
+    play_args: tuple[str, ...] = (),
+) -> dict[str, list[Any]]:
+    """``amsfe play --ordered BAG`` into ``amsfe node paper-sim --record REC`` (2 s, a deep
+    reliable queue: no sample lost on a loaded machine); both exit 0; the record's topics."""
+    env = _ros_env(tmp_path)
+    depth = ["--ros-args", "-p", "qos.depth:=5000"]
+    procs = []
+    try:
+        procs.append(_start(env, "node", "paper-sim", "--duration", "2", "--record", str(rec),
+                            *node_args, *PATIENT_NODE, *depth))  # fmt: skip
+        procs.append(_start(env, "play", str(bag), "--start-timeout", "60", "--ordered",
+                            *play_args, *depth))  # fmt: skip
+    finally:
+        results = _finish(procs, 120.0)
+    for code, text in results:
+        assert code == 0, text
+    return _bag(rec)
+
+
 @pytest.mark.ros
 @pytest.mark.slow
 def test_play_into_node_is_estimate(paper: Any, tmp_path: Path) -> None:
@@ -593,20 +617,9 @@ def test_play_into_node_is_estimate(paper: Any, tmp_path: Path) -> None:
     sc, lib = paper
     bag = write_run_bag(run(sc, lib, runtime="compiled"), tmp_path / "bag")
     ref = estimate_command(bag, tmp_path / "est", EstimateOptions(plots=False)).estimate
-    env = _ros_env(tmp_path)
     rec = tmp_path / "rec"
-    depth = ["--ros-args", "-p", "qos.depth:=5000"]  # no sample lost on a loaded machine
-    procs = []
-    try:
-        procs.append(_start(env, "node", "paper-sim", "--duration", "2", "--record", str(rec),
-                            *PATIENT_NODE, *depth))  # fmt: skip
-        procs.append(_start(env, "play", str(bag), "--start-timeout", "60", "--ordered", *depth))
-    finally:
-        results = _finish(procs, 120.0)
-    for code, text in results:
-        assert code == 0, text
+    got = _play_into_recording_node(tmp_path, bag, rec)
     n = lib.n
-    got = _bag(rec)
     est = np.array([np.r_[m.position, m.velocity] for m in got["/amsfe/estimate"]])
     np.testing.assert_allclose(est, ref.x_hat[:, : 2 * n], rtol=0, atol=1e-9)
     again = estimate_command(rec, tmp_path / "est2", EstimateOptions(plots=False)).estimate
@@ -637,22 +650,12 @@ def test_play_into_node_with_a_joint_torque_is_estimate(
     sc, lib = paper
     _, bag, spec = _effort_log(sc, lib, kind, tmp_path, positions, shared)
     ref = _estimate_with(bag, spec, tmp_path / "est")
-    env = _ros_env(tmp_path)
     rec = tmp_path / "rec"
-    depth = ["--ros-args", "-p", "qos.depth:=5000"]  # no sample lost on a loaded machine
-    procs = []
-    try:
-        procs.append(_start(env, "node", "paper-sim", "--duration", "2", "--record", str(rec),
-                            "--topic-spec", str(spec), "--estimator", "replay",
-                            *PATIENT_NODE, *depth))  # fmt: skip
-        procs.append(_start(env, "play", str(bag), "--start-timeout", "60", "--ordered",
-                            "--topic-spec", str(spec), *depth))  # fmt: skip
-    finally:
-        results = _finish(procs, 120.0)
-    for code, text in results:
-        assert code == 0, text
+    spec_args = ("--topic-spec", str(spec))
+    got = _play_into_recording_node(
+        tmp_path, bag, rec, (*spec_args, "--estimator", "replay"), spec_args
+    )
     n = lib.n
-    got = _bag(rec)
     est = np.array([np.r_[m.position, m.velocity] for m in got["/amsfe/estimate"]])
     assert est.shape == (ref.x_hat.shape[0], 2 * n)
     np.testing.assert_allclose(est, ref.x_hat[:, : 2 * n], rtol=0, atol=1e-9)
