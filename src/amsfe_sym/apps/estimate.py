@@ -22,6 +22,7 @@ import numpy as np
 from amsfe_sym.apps.estimate_filter import (
     HELD_THETA_STD,
     INPUT_UNKNOWN_ESTIMATOR,
+    OOSM_REFUSES,
     ROBOT_TORQUE_STD,
     estimator_note,
     filter_for_log,
@@ -293,8 +294,7 @@ def estimate_command(
         sc = sc.with_overrides(estimator=INPUT_UNKNOWN_ESTIMATOR)
         print(
             f"  estimator {INPUT_UNKNOWN_ESTIMATOR}: the default for effort kind "
-            f"{log.effort_kind!r} (oosm's single-lag update refuses camera frames when the input "
-            "is estimated; docs/effort.md section 2); --estimator to choose"
+            f"{log.effort_kind!r} ({OOSM_REFUSES}); --estimator to choose"
         )
     elif note := estimator_note(log.effort_kind, sc.estimator):
         print(f"  {note}")

@@ -16,6 +16,7 @@ from amsfe_sym.topics.spec import FROM_LOG, TopicSpec
 __all__ = [
     "HELD_THETA_STD",
     "INPUT_UNKNOWN_ESTIMATOR",
+    "OOSM_REFUSES",
     "ROBOT_TORQUE_STD",
     "LogFilter",
     "current_r",
@@ -28,6 +29,11 @@ __all__ = [
 #: retrodicted covariance indefinite and refuses every camera frame; replay's exact
 #: re-filtering fuses them (docs/effort.md sections 2-3).
 INPUT_UNKNOWN_ESTIMATOR = "replay"
+#: Why oosm fuses no frame with the input estimated, as both printed lines give it.
+OOSM_REFUSES = (
+    "oosm's single-lag update refuses camera frames when the input is estimated; "
+    "docs/effort.md section 2"
+)
 
 
 def estimator_note(effort_kind: str, estimator: str) -> str | None:
@@ -37,9 +43,8 @@ def estimator_note(effort_kind: str, estimator: str) -> str | None:
     if estimator != "oosm" or effort_kind not in ("joint_torque", "none"):
         return None
     return (
-        f"estimator oosm with effort kind {effort_kind!r} fuses no camera frame (with the "
-        "input estimated its single-lag update refuses them; docs/effort.md section 2); "
-        f"--estimator {INPUT_UNKNOWN_ESTIMATOR} fuses them"
+        f"estimator oosm with effort kind {effort_kind!r} fuses no camera frame "
+        f"({OOSM_REFUSES}); --estimator {INPUT_UNKNOWN_ESTIMATOR} fuses them"
     )
 
 

@@ -361,6 +361,7 @@ static const double *headroom(amsfe_ctrl *c, const double **in, int ih, int ie, 
     if (dem > c->u_max[j] && c->u_max[j] / dem < r) r = c->u_max[j] / dem;
   }
   double rho = c->rho;
+  if (rho == 1.0 && r == 1.0) return c->wf; /* unscaled, as the Python returns early */
   c->rho = r < rho ? r : rho + c->par.T / tau * (r - rho);
   for (long j = 0; j < n; ++j) {
     c->hs[j] = c->h[j] * c->rho, c->epss[j] = c->eps[j] * c->rho;
