@@ -18,6 +18,7 @@
  *   ctrl <controller> <T> <p> <qmd_next_hold> <state_true> <link_bandwidth> <motor_bandwidth>
  *        <startup_converged> <ready_q_std> <ready_qd_std> <blend_accel> <blend_rate>
  *        <ready_nis> <ready_nis_window> <hold_motor> <blend_wf> <headroom_tau>
+ *        <blend_lead>
  *   <name> <n numbers>   for h lam Lt eps phi wm tau_max wf vmax u_max Mm Fm Ks ks_theta
  *   theta_initial <p numbers>
  *   frame <exposure step> <u> <v>     (delivered at the next `step`; any number per step)
@@ -87,8 +88,8 @@ int main(int argc, char **argv) {
     if (est_block_line(&blk, &d, &r, &est)) {
       if (k) log_fail(&r, "%s: expected the estimator block first, found it after steps", r.key);
     } else if (vi == NCTRL - 1) { /* ctrl */
-      char *t[17];
-      log_fixed(&r, "ctrl", t, 17);
+      char *t[18];
+      log_fixed(&r, "ctrl", t, 18);
       int *ints[] = {&cp.controller, &cp.qmd_next_hold, &cp.state_true, &cp.startup_converged,
                      &cp.hold_motor};
       int int_at[] = {0, 3, 4, 7, 14};
@@ -96,9 +97,10 @@ int main(int argc, char **argv) {
         *ints[i] = (int)log_parse_long(&r, "ctrl", int_at[i], t[int_at[i]], INT_MIN, INT_MAX);
       double *dbl[] = {&cp.T,           &cp.p,           &cp.link_bandwidth, &cp.motor_bandwidth,
                        &cp.ready_q_std, &cp.ready_qd_std, &cp.blend_accel, &cp.blend_rate,
-                       &cp.ready_nis,   &cp.ready_nis_window, &cp.blend_wf, &cp.headroom_tau};
-      int dbl_at[] = {1, 2, 5, 6, 8, 9, 10, 11, 12, 13, 15, 16};
-      for (int i = 0; i < 12; ++i) *dbl[i] = log_parse_double(&r, "ctrl", dbl_at[i], t[dbl_at[i]]);
+                       &cp.ready_nis,   &cp.ready_nis_window, &cp.blend_wf, &cp.headroom_tau,
+                       &cp.blend_lead};
+      int dbl_at[] = {1, 2, 5, 6, 8, 9, 10, 11, 12, 13, 15, 16, 17};
+      for (int i = 0; i < 13; ++i) *dbl[i] = log_parse_double(&r, "ctrl", dbl_at[i], t[dbl_at[i]]);
       seen |= 1u << vi;
     } else if (vi == NV) { /* ks_theta: integers (-1 = the spec's Ks) */
       log_vector(&r, "ks_theta", ks_d, n);

@@ -14,10 +14,11 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
-from amsfe_sym.codegen import ALL_PARTS, compiler, generate
+from amsfe_sym.codegen import ALL_PARTS, compiler, generate, library_for
 from amsfe_sym.load import Robot, load_robot
 from amsfe_sym.load.spec import robots_dir
 from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.scenario import Scenario, load_scenario
 
 # In CI (CI=true) property tests draw a fixed sequence of examples, so a red run can be
 # reproduced; locally they explore new examples each run.
@@ -133,3 +134,11 @@ def one_chord_2link(tmp_path_factory: pytest.TempPathFactory) -> ModelLibrary:
     (folder / "robot.toml").write_text(spec)
     gen = generate(folder / "robot.toml", extra_cflags=["-O0"], out=folder.parent / "gen")
     return ModelLibrary(gen.out_dir)
+
+
+@pytest.fixture(scope="module")
+def paper_sim() -> tuple[Scenario, ModelLibrary]:
+    """paper-sim and its library (compiled once per session: the content-hash cache); a
+    module that records its own runs defines its own ``paper_sim``."""
+    sc = load_scenario("paper-sim")
+    return sc, library_for(sc)

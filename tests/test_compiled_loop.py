@@ -42,12 +42,6 @@ BLENDED = ("amsfe", "dtsmc-ekf")  # truth acts on the true state: compared with 
 SIGNALS = ("x_true", "x_hat", "P_diag", "nees", "u", "z_enc", "s", "bound", "frames", "tau_d")
 
 
-@pytest.fixture(scope="module")
-def paper_sim() -> tuple[Scenario, ModelLibrary]:
-    sc = load_scenario("paper-sim")
-    return sc, library_for(sc)
-
-
 def assert_same_run(a: RunResult, b: RunResult, tol: float = 1e-8) -> None:
     """Every recorded signal within ``tol`` (relative to 1 + |a|), the same decisions."""
     assert a.diverged_at == b.diverged_at
@@ -159,7 +153,7 @@ def test_compiled_controller_tick_by_tick(
         if name in ("amsfe", "dtsmc-ekf"):  # the start-up waited, then ran, on both sides
             assert waited[0] and not waited[-1], name
         if blend != "inf" and name == "amsfe":  # the blend ran (truth starts on the path)
-            tb = ctrl._blend[1]  # type: ignore[attr-defined]
+            tb = ctrl._blend[2]  # type: ignore[attr-defined]
             assert tb > 0
 
 

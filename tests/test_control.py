@@ -15,7 +15,7 @@ import pinocchio as pin
 import pytest
 
 from amsfe_sym.apps.check import random_states
-from amsfe_sym.codegen import generate, library_for
+from amsfe_sym.codegen import generate
 from amsfe_sym.control import LawInputs, make_controller
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.signals.trajectory import from_config as trajectory_from_config
@@ -375,12 +375,6 @@ def test_gain_changed_at_run_time_changes_u_without_regenerating(libraries) -> N
 
 
 # ----------------------------------------------------------------------------- closed loop
-
-
-@pytest.fixture(scope="module")
-def paper_sim():
-    sc = load_scenario("paper-sim")
-    return sc, library_for(sc)
 
 
 @pytest.mark.slow

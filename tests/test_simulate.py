@@ -18,12 +18,6 @@ from amsfe_sym.sim.loop import run
 from amsfe_sym.sim.record import summarize
 
 
-@pytest.fixture(scope="module")
-def paper_sim():
-    sc = load_scenario("paper-sim")
-    return sc, library_for(sc)
-
-
 def test_cli_run_folder_and_exact_rerun(tmp_path: Path, capsys) -> None:
     out = tmp_path / "run"
     args = ["simulate", "--duration", "0.6", "--estimator", "replay", "--seed", "3"]

@@ -14,11 +14,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from amsfe_sym.codegen import library_for
 from amsfe_sym.control import LawInputs
 from amsfe_sym.errors import ConfigError
 from amsfe_sym.runtime.library import ModelLibrary
-from amsfe_sym.scenario import Scenario, apply_sets, load_scenario
+from amsfe_sym.scenario import Scenario, apply_sets
 from amsfe_sym.sim.builders import build_controller
 from amsfe_sym.sim.loop import run
 from tests.test_compiled_loop import assert_same_run
@@ -33,12 +32,6 @@ STARTUP = (
     "blend_rate=5",
     "blend_wf=20",
 )
-
-
-@pytest.fixture(scope="module")
-def paper_sim() -> tuple[Scenario, ModelLibrary]:
-    sc = load_scenario("paper-sim")
-    return sc, library_for(sc)
 
 
 def _with(sc: Scenario, controller: str, sets: tuple[str, ...]) -> Scenario:

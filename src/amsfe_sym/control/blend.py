@@ -29,7 +29,16 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["A0", "A1", "B0", "B1", "blend_offsets", "blend_time", "blend_weight"]
+__all__ = [
+    "A0",
+    "A1",
+    "B0",
+    "B1",
+    "blend_offsets",
+    "blend_through",
+    "blend_time",
+    "blend_weight",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -122,3 +131,65 @@ def blend_offsets(s: float, tb: float, d0: FloatArray, d1: FloatArray) -> FloatA
         out[r * n : (r + 1) * n] = (d0 * _poly(B0, r, tau) + d1 * tb * _poly(B1, r, tau)) / scale
         scale *= tb
     return out
+
+
+def _through(
+    e0: FloatArray, e1: FloatArray, wait: float, tb: float
+) -> tuple[FloatArray, FloatArray]:
+    """The offsets (d0, d1) of the blend of duration ``tb`` whose offset and rate at ``wait``
+    [s] after its start are (e0, e1): per joint, the 2x2 system
+    ``[b0, Tb b1; b0' / Tb, b1'] (d0, d1) = (e0, e1)`` at tau = wait / Tb (the C the same)."""
+    tau = wait / tb
+    a, b = _poly(B0, 0, tau), tb * _poly(B1, 0, tau)
+    c, d = _poly(B0, 1, tau) / tb, _poly(B1, 1, tau)
+    det = a * d - b * c
+    return (d * e0 - b * e1) / det, (a * e1 - c * e0) / det
+
+
+def blend_through(
+    e0: FloatArray, e1: FloatArray, wait: float, accel: float, rate: float = math.inf
+) -> tuple[float, FloatArray, FloatArray]:
+    """The blend that started ``wait`` [s] ago and passes through the offsets (e0, e1) now:
+    its duration Tb [s] and its offsets at its start (d0, d1), for a start-up that trusted
+    its estimate ``wait`` after the loop began (``blend_from = "start"``, issue 28).
+
+    Tb is the least (by bisection) with Tb > wait whose blend, solved to pass through
+    (e0, e1) at ``wait`` (:func:`_through`), keeps the budgets of :func:`blend_time`:
+    ``blend_time(d0, d1) <= Tb``.  Because b0 and b1 are flat to the 4th order at the start,
+    d0 ~ e0 - e1 wait and d1 ~ e1 when ``wait << Tb``: the plan is the one the oracle would
+    have made at the first tick from the state the arm then had, had it moved on at its rate,
+    so the wait spends the polynomial's flat start instead of adding e1 wait to the offset
+    the blend must return.  ``wait = 0`` (or no offset, or ``accel`` infinite) is
+    :func:`blend_time` on (e0, e1) itself.
+
+    Args:
+        e0: The angle offsets now [rad], per joint.
+        e1: The rate offsets now [rad/s], per joint.
+        wait: Time since the blend's start [s], >= 0.
+        accel: The offset's acceleration budget [rad/s^2].
+        rate: The bandwidth [rad/s] bounding its jerk and snap (inf: no bound).
+    """
+    tb0 = blend_time(e0, e1, accel, rate)
+    if not wait > 0.0 or tb0 == 0.0:
+        return tb0, e0.copy(), e1.copy()
+
+    def fits(tb: float) -> bool:
+        d0, d1 = _through(e0, e1, wait, tb)
+        ok = bool(np.all(np.isfinite(d0)) and np.all(np.isfinite(d1)))
+        return ok and not blend_time(d0, d1, accel, rate) > tb
+
+    lo, step = wait, tb0
+    hi = wait + step
+    for _ in range(64):  # bracket: a blend long enough always fits
+        if fits(hi):
+            break
+        lo, step = hi, 2.0 * step
+        hi = wait + step
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if fits(mid):
+            hi = mid
+        else:
+            lo = mid
+    d0, d1 = _through(e0, e1, wait, hi)
+    return hi, d0, d1

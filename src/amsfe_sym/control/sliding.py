@@ -32,7 +32,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from amsfe_sym.control.base import Controller, FloatArray, LawInputs, register
-from amsfe_sym.control.blend import blend_offsets, blend_time, blend_weight
+from amsfe_sym.control.blend import blend_offsets, blend_through, blend_time, blend_weight
 from amsfe_sym.errors import ConfigError, check_known_keys, describe
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.signals.trajectory import Trajectory
@@ -161,6 +161,7 @@ class _Cascade(_SlidingBase):
         "blend_rate": float("inf"),
         "blend_wf": float("inf"),
         "headroom_tau": float("inf"),
+        "blend_lead": 0.0,
     }
     #: The gains ``headroom_tau`` scales by the actuators' headroom (the loops' bandwidths and
     #: the reaching law's gains).
@@ -195,6 +196,12 @@ class _Cascade(_SlidingBase):
     #: actuators cannot meet lowers the loops' bandwidths on every joint alike, so the law
     #: asks what they can apply instead of winding the flexible mode into a saturated
     #: oscillation (issue 28, docs/control.md "Start-up").
+    #: With ``blend_lead`` in (0, 1] the blend is planned as if it had started that share of
+    #: the wait before the trusted tick (1: at the loop's first tick), through the trusted
+    #: estimate at the trusted tick (:func:`~amsfe_sym.control.blend.blend_through`): the
+    #: wait spends the blend's flat start instead of adding the offset the arm drifted
+    #: meanwhile to the one the blend must return; 0: planned from the trusted tick
+    #: (docs/control.md, "Start-up, issue 28, fourth pass").
     STARTUPS: ClassVar[tuple[str, ...]] = ("first", "converged")
     HOLDS: ClassVar[tuple[str, ...]] = ("reference", "motor", "auto")
 
@@ -242,7 +249,20 @@ class _Cascade(_SlidingBase):
         self._blend_accel = self._scalar("blend_accel")
         self._blend_rate = self._scalar("blend_rate")
         self._blend_wf = self._scalar("blend_wf")
-        self._blend: tuple[int, float, FloatArray, FloatArray] | None = None  # k0, Tb, d0, d1
+        lead = self.gains["blend_lead"]
+        if isinstance(lead, bool) or not isinstance(lead, int | float) or not 0 <= lead <= 1:
+            raise ConfigError(
+                describe(
+                    f"controller {self.name!r} gain blend_lead",
+                    "a number in [0, 1] (0: off)",
+                    repr(lead),
+                    "see docs/control.md, Start-up",
+                )
+            )
+        self._blend_lead = float(lead)
+        self._k_first: int | None = None  # the loop's first tick (blend_lead)
+        # the blend: its first tick k0, s at k0 [s], Tb, d0, d1
+        self._blend: tuple[int, float, float, FloatArray, FloatArray] | None = None
         self._headroom_tau = self._scalar("headroom_tau")
         self._rho = 1.0  # the headroom scale of the gains (1: unscaled)
         self._u_demand: FloatArray | None = None  # the law's last torque demand [N m]
@@ -300,6 +320,7 @@ class _Cascade(_SlidingBase):
         own["blend_rate"] = self._blend_rate
         own["blend_wf"] = self._blend_wf
         own["headroom_tau"] = self._headroom_tau
+        own["blend_lead"] = self._blend_lead
         return own
 
     def _converged(self, P_diag: FloatArray | None, nis: float | None = None) -> bool:
@@ -357,6 +378,8 @@ class _Cascade(_SlidingBase):
         lead = self._law_inputs(x_true, theta_true, x_hat, z_enc)
         ref = self._ref_at(k, t)
         gains = self._gain_args()
+        if self._k_first is None:
+            self._k_first = k
         if self.gains["startup"] == "converged" and not self._converged(
             tick.P_diag, tick.encoder_nis
         ):
@@ -382,11 +405,16 @@ class _Cascade(_SlidingBase):
             if not self._started and self.gains["startup"] == "converged":
                 # the blended reference starts from the state the law acts on
                 d0, d1 = lead[0][:n] - ref[:n], lead[0][n : 2 * n] - ref[n : 2 * n]
-                tb = blend_time(d0, d1, self._blend_accel, self._blend_rate)
-                self._blend = (k, tb, d0.copy(), d1.copy())
+                assert self._k_first is not None
+                s0 = self._blend_lead * ((k - self._k_first) * self.lib.T)
+                if s0 > 0.0:  # planned as if started s0 ago, through the estimate now
+                    tb, d0, d1 = blend_through(d0, d1, s0, self._blend_accel, self._blend_rate)
+                else:
+                    tb = blend_time(d0, d1, self._blend_accel, self._blend_rate)
+                self._blend = (k, s0, tb, d0.copy(), d1.copy())
             if self._blend is not None:
-                k0, tb, d0, d1 = self._blend
-                sb = (k - k0) * self.lib.T
+                k0, s0, tb, d0, d1 = self._blend
+                sb = (k - k0) * self.lib.T + s0
                 gains = self._headroom(gains, sb < tb)
                 ref = ref + blend_offsets(sb, tb, d0, d1)
                 gains = self._blend_gains(gains, sb, tb)

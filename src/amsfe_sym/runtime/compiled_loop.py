@@ -94,6 +94,7 @@ class ControllerParams:
     hold_motor: bool = False
     blend_wf: float = float("inf")
     headroom_tau: float = float("inf")
+    blend_lead: float = 0.0
     _keep: list[Any] = field(default_factory=list, repr=False)
 
     def struct(self) -> ctypes.Structure:
@@ -142,6 +143,7 @@ class ControllerParams:
             int(self.hold_motor),
             float(self.blend_wf),
             float(self.headroom_tau),
+            float(self.blend_lead),
         )
 
 
@@ -419,7 +421,7 @@ def write_loop_log(
         f"{int(params.startup_converged)} {params.ready_q_std!r} {params.ready_qd_std!r} "
         f"{params.blend_accel!r} {params.blend_rate!r} "
         f"{params.ready_nis!r} {params.ready_nis_window!r} {int(params.hold_motor)} "
-        f"{params.blend_wf!r} {params.headroom_tau!r}"
+        f"{params.blend_wf!r} {params.headroom_tau!r} {params.blend_lead!r}"
     )
     n = params.u_max.size
     for key in ("h", "lam", "Lt", "eps", "phi", "wm", "tau_max", "wf", "vmax"):

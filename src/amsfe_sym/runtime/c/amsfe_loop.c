@@ -52,6 +52,9 @@ struct amsfe_ctrl {
   double *c_hold;  /* cascade: the motor's offset from qm_r at the first tick [n] */
   double *hold1, *hold0; /* the law's hold input: ones, zeros [n] */
   long blend_k0;   /* cascade: the blended start's first tick (control/blend.py) */
+  double blend_s0; /* s at blend_k0 [s] (blend_lead: the plan started that long before) */
+  long k_first;    /* the first tick this controller ran (blend_lead) */
+  int have_kfirst;
   double blend_tb; /* its duration [s] */
   double *blend_d0, *blend_d1, *refb; /* its offsets [n], [n]; the blended reference [5n] */
   double *wfb;     /* the command filter's bandwidth while the blend runs (blend_wf) [n] */
@@ -134,6 +137,7 @@ static int ctrl_params_ok(const amsfe_ctrl_params *p) {
                                !(p->blend_accel > 0) || !(p->blend_rate > 0) ||
                                !(p->ready_nis >= 0) || !(p->blend_wf >= 0) ||
                                !(p->headroom_tau >= 0) ||
+                               !(p->blend_lead >= 0 && p->blend_lead <= 1) ||
                                (p->ready_nis > 0 && !(p->ready_nis_window > 0))))
     return 0;
   if (p->controller == AMSFE_CTRL_TRUTH_CT)
@@ -169,6 +173,8 @@ void amsfe_ctrl_reset(amsfe_ctrl *c) {
   c->ready = 0;
   c->have_hold = 0;
   c->have_mhold = 0;
+  c->have_kfirst = 0;
+  c->blend_s0 = 0.0;
   c->rho = 1.0;
   c->have_udem = 0;
   c->nis_mean = 0.0;
@@ -305,6 +311,56 @@ static double blend_time(const double *d0, const double *d1, long n, double acce
   return tb;
 }
 
+/* control/blend.py's _through: (d0, d1) of the blend of duration tb whose offset and rate are
+ * (e0, e1) at wait after its start; 0 when one is not finite */
+static int blend_solve(const double *e0, const double *e1, long n, double wait, double tb,
+                       double *d0, double *d1) {
+  double tau = wait / tb;
+  double a = blend_poly(BLEND_B0, 0, tau), b = tb * blend_poly(BLEND_B1, 0, tau);
+  double c = blend_poly(BLEND_B0, 1, tau) / tb, d = blend_poly(BLEND_B1, 1, tau);
+  double det = a * d - b * c;
+  int ok = 1;
+  for (long j = 0; j < n; ++j) {
+    d0[j] = (d * e0[j] - b * e1[j]) / det;
+    d1[j] = (a * e1[j] - c * e0[j]) / det;
+    ok = ok && isfinite(d0[j]) && isfinite(d1[j]);
+  }
+  return ok;
+}
+
+static int blend_fits(const double *e0, const double *e1, long n, double wait, double tb,
+                      double accel, double rate, double *d0, double *d1) {
+  return blend_solve(e0, e1, n, wait, tb, d0, d1) &&
+         !(blend_time(d0, d1, n, accel, rate) > tb);
+}
+
+/* control/blend.py's blend_through: the blend that started wait [s] ago and passes through
+ * the offsets (e0, e1) now; its duration, and its offsets at its start into (d0, d1) */
+static double blend_through(const double *e0, const double *e1, long n, double wait,
+                            double accel, double rate, double *d0, double *d1) {
+  double tb0 = blend_time(e0, e1, n, accel, rate);
+  if (!(wait > 0.0) || tb0 == 0.0) {
+    memcpy(d0, e0, sizeof(double) * (size_t)n);
+    memcpy(d1, e1, sizeof(double) * (size_t)n);
+    return tb0;
+  }
+  double lo = wait, step = tb0, hi = wait + step;
+  for (int i = 0; i < 64; ++i) { /* bracket: a blend long enough always fits */
+    if (blend_fits(e0, e1, n, wait, hi, accel, rate, d0, d1)) break;
+    lo = hi, step = 2.0 * step;
+    hi = wait + step;
+  }
+  for (int i = 0; i < 60; ++i) {
+    double mid = 0.5 * (lo + hi);
+    if (blend_fits(e0, e1, n, wait, mid, accel, rate, d0, d1))
+      hi = mid;
+    else
+      lo = mid;
+  }
+  blend_solve(e0, e1, n, wait, hi, d0, d1);
+  return hi;
+}
+
 /* blend_offsets(s, Tb, d0, d1)[: orders n] into out (zero once s >= Tb) */
 static void blend_offsets_into(double s, double tb, const double *d0, const double *d1, long n,
                                int orders, double *out) {
@@ -323,7 +379,7 @@ static void blend_offsets_into(double s, double tb, const double *d0, const doub
 /* ref + blend_offsets(s, Tb, d0, d1) into c->refb */
 static const double *blended(amsfe_ctrl *c, long k, const double *ref) {
   long n = c->d.n;
-  double s = (double)(k - c->blend_k0) * c->par.T, tb = c->blend_tb;
+  double s = (double)(k - c->blend_k0) * c->par.T + c->blend_s0, tb = c->blend_tb;
   if (!(s < tb)) return ref;
   double tau = s / tb, scale = 1.0;
   for (int r = 0; r < 5; ++r) {
@@ -340,7 +396,8 @@ static const double *blended(amsfe_ctrl *c, long k, const double *ref) {
  * scaled it), while the blend runs */
 static const double *blend_bandwidth(amsfe_ctrl *c, long k, const double *wf) {
   long n = c->d.n;
-  double s = (double)(k - c->blend_k0) * c->par.T, tb = c->blend_tb, bwf = c->par.blend_wf;
+  double s = (double)(k - c->blend_k0) * c->par.T + c->blend_s0, tb = c->blend_tb;
+  double bwf = c->par.blend_wf;
   if (!(s < tb) || !(bwf > 0) || isinf(bwf)) return wf;
   double w = blend_poly(BLEND_B0, 0, s / tb);
   for (long j = 0; j < n; ++j) c->wfb[j] = fmin(wf[j], w * bwf + (1.0 - w) * wf[j]);
@@ -376,6 +433,7 @@ static int cascade(amsfe_ctrl *c, long k, const double *lead0, const double *lea
                    const double *ref, const double *z, double *u, amsfe_ctrl_out *out) {
   long n = c->d.n;
   int dtsmc = c->par.controller == AMSFE_CTRL_DTSMC;
+  if (!c->have_kfirst) c->k_first = k, c->have_kfirst = 1;
   const double *lt = c->par.controller == AMSFE_CTRL_DTSMC_EKF ? c->zeros : c->Lt;
   const double *in[16];
   int m = 0;
@@ -431,11 +489,19 @@ static int cascade(amsfe_ctrl *c, long k, const double *lead0, const double *lea
         c->blend_d1[j] = lead0[n + j] - ref[n + j];
       }
       c->blend_k0 = k;
-      c->blend_tb =
-          blend_time(c->blend_d0, c->blend_d1, n, c->par.blend_accel, c->par.blend_rate);
+      c->blend_s0 = c->par.blend_lead * ((double)(k - c->k_first) * c->par.T);
+      if (c->blend_s0 > 0.0) { /* planned as if started s0 ago, through the estimate now */
+        memcpy(c->mr[0], c->blend_d0, sizeof(double) * (size_t)n);
+        memcpy(c->mr[1], c->blend_d1, sizeof(double) * (size_t)n);
+        c->blend_tb = blend_through(c->mr[0], c->mr[1], n, c->blend_s0, c->par.blend_accel,
+                                    c->par.blend_rate, c->blend_d0, c->blend_d1);
+      } else {
+        c->blend_tb =
+            blend_time(c->blend_d0, c->blend_d1, n, c->par.blend_accel, c->par.blend_rate);
+      }
     }
     if (c->par.startup_converged) { /* once started */
-      double sb = (double)(k - c->blend_k0) * c->par.T;
+      double sb = (double)(k - c->blend_k0) * c->par.T + c->blend_s0;
       const double *wf = headroom(c, in, ih, ie, iw, sb < c->blend_tb);
       in[dtsmc ? 2 : 1] = blended(c, k, ref);
       *wf_in = blend_bandwidth(c, k, wf);

@@ -89,6 +89,11 @@ typedef struct {
    * rho, which drops to r at once and returns towards it as rho += T / headroom_tau
    * (r - rho) [s]; 0 (a zeroed block) or INFINITY = off (control/sliding.py) */
   double headroom_tau;
+  /* with startup_converged and a blend, in [0, 1]: the blend is planned as if it had started
+   * blend_lead times the wait (from the first tick the controller ran to the trusted one)
+   * before the trusted tick, through the trusted estimate there (control/blend.py's
+   * blend_through, issue 28); 0 (a zeroed block) = planned from the trusted tick */
+  double blend_lead;
 } amsfe_ctrl_params;
 
 /* What a tick computed besides the torque. */
