@@ -57,6 +57,7 @@ struct amsfe_ctrl {
   int have_kfirst;
   double blend_tb; /* its duration [s] */
   double *blend_d0, *blend_d1, *refb; /* its offsets [n], [n]; the blended reference [5n] */
+  double *blend_e0, *blend_e1; /* blend_lead: the trusted offsets it passes through [n], [n] */
   double *wfb;     /* the command filter's bandwidth while the blend runs (blend_wf) [n] */
   double rho;      /* headroom_tau: the gains' scale (1: unscaled) */
   int have_udem;   /* ... the law's demand u_dem of the last tick it acted is known */
@@ -91,7 +92,8 @@ static int ctrl_layout(amsfe_ctrl *c, char *base) {
                      &c->prev_qmd_d, &c->qmd_next, &c->Ksv, &c->b, &c->acc,
                      &c->c_hold, &c->hold1, &c->hold0, &c->blend_d0, &c->blend_d1,
                      &c->mhold_d0, &c->mhold_d1, &c->mr[0], &c->mr[1], &c->mr[2],
-                     &c->wfb, &c->u_dem, &c->hs, &c->epss, &c->wms, &c->wfs};
+                     &c->wfb, &c->u_dem, &c->hs, &c->epss, &c->wms, &c->wfs,
+                     &c->blend_e0, &c->blend_e1};
   for (size_t i = 0; i < sizeof(vecs) / sizeof(vecs[0]); ++i) *vecs[i] = DBL(&cv, n);
   c->refb = DBL(&cv, 5 * n);
   c->theta0 = DBL(&cv, d.N - 4 * n + 1);
@@ -491,9 +493,9 @@ static int cascade(amsfe_ctrl *c, long k, const double *lead0, const double *lea
       c->blend_k0 = k;
       c->blend_s0 = c->par.blend_lead * ((double)(k - c->k_first) * c->par.T);
       if (c->blend_s0 > 0.0) { /* planned as if started s0 ago, through the estimate now */
-        memcpy(c->mr[0], c->blend_d0, sizeof(double) * (size_t)n);
-        memcpy(c->mr[1], c->blend_d1, sizeof(double) * (size_t)n);
-        c->blend_tb = blend_through(c->mr[0], c->mr[1], n, c->blend_s0, c->par.blend_accel,
+        memcpy(c->blend_e0, c->blend_d0, sizeof(double) * (size_t)n);
+        memcpy(c->blend_e1, c->blend_d1, sizeof(double) * (size_t)n);
+        c->blend_tb = blend_through(c->blend_e0, c->blend_e1, n, c->blend_s0, c->par.blend_accel,
                                     c->par.blend_rate, c->blend_d0, c->blend_d1);
       } else {
         c->blend_tb =
