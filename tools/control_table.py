@@ -9,8 +9,9 @@ docs/runtime-c.md).
 
 Metrics (after the transient: the last 80 % of each run): tracking RMSE and max error per
 joint [rad], RMS torque [N m], chattering as the total variation of u per second [N m/s],
-the fraction of saturated ticks, and how many runs diverged (their metrics are left out of
-the means and the count is shown).
+the fraction of saturated ticks, and how many runs diverged, with when. A diverged run counts
+as +inf in every statistic, never dropped (issue 28): a row with a divergence has mean inf
+(and no std), and its medians are over every run.
 """
 
 from __future__ import annotations
@@ -73,16 +74,27 @@ def _one(job: tuple[str, str, str, int, float | None, str]) -> dict[str, Any]:
     }
 
 
+def _values(rows: list[dict[str, Any]], key: str) -> np.ndarray:
+    """``key`` of every run, (runs, width); a diverged run's values are +inf."""
+    ok = [r for r in rows if r["diverged_at_s"] is None]
+    width = np.asarray(ok[0][key], dtype=float).size if ok else 1
+    return np.array(
+        [r[key] if r["diverged_at_s"] is None else [np.inf] * width for r in rows], dtype=float
+    ).reshape(len(rows), width)
+
+
 def _stat(rows: list[dict[str, Any]], key: str) -> tuple[list[float], list[float]]:
-    v = np.array([r[key] for r in rows], dtype=float)
-    v = v.reshape(len(rows), -1)
+    """Mean and std over every run; with a diverged run the mean is inf and the std NaN."""
+    v = _values(rows, key)
+    if np.isinf(v).any():
+        return np.full(v.shape[1], np.inf).tolist(), np.full(v.shape[1], np.nan).tolist()
     return v.mean(axis=0).tolist(), v.std(axis=0).tolist()
 
 
 def print_table(scenario: str, seeds: int, pairs: tuple, rows: list[dict[str, Any]]) -> list:
     """Print the markdown table; return its entries (means and stds per controller)."""
     table = []
-    print(f"{scenario}: {seeds} seeds; mean ± std (and median) over the runs that did not diverge")
+    print(f"{scenario}: {seeds} seeds; mean ± std (and median); a diverged run counts as inf")
     print(
         "| controller | estimator | diverged | tracking RMSE [mrad] | median RMSE [mrad] | "
         "max error [mrad] | RMS u [N m] | TV(u) [N m/s] | saturated [%] |"
@@ -99,9 +111,10 @@ def print_table(scenario: str, seeds: int, pairs: tuple, rows: list[dict[str, An
             "diverged": len(div),
         }
         when = f" (t = {min(div):.2f}-{max(div):.2f} s)" if div else ""
-        if not ok:
+        if div:
             entry["diverged_at_s"] = [min(div), max(div)]
-            print(f"| {c} | {e} | {len(rs)}/{len(rs)}{when} | - | - | - | - | - | - |")
+        if not ok:  # every run diverged: every statistic is inf
+            print(f"| {c} | {e} | {len(rs)}/{len(rs)}{when} | inf | inf | inf | inf | inf | inf |")
             table.append(entry)
             continue
         for key in (
@@ -111,20 +124,20 @@ def print_table(scenario: str, seeds: int, pairs: tuple, rows: list[dict[str, An
             "u_total_variation_per_s",
             "saturated_fraction",
         ):
-            entry[key] = _stat(ok, key)
-        med = np.median(np.array([r["tracking_rmse"] for r in ok], dtype=float), axis=0)
+            entry[key] = _stat(rs, key)
+        med = np.median(_values(rs, "tracking_rmse"), axis=0)
         entry["tracking_rmse_median"] = med.tolist()
 
         def fmt(key: str, scale: float = 1.0, digits: int = 2, entry: dict = entry) -> str:
             m, sd = entry[key]
             return " / ".join(
-                f"{scale * a:.{digits}f} ± {scale * b:.{digits}f}"
+                "inf" if np.isinf(a) else f"{scale * a:.{digits}f} ± {scale * b:.{digits}f}"
                 for a, b in zip(m, sd, strict=True)
             )
 
         print(
             f"| {c} | {e} | {len(div)}/{len(rs)}{when} | {fmt('tracking_rmse', 1e3)} | "
-            + " / ".join(f"{1e3 * v:.2f}" for v in med)
+            + " / ".join("inf" if np.isinf(v) else f"{1e3 * v:.2f}" for v in med)
             + f" | {fmt('tracking_max_error', 1e3)} | {fmt('u_rms', 1, 1)} | "
             f"{fmt('u_total_variation_per_s', 1, 0)} | {fmt('saturated_fraction', 100, 1)} |"
         )
