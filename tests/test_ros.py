@@ -385,6 +385,29 @@ def test_std_every_bad_value_is_one_line(tmp_path: Path) -> None:
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize(("kind", "noted"), [("none", True), ("applied", False)])
+def test_the_node_says_when_oosm_will_fuse_no_frame(tmp_path: Path, kind: str, noted: bool) -> None:
+    """``amsfe node`` prints the estimator note (apps/estimate_filter.estimator_note) before
+    rclpy starts when its topic spec's effort is not the applied torque and the estimator is
+    oosm, and not otherwise (rclpy blocked here: the node then stops in one line, exit 2)."""
+    from amsfe_sym.apps.estimate_filter import estimator_note
+
+    spec = tmp_path / "topics.toml"
+    spec.write_text(f'[effort]\nkind = "{kind}"\n')
+    block = "import sys; sys.modules['rclpy'] = None; from amsfe_sym.apps.cli import main; "
+    env = {**os.environ, "PYTHONPATH": str(SRC)}
+    argv = ["node", "paper-sim", "--topic-spec", str(spec)]
+    node = subprocess.run(
+        [sys.executable, "-c", block + f"sys.exit(main({argv!r}))"],
+        env=env, capture_output=True, text=True, timeout=300, cwd=tmp_path,
+    )  # fmt: skip
+    assert node.returncode == 2, node.stderr
+    note = estimator_note(kind, "oosm")
+    assert (note is not None) == noted
+    printed = [x for x in node.stdout.splitlines() if x.startswith("node: estimator oosm")]
+    assert printed == ([f"node: {note}"] if noted else []), node.stdout
+
+
 @pytest.mark.parametrize(("every", "end_k"), [(1, 5), (10, 2000), (7, 20), (3, None)])
 def test_std_due_ticks(every: int, end_k: int | None) -> None:
     """estimate_std / theta go out at tick 0, every ``every``-th tick and the last one."""
