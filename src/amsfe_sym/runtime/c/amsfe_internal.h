@@ -127,7 +127,7 @@ AMSFE_HIDDEN int amsfe_a1_retrodict(int M, int m, const int *rows, const double 
  * step's own check); NULL when P is not positive definite.  amsfe_runtime.c. */
 struct amsfe_est;
 AMSFE_HIDDEN const double *amsfe_est_factor(struct amsfe_est *e);
-#define AMSFE_RETRO_WORK(M, m) (4L * (M) * (m) + (long)(M) * (M) + 2L * (m) * (m))
+#define AMSFE_RETRO_WORK(M, m) (5L * (M) * (m) + (long)(M) * (M) + 2L * (m) * (m))
 #define AMSFE_PREDICT_WORK(N, nw) (2L * (N) * (N) + (long)(N) * (nw))
 #define AMSFE_JOSEPH_WORK(M, m) (4L * (M) * (m) + 3L * (m) * (m) + (m))
 

@@ -352,55 +352,18 @@ KERNEL_CLONES int amsfe_a1_retrodict(int M, int m, const int *restrict rows,
                                      const double *restrict nu, const double *restrict Pp,
                                      double *restrict xs, double *restrict Mo,
                                      double *restrict C, double *restrict w) {
-  /* [U | Wt | U] (M x 3m), Pr = P_prior H^T, D = P - Q, S, its factor */
-  double *U = w, *Wt = w + (long)M * m, *U2 = Wt + (long)M * m;
-  double *restrict Pr = U2 + (long)M * m, *restrict D = Pr + (long)M * m;
-  double *restrict S = D + (long)M * M, *restrict Ls = S + m * m;
+  /* the selection's Q H^T = Q[:, rows], P_prior H^T = P_prior[:, rows] and S, then the
+   * formulas of amsfe_a1_retrodict_cols (the same values: bit-identical results) */
+  double *restrict QHt = w, *restrict PpHt = w + (long)M * m, *restrict S = PpHt + (long)M * m;
+  for (int a = 0; a < m; ++a) {
+    memcpy(QHt + (long)a * M, Q + (long)rows[a] * M, sizeof(double) * (size_t)M);
+    memcpy(PpHt + (long)a * M, Pp + (long)rows[a] * M, sizeof(double) * (size_t)M);
+  }
   for (int b = 0; b < m; ++b)
     for (int a = 0; a < m; ++a)
       AT(S, a, b, m) = 0.5 * (AT(Pp, rows[a], rows[b], M) + AT(Pp, rows[b], rows[a], M)) +
                        (a == b ? r[a] : 0.0);
-  if (!amsfe_cholesky(m, S, Ls)) return 0;
-  for (long c = 0; c < m; ++c) { /* Wt = Q H^T S^-1: Q[:, rows] Ls^-T Ls^-1 */
-    double *wc = Wt + c * M;
-    const double *restrict qc = Q + (long)rows[c] * M;
-    for (int i = 0; i < M; ++i) wc[i] = qc[i];
-    for (long a = 0; a < c; ++a) {
-      const double *wa = Wt + a * M;
-      double f = AT(Ls, c, a, m);
-      for (int i = 0; i < M; ++i) wc[i] -= wa[i] * f;
-    }
-    double d = AT(Ls, c, c, m);
-    for (int i = 0; i < M; ++i) wc[i] /= d;
-  }
-  for (long c = m - 1; c >= 0; --c) {
-    double *wc = Wt + c * M;
-    for (long a = c + 1; a < m; ++a) {
-      const double *wa = Wt + a * M;
-      double f = AT(Ls, a, c, m);
-      for (int i = 0; i < M; ++i) wc[i] -= wa[i] * f;
-    }
-    double d = AT(Ls, c, c, m);
-    for (int i = 0; i < M; ++i) wc[i] /= d;
-  }
-  for (int i = 0; i < M; ++i) xs[i] = x[i]; /* x_shift = x - Wt nu */
-  for (int a = 0; a < m; ++a) {
-    const double *restrict wa = Wt + (long)a * M;
-    const double *restrict pa = Pp + (long)rows[a] * M, *restrict qa = Q + (long)rows[a] * M;
-    double *restrict ua = U + (long)a * M, *restrict ra = Pr + (long)a * M;
-    double f = nu[a];
-    for (int i = 0; i < M; ++i) {
-      xs[i] -= wa[i] * f;
-      ra[i] = pa[i];
-      ua[i] = pa[i] - 0.5 * qa[i];
-    }
-  }
-  memcpy(U2, U, sizeof(double) * (size_t)M * (size_t)m);
-  for (long i = 0; i < (long)M * M; ++i) D[i] = P[i] - Q[i];
-  tiles(M, M, 0, 1, 0, 0, 2 * m, U, Wt, M, 1, D, Mo); /* lower of D + [U Wt] [Wt U]^T */
-  amsfe_mirror_lower(M, Mo);
-  tiles(M, M, 0, 0, 0, 0, m, Pr, Wt, M, 1, D, C); /* C = D + P_prior H^T Wt^T */
-  return 1;
+  return amsfe_a1_retrodict_cols(M, m, S, QHt, PpHt, x, P, Q, nu, xs, Mo, C, S + m * m);
 }
 
 /* The Joseph-form update of amsfe_joseph_select for a measurement whose jacobian H (m x M) is
