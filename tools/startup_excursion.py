@@ -7,6 +7,9 @@ hand-over's blend *plans* (the peak of |delta| of control/blend.py over the plan
   the peak after the trusted tick),
 * the oracle's, planned at t = 0 from the true start,
 
+and the offset's largest snap [rad/s^4] at the trusted tick of the plan led from the first
+tick (the plan made at the trusted tick has none there),
+
 with the trusted tick and the estimate taken from an ``amsfe`` run with ``blend_lead = 0``
 (compiled, 3 s), whether that run diverged, and whether it still diverges when the estimate
 starts exactly at the plant's state (the wait and the hold unchanged)::
@@ -78,9 +81,11 @@ def one(seed: int) -> dict[str, Any]:
         "start_rate_offset": o1.tolist(),
         "trusted_offset": e0.tolist(),
         "trusted_rate_offset": e1.tolist(),
+        "true_rate_offset_at_trust": (res.x_true[k, n : 2 * n] - ref.qd.reshape(2, n)[1]).tolist(),
         "planned_peak_at_trust": _peak(tb_now, e0, e1),
         "planned_peak_led_after_trust": _peak(tb_led, d0, d1, s0),
         "planned_peak_oracle": _peak(tb_oracle, o0, o1),
+        "snap_at_trust_led": float(np.abs(blend_offsets(s0, tb_led, d0, d1)[4 * n :]).max()),
         "tb_at_trust": tb_now,
         "tb_led_after_trust": tb_led - s0,
         "diverged_at": res.diverged_at,
