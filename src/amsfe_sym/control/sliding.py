@@ -405,13 +405,11 @@ class _Cascade(_SlidingBase):
             if not self._started and self.gains["startup"] == "converged":
                 # the blended reference starts from the state the law acts on
                 d0, d1 = lead[0][:n] - ref[:n], lead[0][n : 2 * n] - ref[n : 2 * n]
+                # planned as if started s0 ago, through the estimate now (s0 = 0: from now)
                 assert self._k_first is not None
                 s0 = self._blend_lead * ((k - self._k_first) * self.lib.T)
-                if s0 > 0.0:  # planned as if started s0 ago, through the estimate now
-                    tb, d0, d1 = blend_through(d0, d1, s0, self._blend_accel, self._blend_rate)
-                else:
-                    tb = blend_time(d0, d1, self._blend_accel, self._blend_rate)
-                self._blend = (k, s0, tb, d0.copy(), d1.copy())
+                tb, d0, d1 = blend_through(d0, d1, s0, self._blend_accel, self._blend_rate)
+                self._blend = (k, s0, tb, d0, d1)
             if self._blend is not None:
                 k0, s0, tb, d0, d1 = self._blend
                 sb = (k - k0) * self.lib.T + s0

@@ -491,16 +491,12 @@ static int cascade(amsfe_ctrl *c, long k, const double *lead0, const double *lea
         c->blend_d1[j] = lead0[n + j] - ref[n + j];
       }
       c->blend_k0 = k;
+      /* planned as if started s0 ago, through the estimate now (s0 = 0: from now) */
       c->blend_s0 = c->par.blend_lead * ((double)(k - c->k_first) * c->par.T);
-      if (c->blend_s0 > 0.0) { /* planned as if started s0 ago, through the estimate now */
-        memcpy(c->blend_e0, c->blend_d0, sizeof(double) * (size_t)n);
-        memcpy(c->blend_e1, c->blend_d1, sizeof(double) * (size_t)n);
-        c->blend_tb = blend_through(c->blend_e0, c->blend_e1, n, c->blend_s0, c->par.blend_accel,
-                                    c->par.blend_rate, c->blend_d0, c->blend_d1);
-      } else {
-        c->blend_tb =
-            blend_time(c->blend_d0, c->blend_d1, n, c->par.blend_accel, c->par.blend_rate);
-      }
+      memcpy(c->blend_e0, c->blend_d0, sizeof(double) * (size_t)n);
+      memcpy(c->blend_e1, c->blend_d1, sizeof(double) * (size_t)n);
+      c->blend_tb = blend_through(c->blend_e0, c->blend_e1, n, c->blend_s0, c->par.blend_accel,
+                                  c->par.blend_rate, c->blend_d0, c->blend_d1);
     }
     if (c->par.startup_converged) { /* once started */
       double sb = (double)(k - c->blend_k0) * c->par.T + c->blend_s0;
