@@ -12,7 +12,6 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from amsfe_sym.control import LawInputs
 from amsfe_sym.errors import ConfigError
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
@@ -20,7 +19,7 @@ from amsfe_sym.sim.builders import build_controller
 from amsfe_sym.sim.loop import run
 from tests.test_compiled_loop import assert_same_run
 from tests.test_headroom import _with
-from tests.test_startup import controller_pair
+from tests.test_startup import assert_same_tick, controller_pair
 
 
 def _grid_start_19765(sc: Scenario) -> Scenario:
@@ -46,7 +45,6 @@ def test_compiled_lead_tick_by_tick(
     sets = ("ready_qd_std=0.05", "ready_nis=inf", f"hold={hold}", f"blend_lead={lead}")
     K, n = 80, lib.n
     ctrl, cc, refs = controller_pair(_with(sc, "amsfe", *sets), lib, K)
-    t = np.arange(K) * lib.T
     rng = np.random.default_rng(2)
     q0, qd0 = refs[0, :n], refs[0, n : 2 * n]
     x = np.concatenate([q0 + 0.3, qd0 - 3.0, q0, qd0 + 0.5, lib.theta_true])
@@ -54,10 +52,7 @@ def test_compiled_lead_tick_by_tick(
         x_hat = x + 1e-3 * rng.standard_normal(lib.N)
         z = x[2 * n : 4 * n] + 1e-4 * rng.standard_normal(2 * n)
         P = np.diag(np.full(lib.N, (0.3 * np.exp(-k / 4.0)) ** 2))
-        tick = LawInputs(k, float(t[k]), x[: 4 * n], x[4 * n :], x_hat, z, np.diag(P))
-        u_py, _ = ctrl.saturate(ctrl.torque(tick))
-        u_c = cc.torque(k, refs[k], x_hat, z, x, P, None)
-        np.testing.assert_allclose(u_c, u_py, rtol=1e-12, atol=1e-12, err_msg=f"k={k}")
+        assert_same_tick(ctrl, cc, k, refs[k], x, x_hat, z, P)
         x[:n] += 1e-3 * np.sin(k)
     k0, s0, tb, _, _ = ctrl._blend
     assert 0 < k0 < K - 20  # it waited, then started

@@ -13,14 +13,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from amsfe_sym.control import LawInputs
 from amsfe_sym.errors import ConfigError
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario, apply_sets
 from amsfe_sym.sim.builders import build_controller
 from amsfe_sym.sim.loop import run
 from tests.test_compiled_loop import assert_same_run
-from tests.test_startup import controller_pair
+from tests.test_startup import assert_same_tick, controller_pair
 
 TAU = 0.05
 
@@ -74,20 +73,15 @@ def test_compiled_headroom_tick_by_tick(paper_sim: tuple[Scenario, ModelLibrary]
     ctrl, cc, refs = controller_pair(
         _with(sc, "amsfe", f"headroom_tau={TAU}", "blend_wf=20"), lib, K
     )
-    t = np.arange(K) * lib.T
     rng = np.random.default_rng(3)
     q0, qd0 = refs[0, :n], refs[0, n : 2 * n]
     x = np.concatenate([q0 + 0.4, qd0 - 3.0, q0 - 1.0, qd0 + 5.0, lib.theta_true])
     rhos = []
     for k in range(K):
-        ref = refs[k]
         x_hat = x + 1e-3 * rng.standard_normal(lib.N)
         z = x[2 * lib.n : 4 * lib.n] + 1e-4 * rng.standard_normal(2 * lib.n)
         P = np.diag(np.full(lib.N, 1e-6))
-        tick = LawInputs(k, float(t[k]), x[: 4 * lib.n], x[4 * lib.n :], x_hat, z, np.diag(P))
-        u_py, _ = ctrl.saturate(ctrl.torque(tick))
-        u_c = cc.torque(k, ref, x_hat, z, x, P, None)
-        np.testing.assert_allclose(u_c, u_py, rtol=1e-12, atol=1e-12, err_msg=f"k={k}")
+        assert_same_tick(ctrl, cc, k, refs[k], x, x_hat, z, P)
         rhos.append(ctrl._rho)
         if k == 20:  # the arm joins the path: the demand falls within the limits
             qk, qdk = refs[k, :n], refs[k, n : 2 * n]

@@ -53,6 +53,27 @@ def controller_pair(sc: Scenario, lib: ModelLibrary, K: int) -> tuple[Any, Any, 
     return ctrl, cc, np.hstack([np.asarray(a).reshape(K, -1) for a in rows])
 
 
+def assert_same_tick(
+    ctrl: Any,
+    cc: Any,
+    k: int,
+    ref: np.ndarray,
+    x: np.ndarray,
+    x_hat: np.ndarray,
+    z: np.ndarray,
+    P: np.ndarray,
+    nis: float | None = None,
+) -> None:
+    """One tick of ``controller_pair``'s twins on the same inputs (true state ``x``, estimate
+    ``x_hat`` with covariance ``P``, encoders ``z``, encoder NIS ``nis``): their limited
+    torques equal to 1e-12 N m."""
+    n4, t = 4 * ctrl.n, k * ctrl.lib.T
+    tick = LawInputs(k, float(t), x[:n4], x[n4:], x_hat, z, np.diag(P), nis)
+    u_py, _ = ctrl.saturate(ctrl.torque(tick))
+    u_c = cc.torque(k, ref, x_hat, z, x, P, nis)
+    np.testing.assert_allclose(u_c, u_py, rtol=1e-12, atol=1e-12, err_msg=f"k={k}")
+
+
 def _moving(sc: Scenario) -> Scenario:
     """A moving start: the arm 0.3 rad off the path, moving against it at 2 rad/s; the
     estimate 0.4 rad and 2 rad/s off."""
@@ -167,21 +188,16 @@ def test_compiled_startup_tick_by_tick(
     sets = (*sets, f"blend_wf={blend_wf}")
     K, n = 60, lib.n
     ctrl, cc, refs = controller_pair(_with(sc, "amsfe", sets), lib, K)
-    t = np.arange(K) * lib.T
     rng = np.random.default_rng(1)
     q0, qd0 = refs[0, :n], refs[0, n : 2 * n]
     x = np.concatenate([q0 + 0.2, qd0 - 1.0, q0, qd0 + 0.5, lib.theta_true])
     waited = []
     for k in range(K):
-        ref = refs[k]
         x_hat = x + 1e-3 * rng.standard_normal(lib.N)
         z = x[2 * lib.n : 4 * lib.n] + 1e-4 * rng.standard_normal(2 * lib.n)
         P = np.diag(np.full(lib.N, (0.3 * np.exp(-k / 4.0)) ** 2))
         nis = None if k == 0 else 40.0 * np.exp(-k / 6.0) + 3.0  # falls below 6 at k ~ 15
-        tick = LawInputs(k, float(t[k]), x[: 4 * lib.n], x[4 * lib.n :], x_hat, z, np.diag(P))
-        u_py, _ = ctrl.saturate(ctrl.torque(tick._replace(encoder_nis=nis)))
-        u_c = cc.torque(k, ref, x_hat, z, x, P, nis)
-        np.testing.assert_allclose(u_c, u_py, rtol=1e-12, atol=1e-12, err_msg=f"k={k}")
+        assert_same_tick(ctrl, cc, k, refs[k], x, x_hat, z, P, nis)
         waited.append(not ctrl._ready)
         x[: lib.n] += 1e-3 * np.sin(k)
     # the covariance alone passes at k = 10 (0.3 e^(-k/4) <= 0.03); the mean NIS holds the
