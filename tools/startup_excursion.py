@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from startup_moving import _start
+from startup_moving import _start, covariance_ready
 
 from amsfe_sym.codegen import library_for
 from amsfe_sym.control import Amsfe
@@ -61,10 +61,7 @@ def one(seed: int) -> dict[str, Any]:
     start = replace(sc, plant=replace(sc.plant, q0=tuple(q0), qd0=tuple(qd0)))
     res = run(replace(start, estimate0=replace(sc.estimate0, q=tuple(qh), qd=tuple(qdh))), lib)
     exact = run(replace(start, estimate0=replace(sc.estimate0, q=tuple(q0), qd=tuple(qd0))), lib)
-    sd = np.sqrt(res.P_diag[:, : 2 * n])
-    ok = np.all(sd[:, :n] <= g["ready_q_std"], axis=1) & np.all(
-        sd[:, n:] <= g["ready_qd_std"], axis=1
-    )
+    ok = covariance_ready(res, g)
     k = int(np.argmax(ok))
     ref = from_config(dict(sc.trajectory)).evaluate(np.array([0.0, k * T]))
     e0 = res.x_hat[k, :n] - ref.q.reshape(2, n)[1]

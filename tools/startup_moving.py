@@ -62,6 +62,17 @@ def _start(seed: int) -> tuple[tuple[float, ...], ...]:
     )
 
 
+def covariance_ready(res: Any, gains: dict[str, Any]) -> np.ndarray:
+    """Per tick of ``res``, whether the start-up's covariance tests pass: every link angle's
+    and rate's posterior std within ``ready_q_std`` and ``ready_qd_std`` (their defaults
+    when the gains do not set them)."""
+    n = res.lib.n
+    sd = np.sqrt(res.P_diag[:, : 2 * n])
+    return np.all(sd[:, :n] <= gains.get("ready_q_std", 0.03), axis=1) & np.all(
+        sd[:, n:] <= gains.get("ready_qd_std", np.inf), axis=1
+    )
+
+
 def one(job: tuple[str, int, str, str, float, tuple[str, ...], str]) -> dict[str, Any]:
     """One run and its metrics."""
     study, seed, controller, estimator, duration, sets, runtime = job
@@ -90,11 +101,7 @@ def one(job: tuple[str, int, str, str, float, tuple[str, ...], str]) -> dict[str
     w = slice(int(0.2 * K), len(e))
     rmse = np.sqrt(np.mean(e[w] ** 2, axis=0)) if not diverged else np.full(n, np.inf)
     late = e[int(1.5 / T) :]
-    gains = sc.gains_for(controller)
-    sd = np.sqrt(res.P_diag[:, : 2 * n])
-    ok = np.all(sd[:, :n] <= gains.get("ready_q_std", 0.03), axis=1) & np.all(
-        sd[:, n:] <= gains.get("ready_qd_std", np.inf), axis=1
-    )
+    ok = covariance_ready(res, sc.gains_for(controller))
     ready = float(res.t[int(np.argmax(ok))]) if controller != "truth" and ok.any() else None
     out: dict[str, Any] = {
         "study": study,
