@@ -20,7 +20,6 @@ import functools
 import json
 import os
 import shutil
-import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -50,6 +49,7 @@ from amsfe_sym.codegen.compile_units import (
 )
 from amsfe_sym.codegen.compile_units import say as _say
 from amsfe_sym.codegen.manifest import manifest_document
+from amsfe_sym.core.folders import TMP_MARKER, make_tmp
 from amsfe_sym.core.interrupts import DeferredSignals, checkpoint
 from amsfe_sym.core.jsonfile import to_json
 from amsfe_sym.errors import CodegenError, RunFolderError, describe
@@ -245,7 +245,7 @@ def _build(
 
     parent.mkdir(parents=True, exist_ok=True)
     clean_stale_tmp(parent, spec.name)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{spec.name}-{os.getpid()}-", dir=parent))
+    tmp = make_tmp(parent, f".{spec.name}-{os.getpid()}-")
     tmp.chmod(0o755)
     try:
         t = time.perf_counter()
@@ -330,6 +330,7 @@ def _build(
         manifest["joint_modes"] = modes_document(robot_obj, modes)
         (tmp / MANIFEST).write_text(to_json(manifest))
         checkpoint()
+        (tmp / TMP_MARKER).unlink()  # what is renamed into place is the library folder
         replace_dir(tmp, out_dir)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
