@@ -1,4 +1,4 @@
-"""The blend planned before the trusted tick (``blend_lead``, docs/control.md "Start-up,
+"""The blend planned before the trusted tick (``blend_lead``, docs/explanation/control.md "Start-up,
 issue 28, fourth pass"): the Python controller and amsfe_ctrl (runtime/c/amsfe_loop.c) equal
 tick by tick and in the loop, the gain's checks, and the moving start that motivated it.
 

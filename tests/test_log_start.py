@@ -1,4 +1,4 @@
-"""Where ``amsfe estimate LOG --robot ROBOT`` starts the links (docs/logs.md, "Where the
+"""Where ``amsfe estimate LOG --robot ROBOT`` starts the links (docs/how-to/logs.md, "Where the
 estimate starts"; issue 26): a log of effort kind ``none`` gives motor angles only, and on
 the paper's soft arm the springs deflect 1.45 rad under gravity.  The start is the springs'
 balance at the first sample, chosen by the first camera frame

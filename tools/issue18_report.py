@@ -1,4 +1,4 @@
-"""Issue 18's targets, met or not: runs ``amsfe bench`` and writes docs/performance.md's
+"""Issue 18's targets, met or not: runs ``amsfe bench`` and writes docs/explanation/performance.md's
 "Issue 18" section (between its ``<!-- issue-18 -->`` markers) and docs/data/bench-issue18.json.
 
     .venv/bin/python tools/issue18_report.py            # the bench (~15-25 min on 2 cores), then the section

@@ -22,7 +22,7 @@ the generated ``plant_step`` integrates), code-generated once per robot and comp
 small C driver holding the integrators: ``semi_implicit`` (symplectic Euler), ``rk2``
 (midpoint), ``rk3`` (Kutta's third order) and ``rk4`` (the classical one ``plant_step`` uses).
 
-Writes docs/data/plant-accuracy.json and the page docs/plant-accuracy.md.
+Writes docs/data/plant-accuracy.json and the page docs/explanation/plant-accuracy.md.
 """
 
 from __future__ import annotations
@@ -422,7 +422,7 @@ def main() -> None:
             write_page(saved["results"], saved["machine"])
         )
         Path(args.from_json).write_text(json.dumps(saved, indent=2) + "\n")
-        print("wrote docs/plant-accuracy.md")
+        print("wrote docs/explanation/plant-accuracy.md")
         return
     logging.getLogger("amsfe_sym").setLevel(logging.ERROR)
     from amsfe_sym.core.provenance import provenance
@@ -441,7 +441,7 @@ def main() -> None:
         data = ROOT / "docs" / "data" / "plant-accuracy.json"
         data.write_text(json.dumps({"machine": machine, "results": results}, indent=2) + "\n")
         (ROOT / "docs" / "plant-accuracy.md").write_text(page)
-        print(f"wrote {data} and docs/plant-accuracy.md")
+        print(f"wrote {data} and docs/explanation/plant-accuracy.md")
 
 
 if __name__ == "__main__":

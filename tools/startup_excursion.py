@@ -1,4 +1,4 @@
-"""What the blend plans on a moving start (docs/control.md, "Start-up, issue 28, fourth
+"""What the blend plans on a moving start (docs/explanation/control.md, "Start-up, issue 28, fourth
 pass"): for grid starts of tools/startup_moving.py, the largest offset from the path that the
 hand-over's blend *plans* (the peak of |delta| of control/blend.py over the plan, any joint),
 

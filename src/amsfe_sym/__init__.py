@@ -1,6 +1,6 @@
 """amsfe_sym: code-generated models, multirate sensor fusion and DTSMC for elastic-joint arms.
 
-The pipeline flows one way; the package's folders are its stages (docs/architecture.md):
+The pipeline flows one way; the package's folders are its stages (docs/explanation/architecture.md):
 ``core`` (foundation: TOML, camera frames, provenance) -> ``load`` (robot.toml + URDF ->
 Pinocchio model) -> ``scenario`` (a run's settings) -> ``symbolic`` (CasADi SX) -> ``codegen``
 (C + shared library + manifest in ``generated/<name>/``) -> ``runtime`` (load and call the

@@ -121,7 +121,7 @@ def get_argument_parser() -> argparse.ArgumentParser:
         "--out",
         default=None,
         help="run folder (default runs/<scenario>-<stamp>); an existing one is refused "
-        "(docs/scenarios.md, 'Output paths')",
+        "(docs/reference/scenarios.md, 'Output paths')",
     )
     s.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     s.add_argument("--no-plots", action="store_true", help="skip the figures")
@@ -143,7 +143,7 @@ def get_argument_parser() -> argparse.ArgumentParser:
         const="",
         default=None,
         metavar="DIR",
-        help="also write the run as a rosbag2 in MCAP (default <run folder>/bag; docs/logs.md); "
+        help="also write the run as a rosbag2 in MCAP (default <run folder>/bag; docs/how-to/logs.md); "
         "DIR elsewhere is written together with the run folder, both or neither, and follows "
         "the --out rules",
     )
@@ -165,7 +165,7 @@ def get_argument_parser() -> argparse.ArgumentParser:
     add_sweep_arguments(
         sub.add_parser(
             "sweep",
-            help="scenario grid x estimators x controllers x seeds on Dask (docs/sweeps.md)",
+            help="scenario grid x estimators x controllers x seeds on Dask (docs/how-to/sweeps.md)",
         )
     )
     return parser
@@ -419,7 +419,7 @@ def _study(args: argparse.Namespace) -> int:
     from amsfe_sym.apps.study import run_study
 
     inputs = _input_files(args.scenario)
-    if args.claims:  # the claim table of docs/reproduction.md on these seeds
+    if args.claims:  # the claim table of docs/explanation/reproduction.md on these seeds
         from amsfe_sym.apps.study.claims import (
             format_claims,
             is_claims_folder,

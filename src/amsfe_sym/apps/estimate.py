@@ -1,5 +1,5 @@
 """``amsfe estimate LOG``: an estimator of a generated robot over a recorded log (a ROS 1
-``.bag``, a rosbag2 folder, an ``.mcap``), into a run folder (docs/logs.md).
+``.bag``, a rosbag2 folder, an ``.mcap``), into a run folder (docs/how-to/logs.md).
 
 A log written by ``amsfe simulate --bag`` carries its robot, scenario and estimator
 (``/amsfe/config``), so ``amsfe estimate LOG`` alone reproduces the run's estimates; any
@@ -98,7 +98,7 @@ def default_scenario(robot: str) -> Scenario:
     (``[filter]``: process noise 0.1 N m, :data:`ROBOT_TORQUE_STD` once the log is read,
     then the log spec's ``[filter]``: :func:`~amsfe_sym.apps.estimate_filter.filter_for_log`;
     buffer 1000 steps; ``[encoders]`` and
-    ``[camera]``: the sensor noise the filter's R is built from; docs/scenarios.md), the
+    ``[camera]``: the sensor noise the filter's R is built from; docs/reference/scenarios.md), the
     ``oosm`` estimator (:data:`INPUT_UNKNOWN_ESTIMATOR` once the log shows no applied
     torque), and the estimate's start replaced by the log's first sample
     (:func:`_start_from_log`).  No plant or trajectory is used."""
@@ -126,7 +126,7 @@ def default_scenario(robot: str) -> Scenario:
 def _link_start(sc: Scenario, log: RobotLog, lib: Any, effort: Any) -> LogLinkStart:
     """The link angles of the log's first sample by its effort kind, a balance missing
     :data:`ROBOT_TORQUE_STD` of torque (:func:`~amsfe_sym.apps.estimate_start.scenario_start`;
-    docs/effort.md, "Where the estimate starts")."""
+    docs/explanation/effort.md, "Where the estimate starts")."""
     return scenario_start(sc, log, lib, effort, ROBOT_TORQUE_STD)
 
 
@@ -145,7 +145,7 @@ def _start_from_log(
     no spring damping: the one-step sensitivity of the link angles to theta (eqs. 1a, 4)
     follows the aliased phase of an undamped oscillation, not the static deflection the
     data show, and on the real Panda log the payload ran from 0 to 21 kg in 90 steps before
-    every estimator diverged (docs/logs.md, "A real Panda recording, worked")."""
+    every estimator diverged (docs/how-to/logs.md, "A real Panda recording, worked")."""
     n = log.u.shape[1]
     z0 = log.z[0]
     e0 = replace(sc.estimate0, q=tuple(map(float, start.q)), qd=tuple(map(float, z0[n:])))
@@ -175,7 +175,7 @@ def _config_scenario(path: Path, config: dict[str, Any]) -> Scenario:
                 f"log {path}: /amsfe/config scenario_toml",
                 "the run's scenario as TOML (written by amsfe simulate --bag)",
                 f"text that is not TOML ({exc})",
-                "pass --scenario FILE (or --robot ROBOT) to give it yourself (docs/logs.md)",
+                "pass --scenario FILE (or --robot ROBOT) to give it yourself (docs/how-to/logs.md)",
             )
         ) from exc
     return parse_scenario(data, path)
@@ -198,7 +198,7 @@ def _scenario(path: Path, config: dict[str, Any] | None, options: EstimateOption
                 "amsfe's run config (/amsfe/config, written by amsfe simulate --bag)",
                 "none",
                 "pass --robot ROBOT (a shipped robot or a robot.toml: the estimate starts "
-                "from the log), or --scenario FILE to tune the filter (docs/logs.md)",
+                "from the log), or --scenario FILE to tune the filter (docs/how-to/logs.md)",
             )
         )
     if from_config is not None and sc is not from_config:
@@ -344,9 +344,9 @@ def _estimator(
 ) -> Any:
     """The estimator and the log it is fed: for an effort of kind ``joint_torque`` or
     ``none``, :func:`~amsfe_sym.sim.effort.effort_estimator`'s (the input and encoder
-    measurements derived from the log, docs/effort.md), the library's C estimator with
+    measurements derived from the log, docs/explanation/effort.md), the library's C estimator with
     ``--runtime compiled`` (the default; oosm's inverse backward map with the input as states
-    is refused there in one line: docs/effort.md, "Compiled").  ``effort``:
+    is refused there in one line: docs/explanation/effort.md, "Compiled").  ``effort``:
     the log spec's ``[effort]`` noise keys and ``[joints] positions`` as an ``EffortSpec``
     (None: the defaults); its kind is replaced by the log's."""
     from amsfe_sym.estimation.effort import EffortSpec

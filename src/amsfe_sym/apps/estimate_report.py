@@ -1,6 +1,6 @@
 """What ``amsfe estimate`` reports about a run: ``summary.json`` (each role's messages used
 and skipped, the clock offset, NIS), the printed headline and the figures (``estimate.png``,
-``nis.png``); docs/logs.md, "Consistency without truth"."""
+``nis.png``); docs/how-to/logs.md, "Consistency without truth"."""
 
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ __all__ = [
 @dataclass(frozen=True)
 class CommandTiming:
     """Wall time [s] of the phases of ``amsfe estimate`` other than reading and estimating
-    (docs/logs.md, "Speed"); each phase includes the imports made in it.
+    (docs/how-to/logs.md, "Speed"); each phase includes the imports made in it.
 
     Attributes:
         startup_s: From the process's start to the command's: the interpreter, the
@@ -117,7 +117,7 @@ def nis_report(run: EstimateRun) -> dict[str, Any]:
     """Normalized innovation squared of the encoder updates (dof 2n; 3n with a joint
     torque) and of the camera frames (dof 2): mean and the fraction inside the two-sided
     chi-square 95 % band.  A filter whose model and noise fit the arm has mean NIS near the
-    dof and about 95 % inside (docs/logs.md, "Consistency without truth").  Empty where the
+    dof and about 95 % inside (docs/how-to/logs.md, "Consistency without truth").  Empty where the
     replay did not record NIS."""
     est, log = run.estimate, run.log
     n = log.u.shape[1]
@@ -252,7 +252,7 @@ def _noise_dict(noise: EncoderNoise | None) -> dict[str, Any] | None:
 def _timing(run: EstimateRun) -> dict[str, float | None]:
     """The command's phases [s] and its real-time factors: the log's duration over the
     command's wall time (``real_time_factor_command``) and over start-up + wall time
-    (``real_time_factor_end_to_end``, null when start-up was not measured); docs/logs.md,
+    (``real_time_factor_end_to_end``, null when start-up was not measured); docs/how-to/logs.md,
     "Speed"."""
     t, d = run.timing, run.log.K * run.log.T
     whole = None if t.startup_s is None else t.startup_s + t.wall_s

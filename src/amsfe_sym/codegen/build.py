@@ -8,7 +8,7 @@ a library whose bytes still match it (a truncated or damaged ``.so`` is rebuilt 
 refused by :class:`~amsfe_sym.runtime.library.ModelLibrary`).  Hidden temporary folders left
 by a killed run (its pid gone, or older than an hour) are removed by the next build.
 
-Compiler flags: ``-O1`` by default (see docs/codegen.md for the measurements behind it);
+Compiler flags: ``-O1`` by default (see docs/explanation/codegen.md for the measurements behind it);
 override with ``$AMSFE_CFLAGS`` or ``--cflags``.  ``-march=native`` ties the library to
 the CPU; it is allowed, and since the flags are hashed, a changed flag rebuilds.
 """
