@@ -418,7 +418,7 @@ def main() -> None:
         saved = json.loads(Path(args.from_json).read_text())
         for res in saved["results"]:
             res["choice"] = _choice(res["rows"])
-        (ROOT / "docs" / "plant-accuracy.md").write_text(
+        (ROOT / "docs" / "explanation" / "plant-accuracy.md").write_text(
             write_page(saved["results"], saved["machine"])
         )
         Path(args.from_json).write_text(json.dumps(saved, indent=2) + "\n")
@@ -440,7 +440,7 @@ def main() -> None:
     if not args.no_write:
         data = ROOT / "docs" / "data" / "plant-accuracy.json"
         data.write_text(json.dumps({"machine": machine, "results": results}, indent=2) + "\n")
-        (ROOT / "docs" / "plant-accuracy.md").write_text(page)
+        (ROOT / "docs" / "explanation" / "plant-accuracy.md").write_text(page)
         print(f"wrote {data} and docs/explanation/plant-accuracy.md")
 
 

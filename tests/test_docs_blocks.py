@@ -1,0 +1,209 @@
+"""Every code block of the docs runs: README.md and docs/**/*.md, as a reader would paste it.
+
+A fenced block whose language is ``bash``/``sh`` runs under ``bash -e`` in a temporary folder
+(the repository's ``robots/``, ``scenarios/``, ``sweeps/``, ``tools/``, ``examples/`` and
+``docs/`` linked in, the running interpreter's venv first on PATH and as ``.venv``); a
+``python`` block runs with the same interpreter there. The blocks of one page run in order in
+one folder, so a tutorial's later step uses what an earlier one wrote. Only the exit status
+is asserted (a block's output is checked where the docs show it: tests/test_docs_numbers.py).
+
+The fence's info string says what CI does with a block (after the language):
+
+    ```bash                      run in CI
+    ```bash {ci=slow}            run in CI, the page's test marked slow (more than a few s)
+    ```bash {ci=ros}             run where the [ros] extra is installed (marked ros)
+    ```bash {ci=skip: REASON}    not run; the reason is required and shown as the skip
+
+Blocks in other languages (text, toml, c, ...) are shown, not run.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+RUN_LANGS = {"bash": "bash", "sh": "bash", "shell": "bash", "python": "python", "py": "python"}
+LINKED = ("robots", "scenarios", "sweeps", "tools", "examples", "docs")
+_FENCE = re.compile(r"^(\s*)(`{3,}|~{3,})\s*([^`\s{]*)\s*(\{.*\})?\s*$")
+_CI = re.compile(r"^\{ci=(run|slow|ros|skip)(?::\s*(.*))?\}$")
+BLOCK_TIMEOUT_S = 600  # a hung block fails instead of hanging CI; not a timing assertion
+
+
+@dataclass(frozen=True)
+class Block:
+    page: str  # path relative to the repository
+    line: int  # the opening fence's line, 1-based
+    lang: str  # "bash" or "python"
+    ci: str  # run, slow, ros or skip
+    reason: str  # why a block is skipped
+    code: str
+
+    @property
+    def where(self) -> str:
+        return f"{self.page}:{self.line}"
+
+
+def extract(page: Path, root: Path = ROOT) -> list[Block]:
+    """The runnable blocks of one Markdown page, in order; a bad ``{ci=...}`` raises."""
+    lines = page.read_text().splitlines()
+    out: list[Block] = []
+    i = 0
+    while i < len(lines):
+        m = _FENCE.match(lines[i])
+        if not m:
+            i += 1
+            continue
+        indent, fence, lang, attrs = m.group(1), m.group(2), m.group(3).lower(), m.group(4)
+        j = i + 1
+        while j < len(lines) and not lines[j].strip().startswith(fence):
+            j += 1
+        body = [ln[len(indent) :] if ln.startswith(indent) else ln for ln in lines[i + 1 : j]]
+        if lang in RUN_LANGS:
+            ci, reason = "run", ""
+            if attrs:
+                a = _CI.match(attrs)
+                where = f"{page.relative_to(root)}:{i + 1}"
+                if a is None:
+                    raise ValueError(f"{where}: unknown fence attributes {attrs}")
+                ci, reason = a.group(1), (a.group(2) or "").strip()
+                if ci == "skip" and not reason:
+                    raise ValueError(f"{where}: {{ci=skip}} needs a reason: {{ci=skip: why}}")
+            out.append(
+                Block(
+                    str(page.relative_to(root)),
+                    i + 1,
+                    RUN_LANGS[lang],
+                    ci,
+                    reason,
+                    "\n".join(body) + "\n",
+                )
+            )
+        i = j + 1
+    return out
+
+
+def pages(root: Path = ROOT) -> list[Path]:
+    found = [root / "README.md", *sorted((root / "docs").rglob("*.md"))]
+    return [p for p in found if "data" not in p.relative_to(root).parts[1:2]]
+
+
+def _ros_available() -> bool:
+    try:
+        import rclpy  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _workdir(tmp: Path) -> Path:
+    for name in LINKED:
+        (tmp / name).symlink_to(ROOT / name, target_is_directory=True)
+    (tmp / ".venv").symlink_to(Path(sys.prefix), target_is_directory=True)
+    return tmp
+
+
+def run_block(block: Block, cwd: Path) -> subprocess.CompletedProcess[str]:
+    env = dict(os.environ)
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
+    env["PYTHONPATH"] = os.pathsep.join(
+        p for p in (str(ROOT / "src"), env.get("PYTHONPATH", "")) if p
+    )
+    env.setdefault("AMSFE_GENERATED_DIR", str(ROOT / "generated"))
+    env["MPLBACKEND"] = "Agg"
+    argv = ["bash", "-e", "-c", block.code] if block.lang == "bash" else [sys.executable, "-"]
+    return subprocess.run(
+        argv,
+        cwd=cwd,
+        env=env,
+        input=None if block.lang == "bash" else block.code,
+        capture_output=True,
+        text=True,
+        timeout=BLOCK_TIMEOUT_S,
+    )
+
+
+def _page_params() -> list[object]:
+    params: list[object] = []
+    for page in pages():
+        blocks = extract(page)
+        runnable = [b for b in blocks if b.ci != "skip"]
+        if not runnable:
+            continue
+        marks = []
+        if any(b.ci == "slow" for b in runnable):
+            marks.append(pytest.mark.slow)
+        if any(b.ci == "ros" for b in runnable):
+            marks.append(pytest.mark.ros)
+        rel = str(page.relative_to(ROOT))
+        params.append(pytest.param(rel, marks=marks, id=rel))
+    return params
+
+
+def _skipped() -> list[object]:
+    return [
+        pytest.param(b, id=b.where) for p in pages() for b in extract(p) if b.ci == "skip"
+    ]
+
+
+@pytest.mark.parametrize("page", _page_params())
+def test_the_page_s_blocks_run(page: str, tmp_path: Path) -> None:
+    cwd = _workdir(tmp_path)
+    ros = _ros_available()
+    for block in extract(ROOT / page):
+        if block.ci == "skip" or (block.ci == "ros" and not ros):
+            continue
+        done = run_block(block, cwd)
+        assert done.returncode == 0, (
+            f"{block.where}: exit {done.returncode}\n--- block\n{block.code}"
+            f"--- stdout (tail)\n{done.stdout[-3000:]}\n--- stderr (tail)\n{done.stderr[-3000:]}"
+        )
+
+
+@pytest.mark.parametrize("block", _skipped())
+def test_a_skipped_block_says_why(block: Block) -> None:
+    pytest.skip(f"{block.where}: {block.reason}")
+
+
+def test_every_page_s_fences_parse() -> None:
+    """A ``{ci=skip}`` without its reason, or an unknown attribute, fails here."""
+    blocks = [b for p in pages() for b in extract(p)]
+    assert any(b.page == "README.md" for b in blocks)
+    assert any(b.page.startswith("docs/tutorials/") and b.ci != "skip" for b in blocks)
+
+
+def test_a_failing_block_is_found_and_a_bad_fence_refused(tmp_path: Path) -> None:
+    (tmp_path / "docs").mkdir()
+    page = tmp_path / "docs" / "p.md"
+    page.write_text(
+        "# p\n\n```bash\necho ok > out.txt\n```\n\n```text\nnot run\n```\n\n"
+        "```python {ci=slow}\nimport pathlib\nassert pathlib.Path('out.txt').read_text() == 'x'\n"
+        "```\n\n```bash {ci=skip: needs a robot}\nexit 3\n```\n"
+    )
+    blocks = extract(page, tmp_path)
+    assert [(b.lang, b.ci, b.line) for b in blocks] == [
+        ("bash", "run", 3),
+        ("python", "slow", 11),
+        ("bash", "skip", 16),
+    ]
+    assert blocks[2].reason == "needs a robot"
+    cwd = tmp_path / "cwd"
+    cwd.mkdir()
+    assert run_block(blocks[0], cwd).returncode == 0
+    assert (cwd / "out.txt").read_text() == "ok\n"
+    failed = run_block(blocks[1], cwd)
+    assert failed.returncode != 0 and "AssertionError" in failed.stderr
+    page.write_text("```bash {ci=skip}\nexit 3\n```\n")
+    with pytest.raises(ValueError, match="needs a reason"):
+        extract(page, tmp_path)
+    page.write_text("```bash {ci=maybe}\nexit 3\n```\n")
+    with pytest.raises(ValueError, match="unknown fence attributes"):
+        extract(page, tmp_path)
+    shutil.rmtree(cwd)
