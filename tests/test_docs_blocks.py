@@ -148,9 +148,7 @@ def _page_params() -> list[object]:
 
 
 def _skipped() -> list[object]:
-    return [
-        pytest.param(b, id=b.where) for p in pages() for b in extract(p) if b.ci == "skip"
-    ]
+    return [pytest.param(b, id=b.where) for p in pages() for b in extract(p) if b.ci == "skip"]
 
 
 @pytest.mark.parametrize("page", _page_params())

@@ -23,6 +23,7 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
 CLI_PAGE = "reference/cli.md"
+_REF = re.compile(r"\]\s?\[([^\]\[]+)\](?![(\[:])")
 _LINK = re.compile(r"\[([^\]]+)\]\(([^)\s#]+)(#[^)\s]*)?\)")
 
 
@@ -81,6 +82,9 @@ def cli_reference() -> str:
 
 
 def on_files(files: Any, config: Any) -> Any:
+    """Adds the command reference. Also: text such as ``median [95% CI]`` after a bracketed
+    interval reads as a Markdown reference link to mkdocs-autorefs (added by mkdocstrings
+    after the hooks' ``on_config``); only the API's own cross-references are wanted."""
     from mkdocs.structure.files import File
 
     files.append(File.generated(config, CLI_PAGE, content=cli_reference()))
@@ -103,4 +107,6 @@ def on_page_markdown(markdown: str, page: Any, config: Any, files: Any) -> str:
             return text
         return f"{text} (`{repo_path}` in the repository)"
 
-    return _LINK.sub(fix, markdown)
+    # "[lo, hi] [95% CI]", "[a][unit]": text, not reference links (mkdocs-autorefs would
+    # report them as missing cross-references)
+    return _REF.sub(r"]\\[\1]", _LINK.sub(fix, markdown))
