@@ -153,6 +153,23 @@ ALLOWED: dict[str, set[str]] = {
         "ros",
     },
     "apps.cli": {""},  # the command line: everything
+    # the public API composes the applications' parts (never the command line)
+    "api": {
+        "errors",
+        "core",
+        "load",
+        "scenario",
+        "signals",
+        "codegen",
+        "runtime",
+        "estimation",
+        "control",
+        "sim",
+        "logs",
+        "topics",
+        "ros",
+        "apps",
+    },
     "__main__": {"apps.cli"},
 }
 

@@ -232,7 +232,7 @@ def test_the_log_specs_effort_noise_reaches_the_estimator(
     estimator's: the same log with another random walk gives other estimates, equal to
     those of an estimator built with that EffortSpec; a bad value is one line, nothing
     written."""
-    from amsfe_sym.apps.estimate import _estimator
+    from amsfe_sym.apps.estimate_build import _estimator
     from amsfe_sym.estimation.effort import EffortSpec
     from amsfe_sym.logs.replay import estimate_log
 
@@ -249,7 +249,7 @@ def test_the_log_specs_effort_noise_reaches_the_estimator(
     run30 = got[30.0]
     lib = library_for(run30.scenario)
     eff = EffortSpec(kind="none", input_rate_std=30.0)
-    est, feed = _estimator(run30.scenario, lib, run30.log, EstimateOptions(), eff)
+    est, feed = _estimator(run30.scenario, lib, run30.log, True, eff)
     ref = estimate_log(feed, est, states=lib.N)
     assert np.max(np.abs(ref.x_hat - run30.estimate.x_hat)) <= 1e-12
     bad = tmp_path / "bad.toml"

@@ -20,7 +20,7 @@ import pandas as pd
 import pytest
 from scipy.optimize import brentq
 
-import amsfe_sym.apps.estimate as estimate_app
+import amsfe_sym.apps.estimate_build as estimate_app
 from amsfe_sym.apps.cli import main
 from amsfe_sym.apps.estimate import EstimateOptions, estimate_command
 from amsfe_sym.apps.estimate_start import log_link_start
