@@ -1,4 +1,5 @@
-"""The pipeline's layers (docs/explanation/architecture.md): each room imports only the rooms before it,
+"""The pipeline's layers (docs/explanation/architecture.md): each room imports only the rooms
+before it,
 no module imports itself back through others, and the runtime side never needs CasADi or
 Pinocchio."""
 

@@ -70,7 +70,8 @@ def _estimate(res: RunResult, robot: str, kind: str, estimator: str, tmp: Path):
 def test_a_simulated_log_without_the_applied_torque_runs_to_the_end(
     runs: dict[str, RunResult], robot: str, kind: str, estimator: str, tmp_path: Path
 ) -> None:
-    """Every tick estimated (the input states of docs/explanation/effort.md left out of the N columns),
+    """Every tick estimated (the input states of docs/explanation/effort.md left out of the N
+    columns),
     the NEES of every tick finite and in summary.json, the robot's N states only.  The links
     are tracked except on paper_2link without effort: there only the camera sees them, and
     from the log's start (link = motor angle, 1.45 rad from the truth, 3 sigma of P(0|0))
@@ -100,7 +101,8 @@ def test_the_torque_sensor_sees_the_soft_links_better_than_no_effort(
 ) -> None:
     """On the paper's soft arm (Ks = 10 N m/rad) the measured spring torque gives the link
     angles; without effort they are seen through the camera and a random-walk input only
-    (docs/explanation/effort.md section 2): the link error of ``joint_torque`` is below ``none``'s."""
+    (docs/explanation/effort.md section 2): the link error of ``joint_torque`` is below
+    ``none``'s."""
     res = runs["paper_2link"]
     n = res.lib.n
     rmse = {}
@@ -200,7 +202,9 @@ def test_link_side_positions_with_a_joint_torque_are_turned_into_motor_angles(
         opts = EstimateOptions(robot="paper_2link", log_spec=str(spec), plots=False)
         try:
             got = estimate_command(log, tmp / "est", opts)
-        except EstimatorError:  # a run that stops counts as the worst error (docs/explanation/effort.md)
+        except (
+            EstimatorError
+        ):  # a run that stops counts as the worst error (docs/explanation/effort.md)
             assert name == "link log read as motor"
             rmse[name] = np.inf
             continue

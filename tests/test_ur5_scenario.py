@@ -56,7 +56,8 @@ def test_ur5_demo_converges_and_is_consistent(ur5_demo, estimator: str) -> None:
     assert np.sqrt(res.P_diag[-1, L["theta"]][0]) < 1e-3
     # link angles: < 3 mrad RMSE on every joint over the last 80 % (measured 2.32 mrad on
     # wrist 3, 0.03-0.13 on the others; 1.02 before the model took 4 RK4 steps per T, when
-    # the filter was inconsistent under the sliding-mode laws: docs/explanation/ur5-estimation.md, 7)
+    # the filter was inconsistent under the sliding-mode laws: docs/explanation/ur5-estimation.md,
+    # 7)
     assert max(s["estimation_rmse"]["q"]) < 3e-3, s["estimation_rmse"]["q"]
     # consistency: mean NEES 31.8 (33.4 with the 4-step model) at seed 0, 1 s (N = 25)
     assert 20.0 < s["nees_mean"] < 45.0, s["nees_mean"]

@@ -37,7 +37,8 @@ class LogArrays:
         qd_motor: Motor rates qmd [rad/s], (K, n).
         effort: The logged effort held by stamp [N m], (K, n), or None.
         effort_kind: What ``effort`` is: ``applied`` (the motor torque u), ``joint_torque``
-            (a joint torque sensor's tau_J) or ``none`` (no usable torque; docs/explanation/effort.md).
+            (a joint torque sensor's tau_J) or ``none`` (no usable torque;
+            docs/explanation/effort.md).
         camera_t: Each camera frame's exposure time [s] from the first sample, (F,).
         camera_uv: Each frame's pixel [u, v] [px], (F, 2).
         camera_arrival_t: The time each frame reached the estimator [s], (F,).

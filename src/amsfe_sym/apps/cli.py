@@ -143,7 +143,8 @@ def get_argument_parser() -> argparse.ArgumentParser:
         const="",
         default=None,
         metavar="DIR",
-        help="also write the run as a rosbag2 in MCAP (default <run folder>/bag; docs/how-to/logs.md); "
+        help="also write the run as a rosbag2 in MCAP (default <run folder>/bag; "
+        "docs/how-to/logs.md); "
         "DIR elsewhere is written together with the run folder, both or neither, and follows "
         "the --out rules",
     )

@@ -34,7 +34,10 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=SEED, default=None)
     p.add_argument("--duration", type=DURATION, default=None, help="[s] of sample time")
     p.add_argument(
-        "--topic-spec", default=None, metavar="FILE", help="topics, joints, QoS (docs/reference/topics.md)"
+        "--topic-spec",
+        default=None,
+        metavar="FILE",
+        help="topics, joints, QoS (docs/reference/topics.md)",
     )
     p.add_argument(
         "--set",
@@ -201,7 +204,10 @@ def add_play_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("log", help="rosbag2 folder or .mcap file (amsfe simulate --bag writes one)")
     p.add_argument("--rate", type=SECONDS, default=1.0, help="speed factor of the recorded pace")
     p.add_argument(
-        "--topic-spec", default=None, metavar="FILE", help="topics, joints, QoS (docs/reference/topics.md)"
+        "--topic-spec",
+        default=None,
+        metavar="FILE",
+        help="topics, joints, QoS (docs/reference/topics.md)",
     )
     p.add_argument("--start-timeout", type=SECONDS, default=30.0, help="wait for a node [s]")
     p.add_argument(

@@ -1,5 +1,6 @@
 """The paper's laws as printed: (37) ``amsfe-paper`` and the baseline (54) ``dtsmc-paper``,
-on the generated laws; docs/explanation/control.md says why they fail on the paper's arm (law (37) as
+on the generated laws; docs/explanation/control.md says why they fail on the paper's arm (law (37)
+as
 printed hides u: PAPER-NOTES section 4), which is why the cascades of
 :mod:`amsfe_sym.control.sliding` exist."""
 

@@ -2,7 +2,8 @@
 
 Each class reads its inputs (the fusion estimate, the encoders, or the true state), calls one
 generated law of :mod:`amsfe_sym.symbolic.control` (the maths lives there, once), and keeps
-the little memory the law needs between ticks.  docs/explanation/control.md derives the laws and says
+the little memory the law needs between ticks.  docs/explanation/control.md derives the laws and
+says
 why the printed ones fail on the paper's arm.
 
 ========================  =======================  ======================================
@@ -166,7 +167,8 @@ class _Cascade(_SlidingBase):
     #: The gains ``headroom_tau`` scales by the actuators' headroom (the loops' bandwidths and
     #: the reaching law's gains).
     HEADROOM_GAINS: ClassVar[tuple[str, ...]] = ("h", "eps", "wm", "wf")
-    #: The start-ups (docs/explanation/control.md, "Start-up"): ``"first"`` starts the command filter at
+    #: The start-ups (docs/explanation/control.md, "Start-up"): ``"first"`` starts the command
+    #: filter at
     #: rest on the first command, whatever the estimate (the form the paper's laws imply);
     #: ``"converged"`` waits until the estimate is fit for the law: every link angle's and
     #: rate's posterior standard deviation below ``ready_q_std`` [rad] and ``ready_qd_std``
@@ -178,7 +180,8 @@ class _Cascade(_SlidingBase):
     #: the motor's own angle and rate (the encoders need no convergence) and joins the
     #: reference's motor trajectory within the blend's budget; ``"auto"``: ``"motor"`` when
     #: the estimator's model is the paper's (``integrator = "paper"``, whose filter takes
-    #: ~0.3 s to pass the rate test), else ``"reference"`` (docs/explanation/control.md measures both).
+    #: ~0.3 s to pass the rate test), else ``"reference"`` (docs/explanation/control.md measures
+    #: both).
     #: Then the filter starts at rest on the first trusted command, as it would with the
     #: true state.
     #: With ``blend_accel`` [rad/s^2] finite, the reference then starts from the state the law
@@ -461,7 +464,8 @@ class Dtsmc(_Cascade):
     estimator.  It reads the motor encoders and removes the spring deflection the plan
     predicts: ``q = qm - (qm_r - q_d)``, ``qd = qmd - (qmd_r - qd_d)`` (``qm_r`` the motor
     angle of the desired motion), computed inside the generated law; theta stays at its
-    initial value.  docs/explanation/control.md says why the simpler readings (q = qm, or removing the
+    initial value.  docs/explanation/control.md says why the simpler readings (q = qm, or removing
+    the
     deflection commanded one tick before) diverge."""
 
     name = "dtsmc"

@@ -1,10 +1,12 @@
 """Where the links are at a log's first sample when only the motor angles are known.
 
-A log of effort kind ``none`` (docs/explanation/effort.md) gives the motor angles ``qm`` and rates, not
+A log of effort kind ``none`` (docs/explanation/effort.md) gives the motor angles ``qm`` and rates,
+not
 the link angles ``q``: on an elastic arm the springs deflect under gravity by
 ``qm - q = Ks^-1 g(q)`` (eq. 1b at rest), 1.45 rad on the paper's soft arm.  Started at
 ``q = qm`` the estimator is 3 sigma off, its camera frames are gated out, and the encoders
-alone never see the link (docs/explanation/effort.md section 2).  This module finds the link angles that
+alone never see the link (docs/explanation/effort.md section 2).  This module finds the link angles
+that
 balance the springs at the first sample,
 
     tau(q) = Ks (qm - q),    tau(q) = g(q, theta) + C(q, qd) qd    (eq. 1a with qdd = 0),

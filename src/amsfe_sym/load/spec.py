@@ -58,7 +58,8 @@ class ModelSpec:
         plant_substeps: RK4 substeps per T of the continuous-time plant.
         model_substeps: RK4 steps per T of the estimator's ``rk4`` model F (used whenever the
             model is ``rk4``, the spec's integrator or a scenario's): more resolve a joint
-            mode near w T ~ 1 that one step mis-integrates (robots/ur5, docs/explanation/ur5-estimation.md).
+            mode near w T ~ 1 that one step mis-integrates (robots/ur5,
+            docs/explanation/ur5-estimation.md).
     """
 
     joints: tuple[str, ...] | None = None

@@ -124,7 +124,8 @@ def estimate_log(
         progress: Show a progress bar; None: for logs of at least
             :data:`PROGRESS_MIN_TICKS` ticks.
         states: The robot's state size N (eq. 2) when ``est`` carries more (the input
-            states of an effort of kind ``joint_torque`` or ``none``, docs/explanation/effort.md): the
+            states of an effort of kind ``joint_torque`` or ``none``, docs/explanation/effort.md):
+            the
             estimates, their variances and the NEES are of the first N; None: all of them.
     """
     bar = _progress(log, est, progress)

@@ -160,7 +160,10 @@ def _kind(path: Path) -> str:
     }.get(path.suffix, f"a {path.suffix or 'extension-less'} file starting with {head[:8]!r}")
     fix = {
         ".db3": "pass the folder holding it and its metadata.yaml",
-    }.get(path.suffix, "convert it to a ROS 1 .bag, a rosbag2 folder or an .mcap (docs/how-to/logs.md)")
+    }.get(
+        path.suffix,
+        "convert it to a ROS 1 .bag, a rosbag2 folder or an .mcap (docs/how-to/logs.md)",
+    )
     raise LogError(
         describe(
             f"log {path}", "a ROS 1 .bag, a rosbag2 folder (MCAP or sqlite3) or an .mcap", what, fix

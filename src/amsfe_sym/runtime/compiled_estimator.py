@@ -227,7 +227,8 @@ class CompiledEstimator(Estimator):
                     f"compiled {bad} on a log without the applied torque",
                     "oosm with backward_map 'linearised', or another estimator",
                     bad,
-                    "use 'replay' (docs/explanation/effort.md), or the Python estimator (amsfe estimate "
+                    "use 'replay' (docs/explanation/effort.md), or the Python estimator "
+                    "(amsfe estimate "
                     "--runtime python; compiled = False)",
                 )
             )

@@ -1,6 +1,7 @@
 """Assemble every symbolic function of one robot (the generated-function contract).
 
-:func:`build_functions` returns CasADi Functions named and shaped as docs/explanation/architecture.md's
+:func:`build_functions` returns CasADi Functions named and shaped as
+docs/explanation/architecture.md's
 contract table says; :mod:`amsfe_sym.codegen` turns them into one C library.  All outputs
 are dense so the C buffers are plain column-major arrays.
 """

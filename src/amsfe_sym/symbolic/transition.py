@@ -68,7 +68,8 @@ STAGE_DERIVATIVES = ("analytic", "reverse_ad")
 #: Up to this many joints the rk4 ``transition_step`` is expanded into SX (straight-line C)
 #: and the C estimators call it; beyond, it is an MX graph over the generated stage (the
 #: contract's function, small) and the C estimators call the chain of
-#: ``runtime/c/amsfe_model.c``.  Measured (tools/codegen_sizes.py, docs/explanation/codegen.md): 2-link
+#: ``runtime/c/amsfe_model.c``.  Measured (tools/codegen_sizes.py, docs/explanation/codegen.md):
+#: 2-link
 #: expanded 0.78 us against 1.55 us chained; UR5 chained 20.5 us against 67 us as MX (and
 #: 42 us expanded, in 60k lines).
 EXPAND_MAX_JOINTS = 2

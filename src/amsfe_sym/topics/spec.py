@@ -70,7 +70,8 @@ class TopicSpec:
             ``input_model``, ``input_rate_std``, ``input_std0``), checked by the estimator's
             ``effort_spec`` (docs/explanation/effort.md).
         filter_options: The ``[filter]`` keys as written, type-checked (:data:`FILTER_KEYS`:
-            the scenario's ``[filter]``, docs/reference/scenarios.md); ``amsfe estimate`` applies them
+            the scenario's ``[filter]``, docs/reference/scenarios.md); ``amsfe estimate`` applies
+            them
             over ``--robot``'s defaults and over a scenario's ``[filter]`` (the log spec wins,
             key by key) and the scenario's own checks judge the result.  ``encoder_q_std``
             and ``encoder_qd_std`` may be :data:`FROM_LOG`: measured from the log.
@@ -214,7 +215,10 @@ def parse_topic_spec(data: dict[str, Any], where: str = "topic spec") -> TopicSp
         if bad:
             fix = "drop them"
             if section == "filter":
-                fix = "rename or drop them (the scenario's [filter] keys: docs/reference/scenarios.md)"
+                fix = (
+                    "rename or drop them (the scenario's [filter] keys: "
+                    "docs/reference/scenarios.md)"
+                )
             raise ConfigError(
                 describe(f"{where} [{section}]", f"keys among {list(keys)}", str(bad), fix)
             )

@@ -1,6 +1,7 @@
 """``amsfe bench``: what generation, one model call and one estimator tick cost.
 
-Three main sections, side by side (docs/explanation/performance.md shows the numbers and explains them):
+Three main sections, side by side (docs/explanation/performance.md shows the numbers and explains
+them):
 
 1. **generation**: a cold ``generate(force=True)`` into a temporary folder and a cached
    second call, each in a fresh Python process as a user runs ``amsfe generate`` twice;

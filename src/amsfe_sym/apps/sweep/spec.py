@@ -295,7 +295,9 @@ def parse_sweep(data: Mapping[str, Any], path: Path | None = None) -> SweepSpec:
         (data.get("report", {}), _REPORT_KEYS),
     ):
         if not isinstance(table, Mapping):
-            raise _bad(where, "tables [sweep], [axes], [report]", table, "see docs/how-to/sweeps.md")
+            raise _bad(
+                where, "tables [sweep], [axes], [report]", table, "see docs/how-to/sweeps.md"
+            )
         check_known_keys(where, table, allowed, "remove or rename them (docs/how-to/sweeps.md)")
     sw = dict(data.get("sweep", {}))
     scenario_ref = sw.get("scenario", "paper-sim")
@@ -338,7 +340,9 @@ def parse_sweep(data: Mapping[str, Any], path: Path | None = None) -> SweepSpec:
         )
     axes_raw = data.get("axes", {})
     if not isinstance(axes_raw, Mapping):
-        raise _bad(f"{where}: [axes]", "a table of axis = values", axes_raw, "see docs/how-to/sweeps.md")
+        raise _bad(
+            f"{where}: [axes]", "a table of axis = values", axes_raw, "see docs/how-to/sweeps.md"
+        )
     axes = {str(k): _axis_values(str(k), v) for k, v in axes_raw.items()}
     for key, values in axes.items():
         if key.startswith(ROBOT_PREFIX):
