@@ -233,3 +233,29 @@ def test_every_docs_page_the_code_names_exists() -> None:
                 if not (ROOT / target).exists() and f.name != Path(__file__).name:
                     missing.append(f"{f.relative_to(ROOT)}: {target}")
     assert not missing, "\n".join(missing)
+
+
+def _low_level_modules() -> set[str]:
+    """The modules of the low-level API that ``amsfe_sym.api``'s docstring lists (what the
+    public names are made of); the docs' examples may use them beside ``amsfe_sym``."""
+    import amsfe_sym.api
+
+    names = re.findall(r"`~?(amsfe_sym(?:\.\w+)+)`", amsfe_sym.api.__doc__ or "")
+    return {n.rsplit(".", 1)[0] for n in names}
+
+
+def test_the_docs_examples_import_only_the_public_api() -> None:
+    allowed = {"amsfe_sym", "amsfe_sym.api"} | _low_level_modules()
+    imports = re.compile(
+        r"^\s*(?:from\s+(amsfe_sym[\w.]*)\s+import|import\s+(amsfe_sym[\w.]*))", re.M
+    )
+    outside = [
+        f"{b.where}: {mod}"
+        for p in pages()
+        for b in extract(p)
+        if b.lang == "python"
+        for m in imports.finditer(b.code)
+        if (mod := m.group(1) or m.group(2)) not in allowed
+    ]
+    assert "amsfe_sym.sim.loop" in allowed  # the docstring's list was read
+    assert not outside, "\n".join(outside)

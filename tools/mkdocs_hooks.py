@@ -110,3 +110,21 @@ def on_page_markdown(markdown: str, page: Any, config: Any, files: Any) -> str:
     # "[lo, hi] [95% CI]", "[a][unit]": text, not reference links (mkdocs-autorefs would
     # report them as missing cross-references)
     return _REF.sub(r"]\\[\1]", _LINK.sub(fix, markdown))
+
+
+_AUTOREF = re.compile(r"<autoref ([^>]*)>(.*?)</autoref>", re.S)
+_IDENTIFIER = re.compile(r'identifier="([^"]*)"')
+
+
+def on_page_content(html: str, page: Any, config: Any, files: Any) -> str:
+    """A docstring's "[u, v] [px]" is read by mkdocs-autorefs as a reference to an object
+    ``px``; a cross-reference to the API is always a dotted path, so a target without a dot
+    is put back as the text it was."""
+
+    def text(m: re.Match[str]) -> str:
+        ident = _IDENTIFIER.search(m.group(1))
+        if ident is None or "." in ident.group(1):
+            return m.group(0)
+        return f"[{m.group(2)}][{ident.group(1)}]"
+
+    return _AUTOREF.sub(text, html)
