@@ -335,7 +335,7 @@ def write_page(results: list[dict[str, Any]], machine: str) -> str:
         "<!-- written by tools/plant_accuracy.py; edit the script, not this page -->",
         "",
         "The simulated plant (the continuous-time Spong model, `plant_step` in each library) is "
-        "integrated over each sampling interval T with u held.  How finely?  Issue 18 asks for "
+        "integrated over each sampling interval T with u held.  How finely?  The target is "
         f"<= {TOLERANCE:g} rad of link angle over 10 s, against the same plant at 10x the "
         "substeps, at the least cost.  Measured by:",
         "",
