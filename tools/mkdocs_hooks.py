@@ -81,6 +81,30 @@ def cli_reference() -> str:
     return "\n".join(out)
 
 
+def _present(nav: list[Any], docs_dir: Path) -> list[Any]:
+    """The nav without the entries whose page is not in ``docs_dir`` (nor generated)."""
+    out: list[Any] = []
+    for item in nav:
+        if isinstance(item, dict):
+            ((title, value),) = item.items()
+            if isinstance(value, list):
+                kept = _present(value, docs_dir)
+                if kept:
+                    out.append({title: kept})
+            elif value == CLI_PAGE or (docs_dir / value).exists():
+                out.append(item)
+        elif item == CLI_PAGE or (docs_dir / item).exists():
+            out.append(item)
+    return out
+
+
+def on_config(config: Any) -> Any:
+    """Pages another branch brings are in mkdocs.yml's nav before they exist."""
+    if config["nav"]:
+        config["nav"] = _present(config["nav"], Path(config["docs_dir"]))
+    return config
+
+
 def on_files(files: Any, config: Any) -> Any:
     """Adds the command reference. Also: text such as ``median [95% CI]`` after a bracketed
     interval reads as a Markdown reference link to mkdocs-autorefs (added by mkdocstrings
