@@ -204,7 +204,7 @@ class _Cascade(_SlidingBase):
     #: estimate at the trusted tick (:func:`~amsfe_sym.control.blend.blend_through`): the
     #: wait spends the blend's flat start instead of adding the offset the arm drifted
     #: meanwhile to the one the blend must return; 0: planned from the trusted tick
-    #: (docs/explanation/control.md, "Start-up, issue 28, fourth pass").
+    #: (docs/explanation/control.md, "Start-up: the blend planned before the trusted tick").
     STARTUPS: ClassVar[tuple[str, ...]] = ("first", "converged")
     HOLDS: ClassVar[tuple[str, ...]] = ("reference", "motor", "auto")
 
