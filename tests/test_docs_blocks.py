@@ -259,3 +259,23 @@ def test_the_docs_examples_import_only_the_public_api() -> None:
     ]
     assert "amsfe_sym.sim.loop" in allowed  # the docstring's list was read
     assert not outside, "\n".join(outside)
+
+
+def test_the_readme_s_links_lead_somewhere() -> None:
+    """README.md is outside the site (mkdocs checks the pages' links): its relative links and
+    their anchors are checked here, anchors as the site makes them from the headings."""
+    from markdown.extensions.toc import slugify
+
+    text = (ROOT / "README.md").read_text()
+    broken = []
+    for target, anchor in re.findall(r"\]\(([^)#\s]+)(?:#([^)\s]+))?\)", text):
+        if re.match(r"[a-z]+:", target):
+            continue
+        path = ROOT / target
+        if not path.exists():
+            broken.append(target)
+        elif anchor and path.suffix == ".md":
+            heads = re.findall(r"^#+\s+(.*)$", path.read_text(), re.M)
+            if anchor not in {slugify(h, "-") for h in heads}:
+                broken.append(f"{target}#{anchor}")
+    assert not broken, broken
