@@ -118,6 +118,13 @@ def run_block(block: Block, cwd: Path) -> subprocess.CompletedProcess[str]:
     )
     env.setdefault("AMSFE_GENERATED_DIR", str(ROOT / "generated"))
     env["MPLBACKEND"] = "Agg"
+    if block.ci == "ros":
+        # a domain of its own, outside tests/test_ros.py's 1..101, and localhost only: two
+        # runs on one machine (another checkout, xdist workers) must not hear each other
+        env["ROS_DOMAIN_ID"] = str(102 + os.getpid() % 100)
+        env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        env.pop("ROS_LOCALHOST_ONLY", None)
+        env["ROS_LOG_DIR"] = str(cwd / "ros-log")
     argv = ["bash", "-e", "-c", block.code] if block.lang == "bash" else [sys.executable, "-"]
     return subprocess.run(
         argv,
