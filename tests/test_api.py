@@ -253,3 +253,47 @@ def test_the_notebook_example_runs() -> None:
     assert path.read_text().startswith("# %% [markdown]")
     ns = runpy.run_path(str(path), run_name="__main__")
     assert ns["rmse_q"].shape == (2,) and np.all(ns["rmse_q"] < 5e-3)
+
+
+def test_libraries_go_to_the_current_directory_by_default(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``$AMSFE_GENERATED_DIR`` when set, else ``generated/`` in the current directory (as
+    ``runs/``), never the checkout the package was installed from."""
+    from amsfe_sym.codegen import default_out_dir
+
+    monkeypatch.delenv("AMSFE_GENERATED_DIR", raising=False)
+    monkeypatch.chdir(tmp_path)
+    assert default_out_dir() == tmp_path / "generated"
+    monkeypatch.setenv("AMSFE_GENERATED_DIR", str(tmp_path / "elsewhere"))
+    assert default_out_dir() == tmp_path / "elsewhere"
+
+
+def test_generate_names_each_lowered_default_stiffness() -> None:
+    """A bare URDF's default Ks lowered for a light joint is one line naming the joint, the
+    two values and why; a spec that gives Ks says nothing."""
+    from dataclasses import replace
+
+    from amsfe_sym.codegen.build import lowered_stiffness
+    from amsfe_sym.load.spec import load_spec
+
+    spec = load_spec("paper_2link")
+    assert lowered_stiffness(spec, [10.0, 10.0], ["a", "b"]) == []
+    bare = replace(spec, actuators=replace(spec.actuators, Ks=None))
+    lines = lowered_stiffness(bare, [1000.0, 130.9], ["shoulder", "wrist_3_joint"])
+    assert len(lines) == 1
+    assert "wrist_3_joint" in lines[0] and "1000 to 130.9 N m/rad" in lines[0]
+    assert "w T <= 0.5" in lines[0] and "[actuators] Ks" in lines[0]
+
+
+def test_check_tolerance_of_a_chain_grows_with_what_it_chains() -> None:
+    """``transition_step_chain``'s tolerance is 64 m kappa(M) eps (at least the former
+    1e-13): the UR10 of a bare URDF with model_substeps = 7 (kappa of its M in the
+    thousands) passes its 1.31e-13."""
+    from amsfe_sym.apps.check import chain_tolerance
+
+    eps = float(np.finfo(float).eps)
+    assert chain_tolerance(1, 1.0) == 1e-13
+    assert chain_tolerance(7, 1e3) == pytest.approx(64 * 7 * 1e3 * eps)
+    assert chain_tolerance(7, 1e3) > 1.31e-13
+    assert chain_tolerance(14, 1e3) == pytest.approx(2 * chain_tolerance(7, 1e3))

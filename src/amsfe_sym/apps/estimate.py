@@ -13,6 +13,7 @@ the robot's library is generated or loaded.
 from __future__ import annotations
 
 import argparse
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -254,7 +255,12 @@ def from_args(args: argparse.Namespace) -> int:
         robot=args.robot,
         verbose=True,
     )
-    print_summary(summary(estimate_command(log, out, opts, startup_s)), out)
+    run = estimate_command(log, out, opts, startup_s)
+    print_summary(summary(run), out)
+    from amsfe_sym.apps.plots.cost import hint_line
+
+    if hint := hint_line(run.figures_s, (run.timing.startup_s or 0.0) + run.timing.wall_s):
+        print(f"  {hint}")
     return 0
 
 
@@ -294,7 +300,9 @@ def _write(
         start = max(log.t0_ns, 0) * 1e-9
         write_estimate_bag(tmp / "estimates", start, log.t, joints, est.x_hat, est.P_diag)
         if options.plots:
+            t = time.perf_counter()
             figures(run, tmp)
+            run.figures_s = time.perf_counter() - t
         if clock is not None:
             wall = clock.lap("write")
             p = clock.spent
