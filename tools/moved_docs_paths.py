@@ -8,7 +8,8 @@ fails on a docs path that does not exist, and ruff on a line the longer path mad
     .venv/bin/python tools/moved_docs_paths.py          # list; exit 1 when any is found
     .venv/bin/python tools/moved_docs_paths.py --fix    # rewrite them in place
 
-Only text files under git are read; docs/data/ (stored outputs) is left alone but for the
+Relative links from a page directly in docs/ (``[x](logs.md)``) are rewritten too. Only text
+files under git are read; docs/data/ (stored outputs) is left alone but for the
 claims registry.
 """
 
@@ -45,6 +46,8 @@ MOVED = {
 }
 OLD = re.compile(r"docs/(" + "|".join(re.escape(k) for k in MOVED) + r")(?![\w-])")
 SUFFIXES = (".py", ".md", ".toml", ".txt", ".c", ".h", ".yml", ".yaml")
+#: a relative Markdown link from a page directly in docs/ (where other branches add theirs)
+LINK = re.compile(r"\]\((" + "|".join(re.escape(k) for k in MOVED) + r")(?=[#)])")
 
 
 def tracked_files() -> list[Path]:
@@ -57,7 +60,17 @@ def tracked_files() -> list[Path]:
         if f.endswith(SUFFIXES)
         and (not f.startswith("docs/data/") or f.endswith("claims-registry.toml"))
     ]
-    return [ROOT / f for f in keep if (ROOT / f).is_file()]
+    return [ROOT / f for f in keep if (ROOT / f).is_file() and f != "tools/moved_docs_paths.py"]
+
+
+def rewrite(path: Path, text: str) -> tuple[str, list[str]]:
+    """The text with the old paths replaced, and the old paths found."""
+    hits = OLD.findall(text)
+    text = OLD.sub(lambda m: "docs/" + MOVED[m.group(1)], text)
+    if path.parent == ROOT / "docs" and path.suffix == ".md":
+        hits += LINK.findall(text)
+        text = LINK.sub(lambda m: "](" + MOVED[m.group(1)], text)
+    return text, hits
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -67,14 +80,14 @@ def main(argv: list[str] | None = None) -> int:
     found = 0
     for path in tracked_files():
         text = path.read_text()
-        hits = OLD.findall(text)
+        new, hits = rewrite(path, text)
         if not hits:
             continue
         found += len(hits)
         rel = path.relative_to(ROOT)
         print(f"{rel}: {len(hits)} old path(s): {', '.join(sorted(set(hits)))}")
         if args.fix:
-            path.write_text(OLD.sub(lambda m: "docs/" + MOVED[m.group(1)], text))
+            path.write_text(new)
     if found and not args.fix:
         print(f"{found} old docs path(s); --fix rewrites them")
         return 1

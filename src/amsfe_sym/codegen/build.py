@@ -370,7 +370,7 @@ def lowered_stiffness(spec: RobotSpec, Ks: Sequence[float], joints: Sequence[str
         f"[amsfe] {spec.name}: joint {name}: default stiffness Ks lowered from {default:g} to "
         f"{k:.4g} N m/rad, so that its link-against-motor mode keeps w T <= 0.5 at "
         f"T = {spec.model.T:g} s (w^2 = Ks (1/J + 1/Mm), J its lightest inertia); set your "
-        "arm's own with [actuators] Ks in a robot.toml (docs/robot-spec.md)"
+        "arm's own with [actuators] Ks in a robot.toml (docs/reference/robot-spec.md)"
         for name, k in zip(joints, Ks, strict=True)
         if float(k) < default * (1 - 1e-9)
     ]

@@ -1,5 +1,5 @@
 """Figures of an estimate over a recorded log (``amsfe estimate``): ``estimate.png`` and
-``nis.png`` (docs/logs.md, "Consistency without truth").
+``nis.png`` (docs/how-to/logs.md, "Consistency without truth").
 
 ``estimate.png`` has one panel per joint.  A log with the truth (a simulated one) shows the
 link-angle error with the filter's +-2 sigma band.  Any other log shows what can be judged
