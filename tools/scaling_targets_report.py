@@ -1,8 +1,9 @@
-"""Issue 18's targets, met or not: runs ``amsfe bench`` and writes docs/performance.md's
-"Issue 18" section (between its ``<!-- issue-18 -->`` markers) and docs/data/bench-issue18.json.
+"""The targets for generated code that scales, met or not: runs ``amsfe bench`` and writes the
+section of docs/explanation/performance.md between its ``<!-- scaling-targets -->`` markers,
+and docs/data/bench-issue18.json (the data file keeps its first name).
 
-    .venv/bin/python tools/issue18_report.py            # the bench (~15-25 min on 2 cores), then the section
-    .venv/bin/python tools/issue18_report.py --from docs/data/bench-issue18.json   # the section only
+    .venv/bin/python tools/scaling_targets_report.py            # the bench (~15-25 min on 2 cores), then the section
+    .venv/bin/python tools/scaling_targets_report.py --from docs/data/bench-issue18.json   # the section only
 
 The bench runs the sections the targets need: the closed loop (paper-sim, ur5-control,
 panda-control, 10 s each) and the scaling table (chains of 1..12 joints and the Panda).  The
@@ -23,8 +24,8 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "docs" / "data" / "bench-issue18.json"
-PAGE = ROOT / "docs" / "performance.md"
-BEGIN, END = "<!-- issue-18 begin -->", "<!-- issue-18 end -->"
+PAGE = ROOT / "docs" / "explanation" / "performance.md"
+BEGIN, END = "<!-- scaling-targets begin -->", "<!-- scaling-targets end -->"
 
 
 def run_bench(dest: Path) -> dict[str, Any]:
@@ -71,9 +72,9 @@ def section(report: dict[str, Any]) -> str:
     out = [
         BEGIN,
         "",
-        "## Issue 18: the targets, met or not",
+        "## Targets for generated code that scales, met or not",
         "",
-        "<!-- written by tools/issue18_report.py from docs/data/bench-issue18.json -->",
+        "<!-- written by tools/scaling_targets_report.py from docs/data/bench-issue18.json -->",
         "",
         f"Measured with `{meta.get('command', 'amsfe bench')}` "
         f"({meta.get('wall_s', '?')} s) on {cpu.get('Model name', m['cpu'])} "
