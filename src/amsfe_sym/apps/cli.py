@@ -147,6 +147,15 @@ def get_argument_parser() -> argparse.ArgumentParser:
         "DIR elsewhere is written together with the run folder, both or neither, and follows "
         "the --out rules",
     )
+    s.add_argument(
+        "--images",
+        nargs="?",
+        const="mono8",
+        default=None,
+        choices=("mono8", "jpeg", "png"),
+        help="with --bag: the camera writes images of the marker (default mono8; or jpeg, png "
+        "compressed) and its CameraInfo instead of its pixel topic (docs/camera.md)",
+    )
     add_set(s)
 
     add_estimate_arguments(
@@ -342,6 +351,7 @@ def _simulate(args: argparse.Namespace) -> int:
         runtime=args.runtime,
         bag=None if args.bag is None else Path(args.bag) if args.bag else BAG_IN_RUN,
         inputs=_input_files(args.scenario),
+        images=args.images,
     )
     one = not (compare and args.controller is None)  # else: the paper's comparison
     name = f"{sc.name}-{sc.estimator}-{stamp}" if one else f"{sc.name}-{stamp}"

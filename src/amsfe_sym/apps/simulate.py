@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -50,6 +51,9 @@ class SimulateOptions:
         bag: Also write the run as a rosbag2 in MCAP (:mod:`amsfe_sym.logs.write`) at this
             folder; :data:`BAG_IN_RUN`: ``<run folder>/bag``; None: no bag.
         inputs: Files the command reads (the scenario file): never written.
+        images: With the bag, the camera writes images of the marker in this format
+            (``mono8``, ``jpeg``, ``png``) and its CameraInfo instead of its pixel topic
+            (docs/camera.md); None: the pixel topic.
     """
 
     plots: bool = True
@@ -58,6 +62,7 @@ class SimulateOptions:
     runtime: str = "compiled"
     bag: Path | str | None = None
     inputs: tuple[Path, ...] = ()
+    images: str | None = None
 
 
 @dataclass(frozen=True)
@@ -94,11 +99,20 @@ def _urdf_text(res: RunResult) -> str | None:
     return urdf.read_text() if urdf.is_file() else None
 
 
-def _write_bag_into(res: RunResult, folder: Path) -> None:
+def _images(options: SimulateOptions) -> Any:
+    """The simulated camera's image options of ``--images`` (None: the pixel topic)."""
+    if options.images is None:
+        return None
+    from amsfe_sym.vision.sim_images import ImageOptions
+
+    return ImageOptions(format=options.images)  # type: ignore[arg-type]
+
+
+def _write_bag_into(res: RunResult, folder: Path, options: SimulateOptions) -> None:
     """The run's bag as ``folder/bag``, inside the run folder being written."""
     from amsfe_sym.logs.write import run_bag_filler
 
-    run_bag_filler(res, _urdf_text(res))(folder / "bag")
+    run_bag_filler(res, _urdf_text(res), _images(options))(folder / "bag")
 
 
 def simulate_one(
@@ -128,11 +142,12 @@ def simulate_one(
 
     def extra(folder: Path) -> None:
         if inside:
-            _write_bag_into(res, folder)
+            _write_bag_into(res, folder, options)
 
     jobs = [FolderJob(out, run_filler(res, out, figures, extra), options.force)]
     if outs.bag is not None:
-        jobs.append(bag_job(outs.bag.path, run_bag_filler(res, _urdf_text(res)), options.force))
+        filler = run_bag_filler(res, _urdf_text(res), _images(options))
+        jobs.append(bag_job(outs.bag.path, filler, options.force))
     write_folders(jobs)
     if options.bag is not None:
         bag = out / "bag" if inside else Path(options.bag)
@@ -173,12 +188,12 @@ def simulate_comparison(
 
     def extra(name: str, res: RunResult, folder: Path) -> None:
         if inside:
-            _write_bag_into(res, folder)
+            _write_bag_into(res, folder, options)
 
     def bags(folder: Path) -> None:
         folder.mkdir()
         for name, res in cmp.results.items():
-            run_bag_filler(res, _urdf_text(res))(folder / name)
+            run_bag_filler(res, _urdf_text(res), _images(options))(folder / name)
 
     jobs = [FolderJob(out, comparison_filler(cmp, figures, extra), options.force)]
     if outs.bag is not None:

@@ -1,0 +1,94 @@
+"""The marker in an image: OpenCV's ArUco detector (AprilTag families included) with
+sub-pixel corner refinement, and the tracked point from its corners (docs/camera.md, "The
+marker")."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amsfe_sym.vision.spec import CORNERS, MarkerSpec
+
+__all__ = ["Detection", "MarkerDetector", "diagonals_meet", "tracked_point"]
+
+FloatArray = NDArray[np.float64]
+
+#: Why a frame gave no point (counted by the log reader under these names).
+NO_MARKER = "without the marker (nothing detected)"
+OTHER_ID = "with another marker id only"
+
+
+@dataclass(frozen=True, eq=False)
+class Detection:
+    """What the detector found in one image.
+
+    Attributes:
+        corners: The marker's 4 corners in raw image pixels (4, 2) [px], OpenCV's order
+            (:data:`~amsfe_sym.vision.spec.CORNERS`), or None when it was not found.
+        skipped: Why there is no point (None: found).
+        ids: Every id seen in the image.
+    """
+
+    corners: FloatArray | None
+    skipped: str | None
+    ids: tuple[int, ...] = ()
+
+
+class MarkerDetector:
+    """One ``cv2.aruco.ArucoDetector`` for a :class:`MarkerSpec` (built once, reused).
+
+    Sub-pixel refinement: ``CORNER_REFINE_SUBPIX`` (``cornerSubPix`` on each corner, window
+    ``refine_window`` px, stopping at 0.01 px or 50 iterations).
+    """
+
+    def __init__(self, spec: MarkerSpec, refine_window: int = 5) -> None:
+        import cv2
+
+        self.spec = spec
+        dictionary = cv2.aruco.getPredefinedDictionary(_dictionary_id(spec.dictionary))
+        params = cv2.aruco.DetectorParameters()
+        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+        params.cornerRefinementWinSize = int(refine_window)
+        params.cornerRefinementMaxIterations = 50
+        params.cornerRefinementMinAccuracy = 0.01
+        self._detector: Any = cv2.aruco.ArucoDetector(dictionary, params)
+
+    def detect(self, grey: NDArray[np.uint8]) -> Detection:
+        """The spec's marker in the grey image ``grey`` (height, width)."""
+        corners, ids, _ = self._detector.detectMarkers(grey)
+        seen = () if ids is None else tuple(int(i) for i in np.asarray(ids).ravel())
+        if not seen:
+            return Detection(None, NO_MARKER)
+        if self.spec.id not in seen:
+            return Detection(None, OTHER_ID, seen)
+        c = np.asarray(corners[seen.index(self.spec.id)], dtype=np.float64).reshape(4, 2)
+        return Detection(c, None, seen)
+
+
+def _dictionary_id(name: str) -> int:
+    import cv2
+
+    for attr in (name, name.upper()):
+        if hasattr(cv2.aruco, attr):
+            return int(getattr(cv2.aruco, attr))
+    raise KeyError(name)  # (parse_marker checked the name against DICTIONARIES)
+
+
+def diagonals_meet(corners: FloatArray) -> FloatArray:
+    """The intersection of the diagonals 0-2 and 1-3 of a quadrilateral (4, 2) [px]: the
+    image of the square's centre under any homography (perspective keeps lines and
+    incidence), so on undistorted corners it is the projection of the marker's centre."""
+    a, b, c, d = (np.append(p, 1.0) for p in np.asarray(corners, dtype=np.float64))
+    x = np.cross(np.cross(a, c), np.cross(b, d))
+    out: FloatArray = x[:2] / x[2]
+    return out
+
+
+def tracked_point(corners: FloatArray, point: str) -> FloatArray:
+    """The tracked point of undistorted ``corners`` (4, 2) [px]: ``centre`` or a named corner."""
+    if point == "centre":
+        return diagonals_meet(corners)
+    return np.asarray(corners[CORNERS.index(point)], dtype=np.float64).copy()

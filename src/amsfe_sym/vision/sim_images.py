@@ -1,0 +1,158 @@
+"""The simulated camera's images and CameraInfo as ROS messages (``amsfe simulate --bag
+--images``; docs/camera.md, "Simulated images").
+
+Each delivered frame of a run becomes the image the true camera took at its exposure step:
+the marker centred on the true tracked point (the generated ``tracked_point`` at the true
+q and theta), rendered through the robot's pinhole and :class:`ImageOptions`' distortion,
+blur and noise (:mod:`amsfe_sym.vision.render`), stamped with the exposure and logged at
+its delivery, with the CameraInfo (K = the robot's intrinsics, the distortion, P = [K | 0])
+of the same stamp.  One image is held at a time.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.vision.camera_info import CameraInfo, make_camera_info
+from amsfe_sym.vision.render import ImageNoise, MarkerRenderer, marker_corners
+from amsfe_sym.vision.spec import MarkerSpec
+
+__all__ = ["IMAGE_FORMATS", "ImageOptions", "SimulatedCamera"]
+
+FloatArray = NDArray[np.float64]
+ImageFormat = Literal["mono8", "jpeg", "png"]
+#: How ``--images`` writes a frame: a raw mono8 Image, or a jpeg / png CompressedImage.
+IMAGE_FORMATS: tuple[str, ...] = ("mono8", "jpeg", "png")
+
+#: The topics the simulated camera writes (a usb_cam / image_proc layout).
+IMAGE_TOPIC = "/camera/image_raw"
+COMPRESSED_TOPIC = "/camera/image_raw/compressed"
+INFO_TOPIC = "/camera/camera_info"
+
+
+@dataclass(frozen=True)
+class ImageOptions:
+    """What the simulated camera writes.
+
+    Attributes:
+        format: ``mono8`` (sensor_msgs/Image) or ``jpeg`` / ``png`` (CompressedImage).
+        marker: The marker on the tracked point (a 10 cm AprilTag 36h11 id 0 by default:
+            about 27 px across at the 2-link arm's 1.5 m and f = 400 px).
+        noise: Blur, pixel noise and contrast of the images.
+        model: The true camera's distortion model (``plumb_bob``, ``rational_polynomial``,
+            ``equidistant``).
+        D: Its coefficients (all zero: a rectified camera).
+        jpeg_quality: 0..100 for ``jpeg``.
+    """
+
+    format: ImageFormat = "mono8"
+    marker: MarkerSpec = field(default_factory=lambda: MarkerSpec(size=0.1))
+    noise: ImageNoise = field(default_factory=ImageNoise)
+    model: str = "plumb_bob"
+    D: tuple[float, ...] = (-0.12, 0.04, 0.0005, -0.0003, 0.0)
+    jpeg_quality: int = 95
+
+    def __post_init__(self) -> None:
+        if self.format not in IMAGE_FORMATS:
+            raise ConfigError(
+                describe("--images", f"one of {list(IMAGE_FORMATS)}", repr(self.format), "fix it")
+            )
+
+
+class SimulatedCamera:
+    """The true camera of a run: its CameraInfo and a renderer (built once).
+
+    Args:
+        manifest_camera: The library's resolved camera (``lib.manifest.camera``: K, R_cw,
+            position, width, height).
+        tracked_point: ``r = tracked_point(q, theta)`` [m], the generated function.
+        options: What to write.
+        rng: The images' noise (seeded by the run's seed).
+    """
+
+    def __init__(
+        self,
+        manifest_camera: Any,
+        tracked_point: Any,
+        options: ImageOptions,
+        rng: np.random.Generator,
+    ) -> None:
+        cam = manifest_camera
+        self.K = np.asarray(cam.K, dtype=np.float64)
+        self.R_cw = np.asarray(cam.R_cw, dtype=np.float64)
+        self.position = np.asarray(cam.position, dtype=np.float64)
+        self.info: CameraInfo = make_camera_info(
+            cam.width, cam.height, options.model, self.K, options.D
+        )
+        self.options, self.rng = options, rng
+        self.tracked_point = tracked_point
+        self.renderer = MarkerRenderer(self.info, options.marker, options.noise)
+
+    @property
+    def image_topic(self) -> str:
+        """The topic the images go to."""
+        return IMAGE_TOPIC if self.options.format == "mono8" else COMPRESSED_TOPIC
+
+    @property
+    def image_type(self) -> str:
+        """Their message type."""
+        return (
+            "sensor_msgs/msg/Image"
+            if self.options.format == "mono8"
+            else "sensor_msgs/msg/CompressedImage"
+        )
+
+    def corners(self, q: FloatArray, theta: FloatArray) -> FloatArray:
+        """The marker's 4 corners (4, 2) [px] in the pinhole image at (q, theta)."""
+        r = np.asarray(self.tracked_point(q, theta)[0], dtype=np.float64).ravel()
+        return marker_corners(self.K, self.R_cw, self.position, r, self.options.marker.size)
+
+    def messages(self, stamp_ns: int, q: FloatArray, theta: FloatArray) -> tuple[Any, Any]:
+        """The image (rosbags message of :attr:`image_type`) and CameraInfo stamped
+        ``stamp_ns`` [ns] (the exposure) of the arm at (q [rad], theta)."""
+        import cv2
+
+        from amsfe_sym.logs.source import typestore
+
+        ts = typestore().types
+        stamp = ts["builtin_interfaces/msg/Time"](
+            sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000
+        )
+        header = ts["std_msgs/msg/Header"](stamp=stamp, frame_id="camera")
+        img = self.renderer.render(self.corners(q, theta), self.rng)
+        h, w = img.shape
+        if self.options.format == "mono8":
+            msg = ts["sensor_msgs/msg/Image"](
+                header=header, height=h, width=w, encoding="mono8", is_bigendian=0, step=w,
+                data=img.ravel(),
+            )  # fmt: skip
+        else:
+            ext = ".jpg" if self.options.format == "jpeg" else ".png"
+            params = [cv2.IMWRITE_JPEG_QUALITY, self.options.jpeg_quality] if ext == ".jpg" else []
+            ok, buf = cv2.imencode(ext, img, params)
+            if not ok:  # (OpenCV encodes any uint8 image; this is its failure flag)
+                raise ConfigError(describe("--images", f"an encodable {ext}", "none", "use mono8"))
+            msg = ts["sensor_msgs/msg/CompressedImage"](
+                header=header, format=self.options.format, data=np.asarray(buf, np.uint8).ravel()
+            )
+        return msg, self.info_message(header)
+
+    def info_message(self, header: Any) -> Any:
+        """The CameraInfo with ``header`` (rosbags message)."""
+        from amsfe_sym.logs.source import typestore
+
+        ts = typestore().types
+        i = self.info
+        roi = ts["sensor_msgs/msg/RegionOfInterest"](
+            x_offset=0, y_offset=0, height=0, width=0, do_rectify=False
+        )
+        return ts["sensor_msgs/msg/CameraInfo"](
+            header=header, height=i.height, width=i.width, distortion_model=i.model,
+            d=np.asarray(i.D, np.float64), k=i.K.ravel().copy(), r=i.R.ravel().copy(),
+            p=i.P.ravel().copy(), binning_x=0, binning_y=0, roi=roi,
+        )  # fmt: skip
