@@ -145,7 +145,7 @@ def _read_decoded(
 
     own = None
     if plan.camera_info is not None:  # an image camera topic: its marker detected as read
-        from amsfe_sym.vision.log_frames import decoders
+        from amsfe_sym.logs.images import decoders
 
         own = decoders(plan, spec.marker)
     got = read_topics(path, plan.topics_read, decoders=own)
@@ -355,7 +355,7 @@ def read_log(
     on_grid = OnGrid(path, plan, times, decoded, grid, clock, K)  # (the grid the log starts on)
     frames: list[CameraFrame] = []
     if "camera" in present and plan.camera_info is not None:  # images: docs/camera.md
-        from amsfe_sym.vision.log_frames import image_frames
+        from amsfe_sym.logs.images import image_frames
 
         frames = image_frames(on_grid, usage["camera"], spec.marker)
     elif "camera" in present:

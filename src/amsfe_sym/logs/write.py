@@ -191,6 +191,8 @@ def run_bag_filler(
     est = encode_joint_states(stamps, joints, x_hat[:, :n], x_hat[:, n : 2 * n])
 
     def fill(path: Path) -> None:
+        from amsfe_sym.logs.images import image_messages
+
         camera = None if images is None else _camera(res, images)
         bag = _Bag(path)
         try:
@@ -211,8 +213,8 @@ def run_bag_filler(
                     if camera is not None:
                         kap = int(kappa)
                         x = res.x_true[kap]
-                        msg, info = camera.messages(
-                            _ns(kap * lib.T), x[lib.layout["q"]], x[lib.layout["theta"]]
+                        msg, info = image_messages(
+                            camera, _ns(kap * lib.T), x[lib.layout["q"]], x[lib.layout["theta"]]
                         )
                         bag.write(camera.image_topic, camera.image_type, t, msg)
                         bag.write(_INFO, "sensor_msgs/msg/CameraInfo", t, info)

@@ -4,11 +4,14 @@ undistorted tracked point at the exposure stamp -> the camera frame the estimato
 The stage between robot I/O and estimation: :mod:`~amsfe_sym.vision.spec` (what to look
 for), :mod:`~amsfe_sym.vision.camera_info` (CameraInfo, undistortion by point),
 :mod:`~amsfe_sym.vision.images` (image messages -> grey), :mod:`~amsfe_sym.vision.marker`
-(ArUco / AprilTag detection, the tracked point), :mod:`~amsfe_sym.vision.detections` and
-:mod:`~amsfe_sym.vision.log_frames` (a log's image topic, a slice at a time),
-:mod:`~amsfe_sym.vision.render` (the simulated camera's images) and
-:mod:`~amsfe_sym.vision.node` (live detection beside ``amsfe node``).  OpenCV is imported
+(ArUco / AprilTag detection, the tracked point), :mod:`~amsfe_sym.vision.detections` (an
+image topic's payloads, a slice at a time), :mod:`~amsfe_sym.vision.render` and
+:mod:`~amsfe_sym.vision.sim_images` (the simulated camera's images).  OpenCV is imported
 only when an image is handled.
+
+May import: ``errors`` and ``core`` only.  It knows images and points, not containers or
+messages' wire formats: the log reader (``logs.images``) and the live node (``ros``) call
+it with decoded messages and a deserializer.
 """
 
 from __future__ import annotations

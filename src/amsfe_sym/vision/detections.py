@@ -9,19 +9,19 @@ holds the corners of every frame and one slice of images, never every image.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.errors import LogError, describe
-from amsfe_sym.vision.camera_info import CameraInfo, camera_info_from_message, undistort
+from amsfe_sym.vision.camera_info import CameraInfo, undistort
 from amsfe_sym.vision.images import grey_from_message
 from amsfe_sym.vision.marker import NO_MARKER, OTHER_ID, MarkerDetector, tracked_point
 from amsfe_sym.vision.spec import MarkerSpec
 
-__all__ = ["REASONS", "Detections", "ImageDecoder", "camera_info_of", "image_sizes", "points_of"]
+__all__ = ["REASONS", "Detections", "ImageDecoder", "image_sizes", "points_of"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -62,25 +62,29 @@ class ImageDecoder:
     contract, :func:`amsfe_sym.logs.decode.decode_payloads`): every image decoded to grey
     and searched for ``spec``'s marker.
 
+    Args:
+        msgtype: ``sensor_msgs/msg/Image`` or ``sensor_msgs/msg/CompressedImage``.
+        spec: The marker.
+        deserialize: ``deserialize(raw, msgtype, encoding, where)`` -> a message (the log
+            reader's, :func:`amsfe_sym.logs.decode.deserialize`).
+
     Attributes:
         frames: Images decoded so far (for a progress line).
     """
 
-    def __init__(self, msgtype: str, spec: MarkerSpec) -> None:
-        self.msgtype, self.spec = msgtype, spec
+    def __init__(self, msgtype: str, spec: MarkerSpec, deserialize: Callable[..., Any]) -> None:
+        self.msgtype, self.spec, self.deserialize = msgtype, spec, deserialize
         self.detector = MarkerDetector(spec)
         self.frames = 0
 
     def __call__(self, raws: Sequence[bytes], encoding: str = "cdr", where: str = "") -> Detections:
-        from amsfe_sym.logs.decode import deserialize
-
         M = len(raws)
         stamps = np.zeros(M, np.int64)
         corners = np.full((M, 4, 2), np.nan)
         reason = np.zeros(M, np.int64)
         size = np.zeros((M, 2), np.int64)
         for i in range(M):
-            msg = deserialize(raws[i], self.msgtype, encoding, where)  # type: ignore[arg-type]
+            msg = self.deserialize(raws[i], self.msgtype, encoding, where)
             img = grey_from_message(msg, self.msgtype, where or self.msgtype)
             stamps[i] = img.stamp_ns
             size[i] = img.pixels.shape[1], img.pixels.shape[0]
@@ -91,35 +95,6 @@ class ImageDecoder:
                 corners[i] = det.corners
             self.frames += 1
         return Detections(stamps, corners, reason, size)
-
-
-def camera_info_of(
-    raws: Sequence[bytes], encoding: str, where: str, size: tuple[int, int] | None = None
-) -> CameraInfo:
-    """The camera's calibration from its info topic's payloads: the first message (a
-    driver publishes the same one with every image); every later one must be the same
-    size.
-
-    Raises:
-        LogError: no message, an undecodable one, what :func:`make_camera_info` refuses, or
-            an image ``size`` (width, height) that differs from the info's.
-    """
-    from amsfe_sym.logs.decode import deserialize
-
-    if not raws:
-        raise LogError(describe(where, "CameraInfo messages", "none", "record the info topic"))
-    t = "sensor_msgs/msg/CameraInfo"
-    info = camera_info_from_message(deserialize(raws[0], t, encoding, where), where)  # type: ignore[arg-type]
-    if size is not None and (info.width, info.height) != size:
-        raise LogError(
-            describe(
-                where,
-                f"a CameraInfo of the images' size {size[0]} x {size[1]} px",
-                f"{info.width} x {info.height} px",
-                "record the CameraInfo of this camera mode (or rescale the calibration)",
-            )
-        )
-    return info
 
 
 def points_of(det: Detections, info: CameraInfo, spec: MarkerSpec) -> FloatArray:

@@ -6,7 +6,8 @@ the marker centred on the true tracked point (the generated ``tracked_point`` at
 q and theta), rendered through the robot's pinhole and :class:`ImageOptions`' distortion,
 blur and noise (:mod:`amsfe_sym.vision.render`), stamped with the exposure and logged at
 its delivery, with the CameraInfo (K = the robot's intrinsics, the distortion, P = [K | 0])
-of the same stamp.  One image is held at a time.
+of the same stamp (the messages: :func:`amsfe_sym.logs.images.image_messages`).  One image
+is held at a time.
 """
 
 from __future__ import annotations
@@ -112,47 +113,18 @@ class SimulatedCamera:
         r = np.asarray(self.tracked_point(q, theta)[0], dtype=np.float64).ravel()
         return marker_corners(self.K, self.R_cw, self.position, r, self.options.marker.size)
 
-    def messages(self, stamp_ns: int, q: FloatArray, theta: FloatArray) -> tuple[Any, Any]:
-        """The image (rosbags message of :attr:`image_type`) and CameraInfo stamped
-        ``stamp_ns`` [ns] (the exposure) of the arm at (q [rad], theta)."""
+    def image(self, q: FloatArray, theta: FloatArray) -> NDArray[np.uint8]:
+        """The grey image (height, width) the true camera takes of the arm at (q [rad],
+        theta)."""
+        return self.renderer.render(self.corners(q, theta), self.rng)
+
+    def encoded(self, image: NDArray[np.uint8]) -> NDArray[np.uint8]:
+        """``image`` compressed as :attr:`ImageOptions.format` (jpeg or png) says."""
         import cv2
 
-        from amsfe_sym.logs.source import typestore
-
-        ts = typestore().types
-        stamp = ts["builtin_interfaces/msg/Time"](
-            sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000
-        )
-        header = ts["std_msgs/msg/Header"](stamp=stamp, frame_id="camera")
-        img = self.renderer.render(self.corners(q, theta), self.rng)
-        h, w = img.shape
-        if self.options.format == "mono8":
-            msg = ts["sensor_msgs/msg/Image"](
-                header=header, height=h, width=w, encoding="mono8", is_bigendian=0, step=w,
-                data=img.ravel(),
-            )  # fmt: skip
-        else:
-            ext = ".jpg" if self.options.format == "jpeg" else ".png"
-            params = [cv2.IMWRITE_JPEG_QUALITY, self.options.jpeg_quality] if ext == ".jpg" else []
-            ok, buf = cv2.imencode(ext, img, params)
-            if not ok:  # (OpenCV encodes any uint8 image; this is its failure flag)
-                raise ConfigError(describe("--images", f"an encodable {ext}", "none", "use mono8"))
-            msg = ts["sensor_msgs/msg/CompressedImage"](
-                header=header, format=self.options.format, data=np.asarray(buf, np.uint8).ravel()
-            )
-        return msg, self.info_message(header)
-
-    def info_message(self, header: Any) -> Any:
-        """The CameraInfo with ``header`` (rosbags message)."""
-        from amsfe_sym.logs.source import typestore
-
-        ts = typestore().types
-        i = self.info
-        roi = ts["sensor_msgs/msg/RegionOfInterest"](
-            x_offset=0, y_offset=0, height=0, width=0, do_rectify=False
-        )
-        return ts["sensor_msgs/msg/CameraInfo"](
-            header=header, height=i.height, width=i.width, distortion_model=i.model,
-            d=np.asarray(i.D, np.float64), k=i.K.ravel().copy(), r=i.R.ravel().copy(),
-            p=i.P.ravel().copy(), binning_x=0, binning_y=0, roi=roi,
-        )  # fmt: skip
+        ext = ".jpg" if self.options.format == "jpeg" else ".png"
+        params = [cv2.IMWRITE_JPEG_QUALITY, self.options.jpeg_quality] if ext == ".jpg" else []
+        ok, buf = cv2.imencode(ext, image, params)
+        if not ok:  # (OpenCV encodes any uint8 image; this is its failure flag)
+            raise ConfigError(describe("--images", f"an encodable {ext}", "none", "use mono8"))
+        return np.asarray(buf, np.uint8).ravel()

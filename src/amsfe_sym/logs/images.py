@@ -1,9 +1,11 @@
-"""An image camera topic of a log -> the camera frames the estimators take (docs/camera.md):
-the stage between the log reader and estimation.  The reader decodes the image topic with
-:func:`decoders` (detection, a slice at a time); :func:`image_frames` then undistorts each
-detected point with the log's CameraInfo and puts it on the tick grid exactly as a pixel
-topic's point (:func:`amsfe_sym.logs.sensors.camera_frames`), frames without the marker
-counted by reason beside the reader's own reasons."""
+"""An image camera topic of a log -> the camera frames the estimators take, and the
+simulated camera's images as messages (docs/camera.md).
+
+The reader decodes the image topic with :func:`decoders` (detection, a slice at a time);
+:func:`image_frames` then undistorts each detected point with the log's CameraInfo and puts
+it on the tick grid exactly as a pixel topic's point
+(:func:`amsfe_sym.logs.sensors.camera_frames`), frames without the marker counted by reason
+beside the reader's own reasons."""
 
 from __future__ import annotations
 
@@ -16,11 +18,16 @@ from numpy.typing import NDArray
 
 from amsfe_sym.core.camera_frame import CameraFrame
 from amsfe_sym.errors import LogError, describe
+from amsfe_sym.logs.decode import Points, deserialize
+from amsfe_sym.logs.grid import RoleUse, count_skip
+from amsfe_sym.logs.plan import LogPlan
+from amsfe_sym.logs.sensors import OnGrid, camera_frames
 from amsfe_sym.vision.camera_info import CameraInfo, camera_info_from_message
 from amsfe_sym.vision.detections import REASONS, Detections, ImageDecoder, image_sizes, points_of
+from amsfe_sym.vision.sim_images import SimulatedCamera
 from amsfe_sym.vision.spec import CAMERA_INFO, MarkerSpec
 
-__all__ = ["CameraInfos", "decoders", "image_frames"]
+__all__ = ["CameraInfos", "decoders", "image_frames", "image_messages"]
 
 IntArray = NDArray[np.int64]
 
@@ -41,8 +48,6 @@ class CameraInfos:
 
 
 def _decode_infos(raws: Sequence[bytes], encoding: str = "cdr", where: str = "") -> CameraInfos:
-    from amsfe_sym.logs.decode import deserialize
-
     stamps = np.zeros(len(raws), np.int64)
     infos = np.empty(len(raws), dtype=object)
     for i in range(len(raws)):
@@ -53,19 +58,19 @@ def _decode_infos(raws: Sequence[bytes], encoding: str = "cdr", where: str = "")
     return CameraInfos(stamps, infos)
 
 
-def decoders(plan: Any, marker: MarkerSpec) -> dict[str, Any]:
+def decoders(plan: LogPlan, marker: MarkerSpec) -> dict[str, Any]:
     """The log reader's decoders of an image camera topic and its CameraInfo topic (none
     for a pixel topic)."""
     if plan.camera_info is None:
         return {}
     image = plan.roles["camera"]
     return {
-        image: ImageDecoder(plan.topics[image].msgtype, marker),
+        image: ImageDecoder(plan.topics[image].msgtype, marker, deserialize),
         plan.camera_info: _decode_infos,
     }
 
 
-def image_frames(log: Any, use: Any, marker: MarkerSpec) -> list[CameraFrame]:
+def image_frames(log: OnGrid, use: RoleUse, marker: MarkerSpec) -> list[CameraFrame]:
     """The camera frames of an image topic (``log``: the reader's
     :class:`~amsfe_sym.logs.sensors.OnGrid`, ``use``: the camera role's
     :class:`~amsfe_sym.logs.grid.RoleUse`): each found marker's point undistorted by the
@@ -75,12 +80,8 @@ def image_frames(log: Any, use: Any, marker: MarkerSpec) -> list[CameraFrame]:
         LogError: no CameraInfo message, an image of another size than the CameraInfo, or a
             log in which the marker is never found.
     """
-    from amsfe_sym.logs.decode import Points
-    from amsfe_sym.logs.grid import count_skip
-    from amsfe_sym.logs.sensors import camera_frames
-
     plan = log.plan
-    topic, info_topic = plan.roles["camera"], plan.camera_info
+    topic, info_topic = plan.roles["camera"], str(plan.camera_info)
     det: Detections = log.decoded[topic]
     infos: CameraInfos | None = log.decoded.get(info_topic)
     where = f"log {log.path}: {info_topic} (CameraInfo of {topic})"
@@ -118,3 +119,37 @@ def image_frames(log: Any, use: Any, marker: MarkerSpec) -> list[CameraFrame]:
         decoded={**log.decoded, topic: Points(det.stamp_ns[found], xyz)},
     )
     return camera_frames(on_grid, use)
+
+
+def image_messages(camera: SimulatedCamera, stamp_ns: int, q: Any, theta: Any) -> tuple[Any, Any]:
+    """The simulated ``camera``'s image (a ``rosbags`` Image, or CompressedImage for jpeg and
+    png) of the arm at (q [rad], theta) and its CameraInfo, both stamped ``stamp_ns`` [ns]
+    (the exposure)."""
+    from amsfe_sym.logs.source import typestore
+
+    ts = typestore().types
+    stamp = ts["builtin_interfaces/msg/Time"](
+        sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000
+    )
+    header = ts["std_msgs/msg/Header"](stamp=stamp, frame_id="camera")
+    img = camera.image(q, theta)
+    h, w = img.shape
+    if camera.options.format == "mono8":
+        msg = ts["sensor_msgs/msg/Image"](
+            header=header, height=h, width=w, encoding="mono8", is_bigendian=0, step=w,
+            data=img.ravel(),
+        )  # fmt: skip
+    else:
+        msg = ts["sensor_msgs/msg/CompressedImage"](
+            header=header, format=camera.options.format, data=camera.encoded(img)
+        )
+    i = camera.info
+    roi = ts["sensor_msgs/msg/RegionOfInterest"](
+        x_offset=0, y_offset=0, height=0, width=0, do_rectify=False
+    )
+    info = ts["sensor_msgs/msg/CameraInfo"](
+        header=header, height=i.height, width=i.width, distortion_model=i.model,
+        d=np.asarray(i.D, np.float64), k=i.K.ravel().copy(), r=i.R.ravel().copy(),
+        p=i.P.ravel().copy(), binning_x=0, binning_y=0, roi=roi,
+    )  # fmt: skip
+    return msg, info
