@@ -14,7 +14,7 @@ dictionary = "DICT_APRILTAG_36h11"   # any cv2.aruco dictionary name
 id = 0                            # the marker's id in it
 size = 0.05                       # its black square's side [m]
 point = "centre"                  # or "top_left" | "top_right" | "bottom_right" | "bottom_left"
-pixel_std = 0.3                   # the detected point's standard deviation per axis [px]
+pixel_std = 0.15                  # the detected point's standard deviation per axis [px]
 ```
 """
 
@@ -66,16 +66,17 @@ class MarkerSpec:
         size: Side of the marker's black square [m] (the renderer draws it this size).
         point: The tracked point: ``centre`` (intersection of the diagonals, the
             projection of the square's centre) or a named corner (:data:`CORNERS`).
-        pixel_std: Standard deviation of the detected point per axis [px]; the default is
-            the spread measured on rendered 640x480 images (tests/test_vision_marker.py,
-            docs/camera.md), rounded up.
+        pixel_std: Standard deviation of the detected point per axis [px]; the default
+            bounds the spread measured on rendered images of 20-60 px markers
+            (tests/test_vision_marker.py, docs/camera.md): the value for ``[filter]
+            camera_pixel_std`` when the images are this clean.
     """
 
     dictionary: str = "DICT_APRILTAG_36h11"
     id: int = 0
     size: float = 0.05
     point: Point = "centre"
-    pixel_std: float = 0.3
+    pixel_std: float = 0.15
 
 
 def parse_marker(table: dict[str, Any], where: str = "[marker]") -> MarkerSpec:
