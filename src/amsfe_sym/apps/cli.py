@@ -165,6 +165,9 @@ def get_argument_parser() -> argparse.ArgumentParser:
     ros_nodes.add_sim_node_arguments(sub.add_parser("sim-node", help="the simulated arm on ROS 2"))
     ros_nodes.add_node_arguments(sub.add_parser("node", help="estimator/controller on ROS 2"))
     ros_nodes.add_play_arguments(sub.add_parser("play", help="a log's sensor topics on ROS 2"))
+    ros_nodes.add_camera_node_arguments(
+        sub.add_parser("camera-node", help="images -> the marker's pixel topic, live (ROS 2)")
+    )
     add_bench_arguments(
         sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
     )
@@ -223,6 +226,7 @@ def _main(argv: Sequence[str] | None) -> int:
         "sim-node": ros_nodes.sim_node_from_args,
         "node": ros_nodes.node_from_args,
         "play": ros_nodes.play_from_args,
+        "camera-node": ros_nodes.camera_node_from_args,
     }
     with ledger() as book:
         try:
