@@ -1,0 +1,180 @@
+"""The camera chain's numbers in docs/camera.md ("Accuracy", "Speed", "End to end").
+
+1. Detection accuracy: the paper's 2-link arm at random q, its marker rendered by the
+   simulated camera through each lens (blur 0.8 px, noise 4 grey levels), detected,
+   undistorted and compared with the generated camera map: RMS per axis, 90th percentile
+   and worst error [px], frames missed; for a 10 cm and a 17 cm marker (~27 and ~45 px).
+2. Speed: decoding a 640 x 512 mono8 ``sensor_msgs/Image`` (CDR) + detection + undistortion
+   per frame, median and 90th percentile [ms], one process.
+3. End to end (issue 35's done-when): ``amsfe simulate --controller amsfe --seed S --bag``
+   with and without ``--images``, each estimated by ``amsfe estimate BAG --robot
+   paper_2link``: link-angle RMSE of both and their ratio per joint.
+
+Writes docs/data/camera-accuracy.json and prints the tables:
+
+    .venv/bin/python tools/camera_accuracy.py [--frames 60] [--seeds 17 18 19]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from amsfe_sym.codegen import library_for
+from amsfe_sym.scenario import load_scenario
+from amsfe_sym.vision.camera_info import make_camera_info, undistort
+from amsfe_sym.vision.images import grey_from_message
+from amsfe_sym.vision.marker import MarkerDetector, tracked_point
+from amsfe_sym.vision.render import ImageNoise, MarkerRenderer, marker_corners
+from amsfe_sym.vision.spec import MarkerSpec
+
+LENSES = {
+    "plumb_bob": ("plumb_bob", (-0.12, 0.04, 0.0005, -0.0003, 0.0)),
+    "plumb_bob_strong": ("plumb_bob", (-0.3, 0.1, 0.001, -0.001, -0.02)),
+    "rational_polynomial": ("rational_polynomial", (-0.2, 0.05, 0.001, -5e-4, 0.0, 0.01, 0, 0)),
+    "equidistant": ("equidistant", (-0.05, 0.01, 0.0, 0.0)),
+    "rectified": ("plumb_bob", (0.0, 0.0, 0.0, 0.0, 0.0)),
+}
+
+
+def accuracy(lib, lens: str, size: float, frames: int, seed: int) -> dict:
+    model, D = LENSES[lens]
+    cam = lib.manifest.camera
+    info = make_camera_info(cam.width, cam.height, model, np.asarray(cam.K), D)
+    spec = MarkerSpec(size=size)
+    renderer, detector = MarkerRenderer(info, spec, ImageNoise()), MarkerDetector(spec)
+    camera, point = lib.function("camera"), lib.function("tracked_point")
+    rng = np.random.default_rng(seed)
+    err, missed = [], 0
+    while len(err) + missed < frames:
+        q = rng.uniform(-np.pi, np.pi, lib.n)
+        y = np.asarray(camera(q, lib.theta_true)[0]).ravel()
+        if not (60 < y[0] < cam.width - 60 and 60 < y[1] < cam.height - 60):
+            continue
+        r = np.asarray(point(q, lib.theta_true)[0]).ravel()
+        det = detector.detect(
+            renderer.render(marker_corners(cam.K, cam.R_cw, cam.position, r, size), rng)
+        )
+        if det.corners is None:
+            missed += 1
+            continue
+        err.append(tracked_point(undistort(info, det.corners), "centre") - y)
+    e = np.array(err)
+    a = np.abs(e).max(axis=1)
+    return {
+        "lens": lens,
+        "marker_m": size,
+        "frames": frames,
+        "missed": missed,
+        "rms_px": [round(float(v), 3) for v in np.sqrt(np.mean(e**2, axis=0))],
+        "p90_px": round(float(np.percentile(a, 90)), 3),
+        "max_px": round(float(a.max()), 3),
+    }
+
+
+def speed(lib, frames: int) -> dict:
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    cam = lib.manifest.camera
+    info = make_camera_info(
+        cam.width, cam.height, *LENSES["plumb_bob"][:1], np.asarray(cam.K), LENSES["plumb_bob"][1]
+    )
+    spec = MarkerSpec(size=0.1)
+    renderer, detector = MarkerRenderer(info, spec, ImageNoise()), MarkerDetector(spec)
+    point = lib.function("tracked_point")
+    rng = np.random.default_rng(1)
+    raws = []
+    for _ in range(frames):
+        r = np.asarray(point(rng.uniform(-1.5, 1.5, lib.n), lib.theta_true)[0]).ravel()
+        img = renderer.render(marker_corners(cam.K, cam.R_cw, cam.position, r, 0.1), rng)
+        stamp = ts.types["builtin_interfaces/msg/Time"](sec=1, nanosec=0)
+        msg = ts.types["sensor_msgs/msg/Image"](
+            header=ts.types["std_msgs/msg/Header"](stamp=stamp, frame_id="camera"),
+            height=img.shape[0], width=img.shape[1], encoding="mono8", is_bigendian=0,
+            step=img.shape[1], data=img.ravel(),
+        )  # fmt: skip
+        raws.append(ts.serialize_cdr(msg, "sensor_msgs/msg/Image"))
+    ms = []
+    for raw in raws:
+        t0 = time.perf_counter()
+        msg = ts.deserialize_cdr(raw, "sensor_msgs/msg/Image")
+        grey = grey_from_message(msg, "sensor_msgs/msg/Image")
+        det = detector.detect(grey.pixels)
+        if det.corners is not None:
+            tracked_point(undistort(info, det.corners), "centre")
+        ms.append((time.perf_counter() - t0) * 1e3)
+    return {
+        "frames": frames,
+        "image": f"{cam.width} x {cam.height} mono8",
+        "median_ms": round(float(np.median(ms)), 2),
+        "p90_ms": round(float(np.percentile(ms, 90)), 2),
+        "frames_per_s": round(1e3 / float(np.median(ms)), 1),
+    }
+
+
+def end_to_end(seed: int, tmp: Path) -> dict:
+    from amsfe_sym.apps.cli import main
+
+    out = {"seed": seed}
+    for name, extra in (("pixels", []), ("images", ["--images"])):
+        run = tmp / f"{name}-{seed}"
+        assert main(["simulate", "--controller", "amsfe", "--seed", str(seed), "--out", str(run),
+                     "--bag", "--no-plots", "--no-progress", *extra]) == 0  # fmt: skip
+        est = tmp / f"est-{name}-{seed}"
+        assert main(["estimate", str(run / "bag"), "--robot", "paper_2link", "--out", str(est),
+                     "--no-plots"]) == 0  # fmt: skip
+        s = json.loads((est / "summary.json").read_text())
+        out[f"rmse_q_{name}"] = [round(float(v), 6) for v in s["estimation_rmse_q"]]
+        out[f"frames_{name}"] = s["topics"]["camera"]["used"]
+    out["ratio"] = [
+        round(b / a, 4) for a, b in zip(out["rmse_q_pixels"], out["rmse_q_images"], strict=True)
+    ]
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=60)
+    ap.add_argument("--seeds", type=int, nargs="*", default=[17, 18, 19])
+    ap.add_argument(
+        "--out", default=str(Path(__file__).parent.parent / "docs/data/camera-accuracy.json")
+    )
+    args = ap.parse_args()
+    lib = library_for(load_scenario("paper-sim"))
+    acc = [
+        accuracy(lib, lens, size, args.frames, 100 + i)
+        for i, (lens, size) in enumerate((lens, size) for size in (0.1, 0.17) for lens in LENSES)
+    ]
+    print("| lens | marker | frames | missed | RMS u, v [px] | p90 [px] | max [px] |")
+    print("|---|---|---|---|---|---|---|")
+    for a in acc:
+        print(
+            f"| {a['lens']} | {a['marker_m']} m | {a['frames']} | {a['missed']} | "
+            f"{a['rms_px'][0]}, {a['rms_px'][1]} | {a['p90_px']} | {a['max_px']} |"
+        )
+    sp = speed(lib, args.frames)
+    print(
+        f"decode + detect + undistort, {sp['image']}: median {sp['median_ms']} ms, "
+        f"p90 {sp['p90_ms']} ms ({sp['frames_per_s']} frames/s)"
+    )
+    with tempfile.TemporaryDirectory() as d:
+        e2e = [end_to_end(s, Path(d)) for s in args.seeds]
+    for e in e2e:
+        print(
+            f"seed {e['seed']}: RMSE q pixels {e['rmse_q_pixels']}, images {e['rmse_q_images']}, "
+            f"ratio {e['ratio']}, frames {e['frames_pixels']} / {e['frames_images']}"
+        )
+    Path(args.out).write_text(
+        json.dumps({"accuracy": acc, "speed": sp, "end_to_end": e2e}, indent=1) + "\n"
+    )
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
