@@ -134,3 +134,29 @@ def test_the_reported_pixel_std_bounds_the_measured_spread(lib) -> None:
     got, true = _renders(lib, "plumb_bob", 40, seed=23, spec=MarkerSpec(size=0.1), noise=noisy)
     ok = np.isfinite(got).all(axis=1)
     assert np.sqrt(np.mean((got[ok] - true[ok]) ** 2)) > reported
+
+
+def test_a_region_of_interest_finds_the_same_corners(lib) -> None:
+    """Detection in a region around the last corners gives the whole image's corners (to
+    2e-3 px: the region's detector keeps the minimum perimeter in pixels, which moves the
+    refinement's start by a hair), and a marker that left the region is found in the whole
+    image."""
+    spec = MarkerSpec(size=0.1)
+    cam = lib.manifest.camera
+    info = make_camera_info(
+        cam.width, cam.height, *LENSES["plumb_bob"][:1], _K(lib), LENSES["plumb_bob"][1]
+    )
+    renderer, detector = MarkerRenderer(info, spec), MarkerDetector(spec)
+    rng = np.random.default_rng(31)
+    point = lib.function("tracked_point")
+    images = []
+    for q in ([0.3, -0.8], [0.32, -0.78], [-1.2, 0.9]):  # the third: far from the second
+        r = np.asarray(point(np.array(q), lib.theta_true)[0]).ravel()
+        images.append(renderer.render(marker_corners(cam.K, cam.R_cw, cam.position, r, 0.1), rng))
+    full = [detector.detect(img).corners for img in images]
+    assert all(c is not None for c in full)
+    near = detector.detect(images[1], full[0]).corners
+    assert near is not None and np.abs(near - full[1]).max() < 2e-3
+    moved = detector.detect(images[2], full[1]).corners
+    assert moved is not None and np.abs(moved - full[2]).max() < 2e-3
+    assert np.abs(full[2] - full[1]).max() > 50  # (it did leave the region)

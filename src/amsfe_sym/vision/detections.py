@@ -76,6 +76,7 @@ class ImageDecoder:
         self.msgtype, self.spec, self.deserialize = msgtype, spec, deserialize
         self.detector = MarkerDetector(spec)
         self.frames = 0
+        self._last: FloatArray | None = None  # the previous image's corners: the region
 
     def __call__(self, raws: Sequence[bytes], encoding: str = "cdr", where: str = "") -> Detections:
         M = len(raws)
@@ -88,7 +89,8 @@ class ImageDecoder:
             img = grey_from_message(msg, self.msgtype, where or self.msgtype)
             stamps[i] = img.stamp_ns
             size[i] = img.pixels.shape[1], img.pixels.shape[0]
-            det = self.detector.detect(img.pixels)
+            det = self.detector.detect(img.pixels, self._last)  # (around the last first)
+            self._last = det.corners
             if det.corners is None:
                 reason[i] = REASONS.index(det.skipped or NO_MARKER)
             else:

@@ -53,25 +53,71 @@ class MarkerDetector:
         import cv2
 
         self.spec = spec
-        dictionary = cv2.aruco.getPredefinedDictionary(_dictionary_id(spec.dictionary))
+        self._dictionary = cv2.aruco.getPredefinedDictionary(_dictionary_id(spec.dictionary))
+        self._window = (int(refine_window), float(relative_window))
+        self._params = self._parameters(None)
+        self._detector: Any = cv2.aruco.ArucoDetector(self._dictionary, self._params)
+        self._roi: dict[tuple[int, int], Any] = {}  # (crop side, image side) -> detector
+
+    def _parameters(self, min_perimeter_rate: float | None) -> Any:
+        """The detector's parameters (OpenCV's defaults, sub-pixel refinement; a minimum
+        marker perimeter rate if given)."""
+        import cv2
+
         params = cv2.aruco.DetectorParameters()
         params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
-        params.cornerRefinementWinSize = int(refine_window)
-        params.relativeCornerRefinmentWinSize = float(relative_window)  # (OpenCV's spelling)
+        params.cornerRefinementWinSize = self._window[0]
+        params.relativeCornerRefinmentWinSize = self._window[1]  # (OpenCV's spelling)
         params.cornerRefinementMaxIterations = 50
         params.cornerRefinementMinAccuracy = 0.01
-        self._detector: Any = cv2.aruco.ArucoDetector(dictionary, params)
+        if min_perimeter_rate is not None:
+            params.minMarkerPerimeterRate = min_perimeter_rate
+        return params
 
-    def detect(self, grey: NDArray[np.uint8]) -> Detection:
-        """The spec's marker in the grey image ``grey`` (height, width)."""
-        corners, ids, _ = self._detector.detectMarkers(grey)
+    def detect(self, grey: NDArray[np.uint8], near: FloatArray | None = None) -> Detection:
+        """The spec's marker in the grey image ``grey`` (height, width).
+
+        ``near``: the marker's corners (4, 2) [px] in a previous image; the marker is first
+        searched in a square region of interest around them (3 marker sides, at least 64 px,
+        with the detector's minimum marker perimeter kept in pixels), then, if it is not
+        there, in the whole image.  Corners found in the region are those of the whole image
+        to ~1e-3 px (tests/test_vision_marker.py).
+        """
+        if near is not None and np.isfinite(near).all():
+            found = self._near(grey, np.asarray(near, dtype=np.float64).reshape(4, 2))
+            if found is not None:
+                return found
+        return self._found(self._detector, grey, 0, 0)
+
+    def _found(self, detector: Any, grey: NDArray[np.uint8], x0: int, y0: int) -> Detection:
+        corners, ids, _ = detector.detectMarkers(grey)
         seen = () if ids is None else tuple(int(i) for i in np.asarray(ids).ravel())
         if not seen:
             return Detection(None, NO_MARKER)
         if self.spec.id not in seen:
             return Detection(None, OTHER_ID, seen)
         c = np.asarray(corners[seen.index(self.spec.id)], dtype=np.float64).reshape(4, 2)
-        return Detection(c, None, seen)
+        return Detection(c + np.array([x0, y0], dtype=np.float64), None, seen)
+
+    def _near(self, grey: NDArray[np.uint8], near: FloatArray) -> Detection | None:
+        import cv2
+
+        h, w = grey.shape
+        lo, hi = near.min(axis=0), near.max(axis=0)
+        side = float(max(hi - lo))
+        crop = max(64, 1 << int(np.ceil(np.log2(max(3.0 * side, 1.0)))))
+        if crop >= 0.5 * min(w, h):
+            return None  # (a region that large saves nothing)
+        cx, cy = 0.5 * (lo + hi)
+        x0 = int(np.clip(round(cx - crop / 2), 0, w - crop))
+        y0 = int(np.clip(round(cy - crop / 2), 0, h - crop))
+        key = (crop, max(w, h))
+        if key not in self._roi:
+            rate = self._params.minMarkerPerimeterRate * max(w, h) / crop
+            params = self._parameters(min(rate, 4.0))
+            self._roi[key] = cv2.aruco.ArucoDetector(self._dictionary, params)
+        det = self._found(self._roi[key], grey[y0 : y0 + crop, x0 : x0 + crop], x0, y0)
+        return det if det.corners is not None else None
 
 
 def _dictionary_id(name: str) -> int:
