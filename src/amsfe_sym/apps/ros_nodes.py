@@ -84,6 +84,12 @@ def add_sim_node_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--rate", type=SECONDS, default=1.0, help="free running: speed of the wall clock"
     )
+    p.add_argument(
+        "--images",
+        action="store_true",
+        help="publish each frame as the camera's image (/camera/image_raw) and its CameraInfo "
+        "instead of the pixel topic: amsfe camera-node detects them (docs/camera.md)",
+    )
 
 
 def sim_node_from_args(args: argparse.Namespace) -> int:
@@ -103,6 +109,7 @@ def sim_node_from_args(args: argparse.Namespace) -> int:
         rate=args.rate,
         ros_args=tuple(args.ros_args),
         domain_id=_domain(),
+        images=args.images,
     )
     mode = "lockstep" if args.lockstep else "free running"
     print(f"sim-node: {sc.name} seed {sc.seed}, {sc.duration:g} s, {mode}", flush=True)

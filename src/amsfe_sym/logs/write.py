@@ -240,7 +240,7 @@ def run_bag_filler(
     return fill
 
 
-_INFO = "/camera/camera_info"
+_INFO = "/camera/camera_info"  # (vision.sim_images.INFO_TOPIC)
 
 
 def _camera(res: RunResult, images: ImageOptions) -> Any:

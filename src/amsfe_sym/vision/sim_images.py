@@ -23,7 +23,14 @@ from amsfe_sym.vision.camera_info import CameraInfo, make_camera_info
 from amsfe_sym.vision.render import ImageNoise, MarkerRenderer, marker_corners
 from amsfe_sym.vision.spec import MarkerSpec
 
-__all__ = ["IMAGE_FORMATS", "ImageOptions", "SimulatedCamera"]
+__all__ = [
+    "COMPRESSED_TOPIC",
+    "IMAGE_FORMATS",
+    "IMAGE_TOPIC",
+    "INFO_TOPIC",
+    "ImageOptions",
+    "SimulatedCamera",
+]
 
 FloatArray = NDArray[np.float64]
 ImageFormat = Literal["mono8", "jpeg", "png"]
