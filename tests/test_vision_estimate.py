@@ -44,7 +44,22 @@ def test_images_fuse_as_well_as_the_pixel_topic(tmp_path, capsys) -> None:
     assert frames > 50
     cam = img["topics"]["camera"]
     assert cam["messages"] == frames and cam["used"] == frames and not cam["skipped"]
+    # Foxglove's annotation: the detected point of every image, at the image's stamp
+    marks = _messages(tmp_path / "images" / "bag", "/camera/marker_detected")
+    images = _messages(tmp_path / "images" / "bag", "/camera/image_raw")
+    assert len(marks) == len(images) == frames
+    assert [m.header.stamp for m in marks] == [m.header.stamp for m in images]
     e_pix, e_img = pix["estimation_rmse_q"], img["estimation_rmse_q"]
     print(f"link-angle RMSE [rad]: pixel topic {e_pix}, images {e_img}")
     for a, b in zip(e_pix, e_img, strict=True):
         assert b <= 1.10 * a, (e_pix, e_img)
+
+
+def _messages(bag: Path, topic: str) -> list:
+    from rosbags.highlevel import AnyReader
+
+    from amsfe_sym.logs.decode import typestore
+
+    with AnyReader([bag], default_typestore=typestore()) as reader:
+        conns = [c for c in reader.connections if c.topic == topic]
+        return [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(conns)]

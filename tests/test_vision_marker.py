@@ -13,17 +13,8 @@ from amsfe_sym.scenario import load_scenario
 from amsfe_sym.vision.camera_info import distort, make_camera_info, undistort
 from amsfe_sym.vision.marker import MarkerDetector, diagonals_meet, tracked_point
 from amsfe_sym.vision.render import ImageNoise, MarkerRenderer, marker_corners
+from amsfe_sym.vision.sim_images import LENSES
 from amsfe_sym.vision.spec import CORNERS, MarkerSpec
-
-#: Distortions of real lenses: a webcam's barrel, a strong wide-angle's (plumb_bob), a
-#: rational_polynomial, a fisheye (equidistant), and none (an already rectified image).
-LENSES = {
-    "plumb_bob": ("plumb_bob", (-0.12, 0.04, 0.0005, -0.0003, 0.0)),
-    "plumb_bob_strong": ("plumb_bob", (-0.3, 0.1, 0.001, -0.001, -0.02)),
-    "rational_polynomial": ("rational_polynomial", (-0.2, 0.05, 0.001, -5e-4, 0.0, 0.01, 0, 0)),
-    "equidistant": ("equidistant", (-0.05, 0.01, 0.0, 0.0)),
-    "rectified": ("plumb_bob", (0.0, 0.0, 0.0, 0.0, 0.0)),
-}
 
 
 @pytest.fixture(scope="module")

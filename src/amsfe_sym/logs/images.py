@@ -121,10 +121,14 @@ def image_frames(log: OnGrid, use: RoleUse, marker: MarkerSpec) -> list[CameraFr
     return camera_frames(on_grid, use)
 
 
-def image_messages(camera: SimulatedCamera, stamp_ns: int, q: Any, theta: Any) -> tuple[Any, Any]:
+def image_messages(
+    camera: SimulatedCamera, stamp_ns: int, q: Any, theta: Any
+) -> tuple[Any, Any, Any]:
     """The simulated ``camera``'s image (a ``rosbags`` Image, or CompressedImage for jpeg and
-    png) of the arm at (q [rad], theta) and its CameraInfo, both stamped ``stamp_ns`` [ns]
-    (the exposure)."""
+    png) of the arm at (q [rad], theta), its CameraInfo and a ``visualization_msgs/
+    ImageMarker`` (a green circle where the camera chain detects the tracked point: Foxglove
+    draws it over the image; None without the marker), all stamped ``stamp_ns`` [ns] (the
+    exposure)."""
     from amsfe_sym.logs.source import typestore
 
     ts = typestore().types
@@ -152,4 +156,17 @@ def image_messages(camera: SimulatedCamera, stamp_ns: int, q: Any, theta: Any) -
         d=np.asarray(i.D, np.float64), k=i.K.ravel().copy(), r=i.R.ravel().copy(),
         p=i.P.ravel().copy(), binning_x=0, binning_y=0, roi=roi,
     )  # fmt: skip
-    return msg, info
+    found = camera.detected(img)
+    if found is None:
+        return msg, info, None
+    marker = ts["visualization_msgs/msg/ImageMarker"]
+    green = ts["std_msgs/msg/ColorRGBA"](r=0.1, g=0.9, b=0.2, a=1.0)
+    none = ts["std_msgs/msg/ColorRGBA"](r=0.0, g=0.0, b=0.0, a=0.0)
+    mark = marker(
+        header=header, ns="amsfe", id=0, type=marker.CIRCLE, action=marker.ADD,
+        position=ts["geometry_msgs/msg/Point"](x=float(found[0]), y=float(found[1]), z=0.0),
+        scale=6.0, outline_color=green, filled=0, fill_color=none,
+        lifetime=ts["builtin_interfaces/msg/Duration"](sec=0, nanosec=0), points=[],
+        outline_colors=[],
+    )  # fmt: skip
+    return msg, info, mark

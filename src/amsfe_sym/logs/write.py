@@ -10,7 +10,8 @@ robot, resolved scenario and runtime), ``/robot_description`` (String: the URDF)
 (world -> every link, true and ``est/``-prefixed, at :data:`TF_RATE_HZ`).  With images
 (``amsfe simulate --bag --images``) the camera writes, instead of ``/camera/marker``, the
 image the true camera took of the marker (``/camera/image_raw`` or its ``/compressed``) and
-``/camera/camera_info`` (:mod:`amsfe_sym.vision.sim_images`, docs/camera.md).
+``/camera/camera_info``, with ``/camera/marker_detected`` (ImageMarker: the detected point,
+drawn by Foxglove over the image) (:mod:`amsfe_sym.vision.sim_images`, docs/camera.md).
 """
 
 from __future__ import annotations
@@ -213,11 +214,13 @@ def run_bag_filler(
                     if camera is not None:
                         kap = int(kappa)
                         x = res.x_true[kap]
-                        msg, info = image_messages(
+                        msg, info, mark = image_messages(
                             camera, _ns(kap * lib.T), x[lib.layout["q"]], x[lib.layout["theta"]]
                         )
                         bag.write(camera.image_topic, camera.image_type, t, msg)
                         bag.write(_INFO, "sensor_msgs/msg/CameraInfo", t, info)
+                        if mark is not None:  # Foxglove: the detected point on the image
+                            bag.write(_DETECTED, "visualization_msgs/msg/ImageMarker", t, mark)
                         fi += 1
                         continue
                     pt = ts["geometry_msgs/msg/PointStamped"](
@@ -241,6 +244,7 @@ def run_bag_filler(
 
 
 _INFO = "/camera/camera_info"  # (vision.sim_images.INFO_TOPIC)
+_DETECTED = "/camera/marker_detected"
 
 
 def _camera(res: RunResult, images: ImageOptions) -> Any:

@@ -28,6 +28,7 @@ __all__ = [
     "IMAGE_FORMATS",
     "IMAGE_TOPIC",
     "INFO_TOPIC",
+    "LENSES",
     "ImageOptions",
     "SimulatedCamera",
 ]
@@ -36,6 +37,17 @@ FloatArray = NDArray[np.float64]
 ImageFormat = Literal["mono8", "jpeg", "png"]
 #: How ``--images`` writes a frame: a raw mono8 Image, or a jpeg / png CompressedImage.
 IMAGE_FORMATS: tuple[str, ...] = ("mono8", "jpeg", "png")
+
+#: Lenses to render through (model, D): a webcam's barrel (the simulated camera's default),
+#: a strong wide-angle's (plumb_bob), a rational_polynomial, a fisheye (equidistant), and an
+#: already rectified image (the tests' and tools/camera_accuracy.py's lenses).
+LENSES: dict[str, tuple[str, tuple[float, ...]]] = {
+    "plumb_bob": ("plumb_bob", (-0.12, 0.04, 0.0005, -0.0003, 0.0)),
+    "plumb_bob_strong": ("plumb_bob", (-0.3, 0.1, 0.001, -0.001, -0.02)),
+    "rational_polynomial": ("rational_polynomial", (-0.2, 0.05, 0.001, -5e-4, 0.0, 0.01, 0, 0)),
+    "equidistant": ("equidistant", (-0.05, 0.01, 0.0, 0.0)),
+    "rectified": ("plumb_bob", (0.0, 0.0, 0.0, 0.0, 0.0)),
+}
 
 #: The topics the simulated camera writes (a usb_cam / image_proc layout).
 IMAGE_TOPIC = "/camera/image_raw"
@@ -61,8 +73,8 @@ class ImageOptions:
     format: ImageFormat = "mono8"
     marker: MarkerSpec = field(default_factory=lambda: MarkerSpec(size=0.1))
     noise: ImageNoise = field(default_factory=ImageNoise)
-    model: str = "plumb_bob"
-    D: tuple[float, ...] = (-0.12, 0.04, 0.0005, -0.0003, 0.0)
+    model: str = LENSES["plumb_bob"][0]
+    D: tuple[float, ...] = LENSES["plumb_bob"][1]
     jpeg_quality: int = 95
 
     def __post_init__(self) -> None:
@@ -100,6 +112,7 @@ class SimulatedCamera:
         self.options, self.rng = options, rng
         self.tracked_point = tracked_point
         self.renderer = MarkerRenderer(self.info, options.marker, options.noise)
+        self._detector: Any = None
 
     @property
     def image_topic(self) -> str:
@@ -124,6 +137,21 @@ class SimulatedCamera:
         """The grey image (height, width) the true camera takes of the arm at (q [rad],
         theta)."""
         return self.renderer.render(self.corners(q, theta), self.rng)
+
+    def detected(self, image: NDArray[np.uint8]) -> FloatArray | None:
+        """The tracked point the camera chain finds in ``image``, in the raw image's pixels
+        (undistorted to take the point, then distorted back: where to draw it on the image)
+        [px], or None without the marker."""
+        from amsfe_sym.vision.camera_info import distort, undistort
+        from amsfe_sym.vision.marker import MarkerDetector, tracked_point
+
+        if self._detector is None:
+            self._detector = MarkerDetector(self.options.marker)
+        det = self._detector.detect(image)
+        if det.corners is None:
+            return None
+        point = tracked_point(undistort(self.info, det.corners), self.options.marker.point)
+        return distort(self.info, point)[0]
 
     def encoded(self, image: NDArray[np.uint8]) -> NDArray[np.uint8]:
         """``image`` compressed as :attr:`ImageOptions.format` (jpeg or png) says."""
