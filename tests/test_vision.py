@@ -449,3 +449,11 @@ def test_images_are_detected_a_slice_at_a_time(sim, tmp_path, monkeypatch) -> No
         got = _read(sim, write_images_log(tmp_path / fmt, joints, frames, fmt))
         _check_frames(sim, got, truth)
         assert sum(seen) == len(sim.frames) and max(seen) <= 3 and len(seen) >= 3, (fmt, seen)
+
+
+def test_images_without_a_bag_are_refused_in_one_line(tmp_path, capsys) -> None:
+    """``amsfe simulate --images`` without ``--bag``: one line, exit 2, no run folder."""
+    out = tmp_path / "run"
+    code, _, err = _cli(["simulate", "--images", "--out", str(out), "--no-plots"], capsys)
+    _one_line(code, err, out)
+    assert "--bag" in err

@@ -16,6 +16,7 @@ import numpy as np
 
 from amsfe_sym.core.folders import FolderJob, write_folders
 from amsfe_sym.core.outputs import Output, check_output
+from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.sim.loop import run
@@ -80,7 +81,12 @@ def check_outputs(out: Path, options: SimulateOptions) -> SimulateOutputs:
 
     Raises:
         RunFolderError: one line naming the path, what is there and what to do.
+        ConfigError: ``--images`` without ``--bag``.
     """
+    if options.images is not None and options.bag is None:
+        raise ConfigError(
+            describe("--images", "--bag too (the images go into the bag)", "no --bag", "add --bag")
+        )
     run_out = check_output(out, option="--out", force=options.force, inputs=options.inputs)
     bag = None
     if options.bag is not None and options.bag != BAG_IN_RUN:
