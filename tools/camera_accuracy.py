@@ -9,6 +9,9 @@
 3. End to end (issue 35's done-when): ``amsfe simulate --controller amsfe --seed S --bag``
    with and without ``--images``, each estimated by ``amsfe estimate BAG --robot
    paper_2link``: link-angle RMSE of both and their ratio per joint.
+4. (``--long``) A 60 s log with a 30 Hz camera, with and without images: bag size, read +
+   estimate time, peak memory of ``amsfe estimate`` (memory bounded: it must not grow with
+   the images' bytes).
 
 Writes docs/data/camera-accuracy.json and prints the tables:
 
@@ -139,16 +142,66 @@ def end_to_end(seed: int, tmp: Path) -> dict:
     return out
 
 
+_RSS = """
+import json, resource, sys
+from amsfe_sym.apps.cli import main
+code = main(sys.argv[1:])
+rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+print(json.dumps({"code": code, "max_rss_mb": rss}))
+"""
+
+
+def long_log(tmp: Path, seed: int = 23) -> dict:
+    """Part 4: a 60 s run with a 30 Hz camera (period = delay = 33 ticks), written with and
+    without ``--images``, each estimated in a process of its own: the bag's size, frames
+    fused, the read + estimate time the command prints and the process's peak memory."""
+    import subprocess
+    import sys
+
+    out: dict = {"seed": seed, "duration_s": 60, "camera_hz": 30}
+    for name, extra in (("pixels", []), ("images", ["--images"])):
+        run = tmp / f"long-{name}"
+        sim = ["simulate", "--controller", "amsfe", "--seed", str(seed), "--duration", "60",
+               "--set", "camera.period=33", "--set", "camera.delay=33", "--out", str(run),
+               "--bag", "--no-plots", "--no-progress", *extra]  # fmt: skip
+        subprocess.run([sys.executable, "-c", _RSS, *sim], check=True, capture_output=True)
+        size = sum(f.stat().st_size for f in (run / "bag").iterdir())
+        est = ["estimate", str(run / "bag"), "--robot", "paper_2link", "--out",
+               str(tmp / f"long-est-{name}"), "--no-plots"]  # fmt: skip
+        p = subprocess.run([sys.executable, "-c", _RSS, *est], check=True, capture_output=True,
+                           text=True)  # fmt: skip
+        lines = p.stdout.splitlines()
+        speed = next(ln.strip() for ln in lines if ln.strip().startswith("speed:"))
+        summary = json.loads((tmp / f"long-est-{name}" / "summary.json").read_text())
+        out[name] = {
+            "bag_mb": round(size / 2**20, 1),
+            "frames_used": summary["topics"]["camera"]["used"],
+            "speed_line": speed,
+            "max_rss_mb": round(json.loads(lines[-1])["max_rss_mb"], 1),
+            "rmse_q": [round(float(v), 6) for v in summary["estimation_rmse_q"]],
+        }
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=60)
     ap.add_argument("--seeds", type=int, nargs="*", default=[17, 18, 19])
     ap.add_argument("--speed-only", action="store_true", help="only part 2, into --out's speed")
+    ap.add_argument("--long", action="store_true", help="only part 4 (60 s, 30 Hz), into --out")
     ap.add_argument(
         "--out", default=str(Path(__file__).parent.parent / "docs/data/camera-accuracy.json")
     )
     args = ap.parse_args()
     lib = library_for(load_scenario("paper-sim"))
+    if args.long:  # part 4 alone, into the stored file
+        with tempfile.TemporaryDirectory() as d:
+            lg = long_log(Path(d))
+        print(json.dumps(lg, indent=1))
+        path = Path(args.out)
+        doc = json.loads(path.read_text()) if path.is_file() else {}
+        path.write_text(json.dumps({**doc, "long_log": lg}, indent=1) + "\n")
+        return
     if args.speed_only:  # part 2 again, into the stored file (a quieter machine)
         sp = speed(lib, args.frames)
         print(sp)
