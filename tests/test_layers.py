@@ -83,8 +83,10 @@ ALLOWED: dict[str, set[str]] = {
         "estimation.registry",
     },
     "runtime": {"errors"},
-    # what a topic means, for logs and live nodes alike
-    "topics": {"errors", "core"},
+    # what a topic means, for logs and live nodes alike (and the marker its images show)
+    "topics": {"errors", "core", "vision.spec"},
+    # the camera chain: images, CameraInfo, the marker, undistortion (docs/camera.md)
+    "vision": {"errors", "core"},
     # the compiled estimators implement estimation's Estimator interface over the library
     "runtime.compiled_estimator": {
         "errors",
@@ -120,6 +122,7 @@ ALLOWED: dict[str, set[str]] = {
         "estimation",
         "sim",
         "topics",
+        "vision",
     },
     # the live ROS 2 nodes: the applications' peers (rclpy imported only inside ros/)
     "ros": {
@@ -135,6 +138,7 @@ ALLOWED: dict[str, set[str]] = {
         "sim",
         "logs",
         "topics",
+        "vision",
     },
     # the applications may import every room, never the command line
     "apps": {
@@ -152,6 +156,7 @@ ALLOWED: dict[str, set[str]] = {
         "logs",
         "topics",
         "ros",
+        "vision",
     },
     "apps.cli": {""},  # the command line: everything
     # the public API composes the applications' parts (never the command line)

@@ -17,19 +17,16 @@ from typing import TYPE_CHECKING
 
 from amsfe_sym import __version__
 from amsfe_sym.apps import ros_nodes
-from amsfe_sym.apps.arguments import (
-    DURATION,
-    SAMPLES,
-    SEED,
-    Parser,
-    lock_arg,
-    number_type,
+from amsfe_sym.apps.arguments import Parser
+from amsfe_sym.apps.command_args import (
+    add_check_arguments,
+    add_generate_arguments,
+    add_simulate_arguments,
 )
 from amsfe_sym.apps.estimate import add_arguments as add_estimate_arguments
 from amsfe_sym.apps.estimate import from_args as estimate_from_args
 from amsfe_sym.apps.options import (
     add_bench_arguments,
-    add_set,
     add_study_arguments,
     add_sweep_arguments,
 )
@@ -56,103 +53,15 @@ def get_argument_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True)
 
-    g = sub.add_parser("generate", help="URDF/robot -> generated/<name>/ (C, library, manifest)")
-    g.add_argument("robot", nargs="?", default="paper_2link", help="robot name, folder or URDF")
-    g.add_argument(
-        "--out",
-        default=None,
-        help="parent folder of the libraries (default: generated/); a file or a folder of "
-        "yours at <out>/<robot> is never replaced",
+    add_generate_arguments(
+        sub.add_parser("generate", help="URDF/robot -> generated/<name>/ (C, library, manifest)")
     )
-    g.add_argument(
-        "--lock",
-        nargs="+",
-        type=lock_arg,
-        default=[],
-        metavar="JOINT[=VALUE]",
-        help="hold joints fixed (value in rad or m, default 0)",
+    add_check_arguments(
+        sub.add_parser("check", help="every generated function vs Pinocchio / finite differences")
     )
-    g.add_argument("--force", action="store_true", help="rebuild even if the cache matches")
-    g.add_argument("--cflags", default=None, help="extra compiler flags (quoted)")
-    g.add_argument(
-        "--period",
-        type=number_type(float, 0.0, False, "pass the log's sampling interval, e.g. 0.0333"),
-        default=None,
-        metavar="T",
-        help="generate at this sampling interval [s] instead of the robot's T, as a library of "
-        "its own (<robot>_T<us>us...), model_substeps chosen from the joint modes",
+    add_simulate_arguments(
+        sub.add_parser("simulate", help="run a scenario: plant, sensors, estimator, controller")
     )
-    g.add_argument(
-        "--substeps",
-        type=number_type(int, 1, True, "pass --substeps 4, or omit it to choose from the modes"),
-        default=None,
-        metavar="K",
-        help="rk4 model steps per T (with --period; default: from the joint modes)",
-    )
-
-    c = sub.add_parser("check", help="every generated function vs Pinocchio / finite differences")
-    c.add_argument("robot", nargs="?", default="paper_2link")
-    c.add_argument(
-        "--out",
-        default=None,
-        help="parent folder of generated libraries (a missing library is built there; a "
-        "folder of yours at <out>/<robot> is never replaced)",
-    )
-    c.add_argument("--lock", nargs="+", type=lock_arg, default=[], metavar="JOINT[=VALUE]")
-    c.add_argument("--samples", type=SAMPLES, default=50, help="random states (default 50)")
-    c.add_argument("--seed", type=SEED, default=0)
-    c.add_argument("--cflags", default=None, help="extra compiler flags (quoted)")
-
-    s = sub.add_parser("simulate", help="run a scenario: plant, sensors, estimator, controller")
-    s.add_argument("scenario", nargs="?", default="paper-sim", help="scenario name or .toml")
-    s.add_argument(
-        "--estimator", default=None, help="estimator name (an unknown name lists the known ones)"
-    )
-    s.add_argument(
-        "--controller",
-        default=None,
-        help="one controller (default: the scenario's compare list, else its controller)",
-    )
-    s.add_argument(
-        "--compare",
-        default=None,
-        metavar="A,B,...",
-        help="controllers to compare on one seed (default: the scenario's compare list)",
-    )
-    s.add_argument("--seed", type=SEED, default=None)
-    s.add_argument("--duration", type=DURATION, default=None, help="simulated time [s]")
-    s.add_argument(
-        "--out",
-        default=None,
-        help="run folder (default runs/<scenario>-<stamp>); an existing one is refused "
-        "(docs/reference/scenarios.md, 'Output paths')",
-    )
-    s.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    s.add_argument("--no-plots", action="store_true", help="skip the figures")
-    s.add_argument(
-        "--force",
-        action="store_true",
-        help="replace an existing --out (and --bag) that amsfe wrote; never a folder of "
-        "yours, never an input",
-    )
-    s.add_argument(
-        "--runtime",
-        choices=("compiled", "python"),
-        default="compiled",
-        help="compiled: the loop in generated C (default); python: the readable reference",
-    )
-    s.add_argument(
-        "--bag",
-        nargs="?",
-        const="",
-        default=None,
-        metavar="DIR",
-        help="also write the run as a rosbag2 in MCAP (default <run folder>/bag; "
-        "docs/how-to/logs.md); "
-        "DIR elsewhere is written together with the run folder, both or neither, and follows "
-        "the --out rules",
-    )
-    add_set(s)
 
     add_estimate_arguments(
         sub.add_parser("estimate", help="an estimator over a recorded rosbag2 / MCAP log")
@@ -161,6 +70,9 @@ def get_argument_parser() -> argparse.ArgumentParser:
     ros_nodes.add_sim_node_arguments(sub.add_parser("sim-node", help="the simulated arm on ROS 2"))
     ros_nodes.add_node_arguments(sub.add_parser("node", help="estimator/controller on ROS 2"))
     ros_nodes.add_play_arguments(sub.add_parser("play", help="a log's sensor topics on ROS 2"))
+    ros_nodes.add_camera_node_arguments(
+        sub.add_parser("camera-node", help="images -> the marker's pixel topic, live (ROS 2)")
+    )
     add_bench_arguments(
         sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
     )
@@ -219,6 +131,7 @@ def _main(argv: Sequence[str] | None) -> int:
         "sim-node": ros_nodes.sim_node_from_args,
         "node": ros_nodes.node_from_args,
         "play": ros_nodes.play_from_args,
+        "camera-node": ros_nodes.camera_node_from_args,
     }
     with ledger() as book:
         try:
@@ -371,6 +284,7 @@ def _simulate(args: argparse.Namespace) -> int:
         runtime=args.runtime,
         bag=None if args.bag is None else Path(args.bag) if args.bag else BAG_IN_RUN,
         inputs=_input_files(args.scenario),
+        images=args.images,
     )
     one = not (compare and args.controller is None)  # else: the paper's comparison
     name = f"{sc.name}-{sc.estimator}-{stamp}" if one else f"{sc.name}-{stamp}"

@@ -18,9 +18,11 @@ from amsfe_sym.apps.arguments import DURATION, SEED, number_type
 from amsfe_sym.errors import ConfigError, describe
 
 __all__ = [
+    "add_camera_node_arguments",
     "add_node_arguments",
     "add_play_arguments",
     "add_sim_node_arguments",
+    "camera_node_from_args",
     "node_from_args",
     "play_from_args",
     "sim_node_from_args",
@@ -85,6 +87,12 @@ def add_sim_node_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--rate", type=SECONDS, default=1.0, help="free running: speed of the wall clock"
     )
+    p.add_argument(
+        "--images",
+        action="store_true",
+        help="publish each frame as the camera's image (/camera/image_raw) and its CameraInfo "
+        "instead of the pixel topic: amsfe camera-node detects them (docs/camera.md)",
+    )
 
 
 def sim_node_from_args(args: argparse.Namespace) -> int:
@@ -104,6 +112,7 @@ def sim_node_from_args(args: argparse.Namespace) -> int:
         rate=args.rate,
         ros_args=tuple(args.ros_args),
         domain_id=_domain(),
+        images=args.images,
     )
     mode = "lockstep" if args.lockstep else "free running"
     print(f"sim-node: {sc.name} seed {sc.seed}, {sc.duration:g} s, {mode}", flush=True)
@@ -234,4 +243,37 @@ def play_from_args(args: argparse.Namespace) -> int:
     rep = play_log(Path(args.log), opts)
     sent = ", ".join(f"{t} {c}" for t, c in rep.messages.items())
     print(f"play: {rep.log_s:.2f} s of log in {rep.wall_s:.2f} s wall: {sent}", flush=True)
+    return 0
+
+
+def add_camera_node_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``amsfe camera-node`` (docs/camera.md, "Live")."""
+    p.add_argument(
+        "--topic-spec",
+        default=None,
+        metavar="FILE",
+        help="[marker], the pixel topic it publishes ([topics] camera) and QoS",
+    )
+    p.add_argument("--image", default="/camera/image_raw", help="the image topic")
+    p.add_argument("--info", default="/camera/camera_info", help="its CameraInfo topic")
+    p.add_argument("--compressed", action="store_true", help="the image topic is a CompressedImage")
+    p.add_argument("--duration", type=SECONDS, default=None, help="stop after this long [s]")
+    p.add_argument("--ros-args", nargs=argparse.REMAINDER, default=[], help="the rest: ROS 2")
+
+
+def camera_node_from_args(args: argparse.Namespace) -> int:
+    """``amsfe camera-node`` from its parsed options."""
+    from amsfe_sym.ros.camera_node import CameraNodeOptions, run_camera_node
+    from amsfe_sym.topics import read_topic_spec
+
+    opts = CameraNodeOptions(
+        spec=read_topic_spec(args.topic_spec),
+        image=args.image,
+        info=args.info,
+        compressed=args.compressed or args.image.endswith("/compressed"),
+        duration=args.duration,
+        ros_args=tuple(args.ros_args),
+        domain_id=_domain(),
+    )
+    run_camera_node(opts, say=lambda line: print(line, flush=True))
     return 0

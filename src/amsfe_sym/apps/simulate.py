@@ -10,11 +10,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from amsfe_sym.core.folders import FolderJob, write_folders
 from amsfe_sym.core.outputs import Output, check_output
+from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.sim.loop import run
@@ -52,6 +54,9 @@ class SimulateOptions:
         inputs: Files the command reads (the scenario file): never written.
         started_s: How long the command had run before this call [s] (the library's
             compile, start-up), for the ``--no-plots`` hint's share; None: 0.
+        images: With the bag, the camera writes images of the marker in this format
+            (``mono8``, ``jpeg``, ``png``) and its CameraInfo instead of its pixel topic
+            (docs/camera.md); None: the pixel topic.
     """
 
     plots: bool = True
@@ -61,6 +66,7 @@ class SimulateOptions:
     bag: Path | str | None = None
     inputs: tuple[Path, ...] = ()
     started_s: float | None = None
+    images: str | None = None
 
 
 @dataclass(frozen=True)
@@ -78,7 +84,12 @@ def check_outputs(out: Path, options: SimulateOptions) -> SimulateOutputs:
 
     Raises:
         RunFolderError: one line naming the path, what is there and what to do.
+        ConfigError: ``--images`` without ``--bag``.
     """
+    if options.images is not None and options.bag is None:
+        raise ConfigError(
+            describe("--images", "--bag too (the images go into the bag)", "no --bag", "add --bag")
+        )
     run_out = check_output(out, option="--out", force=options.force, inputs=options.inputs)
     bag = None
     if options.bag is not None and options.bag != BAG_IN_RUN:
@@ -97,11 +108,20 @@ def _urdf_text(res: RunResult) -> str | None:
     return urdf.read_text() if urdf.is_file() else None
 
 
-def _write_bag_into(res: RunResult, folder: Path) -> None:
+def _images(options: SimulateOptions) -> Any:
+    """The simulated camera's image options of ``--images`` (None: the pixel topic)."""
+    if options.images is None:
+        return None
+    from amsfe_sym.vision.sim_images import ImageOptions
+
+    return ImageOptions(format=options.images)  # type: ignore[arg-type]
+
+
+def _write_bag_into(res: RunResult, folder: Path, options: SimulateOptions) -> None:
     """The run's bag as ``folder/bag``, inside the run folder being written."""
     from amsfe_sym.logs.write import run_bag_filler
 
-    run_bag_filler(res, _urdf_text(res))(folder / "bag")
+    run_bag_filler(res, _urdf_text(res), _images(options))(folder / "bag")
 
 
 def simulate_one(
@@ -133,11 +153,12 @@ def simulate_one(
 
     def extra(folder: Path) -> None:
         if inside:
-            _write_bag_into(res, folder)
+            _write_bag_into(res, folder, options)
 
     jobs = [FolderJob(out, run_filler(res, out, figures, extra), options.force)]
     if outs.bag is not None:
-        jobs.append(bag_job(outs.bag.path, run_bag_filler(res, _urdf_text(res)), options.force))
+        filler = run_bag_filler(res, _urdf_text(res), _images(options))
+        jobs.append(bag_job(outs.bag.path, filler, options.force))
     write_folders(jobs)
     if options.bag is not None:
         bag = out / "bag" if inside else Path(options.bag)
@@ -182,12 +203,12 @@ def simulate_comparison(
 
     def extra(name: str, res: RunResult, folder: Path) -> None:
         if inside:
-            _write_bag_into(res, folder)
+            _write_bag_into(res, folder, options)
 
     def bags(folder: Path) -> None:
         folder.mkdir()
         for name, res in cmp.results.items():
-            run_bag_filler(res, _urdf_text(res))(folder / name)
+            run_bag_filler(res, _urdf_text(res), _images(options))(folder / name)
 
     jobs = [FolderJob(out, comparison_filler(cmp, figures, extra), options.force)]
     if outs.bag is not None:

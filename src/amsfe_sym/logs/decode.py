@@ -316,6 +316,8 @@ def _pad(a: FloatArray, width: int) -> FloatArray:
 def concat_decoded(parts: Sequence[Any]) -> Any:
     """Decoded slices of one topic (one type), joined as if decoded in one call."""
     first = parts[0]
+    if hasattr(first, "concat"):  # a decoder's own columns (vision.detections.Detections)
+        return first.concat(parts)
     if isinstance(first, Strings):
         return Strings([s for p in parts for s in p.data])
     if isinstance(first, Points):

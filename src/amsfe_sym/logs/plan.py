@@ -62,6 +62,8 @@ class LogPlan:
         names: The log's JointState names of the robot's joints, in q order.
         unused: Role without a topic -> the log's topics of that role's types that play no
             role (a stream that is there but not used is said, never silent).
+        camera_info: The CameraInfo topic when the camera topic is an image topic (its
+            marker is detected: :mod:`amsfe_sym.vision`), else None.
     """
 
     path: Path
@@ -72,6 +74,12 @@ class LogPlan:
     kind_how: str
     names: tuple[str, ...]
     unused: dict[str, list[str]] = field(default_factory=dict)
+    camera_info: str | None = None
+
+    @property
+    def topics_read(self) -> set[str]:
+        """Every topic the reader reads: the roles' and the camera's CameraInfo."""
+        return set(self.roles.values()) | ({self.camera_info} if self.camera_info else set())
 
     def lines(self) -> list[str]:
         """One line per role saying which topic plays it and why (printed by estimate)."""
@@ -89,6 +97,8 @@ class LogPlan:
             line = f"{role}: {topic} ({info.msgtype}, {self.how[role]})"
             if role == "effort":
                 line += f", kind {self.effort_kind} ({self.kind_how})"
+            if role == "camera" and self.camera_info is not None:
+                line += f", images: the marker detected, CameraInfo {self.camera_info}"
             out.append(line)
         return out
 
@@ -215,6 +225,7 @@ def plan_log(
         elif topic in topics:
             check_type(path, role, topics[topic])
             roles[role], how[role] = topic, "default"
+    camera_info = _camera_images(path, spec, topics, roles, how)
     states = [t for t, i in topics.items() if i.msgtype == JOINT_STATE and i.encoding != "json"]
     firsts = _first_states(path, topics, set(states))
     if "encoders" not in roles:
@@ -280,14 +291,68 @@ def plan_log(
             )
         else:
             kind, kind_how = "applied", "a separate effort topic: the applied torque"
-    used = set(roles.values())
+    used = set(roles.values()) | ({camera_info} if camera_info else set())
     unused = {
         r: sorted(t for t, i in topics.items() if i.msgtype in ROLES[r].types and t not in used)
         for r in LOG_ROLES
         if r not in roles
     }
     return LogPlan(
-        path, topics, roles, how, kind, kind_how, names, {r: u for r, u in unused.items() if u}
+        path,
+        topics,
+        roles,
+        how,
+        kind,
+        kind_how,
+        names,
+        {r: u for r, u in unused.items() if u},
+        camera_info,
+    )
+
+
+def _camera_images(
+    path: Path,
+    spec: LogSpec,
+    topics: dict[str, TopicInfo],
+    roles: dict[str, str],
+    how: dict[str, str],
+) -> str | None:
+    """Without a camera topic yet: the log's one image topic (found); with an image camera
+    topic: its CameraInfo topic (the spec's ``[camera] info``, else the ``camera_info``
+    beside the images, else the log's only CameraInfo topic).
+
+    Raises:
+        LogError: an image topic without a CameraInfo topic, or with several to choose from.
+    """
+    from amsfe_sym.vision.spec import CAMERA_INFO, IMAGE_TYPES
+
+    if "camera" not in roles:
+        images = [t for t, i in topics.items() if i.msgtype in IMAGE_TYPES]
+        if len(images) == 1:
+            roles["camera"], how["camera"] = images[0], "found"
+    if "camera" not in roles or topics[roles["camera"]].msgtype not in IMAGE_TYPES:
+        return None
+    image = roles["camera"]
+    infos = sorted(t for t, i in topics.items() if i.msgtype == CAMERA_INFO)
+    if spec.camera_info is not None:
+        if spec.camera_info not in infos:
+            raise refuse(
+                f"log {path}",
+                f"the CameraInfo topic {spec.camera_info} named in the topic spec",
+                f"CameraInfo topics {infos}",
+                "fix [camera] info in the topic spec",
+            )
+        return spec.camera_info
+    beside = image.rsplit("/", 1)[0] + "/camera_info"
+    if beside in infos:
+        return beside
+    if len(infos) == 1:
+        return infos[0]
+    raise refuse(
+        f"log {path}: {image} (camera images)",
+        "the camera's CameraInfo topic (its intrinsics and distortion)",
+        f"CameraInfo topics {infos}" if infos else "none",
+        "record the driver's camera_info topic, or name it in the topic spec's [camera] info",
     )
 
 

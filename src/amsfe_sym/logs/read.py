@@ -135,13 +135,20 @@ class RobotLog:
         return np.arange(self.K, dtype=np.float64) * self.T
 
 
-def _read_decoded(path: Path, plan: LogPlan) -> tuple[dict[str, IntArray], dict[str, Any]]:
+def _read_decoded(
+    path: Path, plan: LogPlan, spec: LogSpec
+) -> tuple[dict[str, IntArray], dict[str, Any]]:
     """Log times and decoded columns of every topic the plan uses (a topic without a
     message: absent), in one pass of :func:`amsfe_sym.logs.stream.read_topics` (bounded
     memory, bulk decoding, a progress bar on long logs)."""
     from amsfe_sym.logs.stream import read_topics
 
-    got = read_topics(path, set(plan.roles.values()))
+    own = None
+    if plan.camera_info is not None:  # an image camera topic: its marker detected as read
+        from amsfe_sym.logs.images import decoders
+
+        own = decoders(plan, spec.marker)
+    got = read_topics(path, plan.topics_read, decoders=own)
     return (
         {t: np.asarray(v.log_time_ns, dtype=np.int64) for t, v in got.items()},
         {t: v.decoded for t, v in got.items()},
@@ -168,7 +175,7 @@ def read_log(
     plan = plan or plan_log(path, spec, joints)
     n = len(joints)
     names = plan.names
-    times, decoded = _read_decoded(path, plan)
+    times, decoded = _read_decoded(path, plan, spec)
     usage = {r: RoleUse(plan.roles.get(r), not_used=plan.unused.get(r, [])) for r in LOG_ROLES}
     for ru in usage.values():
         if ru.topic is not None:
@@ -347,7 +354,11 @@ def read_log(
     # ------------------------------------------------------------------ camera frames
     on_grid = OnGrid(path, plan, times, decoded, grid, clock, K)  # (the grid the log starts on)
     frames: list[CameraFrame] = []
-    if "camera" in present:
+    if "camera" in present and plan.camera_info is not None:  # images: docs/camera.md
+        from amsfe_sym.logs.images import image_frames
+
+        frames = image_frames(on_grid, usage["camera"], spec.marker)
+    elif "camera" in present:
         frames = camera_frames(on_grid, usage["camera"])
 
     # ------------------------------------------------------------------ truth

@@ -62,10 +62,15 @@ Decoded = JointStates | Points | Float64Arrays | Strings
 
 #: Messages decoded at once on the message-by-message path (bounds the raw bytes held).
 SLICE = 65536
+#: ... and payload bytes (images: a slice of large messages is cut at this size).
+SLICE_BYTES = 64 << 20
 #: Logs spanning at least this long [s] get a progress bar (``progress=None``).
 PROGRESS_MIN_S = 5.0
 
 Progress = Callable[[int, int], None]
+#: A topic's own decoder (``decode(payloads, encoding, where)``, e.g. an image topic's
+#: marker detector, :class:`amsfe_sym.vision.detections.ImageDecoder`), by topic.
+Decoders = dict[str, Callable[..., Any]]
 
 
 class _Bar:
@@ -122,15 +127,21 @@ class Topic:
 class _Parts:
     """A topic's decoded slices, joined at the end."""
 
-    def __init__(self, name: str, msgtype: str, encoding: Encoding) -> None:
+    def __init__(
+        self, name: str, msgtype: str, encoding: Encoding, decoder: Callable[..., Any] | None = None
+    ) -> None:
         self.name, self.msgtype, self.encoding = name, msgtype, encoding
+        self.decoder = decoder
         self.times: list[IntArray] = []
         self.decoded: list[Any] = []
         self.raw: list[bytes] = []
 
     def add(self, times: IntArray, payloads: Payloads, where: str) -> None:
         self.times.append(times)
-        dec = decode_payloads(self.msgtype, payloads, self.encoding, where)
+        if self.decoder is not None:
+            dec = self.decoder(payloads, self.encoding, where)
+        else:
+            dec = decode_payloads(self.msgtype, payloads, self.encoding, where)
         if dec is None:
             self.raw.extend(payloads)
         else:
@@ -176,6 +187,7 @@ def read_topics(
     path: Path,
     topics: Iterable[str],
     progress: Progress | bool | None = None,
+    decoders: Decoders | None = None,
 ) -> dict[str, Topic]:
     """The ``topics`` of the log at ``path``, decoded (a topic with no message: absent).
 
@@ -186,16 +198,19 @@ def read_topics(
             0), True or False for a tqdm bar or none; None: a bar for an MCAP spanning at
             least :data:`PROGRESS_MIN_S`, or once :data:`SLICE` messages were read otherwise
             (a bar shows once the read has taken 1 s).
+        decoders: Topics decoded by their own decoder instead of their type's (an image
+            topic's marker detector), called on each slice of payloads as it is cut.
 
     Raises:
         LogError: unreadable, truncated, or a payload that does not decode.
     """
     wanted = set(topics)
+    own = decoders or {}
     if path.is_file() and path.suffix == ".bag":
         parts_bag: dict[str, _Parts] = {}
         bar = _Bar(f"read {path.name}", "B")
         try:
-            _read_bag(path, wanted, parts_bag, _callback(progress, bar))
+            _read_bag(path, wanted, parts_bag, _callback(progress, bar), own)
             return {name: t for name, p in parts_bag.items() if (t := p.topic()).count}
         except NotIndexed:
             pass
@@ -207,7 +222,7 @@ def read_topics(
         bar = _Bar(f"read {path.name}", "B")
         try:
             for f in files:
-                _read_mcap(f, wanted, parts, _callback(progress, bar), auto=progress is None)
+                _read_mcap(f, wanted, parts, _callback(progress, bar), progress is None, own)
             out = {name: p.topic() for name, p in parts.items()}
             return {name: t for name, t in out.items() if t.count}
         except NotIndexed:
@@ -216,7 +231,7 @@ def read_topics(
             bar.close()
     bar = _Bar(f"read {path.name}", "msg")
     try:
-        return _read_messages(path, wanted, _callback(progress, bar))
+        return _read_messages(path, wanted, _callback(progress, bar), own)
     finally:
         bar.close()
 
@@ -238,11 +253,14 @@ def _mcap_files(path: Path) -> list[Path] | None:
     return None
 
 
-def _read_messages(path: Path, wanted: set[str], progress: Progress | None) -> dict[str, Topic]:
+def _read_messages(
+    path: Path, wanted: set[str], progress: Progress | None, decoders: Decoders
+) -> dict[str, Topic]:
     from amsfe_sym.logs.source import iter_messages
 
     parts: dict[str, _Parts] = {}
     pending: dict[str, tuple[list[int], list[bytes]]] = {}
+    held: dict[str, int] = {}  # payload bytes pending, by topic
 
     def flush(name: str) -> None:
         times, raws = pending.pop(name)
@@ -250,12 +268,15 @@ def _read_messages(path: Path, wanted: set[str], progress: Progress | None) -> d
 
     for done, m in enumerate(iter_messages(path, wanted), start=1):
         if m.topic not in parts:
-            parts[m.topic] = _Parts(m.topic, m.msgtype, getattr(m, "encoding", "cdr"))
+            enc: Encoding = getattr(m, "encoding", "cdr")
+            parts[m.topic] = _Parts(m.topic, m.msgtype, enc, decoders.get(m.topic))
         times, raws = pending.setdefault(m.topic, ([], []))
         times.append(int(m.log_time_ns))
         raws.append(m.raw)
-        if len(raws) >= SLICE:
+        held[m.topic] = held.get(m.topic, 0) + len(m.raw)
+        if len(raws) >= SLICE or held[m.topic] >= SLICE_BYTES:
             flush(m.topic)
+            held[m.topic] = 0
         if progress is not None and done % SLICE == 0:
             progress(done, 0)
     for name in list(pending):
@@ -269,7 +290,8 @@ def _read_mcap(
     wanted: set[str],
     parts: dict[str, _Parts],
     progress: Progress | None,
-    auto: bool = False,
+    auto: bool,
+    decoders: Decoders,
 ) -> None:
     summary = summary_of(path)
     stats = summary.statistics
@@ -287,7 +309,7 @@ def _read_mcap(
         schema = summary.schemas.get(ch.schema_id)
         name = schema.name if schema is not None else ""
         if ch.topic not in parts:
-            parts[ch.topic] = _Parts(ch.topic, name, "cdr")
+            parts[ch.topic] = _Parts(ch.topic, name, "cdr", decoders.get(ch.topic))
     chunks = checked_chunks(path, summary)
     total = sum(c.chunk_length for c in chunks)
     done = 0
@@ -325,7 +347,11 @@ def _gather_u32(buf: NDArray[np.uint8], at: IntArray) -> IntArray:
 
 
 def _read_bag(
-    path: Path, wanted: set[str], parts: dict[str, _Parts], progress: Progress | None
+    path: Path,
+    wanted: set[str],
+    parts: dict[str, _Parts],
+    progress: Progress | None,
+    decoders: Decoders,
 ) -> None:
     """A ROS 1 bag (format 2.0) through its index, chunk by chunk."""
     from rosbags.rosbag1 import Reader
@@ -348,7 +374,7 @@ def _read_bag(
         by_chunk: dict[int, dict[int, list[tuple[int, int]]]] = {}
         for cid, c in conns.items():
             if c.topic not in parts:
-                parts[c.topic] = _Parts(c.topic, c.msgtype, "ros1")
+                parts[c.topic] = _Parts(c.topic, c.msgtype, "ros1", decoders.get(c.topic))
             elif parts[c.topic].msgtype != c.msgtype:
                 raise NotIndexed  # two types on one topic: the message path refuses it
             for e in reader.indexes.get(cid, []):

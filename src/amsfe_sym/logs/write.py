@@ -7,14 +7,18 @@ as the loop read them), ``/motor_torque`` (JointState effort: the applied torque
 ``/joint_states`` (true q, qd), ``/amsfe/estimate`` (estimated q, qd), ``/amsfe/truth``
 (Float64MultiArray: the true state, for the NEES), ``/amsfe/config`` (String: JSON of the
 robot, resolved scenario and runtime), ``/robot_description`` (String: the URDF) and ``/tf``
-(world -> every link, true and ``est/``-prefixed, at :data:`TF_RATE_HZ`).
+(world -> every link, true and ``est/``-prefixed, at :data:`TF_RATE_HZ`).  With images
+(``amsfe simulate --bag --images``) the camera writes, instead of ``/camera/marker``, the
+image the true camera took of the marker (``/camera/image_raw`` or its ``/compressed``) and
+``/camera/camera_info``, with ``/camera/marker_detected`` (ImageMarker: the detected point,
+drawn by Foxglove over the image) (:mod:`amsfe_sym.vision.sim_images`, docs/camera.md).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,6 +31,9 @@ from amsfe_sym.logs.source import typestore
 from amsfe_sym.logs.spec import LogSpec
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.sim.result import RunResult
+
+if TYPE_CHECKING:
+    from amsfe_sym.vision.sim_images import ImageOptions
 
 __all__ = [
     "TF_RATE_HZ",
@@ -151,9 +158,12 @@ def write_run_bag(
     return out
 
 
-def run_bag_filler(res: RunResult, urdf_text: str | None = None) -> Callable[[Path], None]:
+def run_bag_filler(
+    res: RunResult, urdf_text: str | None = None, images: ImageOptions | None = None
+) -> Callable[[Path], None]:
     """``fill(path)``: writes ``res`` as a rosbag2 folder at ``path`` (which must not exist):
-    its URDF, ``/tf`` of the true and estimated arms, sensors, torque, truth and config."""
+    its URDF, ``/tf`` of the true and estimated arms, sensors, torque, truth and config;
+    with ``images``, the camera's images and CameraInfo instead of its pixel topic."""
     lib, sc = res.lib, res.scenario
     n, N = lib.n, lib.N
     joints = list(lib.manifest.joints)
@@ -182,6 +192,9 @@ def run_bag_filler(res: RunResult, urdf_text: str | None = None) -> Callable[[Pa
     est = encode_joint_states(stamps, joints, x_hat[:, :n], x_hat[:, n : 2 * n])
 
     def fill(path: Path) -> None:
+        from amsfe_sym.logs.images import image_messages
+
+        camera = None if images is None else _camera(res, images)
         bag = _Bag(path)
         try:
             bag.write(
@@ -198,6 +211,18 @@ def run_bag_filler(res: RunResult, urdf_text: str | None = None) -> Callable[[Pa
                 bag.write_raw(spec.encoders, JOINT_STATE, ns, enc[k])
                 while fi < len(frames) and frames[fi][1] <= k:
                     kappa, _, pu, pv = frames[fi]
+                    if camera is not None:
+                        kap = int(kappa)
+                        x = res.x_true[kap]
+                        msg, info, mark = image_messages(
+                            camera, _ns(kap * lib.T), x[lib.layout["q"]], x[lib.layout["theta"]]
+                        )
+                        bag.write(camera.image_topic, camera.image_type, t, msg)
+                        bag.write(_INFO, "sensor_msgs/msg/CameraInfo", t, info)
+                        if mark is not None:  # Foxglove: the detected point on the image
+                            bag.write(_DETECTED, "visualization_msgs/msg/ImageMarker", t, mark)
+                        fi += 1
+                        continue
                     pt = ts["geometry_msgs/msg/PointStamped"](
                         header=_header(kappa * lib.T, "camera"),
                         point=ts["geometry_msgs/msg/Point"](x=pu, y=pv, z=0.0),
@@ -216,6 +241,20 @@ def run_bag_filler(res: RunResult, urdf_text: str | None = None) -> Callable[[Pa
             bag.close()
 
     return fill
+
+
+_INFO = "/camera/camera_info"  # (vision.sim_images.INFO_TOPIC)
+_DETECTED = "/camera/marker_detected"
+
+
+def _camera(res: RunResult, images: ImageOptions) -> Any:
+    """The run's true camera (:class:`~amsfe_sym.vision.sim_images.SimulatedCamera`), its
+    noise drawn from the run's seed (a stream of its own: the run's draws are unchanged)."""
+    from amsfe_sym.vision.sim_images import SimulatedCamera
+
+    rng = np.random.default_rng([int(res.scenario.seed), 35])
+    lib = res.lib
+    return SimulatedCamera(lib.manifest.camera, lib.function("tracked_point"), images, rng)
 
 
 def _tf_frames(res: RunResult, urdf_text: str | None) -> dict[int, Any] | None:

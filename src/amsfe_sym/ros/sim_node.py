@@ -60,6 +60,10 @@ class SimNodeOptions:
             machine that cannot keep up with the robot's rate).
         ros_args: ``--ros-args`` for rclpy (parameters, remaps).
         domain_id: ROS_DOMAIN_ID (None: the environment's).
+        images: Publish each frame as the image the true camera took
+            (``/camera/image_raw``, mono8) and its ``/camera/camera_info``, at the frame's
+            delivery, stamped with its exposure, instead of the pixel topic (docs/camera.md:
+            ``amsfe camera-node`` turns them into it).
     """
 
     lockstep: bool = False
@@ -69,6 +73,7 @@ class SimNodeOptions:
     rate: float = 1.0
     ros_args: tuple[str, ...] = ()
     domain_id: int | None = None
+    images: bool = False
 
 
 @dataclass(frozen=True)
@@ -136,6 +141,7 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         pub_eff = node.create_publisher(m.JointState, spec.effort, qos)
         pub_truth = node.create_publisher(m.Float64MultiArray, spec.truth, qos)
         pub_clock = node.create_publisher(m.Clock, spec.clock, qos_profile(spec, depth=1))
+        images = _Images(node, lib, sc.seed, qos) if options.images else None
         commands: list[FloatArray] = []
         n = lib.n
 
@@ -172,9 +178,15 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
                 ns = k * T_ns
                 pub_clock.publish(m.clock(ns))
                 pub_truth.publish(m.float64_array(s.x_true))
-                for fr in s.frames:
-                    pub_cam.publish(m.point_stamped(fr.exposure_step * T_ns, fr.z[0], fr.z[1]))
-                if options.lockstep and s.frames and not _acked(pub_cam, options.command_timeout):
+                if images is not None:
+                    images.state(k, s.x_true)
+                for fr in s.frames:  # the pixel topic, or (--images) what camera-node reads
+                    if images is None:
+                        pub_cam.publish(m.point_stamped(fr.exposure_step * T_ns, *fr.z[:2]))
+                    else:
+                        images.publish(fr.exposure_step, T_ns)
+                shown = pub_cam if images is None else images.pub
+                if options.lockstep and s.frames and not _acked(shown, options.command_timeout):
                     node.get_logger().warning(
                         f"tick {k}: a camera frame not acknowledged within "
                         f"{options.command_timeout:g} s: the node may fuse it a tick late"
@@ -256,3 +268,50 @@ def _wait_peers(ex: object, pub: object, sub: object | None, timeout: float) -> 
                 )
             )
         ex.spin_once(timeout_sec=0.05)  # type: ignore[attr-defined]
+
+
+class _Images:
+    """``sim-node --images``: the true camera's image of each frame and its CameraInfo
+    (:mod:`amsfe_sym.vision.sim_images`), from the true state at the frame's exposure."""
+
+    def __init__(self, node: Any, lib: ModelLibrary, seed: int, qos: Any) -> None:
+        from sensor_msgs.msg import CameraInfo, Image
+
+        from amsfe_sym.vision.sim_images import INFO_TOPIC, ImageOptions, SimulatedCamera
+
+        rng = np.random.default_rng([int(seed), 35])  # (as amsfe simulate --bag --images)
+        self.camera = SimulatedCamera(
+            lib.manifest.camera, lib.function("tracked_point"), ImageOptions(), rng
+        )
+        self.layout = lib.layout
+        self.states: dict[int, FloatArray] = {}
+        self.horizon = 8 * (lib.manifest.camera.period + lib.manifest.camera.delay) + 64
+        self.Image, self.CameraInfo = Image, CameraInfo
+        self.pub = node.create_publisher(Image, self.camera.image_topic, qos)
+        self.pub_info = node.create_publisher(CameraInfo, INFO_TOPIC, qos)
+
+    def state(self, k: int, x: FloatArray) -> None:
+        """The true state at tick k (kept for the frames exposed then)."""
+        self.states[k] = np.array(x, dtype=np.float64)
+        self.states.pop(k - self.horizon, None)
+
+    def publish(self, kappa: int, T_ns: int) -> None:
+        """The image exposed at tick ``kappa`` and its CameraInfo."""
+        from amsfe_sym.ros import messages as m
+
+        x = self.states.get(kappa)
+        if x is None:
+            return
+        grey = self.camera.image(x[self.layout["q"]], x[self.layout["theta"]])
+        h, w = grey.shape
+        hdr = m.Header(stamp=m.ns_to_stamp(kappa * T_ns), frame_id="camera")
+        msg = self.Image(header=hdr, height=h, width=w, encoding="mono8", step=w)
+        msg.data = grey.tobytes()
+        i = self.camera.info
+        info = self.CameraInfo(
+            header=hdr, width=i.width, height=i.height, distortion_model=i.model,
+            d=i.D.tolist(), k=i.K.ravel().tolist(), r=i.R.ravel().tolist(),
+            p=i.P.ravel().tolist(),
+        )  # fmt: skip
+        self.pub.publish(msg)
+        self.pub_info.publish(info)

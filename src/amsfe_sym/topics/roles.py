@@ -34,6 +34,8 @@ FLOAT64_ARRAY = "std_msgs/msg/Float64MultiArray"
 POINT_STAMPED = "geometry_msgs/msg/PointStamped"
 STRING = "std_msgs/msg/String"
 CLOCK = "rosgraph_msgs/msg/Clock"
+IMAGE = "sensor_msgs/msg/Image"  # detected by amsfe_sym.vision (docs/camera.md)
+COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 
 
 @dataclass(frozen=True)
@@ -86,11 +88,12 @@ ROLES: dict[str, Role] = {
         Role(
             "camera",
             "/camera/marker",
-            (POINT_STAMPED,),
+            (POINT_STAMPED, IMAGE, COMPRESSED_IMAGE),
             "header",
             "in",
             False,
-            "point.x, point.y = pixel u, v [px]; header.stamp = exposure, arrival = receive",
+            "point.x, point.y = pixel u, v [px]; header.stamp = exposure, arrival = receive; "
+            "or images: the marker detected, its point undistorted (docs/camera.md)",
         ),
         Role(
             "truth",

@@ -26,6 +26,15 @@ max_gap_steps = 5                 # missing encoder samples predicted through; m
 [qos]                             # live topics (amsfe node, sim-node, play)
 reliability = "reliable"          # or "best_effort" (what most drivers' sensor topics use)
 depth = 100                       # history depth (KEEP_LAST)
+
+[camera]                          # when [topics] camera is an image topic (docs/camera.md)
+info = "/camera/camera_info"      # its CameraInfo (default: the log's one CameraInfo topic)
+
+[marker]                          # what the images are searched for (amsfe_sym.vision.spec)
+dictionary = "DICT_APRILTAG_36h11"
+id = 0
+size = 0.05                       # [m]
+point = "centre"                  # or a corner: "top_left", ...
 ```
 
 The key ``[topics] torque`` of older log specs is read as ``effort``.
@@ -42,6 +51,7 @@ from amsfe_sym.core.toml import read_toml
 from amsfe_sym.core.values import BACKWARD_MAPS, read_int, read_number
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.topics.roles import EFFORT_KINDS, ROLES, EffortKind
+from amsfe_sym.vision.spec import MarkerSpec, parse_camera_section, parse_marker
 
 __all__ = ["FILTER_KEYS", "FROM_LOG", "TopicSpec", "parse_topic_spec", "read_topic_spec"]
 
@@ -79,6 +89,8 @@ class TopicSpec:
         max_gap_steps: Missing encoder samples in a row the estimator predicts through.
         reliability: QoS reliability of live topics: ``reliable`` or ``best_effort``.
         depth: QoS history depth of live topics (KEEP_LAST).
+        camera_info: The CameraInfo topic of an image camera topic (None: the log's one).
+        marker: The marker an image camera topic is searched for.
         source: The file read (None: the defaults).
     """
 
@@ -103,6 +115,8 @@ class TopicSpec:
     max_gap_steps: int = 5
     reliability: Literal["reliable", "best_effort"] = "reliable"
     depth: int = 100
+    camera_info: str | None = None
+    marker: MarkerSpec = field(default_factory=MarkerSpec)
     source: Path | None = field(default=None, compare=False)
 
     def topic(self, role: str) -> str:
@@ -153,6 +167,8 @@ _SECTIONS = {
     "filter": FILTER_KEYS,
     "timing": ("grid_tolerance", "max_gap_steps"),
     "qos": ("reliability", "depth"),
+    "camera": ("info",),
+    "marker": ("dictionary", "id", "size", "point", "pixel_std"),
 }
 
 
@@ -211,6 +227,12 @@ def parse_topic_spec(data: dict[str, Any], where: str = "topic spec") -> TopicSp
         table = data.get(section, {})
         if not isinstance(table, dict):
             raise ConfigError(describe(f"{where} [{section}]", "a table", repr(table), "fix it"))
+        if section == "camera":
+            out["camera_info"] = parse_camera_section(table, f"{where} [camera]")
+            continue
+        if section == "marker":
+            out["marker"] = parse_marker(table, f"{where} [marker]")
+            continue
         bad = sorted(set(table) - set(keys))
         if bad:
             fix = "drop them"

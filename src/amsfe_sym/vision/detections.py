@@ -1,0 +1,121 @@
+"""Image payloads of a log -> the marker's corners, a slice at a time (docs/camera.md,
+"Images in"); then, with the CameraInfo, the undistorted tracked point of each frame.
+
+The log reader (:func:`amsfe_sym.logs.stream.read_topics`) hands each slice of an image
+topic's payloads (one MCAP or bag chunk, or a bounded slice of messages) to an
+:class:`ImageDecoder`: each image is decoded, searched for the marker and dropped, so memory
+holds the corners of every frame and one slice of images, never every image.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amsfe_sym.vision.camera_info import CameraInfo, undistort
+from amsfe_sym.vision.images import grey_from_message
+from amsfe_sym.vision.marker import NO_MARKER, OTHER_ID, MarkerDetector, tracked_point
+from amsfe_sym.vision.spec import MarkerSpec
+
+__all__ = ["REASONS", "Detections", "ImageDecoder", "image_sizes", "points_of"]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+#: Why a frame has no point, by code (0: found); the log reader counts them by these names.
+REASONS = ("", NO_MARKER, OTHER_ID)
+
+
+@dataclass
+class Detections:
+    """An image topic's frames as columns (one row per message, in the order given).
+
+    Attributes:
+        stamp_ns: ``header.stamp`` [ns]: the exposure, (M,).
+        corners: The marker's corners in raw pixels (M, 4, 2) [px]; NaN where not found.
+        reason: Index into :data:`REASONS` (0: found), (M,).
+        size: Each image's width and height (M, 2) [px].
+    """
+
+    stamp_ns: IntArray
+    corners: FloatArray
+    reason: IntArray
+    size: IntArray
+
+    @staticmethod
+    def concat(parts: Sequence[Detections]) -> Detections:
+        """Slices of one topic joined as if decoded at once."""
+        return Detections(
+            np.concatenate([p.stamp_ns for p in parts]),
+            np.concatenate([p.corners for p in parts]),
+            np.concatenate([p.reason for p in parts]),
+            np.concatenate([p.size for p in parts]),
+        )
+
+
+class ImageDecoder:
+    """``decode(payloads, encoding, where)`` of an image topic (the log reader's decoder
+    contract, :func:`amsfe_sym.logs.decode.decode_payloads`): every image decoded to grey
+    and searched for ``spec``'s marker.
+
+    Args:
+        msgtype: ``sensor_msgs/msg/Image`` or ``sensor_msgs/msg/CompressedImage``.
+        spec: The marker.
+        deserialize: ``deserialize(raw, msgtype, encoding, where)`` -> a message (the log
+            reader's, :func:`amsfe_sym.logs.decode.deserialize`).
+
+    Attributes:
+        frames: Images decoded so far (for a progress line).
+    """
+
+    def __init__(self, msgtype: str, spec: MarkerSpec, deserialize: Callable[..., Any]) -> None:
+        self.msgtype, self.spec, self.deserialize = msgtype, spec, deserialize
+        self.detector = MarkerDetector(spec)
+        self.frames = 0
+        self._last: FloatArray | None = None  # the previous image's corners: the region
+
+    def __call__(self, raws: Sequence[bytes], encoding: str = "cdr", where: str = "") -> Detections:
+        M = len(raws)
+        stamps = np.zeros(M, np.int64)
+        corners = np.full((M, 4, 2), np.nan)
+        reason = np.zeros(M, np.int64)
+        size = np.zeros((M, 2), np.int64)
+        for i in range(M):
+            msg = self.deserialize(raws[i], self.msgtype, encoding, where)
+            img = grey_from_message(msg, self.msgtype, where or self.msgtype)
+            stamps[i] = img.stamp_ns
+            size[i] = img.pixels.shape[1], img.pixels.shape[0]
+            det = self.detector.detect(img.pixels, self._last)  # (around the last first)
+            self._last = det.corners
+            if det.corners is None:
+                reason[i] = REASONS.index(det.skipped or NO_MARKER)
+            else:
+                corners[i] = det.corners
+            self.frames += 1
+        return Detections(stamps, corners, reason, size)
+
+
+def points_of(det: Detections, info: CameraInfo, spec: MarkerSpec) -> FloatArray:
+    """The tracked point of each frame (M, 2) [px], undistorted by ``info`` into its
+    pinhole's pixels (NaN where the marker was not found): the corners are undistorted
+    first, then the centre is where their diagonals meet (which is the projection of the
+    marker's centre only in an undistorted image)."""
+    M = det.stamp_ns.size
+    und = undistort(info, det.corners.reshape(-1, 2)).reshape(M, 4, 2)
+    out = np.full((M, 2), np.nan)
+    for i in np.flatnonzero(det.reason == 0):
+        out[i] = tracked_point(und[i], spec.point)
+    return out
+
+
+def image_sizes(det: Detections) -> list[tuple[int, int]]:
+    """The distinct image sizes (width, height) of a topic, in order of first appearance."""
+    seen: list[tuple[int, int]] = []
+    for w, h in det.size.tolist():
+        if (w, h) not in seen:
+            seen.append((w, h))
+    return seen

@@ -1,0 +1,146 @@
+"""The marker in an image: OpenCV's ArUco detector (AprilTag families included) with
+sub-pixel corner refinement, and the tracked point from its corners (docs/camera.md, "The
+marker")."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amsfe_sym.vision.spec import CORNERS, MarkerSpec
+
+__all__ = ["Detection", "MarkerDetector", "diagonals_meet", "tracked_point"]
+
+FloatArray = NDArray[np.float64]
+
+#: Why a frame gave no point (counted by the log reader under these names).
+NO_MARKER = "without the marker (nothing detected)"
+OTHER_ID = "with another marker id only"
+
+
+@dataclass(frozen=True, eq=False)
+class Detection:
+    """What the detector found in one image.
+
+    Attributes:
+        corners: The marker's 4 corners in raw image pixels (4, 2) [px], OpenCV's order
+            (:data:`~amsfe_sym.vision.spec.CORNERS`), or None when it was not found.
+        skipped: Why there is no point (None: found).
+        ids: Every id seen in the image.
+    """
+
+    corners: FloatArray | None
+    skipped: str | None
+    ids: tuple[int, ...] = ()
+
+
+class MarkerDetector:
+    """One ``cv2.aruco.ArucoDetector`` for a :class:`MarkerSpec` (built once, reused).
+
+    Sub-pixel refinement: ``CORNER_REFINE_SUBPIX`` (``cornerSubPix`` on each corner,
+    stopping at 0.01 px or 50 iterations) in a half-window of ``relative_window`` of the
+    marker's module (bit) size, at most ``refine_window`` px.  OpenCV's default 0.3 left
+    markers of 20-40 px at 0.5 px RMS on the renders of tests/test_vision_marker.py; 0.8 at
+    0.11-0.14 px (docs/camera.md, "Accuracy").
+    """
+
+    def __init__(
+        self, spec: MarkerSpec, refine_window: int = 5, relative_window: float = 0.8
+    ) -> None:
+        import cv2
+
+        self.spec = spec
+        self._dictionary = cv2.aruco.getPredefinedDictionary(_dictionary_id(spec.dictionary))
+        self._window = (int(refine_window), float(relative_window))
+        self._params = self._parameters(None)
+        self._detector: Any = cv2.aruco.ArucoDetector(self._dictionary, self._params)
+        self._roi: dict[tuple[int, int], Any] = {}  # (crop side, image side) -> detector
+
+    def _parameters(self, min_perimeter_rate: float | None) -> Any:
+        """The detector's parameters (OpenCV's defaults, sub-pixel refinement; a minimum
+        marker perimeter rate if given)."""
+        import cv2
+
+        params = cv2.aruco.DetectorParameters()
+        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+        params.cornerRefinementWinSize = self._window[0]
+        params.relativeCornerRefinmentWinSize = self._window[1]  # (OpenCV's spelling)
+        params.cornerRefinementMaxIterations = 50
+        params.cornerRefinementMinAccuracy = 0.01
+        if min_perimeter_rate is not None:
+            params.minMarkerPerimeterRate = min_perimeter_rate
+        return params
+
+    def detect(self, grey: NDArray[np.uint8], near: FloatArray | None = None) -> Detection:
+        """The spec's marker in the grey image ``grey`` (height, width).
+
+        ``near``: the marker's corners (4, 2) [px] in a previous image; the marker is first
+        searched in a square region of interest around them (3 marker sides, at least 64 px,
+        with the detector's minimum marker perimeter kept in pixels), then, if it is not
+        there, in the whole image.  Corners found in the region are those of the whole image
+        to ~1e-3 px (tests/test_vision_marker.py).
+        """
+        if near is not None and np.isfinite(near).all():
+            found = self._near(grey, np.asarray(near, dtype=np.float64).reshape(4, 2))
+            if found is not None:
+                return found
+        return self._found(self._detector, grey, 0, 0)
+
+    def _found(self, detector: Any, grey: NDArray[np.uint8], x0: int, y0: int) -> Detection:
+        corners, ids, _ = detector.detectMarkers(grey)
+        seen = () if ids is None else tuple(int(i) for i in np.asarray(ids).ravel())
+        if not seen:
+            return Detection(None, NO_MARKER)
+        if self.spec.id not in seen:
+            return Detection(None, OTHER_ID, seen)
+        c = np.asarray(corners[seen.index(self.spec.id)], dtype=np.float64).reshape(4, 2)
+        return Detection(c + np.array([x0, y0], dtype=np.float64), None, seen)
+
+    def _near(self, grey: NDArray[np.uint8], near: FloatArray) -> Detection | None:
+        import cv2
+
+        h, w = grey.shape
+        lo, hi = near.min(axis=0), near.max(axis=0)
+        side = float(max(hi - lo))
+        crop = max(64, 1 << int(np.ceil(np.log2(max(3.0 * side, 1.0)))))
+        if crop >= 0.5 * min(w, h):
+            return None  # (a region that large saves nothing)
+        cx, cy = 0.5 * (lo + hi)
+        x0 = int(np.clip(round(cx - crop / 2), 0, w - crop))
+        y0 = int(np.clip(round(cy - crop / 2), 0, h - crop))
+        key = (crop, max(w, h))
+        if key not in self._roi:
+            rate = self._params.minMarkerPerimeterRate * max(w, h) / crop
+            params = self._parameters(min(rate, 4.0))
+            self._roi[key] = cv2.aruco.ArucoDetector(self._dictionary, params)
+        det = self._found(self._roi[key], grey[y0 : y0 + crop, x0 : x0 + crop], x0, y0)
+        return det if det.corners is not None else None
+
+
+def _dictionary_id(name: str) -> int:
+    import cv2
+
+    for attr in (name, name.upper()):
+        if hasattr(cv2.aruco, attr):
+            return int(getattr(cv2.aruco, attr))
+    raise KeyError(name)  # (parse_marker checked the name against DICTIONARIES)
+
+
+def diagonals_meet(corners: FloatArray) -> FloatArray:
+    """The intersection of the diagonals 0-2 and 1-3 of a quadrilateral (4, 2) [px]: the
+    image of the square's centre under any homography (perspective keeps lines and
+    incidence), so on undistorted corners it is the projection of the marker's centre."""
+    a, b, c, d = (np.append(p, 1.0) for p in np.asarray(corners, dtype=np.float64))
+    x = np.cross(np.cross(a, c), np.cross(b, d))
+    out: FloatArray = x[:2] / x[2]
+    return out
+
+
+def tracked_point(corners: FloatArray, point: str) -> FloatArray:
+    """The tracked point of undistorted ``corners`` (4, 2) [px]: ``centre`` or a named corner."""
+    if point == "centre":
+        return diagonals_meet(corners)
+    return np.asarray(corners[CORNERS.index(point)], dtype=np.float64).copy()
