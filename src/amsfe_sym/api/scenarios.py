@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.codegen.build import GenerateResult
+from amsfe_sym.codegen.build import GenerateResult, generate
 from amsfe_sym.errors import ConfigError, describe
 
 if TYPE_CHECKING:
@@ -29,29 +29,6 @@ FloatArray = NDArray[np.float64]
 Robot = GenerateResult
 
 _RUNTIMES = {"c": "compiled", "compiled": "compiled", "python": "python"}
-
-
-def generate(robot: str | os.PathLike[str] = "paper_2link", **opts: Any) -> Robot:
-    """Generate (or reuse from the cache) the compiled model library of a robot.
-
-    Args:
-        robot: A shipped robot's name (``paper_2link``, ``paper_1link``, ``panda``,
-            ``ur5``), its folder, a ``robot.toml`` or a bare URDF.
-        **opts: :func:`amsfe_sym.codegen.generate`'s options: ``out`` (the parent folder;
-            default :func:`amsfe_sym.codegen.default_out_dir`), ``lock`` (joint -> value
-            [rad or m]), ``extra_cflags``, ``force``, ``progress``, ``parts``.
-
-    Returns:
-        A :class:`~amsfe_sym.codegen.build.GenerateResult` (``Robot``): ``out_dir``,
-        ``manifest_path``, ``library_path``, ``reused`` and ``seconds`` [s].
-
-    Raises:
-        UrdfError, SpecError, ModelError: bad input (nothing is written).
-        CodegenError: the compiler failed (nothing is replaced).
-    """
-    from amsfe_sym.codegen import generate as _generate
-
-    return _generate(robot, **opts)
 
 
 def _set_text(value: object) -> str:

@@ -83,8 +83,8 @@ def joint_grid(
             for i in range(1, rows_per_joint)
         ]
         for ax in axes:  # few ticks: each is a text to lay out and draw
-            ax.xaxis.set_major_locator(MaxNLocator(5))
-            ax.yaxis.set_major_locator(MaxNLocator(5))
+            ax.xaxis.set_major_locator(MaxNLocator(4))
+            ax.yaxis.set_major_locator(MaxNLocator(4))
             ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 3))  # 1e-4 above the axis
             ax.tick_params(labelsize=7)
             ax.yaxis.get_offset_text().set_fontsize(7)
