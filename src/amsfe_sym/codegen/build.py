@@ -227,7 +227,7 @@ def _build(
     _say(
         progress,
         f"[amsfe] {spec.name}: {'rebuilding' if force else 'no library in the cache'} "
-        f"({out_dir}): generating it (model, C, compile; a 7-joint arm takes about a minute, "
+        f"({out_dir}): generating it (model, C, compile: once per robot and settings, "
         "then it is reused)",
     )
     timings: dict[str, float] = {}
