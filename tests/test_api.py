@@ -321,3 +321,22 @@ def test_a_build_says_so_and_names_the_lowered_stiffness(
     assert err.index(lowered[0]) < compiling
     again = am.generate(urdf, out=out, parts=("model",))
     assert again.reused and capsys.readouterr().err == ""
+
+
+def test_the_api_page_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """docs/api.md's Python blocks, run in order in one namespace (as a reader would paste
+    them into one session), import nothing but the public API."""
+    import re
+
+    text = (ROOT / "docs" / "api.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    assert len(blocks) >= 5
+    for code in blocks:
+        for line in code.splitlines():
+            if line.startswith(("import amsfe_sym", "from amsfe_sym")):
+                assert line.strip() == "import amsfe_sym as am", line
+    monkeypatch.chdir(tmp_path)
+    ns: dict[str, object] = {}
+    for code in blocks:
+        exec(compile(code, "docs/api.md", "exec"), ns)
+    assert list(tmp_path.iterdir()) == []  # the API wrote nothing here (a temporary bag)

@@ -140,6 +140,28 @@ class SimResult:
         """1-sigma of the estimated link angles [rad], (K, n)."""
         return np.sqrt(self.P_diag[:, self.layout["q"]])
 
+    def write_bag(self, path: str | os.PathLike[str], replace: bool = False) -> Path:
+        """Write the run as a rosbag2 in MCAP (``amsfe simulate --bag``'s: the URDF, ``/tf``
+        of the true and estimated arms, encoders, camera frames, torque, the truth and the
+        run's config), which :func:`~amsfe_sym.api.read_log` and ``amsfe estimate`` read.
+
+        Args:
+            path: The bag folder (new, or with ``replace`` one amsfe wrote).
+            replace: Replace an existing bag that amsfe wrote (never a folder of yours).
+
+        Returns:
+            The bag folder.
+
+        Raises:
+            RunFolderError: ``path`` holds something amsfe did not write, or exists without
+                ``replace``.
+        """
+        from amsfe_sym.apps.simulate import write_bag
+        from amsfe_sym.core.outputs import check_output
+
+        check_output(path, option="path", force=replace)
+        return write_bag(self.run, Path(path), replace=replace)
+
 
 def simulate(
     scenario: str | os.PathLike[str] | Scenario = "paper-sim",

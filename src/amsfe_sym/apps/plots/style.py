@@ -34,8 +34,9 @@ FloatArray = NDArray[np.float64]
 DPI = 100
 #: Joint panels per row of a grid (a 7-joint arm: 4 + 3).
 MAX_COLUMNS = 4
-#: Columns of pixels a panel's line is cut to by :func:`envelope` (wider than any panel).
-PIXELS = 1000
+#: Columns of pixels a line is cut to by :func:`envelope`: a joint's panel is 3.8-4 in wide
+#: at :data:`DPI` (wider figures pass their own).
+PIXELS = 500
 
 
 def pyplot() -> Any:
