@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from amsfe_sym.api.recordings import LogArrays
-from amsfe_sym.api.scenarios import load_scenario
+from amsfe_sym.api.scenarios import LinkAngles, load_scenario
 from amsfe_sym.errors import ShapeError, describe
 
 if TYPE_CHECKING:
@@ -27,7 +27,7 @@ FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
-class EstimateArrays:
+class EstimateArrays(LinkAngles):
     """An estimator over a whole recording (:meth:`Estimator.run`), K ticks.
 
     Attributes:
@@ -54,16 +54,6 @@ class EstimateArrays:
     nees: FloatArray | None
     layout: dict[str, slice]
     counters: dict[str, int]
-
-    @property
-    def q_hat(self) -> FloatArray:
-        """Estimated link angles [rad], (K, n)."""
-        return self.x_hat[:, self.layout["q"]]
-
-    @property
-    def q_std(self) -> FloatArray:
-        """1-sigma of the estimated link angles [rad], (K, n)."""
-        return np.sqrt(self.P_diag[:, self.layout["q"]])
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from amsfe_sym.scenario import Scenario
     from amsfe_sym.sim.result import RunResult
 
-__all__ = ["Robot", "SimResult", "generate", "load_scenario", "simulate"]
+__all__ = ["LinkAngles", "Robot", "SimResult", "generate", "load_scenario", "simulate"]
 
 FloatArray = NDArray[np.float64]
 
@@ -82,8 +82,26 @@ def load_scenario(
     return apply_sets(sc, [f"{k}={_set_text(v)}" for k, v in rest.items()])
 
 
+class LinkAngles:
+    """The link angles of a result with ``x_hat``, ``P_diag`` and ``layout`` (eq. 2)."""
+
+    x_hat: FloatArray
+    P_diag: FloatArray
+    layout: dict[str, slice]
+
+    @property
+    def q_hat(self) -> FloatArray:
+        """Estimated link angles [rad], (K, n)."""
+        return self.x_hat[:, self.layout["q"]]
+
+    @property
+    def q_std(self) -> FloatArray:
+        """1-sigma of the estimated link angles [rad], (K, n)."""
+        return np.sqrt(self.P_diag[:, self.layout["q"]])
+
+
 @dataclass(frozen=True)
-class SimResult:
+class SimResult(LinkAngles):
     """A simulated closed-loop run (:func:`simulate`), K ticks of T seconds.
 
     Attributes:
@@ -129,16 +147,6 @@ class SimResult:
     def q_true(self) -> FloatArray:
         """True link angles [rad], (K, n)."""
         return self.x_true[:, self.layout["q"]]
-
-    @property
-    def q_hat(self) -> FloatArray:
-        """Estimated link angles [rad], (K, n)."""
-        return self.x_hat[:, self.layout["q"]]
-
-    @property
-    def q_std(self) -> FloatArray:
-        """1-sigma of the estimated link angles [rad], (K, n)."""
-        return np.sqrt(self.P_diag[:, self.layout["q"]])
 
     def write_bag(self, path: str | os.PathLike[str], replace: bool = False) -> Path:
         """Write the run as a rosbag2 in MCAP (``amsfe simulate --bag``'s: the URDF, ``/tf``
