@@ -1,8 +1,9 @@
 """Shared fixtures: every robot is generated (and compiled) at most once per session.
 
-Libraries go to the content-hash cache of :func:`amsfe_sym.codegen.default_out_dir`
-(``generated/`` in the repository, or ``$AMSFE_GENERATED_DIR``), so a second test run, and
-the README's main command, reuse them instead of compiling again.
+Libraries go to the content-hash cache of :func:`amsfe_sym.codegen.default_out_dir`:
+``$AMSFE_GENERATED_DIR``, set here to the repository's ``generated/`` when it is not set (the
+default is the current directory's, and tests change it), so a second test run, and the
+README's main command, reuse them instead of compiling again.
 """
 
 from __future__ import annotations
@@ -19,6 +20,11 @@ from amsfe_sym.load import Robot, load_robot
 from amsfe_sym.load.spec import robots_dir
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario, load_scenario
+
+# one library cache for the session, whatever folder a test runs in (monkeypatch.chdir)
+os.environ.setdefault(
+    "AMSFE_GENERATED_DIR", str(Path(__file__).resolve().parent.parent / "generated")
+)
 
 # In CI (CI=true) property tests draw a fixed sequence of examples, so a red run can be
 # reproduced; locally they explore new examples each run.

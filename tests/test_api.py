@@ -297,3 +297,46 @@ def test_check_tolerance_of_a_chain_grows_with_what_it_chains() -> None:
     assert chain_tolerance(7, 1e3) == pytest.approx(64 * 7 * 1e3 * eps)
     assert chain_tolerance(7, 1e3) > 1.31e-13
     assert chain_tolerance(14, 1e3) == pytest.approx(2 * chain_tolerance(7, 1e3))
+
+
+@pytest.mark.slow
+def test_a_build_says_so_and_names_the_lowered_stiffness(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A bare URDF built with progress (what ``amsfe simulate`` and ``generate`` show): the
+    first line says the library is not cached and is being generated, then one line per
+    joint whose default stiffness was lowered (the UR10's wrist 3, from 1000 to ~131
+    N m/rad), before the compiler runs; a second call reuses it silently."""
+    from tests.conftest import erd_urdf
+
+    urdf = erd_urdf("ur_description/urdf/ur10_robot.urdf")
+    out = tmp_path / "gen"
+    res = am.generate(urdf, out=out, parts=("model",), progress=True)
+    err = capsys.readouterr().err.splitlines()
+    assert not res.reused
+    assert "no library in the cache" in err[0] and "generating it" in err[0]
+    lowered = [ln for ln in err if "default stiffness Ks lowered" in ln]
+    assert len(lowered) == 1 and "wrist_3_joint" in lowered[0]
+    compiling = next(i for i, ln in enumerate(err) if "compiling" in ln)
+    assert err.index(lowered[0]) < compiling
+    again = am.generate(urdf, out=out, parts=("model",))
+    assert again.reused and capsys.readouterr().err == ""
+
+
+def test_the_api_page_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """docs/api.md's Python blocks, run in order in one namespace (as a reader would paste
+    them into one session), import nothing but the public API."""
+    import re
+
+    text = (ROOT / "docs" / "api.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    assert len(blocks) >= 5
+    for code in blocks:
+        for line in code.splitlines():
+            if line.startswith(("import amsfe_sym", "from amsfe_sym")):
+                assert line.strip() == "import amsfe_sym as am", line
+    monkeypatch.chdir(tmp_path)
+    ns: dict[str, object] = {}
+    for code in blocks:
+        exec(compile(code, "docs/api.md", "exec"), ns)
+    assert list(tmp_path.iterdir()) == []  # the API wrote nothing here (a temporary bag)

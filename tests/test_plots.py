@@ -72,6 +72,10 @@ def test_envelope_keeps_every_spike_and_cuts_to_the_pixels() -> None:
     assert np.nanmax(yc) == 50.0 and np.nanmin(yc) == -70.0
     assert np.all(np.diff(tc) >= 0)
     assert np.nanmax(y2c) == pytest.approx(np.nanmax(y2)) and np.isfinite(y2c).all()
+    # a run that stopped early (4875 ticks): its last samples are drawn too
+    t3 = np.arange(4875) * 1e-3
+    tc3, yc3 = envelope(t3, np.where(t3 > 4.8, 9.0, 0.0), pixels=500)
+    assert tc3[-1] > t3[-1] - 4.875 / 500 and np.nanmax(yc3) == 9.0  # within a column
     short = np.arange(100.0)
     out = envelope(short, short, pixels=800)
     assert out[0] is short and out[1] is short

@@ -42,22 +42,6 @@ if TYPE_CHECKING:
 
 __version__ = "0.1.0"
 
-#: The public API (:mod:`amsfe_sym.api`), imported on first use.
-_API = (
-    "EstimateArrays",
-    "Estimator",
-    "LogArrays",
-    "Robot",
-    "SimResult",
-    "StepResult",
-    "generate",
-    "load_scenario",
-    "read_log",
-    "simulate",
-)
-#: The low-level library loaders (:mod:`amsfe_sym.codegen`), imported on first use.
-_CODEGEN = ("library_for", "load_library")
-
 __all__ = [
     "AmsfeError",
     "EstimateArrays",
@@ -74,6 +58,10 @@ __all__ = [
     "read_log",
     "simulate",
 ]
+#: The low-level library loaders (:mod:`amsfe_sym.codegen`), imported on first use.
+_CODEGEN = ("library_for", "load_library")
+#: The public API (:mod:`amsfe_sym.api`), imported on first use.
+_API = tuple(n for n in __all__ if n not in ("AmsfeError", "__version__", *_CODEGEN))
 
 
 def __getattr__(name: str) -> Any:

@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from amsfe_sym.api.recordings import LogArrays
-from amsfe_sym.api.scenarios import load_scenario
+from amsfe_sym.api.scenarios import LinkAngles, load_scenario
 from amsfe_sym.errors import ShapeError, describe
 
 if TYPE_CHECKING:
@@ -27,7 +27,7 @@ FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
-class EstimateArrays:
+class EstimateArrays(LinkAngles):
     """An estimator over a whole recording (:meth:`Estimator.run`), K ticks.
 
     Attributes:
@@ -54,16 +54,6 @@ class EstimateArrays:
     nees: FloatArray | None
     layout: dict[str, slice]
     counters: dict[str, int]
-
-    @property
-    def q_hat(self) -> FloatArray:
-        """Estimated link angles [rad], (K, n)."""
-        return self.x_hat[:, self.layout["q"]]
-
-    @property
-    def q_std(self) -> FloatArray:
-        """1-sigma of the estimated link angles [rad], (K, n)."""
-        return np.sqrt(self.P_diag[:, self.layout["q"]])
 
 
 @dataclass(frozen=True)
@@ -128,6 +118,13 @@ class Estimator:
         Args:
             scenario: A scenario's name or path, or a Scenario (:func:`load_scenario`).
             kind: ``oosm`` (the paper's), ``replay``, ``cloning``, ``naive`` or ``encoders``.
+
+        Returns:
+            The :class:`Estimator` (its library is loaded, or generated, at the first
+            :meth:`run` or :meth:`step`).
+
+        Raises:
+            ConfigError: no such scenario.
         """
         sc = load_scenario(scenario).with_overrides(estimator=kind)
         return cls(sc, robot_defaults=False, kind=kind, spec=None)
@@ -148,6 +145,13 @@ class Estimator:
                 when the effort is not the applied torque (as the command chooses).
             spec: A topic spec TOML (``--log-spec``: its ``[effort]``, ``[filter]`` and
                 ``[joints]``); None: the log's own (:func:`read_log`'s ``topics``).
+
+        Returns:
+            The :class:`Estimator`.
+
+        Raises:
+            SpecError: no such robot, or a spec it refuses.
+            ConfigError: a topic spec it refuses.
         """
         from amsfe_sym.apps.estimate import default_scenario
         from amsfe_sym.topics.spec import read_topic_spec
@@ -320,10 +324,16 @@ class Estimator:
         )
 
     def camera(self, t_exposure: float, uv: ArrayLike) -> None:
-        """A camera frame: the pixel ``uv`` [px] of the tracked point, exposed at
-        ``t_exposure`` [s] (the clock of :meth:`step`'s times).  It is fused with the next
-        encoder sample (late frames are the point of the out-of-sequence update: the
-        estimator goes back to the exposure tick)."""
+        """A camera frame as it arrives, fused with the next encoder sample at its exposure
+        tick (late frames are the point of the out-of-sequence update).
+
+        Args:
+            t_exposure: When the image was exposed [s] (the clock of :meth:`step`'s times).
+            uv: The tracked point's pixel [u, v] [px].
+
+        Raises:
+            ShapeError: ``uv`` is not two values.
+        """
         loop = self._loop("applied")
         z = np.asarray(uv, dtype=np.float64).reshape(-1)
         if z.size != 2:

@@ -48,6 +48,8 @@ class LogArrays:
         spec: The topic spec the log was read with (its ``[effort]``, ``[filter]`` and
             ``[joints]`` tables reach the estimator).
         robot: The robot the log was read for (a :func:`read_log` log), else None.
+        derived: The robot's spec at the log's period when the log was read at another rate
+            than the robot's T (a library ``amsfe generate ROBOT --period`` built), else None.
     """
 
     t: FloatArray

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.codegen.build import GenerateResult
+from amsfe_sym.codegen.build import GenerateResult, generate
 from amsfe_sym.errors import ConfigError, describe
 
 if TYPE_CHECKING:
@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from amsfe_sym.scenario import Scenario
     from amsfe_sym.sim.result import RunResult
 
-__all__ = ["Robot", "SimResult", "generate", "load_scenario", "simulate"]
+__all__ = ["LinkAngles", "Robot", "SimResult", "generate", "load_scenario", "simulate"]
 
 FloatArray = NDArray[np.float64]
 
@@ -29,29 +29,6 @@ FloatArray = NDArray[np.float64]
 Robot = GenerateResult
 
 _RUNTIMES = {"c": "compiled", "compiled": "compiled", "python": "python"}
-
-
-def generate(robot: str | os.PathLike[str] = "paper_2link", **opts: Any) -> Robot:
-    """Generate (or reuse from the cache) the compiled model library of a robot.
-
-    Args:
-        robot: A shipped robot's name (``paper_2link``, ``paper_1link``, ``panda``,
-            ``ur5``), its folder, a ``robot.toml`` or a bare URDF.
-        **opts: :func:`amsfe_sym.codegen.generate`'s options: ``out`` (the parent folder;
-            default :func:`amsfe_sym.codegen.default_out_dir`), ``lock`` (joint -> value
-            [rad or m]), ``extra_cflags``, ``force``, ``progress``, ``parts``.
-
-    Returns:
-        A :class:`~amsfe_sym.codegen.build.GenerateResult` (``Robot``): ``out_dir``,
-        ``manifest_path``, ``library_path``, ``reused`` and ``seconds`` [s].
-
-    Raises:
-        UrdfError, SpecError, ModelError: bad input (nothing is written).
-        CodegenError: the compiler failed (nothing is replaced).
-    """
-    from amsfe_sym.codegen import generate as _generate
-
-    return _generate(robot, **opts)
 
 
 def _set_text(value: object) -> str:
@@ -105,8 +82,26 @@ def load_scenario(
     return apply_sets(sc, [f"{k}={_set_text(v)}" for k, v in rest.items()])
 
 
+class LinkAngles:
+    """The link angles of a result with ``x_hat``, ``P_diag`` and ``layout`` (eq. 2)."""
+
+    x_hat: FloatArray
+    P_diag: FloatArray
+    layout: dict[str, slice]
+
+    @property
+    def q_hat(self) -> FloatArray:
+        """Estimated link angles [rad], (K, n)."""
+        return self.x_hat[:, self.layout["q"]]
+
+    @property
+    def q_std(self) -> FloatArray:
+        """1-sigma of the estimated link angles [rad], (K, n)."""
+        return np.sqrt(self.P_diag[:, self.layout["q"]])
+
+
 @dataclass(frozen=True)
-class SimResult:
+class SimResult(LinkAngles):
     """A simulated closed-loop run (:func:`simulate`), K ticks of T seconds.
 
     Attributes:
@@ -153,15 +148,27 @@ class SimResult:
         """True link angles [rad], (K, n)."""
         return self.x_true[:, self.layout["q"]]
 
-    @property
-    def q_hat(self) -> FloatArray:
-        """Estimated link angles [rad], (K, n)."""
-        return self.x_hat[:, self.layout["q"]]
+    def write_bag(self, path: str | os.PathLike[str], replace: bool = False) -> Path:
+        """Write the run as a rosbag2 in MCAP (``amsfe simulate --bag``'s: the URDF, ``/tf``
+        of the true and estimated arms, encoders, camera frames, torque, the truth and the
+        run's config), which :func:`~amsfe_sym.api.read_log` and ``amsfe estimate`` read.
 
-    @property
-    def q_std(self) -> FloatArray:
-        """1-sigma of the estimated link angles [rad], (K, n)."""
-        return np.sqrt(self.P_diag[:, self.layout["q"]])
+        Args:
+            path: The bag folder (new, or with ``replace`` one amsfe wrote).
+            replace: Replace an existing bag that amsfe wrote (never a folder of yours).
+
+        Returns:
+            The bag folder.
+
+        Raises:
+            RunFolderError: ``path`` holds something amsfe did not write, or exists without
+                ``replace``.
+        """
+        from amsfe_sym.apps.simulate import write_bag
+        from amsfe_sym.core.outputs import check_output
+
+        check_output(path, option="path", force=replace)
+        return write_bag(self.run, Path(path), replace=replace)
 
 
 def simulate(

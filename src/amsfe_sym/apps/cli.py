@@ -201,9 +201,8 @@ def _generate(args: argparse.Namespace) -> int:
 
 
 def _generate_state(res: GenerateResult) -> str:
-    """What ``generate`` did and how long the command took: a cache hit's own check is a
-    few ms, the command's start-up and imports seconds (both said, so neither is taken for
-    the other)."""
+    """What ``generate`` did, in how long, and the command's time (start-up and imports
+    included: seconds, where a cache hit's own check is a few ms)."""
     from amsfe_sym.apps.phases import command_startup_s, process_age_s
 
     state = "up to date (cached)" if res.reused else "generated"

@@ -224,12 +224,6 @@ def _build(
     from amsfe_sym.load import load_robot
     from amsfe_sym.symbolic.model import build_functions
 
-    _say(
-        progress,
-        f"[amsfe] {spec.name}: {'rebuilding' if force else 'no library in the cache'} "
-        f"({out_dir}): generating it (model, C, compile; a 7-joint arm takes about a minute, "
-        "then it is reused)",
-    )
     timings: dict[str, float] = {}
     t = time.perf_counter()
     robot_obj = load_robot(spec)
@@ -237,6 +231,12 @@ def _build(
     t = time.perf_counter()
     modes = joint_modes(robot_obj)
     timings["modes"] = time.perf_counter() - t
+    _say(  # once the input is known good: bad input is one line, this is not an error
+        progress,
+        f"[amsfe] {spec.name}: {'rebuilding' if force else 'no library in the cache'} "
+        f"({out_dir}): generating it (model, C, compile: once per robot and settings, "
+        "then it is reused)",
+    )
     if progress:  # before the compile, not after it (a 7-DOF arm compiles for ~20 s)
         m = spec.model
         warn_stiff(

@@ -29,9 +29,13 @@ from amsfe_sym.apps.plots.style import (
 )
 from amsfe_sym.logs.read import RobotLog
 
-__all__ = ["plot_log"]
+__all__ = ["RUG_MAX", "plot_log"]
 
 FloatArray = NDArray[np.float64]
+
+#: Camera frames marked by a tick at the bottom of each panel up to this many (more make a
+#: solid bar: the title gives their count and mean period instead).
+RUG_MAX = 200
 
 
 def plot_log(
@@ -89,7 +93,7 @@ def plot_log(
             ) + abs(center)
             ax.set_ylabel(f"joint {j + 1} [rad]", fontsize=8)
         ax.set_ylim(-lim, lim)
-        if arrivals.size:  # one collection: an axvline each took 12 of 15 s for 1818 x 7
+        if 0 < arrivals.size <= RUG_MAX:  # one collection (an axvline each: 12 of 15 s)
             ax.vlines(
                 arrivals,
                 0,
@@ -104,11 +108,12 @@ def plot_log(
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
     cells[0][0].legend(loc="upper right", fontsize=6)
-    title(
-        fig,
-        f"{estimator} on {log.path.name}; axes set by the last 80 %; ticks at the bottom: "
-        "camera frames' arrivals",
-    )
+    if arrivals.size > RUG_MAX:
+        every = float(np.ptp(arrivals)) / (arrivals.size - 1)
+        frames = f"{arrivals.size} camera frames, one every {every:.3g} s"
+    else:
+        frames = "ticks at the bottom: camera frames' arrivals"
+    title(fig, f"{estimator} on {log.path.name}; axes set by the last 80 %; {frames}")
     paths = [save(fig, folder / "estimate.png")]
     if nis:
         paths.append(_nis_figure(log, estimator, nis, encoder_nis, frame_nis, folder))
@@ -135,7 +140,7 @@ def _nis_figure(
             mean = np.convolve(np.where(ok, v, 0), np.ones(w), "same") / np.maximum(
                 np.convolve(ok, np.ones(w), "same"), 1
             )
-            tc, vc, mc = envelope(t, v, mean)
+            tc, vc, mc = envelope(t, v, mean, pixels=800)
             ax.plot(tc, vc, lw=0.3, alpha=0.5, label="encoder update", rasterized=True)
             ax.plot(tc, mc, lw=1.0, color="k", label=f"running mean ({w} ticks)")
         elif frame_nis is not None:
@@ -147,7 +152,7 @@ def _nis_figure(
         ax.set_yscale("log")
         ax.set_ylabel(f"NIS {what}", fontsize=8)
         ax.tick_params(labelsize=7)
-        ax.legend(loc="upper right", fontsize=7)
+        ax.legend(loc="lower right", fontsize=7, framealpha=0.6)
     axes[-1, 0].set_xlabel("t [s]")
     title(fig, f"consistency without truth: NIS of {estimator} on {log.path.name}")
     return save(fig, folder / "nis.png")
