@@ -13,7 +13,7 @@ from amsfe_sym.errors import SpecError, describe
 from amsfe_sym.load.spec import RobotSpec
 from amsfe_sym.load.types import CameraModel
 
-__all__ = ["resolve_camera", "workspace"]
+__all__ = ["matrix_to_quaternion", "quaternion_to_matrix", "resolve_camera", "workspace"]
 
 
 def workspace(
@@ -43,15 +43,64 @@ def workspace(
     return centre, max(radius, 0.05)
 
 
+def quaternion_to_matrix(q: tuple[float, ...] | NDArray[np.float64]) -> NDArray[np.float64]:
+    """The rotation matrix of the unit quaternion ``q = [qx, qy, qz, qw]`` (Hamilton, scalar
+    last, as ROS and scipy write it)."""
+    x, y, z, w = (float(v) for v in q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def matrix_to_quaternion(R: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The unit quaternion ``[qx, qy, qz, qw]`` (``qw >= 0``) of the rotation matrix ``R``
+    (Shepperd's method: the largest of the four squared components first)."""
+    R = np.asarray(R, dtype=float)
+    tr = float(np.trace(R))
+    d = np.array([R[0, 0], R[1, 1], R[2, 2], tr])
+    i = int(np.argmax(d))
+    if i == 3:
+        w = 0.5 * math.sqrt(1.0 + tr)
+        q = np.array(
+            [
+                (R[2, 1] - R[1, 2]) / (4 * w),
+                (R[0, 2] - R[2, 0]) / (4 * w),
+                (R[1, 0] - R[0, 1]) / (4 * w),
+                w,
+            ]
+        )
+    else:
+        j, k = (i + 1) % 3, (i + 2) % 3
+        a = 0.5 * math.sqrt(max(1.0 + 2.0 * R[i, i] - tr, 0.0))
+        q = np.zeros(4)
+        q[i] = a
+        q[j] = (R[j, i] + R[i, j]) / (4 * a)
+        q[k] = (R[k, i] + R[i, k]) / (4 * a)
+        q[3] = (R[k, j] - R[j, k]) / (4 * a)
+    q /= np.linalg.norm(q)
+    return -q if q[3] < 0 else q
+
+
 def resolve_camera(spec: RobotSpec, model: pin.Model, frame_id: int) -> CameraModel:
     """Resolve the camera.
 
     Defaults (bare URDF, or keys left out): the camera looks at the centre of the tracked
     point's workspace (sampled at random q) from 3 workspace radii away along -y, and the
     focal length puts the whole workspace sphere inside 90 % of the shorter image side.
+    ``orientation`` (a quaternion, world-from-camera) replaces ``look_at`` / ``up``: then
+    ``R_cw`` is its matrix transposed (the spec reader refuses both, or one without
+    ``position``).
     """
     c = spec.camera
-    if c.look_at is None or c.position is None or c.fx is None:  # a default needs the workspace
+    if c.orientation is not None and c.position is not None:
+        R_wc = quaternion_to_matrix(c.orientation)
+        position = np.array(c.position, dtype=float)
+        return _camera(spec, model, frame_id, R_wc.T, position)
+    if c.look_at is None or c.position is None:  # a default needs the workspace
         centre, radius = workspace(model, frame_id, spec.tracked.offset)
     look_at = np.array(c.look_at, dtype=float) if c.look_at is not None else centre
     up = np.array(c.up, dtype=float)
@@ -79,10 +128,24 @@ def resolve_camera(spec: RobotSpec, model: pin.Model, frame_id: int) -> CameraMo
         )
     x /= np.linalg.norm(x)
     y = np.cross(z, x)
-    R_cw = np.vstack([x, y, z])
+    return _camera(spec, model, frame_id, np.vstack([x, y, z]), position)
+
+
+def _camera(
+    spec: RobotSpec,
+    model: pin.Model,
+    frame_id: int,
+    R_cw: NDArray[np.float64],
+    position: NDArray[np.float64],
+) -> CameraModel:
+    """The camera at ``position`` [m] with rotation ``R_cw`` (world -> camera): intrinsics
+    the spec's, else the default focal length that frames the workspace."""
+    c = spec.camera
+    z = R_cw[2]
     if c.fx is not None:
         fx = c.fx
     else:
+        centre, radius = workspace(model, frame_id, spec.tracked.offset)
         # the sphere (centre, radius) seen from `position`: its farthest image offset is
         # f * tan(angle to centre + half-angle of the sphere)
         to_c = centre - position
