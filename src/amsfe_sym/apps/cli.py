@@ -24,6 +24,8 @@ from amsfe_sym.apps.arguments import (
     lock_arg,
     number_type,
 )
+from amsfe_sym.apps.calibrate import add_arguments as add_calibrate_arguments
+from amsfe_sym.apps.calibrate import from_args as calibrate_from_args
 from amsfe_sym.apps.estimate import add_arguments as add_estimate_arguments
 from amsfe_sym.apps.estimate import from_args as estimate_from_args
 from amsfe_sym.apps.options import (
@@ -152,6 +154,12 @@ def get_argument_parser() -> argparse.ArgumentParser:
     add_estimate_arguments(
         sub.add_parser("estimate", help="an estimator over a recorded rosbag2 / MCAP log")
     )
+    add_calibrate_arguments(
+        sub.add_parser(
+            "calibrate",
+            help="camera pose, marker offset and time offset from a log (docs/calibrate.md)",
+        )
+    )
 
     ros_nodes.add_sim_node_arguments(sub.add_parser("sim-node", help="the simulated arm on ROS 2"))
     ros_nodes.add_node_arguments(sub.add_parser("node", help="estimator/controller on ROS 2"))
@@ -208,6 +216,7 @@ def _main(argv: Sequence[str] | None) -> int:
         "check": _check,
         "simulate": _simulate,
         "estimate": estimate_from_args,
+        "calibrate": calibrate_from_args,
         "bench": _bench,
         "study": _study,
         "sweep": sweep_from_args,

@@ -85,9 +85,7 @@ class ReprojectionModel:
         R0: The rotation the rotation vector is applied to (world -> camera).
     """
 
-    def __init__(
-        self, robot: Robot, links: LinkAngles, stamp: FloatArray, R0: FloatArray
-    ) -> None:
+    def __init__(self, robot: Robot, links: LinkAngles, stamp: FloatArray, R0: FloatArray) -> None:
         self.robot = robot
         self.links = links
         self.stamp = np.asarray(stamp, dtype=np.float64)

@@ -128,4 +128,4 @@ def observations(log: RobotLog) -> Observations:
     pixel = np.array([np.asarray(f.z, dtype=np.float64)[:2] for f in frames]).reshape(-1, 2)
     use = log.usage.get("camera")
     skipped = dict(use.skipped) if use is not None else {}
-    return Observations(steps * log.T, pixel, steps, skipped)
+    return Observations(steps.astype(np.float64) * log.T, pixel, steps, skipped)

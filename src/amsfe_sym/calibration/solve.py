@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from amsfe_sym.calibration.model import NP, PARAMETERS, ReprojectionModel
+from amsfe_sym.calibration.model import NP, ReprojectionModel
 from amsfe_sym.calibration.observations import NO_ENCODER, LinkAngles, Observations
 from amsfe_sym.errors import LogError, describe
 from amsfe_sym.load.types import Robot
@@ -169,9 +169,8 @@ def initial_guess(
         proj, _ = cv2.projectPoints(obj, rvec, tvec, K, None)
         rms = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - img) ** 2, axis=1))))
         if best is None or rms < best.rms:
-            R, _ = cv2.Rodrigues(rvec)
-            R = np.asarray(R)
-            centre = -R.T @ np.asarray(tvec).reshape(3)
+            R = np.asarray(cv2.Rodrigues(rvec)[0], dtype=np.float64)
+            centre = -R.T @ np.asarray(tvec, dtype=np.float64).reshape(3)
             best = InitialGuess(R, centre, float(dt), rms, int(ok.sum()))
     if best is None:
         raise LogError(
@@ -250,7 +249,8 @@ def calibrate(
     init = initial_guess(robot, links, obs, offset0, max_offset if fit_time_offset else 0.0)
     say(
         f"initial guess (solvePnP over {init.frames} frames, time offset scanned in "
-        f"+-{max_offset:g} s): reprojection RMS {init.rms:.2f} px at {init.time_offset * 1e3:+.0f} ms"
+        f"+-{max_offset:g} s): reprojection RMS {init.rms:.2f} px at "
+        f"{init.time_offset * 1e3:+.0f} ms"
     )
     model = ReprojectionModel(robot, links, obs.stamp, init.R_cw)
     x0 = np.concatenate([np.zeros(3), init.position, offset0, [init.time_offset]])
@@ -377,6 +377,33 @@ def _residual(model: ReprojectionModel, obs: Observations, x: FloatArray) -> Flo
     return res
 
 
+def _problem(
+    model: ReprojectionModel,
+    obs: Observations,
+    x: FloatArray,
+    free: NDArray[np.bool_],
+    idx: NDArray[np.intp],
+) -> tuple[Callable[[FloatArray], FloatArray], Callable[[FloatArray], FloatArray]]:
+    """Residuals [px] and their jacobian over the free parameters ``p`` (the others as in
+    ``x``) for the frames ``idx``."""
+    x = x.copy()
+
+    def full(p: FloatArray) -> FloatArray:
+        xx = x.copy()
+        xx[free] = p
+        return xx
+
+    def fun(p: FloatArray) -> FloatArray:
+        pr = model.project(full(p))
+        return (pr.y[idx] - obs.pixel[idx]).reshape(-1)
+
+    def jac(p: FloatArray) -> FloatArray:
+        pr = model.project(full(p))
+        return pr.J[idx][:, :, free].reshape(-1, int(free.sum()))
+
+    return fun, jac
+
+
 def _fit(
     model: ReprojectionModel,
     obs: Observations,
@@ -397,20 +424,7 @@ def _fit(
         for i in np.flatnonzero(use & ~pr.valid):
             dropped[int(i)] = NO_ENCODER
         use = use & pr.valid
-        idx = np.flatnonzero(use)
-
-        def fun(p: FloatArray) -> FloatArray:
-            xx = x.copy()
-            xx[free] = p
-            pr = model.project(xx)
-            return (pr.y[idx] - obs.pixel[idx]).reshape(-1)
-
-        def jac(p: FloatArray) -> FloatArray:
-            xx = x.copy()
-            xx[free] = p
-            pr = model.project(xx)
-            return pr.J[idx][:, :, free].reshape(-1, int(free.sum()))
-
+        fun, jac = _problem(model, obs, x, free, np.flatnonzero(use))
         sol = least_squares(
             fun, x[free], jac=jac, method="trf", loss=loss, f_scale=f_scale, x_scale="jac"
         )
