@@ -292,12 +292,9 @@ def calibrate(
         Jf = pr.J[use][:, :, free].reshape(-1, int(free.sum()))
         dof = max(r.size - int(free.sum()), 1)
         s2 = float(np.sum(r**2)) / dof
-        cols = np.linalg.norm(Jf, axis=0)
-        cols[cols == 0] = 1.0
-        sv = np.linalg.svd(Jf / cols, compute_uv=False)
-        cov = s2 * np.linalg.pinv(Jf.T @ Jf)
+        sd, sv = _stds(Jf, s2)
         std = np.full(NP, np.nan)
-        std[free] = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        std[free] = sd
         newly = _undetermined(std, free, held)
         if not newly:
             break
@@ -329,6 +326,30 @@ def calibrate(
         pixel=obs.pixel,
         stamp=obs.stamp,
     )
+
+
+#: A singular value of the column-scaled jacobian below this share of the largest: its
+#: direction is not determined at all (the parameters in it get an infinite std).
+RANK_TOLERANCE = 1e-9
+
+
+def _stds(J: FloatArray, s2: float) -> tuple[FloatArray, FloatArray]:
+    """1-sigma of each parameter, ``sqrt(diag(s2 (J^T J)^-1))``, with ``inf`` for a parameter
+    the jacobian does not see (a zero column, or a share of a null direction), and the
+    singular values of ``J`` with unit-norm columns."""
+    cols = np.linalg.norm(J, axis=0)
+    std = np.full(J.shape[1], np.inf)
+    seen = cols > 0
+    if not seen.any():
+        return std, np.zeros(0)
+    _, S, Vt = np.linalg.svd(J[:, seen] / cols[seen], full_matrices=False)
+    good = S / S[0] > RANK_TOLERANCE
+    var = (Vt[good].T ** 2) @ (1.0 / S[good] ** 2)
+    null = (np.abs(Vt[~good]) > 0.1).any(axis=0) if (~good).any() else np.zeros(seen.sum(), bool)
+    sd = np.sqrt(s2 * var) / cols[seen]
+    sd[null] = np.inf
+    std[seen] = sd
+    return std, S
 
 
 def _undetermined(std: FloatArray, free: NDArray[np.bool_], held: dict[str, str]) -> dict[str, str]:
