@@ -35,39 +35,17 @@ import numpy as np
 HERE = Path(__file__).resolve().parent.parent / "tests" / "data" / "calibrate"
 
 
-def true_robot(folder: Path, seed: int, shift: float = 0.03, turn_deg: float = 2.0,
-               marker: float = 0.02) -> Path:
-    """``folder/robot.toml``: calib_arm with the camera moved ``shift`` [m] and turned
-    ``turn_deg``, the marker ``marker`` [m] off the tip (directions from ``seed``), and the
-    scenario beside it."""
-    import cv2
-
+def true_robot(folder: Path, seed: int) -> Path:
+    """``folder/robot.toml``: calib_arm with the camera moved 3 cm and turned 2 deg, the
+    marker 2 cm off the tip (directions from ``seed``), and the scenario beside it."""
+    from amsfe_sym.calibration.spec_out import moved_camera_spec
     from amsfe_sym.load import load_robot
-    from amsfe_sym.load.camera import matrix_to_quaternion
 
     folder.mkdir(parents=True, exist_ok=True)
-    nominal = load_robot(HERE / "robot.toml")
-    rng = np.random.default_rng(seed)
-    d, w, o = (v / np.linalg.norm(v) for v in rng.standard_normal((3, 3)))
-    R = np.asarray(cv2.Rodrigues(w * math.radians(turn_deg))[0]) @ nominal.camera.R_cw
-    q = matrix_to_quaternion(R.T)
-    pos = nominal.camera.position + shift * d
-    lines = []
-    for line in (HERE / "robot.toml").read_text().splitlines():
-        key = line.split("=")[0].strip()
-        if key in ("position", "look_at", "up"):
-            continue
-        if key == "offset":
-            line = f"offset = [{', '.join(repr(float(v)) for v in marker * o)}]"
-        elif key == "name":
-            line = 'name = "calib_arm_true"'
-        elif key == "urdf":
-            line = f'urdf = "{HERE / "calib_arm.urdf"}"'
-        lines.append(line)
-        if line.startswith("[camera]"):
-            lines.append(f"position = [{', '.join(repr(float(v)) for v in pos)}]")
-            lines.append(f"orientation = [{', '.join(repr(float(v)) for v in q)}]")
-    (folder / "robot.toml").write_text("\n".join(lines) + "\n")
+    text = moved_camera_spec(
+        load_robot(HERE / "robot.toml"), np.random.default_rng(seed), name="calib_arm_true"
+    )
+    (folder / "robot.toml").write_text(text)
     shutil.copy(HERE / "calib-sim.toml", folder / "calib-sim.toml")
     return folder / "robot.toml"
 
@@ -89,13 +67,23 @@ def errors(out: Path, truth: Path, stamp_offset: float) -> dict[str, object]:
     import cv2
 
     w_err = np.asarray(cv2.Rodrigues(est.camera.R_cw @ tr.camera.R_cw.T)[0]).reshape(3)
-    names = ["rot_x", "rot_y", "rot_z", "camera_x", "camera_y", "camera_z", "offset_x",
-             "offset_y", "offset_z", "time_offset"]
+    names = [
+        "rot_x",
+        "rot_y",
+        "rot_z",
+        "camera_x",
+        "camera_y",
+        "camera_z",
+        "offset_x",
+        "offset_y",
+        "offset_z",
+        "time_offset",
+    ]
     err = np.concatenate([w_err, dpos, doff, [dt]])
     inside = {}
     for k, name in enumerate(names):
         hw = p[name]["half_width_95"]
-        inside[name] = hw is not None and abs(err[k]) <= hw
+        inside[name] = bool(hw is not None and abs(err[k]) <= hw)
     return {
         "position_mm": float(np.linalg.norm(dpos) * 1e3),
         "rotation_deg": rot,
@@ -122,11 +110,34 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.time()
     for seed in range(args.first_seed, args.first_seed + args.seeds):
         run, out = work / f"run{seed}", work / f"cal{seed}"
-        rc = amsfe(["simulate", str(truth.parent / "calib-sim.toml"), "--controller", "truth-ct",
-                    "--out", str(run), "--bag", "--no-plots", "--no-progress", "--seed",
-                    str(seed), "--set", f"camera.stamp_offset={args.stamp_offset}"])
-        rc = rc or amsfe(["calibrate", str(run / "bag"), "--robot", str(HERE / "robot.toml"),
-                          "--out", str(out), "--no-plots"])
+        rc = amsfe(
+            [
+                "simulate",
+                str(truth.parent / "calib-sim.toml"),
+                "--controller",
+                "truth-ct",
+                "--out",
+                str(run),
+                "--bag",
+                "--no-plots",
+                "--no-progress",
+                "--seed",
+                str(seed),
+                "--set",
+                f"camera.stamp_offset={args.stamp_offset}",
+            ]
+        )
+        rc = rc or amsfe(
+            [
+                "calibrate",
+                str(run / "bag"),
+                "--robot",
+                str(HERE / "robot.toml"),
+                "--out",
+                str(out),
+                "--no-plots",
+            ]
+        )
         row: dict[str, object] = {"seed": seed, "ok": rc == 0}
         if rc == 0:
             row.update(errors(out, truth, args.stamp_offset))
@@ -149,8 +160,7 @@ def main(argv: list[str] | None = None) -> int:
         }
     names = list(rows[0]["inside_95"]) if rows and rows[0]["ok"] else []
     cover = {
-        n: f"{sum(1 for r in rows if r['ok'] and r['inside_95'][n])} / {len(rows)}"
-        for n in names
+        n: f"{sum(1 for r in rows if r['ok'] and r['inside_95'][n])} / {len(rows)}" for n in names
     }
     total = sum(1 for r in rows if r["ok"] for n in names if r["inside_95"][n])
     summary["coverage_95"] = cover
