@@ -67,21 +67,11 @@ def errors(out: Path, truth: Path, stamp_offset: float) -> dict[str, object]:
     import cv2
 
     w_err = np.asarray(cv2.Rodrigues(est.camera.R_cw @ tr.camera.R_cw.T)[0]).reshape(3)
-    names = [
-        "rot_x",
-        "rot_y",
-        "rot_z",
-        "camera_x",
-        "camera_y",
-        "camera_z",
-        "offset_x",
-        "offset_y",
-        "offset_z",
-        "time_offset",
-    ]
+    from amsfe_sym.calibration import PARAMETERS
+
     err = np.concatenate([w_err, dpos, doff, [dt]])
     inside = {}
-    for k, name in enumerate(names):
+    for k, name in enumerate(PARAMETERS):
         hw = p[name]["half_width_95"]
         inside[name] = bool(hw is not None and abs(err[k]) <= hw)
     return {
