@@ -35,15 +35,16 @@ import numpy as np
 HERE = Path(__file__).resolve().parent.parent / "tests" / "data" / "calibrate"
 
 
-def true_robot(folder: Path, seed: int) -> Path:
+def true_robot(folder: Path, seed: int, name: str = "calib_arm_true") -> Path:
     """``folder/robot.toml``: calib_arm with the camera moved 3 cm and turned 2 deg, the
-    marker 2 cm off the tip (directions from ``seed``), and the scenario beside it."""
+    marker 2 cm off the tip (directions from ``seed``), and the scenario beside it; ``name``:
+    its library's (two runs of this script at once need two)."""
     from amsfe_sym.calibration.spec_out import moved_camera_spec
     from amsfe_sym.load import load_robot
 
     folder.mkdir(parents=True, exist_ok=True)
     text = moved_camera_spec(
-        load_robot(HERE / "robot.toml"), np.random.default_rng(seed), name="calib_arm_true"
+        load_robot(HERE / "robot.toml"), np.random.default_rng(seed), name=name
     )
     (folder / "robot.toml").write_text(text)
     shutil.copy(HERE / "calib-sim.toml", folder / "calib-sim.toml")
@@ -95,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     from amsfe_sym.apps.cli import main as amsfe
 
     work = Path(tempfile.mkdtemp(prefix="calibrate-seeds-"))
-    truth = true_robot(work / "true", args.truth_seed)
+    truth = true_robot(work / "true", args.truth_seed, f"calib_arm_true_{args.first_seed}")
     rows = []
     t0 = time.time()
     for seed in range(args.first_seed, args.first_seed + args.seeds):
