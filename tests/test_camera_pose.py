@@ -13,7 +13,7 @@ import pytest
 from amsfe_sym.codegen import generate
 from amsfe_sym.errors import SpecError
 from amsfe_sym.load import load_robot
-from amsfe_sym.load.camera import matrix_to_quaternion, quaternion_to_matrix
+from amsfe_sym.load.rotation import matrix_to_quaternion, quaternion_to_matrix
 from amsfe_sym.load.spec import load_spec, robots_dir
 from amsfe_sym.runtime.library import ModelLibrary
 

@@ -135,6 +135,8 @@ ALLOWED: dict[str, set[str]] = {
         "logs",
         "topics",
     },
+    # the camera calibration: a log read as estimate reads it, the robot's model and camera
+    "calibration": {"errors", "core", "load", "logs"},
     # the applications may import every room, never the command line
     "apps": {
         "errors",
@@ -151,6 +153,7 @@ ALLOWED: dict[str, set[str]] = {
         "logs",
         "topics",
         "ros",
+        "calibration",
     },
     "apps.cli": {""},  # the command line: everything
     "__main__": {"apps.cli"},

@@ -122,7 +122,7 @@ def _rotation_error_deg(R_a: Any, R_b: Any) -> float:
 def report_lines(cal: Calibration, robot: Robot, reader_skipped: dict[str, int]) -> list[str]:
     """What ``amsfe calibrate`` prints after the fit: parameters with intervals, the
     reprojection error per frame, the dropped frames by reason, what was held and why."""
-    from amsfe_sym.load.camera import matrix_to_quaternion
+    from amsfe_sym.load.rotation import matrix_to_quaternion
 
     hw = cal.half_width95()
     out = ["  parameter                  value        95 % interval (linearised)"]
@@ -179,7 +179,7 @@ def _summary(
     held), the pose, the errors per frame, the dropped frames and what was held."""
     from amsfe_sym.calibration.model import PARAMETERS
     from amsfe_sym.calibration.solve import Z95
-    from amsfe_sym.load.camera import matrix_to_quaternion
+    from amsfe_sym.load.rotation import matrix_to_quaternion
 
     e = cal.frame_errors()
     hw = cal.half_width95()

@@ -6,6 +6,9 @@ Flow: a log read as ``amsfe estimate`` reads it -> :mod:`.observations` (frames,
 -> :mod:`.model` (the reprojection map with those parameters, its exact jacobian) ->
 :mod:`.solve` (OpenCV's initial guess, robust least squares, intervals, what the motion
 cannot determine) -> :mod:`.spec_out` (the calibrated ``robot.toml``).
+
+It may import ``errors``, ``core``, ``load`` (the robot, its camera) and ``logs`` (the log
+reader of ``amsfe estimate``); the applications import it (``apps.calibrate``).
 """
 
 from amsfe_sym.calibration.model import NP, PARAMETERS, Projection, ReprojectionModel

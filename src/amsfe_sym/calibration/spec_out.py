@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 from amsfe_sym.calibration.solve import Calibration
 from amsfe_sym.core.toml import dump_toml, read_toml
 from amsfe_sym.errors import SpecError
-from amsfe_sym.load.camera import matrix_to_quaternion
+from amsfe_sym.load.rotation import matrix_to_quaternion
 from amsfe_sym.load.types import Robot
 
 __all__ = ["calibrated_spec", "moved_camera_spec", "spec_with_camera"]

@@ -10,10 +10,11 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import SpecError, describe
+from amsfe_sym.load.rotation import quaternion_to_matrix
 from amsfe_sym.load.spec import RobotSpec
 from amsfe_sym.load.types import CameraModel
 
-__all__ = ["matrix_to_quaternion", "quaternion_to_matrix", "resolve_camera", "workspace"]
+__all__ = ["resolve_camera", "workspace"]
 
 
 def workspace(
@@ -41,48 +42,6 @@ def workspace(
     centre = 0.5 * (P.min(axis=0) + P.max(axis=0))
     radius = float(np.max(np.linalg.norm(P - centre, axis=1)))
     return centre, max(radius, 0.05)
-
-
-def quaternion_to_matrix(q: tuple[float, ...] | NDArray[np.float64]) -> NDArray[np.float64]:
-    """The rotation matrix of the unit quaternion ``q = [qx, qy, qz, qw]`` (Hamilton, scalar
-    last, as ROS and scipy write it)."""
-    x, y, z, w = (float(v) for v in q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def matrix_to_quaternion(R: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The unit quaternion ``[qx, qy, qz, qw]`` (``qw >= 0``) of the rotation matrix ``R``
-    (Shepperd's method: the largest of the four squared components first)."""
-    R = np.asarray(R, dtype=float)
-    tr = float(np.trace(R))
-    d = np.array([R[0, 0], R[1, 1], R[2, 2], tr])
-    i = int(np.argmax(d))
-    if i == 3:
-        w = 0.5 * math.sqrt(1.0 + tr)
-        q = np.array(
-            [
-                (R[2, 1] - R[1, 2]) / (4 * w),
-                (R[0, 2] - R[2, 0]) / (4 * w),
-                (R[1, 0] - R[0, 1]) / (4 * w),
-                w,
-            ]
-        )
-    else:
-        j, k = (i + 1) % 3, (i + 2) % 3
-        a = 0.5 * math.sqrt(max(1.0 + 2.0 * R[i, i] - tr, 0.0))
-        q = np.zeros(4)
-        q[i] = a
-        q[j] = (R[j, i] + R[i, j]) / (4 * a)
-        q[k] = (R[k, i] + R[i, k]) / (4 * a)
-        q[3] = (R[k, j] - R[j, k]) / (4 * a)
-    q /= np.linalg.norm(q)
-    return -q if q[3] < 0 else q
 
 
 def resolve_camera(spec: RobotSpec, model: pin.Model, frame_id: int) -> CameraModel:

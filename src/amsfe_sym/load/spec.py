@@ -12,16 +12,16 @@ names (joints, frames) are checked later, in :mod:`amsfe_sym.load`, against the 
 from __future__ import annotations
 
 import hashlib
-import math
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Literal
 
 from amsfe_sym.core.toml import read_toml
 from amsfe_sym.core.values import read_int, read_number
 from amsfe_sym.errors import SpecError, check_known_keys, describe
+from amsfe_sym.load.rotation import read_orientation
 
 __all__ = [
     "ActuatorSpec",
@@ -108,10 +108,9 @@ class CameraSpec:
         position: Camera centre in the world frame [m].
         look_at: A world point on the optical axis [m].
         up: World direction that appears up in the image (must not be parallel to the axis).
-        orientation: The full rotation instead of ``look_at`` / ``up``: the unit quaternion
-            ``[qx, qy, qz, qw]`` of world-from-camera (its matrix's columns are the camera's
-            x right, y down, z forward axes in the world), needs ``position``; None: from
-            ``look_at`` / ``up``.
+        orientation: Instead of ``look_at`` / ``up``, with ``position``: the unit quaternion
+            ``[qx, qy, qz, qw]`` of world-from-camera (its matrix's columns: the camera's x
+            right, y down, z forward axes in the world).
         period: l, steps between two exposures (eq. 11).
         delay: d, steps from exposure to delivery.
     """
@@ -128,6 +127,10 @@ class CameraSpec:
     period: int = 125
     delay: int = 125
     orientation: tuple[float, float, float, float] | None = None
+
+
+#: The keys of ``[camera]``: the fields of :class:`CameraSpec`.
+_CAMERA_KEYS = {f.name for f in fields(CameraSpec)}
 
 
 @dataclass(frozen=True)
@@ -355,20 +358,7 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
     c = _table(data, "camera", where)
     _no_unknown(
         c,
-        {
-            "width",
-            "height",
-            "fx",
-            "fy",
-            "cx",
-            "cy",
-            "position",
-            "look_at",
-            "up",
-            "period",
-            "delay",
-            "orientation",
-        },
+        _CAMERA_KEYS,
         f"{where} [camera]",
     )
     camera = CameraSpec(
@@ -383,7 +373,7 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
         up=_vec3(c.get("up", (0.0, 0.0, 1.0)), f"{where} [camera] up"),
         period=_count(c.get("period", 125), f"{where} [camera] period", 1),
         delay=_count(c.get("delay", 125), f"{where} [camera] delay", 0),
-        orientation=_orientation(c, f"{where} [camera]"),
+        orientation=read_orientation(c, f"{where} [camera]"),
     )
 
     thetas: list[ThetaSpec] = []
@@ -486,50 +476,6 @@ def _vec3(x: Any, where: str) -> tuple[float, float, float]:
         raise SpecError(describe(where, "3 numbers [x, y, z]", repr(x), "write [x, y, z]"))
     a, b, c = (_finite(v, where) for v in x)
     return (a, b, c)
-
-
-#: How far from 1 the norm of ``[camera] orientation`` may be (it is then normalised).
-UNIT_TOLERANCE = 1e-6
-
-
-def _orientation(c: Mapping[str, Any], where: str) -> tuple[float, float, float, float] | None:
-    """``[camera] orientation``: a unit quaternion [qx, qy, qz, qw] (world-from-camera),
-    normalised; refused with ``look_at`` or ``up``, without ``position``, or not unit."""
-    x = c.get("orientation")
-    if x is None:
-        return None
-    w = f"{where} orientation"
-    if not isinstance(x, Sequence) or isinstance(x, str) or len(x) != 4:
-        raise SpecError(
-            describe(w, "4 numbers [qx, qy, qz, qw]", repr(x), "write [qx, qy, qz, qw]")
-        )
-    q = [_finite(v, w) for v in x]
-    both = [k for k in ("look_at", "up") if k in c]
-    if both:
-        raise SpecError(
-            describe(
-                w,
-                "one rotation: orientation, or look_at / up",
-                f"orientation and {' and '.join(both)}",
-                f"remove {' and '.join(both)} (or orientation)",
-            )
-        )
-    if "position" not in c:
-        raise SpecError(
-            describe(w, "a camera position with it", "none", "add position = [x, y, z]")
-        )
-    norm = math.sqrt(sum(v * v for v in q))
-    if abs(norm - 1.0) > UNIT_TOLERANCE:
-        raise SpecError(
-            describe(
-                w,
-                f"a unit quaternion (norm 1 within {UNIT_TOLERANCE:g}): a rotation",
-                f"norm {norm:.9g}",
-                "write the rotation's quaternion [qx, qy, qz, qw] with all its digits",
-            )
-        )
-    a, b, d, e = (v / norm for v in q)
-    return (a, b, d, e)
 
 
 def _opt_vec(x: Any, where: str, strict: bool = True) -> tuple[float, ...] | None:
