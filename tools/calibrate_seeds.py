@@ -86,6 +86,7 @@ def errors(out: Path, truth: Path, stamp_offset: float) -> dict[str, object]:
         "rotation_deg": rot,
         "offset_mm": float(np.linalg.norm(doff) * 1e3),
         "time_offset_ms": abs(dt) * 1e3,
+        "time_offset_error_ms": dt * 1e3,  # signed: estimate - truth
         "inside_95": inside,
         "reprojection_median_px": cal["reprojection_px"]["median"],
     }
