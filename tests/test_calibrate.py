@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import math
 import shutil
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -31,14 +32,20 @@ STAMP_OFFSET = 0.025
 
 
 @pytest.fixture(scope="module")
-def truth(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def truth(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """The true robot.toml, with its libraries in a folder of this module's own: a library
+    found in a shared cache keeps the spec path of whoever built it first (its manifest), and
+    ``simulate --bag`` reads the spec there (for /tf), which another session's temporary
+    folder no longer has."""
     folder = tmp_path_factory.mktemp("true")
     text = moved_camera_spec(
         load_robot(DATA / "robot.toml"), np.random.default_rng(0), name="calib_arm_true"
     )
     (folder / "robot.toml").write_text(text)
     shutil.copy(DATA / "calib-sim.toml", folder)
-    return folder / "robot.toml"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("AMSFE_GENERATED_DIR", str(folder / "generated"))
+        yield folder / "robot.toml"
 
 
 def _simulate(truth: Path, out: Path, seed: int, *extra: str) -> Path:

@@ -37,6 +37,8 @@ def main(argv: list[str] | None = None) -> int:
 
     work = Path(tempfile.mkdtemp(prefix="calibrate-fusion-"))
     name = "calib_arm_fusion"
+    # its own library folder (a cached library keeps its first builder's spec path)
+    os.environ["AMSFE_GENERATED_DIR"] = str(work / "generated")
     truth = true_robot(work / "true", args.truth_seed, name)
     sim = ["simulate", str(truth.parent / "calib-sim.toml"), "--controller", "truth-ct"]
     sim += ["--estimator", "oosm", "--seed", str(args.seed), "--no-plots", "--no-progress"]

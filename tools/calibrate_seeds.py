@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import shutil
 import sys
 import tempfile
@@ -150,6 +151,9 @@ def main(argv: list[str] | None = None) -> int:
     from amsfe_sym.apps.cli import main as amsfe
 
     work = Path(tempfile.mkdtemp(prefix="calibrate-seeds-"))
+    # the true robot's library in the work folder: a cached one keeps the spec path of its
+    # first builder (an earlier run's deleted folder), which simulate --bag reads for /tf
+    os.environ["AMSFE_GENERATED_DIR"] = str(work / "generated")
     truth = true_robot(work / "true", args.truth_seed, f"calib_arm_true_{args.first_seed}")
     rows: list[dict[str, Any]] = []
     t0 = time.time()

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import math
 from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -27,7 +28,35 @@ if TYPE_CHECKING:  # (OpenCV, Pinocchio and scipy are imported when the command 
     from amsfe_sym.calibration import Calibration
     from amsfe_sym.load.types import Robot
 
-__all__ = ["add_arguments", "calibrate_command", "default_out", "from_args", "report_lines"]
+__all__ = [
+    "CalibrateOptions",
+    "add_arguments",
+    "calibrate_command",
+    "default_out",
+    "from_args",
+    "report_lines",
+]
+
+
+@dataclass(frozen=True)
+class CalibrateOptions:
+    """How ``amsfe calibrate`` runs.
+
+    Attributes:
+        log_spec: Topic spec TOML (topics, joint names, effort kind), or None.
+        pixel_std: Expected pixel noise [px]: the robust loss's scale before it is measured.
+        max_offset: Largest |time offset| the initial scan tries [s].
+        fit_time_offset: False holds the time offset at 0.
+        plots: Draw the figure.
+        force: Replace an existing output folder that amsfe wrote.
+    """
+
+    log_spec: str | None = None
+    pixel_std: float = 1.0
+    max_offset: float = 0.2
+    fit_time_offset: bool = True
+    plots: bool = True
+    force: bool = False
 
 
 def default_out(log_path: Path) -> Path:
@@ -39,15 +68,7 @@ def default_out(log_path: Path) -> Path:
 
 
 def calibrate_command(
-    log_path: Path,
-    robot: str,
-    out: Path,
-    log_spec: str | None = None,
-    pixel_std: float = 1.0,
-    max_offset: float = 0.2,
-    fit_time_offset: bool = True,
-    plots: bool = True,
-    force: bool = False,
+    log_path: Path, robot: str, out: Path, options: CalibrateOptions | None = None
 ) -> tuple[Calibration, Robot]:
     """Calibrate from ``log_path`` with ``robot`` (a shipped name or a ``robot.toml``) and
     write the folder ``out`` (module docstring); prints the report.
@@ -66,13 +87,15 @@ def calibrate_command(
     from amsfe_sym.logs.read import plan_log, read_log
     from amsfe_sym.logs.spec import read_log_spec
 
+    opts = options or CalibrateOptions()
+    log_spec = opts.log_spec
     inputs = [p for p in (log_path, log_spec) if p and Path(p).exists()]
     if log_path.is_file() and (log_path.parent / "metadata.yaml").is_file():
         inputs.append(log_path.parent)
     spec = load_spec(robot)
     if spec.spec_path is not None:
         inputs.append(spec.spec_path)
-    check_output(out, option="--out", force=force, inputs=inputs)
+    check_output(out, option="--out", force=opts.force, inputs=inputs)
     ls = read_log_spec(log_spec)
     joints = modelled_joints(spec) or []
     n_state = 4 * len(joints) + len(spec.theta)
@@ -92,9 +115,9 @@ def calibrate_command(
         rob,
         links,
         obs,
-        pixel_std=pixel_std,
-        max_offset=max_offset,
-        fit_time_offset=fit_time_offset,
+        pixel_std=opts.pixel_std,
+        max_offset=opts.max_offset,
+        fit_time_offset=opts.fit_time_offset,
         progress=lambda s: print(f"  {s}"),
     )
     for line in report_lines(cal, rob, obs.skipped):
@@ -105,10 +128,10 @@ def calibrate_command(
         (tmp / "robot.toml").write_text(text)
         write_json(tmp / "calibration.json", _summary(cal, rob, log_path, obs.skipped))
         _write_residuals(tmp / "residuals.csv", cal)
-        if plots:
+        if opts.plots:
             _figure(tmp / "residuals.png", cal, rob)
 
-    done = write_folder(out, fill, replace=force)
+    done = write_folder(out, fill, replace=opts.force)
     print(f"wrote {done}: robot.toml (amsfe generate {done / 'robot.toml'}), calibration.json")
     return cal, rob
 
@@ -313,10 +336,7 @@ def from_args(args: argparse.Namespace) -> int:
             describe("--max-time-offset", "a number >= 0 [s]", str(args.max_time_offset), "")
         )
     out = Path(args.out) if args.out else default_out(log)
-    calibrate_command(
-        log,
-        args.robot,
-        out,
+    options = CalibrateOptions(
         log_spec=args.log_spec,
         pixel_std=args.pixel_std,
         max_offset=args.max_time_offset,
@@ -324,4 +344,5 @@ def from_args(args: argparse.Namespace) -> int:
         plots=not args.no_plots,
         force=args.force,
     )
+    calibrate_command(log, args.robot, out, options)
     return 0
