@@ -336,6 +336,12 @@ CASES: dict[tuple[str, str], Case] = {
         True,
         lambda tmp: ["estimate", str(_log(tmp)), "--out", str(_log(tmp)), "--force"],
     ),
+    ("calibrate", "--out"): Case(
+        lambda tmp, p: [*CALIBRATE, str(_calib_log(tmp)), "--no-plots", "--out", str(p)],
+        "folder",
+        True,
+        lambda tmp: [*CALIBRATE, str(_calib_log(tmp)), "--out", str(_calib_log(tmp)), "--force"],
+    ),
     ("study", "--out"): Case(
         lambda tmp, p: [
             "study",
@@ -403,6 +409,8 @@ CASES: dict[tuple[str, str], Case] = {
 
 #: Options that name a path the command reads (not an output).
 INPUTS = {
+    ("calibrate", "log"),
+    ("calibrate", "--log-spec"),
     ("estimate", "log"),
     ("estimate", "--log-spec"),
     ("sweep", "spec"),
@@ -462,6 +470,29 @@ def _log(tmp: Path) -> Path:
     dest = tmp / "log"
     if not dest.exists():
         shutil.copytree(_LOG["bag"], dest)
+    return dest
+
+
+#: The calibration test arm (tests/data/calibrate): 6 s of it moving is the least that
+#: determines its camera (3 s is refused: docs/calibrate.md).
+CALIB = Path(__file__).parent / "data" / "calibrate"
+CALIBRATE = ["calibrate", "--robot", str(CALIB / "robot.toml")]
+
+
+def _calib_log(tmp: Path) -> Path:
+    """A 6 s calib-sim bag (one per session, copied into ``tmp``) that ``amsfe calibrate``
+    calibrates."""
+    if "calib" not in _LOG:
+        import tempfile
+
+        root = Path(tempfile.mkdtemp(prefix="amsfe-test-calib-"))
+        sim = ["simulate", str(CALIB / "calib-sim.toml"), "--controller", "truth-ct"]
+        argv = [*sim, "--duration", "6", "--no-progress", "--no-plots", "--bag"]
+        assert main([*argv, "--out", str(root / "run")]) == 0
+        _LOG["calib"] = root / "run" / "bag"
+    dest = tmp / "calib-log"
+    if not dest.exists():
+        shutil.copytree(_LOG["calib"], dest)
     return dest
 
 

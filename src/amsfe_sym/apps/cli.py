@@ -18,6 +18,8 @@ from typing import TYPE_CHECKING
 from amsfe_sym import __version__
 from amsfe_sym.apps import ros_nodes
 from amsfe_sym.apps.arguments import Parser
+from amsfe_sym.apps.calibrate import add_arguments as add_calibrate_arguments
+from amsfe_sym.apps.calibrate import from_args as calibrate_from_args
 from amsfe_sym.apps.command_args import (
     add_check_arguments,
     add_generate_arguments,
@@ -65,6 +67,12 @@ def get_argument_parser() -> argparse.ArgumentParser:
 
     add_estimate_arguments(
         sub.add_parser("estimate", help="an estimator over a recorded rosbag2 / MCAP log")
+    )
+    add_calibrate_arguments(
+        sub.add_parser(
+            "calibrate",
+            help="camera pose, marker offset and time offset from a log (docs/calibrate.md)",
+        )
     )
 
     ros_nodes.add_sim_node_arguments(sub.add_parser("sim-node", help="the simulated arm on ROS 2"))
@@ -125,6 +133,7 @@ def _main(argv: Sequence[str] | None) -> int:
         "check": _check,
         "simulate": _simulate,
         "estimate": estimate_from_args,
+        "calibrate": calibrate_from_args,
         "bench": _bench,
         "study": _study,
         "sweep": sweep_from_args,

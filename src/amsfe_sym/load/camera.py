@@ -10,6 +10,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import SpecError, describe
+from amsfe_sym.load.rotation import quaternion_to_matrix
 from amsfe_sym.load.spec import RobotSpec
 from amsfe_sym.load.types import CameraModel
 
@@ -49,9 +50,16 @@ def resolve_camera(spec: RobotSpec, model: pin.Model, frame_id: int) -> CameraMo
     Defaults (bare URDF, or keys left out): the camera looks at the centre of the tracked
     point's workspace (sampled at random q) from 3 workspace radii away along -y, and the
     focal length puts the whole workspace sphere inside 90 % of the shorter image side.
+    ``orientation`` (a quaternion, world-from-camera) replaces ``look_at`` / ``up``: then
+    ``R_cw`` is its matrix transposed (the spec reader refuses both, or one without
+    ``position``).
     """
     c = spec.camera
-    if c.look_at is None or c.position is None or c.fx is None:  # a default needs the workspace
+    if c.orientation is not None and c.position is not None:
+        R_wc = quaternion_to_matrix(c.orientation)
+        position = np.array(c.position, dtype=float)
+        return _camera(spec, model, frame_id, R_wc.T, position)
+    if c.look_at is None or c.position is None:  # a default needs the workspace
         centre, radius = workspace(model, frame_id, spec.tracked.offset)
     look_at = np.array(c.look_at, dtype=float) if c.look_at is not None else centre
     up = np.array(c.up, dtype=float)
@@ -79,10 +87,24 @@ def resolve_camera(spec: RobotSpec, model: pin.Model, frame_id: int) -> CameraMo
         )
     x /= np.linalg.norm(x)
     y = np.cross(z, x)
-    R_cw = np.vstack([x, y, z])
+    return _camera(spec, model, frame_id, np.vstack([x, y, z]), position)
+
+
+def _camera(
+    spec: RobotSpec,
+    model: pin.Model,
+    frame_id: int,
+    R_cw: NDArray[np.float64],
+    position: NDArray[np.float64],
+) -> CameraModel:
+    """The camera at ``position`` [m] with rotation ``R_cw`` (world -> camera): intrinsics
+    the spec's, else the default focal length that frames the workspace."""
+    c = spec.camera
+    z = R_cw[2]
     if c.fx is not None:
         fx = c.fx
     else:
+        centre, radius = workspace(model, frame_id, spec.tracked.offset)
         # the sphere (centre, radius) seen from `position`: its farthest image offset is
         # f * tan(angle to centre + half-angle of the sphere)
         to_c = centre - position

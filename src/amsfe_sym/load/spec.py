@@ -14,13 +14,14 @@ from __future__ import annotations
 import hashlib
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Literal
 
 from amsfe_sym.core.toml import read_toml
 from amsfe_sym.core.values import read_int, read_number
 from amsfe_sym.errors import SpecError, check_known_keys, describe
+from amsfe_sym.load.rotation import read_orientation
 
 __all__ = [
     "ActuatorSpec",
@@ -108,6 +109,9 @@ class CameraSpec:
         position: Camera centre in the world frame [m].
         look_at: A world point on the optical axis [m].
         up: World direction that appears up in the image (must not be parallel to the axis).
+        orientation: Instead of ``look_at`` / ``up``, with ``position``: the unit quaternion
+            ``[qx, qy, qz, qw]`` of world-from-camera (its matrix's columns: the camera's x
+            right, y down, z forward axes in the world).
         period: l, steps between two exposures (eq. 11).
         delay: d, steps from exposure to delivery.
     """
@@ -123,6 +127,11 @@ class CameraSpec:
     up: tuple[float, float, float] = (0.0, 0.0, 1.0)
     period: int = 125
     delay: int = 125
+    orientation: tuple[float, float, float, float] | None = None
+
+
+#: The keys of ``[camera]``: the fields of :class:`CameraSpec`.
+_CAMERA_KEYS = {f.name for f in fields(CameraSpec)}
 
 
 @dataclass(frozen=True)
@@ -350,7 +359,7 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
     c = _table(data, "camera", where)
     _no_unknown(
         c,
-        {"width", "height", "fx", "fy", "cx", "cy", "position", "look_at", "up", "period", "delay"},
+        _CAMERA_KEYS,
         f"{where} [camera]",
     )
     camera = CameraSpec(
@@ -365,6 +374,7 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
         up=_vec3(c.get("up", (0.0, 0.0, 1.0)), f"{where} [camera] up"),
         period=_count(c.get("period", 125), f"{where} [camera] period", 1),
         delay=_count(c.get("delay", 125), f"{where} [camera] delay", 0),
+        orientation=read_orientation(c, f"{where} [camera]"),
     )
 
     thetas: list[ThetaSpec] = []

@@ -3,7 +3,8 @@
 Topics (stamps in seconds from the run's start; log time = when the loop had the data; the
 table with the message fields is in docs/how-to/logs.md): ``/motor_encoders`` (JointState: qm, qmd
 as the loop read them), ``/motor_torque`` (JointState effort: the applied torque),
-``/camera/marker`` (PointStamped: pixel u, v; stamp = exposure, logged at arrival),
+``/camera/marker`` (PointStamped: pixel u, v; stamp = exposure (+ the scenario's
+``[camera] stamp_offset``), logged at arrival),
 ``/joint_states`` (true q, qd), ``/amsfe/estimate`` (estimated q, qd), ``/amsfe/truth``
 (Float64MultiArray: the true state, for the NEES), ``/amsfe/config`` (String: JSON of the
 robot, resolved scenario and runtime), ``/robot_description`` (String: the URDF) and ``/tf``
@@ -182,6 +183,7 @@ def run_bag_filler(
         "T": lib.T,
     }
     frames = sorted(res.frames.tolist(), key=lambda f: (f[1], f[0]))
+    stamp_offset = sc.camera.stamp_offset  # [s] a camera whose stamps are not its exposures
     tf = _tf_frames(res, urdf_text)
     # the JointState topics, serialized in bulk (logs/encode.py: the same bytes as rosbags)
     stamps = [_ns(float(t)) for t in res.t]
@@ -224,7 +226,7 @@ def run_bag_filler(
                         fi += 1
                         continue
                     pt = ts["geometry_msgs/msg/PointStamped"](
-                        header=_header(kappa * lib.T, "camera"),
+                        header=_header(kappa * lib.T + stamp_offset, "camera"),
                         point=ts["geometry_msgs/msg/Point"](x=pu, y=pv, z=0.0),
                     )
                     bag.write(spec.camera, "geometry_msgs/msg/PointStamped", t, pt)

@@ -44,6 +44,9 @@ class CameraSettings:
 
     ``period`` (l) and ``delay`` (d) [steps]: ``None`` (the key left out, or ``"robot"``)
     takes the robot spec's; :func:`camera_timing` resolves and checks them.
+    ``stamp_offset`` [s]: what the simulated camera's stamps add to the exposure time in a
+    written log (``amsfe simulate --bag``: header stamp = exposure + stamp_offset), the time
+    offset ``amsfe calibrate`` finds (docs/calibrate.md); the run itself is unchanged.
     """
 
     pixel_std: float = 0.5
@@ -53,6 +56,7 @@ class CameraSettings:
     period: int | None = None
     delay: int | None = None
     phase: int = 0
+    stamp_offset: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,190 @@
+"""``amsfe calibrate`` end to end on simulated recordings (issue 35, item 5, its done-when):
+a "true" calib_arm (the typed camera moved 3 cm and turned 2 deg, the marker 2 cm off the
+tip, stamps 25 ms late) simulated by ``amsfe simulate --bag`` (30 s, 1 kHz encoders, a 30 Hz
+640x480 camera with 1 px noise, the arm moving), calibrated with the typed robot.toml.
+
+The method was tuned on seed 5 only; these seeds (4242, 4243) were not looked at before the
+bounds were written.  tools/calibrate_seeds.py measures the spread over more seeds
+(docs/calibrate.md, "Accuracy").
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from amsfe_sym.apps.cli import main
+from amsfe_sym.calibration.spec_out import moved_camera_spec
+from amsfe_sym.codegen import generate
+from amsfe_sym.load import load_robot
+from amsfe_sym.runtime.library import ModelLibrary
+
+pytestmark = pytest.mark.slow
+
+DATA = Path(__file__).parent / "data" / "calibrate"
+STAMP_OFFSET = 0.025
+
+
+@pytest.fixture(scope="module")
+def truth(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """The true robot.toml, with its libraries in a folder of this module's own: a library
+    found in a shared cache keeps the spec path of whoever built it first (its manifest), and
+    ``simulate --bag`` reads the spec there (for /tf), which another session's temporary
+    folder no longer has."""
+    folder = tmp_path_factory.mktemp("true")
+    text = moved_camera_spec(
+        load_robot(DATA / "robot.toml"), np.random.default_rng(0), name="calib_arm_true"
+    )
+    (folder / "robot.toml").write_text(text)
+    shutil.copy(DATA / "calib-sim.toml", folder)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("AMSFE_GENERATED_DIR", str(folder / "generated"))
+        yield folder / "robot.toml"
+
+
+def _simulate(truth: Path, out: Path, seed: int, *extra: str) -> Path:
+    rc = main(
+        [
+            "simulate",
+            str(truth.parent / "calib-sim.toml"),
+            "--controller",
+            "truth-ct",
+            "--out",
+            str(out),
+            "--bag",
+            "--no-plots",
+            "--no-progress",
+            "--seed",
+            str(seed),
+            "--set",
+            f"camera.stamp_offset={STAMP_OFFSET}",
+            *extra,
+        ]
+    )
+    assert rc == 0
+    return out / "bag"
+
+
+def _rotation_deg(Ra: np.ndarray, Rb: np.ndarray) -> float:
+    return math.degrees(math.acos(min(1.0, max(-1.0, (np.trace(Ra @ Rb.T) - 1) / 2))))
+
+
+@pytest.mark.parametrize("seed", [4242, 4243])
+def test_calibrate_recovers_the_true_camera(
+    truth: Path, tmp_path: Path, seed: int, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bag = _simulate(truth, tmp_path / "run", seed)
+    out = tmp_path / "cal"
+    capsys.readouterr()
+    rc = main(["calibrate", str(bag), "--robot", str(DATA / "robot.toml"), "--out", str(out)])
+    printed = capsys.readouterr().out
+    assert rc == 0, printed
+    for words in (
+        "camera position x",
+        "marker offset z",
+        "time offset",
+        "95 % interval (linearised)",
+        "reprojection error per frame: median",
+        "frames dropped",
+        "q = qm - (u - Mm qmdd - Fm qmd) / Ks",
+    ):
+        assert words in printed
+    assert "cannot determine" not in printed
+
+    true, cal = load_robot(truth), load_robot(out / "robot.toml")
+    result = json.loads((out / "calibration.json").read_text())
+    # the issue's bounds
+    assert np.linalg.norm(cal.camera.position - true.camera.position) < 2e-3
+    assert _rotation_deg(cal.camera.R_cw, true.camera.R_cw) < 0.1
+    assert np.linalg.norm(cal.tracked_offset - true.tracked_offset) < 1e-3
+    assert abs(result["time_offset_s"] - STAMP_OFFSET) < 1e-3
+    # the truth within 4 of the stated sigmas (the 95 % coverage is measured over seeds)
+    p = result["parameters"]
+    for k, axis in enumerate("xyz"):
+        err = cal.camera.position[k] - true.camera.position[k]
+        assert abs(err) < 4 * p[f"camera_{axis}"]["std"]
+        err = cal.tracked_offset[k] - true.tracked_offset[k]
+        assert abs(err) < 4 * p[f"offset_{axis}"]["std"]
+    assert abs(result["time_offset_s"] - STAMP_OFFSET) < 4 * p["time_offset"]["std"]
+    assert 0.8 < result["pixel_std"] < 1.2
+    assert (out / "residuals.png").stat().st_size > 10_000
+    assert len((out / "residuals.csv").read_text().splitlines()) > 800
+
+    # amsfe generate accepts the calibrated robot.toml; its camera sees what the true one does
+    lib_cal = ModelLibrary(
+        generate(out / "robot.toml", out=tmp_path / "gen", parts=["model"]).out_dir
+    )
+    lib_true = ModelLibrary(generate(truth, out=tmp_path / "gen", parts=["model"]).out_dir)
+    rng = np.random.default_rng(seed)
+    for _ in range(50):
+        q = np.array([rng.uniform(-1.2, 1.2), rng.uniform(0, 1), rng.uniform(0, 1.6)])
+        y_cal = lib_cal.function("camera")(q, np.zeros(0))[0].reshape(2)
+        y_true = lib_true.function("camera")(q, np.zeros(0))[0].reshape(2)
+        assert np.linalg.norm(y_cal - y_true) < 1.0
+
+
+def test_arm_at_rest_cannot_determine_the_time_offset(
+    truth: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An arm holding still: one line naming the time offset, exit 2, nothing written."""
+    scenario = truth.parent / "calib-sim.toml"
+    text = scenario.read_text()
+    start, end = text.index("[trajectory]"), text.index("[controller_gains")
+    rest = text[:start] + '[trajectory]\nkind = "constant"\nq = [0.0, 0.5, 0.8]\n\n' + text[end:]
+    rest = rest.replace("qd0 = [1.56, 1.05, 2.32]", "qd0 = [0.0, 0.0, 0.0]")
+    (truth.parent / "rest.toml").write_text(rest)
+    rc = main(
+        [
+            "simulate",
+            str(truth.parent / "rest.toml"),
+            "--controller",
+            "truth-ct",
+            "--out",
+            str(tmp_path / "run"),
+            "--bag",
+            "--no-plots",
+            "--no-progress",
+            "--duration",
+            "5",
+        ]
+    )
+    assert rc == 0
+    out = tmp_path / "cal"
+    capsys.readouterr()
+    rc = main(
+        [
+            "calibrate",
+            str(tmp_path / "run" / "bag"),
+            "--robot",
+            str(DATA / "robot.toml"),
+            "--out",
+            str(out),
+        ]
+    )
+    err = capsys.readouterr().err.strip()
+    assert rc == 2
+    assert len(err.splitlines()) == 1
+    assert "time offset cannot be determined" in err and "at rest" in err
+    assert not out.exists()
+
+
+def test_bad_input_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A log that is not there, a robot that is not there, an --out that is the log."""
+    robot = str(DATA / "robot.toml")
+    cases = [
+        ["calibrate", str(tmp_path / "missing.mcap"), "--robot", robot],
+        ["calibrate", str(tmp_path), "--robot", str(tmp_path / "nothing.toml")],
+        ["calibrate", str(tmp_path), "--robot", robot, "--pixel-std", "0"],
+    ]
+    for argv in cases:
+        capsys.readouterr()
+        assert main([*argv, "--out", str(tmp_path / "out")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and err.startswith("error:"), err
+        assert not (tmp_path / "out").exists()
