@@ -34,6 +34,7 @@ from amsfe_sym.apps.options import (
 )
 from amsfe_sym.apps.sweep.command import from_args as sweep_from_args
 from amsfe_sym.core.outputs import check_output, interrupted_note, ledger
+from amsfe_sym.core.values import SUBSTEPS_MAX
 from amsfe_sym.errors import AmsfeError, ConfigError, SpecError, describe
 
 __all__ = ["BROKEN_PIPE", "get_argument_parser", "main"]
@@ -80,7 +81,9 @@ def get_argument_parser() -> argparse.ArgumentParser:
     )
     g.add_argument(
         "--substeps",
-        type=number_type(int, 1, True, "pass --substeps 4, or omit it to choose from the modes"),
+        type=number_type(
+            int, 1, True, "pass --substeps 4, or omit it to choose from the modes", SUBSTEPS_MAX
+        ),
         default=None,
         metavar="K",
         help="rk4 model steps per T (with --period; default: from the joint modes)",

@@ -32,7 +32,12 @@ from amsfe_sym.ros.middleware import (
 )
 from amsfe_sym.topics import TopicSpec
 
-__all__ = ["PLAYED_ROLES", "PlayOptions", "PlayReport", "play_log"]
+__all__ = ["PLAYED_ROLES", "RATE_MAX", "RATE_MIN", "PlayOptions", "PlayReport", "play_log"]
+
+#: The speed factors ``play --rate`` takes (docs/input-rules.md): a thousandth of the recorded
+#: pace (1e-9 played a 2 s log over 63 years) to a thousand times it.
+RATE_MIN = 1e-3
+RATE_MAX = 1e3
 
 #: The roles ``play`` publishes (the sensors, and the truth of a simulated run).
 PLAYED_ROLES = ("camera", "effort", "truth", "encoders")
@@ -146,8 +151,15 @@ def play_log(path: Path, options: PlayOptions) -> PlayReport:
         LogError: an unreadable log, no encoder topic.
         RosError: no subscriber within ``start_timeout``; rclpy missing.
     """
-    if not options.rate > 0:
-        raise RosError(describe("play --rate", "a factor > 0", repr(options.rate), "e.g. 1"))
+    if not RATE_MIN <= options.rate <= RATE_MAX:
+        raise RosError(
+            describe(
+                "play --rate",
+                f"a speed factor in [{RATE_MIN:g}, {RATE_MAX:g}]",
+                repr(options.rate),
+                "e.g. --rate 1 (the recorded pace)",
+            )
+        )
     if options.ordered:
         use_lockstep_profile()
     ctx = start(list(options.ros_args), options.domain_id)
