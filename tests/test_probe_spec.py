@@ -49,3 +49,12 @@ def test_values_inside_the_bounds_are_kept() -> None:
         "theta_rate_std": 0.0,
     }
     assert spec.depth == 5000
+
+
+@pytest.mark.parametrize("kind", ["applied", "none"])
+def test_link_positions_need_a_joint_torque(kind: str) -> None:
+    """``positions = "link"`` with kind applied was ignored without a word (issue 37)."""
+    with pytest.raises(ConfigError, match="link angles would be taken as motor angles"):
+        parse_topic_spec({"joints": {"positions": "link"}, "effort": {"kind": kind}})
+    spec = parse_topic_spec({"joints": {"positions": "link"}, "effort": {"kind": "joint_torque"}})
+    assert spec.positions == "link"

@@ -244,9 +244,9 @@ def period_fix(
     rob = loaded if loaded is not None else load_robot(spec)
     k = substeps_for(joint_modes(rob), T)
     return (
-        f"amsfe generate {robot_source(spec).robot} --period {T:.6g} (its own library, "
+        f"amsfe generate {robot_source(spec).robot} --period {T:.12g} (its own library, "
         f"model_substeps = {k} from the joint modes; in Python: "
-        f"amsfe_sym.codegen.library_at_period(robot, {T:.6g}))"
+        f"amsfe_sym.codegen.library_at_period(robot, {T:.12g}))"
     )
 
 

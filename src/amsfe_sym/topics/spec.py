@@ -304,6 +304,17 @@ def parse_topic_spec(data: dict[str, Any], where: str = "topic spec") -> TopicSp
                 out[key] = value
             else:  # depth
                 out[key] = read_int(value, at, ConfigError, 1, BUFFER_STEPS_MAX)
+    if out.get("positions") == "link" and out.get("effort_kind") in ("applied", "none"):
+        raise ConfigError(
+            describe(
+                f"{where} [joints] positions",
+                '"link" with [effort] kind = "joint_torque" (qm = q + tau_J / Ks)',
+                f'"link" with kind {out["effort_kind"]!r}: the link angles would be taken as '
+                "motor angles",
+                'say kind = "joint_torque" (a torque-sensing arm\'s tau_J), or drop positions '
+                '= "link" if the positions are the motor\'s',
+            )
+        )
     return replace(TopicSpec(), explicit=frozenset(explicit), **out)
 
 
