@@ -35,12 +35,14 @@ from amsfe_sym.errors import AmsfeError
 from amsfe_sym.ros.effort import effort_values, live_effort
 from amsfe_sym.ros.live import HoldKind, LiveLoop, TickOut
 from amsfe_sym.ros.middleware import (
+    check_parameters,
     executor,
     lean_events,
     qos_profile,
     spec_parameters,
     start,
     stop,
+    waiting_line,
 )
 from amsfe_sym.ros.outputs import (
     DEFAULT_STD_EVERY,
@@ -57,6 +59,12 @@ from amsfe_sym.topics import TopicSpec, joint_order
 __all__ = ["EXIT_HOLD", "NodeOptions", "NodeReport", "run_node"]
 
 FloatArray = NDArray[np.float64]
+
+#: A node that has received no encoder sample says, every this many seconds [s, wall], which
+#: topic it waits on and what the graph shows for it (:func:`~amsfe_sym.ros.middleware.
+#: waiting_line`): it waited forever without a word (issue 37).
+WAITING_SAY_S = 10.0
+ENCODER_TYPE = "sensor_msgs/msg/JointState"
 
 #: Exit code of a fail-safe stop (encoder silence, non-finite estimate, estimator failure).
 EXIT_HOLD = 3
@@ -156,6 +164,7 @@ class _Node:
         )
         self.n = lib.n
         self.std_every = std_every_parameter(node, options.std_every)
+        check_parameters(node)  # every parameter declared: a mistyped -p name is refused
         self.record = None if options.record is None else NodeRecord(sc, lib, spec, self.names)
         self.last: TickOut | None = None
         self.last_rx: float | None = None
@@ -408,12 +417,17 @@ def run_node(
         gc.collect()
         gc.freeze()  # the startup's objects (rclpy, numpy, the library): never rescanned
         wait = options.encoder_timeout  # signals raised between spins, not inside rclpy's C++
+        quiet_since, said = time.monotonic(), 0.0  # nothing received yet: said every 30 s
         with DeferredSignals() as signals:
             while ctx.ok() and not down and (not holder or holder[-1].stop is None):
                 ex.spin_once(timeout_sec=0.05)
                 signals.check()
                 state = holder[-1] if holder else None
                 last = None if state is None or not state.active else state.last_rx
+                silent = time.monotonic() - quiet_since
+                if state and state.active and last is None and silent > said + WAITING_SAY_S:
+                    said = silent - silent % WAITING_SAY_S
+                    say(waiting_line(node, state.spec.encoders, ENCODER_TYPE, round(silent)))
                 if state and last is not None and time.monotonic() - last > wait:
                     state.stop = _Stop(
                         f"hold: no encoder sample on {state.spec.encoders} for {wait:g} s "
