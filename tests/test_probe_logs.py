@@ -187,3 +187,20 @@ def test_running_the_period_fix_makes_the_estimate_work(res, tmp_path, capsys, m
     assert "library paper_2link_T1040us" in out, out
     s = json.loads((tmp_path / "b" / "summary.json").read_text())
     assert s["ticks"] == 900 and s["topics"]["encoders"]["used"] == 900
+
+
+def test_a_camera_that_stops_is_named_at_its_last_frame(res, tmp_path) -> None:
+    """The driver-style log of the run with every camera frame after 0.5 s dropped: the
+    estimate goes on (encoders and torque are there) and the camera's note names the tick
+    of its last frame."""
+    from tests.test_log_reader import arm_events
+
+    ev, _ = arm_events(res, offset=0.0, jitter=0.0)
+    cut = [e for e in ev if not (e.topic == "/camera/marker" and e.t > 0.5)]
+    log = write_log(tmp_path / "cam", cut, "mcap")
+    got = _read(res, log, LogSpec(effort_kind="applied"))
+    last = max(f.delivery_step for f in got.frames)
+    assert last <= 501 and len(res.t) == got.K
+    notes = got.usage["camera"].notes
+    key = f"frames end at tick {last} (t = {last * res.lib.T:.4f} s): none over the last "
+    assert notes == {key + "ticks of the log (ticks without a frame)": got.K - 1 - last}

@@ -105,3 +105,32 @@ def test_play_of_a_ros1_bag_into_node_is_estimate(paper: Any, tmp_path: Path) ->
     n = lib.n
     est = np.array([np.r_[m.position, m.velocity] for m in got["/amsfe/estimate"]])
     np.testing.assert_allclose(est, ref.x_hat[:, : 2 * n], rtol=0, atol=1e-9)
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_play_at_the_recorded_pace_loses_no_sample(paper: Any, tmp_path: Path) -> None:
+    """``amsfe play BAG`` into ``amsfe node`` with neither ``--ordered`` nor ``-p
+    qos.depth:=5000`` (tests/test_ros.py passes both): the queues of both ends are sized by
+    ``depth_for``, so on this loaded machine every encoder sample of the bag reaches the
+    node, which estimates each one."""
+    from tests.test_node_record import _bag
+    from tests.test_ros import PATIENT_NODE, _finish, _ros_env, _start
+
+    sc, lib = paper
+    res = run(sc, lib, runtime="compiled")
+    bag = write_run_bag(res, tmp_path / "bag")
+    env = _ros_env(tmp_path)
+    rec = tmp_path / "rec"
+    procs = []
+    try:
+        procs.append(_start(env, "node", "paper-sim", "--duration", "2", "--record", str(rec),
+                            *PATIENT_NODE))  # fmt: skip
+        procs.append(_start(env, "play", str(bag), "--start-timeout", "60"))
+    finally:
+        results = _finish(procs, 120.0)
+    for code, text in results:
+        assert code == 0, text
+    got = _bag(rec)
+    est = np.array([np.r_[m.position, m.velocity] for m in got["/amsfe/estimate"]])
+    assert est.shape == (res.t.size, 2 * lib.n) and np.isfinite(est).all()

@@ -36,6 +36,7 @@ from amsfe_sym.ros.effort import effort_values, live_effort
 from amsfe_sym.ros.live import HoldKind, LiveLoop, TickOut
 from amsfe_sym.ros.middleware import (
     check_parameters,
+    depth_for,
     executor,
     lean_events,
     qos_profile,
@@ -181,23 +182,26 @@ class _Node:
         #: deactivate; an unmanaged one: always).
         self.active = not options.managed
         qos = qos_profile(spec)
+        # the subscriptions hold 5 s at the encoders' rate, as play's publishers do
+        # (middleware.depth_for: one rule for both ends; a slow moment loses no sample)
+        sub_qos = qos_profile(spec, depth=depth_for(1.0 / lib.T, spec))
         sub_events, pub_events = lean_events(node)
         # the camera is subscribed first: a frame and a sample ready at once, the frame first
         node.create_subscription(
-            m.PointStamped, spec.camera, self.on_frame, qos, event_callbacks=sub_events
+            m.PointStamped, spec.camera, self.on_frame, sub_qos, event_callbacks=sub_events
         )
         if self.record is not None:  # the truth only goes into a record (for its NEES)
             node.create_subscription(
-                m.Float64MultiArray, spec.truth, self.on_truth, qos, event_callbacks=sub_events
+                m.Float64MultiArray, spec.truth, self.on_truth, sub_qos, event_callbacks=sub_events
             )
         read = self.effort_kind != "none"
         if read and spec.effort != spec.encoders:
             node.create_subscription(
-                m.JointState, spec.effort, self.on_effort, qos, event_callbacks=sub_events
+                m.JointState, spec.effort, self.on_effort, sub_qos, event_callbacks=sub_events
             )
         self.effort_in_encoders = read and spec.effort == spec.encoders
         node.create_subscription(
-            m.JointState, spec.encoders, self.on_encoders, qos, event_callbacks=sub_events
+            m.JointState, spec.encoders, self.on_encoders, sub_qos, event_callbacks=sub_events
         )
         ev = {"event_callbacks": pub_events}
         self.pub_est = node.create_publisher(m.JointState, spec.estimate, qos, **ev)
