@@ -204,3 +204,15 @@ def test_a_camera_that_stops_is_named_at_its_last_frame(res, tmp_path) -> None:
     notes = got.usage["camera"].notes
     key = f"frames end at tick {last} (t = {last * res.lib.T:.4f} s): none over the last "
     assert notes == {key + "ticks of the log (ticks without a frame)": got.K - 1 - last}
+
+
+def test_one_absurd_torque_is_skipped_and_counted(res, tmp_path) -> None:
+    """A 1e300 torque on /torque: skipped (the tick before it is held), counted as absurd;
+    it was fed to the filter and reported later as "model gave NaN"."""
+    ev = _torque_events(res, 600, 600)
+    bad = next(e for e in ev if e.topic == "/torque" and abs(e.t - (1.0 + 0.3)) < 1e-9)
+    bad.data = [1e300, 0.0]
+    got = _read(res, write_log(tmp_path / "tq", ev, "mcap"), LogSpec(effort="/torque"))
+    assert got.usage["effort"].skipped == {"a value beyond 1e+06 N m (absurd)": 1}
+    assert np.isfinite(got.u).all() and np.abs(got.u).max() < 1e3
+    assert np.array_equal(got.u[300], got.u[299])
