@@ -272,6 +272,44 @@ CASES: list[tuple[str, dict[str, str], list[str], list[str]]] = [
         ["generate", "r/robot.toml"],
         ["integrator", "'euler'"],
     ),
+    # ---- issue 37 item 5: every option bounded before work starts (a hang leaving a .lock,
+    # tracebacks, a library named T0pus for every period below 0.5 ns, a 2 TiB buffer)
+    ("period_1e9", {}, ["generate", "--period", "1e9"], ["--period", "[1e-06, 10] s"]),
+    ("period_1e300", {}, ["generate", "--period", "1e300"], ["--period", "[1e-06, 10] s"]),
+    ("period_1e-320", {}, ["generate", "--period", "1e-320"], ["--period", "1e-320"]),
+    ("period_sub_ns", {}, ["generate", "--period", "4e-10"], ["--period", "[1e-06, 10] s"]),
+    ("substeps_1e10", {}, ["generate", "--substeps", "10000000000"], ["--substeps", "<= 256"]),
+    (
+        "period_needs_too_many_substeps",
+        {},
+        ["generate", "--period", "9"],
+        ["--period", "1 to 256 rk4 steps", "--period 6.6 or shorter"],
+    ),
+    (
+        "spec_T_tiny",
+        {"r/robot.toml": _spec("[model]\nT = 1e-12\n")},
+        ["generate", "r/robot.toml"],
+        ["[model] T", "[1e-06, 10]"],
+    ),
+    (
+        "spec_model_substeps_huge",
+        {"r/robot.toml": _spec("[model]\nmodel_substeps = 100000\n")},
+        ["generate", "r/robot.toml"],
+        ["model_substeps", "[1, 256]"],
+    ),
+    (
+        "buffer_steps_2e9",
+        {},
+        ["simulate", "--set", "filter.buffer_steps=2000000000"],
+        ["buffer_steps", "[1, 100000]"],
+    ),
+    (
+        "encoder_q_std_1e300",
+        {},
+        ["simulate", "--set", "filter.encoder_q_std=1e300"],
+        ["encoder_q_std", "<= 1e+06"],
+    ),
+    ("play_rate_1e-9", {"x.mcap": ""}, ["play", "x.mcap", "--rate", "1e-9"], ["--rate", "0.001"]),
 ]
 
 

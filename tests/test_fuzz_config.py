@@ -6,6 +6,7 @@ exception, and a value that parses is finite where a number is expected."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -106,3 +107,51 @@ def test_a_file_that_is_not_utf8_is_one_line(tmp_path: Path, name: str) -> None:
     p.write_bytes(b'urdf = "x.urdf"\n# caf\xe9\n')
     with pytest.raises(AmsfeError, match="UTF-8"):
         (load_spec if name == "robot.toml" else load_scenario)(p)
+
+
+# ---- issue 37: the topic spec accepted `torque` then `effort` (the second silently won)
+# and refused `effort` then `torque`; the outcome must not depend on the keys' order
+_TOPIC_TABLES = {
+    "topics": st.dictionaries(
+        st.sampled_from(["encoders", "effort", "torque", "camera", "truth"]),
+        st.sampled_from(["/joint_states", "/a", "/b"]),
+        max_size=4,
+    ),
+    "effort": st.dictionaries(
+        st.sampled_from(["kind", "joint_torque_std"]),
+        st.one_of(st.sampled_from(["applied", "none"]), st.floats(0, 2)),
+        max_size=2,
+    ),
+    "filter": st.dictionaries(
+        st.sampled_from(["encoder_q_std", "buffer_steps", "gate_probability"]),
+        st.one_of(st.integers(0, 3), st.floats(0, 2), st.just("log")),
+        max_size=3,
+    ),
+}
+
+
+def _outcome(data: dict[str, Any]) -> Any:
+    from amsfe_sym.topics.spec import parse_topic_spec
+
+    try:
+        spec = parse_topic_spec(data)
+    except AmsfeError as exc:
+        return type(exc)
+    return replace(spec, filter_options=(), effort_options=()), dict(spec.filter_options)
+
+
+@FUZZ
+@given(st.fixed_dictionaries({}, optional=_TOPIC_TABLES))
+def test_topic_spec_outcome_does_not_depend_on_key_order(data: dict[str, Any]) -> None:
+    backwards = {s: dict(reversed(list(t.items()))) for s, t in reversed(list(data.items()))}
+    assert _outcome(data) == _outcome(backwards)
+
+
+@pytest.mark.parametrize(
+    "table", [{"torque": "/a", "effort": "/b"}, {"effort": "/b", "torque": "/a"}]
+)
+def test_torque_and_effort_together_are_refused_in_either_order(table: dict[str, str]) -> None:
+    from amsfe_sym.topics.spec import parse_topic_spec
+
+    with pytest.raises(AmsfeError, match="one of 'torque' and 'effort'"):
+        parse_topic_spec({"topics": table})

@@ -111,7 +111,7 @@ def _spec(tmp_path: Path, body: str) -> Path:
         ('[tracked]\nframe = "nowhere"\n', "'nowhere'"),
         ("[actuators]\nKs = [1.0]\n", "2 values"),
         ("[actuators]\nKs = [1.0, -2.0]\n", "positive"),
-        ("[model]\nT = 0\n", "positive"),
+        ("[model]\nT = 0\n", "[1e-06, 10]"),
         ('[model]\nintegrator = "rk45"\n', "integrator"),
         ("[camera]\nfocal = 3\n", "focal"),
         ("colour = 1\n", "colour"),

@@ -369,13 +369,16 @@ def test_stamp_faults_are_counted_or_refused(res, tmp_path) -> None:
     st.insert(50, base[50])
     got = _read(res, write_log(tmp_path / "dup", _enc_events(res, st, sorted(st)), "mcap"))
     assert got.usage["encoders"].skipped["duplicate (a second sample for a tick)"] == 1
-    # one stamp 0.9 s ahead (inside the far limit): it lands on a later tick's sample; the
-    # sample whose log time fits is kept there, the bad one's own tick is predicted through
+    # one stamp 0.9 s ahead: off its log time by more than the clock-step rule's 10 T for
+    # one sample (issue 37: named and skipped as a far stamp; it used to land on a later
+    # tick as a duplicate); the bad one's own tick is predicted through
     long = [1.7e9 + k * T for k in range(1001)]
     st = list(long)
     st[100] += 0.9
     got = _read(res, write_log(tmp_path / "ahead", _enc_events(res, st, long), "mcap"))
-    assert got.usage["encoders"].skipped == {"duplicate (a second sample for a tick)": 1}
+    assert got.usage["encoders"].skipped == {
+        "stamp far from its log time (another clock or corrupt)": 1
+    }
     assert np.isnan(got.z[100]).all() and np.array_equal(got.z[1000], res.z_enc[1000])
     # stamps running backwards: refused by name
     back = base[::-1]

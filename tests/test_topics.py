@@ -50,7 +50,7 @@ def test_torque_is_read_as_effort() -> None:
         ({"timing": {"grid_tolerance": 0.5}}, r"a number in \(0, 0.5\)"),
         ({"timing": {"max_gap_steps": True}}, "an integer >= 0"),
         ({"qos": {"reliability": "best"}}, "'reliable' or 'best_effort'"),
-        ({"qos": {"depth": 0}}, "an integer >= 1"),
+        ({"qos": {"depth": 0}}, r"an integer in \[1, 100000\]"),
     ],
 )
 def test_bad_specs_are_refused_with_a_fix(doc: dict, match: str) -> None:

@@ -13,6 +13,7 @@ from amsfe_sym.apps.arguments import (
     number_type,
 )
 from amsfe_sym.apps.options import add_set
+from amsfe_sym.core.values import SUBSTEPS_MAX
 
 __all__ = ["add_check_arguments", "add_generate_arguments", "add_simulate_arguments"]
 
@@ -46,7 +47,9 @@ def add_generate_arguments(g: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--substeps",
-        type=number_type(int, 1, True, "pass --substeps 4, or omit it to choose from the modes"),
+        type=number_type(
+            int, 1, True, "pass --substeps 4, or omit it to choose from the modes", SUBSTEPS_MAX
+        ),
         default=None,
         metavar="K",
         help="rk4 model steps per T (with --period; default: from the joint modes)",

@@ -211,7 +211,12 @@ def node_from_args(args: argparse.Namespace) -> int:
 def add_play_arguments(p: argparse.ArgumentParser) -> None:
     """The options of ``amsfe play``."""
     p.add_argument("log", help="rosbag2 folder or .mcap file (amsfe simulate --bag writes one)")
-    p.add_argument("--rate", type=SECONDS, default=1.0, help="speed factor of the recorded pace")
+    p.add_argument(
+        "--rate",
+        type=number_type(float, 1e-3, True, "pass e.g. --rate 1 (the recorded pace)", 1000),
+        default=1.0,
+        help="speed factor of the recorded pace, 0.001 to 1000",
+    )
     p.add_argument(
         "--topic-spec",
         default=None,

@@ -49,6 +49,7 @@ from amsfe_sym.codegen.compile_units import (
 )
 from amsfe_sym.codegen.compile_units import say as _say
 from amsfe_sym.codegen.manifest import manifest_document
+from amsfe_sym.codegen.preflight import check_model_bounds
 from amsfe_sym.core.folders import TMP_MARKER, make_tmp
 from amsfe_sym.core.interrupts import DeferredSignals, checkpoint
 from amsfe_sym.core.jsonfile import to_json
@@ -164,6 +165,7 @@ def generate(
     spec = robot if isinstance(robot, RobotSpec) else load_spec(robot)
     if lock:
         spec = spec.with_locked(lock)
+    check_model_bounds(spec)  # before any lock file or folder (docs/input-rules.md)
     flags = cflags(extra_cflags)
     parts = check_parts(parts)
     key, hash_inputs = content_hash(spec, flags, parts)

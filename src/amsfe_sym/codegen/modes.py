@@ -244,9 +244,9 @@ def period_fix(
     rob = loaded if loaded is not None else load_robot(spec)
     k = substeps_for(joint_modes(rob), T)
     return (
-        f"amsfe generate {robot_source(spec).robot} --period {T:.6g} (its own library, "
+        f"amsfe generate {robot_source(spec).robot} --period {T:.12g} (its own library, "
         f"model_substeps = {k} from the joint modes; in Python: "
-        f"amsfe_sym.codegen.library_at_period(robot, {T:.6g}))"
+        f"amsfe_sym.codegen.library_at_period(robot, {T:.12g}))"
     )
 
 
@@ -281,27 +281,30 @@ def spec_at_period(
     :func:`derived_name`, so it never replaces the robot's own library.
 
     Raises:
-        SpecError: T not a positive finite number, or substeps < 1.
+        SpecError: T outside [PERIOD_MIN, PERIOD_MAX], substeps outside [1, SUBSTEPS_MAX],
+            or a T at which the joint modes need more than SUBSTEPS_MAX rk4 steps
+            (docs/input-rules.md).
     """
+    from amsfe_sym.codegen.preflight import check_period, check_substeps
     from amsfe_sym.load import load_robot
 
-    if not (isinstance(T, (int, float)) and math.isfinite(T) and T > 0):
-        raise SpecError(
-            describe("--period", "a sampling interval > 0 [s]", repr(T), "give e.g. 0.0333")
-        )
-    if substeps is not None and (not isinstance(substeps, int) or substeps < 1):
+    T = check_period(T)  # [PERIOD_MIN, PERIOD_MAX] (docs/input-rules.md)
+    if substeps is not None and (not isinstance(substeps, int) or isinstance(substeps, bool)):
         raise SpecError(
             describe("--substeps", "an integer >= 1", repr(substeps), "give e.g. 4 or omit it")
         )
+    if substeps is not None:
+        check_substeps(substeps, "--substeps", T, chosen=False)
     spec = robot if isinstance(robot, RobotSpec) else load_spec(robot)
     rob = loaded if loaded is not None else load_robot(spec)
     modes = joint_modes(rob)
     integrator = spec.model.integrator
     if substeps is None:
-        substeps = substeps_for(modes, T, margin)
+        substeps = check_substeps(substeps_for(modes, T, margin), "--period", T, chosen=True)
     if integrator != "rk4" and stiff_joints(modes, T, integrator):
         integrator = "rk4"
     plant = max(spec.model.plant_substeps, substeps_for(modes, T, STABILITY_MARGIN))
+    check_substeps(plant, "--period (the plant's rk4 steps)", T, chosen=True)
     cam = spec.camera
     model = replace(
         spec.model,

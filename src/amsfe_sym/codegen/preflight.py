@@ -8,14 +8,22 @@ reports every wrong-length vector in one message, before anything is generated.
 
 from __future__ import annotations
 
+import math
 import xml.etree.ElementTree as ET
 
-from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.core.values import PERIOD_MAX, PERIOD_MIN, SUBSTEPS_MAX
+from amsfe_sym.errors import ConfigError, SpecError, describe
 from amsfe_sym.load.spec import RobotSpec
 from amsfe_sym.scenario import Scenario, run_ticks
 from amsfe_sym.signals.trajectory import from_config as trajectory_from_config
 
-__all__ = ["check_scenario_shapes", "modelled_joints"]
+__all__ = [
+    "check_model_bounds",
+    "check_period",
+    "check_scenario_shapes",
+    "check_substeps",
+    "modelled_joints",
+]
 
 
 def modelled_joints(spec: RobotSpec) -> list[str] | None:
@@ -76,3 +84,58 @@ def check_scenario_shapes(sc: Scenario, spec: RobotSpec) -> None:
                 f"give {n} values per joint vector, in the order {joints}",
             )
         )
+
+
+def check_period(T: object, what: str = "--period") -> float:
+    """``T`` [s] if it is a finite number in [:data:`~amsfe_sym.core.values.PERIOD_MIN`,
+    :data:`~amsfe_sym.core.values.PERIOD_MAX`] (docs/input-rules.md).
+
+    Raises:
+        SpecError: anything else (1e300, 1e-320, nan, a string), in one line with the range.
+    """
+    ok = isinstance(T, int | float) and not isinstance(T, bool) and math.isfinite(T)
+    if not (ok and PERIOD_MIN <= T <= PERIOD_MAX):  # type: ignore[operator]
+        raise SpecError(
+            describe(
+                what,
+                f"a sampling interval in [{PERIOD_MIN:g}, {PERIOD_MAX:g}] s",
+                repr(T),
+                "give the log's period in seconds, e.g. 0.0333",
+            )
+        )
+    return float(T)  # type: ignore[arg-type]
+
+
+def check_substeps(m: int, what: str, T: float, chosen: bool) -> int:
+    """``m`` rk4 steps per ``T`` if 1 <= m <= :data:`~amsfe_sym.core.values.SUBSTEPS_MAX`
+    (each is unrolled in the generated graph: 10^10 of them never finished).  ``chosen``:
+    m was chosen from the joint modes for T, so the fix is a shorter period.
+
+    Raises:
+        SpecError: m out of range, with the longest period that fits when ``chosen``.
+    """
+    if 1 <= m <= SUBSTEPS_MAX:
+        return m
+    if chosen:
+        longest = T * SUBSTEPS_MAX / m
+        fix = (
+            f"the joint modes need {m} rk4 steps per T = {T:g} s: generate at --period "
+            f"{float(f'{longest:.3g}'):g} or shorter (the log's rate, or record faster)"
+        )
+    else:
+        fix = f"pass --substeps from 1 to {SUBSTEPS_MAX} (or omit it: chosen from the modes)"
+    raise SpecError(describe(what, f"1 to {SUBSTEPS_MAX} rk4 steps per T", str(m), fix))
+
+
+def check_model_bounds(spec: RobotSpec) -> None:
+    """Refuse a spec whose T or unrolled step counts are out of range (a spec built in
+    memory, which the robot.toml reader did not see), before any lock or file is made.
+
+    Raises:
+        SpecError: T outside [PERIOD_MIN, PERIOD_MAX] or a step count outside
+            [1, SUBSTEPS_MAX].
+    """
+    m = spec.model
+    check_period(m.T, f"robot {spec.name}: [model] T")
+    for key in ("model_substeps", "plant_substeps", "inverse_iterations"):
+        check_substeps(int(getattr(m, key)), f"robot {spec.name}: [model] {key}", m.T, False)

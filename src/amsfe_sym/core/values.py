@@ -16,11 +16,17 @@ from amsfe_sym.errors import AmsfeError, describe
 
 __all__ = [
     "BACKWARD_MAPS",
+    "BUFFER_STEPS_MAX",
     "C_INT_MAX",
     "EFFORT_KINDS",
+    "NOISE_STD_MAX",
+    "PERIOD_MAX",
+    "PERIOD_MIN",
     "SEED_MAX",
+    "SUBSTEPS_MAX",
     "EffortKind",
     "is_number",
+    "read_in_range",
     "read_int",
     "read_number",
     "read_seed",
@@ -45,6 +51,27 @@ C_INT_MAX = 2**31 - 1
 #: The largest seed: TOML's largest integer (a signed 64-bit one), so the ``config.toml``
 #: of every run re-runs (``amsfe simulate RUN/config.toml``) and any TOML reader reads it.
 SEED_MAX = 2**63 - 1
+
+#: The sampling intervals a robot is generated at [s] (docs/input-rules.md): 1 us (1 MHz,
+#: beyond any joint bus) to 10 s.  A shorter one made a library named ``T0pus`` for every
+#: period below 0.5 ns and 1e-320 overflowed the camera's steps; a longer one asks for
+#: more rk4 substeps than :data:`SUBSTEPS_MAX` for every arm shipped.
+PERIOD_MIN = 1e-6
+PERIOD_MAX = 10.0
+
+#: The most rk4 steps per T (``model_substeps``, ``plant_substeps``, ``inverse_iterations``):
+#: each is unrolled in the generated graph, so 10^10 of them never finished (issue 37); the
+#: Panda at 30 Hz, the most any shipped log needs, takes 62.
+SUBSTEPS_MAX = 256
+
+#: The largest noise standard deviation any key takes (R and Q in their units: rad, rad/s,
+#: px, N m): its square stays far from overflow (1e300 squared is inf) and from swamping
+#: every other term of a covariance in double precision.
+NOISE_STD_MAX = 1e6
+
+#: The most history steps a filter keeps for late frames (``buffer_steps``) and the deepest
+#: QoS history (``[qos] depth``): 100 s at 1 kHz; 2e9 asked for 2 TiB.
+BUFFER_STEPS_MAX = 100_000
 
 
 def is_number(x: object) -> bool:
@@ -78,6 +105,28 @@ def read_number(
         bound = f"{'>' if strict else '>='} {low:g}"
         expected = "a positive number" if strict and low == 0 else f"a number {bound}"
         raise error(describe(where, expected, repr(x), f"use a value {bound}"))
+    return v
+
+
+def read_in_range(
+    x: Any, where: str, error: type[AmsfeError], low: float, high: float, fix: str = ""
+) -> float:
+    """``x`` as a finite float in ``[low, high]`` (docs/input-rules.md: every number a
+    command takes is bounded before any work starts).
+
+    Raises:
+        error: not a number, not finite, or outside the range (the range in the message).
+    """
+    v = read_number(x, where, error)
+    if not low <= v <= high:
+        raise error(
+            describe(
+                where,
+                f"a number in [{low:g}, {high:g}]",
+                repr(x),
+                fix or f"use a value from {low:g} to {high:g}",
+            )
+        )
     return v
 
 

@@ -19,7 +19,14 @@ from pathlib import Path
 from typing import Any, Literal
 
 from amsfe_sym.core.toml import read_toml
-from amsfe_sym.core.values import read_int, read_number
+from amsfe_sym.core.values import (
+    PERIOD_MAX,
+    PERIOD_MIN,
+    SUBSTEPS_MAX,
+    read_in_range,
+    read_int,
+    read_number,
+)
 from amsfe_sym.errors import SpecError, check_known_keys, describe
 from amsfe_sym.load.rotation import read_orientation
 
@@ -324,7 +331,9 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
                 "pick one of those",
             )
         )
-    T = _positive(m.get("T", 0.001), f"{where} [model] T")
+    T = read_in_range(
+        m.get("T", 0.001), f"{where} [model] T", SpecError, PERIOD_MIN, PERIOD_MAX, "give T in s"
+    )
     joints = m.get("joints")
     model = ModelSpec(
         joints=None if joints is None else _names(joints, f"{where} [model] joints"),
@@ -335,9 +344,9 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
         T=T,
         gravity=_vec3(m.get("gravity", (0.0, 0.0, -9.81)), f"{where} [model] gravity"),
         integrator=integrator,  # type: ignore[arg-type]
-        inverse_iterations=_count(m.get("inverse_iterations", 6), f"{where} inverse_iterations", 1),
-        plant_substeps=_count(m.get("plant_substeps", 10), f"{where} plant_substeps", 1),
-        model_substeps=_count(m.get("model_substeps", 1), f"{where} model_substeps", 1),
+        inverse_iterations=_steps(m.get("inverse_iterations", 6), f"{where} inverse_iterations"),
+        plant_substeps=_steps(m.get("plant_substeps", 10), f"{where} plant_substeps"),
+        model_substeps=_steps(m.get("model_substeps", 1), f"{where} model_substeps"),
     )
 
     a = _table(data, "actuators", where)
@@ -466,6 +475,11 @@ def _nonneg(x: Any, where: str) -> float:
 
 def _count(x: Any, where: str, low: int) -> int:
     return read_int(x, where, SpecError, low)
+
+
+def _steps(x: Any, where: str) -> int:
+    """A count of unrolled steps: 1 .. :data:`~amsfe_sym.core.values.SUBSTEPS_MAX`."""
+    return read_int(x, where, SpecError, 1, SUBSTEPS_MAX)
 
 
 def _opt_pos(x: Any, where: str) -> float | None:

@@ -3,6 +3,7 @@ became of each role's messages (docs/how-to/logs.md, "Timing")."""
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -11,13 +12,111 @@ from numpy.typing import NDArray
 
 from amsfe_sym.errors import LogError
 
-__all__ = ["FAR_S", "ClockOffset", "LogRateError", "RoleUse", "TickGrid", "count_skip", "fit_t0"]
+__all__ = [
+    "FAR_S",
+    "VALUE_MAX",
+    "ClockOffset",
+    "ClockStep",
+    "LogRateError",
+    "RoleUse",
+    "TickGrid",
+    "clock_steps",
+    "count_skip",
+    "fit_t0",
+    "period_digits",
+]
 
 IntArray = NDArray[np.int64]
 
 #: An encoder stamp whose (log time - stamp) is this far from the median is skipped [s] (a
 #: stamp from another clock or a corrupt one); at least 100 T and 10 x the offset's spread.
 FAR_S = 1.0
+
+
+#: A logged position [rad or m], velocity [rad/s] or effort [N m] beyond this is no arm's: the
+#: sample is skipped and named like a far stamp (a 1e300 was fed to the filter and reported
+#: later as "covariance lost"; docs/input-rules.md).
+VALUE_MAX = 1e6
+
+
+@dataclass(frozen=True)
+class ClockStep:
+    """A clock step of the header stamps: the stamps jump by ``size_s`` [s] (> 0 ahead, < 0
+    back) against the recorder's clock after the sample received ``at_s`` [s] after the first
+    (log time), tick ``tick`` of the log, and stay there for ``samples`` samples."""
+
+    at_s: float
+    tick: int
+    size_s: float
+    samples: int
+
+    def line(self) -> str:
+        """How the step is named in a message."""
+        way = "ahead" if self.size_s > 0 else "back"
+        return (
+            f"a clock step of the header stamps {abs(self.size_s):.4g} s {way} at tick "
+            f"{self.tick} (t = {self.at_s:.4f} s after the first sample), {self.samples} "
+            "samples on the stepped clock"
+        )
+
+
+def clock_steps(
+    log_ns: IntArray, stamp_ns: IntArray, T: float, max_run: int
+) -> tuple[list[ClockStep], NDArray[np.bool_]]:
+    """The clock steps of a stream, and its samples off the clock for at most ``max_run`` in
+    a row (far or corrupt stamps, skipped like a far stamp).
+
+    The rule (docs/input-rules.md): the offset o = log time - header stamp of each sample, in
+    arrival order, is cut where it jumps by more than ``max(max_run + 1, 10) T`` and ten times
+    its sample-to-sample spread.  The longest piece is the stamping clock; a piece within
+    that jump of it is the same clock (a recorder's stall delays log times, never stamps); a
+    piece further off is a run of bad stamps when it holds at most ``max_run`` samples, a
+    clock step otherwise.
+
+    Args:
+        log_ns: Arrival times [ns], in arrival order.
+        stamp_ns: Header stamps [ns], the same samples.
+        T: Sampling interval [s].
+        max_run: Longest run of bad stamps skipped (``[timing] max_gap_steps``).
+
+    Returns:
+        The steps (each at the first sample of a stepped piece) and the mask of bad stamps.
+    """
+    o = (log_ns - stamp_ns).astype(np.float64) * 1e-9
+    bad = np.zeros(o.size, dtype=bool)
+    if o.size < 3:
+        return [], bad
+    d = np.diff(o)
+    mad = float(np.median(np.abs(d - np.median(d))))
+    thr = max((max(max_run, 9) + 1) * T, 10 * 1.4826 * mad)
+    cuts = np.flatnonzero(np.abs(d) > thr) + 1
+    edges = [0, *cuts.tolist(), o.size]
+    pieces = list(itertools.pairwise(edges))
+    a0, b0 = max(pieces, key=lambda p: p[1] - p[0])
+    ref = float(np.median(o[a0:b0]))
+    steps: list[ClockStep] = []
+    for a, b in pieces:
+        level = float(np.median(o[a:b]))
+        if abs(level - ref) <= thr:
+            continue
+        if b - a <= max_run:
+            bad[a:b] = True
+            continue
+        at = (int(log_ns[a]) - int(log_ns[0])) * 1e-9
+        steps.append(ClockStep(at, round(at / T), ref - level, b - a))
+    return steps, bad
+
+
+def period_digits(period: float, count: float) -> str:
+    """``period`` [s] with the fewest significant digits (3 to 12) that keep ``count``
+    periods within 0.05 of one (the grid of the rounded period still holds every stamp): the
+    number a message prints and its ``--period`` fix uses (stamps 1.04 ms apart were printed
+    as 0.999997 ms and the fix was refused again)."""
+    for digits in range(3, 13):
+        text = f"{period:.{digits}g}"
+        if abs(float(text) - period) * max(count, 1.0) < 0.05 * period:
+            return text
+    return repr(period)
 
 
 class LogRateError(LogError):

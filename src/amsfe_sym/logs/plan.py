@@ -291,6 +291,15 @@ def plan_log(
             )
         else:
             kind, kind_how = "applied", "a separate effort topic: the applied torque"
+    if spec.positions == "link" and kind != "joint_torque":
+        raise refuse(
+            f'log {path}: [joints] positions = "link"',
+            "a joint torque to make the motor angle of (qm = q + tau_J / Ks): [effort] kind "
+            '= "joint_torque"',
+            f"effort kind {kind!r} ({kind_how}): the link angles would be taken as motor angles",
+            'say [effort] kind = "joint_torque" (a torque-sensing arm\'s tau_J), or drop '
+            'positions = "link" if the positions are the motor\'s',
+        )
     used = set(roles.values()) | ({camera_info} if camera_info else set())
     unused = {
         r: sorted(t for t, i in topics.items() if i.msgtype in ROLES[r].types and t not in used)

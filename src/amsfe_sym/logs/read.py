@@ -49,13 +49,15 @@ from amsfe_sym.logs.decode import (
     JointStates,
 )
 from amsfe_sym.logs.grid import (
-    FAR_S,
+    VALUE_MAX,
     ClockOffset,
     LogRateError,
     RoleUse,
     TickGrid,
+    clock_steps,
     count_skip,
     fit_t0,
+    period_digits,
 )
 from amsfe_sym.logs.plan import (
     LOG_ROLES,
@@ -211,12 +213,25 @@ def read_log(
             f"{len(js.names[0])} names)",
             "record the encoders' velocity too, or name another encoder topic",
         )
-    # the clock offset, and stamps far from their log time (another clock, corrupt)
+    # clock steps (refused by name) and runs of stamps far from their log time (another
+    # clock, corrupt: skipped), by the rule of grid.clock_steps (docs/input-rules.md)
+    idx_ok = np.flatnonzero(ok)
+    steps_found, bad_run = clock_steps(log_ns[idx_ok], stamps[idx_ok], T, spec.max_gap_steps)
+    if steps_found:
+        st0 = steps_found[0]
+        raise refuse(
+            where,
+            "header stamps on one clock (a step of the stamping clock splices the trajectory)",
+            st0.line() + (f" ({len(steps_found)} steps)" if len(steps_found) > 1 else ""),
+            f"estimate the log up to t = {st0.at_s:.4f} s or from after it (cut it, e.g. "
+            "mcap filter --end-secs), and let the clock slew instead of step (chrony: no "
+            "makestep while recording)",
+        )
+    far = np.zeros_like(ok)
+    far[idx_ok[bad_run]] = True
     off = (log_ns - stamps).astype(np.float64) * 1e-9
-    med = float(np.median(off[ok]))
+    med = float(np.median(off[ok & ~far]))
     dev = np.abs(off - med)
-    spread = float(np.percentile(off[ok], 95) - np.percentile(off[ok], 5))
-    far = ok & (dev > max(FAR_S, 100 * T, 10 * spread))
     count_skip(use, "stamp far from its log time (another clock or corrupt)", int(far.sum()))
     ok &= ~far
     # stamps that run backwards (in arrival order) beyond the tolerance
@@ -245,14 +260,21 @@ def read_log(
     d = np.diff(stamps[sel]).astype(np.float64) * 1e-9
     d = d[d > 0]
     period = float(np.median(d)) if d.size else T
+    count = 1.0
     if period > 0 and sel.size > 2:  # least squares over each sample's count of periods
         rel = (stamps[sel] - stamps[sel[0]]).astype(np.float64) * 1e-9
-        # counted in the robot's T when the median is near it (a jittered median is off by
-        # a few %, enough to miscount a long log), else in the median
-        idx = np.rint(rel / (T if abs(period - T) < 0.1 * T else period))
-        if idx[-1] > 0:
+        # counted difference by difference, in the robot's T when the median is within the
+        # grid tolerance of it, else in the median (a jitter of less than half a period
+        # never miscounts one difference; counting the whole log in T miscounted a log
+        # stamped every 1.04 ms and printed 0.999997 ms)
+        unit = T if abs(period - T) <= spec.grid_tolerance * T / 10 else period
+        for _ in range(2):  # counted again in the fitted period (a gap's count is exact)
+            idx = np.concatenate([[0.0], np.cumsum(np.rint(np.diff(rel) / unit))])
+            count = float(idx[-1])
+            if idx[-1] <= 0:
+                break
             ic, rc = idx - idx.mean(), rel - rel.mean()
-            period = float(ic @ rc / (ic @ ic))
+            period = unit = float(ic @ rc / (ic @ ic))
     # another rate: more than 10 % off T (a multiple of T would put every sample on the grid
     # with gaps between); a drift of less is judged by the stamps off the grid below
     mismatch = abs(period - T) > 0.1 * T
@@ -261,16 +283,17 @@ def read_log(
     k_all, on = grid.steps(stamps[sel])
     offgrid = int((~on).sum())
     if mismatch or offgrid > 0.01 * sel.size:
+        text = period_digits(period, count)  # the number printed is the fix's number
         raise LogRateError(
             describe(
                 where,
                 f"samples every T = {T:g} s (robot {robot}'s sampling interval)",
-                f"samples every {period:.6g} s (median), {offgrid} of {sel.size} stamps off "
-                f"the grid of T within {spec.grid_tolerance:g} T",
+                f"samples every {text} s (fitted over the stamps), {offgrid} of {sel.size} "
+                f"stamps off the grid of T within {spec.grid_tolerance:g} T",
                 f"generate the robot at the log's period: amsfe generate {robot} --period "
-                f"{period:.6g} (or record at the robot's rate)",
+                f"{text} (or record at the robot's rate)",
             ),
-            float(f"{period:.6g}"),
+            float(text),
         )
     count_skip(use, "stamp off the tick grid", offgrid)
     sel, k_all = sel[on], k_all[on]
@@ -302,6 +325,17 @@ def read_log(
     bad_samples = int(bad[uniq].sum())
     count_skip(use, "sample with a non-finite value (predicted through)", bad_samples)
     z[bad] = np.nan
+    absurd = np.abs(np.nan_to_num(z[uniq])).max(axis=1) > VALUE_MAX
+    if absurd.any():  # a 1e300: skipped and named, as a far stamp is
+        first_k = int(uniq[np.argmax(absurd)])
+        count_skip(
+            use,
+            f"sample with a value beyond {VALUE_MAX:g} (first at tick {first_k}, "
+            f"t = {first_k * T:.4f} s; predicted through)",
+            int(absurd.sum()),
+        )
+        bad[uniq[absurd]] = True
+        z[bad] = np.nan
     if bad.any():
         runs = np.split(np.flatnonzero(bad), np.flatnonzero(np.diff(np.flatnonzero(bad)) > 1) + 1)
         longest = max(runs, key=len)
@@ -314,7 +348,7 @@ def read_log(
             )
     if not np.isfinite(z[0]).all():
         raise refuse(where, "a finite first encoder sample", "NaN or inf", "cut the log there")
-    use.used = int(uniq.size) - bad_samples
+    use.used = int(uniq.size) - bad_samples - int(absurd.sum())
     step1 = np.flatnonzero(np.diff(uniq) == 1)  # consecutive ticks with identical samples
     same = int((z[uniq[step1 + 1]] == z[uniq[step1]]).all(axis=1).sum())
     if same:
@@ -326,7 +360,26 @@ def read_log(
         count_skip(eu, "not used: effort kind none (say [effort] kind to use it)", eu.messages)
     elif "effort" in present:
         on_grid = OnGrid(path, plan, times, decoded, grid, clock, K)
-        effort, first = held_effort(on_grid, spec, usage["effort"], n)
+        held = held_effort(on_grid, spec, usage["effort"], n)
+        effort, first = held.values, held.first
+        if held.end < K:  # the effort stream ended early: the log ends with it, named
+            ended = int(np.isfinite(z[held.end :]).all(axis=1).sum())
+            end_k = held.end - 1 - spec.max_gap_steps
+            count_skip(
+                use,
+                f"after the effort ended at tick {end_k} (t = {end_k * T:.4f} s; a torque is "
+                "not held past max_gap_steps ticks: the log ends there)",
+                ended,
+            )
+            use.used -= ended
+            z, effort, K = z[: held.end], effort[: held.end], held.end
+            if K - first < 2:
+                raise refuse(
+                    f"log {path}: {plan.roles['effort']} (effort)",
+                    "effort samples over the encoders' ticks",
+                    f"the effort ends at tick {end_k}, {K - first} ticks after it starts",
+                    'record the effort over the whole log, or say [effort] kind = "none"',
+                )
         if first > 0:  # the effort starts later than the encoders: so does the log
             finite = np.flatnonzero(np.isfinite(z).all(axis=1))
             later = finite[finite >= first]
@@ -350,6 +403,16 @@ def read_log(
     missing = int((~np.isfinite(z).all(axis=1)).sum())
     if missing:
         skipped["encoder samples missing (predicted through)"] = missing
+
+    # the encoders ending before the log's other streams: named (the log ends with them)
+    others = [times[t][-1] for r, t in present.items() if r != "encoders" and times[t].size]
+    if others:
+        after = (max(others) - int(log_ns[-1])) * 1e-9
+        if after > (spec.max_gap_steps + 1) * T:
+            use.notes[
+                f"the encoders end at tick {K - 1} (t = {(K - 1) * T:.4f} s), "
+                f"{after:.4g} s before the log's other streams (ticks not estimated)"
+            ] = round(after / T)
 
     # ------------------------------------------------------------------ camera frames
     on_grid = OnGrid(path, plan, times, decoded, grid, clock, K)  # (the grid the log starts on)

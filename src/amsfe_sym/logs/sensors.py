@@ -13,11 +13,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.core.camera_frame import CameraFrame
-from amsfe_sym.logs.grid import ClockOffset, RoleUse, TickGrid, count_skip
+from amsfe_sym.logs.grid import VALUE_MAX, ClockOffset, RoleUse, TickGrid, count_skip
 from amsfe_sym.logs.plan import JOINT_STATE, LogPlan, joint_columns, refuse
 from amsfe_sym.logs.spec import LogSpec
 
-__all__ = ["OnGrid", "camera_frames", "held_effort", "truth_on_grid"]
+__all__ = ["HeldEffort", "OnGrid", "camera_frames", "held_effort", "truth_on_grid"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -52,10 +52,28 @@ class OnGrid:
         return out
 
 
-def held_effort(log: OnGrid, spec: LogSpec, use: RoleUse, n: int) -> tuple[FloatArray, int]:
+@dataclass(frozen=True)
+class HeldEffort:
+    """The effort on the tick grid.
+
+    Attributes:
+        values: The effort held by stamp [N m], (K, n); NaN before ``first`` and from
+            ``end`` on.
+        first: The first tick that has an effort sample.
+        end: The tick after the last one the effort covers: K, or where the stream ended
+            (its last sample more than ``max_gap_steps`` ticks before the last tick: the
+            torque is not held past that; docs/input-rules.md).
+    """
+
+    values: FloatArray
+    first: int
+    end: int
+
+
+def held_effort(log: OnGrid, spec: LogSpec, use: RoleUse, n: int) -> HeldEffort:
     """The effort held by stamp on the K ticks (zero-order hold to the nearest tick: the last
-    effort stamped before t_k + T/2) [N m], (K, n), NaN before the first effort sample, and
-    the first tick that has one.
+    effort stamped before t_k + T/2) [N m], (K, n), NaN before the first effort sample and
+    after the stream ends, and the first and end ticks it covers.
 
     Raises:
         LogError: no effort sample with n finite values, or none before the last tick.
@@ -78,6 +96,9 @@ def held_effort(log: OnGrid, spec: LogSpec, use: RoleUse, n: int) -> tuple[Float
     count_skip(use, "not one value per joint", int((~shaped).sum()))
     finite = shaped & np.isfinite(values).all(axis=1)
     count_skip(use, "a non-finite value", int((shaped & ~finite).sum()))
+    absurd = finite & (np.abs(np.nan_to_num(values)).max(axis=1) > VALUE_MAX)
+    count_skip(use, f"a value beyond {VALUE_MAX:g} N m (absurd)", int(absurd.sum()))
+    finite &= ~absurd
     # zero-order hold by stamp: u(k) = the last effort stamped before t_k + T/2 (an effort
     # stamped off the encoder grid, or late by a receive latency, goes to its nearest tick)
     t_rel = (stamps.astype(np.int64) - grid.t0) * 1e-9 / grid.T
@@ -103,10 +124,13 @@ def held_effort(log: OnGrid, spec: LogSpec, use: RoleUse, n: int) -> tuple[Float
         )
     out = np.asarray(values[order[np.maximum(last, 0)]], dtype=np.float64)
     out[last < 0] = np.nan  # before the first effort sample: the caller starts the log later
+    # a stream that ends early is not held: the last sample's tick plus max_gap_steps
+    end = min(K, int(np.floor(ts[-1] + 0.5)) + 1 + spec.max_gap_steps)
+    out[end:] = np.nan
     used = np.unique(last[last >= 0])
     use.used = int(used.size)
     count_skip(use, "superseded before a tick (a later one was held)", int(order.size - used.size))
-    return out, int(np.argmax(last >= 0))
+    return HeldEffort(out, int(np.argmax(last >= 0)), end)
 
 
 def camera_frames(log: OnGrid, use: RoleUse) -> list[CameraFrame]:
@@ -138,6 +162,15 @@ def camera_frames(log: OnGrid, use: RoleUse) -> list[CameraFrame]:
             seen.add(kp)
             frames.append(CameraFrame(kp, pix, ar))
     use.used = len(frames)
+    if len(frames) >= 3:  # a camera that stops: named at its last frame (docs/input-rules.md)
+        arrivals = np.array([f.delivery_step for f in frames])
+        every = float(np.median(np.diff(np.sort(arrivals)))) if arrivals.size > 1 else 0.0
+        last = int(arrivals.max())
+        if every > 0 and log.K - 1 - last > 3 * every:
+            use.notes[
+                f"frames end at tick {last} (t = {last * log.grid.T:.4f} s): none over the "
+                "last ticks of the log (ticks without a frame)"
+            ] = log.K - 1 - last
     return frames
 
 

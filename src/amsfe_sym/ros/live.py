@@ -162,12 +162,64 @@ class LiveLoop:
         self._early: list[tuple[int, FloatArray]] = []
         self._early_frames: list[tuple[int, FloatArray, int | None]] = []
         self._sent0: int | None = None  # the first encoder sample's source timestamp [ns]
+        self._last_sent: int | None = None  # the last used sample's source timestamp [ns]
+        self._bad_run = 0  # encoder samples with a bad stamp in a row
         self.counters: dict[str, int] = dict.fromkeys(DECISION_COUNTERS, 0)
         self.skipped: dict[str, int] = {}
         self._nan = np.full(4 * lib.n, np.nan)
 
     def _skip(self, reason: str, count: int = 1) -> None:
         self.skipped[reason] = self.skipped.get(reason, 0) + count
+
+    def _bad_stamp(self, stamp_ns: int, sent_ns: int | None) -> str | None:
+        """Why an encoder sample's header stamp is not used (None: it is), by the log
+        reader's rule (docs/input-rules.md) on what a live node has: a zero stamp; a stamp
+        more than ``max_gap_steps`` + 1 ticks behind the last used one (a clock step back);
+        a stamp that many ticks ahead of it while the send times (DDS source timestamps)
+        advanced less than a quarter as much (a clock step ahead or a corrupt stamp: a
+        stall delays both).  Skipped and counted; more than ``max_gap_steps`` in a row hold
+        the node with the reason (a 1 h stamp was held as "the encoders stalled", zero
+        stamps as encoder silence, a step as hundreds of missing samples).
+
+        Raises:
+            EstimatorError: more than ``max_gap_steps`` bad stamps in a row.
+        """
+        why, size = None, 0.0
+        span = (self._max_gap + 1) * self._T_ns
+        last = self.t0_ns + self.k * self._T_ns  # the last used tick's stamp
+        d_stamp = stamp_ns - last
+        if stamp_ns == 0:
+            why = "encoder sample with a zero header stamp (unstamped)"
+        elif d_stamp < -span:
+            why, size = "encoder stamp behind the last one (a clock step back)", -d_stamp * 1e-9
+        elif (
+            d_stamp > span
+            and sent_ns is not None
+            and self._last_sent is not None
+            and d_stamp > 4 * (sent_ns - self._last_sent)
+        ):
+            why = "encoder stamp ahead of its send time (a clock step or a corrupt stamp)"
+            size = d_stamp * 1e-9
+        if why is None:
+            self._bad_run = 0
+            self._last_sent = sent_ns
+            return None
+        self._skip(why)
+        self._bad_run += 1
+        if self._bad_run > self._max_gap:
+            found = f"{self._bad_run} samples in a row after tick {self.k}"
+            if size:
+                found += f", the last {size:.4g} s from the last used stamp"
+            raise EstimatorError(
+                describe(
+                    f"encoder stamps at t = {self.k * self.T:.3f} s",
+                    "header stamps on the clock the node started on",
+                    f"{why}: {found}",
+                    "fix the driver's stamping clock (slew, do not step; stamp every "
+                    "sample) and restart the node",
+                )
+            )
+        return why
 
     def tick_of(self, stamp_ns: int) -> int | None:
         """The tick of a stamp [ns] (None when it is off the grid by more than the
@@ -291,6 +343,7 @@ class LiveLoop:
                 self._skip("encoder sample before the first joint torque sample")
                 return None
             self.t0_ns, self.k, self._sent0 = stamp_ns, 0, sent_ns
+            self._last_sent = sent_ns
             self.est = build_estimator(
                 self.sc,
                 self.lib,
@@ -311,6 +364,9 @@ class LiveLoop:
                     self.frame(exposure_ns, zf, sent)
             self._early_frames.clear()
             return self._control(stamp_ns, row[: 2 * self.n], None, 0)
+        bad = self._bad_stamp(stamp_ns, sent_ns)  # issue 37: named, not "stalled"
+        if bad is not None:
+            return None
         k = self.tick_of(stamp_ns)
         if k is None:
             self._skip("encoder sample off the tick grid")

@@ -9,6 +9,7 @@ nothing has to be exported in the user's shell.
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 from collections.abc import Callable
 from dataclasses import replace
@@ -22,12 +23,17 @@ from amsfe_sym.topics import TopicSpec
 __all__ = [
     "DEFAULT_RMW",
     "LOCKSTEP_PROFILE",
+    "QUEUE_SECONDS",
+    "check_parameters",
+    "depth_for",
     "lean_events",
     "load_rclpy",
     "ns_to_stamp",
     "qos_profile",
+    "spec_parameters",
     "stamp_to_ns",
     "use_lockstep_profile",
+    "waiting_line",
 ]
 
 #: The ROS middleware the ``[ros]`` extra installs (the one used unless
@@ -89,6 +95,25 @@ def qos_profile(spec: TopicSpec, *, latched: bool = False, depth: int | None = N
         else ReliabilityPolicy.BEST_EFFORT,
         durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
     )
+
+
+#: How long a live topic's queue holds at its rate [s] (:func:`depth_for`): a reader that
+#: stalls this long (a loaded machine, a garbage collection) loses nothing.
+QUEUE_SECONDS = 5.0
+
+
+def depth_for(rate_hz: float, spec: TopicSpec, seconds: float = QUEUE_SECONDS) -> int:
+    """The history depth (KEEP_LAST) of a topic at ``rate_hz`` [Hz]: ``seconds`` of it, at
+    least the spec's ``[qos] depth`` and at most
+    :data:`~amsfe_sym.core.values.BUFFER_STEPS_MAX`.  The one rule of every queue of
+    ``play`` and the nodes (a publisher's and a subscription's alike), so both ends of a
+    topic hold the same time: ``play`` at the recorded pace needed ``-p qos.depth:=5000`` on
+    a loaded machine before (issue 37).
+    """
+    from amsfe_sym.core.values import BUFFER_STEPS_MAX
+
+    want = math.ceil(rate_hz * seconds) if math.isfinite(rate_hz) and rate_hz > 0 else 0
+    return int(min(BUFFER_STEPS_MAX, max(spec.depth, want)))
 
 
 def ns_to_stamp(ns: int) -> Any:
@@ -196,14 +221,96 @@ def lean_events(node: Any) -> tuple[Any, Any]:
     )
 
 
+def _declared(node: Any, name: str, default: Any, expected: str, example: str) -> Any:
+    """The value of the ROS parameter ``name`` declared with ``default``; a ``-p`` override
+    of another type is refused in one line (rclpy raised its own exception, a traceback:
+    ``-p qos.depth:=abc``).  A float parameter also takes an integer (``:=1``)."""
+    from rcl_interfaces.msg import ParameterDescriptor
+
+    number = isinstance(default, float)
+    try:
+        value = node.declare_parameter(
+            name, default, ParameterDescriptor(dynamic_typing=True) if number else None
+        ).value
+    except Exception as exc:  # rclpy's InvalidParameterTypeException and kin
+        given = getattr(node, "_parameter_overrides", {}).get(name)
+        raise ConfigError(
+            describe(
+                f"ROS parameter {name} of {node.get_name()}",
+                expected,
+                repr(getattr(given, "value", "?")) + f" ({type(exc).__name__})",
+                f"pass e.g. -p {name}:={example}",
+            )
+        ) from exc
+    if number and (isinstance(value, bool) or not isinstance(value, int | float)):
+        raise ConfigError(
+            describe(
+                f"ROS parameter {name} of {node.get_name()}",
+                expected,
+                repr(value),
+                f"pass e.g. -p {name}:={example}",
+            )
+        )
+    return float(value) if number else value
+
+
+def check_parameters(node: Any) -> None:
+    """Refuse, in one line, every ``-p`` override of ``node`` that names no parameter it
+    declared (rclpy ignores them: a mistyped ``-p topic.encoders:=/x`` left the node
+    waiting on ``/joint_states`` forever).  Call it once every parameter is declared.
+
+    Raises:
+        ConfigError: an override of an undeclared name (the declared ones listed).
+    """
+    overrides = set(getattr(node, "_parameter_overrides", {}) or {})
+    declared = {p for p in node._parameters} | {"use_sim_time", "start_type_description_service"}
+    unknown = sorted(overrides - declared)
+    if unknown:
+        raise ConfigError(
+            describe(
+                f"ROS parameters of {node.get_name()}",
+                f"names among {sorted(declared)}",
+                f"{unknown}",
+                "fix the name (e.g. topics.encoders, not topic.encoders) or drop it",
+            )
+        )
+
+
+def waiting_line(node: Any, topic: str, msgtype: str, seconds: float) -> str:
+    """What a node that received nothing on ``topic`` for ``seconds`` [s] prints: the topic
+    it waits on, its type, and the publishers the graph shows for it (with their types: a
+    type mismatch is named), or the topics of that type that do have publishers."""
+    pubs = node.get_publishers_info_by_topic(topic)
+    types = sorted({str(p.topic_type) for p in pubs})
+    with contextlib.suppress(Exception):  # a name rclpy cannot expand: kept as given
+        topic = node.resolve_topic_name(topic)  # as remapped (-r) and namespaced
+    head = f"node: nothing on {topic} ({msgtype}) for {seconds:g} s"
+    if not pubs:
+        same = sorted(
+            t for t, ts in node.get_topic_names_and_types() if msgtype in ts and t != topic
+        )
+        other = f"; topics of that type: {same}" if same else ""
+        return f"{head}: no publisher of {topic} on the graph{other} (check -r / [topics])"
+    wrong = [t for t in types if t != msgtype]
+    if wrong:
+        return (
+            f"{head}: {len(pubs)} publisher(s) of type {wrong}, not {msgtype}: a type "
+            "mismatch, no message can pass (publish the right type or remap)"
+        )
+    return f"{head}: {len(pubs)} publisher(s) of {msgtype}, none delivering (check QoS)"
+
+
 def spec_parameters(node: Any, spec: TopicSpec, joints: tuple[str, ...]) -> TopicSpec:
     """The topic spec as ROS parameters of ``node`` (declared with ``spec``'s values as
     defaults: ``topics.<role>``, ``joints.names``, ``joints.positions``, ``effort.kind``,
     ``timing.*``, ``qos.reliability``, ``qos.depth``; the ``[effort]`` noise keys and the
-    ``[filter]`` keys are the spec's), read back and checked as a spec file is.
+    ``[filter]`` keys are the spec's), read back and checked as a spec file is: a value of
+    another type, or ``joints.names`` of another count than ``joints``, refused in one line
+    (:func:`check_parameters` refuses the names declared nowhere).
 
     Raises:
-        ConfigError: a parameter the spec refuses (a topic without '/', an unknown kind...).
+        ConfigError: a parameter the spec refuses (a topic without '/', an unknown kind, a
+            string where a number goes, a wrong joint count).
     """
     from amsfe_sym.topics import ROLES
     from amsfe_sym.topics.spec import parse_topic_spec
@@ -211,21 +318,38 @@ def spec_parameters(node: Any, spec: TopicSpec, joints: tuple[str, ...]) -> Topi
     data: dict[str, dict[str, Any]] = {s: {} for s in ("topics", "joints", "effort")}
     data["timing"], data["qos"] = {}, {}
     for role in ROLES:
-        data["topics"][role] = node.declare_parameter(f"topics.{role}", spec.topic(role)).value
+        data["topics"][role] = _declared(
+            node, f"topics.{role}", spec.topic(role), "a topic name like '/x'", "/joint_states"
+        )
     names = list(spec.joint_names or joints)
-    data["joints"]["names"] = list(node.declare_parameter("joints.names", names).value)
-    positions = node.declare_parameter("joints.positions", spec.positions).value
-    data["joints"]["positions"] = positions
-    kind = node.declare_parameter("effort.kind", spec.effort_kind or "applied").value
+    got = _declared(node, "joints.names", names, "a list of joint names", "['j1','j2']")
+    data["joints"]["names"] = list(got)
+    if joints and len(got) != len(joints):
+        raise ConfigError(
+            describe(
+                f"ROS parameter joints.names of {node.get_name()}",
+                f"{len(joints)} names (the robot's joints {list(joints)}, in q order)",
+                f"{len(got)}: {list(got)}",
+                f"pass one JointState name per joint, e.g. -p joints.names:={list(joints)}",
+            )
+        )
+    data["joints"]["positions"] = _declared(
+        node, "joints.positions", spec.positions, "'motor' or 'link'", "motor"
+    )
+    kind = _declared(
+        node, "effort.kind", spec.effort_kind or "applied", "an effort kind", "applied"
+    )
     data["effort"] = {**dict(spec.effort_options), "kind": kind}  # the noise keys: the file's
-    data["timing"]["grid_tolerance"] = node.declare_parameter(
-        "timing.grid_tolerance", spec.grid_tolerance
-    ).value
-    data["timing"]["max_gap_steps"] = node.declare_parameter(
-        "timing.max_gap_steps", spec.max_gap_steps
-    ).value
-    data["qos"]["reliability"] = node.declare_parameter("qos.reliability", spec.reliability).value
-    data["qos"]["depth"] = node.declare_parameter("qos.depth", spec.depth).value
+    data["timing"]["grid_tolerance"] = _declared(
+        node, "timing.grid_tolerance", spec.grid_tolerance, "a number in (0, 0.5)", "0.25"
+    )
+    data["timing"]["max_gap_steps"] = _declared(
+        node, "timing.max_gap_steps", spec.max_gap_steps, "an integer >= 0", "5"
+    )
+    data["qos"]["reliability"] = _declared(
+        node, "qos.reliability", spec.reliability, "'reliable' or 'best_effort'", "reliable"
+    )
+    data["qos"]["depth"] = _declared(node, "qos.depth", spec.depth, "an integer >= 1", "100")
     if spec.filter_options:  # the [filter] keys: the file's (as the [effort] noise keys)
         data["filter"] = dict(spec.filter_options)
     parsed = parse_topic_spec(data, f"ROS parameters of {node.get_name()}")

@@ -35,12 +35,15 @@ from amsfe_sym.errors import AmsfeError
 from amsfe_sym.ros.effort import effort_values, live_effort
 from amsfe_sym.ros.live import HoldKind, LiveLoop, TickOut
 from amsfe_sym.ros.middleware import (
+    check_parameters,
+    depth_for,
     executor,
     lean_events,
     qos_profile,
     spec_parameters,
     start,
     stop,
+    waiting_line,
 )
 from amsfe_sym.ros.outputs import (
     DEFAULT_STD_EVERY,
@@ -57,6 +60,12 @@ from amsfe_sym.topics import TopicSpec, joint_order
 __all__ = ["EXIT_HOLD", "NodeOptions", "NodeReport", "run_node"]
 
 FloatArray = NDArray[np.float64]
+
+#: A node that has received no encoder sample says, every this many seconds [s, wall], which
+#: topic it waits on and what the graph shows for it (:func:`~amsfe_sym.ros.middleware.
+#: waiting_line`): it waited forever without a word (issue 37).
+WAITING_SAY_S = 10.0
+ENCODER_TYPE = "sensor_msgs/msg/JointState"
 
 #: Exit code of a fail-safe stop (encoder silence, non-finite estimate, estimator failure).
 EXIT_HOLD = 3
@@ -156,6 +165,7 @@ class _Node:
         )
         self.n = lib.n
         self.std_every = std_every_parameter(node, options.std_every)
+        check_parameters(node)  # every parameter declared: a mistyped -p name is refused
         self.record = None if options.record is None else NodeRecord(sc, lib, spec, self.names)
         self.last: TickOut | None = None
         self.last_rx: float | None = None
@@ -172,23 +182,26 @@ class _Node:
         #: deactivate; an unmanaged one: always).
         self.active = not options.managed
         qos = qos_profile(spec)
+        # the subscriptions hold 5 s at the encoders' rate, as play's publishers do
+        # (middleware.depth_for: one rule for both ends; a slow moment loses no sample)
+        sub_qos = qos_profile(spec, depth=depth_for(1.0 / lib.T, spec))
         sub_events, pub_events = lean_events(node)
         # the camera is subscribed first: a frame and a sample ready at once, the frame first
         node.create_subscription(
-            m.PointStamped, spec.camera, self.on_frame, qos, event_callbacks=sub_events
+            m.PointStamped, spec.camera, self.on_frame, sub_qos, event_callbacks=sub_events
         )
         if self.record is not None:  # the truth only goes into a record (for its NEES)
             node.create_subscription(
-                m.Float64MultiArray, spec.truth, self.on_truth, qos, event_callbacks=sub_events
+                m.Float64MultiArray, spec.truth, self.on_truth, sub_qos, event_callbacks=sub_events
             )
         read = self.effort_kind != "none"
         if read and spec.effort != spec.encoders:
             node.create_subscription(
-                m.JointState, spec.effort, self.on_effort, qos, event_callbacks=sub_events
+                m.JointState, spec.effort, self.on_effort, sub_qos, event_callbacks=sub_events
             )
         self.effort_in_encoders = read and spec.effort == spec.encoders
         node.create_subscription(
-            m.JointState, spec.encoders, self.on_encoders, qos, event_callbacks=sub_events
+            m.JointState, spec.encoders, self.on_encoders, sub_qos, event_callbacks=sub_events
         )
         ev = {"event_callbacks": pub_events}
         self.pub_est = node.create_publisher(m.JointState, spec.estimate, qos, **ev)
@@ -408,12 +421,17 @@ def run_node(
         gc.collect()
         gc.freeze()  # the startup's objects (rclpy, numpy, the library): never rescanned
         wait = options.encoder_timeout  # signals raised between spins, not inside rclpy's C++
+        quiet_since, said = time.monotonic(), 0.0  # nothing received yet: said every 30 s
         with DeferredSignals() as signals:
             while ctx.ok() and not down and (not holder or holder[-1].stop is None):
                 ex.spin_once(timeout_sec=0.05)
                 signals.check()
                 state = holder[-1] if holder else None
                 last = None if state is None or not state.active else state.last_rx
+                silent = time.monotonic() - quiet_since
+                if state and state.active and last is None and silent > said + WAITING_SAY_S:
+                    said = silent - silent % WAITING_SAY_S
+                    say(waiting_line(node, state.spec.encoders, ENCODER_TYPE, round(silent)))
                 if state and last is not None and time.monotonic() - last > wait:
                     state.stop = _Stop(
                         f"hold: no encoder sample on {state.spec.encoders} for {wait:g} s "

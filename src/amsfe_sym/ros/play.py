@@ -3,7 +3,13 @@
 ROS tool for this, ``ros2 bag play``, is not installable from the package index).
 
 The topics are the input roles of the topic spec (encoders, effort, camera, truth) that the
-log holds; each message goes out as the bytes it was recorded as (CDR).  Messages of one log
+log holds; a log is read by the log reader's own code (:mod:`amsfe_sym.logs.source`: a ROS 1
+``.bag``, a rosbag2 folder in MCAP or sqlite3, a plain ``.mcap``), and each message goes out
+as CDR: as recorded when it is CDR, converted when it is ROS 1 (a ROS 1 bag's bytes were
+published as they were, and the node's Fast CDR could not read them: issue 37).  Each
+publisher's history holds :data:`~amsfe_sym.ros.middleware.QUEUE_SECONDS` of its topic at
+the log's rate (:func:`~amsfe_sym.ros.middleware.depth_for`), so a reader that falls behind
+on a loaded machine catches up instead of losing samples.  Messages of one log
 time are published together, the encoder sample last, so that a node has the frames that
 arrived at a tick and the torque of the tick before when its sample arrives.  DDS does not
 order deliveries across topics, so with ``ordered`` a group's camera and effort messages
@@ -24,6 +30,8 @@ from typing import Any
 
 from amsfe_sym.errors import LogError, RosError, describe
 from amsfe_sym.ros.middleware import (
+    check_parameters,
+    depth_for,
     qos_profile,
     spec_parameters,
     start,
@@ -32,7 +40,20 @@ from amsfe_sym.ros.middleware import (
 )
 from amsfe_sym.topics import TopicSpec
 
-__all__ = ["PLAYED_ROLES", "PlayOptions", "PlayReport", "play_log"]
+__all__ = [
+    "PLAYED_ROLES",
+    "RATE_MAX",
+    "RATE_MIN",
+    "PlayOptions",
+    "PlayReport",
+    "play_log",
+    "ros1_to_cdr",
+]
+
+#: The speed factors ``play --rate`` takes (docs/input-rules.md): a thousandth of the recorded
+#: pace (1e-9 played a 2 s log over 63 years) to a thousand times it.
+RATE_MIN = 1e-3
+RATE_MAX = 1e3
 
 #: The roles ``play`` publishes (the sensors, and the truth of a simulated run).
 PLAYED_ROLES = ("camera", "effort", "truth", "encoders")
@@ -86,41 +107,64 @@ def _message_class(msgtype: str) -> Any:
         ) from exc
 
 
-def _groups(path: Path, topics: dict[str, str]) -> Iterator[tuple[int, list[tuple[str, bytes]]]]:
-    """(log time [ns], [(topic, raw CDR)]) per log time, encoder samples last in each."""
-    from rosbags.highlevel import AnyReader
+def ros1_to_cdr(raw: bytes, msgtype: str, where: str = "") -> bytes:
+    """A ROS 1 payload as the CDR of its ROS 2 type: decoded with ROS 1 (Noetic)
+    definitions, built again field by field as the ROS 2 (Humble) type (what ROS 1 has and
+    ROS 2 lacks, ``std_msgs/Header``'s ``seq``, is dropped) and serialized.
 
-    from amsfe_sym.logs.source import typestore
+    Raises:
+        LogError: the bytes do not decode as ``msgtype``.
+    """
+    from amsfe_sym.logs.decode import deserialize, typestore
+
+    store = typestore("cdr")
+    msg = _as_ros2(deserialize(raw, msgtype, "ros1", where), store)
+    return bytes(store.serialize_cdr(msg, msgtype))
+
+
+def _as_ros2(obj: Any, store: Any) -> Any:
+    """A ROS 1 message object rebuilt with ``store``'s (ROS 2) types, recursively."""
+    name = getattr(obj, "__msgtype__", None)
+    if name is not None:
+        cls = store.types[name]
+        return cls(**{f: _as_ros2(getattr(obj, f), store) for f in cls.__dataclass_fields__
+                      if f != "__msgtype__"})  # fmt: skip
+    if isinstance(obj, list):
+        return [_as_ros2(x, store) for x in obj]
+    return obj
+
+
+def _groups(path: Path, topics: dict[str, str]) -> Iterator[tuple[int, list[tuple[str, bytes]]]]:
+    """(log time [ns], [(topic, CDR)]) per log time, encoder samples last in each."""
+    from amsfe_sym.logs.source import iter_messages
 
     order = {t: i for i, t in enumerate(topics)}
-    with AnyReader([path], default_typestore=typestore()) as reader:
-        conns = [c for c in reader.connections if c.topic in topics]
-        group: list[tuple[str, bytes]] = []
-        now: int | None = None
-        for conn, t, raw in reader.messages(connections=conns):
-            if now is not None and t != now:
-                yield now, sorted(group, key=lambda g: order[g[0]])
-                group = []
-            now = t
-            group.append((conn.topic, bytes(raw)))
-        if now is not None:
+    group: list[tuple[str, bytes]] = []
+    now: int | None = None
+    for m in iter_messages(path, set(topics)):
+        if now is not None and m.log_time_ns != now:
             yield now, sorted(group, key=lambda g: order[g[0]])
+            group = []
+        now = m.log_time_ns
+        where = f"log {path}: {m.topic} at {m.log_time_ns} ns"
+        raw = ros1_to_cdr(m.raw, m.msgtype, where) if m.encoding == "ros1" else m.raw
+        group.append((m.topic, raw))
+    if now is not None:
+        yield now, sorted(group, key=lambda g: order[g[0]])
 
 
-def _topics(path: Path, spec: TopicSpec) -> dict[str, str]:
+def _topics(path: Path, spec: TopicSpec) -> tuple[dict[str, str], dict[str, float]]:
     """topic -> message type of the played roles the log holds, in :data:`PLAYED_ROLES`
-    order (the encoders last)."""
-    from rosbags.highlevel import AnyReader
+    order (the encoders last), and each one's mean rate [Hz] over the log (from the
+    container's counts and the encoders' span; 0 where the container has no count).
 
-    from amsfe_sym.logs.source import typestore
+    Raises:
+        LogError: not a log the reader reads, or no encoder topic.
+    """
+    from amsfe_sym.logs.source import log_topics
 
-    try:
-        with AnyReader([path], default_typestore=typestore()) as reader:
-            have = {c.topic: c.msgtype for c in reader.connections}
-    except Exception as exc:  # rosbags raises its own kinds for unreadable bags
-        raise LogError(
-            describe(f"log {path}", "a rosbag2 folder or .mcap file", str(exc), "check the path")
-        ) from exc
+    infos = log_topics(path)
+    have = {t: i.msgtype for t, i in infos.items()}
     out: dict[str, str] = {}
     for role in PLAYED_ROLES:
         topic = spec.topic(role)
@@ -136,7 +180,23 @@ def _topics(path: Path, spec: TopicSpec) -> dict[str, str]:
                 "name the log's encoder topic in a topic spec ([topics] encoders)",
             )
         )
-    return out
+    for topic in out:
+        infos[topic].payload_encoding(path)  # a JSON-encoded MCAP: refused in one line
+    span = _span_s(path, spec.encoders)
+    rates = {t: (infos[t].count or 0) / span if span > 0 else 0.0 for t in out}
+    return out, rates
+
+
+def _span_s(path: Path, topic: str) -> float:
+    """The log-time span of ``topic`` [s] (first to last message)."""
+    from amsfe_sym.logs.source import iter_messages
+
+    first = last = None
+    for m in iter_messages(path, {topic}):
+        if first is None:
+            first = m.log_time_ns
+        last = m.log_time_ns
+    return 0.0 if first is None or last is None else (last - first) * 1e-9
 
 
 def play_log(path: Path, options: PlayOptions) -> PlayReport:
@@ -146,8 +206,15 @@ def play_log(path: Path, options: PlayOptions) -> PlayReport:
         LogError: an unreadable log, no encoder topic.
         RosError: no subscriber within ``start_timeout``; rclpy missing.
     """
-    if not options.rate > 0:
-        raise RosError(describe("play --rate", "a factor > 0", repr(options.rate), "e.g. 1"))
+    if not RATE_MIN <= options.rate <= RATE_MAX:
+        raise RosError(
+            describe(
+                "play --rate",
+                f"a speed factor in [{RATE_MIN:g}, {RATE_MAX:g}]",
+                repr(options.rate),
+                "e.g. --rate 1 (the recorded pace)",
+            )
+        )
     if options.ordered:
         use_lockstep_profile()
     ctx = start(list(options.ros_args), options.domain_id)
@@ -157,9 +224,14 @@ def play_log(path: Path, options: PlayOptions) -> PlayReport:
     node = rclpy.create_node("amsfe_play", context=ctx)
     try:
         spec = spec_parameters(node, options.spec, ())
-        topics = _topics(path, spec)
-        qos = qos_profile(spec)
-        pubs = {t: node.create_publisher(_message_class(m), t, qos) for t, m in topics.items()}
+        check_parameters(node)  # a mistyped -p name: refused, not ignored
+        topics, rates = _topics(path, spec)
+        pubs = {
+            t: node.create_publisher(
+                _message_class(m), t, qos_profile(spec, depth=depth_for(rates[t], spec))
+            )
+            for t, m in topics.items()
+        }
         from amsfe_sym.ros import messages as msgs
 
         clock = node.create_publisher(msgs.Clock, spec.clock, qos_profile(spec, depth=1))

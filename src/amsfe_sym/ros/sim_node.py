@@ -29,6 +29,7 @@ from amsfe_sym.core.interrupts import DeferredSignals
 from amsfe_sym.errors import RosError, describe
 from amsfe_sym.ros.arm import SimArm
 from amsfe_sym.ros.middleware import (
+    check_parameters,
     executor,
     qos_profile,
     spec_parameters,
@@ -134,6 +135,7 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
 
         node = rclpy.create_node("amsfe_sim", context=ctx)
         spec = spec_parameters(node, options.spec, tuple(lib.manifest.joints))
+        check_parameters(node)  # a mistyped -p name: refused, not ignored
         names = list(spec.joint_names or lib.manifest.joints)
         qos = qos_profile(spec)
         pub_enc = node.create_publisher(m.JointState, spec.encoders, qos)

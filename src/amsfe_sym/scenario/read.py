@@ -10,7 +10,15 @@ from pathlib import Path
 from typing import Any
 
 from amsfe_sym.core.toml import read_toml
-from amsfe_sym.core.values import BACKWARD_MAPS, C_INT_MAX, read_int, read_number, read_seed
+from amsfe_sym.core.values import (
+    BACKWARD_MAPS,
+    BUFFER_STEPS_MAX,
+    C_INT_MAX,
+    NOISE_STD_MAX,
+    read_int,
+    read_number,
+    read_seed,
+)
 from amsfe_sym.errors import ConfigError, check_known_keys, describe
 from amsfe_sym.load.spec import INTEGRATORS, data_dir
 from amsfe_sym.scenario.model import (
@@ -232,6 +240,16 @@ def validate(sc: Scenario, where: str = "scenario") -> None:
 
     def positive(v: float, what: str, allow_zero: bool = False, fix: str = "") -> None:
         ok = math.isfinite(v) and (v >= 0 if allow_zero else v > 0)
+        if ok and what != "duration" and v > NOISE_STD_MAX:  # a std: its square must be sane
+            raise ConfigError(
+                describe(
+                    f"{where}: {what}",
+                    f"a standard deviation <= {NOISE_STD_MAX:g} "
+                    "(its unit: docs/reference/scenarios.md)",
+                    repr(v),
+                    "use the sensor's or the model's std (1e300 squared is inf)",
+                )
+            )
         if not ok:
             default_fix = (
                 "use a standard deviation >= 0 (0 = none)"
@@ -285,6 +303,7 @@ def validate(sc: Scenario, where: str = "scenario") -> None:
         )
     for name in ("encoder_q_std", "encoder_qd_std", "camera_pixel_std"):
         positive(getattr(f, name), f"[filter] {name}", allow_zero=True)
+    read_int(f.buffer_steps, f"{where}: [filter] buffer_steps", ConfigError, 1, BUFFER_STEPS_MAX)
     positive(sc.encoders.q_std, "[encoders] q_std", allow_zero=True)
     positive(sc.encoders.qd_std, "[encoders] qd_std", allow_zero=True)
     positive(sc.camera.pixel_std, "[camera] pixel_std", allow_zero=True)

@@ -48,7 +48,14 @@ from pathlib import Path
 from typing import Any, Literal
 
 from amsfe_sym.core.toml import read_toml
-from amsfe_sym.core.values import BACKWARD_MAPS, read_int, read_number
+from amsfe_sym.core.values import (
+    BACKWARD_MAPS,
+    BUFFER_STEPS_MAX,
+    NOISE_STD_MAX,
+    read_in_range,
+    read_int,
+    read_number,
+)
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.topics.roles import EFFORT_KINDS, ROLES, EffortKind
 from amsfe_sym.vision.spec import MarkerSpec, parse_camera_section, parse_marker
@@ -159,6 +166,9 @@ FILTER_KEYS = (*_FILTER_NUMBERS, *_FILTER_INTS, "backward_map")
 #: measured from the log (:mod:`amsfe_sym.logs.noise`).
 FROM_LOG = "log"
 _FROM_LOG_KEYS = ("encoder_q_std", "encoder_qd_std")
+#: The R keys whose 0 means, in a scenario, "the simulated sensor's true noise": a log has
+#: no such thing, so a log spec refuses 0 there (it was printed as applied and was not).
+_MEASURED_STD = (*_FROM_LOG_KEYS, "camera_pixel_std")
 
 _SECTIONS = {
     "topics": _TOPIC_KEYS + tuple(_ALIASES),
@@ -199,7 +209,28 @@ def _filter_value(at: str, key: str, value: Any) -> Any:
                     f'write {key} = 1e-5 or {key} = "{FROM_LOG}"',
                 )
             )
-        return read_number(value, at, ConfigError, low=0.0)
+        if key == "gate_probability":
+            return read_in_range(value, at, ConfigError, 0.0, 1.0, "e.g. 0.9999 (0: no gate)")
+        if key not in _MEASURED_STD:
+            return read_in_range(value, at, ConfigError, 0.0, NOISE_STD_MAX)
+        v = read_number(value, at, ConfigError)
+        if not 0.0 < v <= NOISE_STD_MAX:  # 0: a simulation's "the sensor's true noise"
+            log = key in _FROM_LOG_KEYS
+            raise ConfigError(
+                describe(
+                    at,
+                    f"a noise std in (0, {NOISE_STD_MAX:g}]" + (f' or "{FROM_LOG}"' if log else ""),
+                    "0 (the simulator's 'true sensor noise', which a log does not know)"
+                    if v == 0
+                    else repr(value),
+                    f'write {key} = "{FROM_LOG}" (measured from the log) or the sensor\'s std'
+                    if log
+                    else f"write the sensor's std, or leave {key} out",
+                )
+            )
+        return v
+    if key == "buffer_steps":
+        return read_int(value, at, ConfigError, 1, BUFFER_STEPS_MAX)
     if key in _FILTER_INTS:
         return read_int(value, at, ConfigError, 1)
     if value not in BACKWARD_MAPS:  # backward_map
@@ -250,7 +281,7 @@ def parse_topic_spec(data: dict[str, Any], where: str = "topic spec") -> TopicSp
                 if not isinstance(value, str) or not value.startswith("/") or " " in value:
                     raise ConfigError(describe(at, "a topic name like '/x'", repr(value), "fix it"))
                 role: str = _ALIASES.get(str(key), str(key))
-                if role in explicit and role != key:
+                if role != key and role in table:  # both spellings, in either order
                     raise ConfigError(
                         describe(at, f"one of '{key}' and '{role}'", "both", f"keep '{role}'")
                     )
@@ -298,7 +329,18 @@ def parse_topic_spec(data: dict[str, Any], where: str = "topic spec") -> TopicSp
                     )
                 out[key] = value
             else:  # depth
-                out[key] = _count(at, value, 1)
+                out[key] = read_int(value, at, ConfigError, 1, BUFFER_STEPS_MAX)
+    if out.get("positions") == "link" and out.get("effort_kind") in ("applied", "none"):
+        raise ConfigError(
+            describe(
+                f"{where} [joints] positions",
+                '"link" with [effort] kind = "joint_torque" (qm = q + tau_J / Ks)',
+                f'"link" with kind {out["effort_kind"]!r}: the link angles would be taken as '
+                "motor angles",
+                'say kind = "joint_torque" (a torque-sensing arm\'s tau_J), or drop positions '
+                '= "link" if the positions are the motor\'s',
+            )
+        )
     return replace(TopicSpec(), explicit=frozenset(explicit), **out)
 
 
