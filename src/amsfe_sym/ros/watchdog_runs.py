@@ -34,6 +34,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from amsfe_sym.core.camera_frame import CameraFrame
 from amsfe_sym.ros.arm import SimArm
 from amsfe_sym.ros.live import LiveLoop
 from amsfe_sym.ros.watchdog import Hold, Reason, WatchdogSeen, WatchdogTick
@@ -134,7 +135,7 @@ def run_watched(
     assert loop.ctrl is not None
     run = WatchRun()
     n = lib.n
-    queue: deque[tuple[int, float, FloatArray, list, FloatArray | None]] = deque()
+    queue: deque[tuple[int, float, FloatArray, list[CameraFrame], FloatArray | None]] = deque()
     free = 0.0  # the node is busy until then
     commands: deque[tuple[float, FloatArray]] = deque()  # (ready at, u)
     u_arm = np.zeros(n)
@@ -192,7 +193,7 @@ def run_watched(
             for f in frames:
                 loop.frame(f.exposure_step * T_ns, f.z)
             done = taken + per_sample
-            w = loop.watch(kq * T_ns, zq, taken=taken, clock=lambda d=done: d)
+            w = loop.watch(kq * T_ns, zq, taken=taken, clock=_Clock(done))
             free = done
             if w.tick is not None:
                 run.events.append(WatchEvent(w.tick, taken, -1, w.reason))
@@ -218,3 +219,13 @@ def run_watched(
     run.hold = loop.watchdog.hold
     run.seen = loop.watchdog.seen
     return run
+
+
+class _Clock:
+    """A clock that reads ``now`` [s] (the simulated wall clock)."""
+
+    def __init__(self, now: float) -> None:
+        self.now = now
+
+    def __call__(self) -> float:
+        return self.now
