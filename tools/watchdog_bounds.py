@@ -83,18 +83,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--compute", type=float, default=2e-4)
     ap.add_argument("--parts", nargs="+", default=["measure", "verify", "compute", "faults"])
     ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument(
+        "--merge", action="store_true", help="update the parts run here in an existing --out"
+    )
     args = ap.parse_args(argv)
-    out: dict[str, Any] = {
-        "command": "tools/watchdog_bounds.py " + " ".join(argv or sys.argv[1:]),
-        "machine": _machine(),
-        "defaults": dataclasses.asdict(WatchdogBounds()),
-        "compute": args.compute,
-        "scenarios": {},
-    }
+    command = "tools/watchdog_bounds.py " + " ".join(argv or sys.argv[1:])
+    out: dict[str, Any] = {"commands": [], "scenarios": {}}
+    if args.merge and args.out.is_file():
+        out = json.loads(args.out.read_text())
+    out["commands"].append(command)
+    out |= {"machine": _machine(), "defaults": dataclasses.asdict(WatchdogBounds())}
+    out["compute"] = args.compute
     for name in args.scenarios:
         sc0 = load_scenario(name)
         lib = library_for(sc0)
-        res: dict[str, Any] = {"T": lib.T, "duration": sc0.duration}
+        res: dict[str, Any] = out["scenarios"].get(name, {})
+        res |= {"T": lib.T, "duration": sc0.duration}
         if "measure" in args.parts:
             rows = []
             for seed in range(args.first_seed, args.first_seed + args.seeds):
