@@ -59,6 +59,21 @@ def _seen(run: WatchRun) -> dict[str, float]:
     return {k: d[k] for k in SEEN} | {"true_error": run.true_error}
 
 
+def _clean(name: str, part: str, sc0: Any, lib: Any, seeds: range, **kw: Any) -> dict[str, Any]:
+    """Clean runs of ``sc0`` on ``seeds`` (``run_watched``'s keywords ``kw``): the largest
+    watched quantities and the hold lines."""
+    rows = []
+    for seed in seeds:
+        r = run_watched(sc0.with_overrides(seed=seed), lib, **kw)
+        rows.append(_seen(r) | {"seed": seed, "hold": None if r.hold is None else r.hold.line()})
+        print(name, part, rows[-1], flush=True)
+    return {
+        "seeds": [seeds.start, seeds.stop],
+        "max": {k: max(row[k] for row in rows) for k in (*SEEN, "true_error")},
+        "holds": [row["hold"] for row in rows if row["hold"] is not None],
+    }
+
+
 def _machine() -> str:
     try:
         out = subprocess.run(["lscpu"], capture_output=True, text=True, check=True).stdout
@@ -100,48 +115,16 @@ def main(argv: list[str] | None = None) -> int:
         res: dict[str, Any] = out["scenarios"].get(name, {})
         res |= {"T": lib.T, "duration": sc0.duration}
         if "measure" in args.parts:
-            rows = []
-            for seed in range(args.first_seed, args.first_seed + args.seeds):
-                r = run_watched(
-                    sc0.with_overrides(seed=seed), lib, bounds=OFF, compute=args.compute
-                )
-                rows.append(
-                    _seen(r) | {"seed": seed, "hold": None if r.hold is None else r.hold.name}
-                )
-                print(name, "measure", rows[-1], flush=True)
-            res["measure"] = {
-                "seeds": [args.first_seed, args.first_seed + args.seeds],
-                "max": {k: max(row[k] for row in rows) for k in (*SEEN, "true_error")},
-                "holds": sum(row["hold"] is not None for row in rows),
-            }
+            seeds = range(args.first_seed, args.first_seed + args.seeds)
+            m = _clean(name, "measure", sc0, lib, seeds, bounds=OFF, compute=args.compute)
+            res["measure"] = m | {"holds": len(m["holds"])}
+        first = args.verify_first_seed
         if "verify" in args.parts:
-            rows = []
-            first = args.verify_first_seed
-            for seed in range(first, first + args.verify_seeds):
-                r = run_watched(sc0.with_overrides(seed=seed), lib, compute=args.compute)
-                rows.append(
-                    _seen(r) | {"seed": seed, "hold": None if r.hold is None else r.hold.line()}
-                )
-                print(name, "verify", rows[-1], flush=True)
-            res["verify"] = {
-                "seeds": [first, first + args.verify_seeds],
-                "max": {k: max(row[k] for row in rows) for k in (*SEEN, "true_error")},
-                "holds": [row["hold"] for row in rows if row["hold"] is not None],
-            }
+            seeds = range(first, first + args.verify_seeds)
+            res["verify"] = _clean(name, "verify", sc0, lib, seeds, compute=args.compute)
         if "compute" in args.parts:
-            rows = []
-            first = args.verify_first_seed
-            for seed in range(first, first + args.compute_seeds):
-                r = run_watched(sc0.with_overrides(seed=seed), lib, real_compute=True)
-                rows.append(
-                    _seen(r) | {"seed": seed, "hold": None if r.hold is None else r.hold.line()}
-                )
-                print(name, "compute", rows[-1], flush=True)
-            res["compute"] = {
-                "seeds": [first, first + args.compute_seeds],
-                "max": {k: max(row[k] for row in rows) for k in (*SEEN, "true_error")},
-                "holds": [row["hold"] for row in rows if row["hold"] is not None],
-            }
+            seeds = range(first, first + args.compute_seeds)
+            res["compute"] = _clean(name, "compute", sc0, lib, seeds, real_compute=True)
         if "faults" in args.parts:
             faults: dict[str, Any] = {}
             duration = args.fault_at + 1.0
