@@ -254,7 +254,8 @@ class _Node:
     def on_encoders(self, msg: Any, info: Any) -> None:
         if self.stop is not None or not self.active:
             return
-        self._wait_subscriber()  # the first time: before the watchdog's clock starts
+        if self._first_command and self.pub_cmd is not None:
+            self._wait_subscriber()  # before the watchdog's clock starts
         taken = time.monotonic()
         if (idx := self._order(msg.name)) is None:
             return
@@ -346,8 +347,7 @@ class _Node:
             rec.applied(ns, out.u)
 
     def _wait_subscriber(self) -> None:
-        if not self._first_command or self.pub_cmd is None:
-            return
+        assert self.pub_cmd is not None
         self._first_command = False
         deadline = time.monotonic() + self.options.subscriber_wait
         while self.pub_cmd.get_subscription_count() < 1 and time.monotonic() < deadline:
@@ -454,6 +454,8 @@ def run_node(
             return NodeReport(0, "shutdown", 0, None, {}, None)
         if state.stop is not None:
             reason, code = state.stop.reason, state.stop.code
+        if state.record is not None:
+            state.record.stopped(reason, code, None if state.stop is None else state.stop.watchdog)
         hold = state.hold()
         bad_input = state.stop is not None and state.stop.error is not None
         say(
@@ -464,15 +466,14 @@ def run_node(
     except KeyboardInterrupt:
         state = holder[-1] if holder else None
         if state is not None:
-            reason = "hold: interrupted"
+            if state.record is not None:
+                state.record.stopped("hold: interrupted", None, None)
             hold = state.hold()
             say("node: hold: interrupted" + _held(hold))
         raise
     finally:
         if state is not None and state.record is not None and options.record is not None:
-            try:  # how it stopped (an interrupt's exit code is the command line's)
-                wd = None if state.stop is None else state.stop.watchdog
-                state.record.stopped(reason, None if "interrupted" in reason else code, wd)
+            try:
                 state.record.write(options.record)
             finally:
                 stop(ctx, node)
