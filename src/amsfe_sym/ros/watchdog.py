@@ -463,7 +463,7 @@ class Watchdog:
 
 
 def _nonfinite(v: FloatArray | None) -> bool:
-    return v is not None and not bool(np.all(np.isfinite(v)))
+    return v is not None and not bool(np.isfinite(v).all())
 
 
 def _max_abs_diff(a: FloatArray, b: FloatArray) -> float:
