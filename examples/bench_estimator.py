@@ -1,4 +1,4 @@
-"""Per-call cost of the compiled estimator tick against the Python one (docs/runtime-c.md).
+"""Per-call cost of the compiled estimator tick against the Python one (docs/how-to/runtime-c.md).
 
     .venv/bin/python examples/bench_estimator.py [scenario] [estimator ...]
 

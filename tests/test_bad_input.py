@@ -514,6 +514,7 @@ def test_output_folders_follow_the_umask_and_clean_a_killed_runs_leftovers(
 
     stale = tmp_path / ".run.tmp-999999999-abc"  # a SIGKILLed run's folder (its pid is gone)
     stale.mkdir()
+    (stale / ".amsfe-tmp").write_text("amsfe_sym temporary folder; pid 999999999; start 1\n")
     (stale / "timeseries.csv").write_text("half")
     old = os.umask(0o022)
     try:

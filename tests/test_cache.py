@@ -83,20 +83,27 @@ def test_manifest_without_hash_is_refused(built: Path) -> None:
 
 
 def test_stale_temporary_folders_are_cleaned(tmp_path: Path) -> None:
-    dead = tmp_path / f".{ROBOT}-99999999-abc"  # no such pid
-    old = tmp_path / f".{ROBOT}-{os.getpid()}-old"  # alive but over an hour old
-    live = tmp_path / f".{ROBOT}-{os.getpid()}-new"  # a build in progress: kept
+    """Only a build folder this tool marked, whose process is gone, is removed; an unmarked
+    look-alike (a user's folder), a running build and another robot's name are kept."""
+    from amsfe_sym.core.folders import TMP_MARKER, make_tmp
+
+    dead = tmp_path / f".{ROBOT}-99999999-abc"  # a killed build: marked, no such pid
+    dead.mkdir()
+    (dead / TMP_MARKER).write_text("amsfe_sym temporary folder; pid 99999999; start 1\n")
+    unmarked = tmp_path / f".{ROBOT}-99999999-notes"  # a user's look-alike: no marker
+    live = make_tmp(tmp_path, f".{ROBOT}-{os.getpid()}-")  # a build in progress: kept
     other = tmp_path / f".{ROBOT}-extra-1-x"  # another robot's name ('paper_1link-extra')
-    for d in (dead, old, live, other):
+    for d in (unmarked, other):
         d.mkdir()
     hour_ago = time.time() - 7200
-    os.utime(old, (hour_ago, hour_ago))
+    os.utime(live, (hour_ago, hour_ago))  # an age alone never removes a live build
     removed = clean_stale_tmp(tmp_path, ROBOT)
-    assert sorted(removed) == sorted([dead, old])
-    assert live.is_dir() and other.is_dir()
+    assert removed == [dead]
+    assert live.is_dir() and other.is_dir() and unmarked.is_dir()
     generate(ROBOT, out=tmp_path)
-    kept = [ROBOT, live.name, other.name, ".objects"]  # .objects: codegen/compile_units
+    kept = [ROBOT, live.name, other.name, unmarked.name, ".objects"]  # .objects: compile_units
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(kept)
+    assert not (tmp_path / ROBOT / TMP_MARKER).exists()
 
 
 def test_native_flags_put_the_cpu_kind_in_the_cache_key() -> None:

@@ -1,4 +1,5 @@
-"""The C estimators on logs without the applied torque (issue 26; docs/effort.md, "Compiled").
+"""The C estimators on logs without the applied torque (issue 26; docs/explanation/effort.md,
+"Compiled").
 
 The input carried as states and the joint torque sensors' measurement are computed by the C
 runtime (``runtime/c/amsfe_runtime.c``) and compared here with the Python reference
@@ -108,7 +109,7 @@ def _tick_by_tick(py: Any, c: Any, frames: list[list[Any]], estimator: str) -> N
     if estimator in ("naive", "replay", "cloning"):
         assert reached > 0  # the camera update was computed
     if estimator == "oosm":
-        assert refused + reached > 0  # A1: its decision (docs/effort.md)
+        assert refused + reached > 0  # A1: its decision (docs/explanation/effort.md)
 
 
 @pytest.mark.parametrize(("kind", "input_model", "estimator"), CASES)
@@ -152,7 +153,8 @@ def test_a_stiffness_parameter_enters_the_torque_jacobian(
 @pytest.mark.parametrize("kind", ["joint_torque", "none"])
 def test_gaps_and_lost_torques_match(paper: Any, kind: str, estimator: str) -> None:
     """Encoder gaps and lost torque samples (a ``[qm, qmd, tau_J]`` row holding NaN is
-    dropped whole, docs/effort.md section 6): the same steps, tick by tick and in the batch."""
+    dropped whole, docs/explanation/effort.md section 6): the same steps, tick by tick and in the
+    batch."""
     py, c, frames = _pair(paper, kind, "state", estimator, holes=True)
     missing = ~np.isfinite(py.inputs.z_encoder).all(axis=1)
     assert missing.sum() == (7 if kind == "joint_torque" else 4)

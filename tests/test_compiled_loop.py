@@ -10,7 +10,7 @@ Two comparisons, for every estimator x controller pair on paper-sim:
    two estimators' last-digit differences (5e-14, tests/test_compiled_estimator.py) stay
    small.  On the ``amsfe`` and ``dtsmc-ekf`` loops they do not stay small: those loops
    amplify a 1e-13 perturbation to O(1) in about 6 s, the Python reference as much as the
-   C path (docs/runtime-c.md, ``tools/loop_equivalence.py``), so they are compared over
+   C path (docs/how-to/runtime-c.md, ``tools/loop_equivalence.py``), so they are compared over
    their first second; ``truth`` over 10 s, the rest over 2 s (the tool runs all of them
    over 10 s).
 """
@@ -66,7 +66,7 @@ def test_c_loop_equals_python_loop(
 ) -> None:
     sc, lib = paper_sim
     # the paper's pair over 10 s, the others over 1 s (tools/loop_equivalence.py runs them all
-    # over 10 s: docs/runtime-c.md)
+    # over 10 s: docs/how-to/runtime-c.md)
     duration = 10.0 if (estimator, controller) == ("oosm", "amsfe") else 1.0
     sc = sc.with_overrides(estimator=estimator, controller=controller, duration=duration, seed=1)
     c = run(sc, lib, runtime="compiled")
@@ -179,7 +179,7 @@ def test_blended_start_c_loop_equals_python_loop(
         apply_sets(sc, [f"controller_gains.{controller}.blend_accel=inf"]), lib, runtime="compiled"
     )
     assert not np.allclose(plain.u[:700], c.u[:700])  # the blend changed the run (dtsmc
-    # diverges on paper-sim by 0.9 s with either start: docs/control.md)
+    # diverges on paper-sim by 0.9 s with either start: docs/explanation/control.md)
 
 
 @pytest.mark.slow

@@ -1,7 +1,8 @@
 """The generated control laws (eqs. 30-37, 54 and the cascade) against a plain numpy +
 Pinocchio reference, on their own design models, and in closed loop.
 
-The numpy reference below is written from the equations (docs/control.md), independently of
+The numpy reference below is written from the equations (docs/explanation/control.md),
+independently of
 the CasADi code: Pinocchio gives M (crba), b (nle), g and the Coriolis matrix C, so that the
 link force of (1b) is f = d/dq(1/2 qd^T M qd) - g = C^T qd - g, and the motor reference's
 rate comes from Pinocchio's RNEA derivatives.
@@ -383,7 +384,7 @@ def test_truth_converges_into_band(paper_sim) -> None:
     res = run(sc.with_overrides(controller="truth", estimator="encoders"), lib)
     c = summarize(res)["control"]
     assert res.diverged_at is None
-    # measured 0.3 / 1.1 mrad (docs/control.md); band 3x
+    # measured 0.3 / 1.1 mrad (docs/explanation/control.md); band 3x
     assert c["tracking_rmse"][0] < 1e-3 and c["tracking_rmse"][1] < 3.5e-3
 
 

@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parent.parent
 def test_every_registered_number_stands_in_its_doc() -> None:
     reg = load_registry(ROOT)
     assert reg.numbers and reg.blocks
-    assert {"README.md", "docs/reproduction.md"} <= {n.doc for n in reg.numbers}
+    assert {"README.md", "docs/explanation/reproduction.md"} <= {n.doc for n in reg.numbers}
     moved = check_text(reg)
     assert not moved, "\n".join(m.line() for m in moved)
 

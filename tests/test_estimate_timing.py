@@ -1,4 +1,4 @@
-"""``amsfe estimate``'s account of its time (docs/logs.md, "Speed"): the phases in
+"""``amsfe estimate``'s account of its time (docs/how-to/logs.md, "Speed"): the phases in
 ``summary.json`` add up to the command's wall time and the real-time factors are the log's
 duration over them; the process age behind "start-up"; the estimates table written without
 pandas is pandas' table.  No speed is asserted here."""

@@ -1,4 +1,4 @@
-"""The saturation-aware hand-over of the cascades (``headroom_tau``, docs/control.md
+"""The saturation-aware hand-over of the cascades (``headroom_tau``, docs/explanation/control.md
 "Start-up"; issue 28): while the blend runs, the share of the last demand the actuators could
 apply scales h, eps, wm and wf, drops at once and recovers with its time constant; the C
 controller does the same tick by tick, and the whole loop equals the Python one.

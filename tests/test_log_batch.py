@@ -3,7 +3,7 @@ the per-tick path (``est.step`` from Python, the estimator's own StepReports), f
 compiled estimators: the same x(k|k), diag P(k|k), counters, encoder NIS per tick and frame
 records (kappa, arrival, NIS, fused), on a simulated log as written and on the same log with
 the frames a real log has (duplicates, NaN pixels, frames older than the history, several in
-one tick, out of exposure order) and encoder gaps (docs/logs.md, "Speed")."""
+one tick, out of exposure order) and encoder gaps (docs/how-to/logs.md, "Speed")."""
 
 from __future__ import annotations
 

@@ -20,7 +20,7 @@ from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
 from amsfe_sym.sim.result import RunResult
 
-#: Noise of the simulated torque sensor [N m] (docs/effort.md's choice).
+#: Noise of the simulated torque sensor [N m] (docs/explanation/effort.md's choice).
 TORQUE_STD = 0.05
 
 #: Robot and scenario of each simulated log, and its duration [s] (1 kHz).
@@ -33,7 +33,7 @@ def runs() -> dict[str, RunResult]:
     on paper_2link's 1 s run of seed 5 (since issue 28's saturation-aware hand-over; seed 4
     before it) `replay` on the encoders alone, kind ``none``, loses positive definiteness at
     0.63 s of the 2 ms log, whatever the held theta's std (1e-6 to 1e-4): estimating this
-    soft arm from its motor encoders alone is fragile on some starts (docs/logs.md), which is
+    soft arm from its motor encoders alone is fragile on some starts (docs/how-to/logs.md), which is
     not what these tests check."""
     out = {}
     for robot, (name, duration) in LOGS.items():
@@ -70,11 +70,12 @@ def _estimate(res: RunResult, robot: str, kind: str, estimator: str, tmp: Path):
 def test_a_simulated_log_without_the_applied_torque_runs_to_the_end(
     runs: dict[str, RunResult], robot: str, kind: str, estimator: str, tmp_path: Path
 ) -> None:
-    """Every tick estimated (the input states of docs/effort.md left out of the N columns),
+    """Every tick estimated (the input states of docs/explanation/effort.md left out of the N
+    columns),
     the NEES of every tick finite and in summary.json, the robot's N states only.  The links
     are tracked except on paper_2link without effort: there only the camera sees them, and
     from the log's start (link = motor angle, 1.45 rad from the truth, 3 sigma of P(0|0))
-    its frames are gated out (docs/logs.md, "A real Panda recording, worked")."""
+    its frames are gated out (docs/how-to/logs.md, "A real Panda recording, worked")."""
     res = runs[robot]
     got = _estimate(res, robot, kind, estimator, tmp_path)
     est, N = got.estimate, res.lib.N
@@ -100,7 +101,8 @@ def test_the_torque_sensor_sees_the_soft_links_better_than_no_effort(
 ) -> None:
     """On the paper's soft arm (Ks = 10 N m/rad) the measured spring torque gives the link
     angles; without effort they are seen through the camera and a random-walk input only
-    (docs/effort.md section 2): the link error of ``joint_torque`` is below ``none``'s."""
+    (docs/explanation/effort.md section 2): the link error of ``joint_torque`` is below
+    ``none``'s."""
     res = runs["paper_2link"]
     n = res.lib.n
     rmse = {}
@@ -134,7 +136,7 @@ def test_theta_is_held_only_on_a_log_slower_than_the_robots_t(
 ) -> None:
     """``estimate --robot`` on a log read at a period longer than T (a library generated
     with ``--period``) holds theta at the spec's initial value (no random walk, 1-sigma
-    ``HELD_THETA_STD``: docs/logs.md, "A real Panda recording, worked"); at the robot's own
+    ``HELD_THETA_STD``: docs/how-to/logs.md, "A real Panda recording, worked"); at the robot's own
     T theta is estimated with the scenario defaults."""
     from amsfe_sym.apps.estimate import HELD_THETA_STD
     from amsfe_sym.codegen import library_at_period
@@ -200,7 +202,9 @@ def test_link_side_positions_with_a_joint_torque_are_turned_into_motor_angles(
         opts = EstimateOptions(robot="paper_2link", log_spec=str(spec), plots=False)
         try:
             got = estimate_command(log, tmp / "est", opts)
-        except EstimatorError:  # a run that stops counts as the worst error (docs/effort.md)
+        except (
+            EstimatorError
+        ):  # a run that stops counts as the worst error (docs/explanation/effort.md)
             assert name == "link log read as motor"
             rmse[name] = np.inf
             continue
@@ -228,11 +232,11 @@ def test_a_bad_positions_value_is_refused_in_one_line() -> None:
 def test_the_log_specs_effort_noise_reaches_the_estimator(
     runs: dict[str, RunResult], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """``[effort] input_rate_std`` (and the other noise keys of docs/effort.md) are the
+    """``[effort] input_rate_std`` (and the other noise keys of docs/explanation/effort.md) are the
     estimator's: the same log with another random walk gives other estimates, equal to
     those of an estimator built with that EffortSpec; a bad value is one line, nothing
     written."""
-    from amsfe_sym.apps.estimate import _estimator
+    from amsfe_sym.apps.estimate_build import _estimator
     from amsfe_sym.estimation.effort import EffortSpec
     from amsfe_sym.logs.replay import estimate_log
 
@@ -249,7 +253,7 @@ def test_the_log_specs_effort_noise_reaches_the_estimator(
     run30 = got[30.0]
     lib = library_for(run30.scenario)
     eff = EffortSpec(kind="none", input_rate_std=30.0)
-    est, feed = _estimator(run30.scenario, lib, run30.log, EstimateOptions(), eff)
+    est, feed = _estimator(run30.scenario, lib, run30.log, True, eff)
     ref = estimate_log(feed, est, states=lib.N)
     assert np.max(np.abs(ref.x_hat - run30.estimate.x_hat)) <= 1e-12
     bad = tmp_path / "bad.toml"

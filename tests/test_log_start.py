@@ -1,4 +1,4 @@
-"""Where ``amsfe estimate LOG --robot ROBOT`` starts the links (docs/logs.md, "Where the
+"""Where ``amsfe estimate LOG --robot ROBOT`` starts the links (docs/how-to/logs.md, "Where the
 estimate starts"; issue 26): a log of effort kind ``none`` gives motor angles only, and on
 the paper's soft arm the springs deflect 1.45 rad under gravity.  The start is the springs'
 balance at the first sample, chosen by the first camera frame
@@ -20,7 +20,7 @@ import pandas as pd
 import pytest
 from scipy.optimize import brentq
 
-import amsfe_sym.apps.estimate as estimate_app
+import amsfe_sym.apps.estimate_build as estimate_app
 from amsfe_sym.apps.cli import main
 from amsfe_sym.apps.estimate import EstimateOptions, estimate_command
 from amsfe_sym.apps.estimate_start import log_link_start

@@ -1,4 +1,4 @@
-"""Robot logs (docs/logs.md): a simulated run written as a rosbag2 and estimated back equals
+"""Robot logs (docs/how-to/logs.md): a simulated run written as a rosbag2 and estimated back equals
 the loop's own estimates; bags written independently with ``rosbags``' writer (jittered,
 reordered, dropped, duplicated and broken frames, encoder gaps, missing topics, wrong types,
 truncated files) are estimated as the estimator fed the same inputs directly, or refused with
@@ -175,7 +175,7 @@ def test_refusals_are_one_line_and_leave_nothing(sim, tmp_path, capsys) -> None:
     mcap.write_bytes(data[: len(data) // 2])
     cases["truncated"] = mcap
     # the effort said to be the applied torque: a log without it is refused (without a
-    # spec, a log without effort is an encoders-only log: docs/topics.md)
+    # spec, a log without effort is an encoders-only log: docs/reference/topics.md)
     spec = tmp_path / "spec.toml"
     spec.write_text('[effort]\nkind = "applied"\n')
     for what, bag in cases.items():

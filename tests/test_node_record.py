@@ -1,5 +1,5 @@
 """``amsfe node --record`` with the effort on the encoders' topic (a driver's
-``/joint_states``: position, velocity and effort in one JointState, docs/ros.md): the record
+``/joint_states``: position, velocity and effort in one JointState, docs/how-to/ros.md): the record
 writes one JointState a tick with all three, as the arm sent it, and the log reader gives
 back, bit for bit, the samples and the effort the node recorded (no sample skipped)."""
 

@@ -45,7 +45,9 @@ def test_default_command_writes_the_papers_figures(tmp_path: Path, capsys) -> No
     table = _check(out, SIM_FIGURES, ("amsfe", "dtsmc", "amsfe-paper"))
     rows = table["controllers"]
     assert rows["amsfe"]["diverged_at_s"] is None
-    assert rows["amsfe-paper"]["diverged_at_s"] is not None  # (37) as printed: docs/control.md
+    assert (
+        rows["amsfe-paper"]["diverged_at_s"] is not None
+    )  # (37) as printed: docs/explanation/control.md
     printed = capsys.readouterr().out
     assert "amsfe-paper" in printed and "diverged at t = " in printed
 

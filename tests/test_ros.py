@@ -1,4 +1,4 @@
-"""The ROS 2 nodes (issue 27, docs/ros.md).
+"""The ROS 2 nodes (issue 27, docs/how-to/ros.md).
 
 In process (no middleware): the simulated arm and the live loop of ``amsfe node`` reproduce
 :func:`amsfe_sym.sim.loop.run` tick for tick, and the live loop skips what a log's reader
@@ -62,7 +62,7 @@ def _drive(sc: Any, lib: Any, **live: Any) -> tuple[np.ndarray, np.ndarray, Live
 
 def test_live_loop_is_the_loop(paper: Any) -> None:
     """SimArm + LiveLoop (the nodes' per-tick objects) equal the in-process loop: the Python
-    reference with the C estimator, and the compiled loop (docs/ros.md says why both)."""
+    reference with the C estimator, and the compiled loop (docs/how-to/ros.md says why both)."""
     sc, lib = paper
     x, u, loop = _drive(sc, lib)
     for ref in (run(sc, lib, compiled_estimator=True), run(sc, lib, runtime="compiled")):

@@ -99,7 +99,7 @@ def test_replay_nees_inside_its_95_percent_band(paper_sim) -> None:
             # the oracle controller isolates the estimator (the tracking transient of a
             # controller on the estimate is not what this test is about); the compiled loop,
             # the default, equals the Python reference here to ~1e-12
-            # (tests/test_compiled_loop.py, docs/runtime-c.md)
+            # (tests/test_compiled_loop.py, docs/how-to/runtime-c.md)
             run(
                 sc.with_overrides(estimator="replay", seed=s, duration=2.0, controller="truth-ct"),
                 lib,

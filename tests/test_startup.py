@@ -1,4 +1,5 @@
-"""The cascades' start-up (docs/control.md, "Start-up"; issue 28 item 1): the wait for the
+"""The cascades' start-up (docs/explanation/control.md, "Start-up"; issue 28 item 1): the wait for
+the
 rates and the filter's consistency (the encoders' mean NIS), the motor-side hold, and the C
 controller (runtime/c/amsfe_loop.c) equal to the Python one tick by tick and in the loop.
 

@@ -265,7 +265,7 @@ def test_a_failing_run_is_recorded_not_fatal(tmp_path, monkeypatch) -> None:
 
 def test_claims_keep_their_sign_on_fresh_seeds() -> None:
     """The claim table on 20 seeds no tuning saw (5000-5019, 10 s runs, compiled): the signs
-    docs/reproduction.md states from 200 seeds must hold (a flip fails this test)."""
+    docs/explanation/reproduction.md states from 200 seeds must hold (a flip fails this test)."""
     from amsfe_sym.apps.study.claims import format_claims, run_claims
 
     rows = (("amsfe", "oosm"), ("dtsmc-ekf", "oosm"), ("truth", "oosm"))

@@ -1,4 +1,4 @@
-"""The topic spec and roles (docs/topics.md): one definition for logs and live nodes."""
+"""The topic spec and roles (docs/reference/topics.md): one definition for logs and live nodes."""
 
 from __future__ import annotations
 

@@ -4,7 +4,7 @@ One second of the scenario per estimator: the run stays finite, the payload esti
 from its 2.5 kg prior to the true 2 kg, the link angles are estimated to well under a
 milliradian, and the filter is consistent (mean NEES near N = 25).  Why the scenario's
 choices (rk4 model, payload prior, disturbance level, gains) are what they are:
-docs/ur5-estimation.md.
+docs/explanation/ur5-estimation.md.
 
 The scenario's estimator model is the ``ur5_rk4`` library: the first run on a fresh checkout
 compiles it (~15 s on 2 cores, hence ``slow``); later runs reuse ``generated/``
@@ -56,7 +56,8 @@ def test_ur5_demo_converges_and_is_consistent(ur5_demo, estimator: str) -> None:
     assert np.sqrt(res.P_diag[-1, L["theta"]][0]) < 1e-3
     # link angles: < 3 mrad RMSE on every joint over the last 80 % (measured 2.32 mrad on
     # wrist 3, 0.03-0.13 on the others; 1.02 before the model took 4 RK4 steps per T, when
-    # the filter was inconsistent under the sliding-mode laws: docs/ur5-estimation.md, 7)
+    # the filter was inconsistent under the sliding-mode laws: docs/explanation/ur5-estimation.md,
+    # 7)
     assert max(s["estimation_rmse"]["q"]) < 3e-3, s["estimation_rmse"]["q"]
     # consistency: mean NEES 31.8 (33.4 with the 4-step model) at seed 0, 1 s (N = 25)
     assert 20.0 < s["nees_mean"] < 45.0, s["nees_mean"]

@@ -1,7 +1,7 @@
 """oosm's two backward maps (eq. (24)), paired by seed: ``[filter] backward_map =
 "linearised"`` (about the stored forward pass) against ``"inverse"`` (the paper's eq. (22):
 ``L`` generated inverse transitions, the jacobian at the retrodicted states).
-Reported in docs/estimation-algorithms.md ("The backward map"), written to
+Reported in docs/explanation/estimation-algorithms.md ("The backward map"), written to
 docs/data/backward-map.json.
 
 Per scenario (paper-sim, panda-control, and paper-sim with the paper's own explicit-Euler

@@ -1,4 +1,4 @@
-"""Time spent writing bags (docs/logs.md, "Speed"): ``amsfe estimate LOG --no-plots`` with
+"""Time spent writing bags (docs/how-to/logs.md, "Speed"): ``amsfe estimate LOG --no-plots`` with
 ``write_estimate_bag`` timed, and ``amsfe simulate --controller amsfe --duration 10 --bag
 --no-plots`` with the run bag's filler timed (building it + filling it), wall and CPU,
 the median of ``--repeat`` runs, each in this process.  The tree timed is the one

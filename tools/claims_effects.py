@@ -9,7 +9,7 @@ output folder is what ``amsfe study SCENARIO --claims --first-seed A --seeds N
 ``effects``, ``claims.md`` with the effect-size table), recomputed from the stored per-seed
 RMSE with today's statistics (amsfe_sym.apps.study.claims.table_from_doc). Used where a
 second full run of the first block is costly (ur5-control, panda-control). Reported in
-docs/reproduction.md.
+docs/explanation/reproduction.md.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Size and build time of generated libraries (docs/codegen.md, "Structure kept through
+"""Size and build time of generated libraries (docs/explanation/codegen.md, "Structure kept through
 generation"): lines of C per library and of its largest functions, generate + compile wall
 time cold (a fresh output folder, in a new process), the compile's peak memory, and the rk4
 step's C time (generated ``transition_step`` vs the chained ``transition_step_chain``).

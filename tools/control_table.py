@@ -1,11 +1,11 @@
-"""The controller table of docs/reproduction.md: every (controller, estimator) pair on one
+"""The controller table of docs/explanation/reproduction.md: every (controller, estimator) pair on one
 scenario over many seeds, mean +- std of the closed-loop metrics, in parallel processes.
 
     .venv/bin/python tools/control_table.py paper-sim --first-seed 1000 --seeds 200 \
         --out docs/data/control-paper-sim.json
 
 On the compiled loop (``--runtime python`` for the reference loop: the same statistics,
-docs/runtime-c.md).
+docs/how-to/runtime-c.md).
 
 Metrics (after the transient: the last 80 % of each run): tracking RMSE and max error per
 joint [rad], RMS torque [N m], chattering as the total variation of u per second [N m/s],

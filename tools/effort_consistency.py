@@ -1,4 +1,4 @@
-"""What each kind of effort costs the estimator (issue 26, item 3): docs/effort.md's table.
+"""What each kind of effort costs the estimator (issue 26, item 3): docs/explanation/effort.md's table.
 
 Per seed: one closed-loop run of the scenario (compiled loop, the scenario's controller and
 estimator), then each estimator re-run over its recorded encoders and frames (Python
@@ -36,7 +36,7 @@ from amsfe_sym.estimation.effort import DEFAULT_INPUT_RATE_STD
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "docs" / "data" / "effort-consistency"
-#: (effort kind, input model): the designs compared (docs/effort.md).
+#: (effort kind, input model): the designs compared (docs/explanation/effort.md).
 VARIANTS = (
     ("applied", "state"),
     ("joint_torque", "reconstruct"),

@@ -1,5 +1,5 @@
 """Reading + estimating a 60 s, 1 kHz Panda log without the applied torque, Python against C
-(docs/effort.md, "Compiled").
+(docs/explanation/effort.md, "Compiled").
 
 The log: a closed-loop panda-control run (compiled loop, its amsfe controller, seed 1, 60 s
 at T = 1 ms, a 30 Hz camera) written as ``amsfe simulate --bag`` writes it, the torque topic
@@ -19,7 +19,7 @@ and diag P bit for bit (a sha256).  The order alternates between rounds.
 The other tree compiles its own library (``AMSFE_GENERATED_DIR`` of that process:
 ``--other-gen``).
 
-``--real BAG``: the real franka_ros recording of docs/logs.md ("A real Panda recording,
+``--real BAG``: the real franka_ros recording of docs/how-to/logs.md ("A real Panda recording,
 worked"; its library generated first with ``amsfe generate panda --period 0.0333333``), with
 that section's ``jt-tuned`` and ``none-tuned`` log specs and ``replay``, through both
 runtimes: their times and how far apart their x, diag P and encoder NIS are.
@@ -174,7 +174,7 @@ REAL_SPECS = {
 
 
 def real_recording(bag: Path, out: Path) -> dict[str, Any]:
-    """docs/logs.md's real Panda bag with each spec of REAL_SPECS, C and Python."""
+    """docs/how-to/logs.md's real Panda bag with each spec of REAL_SPECS, C and Python."""
     import numpy as np
 
     from amsfe_sym.apps.estimate import EstimateOptions, estimate_command
@@ -221,7 +221,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--python-repeat", type=int, default=1, help="Python runs per case")
     ap.add_argument("--applied-ratio", default=None, metavar="OTHER_SRC")
     ap.add_argument("--other-gen", default="", help="AMSFE_GENERATED_DIR of the other tree")
-    ap.add_argument("--real", default=None, metavar="BAG", help="docs/logs.md's Panda bag")
+    ap.add_argument("--real", default=None, metavar="BAG", help="docs/how-to/logs.md's Panda bag")
     a = ap.parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -15,7 +15,7 @@ as +inf (never dropped), and the verdict stated only where both blocks agree
 
 A row is ``VARIANT/ESTIMATOR`` (the variant is ``base`` without ``--variant``), prefixed by
 the run length (``3s base/replay``) when a block is more than one study. Without ``--pair``
-each variant's estimators are compared as :data:`PAIRS` (docs/estimation.md section 6);
+each variant's estimators are compared as :data:`PAIRS` (docs/explanation/estimation.md section 6);
 ``--pair A B`` (repeatable) names the rows instead (another variant, another run length).
 ``--metric``: ``q`` (q estimation RMSE per joint [rad], shown in mrad), ``nees`` (the
 time-averaged NEES over the window), ``theta`` (theta RMSE [kg], shown in g),
@@ -129,7 +129,7 @@ def main() -> None:
             text.append(format_effects(a, b, what=what, unit=unit, scale=scale))
         if pairs is not None:
             doc["claims"] = doc["claims"]["all"]
-        if len(one) == 1 and pairs is None:  # the format docs/estimation.md section 6 reads
+        if len(one) == 1 and pairs is None:  # the format docs/explanation/estimation.md section 6 reads
             doc["first"], doc["second"] = doc["first"][0], doc["second"][0]
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "effects.json").write_text(json.dumps(doc, indent=1) + "\n")

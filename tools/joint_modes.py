@@ -1,6 +1,6 @@
 """Each shipped robot's joint modes, what its integrator makes of them at its own T and at a
 log's period, and what the rk4 model's substeps cost in accuracy (issue 26, item 5): the
-numbers of docs/codegen.md, "Joint modes and other sampling intervals".
+numbers of docs/explanation/codegen.md, "Joint modes and other sampling intervals".
 
     .venv/bin/python tools/joint_modes.py                        # robots/*, own T and 30 Hz
     .venv/bin/python tools/joint_modes.py --robots panda --period 0.01

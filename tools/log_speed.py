@@ -1,4 +1,4 @@
-"""Speed and memory of reading and estimating a recorded log (docs/logs.md, "Speed"): the
+"""Speed and memory of reading and estimating a recorded log (docs/how-to/logs.md, "Speed"): the
 10 s, 1 kHz paper-sim log (paper_2link) and the 60 s, 1 kHz panda-control log (7 joints, a
 30 Hz camera), written by ``amsfe simulate --bag`` with fixed seeds, each timed before and
 after in the same run, interleaved, the median of ``--repeat`` runs:
@@ -27,7 +27,7 @@ itself instead, ``amsfe estimate LOG --no-plots`` in a fresh process per run, th
 interleaved (their order alternating by round), with a bare ``python -c pass`` per round:
 the process's wall time seen from outside, what the command printed (read + estimate) and,
 where the tree reports them, its phases (``summary.json`` ``timing``); medians and the
-before / after ratio (docs/logs.md, "Speed").
+before / after ratio (docs/how-to/logs.md, "Speed").
 
     .venv/bin/python tools/log_speed.py            # writes the logs into /tmp/amsfe-log-speed
     .venv/bin/python tools/log_speed.py --repeat 5 --out DIR

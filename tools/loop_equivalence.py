@@ -1,4 +1,4 @@
-"""How closely the compiled closed loop reproduces the Python reference: docs/runtime-c.md.
+"""How closely the compiled closed loop reproduces the Python reference: docs/how-to/runtime-c.md.
 
 For every estimator x controller pair of paper-sim (10 s, one seed) it runs
 

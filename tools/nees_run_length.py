@@ -1,4 +1,4 @@
-"""NEES against run length as effect sizes (docs/estimation.md section 7, README).
+"""NEES against run length as effect sizes (docs/explanation/estimation.md section 7, README).
 
     .venv/bin/python tools/nees_run_length.py --first-seed 1000 --seeds 200 \
         --second-block 13000 --out docs/data/nees-run-length

@@ -1,4 +1,4 @@
-"""The NEES consistency table of docs/estimation.md section 7, re-measured.
+"""The NEES consistency table of docs/explanation/estimation.md section 7, re-measured.
 
     .venv/bin/python tools/nees_table.py --first-seed 0 --seeds 20 --out docs/data/nees-consistency
 

@@ -1,5 +1,5 @@
 """The printed laws (37) and (54) in closed loop, under every reading and relaxation we
-could think of: when does each diverge?  (docs/control.md, section 2.)
+could think of: when does each diverge?  (docs/explanation/control.md, section 2.)
 
     .venv/bin/python tools/paper_laws.py            # paper-sim, seed 0
 

@@ -22,7 +22,7 @@ the generated ``plant_step`` integrates), code-generated once per robot and comp
 small C driver holding the integrators: ``semi_implicit`` (symplectic Euler), ``rk2``
 (midpoint), ``rk3`` (Kutta's third order) and ``rk4`` (the classical one ``plant_step`` uses).
 
-Writes docs/data/plant-accuracy.json and the page docs/plant-accuracy.md.
+Writes docs/data/plant-accuracy.json and the page docs/explanation/plant-accuracy.md.
 """
 
 from __future__ import annotations
@@ -335,7 +335,7 @@ def write_page(results: list[dict[str, Any]], machine: str) -> str:
         "<!-- written by tools/plant_accuracy.py; edit the script, not this page -->",
         "",
         "The simulated plant (the continuous-time Spong model, `plant_step` in each library) is "
-        "integrated over each sampling interval T with u held.  How finely?  Issue 18 asks for "
+        "integrated over each sampling interval T with u held.  How finely?  The target is "
         f"<= {TOLERANCE:g} rad of link angle over 10 s, against the same plant at 10x the "
         "substeps, at the least cost.  Measured by:",
         "",
@@ -418,11 +418,11 @@ def main() -> None:
         saved = json.loads(Path(args.from_json).read_text())
         for res in saved["results"]:
             res["choice"] = _choice(res["rows"])
-        (ROOT / "docs" / "plant-accuracy.md").write_text(
+        (ROOT / "docs" / "explanation" / "plant-accuracy.md").write_text(
             write_page(saved["results"], saved["machine"])
         )
         Path(args.from_json).write_text(json.dumps(saved, indent=2) + "\n")
-        print("wrote docs/plant-accuracy.md")
+        print("wrote docs/explanation/plant-accuracy.md")
         return
     logging.getLogger("amsfe_sym").setLevel(logging.ERROR)
     from amsfe_sym.core.provenance import provenance
@@ -440,8 +440,8 @@ def main() -> None:
     if not args.no_write:
         data = ROOT / "docs" / "data" / "plant-accuracy.json"
         data.write_text(json.dumps({"machine": machine, "results": results}, indent=2) + "\n")
-        (ROOT / "docs" / "plant-accuracy.md").write_text(page)
-        print(f"wrote {data} and docs/plant-accuracy.md")
+        (ROOT / "docs" / "explanation" / "plant-accuracy.md").write_text(page)
+        print(f"wrote {data} and docs/explanation/plant-accuracy.md")
 
 
 if __name__ == "__main__":

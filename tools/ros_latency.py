@@ -1,4 +1,4 @@
-"""Latency of ``amsfe node`` over ROS 2 (docs/ros.md, "Latency"): encoder sample published by
+"""Latency of ``amsfe node`` over ROS 2 (docs/how-to/ros.md, "Latency"): encoder sample published by
 ``amsfe sim-node`` -> estimate received, and -> command received, p50 / p99 / max, per
 scenario; beside it what the node's work costs in process (the live loop's estimator +
 controller per sample, no middleware), so the difference is what rclpy and DDS cost.

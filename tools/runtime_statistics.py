@@ -1,5 +1,5 @@
 """The two runtimes over many seeds on the loops that amplify last-digit differences
-(docs/runtime-c.md): per seed, the compiled and the Python reference run of `amsfe` + `oosm`
+(docs/how-to/runtime-c.md): per seed, the compiled and the Python reference run of `amsfe` + `oosm`
 on paper-sim give different sample paths after a few seconds; this prints how their metrics
 compare over seeds (median, and the paired differences).
 

@@ -1,6 +1,6 @@
 """Soak: run the estimators of paper-sim for many ticks and check that they stay healthy.
 
-Usage (the 10^6-tick run recorded in docs/estimation.md)::
+Usage (the 10^6-tick run recorded in docs/explanation/estimation.md)::
 
     python tools/soak.py --ticks 1000000 --estimators oosm replay cloning
 

@@ -1,4 +1,4 @@
-"""The fixed costs of a Python process around ``amsfe estimate`` (docs/logs.md, "The
+"""The fixed costs of a Python process around ``amsfe estimate`` (docs/how-to/logs.md, "The
 command, end to end"): fresh processes, the median of ``--repeat``.
 
 - wall time from spawn to exit of ``python -c pass``, ``import numpy``, ``import

@@ -1,4 +1,4 @@
-"""The cascade's start-up over many seeds (docs/control.md, "Start-up"; issue 17): ``amsfe``
+"""The cascade's start-up over many seeds (docs/explanation/control.md, "Start-up"; issue 17): ``amsfe``
 (and ``dtsmc-ekf``) on paper-sim with the paper's start (``startup = "first"``: the command
 filter starts at rest on the first command, computed from an estimate that has not converged)
 against ``"converged"`` (wait until the link angles' posterior std is below ``ready_q_std``),

@@ -1,4 +1,4 @@
-"""The start-up's settings on the tuning seeds (docs/control.md, "Start-up"): paper-sim, 3 s
+"""The start-up's settings on the tuning seeds (docs/explanation/control.md, "Start-up"): paper-sim, 3 s
 runs, ``amsfe``.  Group ``threshold`` (Python loop): the paper's start against waiting until
 the link angles' posterior std is below 0.10 / 0.05 / 0.03 / 0.02 rad (rates not waited for);
 group ``blend`` (compiled loop): the wait with the blended reference at offset accelerations

@@ -3,7 +3,7 @@
     .venv/bin/python tools/tick_instructions.py --base 326b07b [--duration 5]
 
 Wall-clock figures on these shared 2-core machines move by 10-50 % between two runs of the
-same binary (docs/performance.md); an instruction count does not.  For each scenario
+same binary (docs/explanation/performance.md); an instruction count does not.  For each scenario
 (paper-sim, ur5-control, panda-control; oosm), both sides' libraries are built from the same
 inputs (the ``--base`` commit's package through ``git archive`` and this worktree's, each in
 its own generated/ folder, as tools/kernels_before_after.py does), one closed-loop run of this

@@ -1,5 +1,5 @@
 """Tune the cascaded controllers on a scenario by the same grid and seeds: the fairness
-protocol of docs/control.md (every controller gets its best point of one grid).
+protocol of docs/explanation/control.md (every controller gets its best point of one grid).
 
     .venv/bin/python tools/tune_controllers.py paper-sim
 

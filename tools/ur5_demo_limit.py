@@ -1,4 +1,4 @@
-"""Why ur5-demo's wrist-3 tracking moved from 31.1 to 138.5 mrad (docs/ur5-estimation.md 5).
+"""Why ur5-demo's wrist-3 tracking moved from 31.1 to 138.5 mrad (docs/explanation/ur5-estimation.md 5).
 
     .venv/bin/python tools/ur5_demo_limit.py
 

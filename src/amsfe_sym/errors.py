@@ -83,12 +83,12 @@ class ConvergenceError(EstimatorError):
 
 class RosError(AmsfeError, RuntimeError):
     """ROS 2 cannot be used as asked: rclpy not installed, no peer on a topic in time, the
-    middleware failing (docs/ros.md)."""
+    middleware failing (docs/how-to/ros.md)."""
 
 
 class LogError(AmsfeError, ValueError):
     """A recorded log cannot be used as asked: unreadable or truncated, a topic missing or of
-    the wrong message type, samples off the tick grid (docs/logs.md)."""
+    the wrong message type, samples off the tick grid (docs/how-to/logs.md)."""
 
 
 class RunFolderError(AmsfeError, FileExistsError):

@@ -1,4 +1,5 @@
-"""What a log's effort is, and how the estimator uses it (issue 26, item 3; docs/effort.md).
+"""What a log's effort is, and how the estimator uses it (issue 26, item 3;
+docs/explanation/effort.md).
 
 Pure parts (no library): the joint-torque measurement and the wrapped transitions against
 finite differences, the input reconstruction against an accurate ODE solution and its noise

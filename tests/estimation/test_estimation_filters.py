@@ -248,7 +248,8 @@ def test_oosm_is_exact_over_a_long_lag_without_intermediate_updates(
 
 
 def test_oosm_multistep_lag_is_an_approximation(capsys: pytest.CaptureFixture[str]) -> None:
-    """The documented behaviour of A1 and Al1 over a lag (docs/estimation-algorithms.md).
+    """The documented behaviour of A1 and Al1 over a lag
+    (docs/explanation/estimation-algorithms.md).
 
     Encoder every step, l = d = lag. A1 (the paper's, PAPER-NOTES section 3) is exact at
     lag 1; past it, an encoder update falls inside the lag and the one-step retrodiction

@@ -13,6 +13,7 @@ import signal
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from amsfe_sym import __version__
 from amsfe_sym.apps import ros_nodes
@@ -35,6 +36,9 @@ from amsfe_sym.apps.options import (
 from amsfe_sym.apps.sweep.command import from_args as sweep_from_args
 from amsfe_sym.core.outputs import check_output, interrupted_note, ledger
 from amsfe_sym.errors import AmsfeError, ConfigError, SpecError, describe
+
+if TYPE_CHECKING:
+    from amsfe_sym.codegen.build import GenerateResult
 
 __all__ = ["BROKEN_PIPE", "get_argument_parser", "main"]
 
@@ -121,7 +125,7 @@ def get_argument_parser() -> argparse.ArgumentParser:
         "--out",
         default=None,
         help="run folder (default runs/<scenario>-<stamp>); an existing one is refused "
-        "(docs/scenarios.md, 'Output paths')",
+        "(docs/reference/scenarios.md, 'Output paths')",
     )
     s.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     s.add_argument("--no-plots", action="store_true", help="skip the figures")
@@ -143,7 +147,8 @@ def get_argument_parser() -> argparse.ArgumentParser:
         const="",
         default=None,
         metavar="DIR",
-        help="also write the run as a rosbag2 in MCAP (default <run folder>/bag; docs/logs.md); "
+        help="also write the run as a rosbag2 in MCAP (default <run folder>/bag; "
+        "docs/how-to/logs.md); "
         "DIR elsewhere is written together with the run folder, both or neither, and follows "
         "the --out rules",
     )
@@ -165,7 +170,7 @@ def get_argument_parser() -> argparse.ArgumentParser:
     add_sweep_arguments(
         sub.add_parser(
             "sweep",
-            help="scenario grid x estimators x controllers x seeds on Dask (docs/sweeps.md)",
+            help="scenario grid x estimators x controllers x seeds on Dask (docs/how-to/sweeps.md)",
         )
     )
     return parser
@@ -261,8 +266,16 @@ def _generate(args: argparse.Namespace) -> int:
     if args.period is not None:
         spec = spec_at_period(spec, args.period, args.substeps)
     res = generate(spec, out=args.out, extra_cflags=extra, force=args.force, progress=True)
-    state = "up to date (cached)" if res.reused else "generated"
-    print(f"{res.out_dir}: {state} in {res.seconds:.2f} s")
+    if res.reused:  # a build says it before compiling
+        import json
+
+        from amsfe_sym.codegen.build import lowered_stiffness
+
+        raw = json.loads(res.manifest_path.read_text())
+        for line in lowered_stiffness(spec, raw["actuators"]["Ks"], raw["joints"]):
+            print(line, file=sys.stderr)
+        warn_stiff(res.stiff(), source, res.modes)
+    print(f"{res.out_dir}: {_generate_state(res)}")
     if args.period is not None:
         m = spec.model
         print(
@@ -271,9 +284,20 @@ def _generate(args: argparse.Namespace) -> int:
         )
     if res.timings:
         print("  " + ", ".join(f"{k} {v:.2f} s" for k, v in res.timings.items()))
-    if res.reused:  # a build says it before compiling
-        warn_stiff(res.stiff(), source, res.modes)
     return 0
+
+
+def _generate_state(res: GenerateResult) -> str:
+    """What ``generate`` did and how long the command took: a cache hit's own check is a
+    few ms, the command's start-up and imports seconds (both said, so neither is taken for
+    the other)."""
+    from amsfe_sym.apps.phases import command_startup_s, process_age_s
+
+    state = "up to date (cached)" if res.reused else "generated"
+    line = f"{state} in {res.seconds:.2f} s"
+    if command_startup_s() is not None and (age := process_age_s()) is not None:
+        line += f"; the command took {age:.1f} s (start-up and imports included)"
+    return line
 
 
 def _check(args: argparse.Namespace) -> int:
@@ -313,8 +337,11 @@ def _check(args: argparse.Namespace) -> int:
 def _simulate(args: argparse.Namespace) -> int:
     """``amsfe simulate``: load the scenario, apply the overrides, generate its library, run,
     write the run folder and print the headline numbers (:mod:`amsfe_sym.apps.simulate`)."""
+    import time
+    from dataclasses import replace
     from datetime import datetime, timezone
 
+    from amsfe_sym.apps.phases import command_startup_s
     from amsfe_sym.apps.simulate import (
         BAG_IN_RUN,
         SimulateOptions,
@@ -325,6 +352,8 @@ def _simulate(args: argparse.Namespace) -> int:
     from amsfe_sym.codegen import library_for
     from amsfe_sym.scenario import apply_sets, load_scenario
 
+    t0 = time.perf_counter()
+    startup = command_startup_s() or 0.0
     sc = load_scenario(args.scenario).with_overrides(
         estimator=args.estimator,
         controller=args.controller,
@@ -347,7 +376,8 @@ def _simulate(args: argparse.Namespace) -> int:
     name = f"{sc.name}-{sc.estimator}-{stamp}" if one else f"{sc.name}-{stamp}"
     out = Path(args.out) if args.out else Path("runs") / name
     check_outputs(out, options)  # before the library is generated and the run
-    lib = library_for(sc)
+    lib = library_for(sc, progress=options.progress)  # a first run compiles: say so
+    options = replace(options, started_s=startup + time.perf_counter() - t0)
     if one:
         simulate_one(sc, lib, out, options)
     else:
@@ -419,7 +449,7 @@ def _study(args: argparse.Namespace) -> int:
     from amsfe_sym.apps.study import run_study
 
     inputs = _input_files(args.scenario)
-    if args.claims:  # the claim table of docs/reproduction.md on these seeds
+    if args.claims:  # the claim table of docs/explanation/reproduction.md on these seeds
         from amsfe_sym.apps.study.claims import (
             format_claims,
             is_claims_folder,

@@ -29,7 +29,7 @@ Registry format (TOML)::
                                   # then ``output``, e.g. "effects/effects.json")
 
     [[block]]
-    doc = "docs/reproduction.md"
+    doc = "docs/explanation/reproduction.md"
     source = "claims-paper-sim"
     stored = "docs/data/claims-paper-sim/claims.md"
     check = "claims"              # re-run: medians and p90s within their stored 95 % intervals

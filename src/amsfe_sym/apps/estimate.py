@@ -1,5 +1,5 @@
 """``amsfe estimate LOG``: an estimator of a generated robot over a recorded log (a ROS 1
-``.bag``, a rosbag2 folder, an ``.mcap``), into a run folder (docs/logs.md).
+``.bag``, a rosbag2 folder, an ``.mcap``), into a run folder (docs/how-to/logs.md).
 
 A log written by ``amsfe simulate --bag`` carries its robot, scenario and estimator
 (``/amsfe/config``), so ``amsfe estimate LOG`` alone reproduces the run's estimates; any
@@ -13,19 +13,25 @@ the robot's library is generated or loaded.
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass, replace
+import time
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
+from amsfe_sym.apps.estimate_build import (
+    LogEstimator,
+    default_scenario,
+    effort_options,
+    estimator_for_log,
+    read_robot_log,
+    robot_of,
+)
 from amsfe_sym.apps.estimate_filter import (
     HELD_THETA_STD,
     INPUT_UNKNOWN_ESTIMATOR,
-    OOSM_REFUSES,
     ROBOT_TORQUE_STD,
-    estimator_note,
-    filter_for_log,
 )
 from amsfe_sym.apps.estimate_report import (
     CommandTiming,
@@ -35,20 +41,16 @@ from amsfe_sym.apps.estimate_report import (
     print_summary,
     summary,
 )
-from amsfe_sym.apps.estimate_start import LogLinkStart, scenario_start
 from amsfe_sym.apps.phases import Phases, command_startup_s
 from amsfe_sym.core.folders import write_folder
 from amsfe_sym.core.jsonfile import write_json
 from amsfe_sym.core.outputs import check_output
 from amsfe_sym.core.toml import dump_toml, tomllib
 from amsfe_sym.errors import LogError, describe
-from amsfe_sym.logs.read import LogRateError, RobotLog, plan_log, read_config, read_log
+from amsfe_sym.logs.read import read_config
 from amsfe_sym.logs.source import log_topics
 from amsfe_sym.logs.spec import read_log_spec
 from amsfe_sym.scenario import Scenario, load_scenario, parse_scenario
-
-if TYPE_CHECKING:  # the spec module is imported when a log's rate needs it, not at start
-    from amsfe_sym.load.spec import RobotSpec
 
 __all__ = [
     "HELD_THETA_STD",
@@ -56,13 +58,17 @@ __all__ = [
     "ROBOT_TORQUE_STD",
     "EstimateOptions",
     "EstimateRun",
+    "LogEstimator",
     "add_arguments",
     "default_out",
     "default_scenario",
+    "effort_options",
     "estimate_command",
+    "estimator_for_log",
     "from_args",
     "nis_report",
     "print_summary",
+    "read_robot_log",
     "summary",
 ]
 
@@ -93,79 +99,6 @@ class EstimateOptions:
     verbose: bool = False
 
 
-def default_scenario(robot: str) -> Scenario:
-    """The settings ``amsfe estimate LOG --robot ROBOT`` runs with: the scenario defaults
-    (``[filter]``: process noise 0.1 N m, :data:`ROBOT_TORQUE_STD` once the log is read,
-    then the log spec's ``[filter]``: :func:`~amsfe_sym.apps.estimate_filter.filter_for_log`;
-    buffer 1000 steps; ``[encoders]`` and
-    ``[camera]``: the sensor noise the filter's R is built from; docs/scenarios.md), the
-    ``oosm`` estimator (:data:`INPUT_UNKNOWN_ESTIMATOR` once the log shows no applied
-    torque), and the estimate's start replaced by the log's first sample
-    (:func:`_start_from_log`).  No plant or trajectory is used."""
-    from amsfe_sym.codegen.preflight import modelled_joints
-    from amsfe_sym.load.spec import load_spec
-
-    spec = load_spec(robot)
-    n = len(modelled_joints(spec) or ())
-    zeros = [0.0] * n
-    filt: dict[str, float | int] = {}
-    if spec.camera.delay + 1 > 1000:
-        filt["buffer_steps"] = 2 * spec.camera.delay + 1
-    data = {
-        "name": f"estimate-{spec.name}",
-        "robot": str(spec.spec_path or spec.urdf) if Path(robot).exists() else robot,
-        "estimator": "oosm",
-        "trajectory": {"kind": "constant", "q": zeros},
-        "plant": {"q0": zeros, "qd0": zeros},
-        "estimate0": {"q": zeros, "qd": zeros, "motor": "encoders"},
-        "filter": filt,
-    }
-    return parse_scenario(data, Path(f"--robot {robot}"))
-
-
-def _link_start(sc: Scenario, log: RobotLog, lib: Any, effort: Any) -> LogLinkStart:
-    """The link angles of the log's first sample by its effort kind, a balance missing
-    :data:`ROBOT_TORQUE_STD` of torque (:func:`~amsfe_sym.apps.estimate_start.scenario_start`;
-    docs/effort.md, "Where the estimate starts")."""
-    return scenario_start(sc, log, lib, effort, ROBOT_TORQUE_STD)
-
-
-def _start_from_log(
-    sc: Scenario, log: RobotLog, start: LogLinkStart, hold_theta: bool = False
-) -> Scenario:
-    """``[estimate0]`` from the log's first encoder sample: link angles ``start`` (by the
-    effort's kind, :func:`_link_start`; its 1-sigma when it has one), link rates = the
-    measured velocities (motor states: the sample itself).  The filter's R and Q:
-    :func:`~amsfe_sym.apps.estimate_filter.filter_for_log`.
-
-    ``hold_theta`` (a log read at a period longer than the robot's T, its library built with
-    model substeps): theta is held at the spec's initial value (1-sigma
-    :data:`HELD_THETA_STD`; ``[filter] theta_rate_std = 0`` there).  At such a period the joint
-    modes turn by many radians a step (w T = 26 for the Panda at 1/30 s) and the model has
-    no spring damping: the one-step sensitivity of the link angles to theta (eqs. 1a, 4)
-    follows the aliased phase of an undamped oscillation, not the static deflection the
-    data show, and on the real Panda log the payload ran from 0 to 21 kg in 90 steps before
-    every estimator diverged (docs/logs.md, "A real Panda recording, worked")."""
-    n = log.u.shape[1]
-    z0 = log.z[0]
-    e0 = replace(sc.estimate0, q=tuple(map(float, start.q)), qd=tuple(map(float, z0[n:])))
-    if start.std is not None:
-        e0 = replace(e0, std={**dict(e0.std), "q": start.std})
-    if hold_theta:
-        e0 = replace(e0, std={**dict(e0.std), "theta": HELD_THETA_STD})
-    return replace(sc, estimate0=e0)
-
-
-def _robot_of(scenario_robot: str) -> tuple[str, list[str], float, int]:
-    """(name, joints, T, N) of a robot from its spec, without generating anything."""
-    from amsfe_sym.codegen.preflight import modelled_joints
-    from amsfe_sym.load.spec import load_spec
-
-    spec = load_spec(scenario_robot)
-    joints = modelled_joints(spec) or []
-    return spec.name, joints, spec.model.T, 4 * len(joints) + len(spec.theta)
-
-
 def _config_scenario(path: Path, config: dict[str, Any]) -> Scenario:
     try:
         data = tomllib.loads(str(config["scenario_toml"]))
@@ -175,7 +108,7 @@ def _config_scenario(path: Path, config: dict[str, Any]) -> Scenario:
                 f"log {path}: /amsfe/config scenario_toml",
                 "the run's scenario as TOML (written by amsfe simulate --bag)",
                 f"text that is not TOML ({exc})",
-                "pass --scenario FILE (or --robot ROBOT) to give it yourself (docs/logs.md)",
+                "pass --scenario FILE (or --robot ROBOT) to give it yourself (docs/how-to/logs.md)",
             )
         ) from exc
     return parse_scenario(data, path)
@@ -198,11 +131,11 @@ def _scenario(path: Path, config: dict[str, Any] | None, options: EstimateOption
                 "amsfe's run config (/amsfe/config, written by amsfe simulate --bag)",
                 "none",
                 "pass --robot ROBOT (a shipped robot or a robot.toml: the estimate starts "
-                "from the log), or --scenario FILE to tune the filter (docs/logs.md)",
+                "from the log), or --scenario FILE to tune the filter (docs/how-to/logs.md)",
             )
         )
     if from_config is not None and sc is not from_config:
-        mine, theirs = _robot_of(sc.robot), _robot_of(from_config.robot)
+        mine, theirs = robot_of(sc.robot), robot_of(from_config.robot)
         if (mine[0], mine[1]) != (theirs[0], theirs[1]):
             raise LogError(
                 describe(
@@ -213,27 +146,6 @@ def _scenario(path: Path, config: dict[str, Any] | None, options: EstimateOption
                 )
             )
     return sc.with_overrides(estimator=options.estimator)
-
-
-def _generated_at_period(robot: str, period: float) -> RobotSpec | None:
-    """The spec of ``robot`` at ``period`` [s] when ``amsfe generate ROBOT --period`` has
-    already built its library (:func:`~amsfe_sym.codegen.modes.spec_at_period`, found in the
-    cache without building anything), else None: then the rate refusal stands."""
-    from amsfe_sym.codegen.build import cached_library
-    from amsfe_sym.codegen.modes import spec_at_period
-
-    spec = spec_at_period(robot, period)
-    return spec if cached_library(spec) is not None else None
-
-
-def _with_modes_fix(exc: LogRateError, robot: str) -> LogRateError:
-    """The rate refusal with :func:`~amsfe_sym.codegen.modes.period_fix`'s command (with the
-    substeps the joint modes need)."""
-    from amsfe_sym.codegen.modes import period_fix
-
-    head = str(exc).split(". Fix: ")[0]
-    fix = period_fix(robot, exc.period)
-    return LogRateError(f"{head}. Fix: {fix}, or record at the robot's rate", exc.period)
 
 
 def estimate_command(
@@ -259,107 +171,42 @@ def estimate_command(
         inputs.append(log_path.parent)  # the .mcap of a bag folder: the folder is the log
     check_output(out, option="--out", force=options.force, inputs=inputs)
     spec = read_log_spec(options.log_spec)
-    effort = _effort_options(spec, options.log_spec)  # checked before anything is read
+    effort = effort_options(spec, options.log_spec)  # checked before anything is read
     clock.lap("setup")
     topics = log_topics(log_path)
     config = read_config(log_path, spec, topics)
     clock.lap("read")
     sc = _scenario(log_path, config, options)
-    name, joints, T, N = _robot_of(sc.robot)
     clock.lap("setup")
-    plan = plan_log(log_path, spec, joints, topics)
-    if options.verbose:
-        for line in plan.lines():
-            print(f"  {line}")
-    derived = None
-    try:
-        log = read_log(log_path, spec, joints, T, N, plan, robot=name)
-    except LogRateError as exc:  # the robot generated at the log's period, if it is cached
-        clock.lap("read")
-        derived = _generated_at_period(sc.robot, exc.period)
-        if derived is None:
-            raise _with_modes_fix(exc, sc.robot) from None
-        if options.verbose:
-            print(f"  the log's period {exc.period:g} s: library {derived.name} (cached)")
-        clock.lap("library")
-        log = read_log(log_path, spec, joints, derived.model.T, N, plan, robot=name)
+    log, derived = read_robot_log(
+        log_path, spec, sc.robot, topics, verbose=options.verbose, clock=clock
+    )
     log.config = config
     clock.lap("read")
     robot_defaults = options.scenario is None and (options.robot is not None or config is None)
-    settled = filter_for_log(
-        sc, log, spec, robot_defaults=robot_defaults, hold_theta=derived is not None
+    built = estimator_for_log(
+        sc,
+        log,
+        spec,
+        effort,
+        robot_defaults=robot_defaults,
+        estimator_given=options.estimator is not None,
+        derived=derived,
+        compiled=options.runtime == "compiled",
+        verbose=options.verbose,
+        clock=clock,
     )
-    sc = settled.scenario
-    if robot_defaults and options.estimator is None and log.effort_kind != "applied":
-        sc = sc.with_overrides(estimator=INPUT_UNKNOWN_ESTIMATOR)
-        print(
-            f"  estimator {INPUT_UNKNOWN_ESTIMATOR}: the default for effort kind "
-            f"{log.effort_kind!r} ({OOSM_REFUSES}); --estimator to choose"
-        )
-    elif note := estimator_note(log.effort_kind, sc.estimator):
-        print(f"  {note}")
-    if options.verbose:
-        c = log.clock
-        print(
-            f"  clock: log time - header stamp = {c.median:+.6f} s (spread {c.spread:.2e} s); "
-            "log times moved onto the stamp clock"
-        )
-        for line in settled.lines:
-            print(f"  {line}")
-    from amsfe_sym.codegen import library_for
-
-    clock.lap("setup")
-    lib = library_for(sc, robot=derived)
-    clock.lap("library")
-    effort = replace(effort, positions=spec.positions)
-    if robot_defaults:
-        # --robot: the defaults, started from the log (theta held at a slower period)
-        start = _link_start(sc, log, lib, effort)
-        sc = _start_from_log(sc, log, start, hold_theta=derived is not None)
-        if options.verbose:
-            print(f"  start: link angles from {start.how}")
-    est, feed = _estimator(sc, lib, log, options, effort)
+    sc, lib, settled = built.scenario, built.lib, built.filter
     from amsfe_sym.logs.replay import estimate_log
 
     clock.lap("setup")
-    result = estimate_log(feed, est, states=lib.N)
+    result = estimate_log(built.feed, built.estimator, states=lib.N)
     clock.lap("estimate")
     run = EstimateRun(
         log, result, sc, out, clock.spent["read"], clock.spent["estimate"], noise=settled.noise
     )
     _write(run, lib.manifest.joints, options, clock, startup_s)
     return run
-
-
-def _effort_options(spec: Any, path: str | None) -> Any:
-    """The :class:`~amsfe_sym.estimation.effort.EffortSpec` of the log spec's ``[effort]``
-    noise keys (its kind is the log's, set later); a bad value is one ConfigError line."""
-    from amsfe_sym.estimation.effort import effort_spec
-
-    return effort_spec(dict(spec.effort_options), f"{path or 'log spec'} [effort]")
-
-
-def _estimator(
-    sc: Scenario, lib: Any, log: RobotLog, options: EstimateOptions, effort: Any = None
-) -> Any:
-    """The estimator and the log it is fed: for an effort of kind ``joint_torque`` or
-    ``none``, :func:`~amsfe_sym.sim.effort.effort_estimator`'s (the input and encoder
-    measurements derived from the log, docs/effort.md), the library's C estimator with
-    ``--runtime compiled`` (the default; oosm's inverse backward map with the input as states
-    is refused there in one line: docs/effort.md, "Compiled").  ``effort``:
-    the log spec's ``[effort]`` noise keys and ``[joints] positions`` as an ``EffortSpec``
-    (None: the defaults); its kind is replaced by the log's."""
-    from amsfe_sym.estimation.effort import EffortSpec
-    from amsfe_sym.sim.builders import build_estimator, build_sensors, scenario_timing
-    from amsfe_sym.sim.effort import effort_estimator
-
-    sensors = build_sensors(sc, lib, np.random.default_rng(sc.seed), scenario_timing(sc, lib))
-    compiled = options.runtime == "compiled"
-    if log.effort_kind == "applied":
-        return build_estimator(sc, lib, sensors, log.z[0], compiled=compiled), log
-    spec = replace(effort or EffortSpec(), kind=log.effort_kind)
-    built = effort_estimator(sc, lib, sensors, log.z, log.effort, spec, compiled=compiled)
-    return built.estimator, replace(log, u=built.inputs.u, z=built.inputs.z_encoder)
 
 
 def add_arguments(e: argparse.ArgumentParser) -> None:
@@ -408,7 +255,12 @@ def from_args(args: argparse.Namespace) -> int:
         robot=args.robot,
         verbose=True,
     )
-    print_summary(summary(estimate_command(log, out, opts, startup_s)), out)
+    run = estimate_command(log, out, opts, startup_s)
+    print_summary(summary(run), out)
+    from amsfe_sym.apps.plots.cost import hint_line
+
+    if hint := hint_line(run.figures_s, (run.timing.startup_s or 0.0) + run.timing.wall_s):
+        print(f"  {hint}")
     return 0
 
 
@@ -448,7 +300,9 @@ def _write(
         start = max(log.t0_ns, 0) * 1e-9
         write_estimate_bag(tmp / "estimates", start, log.t, joints, est.x_hat, est.P_diag)
         if options.plots:
+            t = time.perf_counter()
             figures(run, tmp)
+            run.figures_s = time.perf_counter() - t
         if clock is not None:
             wall = clock.lap("write")
             p = clock.spent

@@ -1,4 +1,4 @@
-"""The filter ``amsfe estimate`` runs a log with (docs/logs.md, "The filter's R and Q on a
+"""The filter ``amsfe estimate`` runs a log with (docs/how-to/logs.md, "The filter's R and Q on a
 log"): ``--robot``'s defaults, then a scenario's ``[filter]``, then the log spec's
 ``[filter]`` (key by key, the log spec wins); the encoder noise measured from the log
 (:mod:`amsfe_sym.logs.noise`) printed, and used where the log spec says ``"log"``."""
@@ -27,12 +27,12 @@ __all__ = [
 #: The estimator of ``--robot`` for a log whose applied torque is not logged (effort kind
 #: ``joint_torque`` or ``none``): with the input as states oosm's A1 update finds its
 #: retrodicted covariance indefinite and refuses every camera frame; replay's exact
-#: re-filtering fuses them (docs/effort.md sections 2-3).
+#: re-filtering fuses them (docs/explanation/effort.md sections 2-3).
 INPUT_UNKNOWN_ESTIMATOR = "replay"
 #: Why oosm fuses no frame with the input estimated, as both printed lines give it.
 OOSM_REFUSES = (
     "oosm's single-lag update refuses camera frames when the input is estimated; "
-    "docs/effort.md section 2"
+    "docs/explanation/effort.md section 2"
 )
 
 
@@ -52,7 +52,7 @@ def estimator_note(effort_kind: str, estimator: str) -> str | None:
 #: log without the applied torque or slower than T (:func:`filter_for_log`): the
 #: torque a real arm's model misses (a URDF's end effector, torque sensor offsets); the
 #: scenario default 0.1 N m is for amsfe's own exact simulations.  The real Panda log of
-#: docs/logs.md ("A real Panda recording, worked") misses up to 4.2 N m of gravity torque;
+#: docs/how-to/logs.md ("A real Panda recording, worked") misses up to 4.2 N m of gravity torque;
 #: with 0.1 N m every estimator diverges on it.
 ROBOT_TORQUE_STD = 5.0
 
@@ -104,11 +104,11 @@ def filter_for_log(
        oosm's A1 update refuses every frame of a paper_2link driver log as indefinite).
        ``hold_theta`` (a log read at a period longer than the robot's T, its library built
        with model substeps): theta is held (``theta_rate_std = 0``; its 1-sigma
-       :data:`HELD_THETA_STD` is the start's, docs/logs.md).  The encoder noise is
+       :data:`HELD_THETA_STD` is the start's, docs/how-to/logs.md).  The encoder noise is
        measured from the log (:func:`~amsfe_sym.logs.noise.encoder_noise`, the median over
        joints) and printed as a suggestion, not used: as the default R it made the filter
        optimistic, or its covariance indefinite, on simulated logs whose default Q is too
-       small (docs/logs.md, "The encoder noise from the log").
+       small (docs/how-to/logs.md, "The encoder noise from the log").
     2. the scenario's ``[filter]`` (``sc`` as given, with ``--scenario``);
     3. the log spec's ``[filter]`` (``spec.filter_options``); ``encoder_q_std = "log"``
        (``encoder_qd_std``) is the measured noise.

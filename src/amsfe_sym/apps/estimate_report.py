@@ -1,6 +1,6 @@
 """What ``amsfe estimate`` reports about a run: ``summary.json`` (each role's messages used
 and skipped, the clock offset, NIS), the printed headline and the figures (``estimate.png``,
-``nis.png``); docs/logs.md, "Consistency without truth"."""
+``nis.png``); docs/how-to/logs.md, "Consistency without truth"."""
 
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ __all__ = [
 @dataclass(frozen=True)
 class CommandTiming:
     """Wall time [s] of the phases of ``amsfe estimate`` other than reading and estimating
-    (docs/logs.md, "Speed"); each phase includes the imports made in it.
+    (docs/how-to/logs.md, "Speed"); each phase includes the imports made in it.
 
     Attributes:
         startup_s: From the process's start to the command's: the interpreter, the
@@ -60,7 +60,8 @@ class EstimateRun:
     """What ``amsfe estimate`` did: the read log, the estimates, the folder and the timing
     (``read_s``: the log read, topic search included; ``estimate_s``: the estimator over
     it; ``timing``: the other phases, set once the folder is written; ``noise``: the encoder
-    noise measured from the log, when it was)."""
+    noise measured from the log, when it was; ``figures_s``: the figures' part of the
+    write [s])."""
 
     log: RobotLog
     estimate: LogEstimate
@@ -70,6 +71,7 @@ class EstimateRun:
     estimate_s: float
     timing: CommandTiming = field(default_factory=CommandTiming)
     noise: EncoderNoise | None = None
+    figures_s: float = 0.0
 
 
 def _finite(x: float) -> float | None:
@@ -117,7 +119,7 @@ def nis_report(run: EstimateRun) -> dict[str, Any]:
     """Normalized innovation squared of the encoder updates (dof 2n; 3n with a joint
     torque) and of the camera frames (dof 2): mean and the fraction inside the two-sided
     chi-square 95 % band.  A filter whose model and noise fit the arm has mean NIS near the
-    dof and about 95 % inside (docs/logs.md, "Consistency without truth").  Empty where the
+    dof and about 95 % inside (docs/how-to/logs.md, "Consistency without truth").  Empty where the
     replay did not record NIS."""
     est, log = run.estimate, run.log
     n = log.u.shape[1]
@@ -252,7 +254,7 @@ def _noise_dict(noise: EncoderNoise | None) -> dict[str, Any] | None:
 def _timing(run: EstimateRun) -> dict[str, float | None]:
     """The command's phases [s] and its real-time factors: the log's duration over the
     command's wall time (``real_time_factor_command``) and over start-up + wall time
-    (``real_time_factor_end_to_end``, null when start-up was not measured); docs/logs.md,
+    (``real_time_factor_end_to_end``, null when start-up was not measured); docs/how-to/logs.md,
     "Speed"."""
     t, d = run.timing, run.log.K * run.log.T
     whole = None if t.startup_s is None else t.startup_s + t.wall_s
@@ -340,70 +342,19 @@ def print_summary(s: dict[str, Any], out: Path) -> None:
 
 def figures(run: EstimateRun, folder: Path) -> None:
     """``estimate.png`` (per joint: the error against the truth with +-2 sigma, or the
-    estimate beside the encoder) and ``nis.png``."""
-    import matplotlib
+    spring deflection and the encoder residual) and ``nis.png``
+    (:func:`~amsfe_sym.apps.plots.log.plot_log`)."""
+    from amsfe_sym.apps.plots.log import plot_log
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    log, est = run.log, run.estimate
-    n = log.u.shape[1]
-    fig, axes = plt.subplots(n, 1, figsize=(8, 2.4 * n + 0.6), sharex=True, squeeze=False)
-    for j in range(n):
-        ax = axes[j, 0]
-        if log.truth is not None:
-            ax.plot(log.t, log.truth[:, j] - est.x_hat[:, j], lw=0.8, label="error q - q_hat")
-            sd = np.sqrt(np.maximum(est.P_diag[:, j], 0))
-            ax.fill_between(log.t, -2 * sd, 2 * sd, alpha=0.2, label="+-2 sigma")
-            ax.set_ylabel(f"q{j + 1} error [rad]")
-        else:
-            ax.plot(log.t, est.x_hat[:, j], lw=0.8, label="q_hat (link)")
-            ax.plot(log.t, log.z[:, j], lw=0.6, label="qm (encoder)")
-            ax.set_ylabel(f"joint {j + 1} [rad]")
-        if log.frames:  # one collection: an axvline each took 12 of 15 s for 1818 frames x 7
-            arrivals = [fr.delivery_step * log.T for fr in log.frames]
-            x_data = ax.get_xaxis_transform()  # x in data, y in axes coordinates
-            ax.vlines(arrivals, 0, 1, transform=x_data, color="k", lw=0.2, alpha=0.2)
-        ax.legend(loc="upper right", fontsize=7)
-    axes[-1, 0].set_xlabel("t [s] (thin lines: camera frames' arrivals)")
-    fig.suptitle(f"{run.scenario.estimator} on {log.path.name}")
-    fig.tight_layout()
-    fig.savefig(folder / "estimate.png", dpi=110)
-    plt.close(fig)
-    _nis_figure(run, folder)
-
-
-def _nis_figure(run: EstimateRun, folder: Path) -> None:
-    """``nis.png``: NIS of the encoder updates and of the camera frames over time, with
-    their chi-square 95 % bands (nothing drawn where the replay recorded no NIS)."""
-    import matplotlib.pyplot as plt
-
-    log, est = run.log, run.estimate
-    rep = nis_report(run)
-    if not rep:
-        return
-    fig, axes = plt.subplots(len(rep), 1, figsize=(8, 2.6 * len(rep) + 0.6), squeeze=False)
-    for ax, (what, r) in zip(axes[:, 0], rep.items(), strict=True):
-        if what == "encoders":
-            t, v = log.t, np.asarray(getattr(est, "encoder_nis", None), dtype=np.float64)
-            ax.plot(t, v, lw=0.3, alpha=0.5, label="encoder update")
-            w = max(1, len(v) // 100)  # its running mean over 1 % of the log
-            ok = np.isfinite(v)
-            mean = np.convolve(np.where(ok, v, 0), np.ones(w), "same") / np.maximum(
-                np.convolve(ok, np.ones(w), "same"), 1
-            )
-            ax.plot(t, mean, lw=1.0, color="k", label=f"running mean ({w} ticks)")
-        else:
-            arrival, v = _frame_nis(est) or (np.zeros(0), np.zeros(0))
-            ax.plot(arrival * log.T, v, ".", ms=3, label="camera frame (at its arrival)")
-        lo, hi = r["band_95"]
-        ax.axhspan(lo, hi, color="g", alpha=0.12, label=f"chi2({r['dof']}) 95 % band")
-        ax.axhline(r["dof"], color="g", lw=0.6)
-        ax.set_yscale("log")
-        ax.set_ylabel(f"NIS {what}")
-        ax.legend(loc="upper right", fontsize=7)
-    axes[-1, 0].set_xlabel("t [s]")
-    fig.suptitle(f"consistency without truth: NIS on {log.path.name}")
-    fig.tight_layout()
-    fig.savefig(folder / "nis.png", dpi=110)
-    plt.close(fig)
+    est = run.estimate
+    enc = getattr(est, "encoder_nis", None)
+    plot_log(
+        run.log,
+        est.x_hat,
+        est.P_diag,
+        run.scenario.estimator,
+        nis_report(run),
+        None if enc is None else np.asarray(enc, dtype=np.float64),
+        _frame_nis(est),
+        folder,
+    )

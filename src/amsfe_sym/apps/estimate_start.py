@@ -1,4 +1,4 @@
-"""The link angles ``amsfe estimate LOG --robot ROBOT`` starts from (docs/logs.md, "Where
+"""The link angles ``amsfe estimate LOG --robot ROBOT`` starts from (docs/how-to/logs.md, "Where
 the estimate starts"), by what the log's effort says of the springs at its first sample:
 
 - ``joint_torque``: the spring torque is measured, so ``q = qm - tau_J / Ks`` is exact

@@ -1,7 +1,7 @@
 """The options of ``amsfe bench``, ``amsfe study`` and ``amsfe sweep`` (the parser is
 :func:`amsfe_sym.apps.cli.get_argument_parser`; ``estimate`` keeps its own in
 :mod:`amsfe_sym.apps.estimate`).  Every option that names a path the command writes says
-the output rule in its help (docs/scenarios.md, "Output paths")."""
+the output rule in its help (docs/reference/scenarios.md, "Output paths")."""
 
 from __future__ import annotations
 
@@ -20,7 +20,8 @@ def add_set(p: argparse.ArgumentParser) -> None:
         default=[],
         metavar="KEY=VALUE",
         help="override a scenario field, e.g. integrator=paper, filter.link_torque_std=2, "
-        'camera.delay=0 (see docs/scenarios.md; "robot" restores the robot\'s camera timing)',
+        'camera.delay=0 (see docs/reference/scenarios.md; "robot" restores the robot\'s '
+        "camera timing)",
     )
 
 
@@ -140,7 +141,9 @@ def add_study_arguments(p: argparse.ArgumentParser) -> None:
         help="a named scenario variant (repeatable): --variant paper integrator=paper",
     )
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    p.add_argument("--claims", action="store_true", help="the claim table of docs/reproduction.md")
+    p.add_argument(
+        "--claims", action="store_true", help="the claim table of docs/explanation/reproduction.md"
+    )
     p.add_argument(
         "--second-block",
         type=SEED,

@@ -1,5 +1,5 @@
 """The wall time of a command's phases and the process's start-up (``amsfe estimate``'s
-``timing``, docs/logs.md "The command, end to end")."""
+``timing``, docs/how-to/logs.md "The command, end to end")."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """``amsfe sim-node``, ``amsfe node`` and ``amsfe play``: the command-line side of the ROS 2
-nodes of :mod:`amsfe_sym.ros` (docs/ros.md).  One ``add_*_arguments`` / ``*_from_args`` pair
+nodes of :mod:`amsfe_sym.ros` (docs/how-to/ros.md).  One ``add_*_arguments`` / ``*_from_args`` pair
 per command; rclpy is imported only when a command runs.
 
 Exit codes: 0 done; 2 bad input (one ``error:`` line); 3 (``amsfe node``) a fail-safe hold
@@ -34,7 +34,10 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=SEED, default=None)
     p.add_argument("--duration", type=DURATION, default=None, help="[s] of sample time")
     p.add_argument(
-        "--topic-spec", default=None, metavar="FILE", help="topics, joints, QoS (docs/topics.md)"
+        "--topic-spec",
+        default=None,
+        metavar="FILE",
+        help="topics, joints, QoS (docs/reference/topics.md)",
     )
     p.add_argument(
         "--set",
@@ -150,7 +153,7 @@ def add_node_arguments(p: argparse.ArgumentParser) -> None:
         "--hold",
         choices=("gravity", "zero"),
         default="gravity",
-        help="the fail-safe command: g(q_hat) or zero (docs/ros.md)",
+        help="the fail-safe command: g(q_hat) or zero (docs/how-to/ros.md)",
     )
 
 
@@ -205,7 +208,10 @@ def add_play_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("log", help="rosbag2 folder or .mcap file (amsfe simulate --bag writes one)")
     p.add_argument("--rate", type=SECONDS, default=1.0, help="speed factor of the recorded pace")
     p.add_argument(
-        "--topic-spec", default=None, metavar="FILE", help="topics, joints, QoS (docs/topics.md)"
+        "--topic-spec",
+        default=None,
+        metavar="FILE",
+        help="topics, joints, QoS (docs/reference/topics.md)",
     )
     p.add_argument("--start-timeout", type=SECONDS, default=30.0, help="wait for a node [s]")
     p.add_argument(

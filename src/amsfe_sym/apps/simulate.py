@@ -50,6 +50,8 @@ class SimulateOptions:
         bag: Also write the run as a rosbag2 in MCAP (:mod:`amsfe_sym.logs.write`) at this
             folder; :data:`BAG_IN_RUN`: ``<run folder>/bag``; None: no bag.
         inputs: Files the command reads (the scenario file): never written.
+        started_s: How long the command had run before this call [s] (the library's
+            compile, start-up), for the ``--no-plots`` hint's share; None: 0.
     """
 
     plots: bool = True
@@ -58,6 +60,7 @@ class SimulateOptions:
     runtime: str = "compiled"
     bag: Path | str | None = None
     inputs: tuple[Path, ...] = ()
+    started_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -115,15 +118,17 @@ def simulate_one(
         RunFolderError: ``out`` or the bag cannot be written as asked (checked before the
             run).
     """
+    from amsfe_sym.apps.plots.cost import FigureClock
     from amsfe_sym.logs.write import bag_job, run_bag_filler
 
+    clock = FigureClock(options.started_s)
     outs = check_outputs(out, options)  # before the run: nothing is computed for nothing
     res = run(sc, lib, progress=options.progress, runtime=options.runtime)
     figures = None
     if options.plots:
         from amsfe_sym.apps.plots.run import plot_run
 
-        figures = plot_run
+        figures = clock.timed(plot_run)
     inside = options.bag == BAG_IN_RUN
 
     def extra(folder: Path) -> None:
@@ -138,6 +143,8 @@ def simulate_one(
         bag = out / "bag" if inside else Path(options.bag)
         print(f"bag: {bag} (open its .mcap in Foxglove; amsfe estimate {bag})")
     print_run(res, out)
+    if hint := clock.hint():
+        print(f"  {hint}")
     return res
 
 
@@ -159,16 +166,18 @@ def simulate_comparison(
     """Run ``sc`` once per controller (same seed and noise), write ``out/<controller>/``,
     ``comparison.json`` and the paper's figures, and print the comparison.  The bags go to
     ``out/<controller>/bag``, or ``<--bag>/<controller>`` written together with ``out``."""
+    from amsfe_sym.apps.plots.cost import FigureClock
     from amsfe_sym.apps.reproduce import comparison_filler, print_comparison, run_comparison
     from amsfe_sym.logs.write import bag_job, run_bag_filler
 
+    clock = FigureClock(options.started_s)
     outs = check_outputs(out, options)  # before the runs
     cmp = run_comparison(sc, controllers, lib, progress=options.progress, runtime=options.runtime)
     figures = None
     if options.plots:
         from amsfe_sym.apps.plots.paper import plot_comparison
 
-        figures = plot_comparison
+        figures = clock.timed(plot_comparison)
     inside = options.bag == BAG_IN_RUN
 
     def extra(name: str, res: RunResult, folder: Path) -> None:
@@ -189,6 +198,8 @@ def simulate_comparison(
         for name in cmp.results:
             print(f"bag: {out / name / 'bag' if inside else Path(options.bag) / name}")
     print_comparison(cmp, out)
+    if hint := clock.hint():
+        print(f"  {hint}")
 
 
 def print_run(res: RunResult, out: Path) -> None:

@@ -8,7 +8,7 @@ a library whose bytes still match it (a truncated or damaged ``.so`` is rebuilt 
 refused by :class:`~amsfe_sym.runtime.library.ModelLibrary`).  Hidden temporary folders left
 by a killed run (its pid gone, or older than an hour) are removed by the next build.
 
-Compiler flags: ``-O1`` by default (see docs/codegen.md for the measurements behind it);
+Compiler flags: ``-O1`` by default (see docs/explanation/codegen.md for the measurements behind it);
 override with ``$AMSFE_CFLAGS`` or ``--cflags``.  ``-march=native`` ties the library to
 the CPU; it is allowed, and since the flags are hashed, a changed flag rebuilds.
 """
@@ -20,7 +20,6 @@ import functools
 import json
 import os
 import shutil
-import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -50,6 +49,7 @@ from amsfe_sym.codegen.compile_units import (
 )
 from amsfe_sym.codegen.compile_units import say as _say
 from amsfe_sym.codegen.manifest import manifest_document
+from amsfe_sym.core.folders import TMP_MARKER, make_tmp
 from amsfe_sym.core.interrupts import DeferredSignals, checkpoint
 from amsfe_sym.core.jsonfile import to_json
 from amsfe_sym.errors import CodegenError, RunFolderError, describe
@@ -57,7 +57,7 @@ from amsfe_sym.load.spec import RobotSpec, load_spec
 from amsfe_sym.runtime.library import file_sha256
 from amsfe_sym.runtime.stability import JointMode, StiffJoint, modes_from_manifest, stiff_joints
 
-__all__ = ["GenerateResult", "cached_library", "generate"]
+__all__ = ["GenerateResult", "cached_library", "generate", "lowered_stiffness"]
 
 #: The hand-written C glue of the compiled estimators, built into every library.
 
@@ -224,6 +224,12 @@ def _build(
     from amsfe_sym.load import load_robot
     from amsfe_sym.symbolic.model import build_functions
 
+    _say(
+        progress,
+        f"[amsfe] {spec.name}: {'rebuilding' if force else 'no library in the cache'} "
+        f"({out_dir}): generating it (model, C, compile; a 7-joint arm takes about a minute, "
+        "then it is reused)",
+    )
     timings: dict[str, float] = {}
     t = time.perf_counter()
     robot_obj = load_robot(spec)
@@ -236,6 +242,11 @@ def _build(
         warn_stiff(
             stiff_joints(modes, m.T, m.integrator, m.model_substeps), robot_source(spec), modes
         )
+    if progress:
+        for line in lowered_stiffness(
+            spec, robot_obj.Ks.tolist(), [j.name for j in robot_obj.joints]
+        ):
+            _say(True, line)
     checkpoint()
     t = time.perf_counter()
     model = build_functions(robot_obj, parts)
@@ -245,7 +256,7 @@ def _build(
 
     parent.mkdir(parents=True, exist_ok=True)
     clean_stale_tmp(parent, spec.name)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{spec.name}-{os.getpid()}-", dir=parent))
+    tmp = make_tmp(parent, f".{spec.name}-{os.getpid()}-")
     tmp.chmod(0o755)
     try:
         t = time.perf_counter()
@@ -332,6 +343,7 @@ def _build(
         manifest["joint_modes"] = modes_document(robot_obj, modes)
         (tmp / MANIFEST).write_text(to_json(manifest))
         checkpoint()
+        (tmp / TMP_MARKER).unlink()  # what is renamed into place is the library folder
         replace_dir(tmp, out_dir)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -346,6 +358,25 @@ def _build(
         timings,
         modes,
     )
+
+
+def lowered_stiffness(spec: RobotSpec, Ks: Sequence[float], joints: Sequence[str]) -> list[str]:
+    """One line per joint whose default stiffness a spec without ``[actuators] Ks`` (a bare
+    URDF) got lowered from :data:`~amsfe_sym.load.parameters.DEFAULT_KS`, saying why and how
+    to set it; empty when the spec gives Ks.  The default keeps each joint's
+    link-against-motor mode at w T <= 0.5 (a light wrist at T = 1 ms would make the
+    discrete model diverge; :func:`~amsfe_sym.load.parameters.default_stiffness`)."""
+    if spec.actuators.Ks is not None:
+        return []
+    default = 1000.0  # load.parameters.DEFAULT_KS (not imported: it imports Pinocchio)
+    return [
+        f"[amsfe] {spec.name}: joint {name}: default stiffness Ks lowered from {default:g} to "
+        f"{k:.4g} N m/rad, so that its link-against-motor mode keeps w T <= 0.5 at "
+        f"T = {spec.model.T:g} s (w^2 = Ks (1/J + 1/Mm), J its lightest inertia); set your "
+        "arm's own with [actuators] Ks in a robot.toml (docs/reference/robot-spec.md)"
+        for name, k in zip(joints, Ks, strict=True)
+        if float(k) < default * (1 - 1e-9)
+    ]
 
 
 def _check_library_folder(out_dir: Path) -> None:

@@ -75,13 +75,13 @@ def check_parts(parts: Sequence[str]) -> tuple[str, ...]:
 
 
 def default_out_dir() -> Path:
-    """``$AMSFE_GENERATED_DIR``, else the repository's ``generated/``, else ``./generated``."""
+    """Where libraries go by default: ``$AMSFE_GENERATED_DIR``, else ``generated/`` in the
+    current directory (as ``runs/``), wherever the package is installed: a command run in
+    another folder no longer writes into the checkout it was installed from
+    (docs/api.md, "Where files go")."""
     env = os.environ.get("AMSFE_GENERATED_DIR")
     if env:
         return Path(env)
-    repo = _PACKAGE.parent.parent
-    if (repo / "pyproject.toml").is_file() and (repo / "generated").is_dir():
-        return repo / "generated"
     return Path.cwd() / "generated"
 
 

@@ -3,7 +3,8 @@
 A library is the generated file (``<robot>.c``) and the hand-written C of ``runtime/c``.  One
 ``cc`` command over all of them compiled them one after the other on one core; the Panda's
 9.8 s of compile were 5.4 s for ``panda.c`` and 4.4 s for the runtime files (2.3 s of them the
-O3 kernels), measured unit by unit on a 2-core AMD EPYC (docs/codegen.md).  Here each file
+O3 kernels), measured unit by unit on a 2-core AMD EPYC (docs/explanation/codegen.md).  Here each
+file
 is its own unit (``cc -c``), the units run ``jobs`` at a time (default: the CPUs this process
 may use), the largest first, and the objects are linked into the shared library.
 

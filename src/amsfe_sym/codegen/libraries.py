@@ -24,7 +24,10 @@ def load_library(
 
 
 def library_for(
-    sc: Scenario, out: str | os.PathLike[str] | None = None, robot: RobotSpec | None = None
+    sc: Scenario,
+    out: str | os.PathLike[str] | None = None,
+    robot: RobotSpec | None = None,
+    progress: bool = False,
 ) -> ModelLibrary:
     """Generate (or reuse) and load the library a scenario runs on.
 
@@ -33,6 +36,8 @@ def library_for(
     checked against the robot spec first (:func:`~amsfe_sym.scenario.camera_timing`), so a
     bad scenario fails before anything is generated.  ``robot`` replaces the spec of
     ``sc.robot`` (a derived spec, e.g. a sweep's other true payload; give it its own name).
+    ``progress``: when the library is built, say so and show the build's progress on stderr
+    (a 7-joint arm compiles for about a minute).
 
     Raises:
         ConfigError: the scenario's camera timing does not fit the robot or the filter.
@@ -54,7 +59,7 @@ def library_for(
             name=f"{spec.name}_{sc.integrator}",
             model=replace(spec.model, integrator=sc.integrator),  # type: ignore[arg-type]
         )
-    return load_library(spec, out=out)
+    return load_library(spec, out=out, progress=progress)
 
 
 def library_at_period(

@@ -14,7 +14,7 @@ neglects the coupling of the modes through the motor damping).  Per joint it kee
 fastest mode and, per integrator, the one that needs the smallest step
 (:mod:`amsfe_sym.runtime.stability` says which w h each integrator can take).  Numerics
 are Pinocchio and numpy only (no CasADi): 200 samples of the Panda take 0.04 s
-(docs/codegen.md, "Joint modes").
+(docs/explanation/codegen.md, "Joint modes").
 
 :func:`spec_at_period` derives, in memory, the spec of a robot sampled at another T (the robot
 folder is never edited), with ``model_substeps`` chosen from the modes;

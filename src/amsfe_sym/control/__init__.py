@@ -2,7 +2,8 @@
 
 ``amsfe``, ``dtsmc``, ``amsfe-paper``, ``dtsmc-paper`` and ``truth`` are the paper's discrete
 terminal sliding mode laws on generated code (:mod:`amsfe_sym.control.sliding`; the laws as
-printed in :mod:`amsfe_sym.control.printed`; derived in docs/control.md); ``truth-ct`` is a
+printed in :mod:`amsfe_sym.control.printed`; derived in docs/explanation/control.md); ``truth-ct``
+is a
 cascaded computed-torque law on the true state.
 
 May import: errors, runtime (the library's laws and manifest), signals.trajectory.

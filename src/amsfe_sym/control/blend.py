@@ -3,7 +3,8 @@
 When a cascade starts (``startup = "converged"``: at the first tick its estimate is trusted),
 the desired trajectory q_d(t) is in general somewhere else than the arm, and moving at another
 rate.  Asking the sliding law to close that gap at once is what swings the joints at start-up
-(docs/control.md, "Start-up").  Instead, as an industrial controller ramps onto a path, the
+(docs/explanation/control.md, "Start-up").  Instead, as an industrial controller ramps onto a path,
+the
 law tracks
 
     q_r(t) = q_d(t) + delta(t - t0),   delta(s) = d0 b0(s / Tb) + d1 Tb b1(s / Tb)   (s < Tb)

@@ -1,5 +1,6 @@
 """The paper's laws as printed: (37) ``amsfe-paper`` and the baseline (54) ``dtsmc-paper``,
-on the generated laws; docs/control.md says why they fail on the paper's arm (law (37) as
+on the generated laws; docs/explanation/control.md says why they fail on the paper's arm (law (37)
+as
 printed hides u: PAPER-NOTES section 4), which is why the cascades of
 :mod:`amsfe_sym.control.sliding` exist."""
 
@@ -39,7 +40,7 @@ class _Printed(_SlidingBase):
                     f"controller {self.name!r} gain qmd_next",
                     "'predict' or 'hold'",
                     repr(self.gains["qmd_next"]),
-                    "see docs/control.md",
+                    "see docs/explanation/control.md",
                 )
             )
         self._u_prev = np.zeros(self.n)
@@ -98,7 +99,7 @@ class AmsfePaper(_Printed):
                     "controller 'amsfe-paper' gain state",
                     "'estimate' (the fusion estimate) or 'true' (an oracle)",
                     repr(self.gains["state"]),
-                    "see docs/control.md",
+                    "see docs/explanation/control.md",
                 )
             )
 

@@ -2,7 +2,8 @@
 
 Each class reads its inputs (the fusion estimate, the encoders, or the true state), calls one
 generated law of :mod:`amsfe_sym.symbolic.control` (the maths lives there, once), and keeps
-the little memory the law needs between ticks.  docs/control.md derives the laws and says
+the little memory the law needs between ticks.  docs/explanation/control.md derives the laws and
+says
 why the printed ones fail on the paper's arm.
 
 ========================  =======================  ======================================
@@ -31,7 +32,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from amsfe_sym.control.base import Controller, FloatArray, LawInputs, register
+from amsfe_sym.control.base import Controller, FloatArray, LawInputs, handed_over, register
 from amsfe_sym.control.blend import blend_offsets, blend_through, blend_time, blend_weight
 from amsfe_sym.errors import ConfigError, check_known_keys, describe
 from amsfe_sym.runtime.library import ModelLibrary
@@ -104,7 +105,7 @@ class _SlidingBase(Controller):
                     f"controller {self.name!r} gain {key}",
                     "finite values >= 0 (wm > 0)",
                     repr(raw),
-                    "see docs/control.md for each gain",
+                    "see docs/explanation/control.md for each gain",
                 )
             )
         return v
@@ -166,7 +167,8 @@ class _Cascade(_SlidingBase):
     #: The gains ``headroom_tau`` scales by the actuators' headroom (the loops' bandwidths and
     #: the reaching law's gains).
     HEADROOM_GAINS: ClassVar[tuple[str, ...]] = ("h", "eps", "wm", "wf")
-    #: The start-ups (docs/control.md, "Start-up"): ``"first"`` starts the command filter at
+    #: The start-ups (docs/explanation/control.md, "Start-up"): ``"first"`` starts the command
+    #: filter at
     #: rest on the first command, whatever the estimate (the form the paper's laws imply);
     #: ``"converged"`` waits until the estimate is fit for the law: every link angle's and
     #: rate's posterior standard deviation below ``ready_q_std`` [rad] and ``ready_qd_std``
@@ -178,7 +180,8 @@ class _Cascade(_SlidingBase):
     #: the motor's own angle and rate (the encoders need no convergence) and joins the
     #: reference's motor trajectory within the blend's budget; ``"auto"``: ``"motor"`` when
     #: the estimator's model is the paper's (``integrator = "paper"``, whose filter takes
-    #: ~0.3 s to pass the rate test), else ``"reference"`` (docs/control.md measures both).
+    #: ~0.3 s to pass the rate test), else ``"reference"`` (docs/explanation/control.md measures
+    #: both).
     #: Then the filter starts at rest on the first trusted command, as it would with the
     #: true state.
     #: With ``blend_accel`` [rad/s^2] finite, the reference then starts from the state the law
@@ -195,13 +198,13 @@ class _Cascade(_SlidingBase):
     #: time constant ``headroom_tau`` (``rho += T / headroom_tau (r - rho)``): a demand the
     #: actuators cannot meet lowers the loops' bandwidths on every joint alike, so the law
     #: asks what they can apply instead of winding the flexible mode into a saturated
-    #: oscillation (issue 28, docs/control.md "Start-up").
+    #: oscillation (issue 28, docs/explanation/control.md "Start-up").
     #: With ``blend_lead`` in (0, 1] the blend is planned as if it had started that share of
     #: the wait before the trusted tick (1: at the loop's first tick), through the trusted
     #: estimate at the trusted tick (:func:`~amsfe_sym.control.blend.blend_through`): the
     #: wait spends the blend's flat start instead of adding the offset the arm drifted
     #: meanwhile to the one the blend must return; 0: planned from the trusted tick
-    #: (docs/control.md, "Start-up, issue 28, fourth pass").
+    #: (docs/explanation/control.md, "Start-up: the blend planned before the trusted tick").
     STARTUPS: ClassVar[tuple[str, ...]] = ("first", "converged")
     HOLDS: ClassVar[tuple[str, ...]] = ("reference", "motor", "auto")
 
@@ -224,7 +227,7 @@ class _Cascade(_SlidingBase):
                     f"controller {self.name!r} gain startup",
                     f"one of {list(self.STARTUPS)}",
                     repr(self.gains["startup"]),
-                    "see docs/control.md, Start-up",
+                    "see docs/explanation/control.md, Start-up",
                 )
             )
         self._ready_std = (
@@ -240,7 +243,7 @@ class _Cascade(_SlidingBase):
                     f"controller {self.name!r} gain hold",
                     f"one of {list(self.HOLDS)}",
                     repr(self.gains["hold"]),
-                    "see docs/control.md, Start-up",
+                    "see docs/explanation/control.md, Start-up",
                 )
             )
         self._mref = lib.function("control_motor_reference")
@@ -256,7 +259,7 @@ class _Cascade(_SlidingBase):
                     f"controller {self.name!r} gain blend_lead",
                     "a number in [0, 1] (0: off)",
                     repr(lead),
-                    "see docs/control.md, Start-up",
+                    "see docs/explanation/control.md, Start-up",
                 )
             )
         self._blend_lead = float(lead)
@@ -304,7 +307,7 @@ class _Cascade(_SlidingBase):
                     f"controller {self.name!r} gain {key}",
                     "a number > 0 (inf: off)",
                     repr(v),
-                    "see docs/control.md, Start-up",
+                    "see docs/explanation/control.md, Start-up",
                 )
             )
         return float(v)
@@ -345,12 +348,8 @@ class _Cascade(_SlidingBase):
             )
         return self._ready
 
-    def handed_over(self, k: int) -> bool:
-        """Converged start-up: trusted, blend over at ``k`` (C: amsfe_ctrl_handed_over)."""
-        if self.gains["startup"] != "converged" or self._blend is None:
-            return self.gains["startup"] != "converged" or self._started
-        k0, s0, tb, _, _ = self._blend
-        return self._started and not ((k - k0) * self.lib.T + s0 < tb)
+    def handed_over(self, k: int) -> bool:  # C: amsfe_ctrl_handed_over
+        return handed_over(self.gains["startup"], self._started, self._blend, k, self.lib.T)
 
     def _gain(self, key: str, size: int) -> FloatArray:
         if key == "tau_max" and self.gains.get("tau_max") is None:
@@ -439,7 +438,7 @@ class _Cascade(_SlidingBase):
 @register
 class Amsfe(_Cascade):
     """``amsfe``: the terminal sliding surface (31)-(33) with the estimation-error term, on
-    the fusion estimate, through the flexible-joint cascade (docs/control.md)."""
+    the fusion estimate, through the flexible-joint cascade (docs/explanation/control.md)."""
 
     name = "amsfe"
     law = "control_amsfe"
@@ -468,7 +467,8 @@ class Dtsmc(_Cascade):
     estimator.  It reads the motor encoders and removes the spring deflection the plan
     predicts: ``q = qm - (qm_r - q_d)``, ``qd = qmd - (qmd_r - qd_d)`` (``qm_r`` the motor
     angle of the desired motion), computed inside the generated law; theta stays at its
-    initial value.  docs/control.md says why the simpler readings (q = qm, or removing the
+    initial value.  docs/explanation/control.md says why the simpler readings (q = qm, or removing
+    the
     deflection commanded one tick before) diverge."""
 
     name = "dtsmc"

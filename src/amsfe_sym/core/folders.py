@@ -4,6 +4,7 @@ on the way leaves nothing half-written."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import tempfile
@@ -19,19 +20,29 @@ from amsfe_sym.errors import RunFolderError, describe
 __all__ = [
     "MARKER",
     "STALE_TMP_SECONDS",
+    "TMP_MARKER",
     "FolderJob",
     "clean_stale_tmp",
     "is_run_folder",
+    "make_tmp",
+    "mark_tmp",
     "replace_dir",
     "write_folder",
     "write_folders",
 ]
 
-#: A hidden temporary folder older than this is left over from a killed run [s].
+#: Kept for callers that still pass an age: the clean-up no longer removes by age (a live
+#: run of several hours keeps its temporaries), only by the marker below [s].
 STALE_TMP_SECONDS = 3600.0
 
 #: The file every output folder of this tool holds: what ``--force`` may replace.
 MARKER = ".amsfe-output"
+
+#: The file every temporary folder of this tool holds from the moment it exists: the pid and
+#: the start time of the process that made it.  The clean-up removes a hidden sibling only
+#: when it holds this file and that process is gone; a look-alike folder of the user's
+#: (``.result-2024-notes``) holds no such file and is never touched.
+TMP_MARKER = ".amsfe-tmp"
 
 
 def is_run_folder(path: Path) -> bool:
@@ -46,30 +57,96 @@ def _pid_alive(pid: int) -> bool:
         return False
     except PermissionError:  # exists, owned by someone else
         return True
+    except OverflowError:  # not a pid this system can have
+        return False
     return True
 
 
-def clean_stale_tmp(parent: Path, name: str, max_age: float = STALE_TMP_SECONDS) -> list[Path]:
-    """Remove the hidden temporary folders a killed process left beside ``parent/<name>``
-    (``.<name>-<pid>-*`` of a build, ``.<name>.tmp-<pid>-*`` of an output folder,
-    ``.<name>.old-<pid>-*`` of a replacement): those whose process is gone, or older than
-    ``max_age`` [s].
+def _start_time(pid: int) -> str | None:
+    """The process's start time (Linux: ``/proc/<pid>/stat`` field 22, clock ticks since
+    boot), which tells a reused pid from the process that wrote a marker; None elsewhere."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    fields = stat.rpartition(")")[2].split()  # after the command name, which may hold spaces
+    return fields[19] if len(fields) > 19 else None
+
+
+def _owner_line(pid: int) -> str:
+    return f"amsfe_sym temporary folder; pid {pid}; start {_start_time(pid)}\n"
+
+
+def mark_tmp(folder: Path) -> Path:
+    """Write :data:`TMP_MARKER` into ``folder``, naming this process: from now on a
+    clean-up may remove ``folder`` once this process is gone.
+
+    Returns:
+        ``folder``.
+    """
+    (folder / TMP_MARKER).write_text(_owner_line(os.getpid()))
+    return folder
+
+
+def make_tmp(parent: Path, prefix: str) -> Path:
+    """A new hidden temporary folder ``parent/<prefix><random>``, marked as this process's
+    (:func:`mark_tmp`) before anything else is written into it.  ``prefix`` should end in
+    ``<pid>-`` so that :func:`clean_stale_tmp` finds it."""
+    tmp = Path(tempfile.mkdtemp(prefix=prefix, dir=parent))
+    try:
+        return mark_tmp(tmp)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _abandoned(folder: Path, pid: int) -> bool:
+    """Whether ``folder`` is a temporary folder this tool made in process ``pid`` and that
+    process is gone (dead, or its pid now names another process): only then may it go."""
+    marker = folder / TMP_MARKER
+    try:
+        if marker.is_symlink() or not marker.is_file():
+            return False
+        text = marker.read_text(errors="replace")
+    except OSError:
+        return False
+    head = "amsfe_sym temporary folder; pid "
+    if not text.startswith(head):
+        return False
+    pid_text, _, rest = text[len(head) :].partition("; start ")
+    if pid_text != str(pid):  # the name and the marker must agree
+        return False
+    if not _pid_alive(pid):
+        return True
+    written = rest.strip()
+    now = _start_time(pid)
+    return written != "None" and now is not None and now != written  # the pid was reused
+
+
+def clean_stale_tmp(parent: Path, name: str, max_age: float | None = None) -> list[Path]:
+    """Remove the hidden temporary folders a killed process of this tool left beside
+    ``parent/<name>`` (``.<name>-<pid>-*`` of a build, ``.<name>.tmp-<pid>-*`` of an output
+    folder, ``.<name>.old-<pid>-*`` of a replacement), but only those that hold this tool's
+    :data:`TMP_MARKER` naming that pid, whose process is gone.  A folder without the marker
+    (a user's ``.result-2024-notes``, a temporary of an older version) is never removed,
+    whatever its name or age; neither is a symbolic link.
+
+    Args:
+        parent: The folder holding ``name``.
+        name: The output's name.
+        max_age: Ignored (kept for callers of the former age rule).
 
     Returns:
         The folders removed.
     """
+    del max_age
     removed = []
-    now = time.time()
     for prefix in (f".{name}-", f".{name}.tmp-", f".{name}.old-"):
         for d in parent.glob(prefix + "*"):
             pid_text = d.name[len(prefix) :].partition("-")[0]
-            if not d.is_dir() or not pid_text.isdigit():  # not ours (another name)
+            if d.is_symlink() or not d.is_dir() or not pid_text.isdigit():
                 continue
-            try:
-                age = now - d.stat().st_mtime
-            except OSError:
-                continue
-            if not _pid_alive(int(pid_text)) or age > max_age:
+            if _abandoned(d, int(pid_text)):
                 shutil.rmtree(d, ignore_errors=True)
                 removed.append(d)
     return removed
@@ -81,13 +158,23 @@ def _umask() -> int:
     return mask
 
 
+def _move_aside(target: Path) -> Path:
+    """Rename the tool's own folder ``target`` to a hidden ``.<name>.old-<pid>-<ns>`` sibling,
+    marked as this process's temporary (so a kill before its removal leaves something a
+    later clean-up may remove), and return that sibling."""
+    old = target.with_name(f".{target.name}.old-{os.getpid()}-{time.time_ns()}")
+    target.rename(old)
+    with contextlib.suppress(OSError):  # unmarked, it is merely never cleaned up
+        mark_tmp(old)
+    return old
+
+
 def replace_dir(new: Path, target: Path) -> None:
     """Move ``new`` to ``target`` replacing any old content, as atomically as rename allows
     (the old one is renamed aside first and removed after)."""
     old = None
     if target.exists():
-        old = target.with_name(f".{target.name}.old-{os.getpid()}-{time.time_ns()}")
-        target.rename(old)
+        old = _move_aside(target)
     new.rename(target)
     if old is not None:
         shutil.rmtree(old, ignore_errors=True)
@@ -158,12 +245,12 @@ def _commit(jobs: Sequence[FolderJob], tmps: Sequence[Path]) -> None:
             if job.replace and (refused := _not_ours(job)) is not None:
                 raise refused
             if job.replace and job.out.exists():
-                old = job.out.with_name(f".{job.out.name}.old-{os.getpid()}-{time.time_ns()}")
-                job.out.rename(old)
+                old = _move_aside(job.out)
             try:
                 tmp.rename(job.out)  # rename(2) refuses a non-empty target
             except OSError as exc:
                 if old is not None:
+                    (old / TMP_MARKER).unlink(missing_ok=True)
                     old.rename(job.out)
                 if not job.replace:
                     raise _another_writer(job.out) from exc
@@ -173,6 +260,7 @@ def _commit(jobs: Sequence[FolderJob], tmps: Sequence[Path]) -> None:
         for out, old in reversed(done):
             shutil.rmtree(out, ignore_errors=True)
             if old is not None:
+                (old / TMP_MARKER).unlink(missing_ok=True)
                 old.rename(out)
         raise
     for _, old in done:
@@ -198,12 +286,11 @@ def write_folders(jobs: Sequence[FolderJob]) -> list[Path]:
         for job in jobs:
             job.out.parent.mkdir(parents=True, exist_ok=True)
             clean_stale_tmp(job.out.parent, job.out.name)  # what a killed run left here
-            tmp = Path(
-                tempfile.mkdtemp(prefix=f".{job.out.name}.tmp-{os.getpid()}-", dir=job.out.parent)
-            )
+            tmp = make_tmp(job.out.parent, f".{job.out.name}.tmp-{os.getpid()}-")
             tmp.chmod(0o777 & ~_umask())  # mkdtemp's 0700 would ignore the user's umask
             tmps.append(tmp)
             job.fill(tmp)
+            (tmp / TMP_MARKER).unlink(missing_ok=True)  # what is renamed into place is output
             (tmp / MARKER).write_text("written by amsfe_sym; `--force` may replace this folder\n")
         with DeferredSignals():
             _commit(jobs, tmps)

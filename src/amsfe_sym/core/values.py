@@ -31,7 +31,8 @@ __all__ = [
 #: (``amsfe_params.backward_map``: 0 linearised, 1 inverse).
 BACKWARD_MAPS = ("linearised", "inverse")
 
-#: What a log's or a live topic's effort is (docs/topics.md, docs/effort.md): ``applied``
+#: What a log's or a live topic's effort is (docs/reference/topics.md, docs/explanation/effort.md):
+#: ``applied``
 #: the motor torque u applied over [t_k, t_k+1] (the input of F, eq. (1b)); ``joint_torque``
 #: the measured joint (spring) torque Ks (qm - q) of torque-sensing arms (Franka, KUKA iiwa),
 #: a measurement of the state, u unknown; ``none`` encoders only, u unknown.

@@ -10,7 +10,7 @@ plug in alike. Five estimators share one interface (:class:`Estimator`):
 - ``replay``: rewind to the exposure step and re-filter (exact for linear-Gaussian);
 - ``cloning``: stochastic cloning of the state at each exposure (exact for linear-Gaussian).
 
-See ``docs/estimation-algorithms.md`` for the maths.
+See ``docs/explanation/estimation-algorithms.md`` for the maths.
 
 May import: errors, core.camera_frame; numpy and scipy only (the robot is seen through
 the TransitionModel / MeasurementModel protocols).

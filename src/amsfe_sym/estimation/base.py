@@ -4,7 +4,7 @@ An estimator holds the posterior ``x(k|k), P(k|k)`` of step ``k``. :meth:`Estima
 advances it to ``k + 1``: predict with the input applied over ``[k, k+1]`` (paper eqs.
 (13)-(14)), update with the encoder sample taken at ``k + 1`` (eqs. (15)-(16), Joseph form),
 then use every camera frame delivered at ``k + 1``; how a late frame is used is what tells
-the estimators apart (see ``docs/estimation-algorithms.md``).
+the estimators apart (see ``docs/explanation/estimation-algorithms.md``).
 
 Everything a step is given is checked before anything is changed: wrong shapes raise
 :class:`~amsfe_sym.errors.ShapeError`, a frame from the future raises
@@ -254,7 +254,7 @@ class Estimator(ABC):
 
     def _note_ungated_outliers(self, report: StepReport) -> None:
         """Gate off: note the frame fused with the largest NIS beyond the default gate's, the
-        cause to name if the filter breaks down (docs/estimation-algorithms.md)."""
+        cause to name if the filter breaks down (docs/explanation/estimation-algorithms.md)."""
         for kappa, nis in zip(report.used, report.frame_nis, strict=False):
             worst = self._ungated_outlier[1] if self._ungated_outlier else self._outlier_nis
             if self._gate_camera == math.inf and nis > worst:

@@ -41,7 +41,7 @@ class FilterConfig:
             filter's stored forward pass (one linear solve per frame); ``"inverse"`` is the
             paper's form, ``L`` applications of the model's inverse transition (eq. (22)) with
             the jacobian of the backward map taken at the points it passes through.  See
-            ``docs/estimation-algorithms.md``.
+            ``docs/explanation/estimation-algorithms.md``.
     """
 
     gate_probability: float | None = 0.9999

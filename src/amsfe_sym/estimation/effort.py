@@ -31,11 +31,12 @@ Without ``u`` the estimator gets its input one of two ways (:data:`INPUT_MODELS`
 
 :func:`~amsfe_sym.estimation.effort_models.wrap_models` builds the estimator's models for a
 kind of effort (the models are in :mod:`amsfe_sym.estimation.effort_models`), and
-:func:`estimator_inputs` what to feed it.  docs/effort.md measures each design (and why the
+:func:`estimator_inputs` what to feed it.  docs/explanation/effort.md measures each design (and why
+the
 simplest one, ``u = 0`` with the motor torque in the process noise, diverges).
 
 Pure numpy: the robot enters through :class:`MotorParams` (the actuators of eq. (1b)).
-docs/effort.md has the design and the measured consistency of each mode.
+docs/explanation/effort.md has the design and the measured consistency of each mode.
 """
 
 from __future__ import annotations
@@ -74,7 +75,7 @@ FloatArray = NDArray[np.float64]
 INPUT_MODELS = ("state", "reconstruct")
 
 #: Default diffusion of the input random walk [N m / sqrt(s)]: 3.2 N m a step at 1 kHz
-#: (chosen on seed 100 of paper-sim and panda-control, docs/effort.md).
+#: (chosen on seed 100 of paper-sim and panda-control, docs/explanation/effort.md).
 DEFAULT_INPUT_RATE_STD = 100.0
 
 #: Default 1-sigma of the initial input state [N m].
@@ -179,7 +180,9 @@ def effort_spec(table: Mapping[str, object], where: str = "[effort]") -> EffortS
         ConfigError: An unknown key, or a value :class:`EffortSpec` refuses.
     """
     fields = ("kind", "joint_torque_std", "input_model", "input_rate_std", "input_std0", "scale")
-    check_known_keys(where, table.keys(), fields, "remove or rename them (docs/effort.md)")
+    check_known_keys(
+        where, table.keys(), fields, "remove or rename them (docs/explanation/effort.md)"
+    )
     kw: dict[str, object] = {}
     for key, value in table.items():
         if key in ("kind", "input_model"):

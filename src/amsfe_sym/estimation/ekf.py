@@ -7,7 +7,7 @@ Pure functions on arrays; no state. Equation numbers are the paper's (Sec. 3.1):
   ``P = (I - K H) P- (I - K H)^T + K R K^T`` instead of the paper's eq. (17)
   ``(I - K H) P-``: it is algebraically equal for the optimal gain, but stays symmetric and
   positive semi-definite under rounding (a deliberate deviation, see
-  ``docs/estimation-algorithms.md``).
+  ``docs/explanation/estimation-algorithms.md``).
 - Innovation gating: the normalised innovation squared ``NIS = nu^T S^-1 nu`` is compared
   with a chi-square quantile computed once by :func:`gate_threshold`.
 

@@ -15,7 +15,7 @@ covariance ``S``, jacobian ``H``, prior ``P(k|k-1)``):
   ``x(j|j)``, priors ``x(j+1|j) = F(x(j|j))`` and jacobians ``A_j``, one linear solve with
   ``Phi`` per frame instead of ``L`` Newton inverses of the transition (exact for a linear
   model; for a nonlinear one the error is second order in the corrections the updates made
-  over the lag, see ``docs/estimation-algorithms.md``); with
+  over the lag, see ``docs/explanation/estimation-algorithms.md``); with
   ``FilterConfig.backward_map = "inverse"`` it is the paper's form instead
   (:func:`backward_inverse`): ``L`` applications of the model's inverse transition
   (eq. (22)) from ``x(k|k) - v_hat``, and ``Fb`` below the jacobian of that map at the points
@@ -31,7 +31,7 @@ Exact (linear-Gaussian) for a one-step lag; an approximation for longer lags, be
 encoder updates at ``kappa+1 .. k-1`` also depend on the process noise of the lag and only the
 last one is accounted for. With no encoder update at ``k`` the ``nu`` terms are zero
 (``v_hat = 0``, ``Pvv = Pxv = Q``). ``Fb`` is never formed: ``Hc Fb`` is one linear solve with
-``Phi^T``. See ``docs/estimation-algorithms.md``.
+``Phi^T``. See ``docs/explanation/estimation-algorithms.md``.
 """
 
 from __future__ import annotations
@@ -446,7 +446,7 @@ class OosmAl1Estimator(OosmEstimator):
     ``oosm``); offered because the paper's A1-over-the-lag breaks down (indefinite
     retrodicted covariance) when several encoder updates fall inside the lag, which Al1 does
     not. Exact for a one-step lag, or when no update falls strictly inside the lag; an
-    approximation otherwise (see ``docs/estimation-algorithms.md``). Also stores the
+    approximation otherwise (see ``docs/explanation/estimation-algorithms.md``). Also stores the
     posterior of each step of the buffer window (``(buffer_steps + 1) nx^2`` floats).
     """
 

@@ -1,10 +1,12 @@
 """Where the links are at a log's first sample when only the motor angles are known.
 
-A log of effort kind ``none`` (docs/effort.md) gives the motor angles ``qm`` and rates, not
+A log of effort kind ``none`` (docs/explanation/effort.md) gives the motor angles ``qm`` and rates,
+not
 the link angles ``q``: on an elastic arm the springs deflect under gravity by
 ``qm - q = Ks^-1 g(q)`` (eq. 1b at rest), 1.45 rad on the paper's soft arm.  Started at
 ``q = qm`` the estimator is 3 sigma off, its camera frames are gated out, and the encoders
-alone never see the link (docs/effort.md section 2).  This module finds the link angles that
+alone never see the link (docs/explanation/effort.md section 2).  This module finds the link angles
+that
 balance the springs at the first sample,
 
     tau(q) = Ks (qm - q),    tau(q) = g(q, theta) + C(q, qd) qd    (eq. 1a with qdd = 0),
@@ -211,7 +213,7 @@ def static_link_start(
                 "the link angles at the log's first sample",
                 "a solution of g(q) + C(q, qd) qd = Ks (qm - q) (the springs' balance)",
                 f"none by Newton from the motor angles {np.round(qm, 4).tolist()}",
-                "give the start yourself: --scenario with [estimate0] q (docs/logs.md)",
+                "give the start yourself: --scenario with [estimate0] q (docs/how-to/logs.md)",
             )
         )
     r = _balance(torque, Ks, qm)

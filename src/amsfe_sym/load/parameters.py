@@ -14,7 +14,7 @@ from amsfe_sym.load.types import JointInfo, ThetaBinding
 
 __all__ = ["DEFAULT_FM", "DEFAULT_KS", "DEFAULT_MM", "bind_theta", "default_stiffness", "per_joint"]
 
-#: Default actuator constants for a bare URDF (documented in docs/robot-spec.md).
+#: Default actuator constants for a bare URDF (documented in docs/reference/robot-spec.md).
 DEFAULT_KS, DEFAULT_MM, DEFAULT_FM = 1000.0, 0.1, 1.0
 
 

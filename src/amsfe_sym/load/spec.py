@@ -1,7 +1,7 @@
 """Robot spec: what the URDF does not say (actuators, camera, unknown parameters, T).
 
 A robot is a folder ``robots/<name>/`` holding a URDF and ``robot.toml``; every key is
-documented in ``docs/robot-spec.md``.  A bare URDF path works too: :func:`default_spec`
+documented in ``docs/reference/robot-spec.md``.  A bare URDF path works too: :func:`default_spec`
 fills in documented defaults (every non-fixed joint modelled, the tip of the chain
 tracked, a camera that sees the whole workspace, no unknown parameters).
 
@@ -58,7 +58,8 @@ class ModelSpec:
         plant_substeps: RK4 substeps per T of the continuous-time plant.
         model_substeps: RK4 steps per T of the estimator's ``rk4`` model F (used whenever the
             model is ``rk4``, the spec's integrator or a scenario's): more resolve a joint
-            mode near w T ~ 1 that one step mis-integrates (robots/ur5, docs/ur5-estimation.md).
+            mode near w T ~ 1 that one step mis-integrates (robots/ur5,
+            docs/explanation/ur5-estimation.md).
     """
 
     joints: tuple[str, ...] | None = None
@@ -150,7 +151,7 @@ class ThetaSpec:
 
 @dataclass(frozen=True)
 class RobotSpec:
-    """Everything about a robot beyond its URDF.  See ``docs/robot-spec.md``.
+    """Everything about a robot beyond its URDF.  See ``docs/reference/robot-spec.md``.
 
     Attributes:
         name: Robot name; output goes to ``generated/<name>/``.
@@ -255,7 +256,7 @@ def load_spec(name_or_path: str | os.PathLike[str]) -> RobotSpec:
 def default_spec(urdf: Path) -> RobotSpec:
     """Spec for a bare URDF: all non-fixed joints, tip of the chain tracked, defaults below.
 
-    Defaults (documented in docs/robot-spec.md): T = 1 ms, semi-implicit integrator,
+    Defaults (documented in docs/reference/robot-spec.md): T = 1 ms, semi-implicit integrator,
     Ks = 1000 N m/rad, Mm = 0.1 kg m^2, Fm = 1 N m s/rad per joint, camera placed by
     :func:`amsfe_sym.load.load_robot` so that it sees the whole workspace, p = 0.
     """
@@ -431,7 +432,7 @@ def _table(data: Mapping[str, Any], key: str, where: str) -> Mapping[str, Any]:
 
 
 def _no_unknown(data: Mapping[str, Any], allowed: set[str], where: str) -> None:
-    fix = "remove or rename them (see docs/robot-spec.md)"
+    fix = "remove or rename them (see docs/reference/robot-spec.md)"
     check_known_keys(where, data, allowed, fix, SpecError)
 
 

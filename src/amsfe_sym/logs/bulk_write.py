@@ -1,6 +1,6 @@
 """Many messages into a rosbag2 being written by ``rosbags`` (MCAP storage, no compression)
 at once: the bytes ``rosbags``' ``Writer.write`` would write one call at a time
-(docs/logs.md, "Speed").
+(docs/how-to/logs.md, "Speed").
 
 ``rosbags``' MCAP writer builds each message record with a few ``BytesIO`` writes and each
 message index entry with two more (~3 us a message on an idle machine: 0.36 s for the

@@ -1,4 +1,4 @@
-"""MCAP chunks cut with numpy (docs/logs.md, "Speed"): the summary's chunk indexes checked
+"""MCAP chunks cut with numpy (docs/how-to/logs.md, "Speed"): the summary's chunk indexes checked
 against the file, a chunk decompressed once (none, zstd, lz4) and each wanted channel's
 payloads located at the offsets its message index lists, no Python object per message.
 :mod:`amsfe_sym.logs.stream` reads whole topics with it, :mod:`amsfe_sym.logs.firsts` the

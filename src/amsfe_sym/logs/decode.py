@@ -1,4 +1,4 @@
-"""A topic's payloads -> numpy arrays, all messages at once (docs/logs.md, "Speed").
+"""A topic's payloads -> numpy arrays, all messages at once (docs/how-to/logs.md, "Speed").
 
 The contract the log reader codes against: one call per topic and message type over the raw
 payloads (CDR of rosbag2 / MCAP, or ROS 1 wire format of a ``.bag``), returning columns.

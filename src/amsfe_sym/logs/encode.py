@@ -1,5 +1,5 @@
 """Bulk CDR encoding of ``sensor_msgs/msg/JointState`` messages that share their joint names
-and field lengths, only the stamp and the float64 values changing (docs/logs.md, "Speed").
+and field lengths, only the stamp and the float64 values changing (docs/how-to/logs.md, "Speed").
 
 One template message is serialized by ``rosbags`` (``serialize_cdr``, little-endian); the
 walk of :mod:`amsfe_sym.logs.layout` (the inverse of the bulk decoders: the same alignment

@@ -1,6 +1,6 @@
 """The first messages of a log's topics, for the topic search before a log is read
 (:func:`amsfe_sym.logs.plan.plan_log`, :func:`~amsfe_sym.logs.plan.read_config`;
-docs/logs.md, "Speed").
+docs/how-to/logs.md, "Speed").
 
 An indexed MCAP (a ``.mcap``, a rosbag2 folder of one) is cut with numpy from the fewest
 chunks that hold them (:mod:`amsfe_sym.logs.stream`'s chunk cutter), where ``mcap``'s reader
@@ -56,7 +56,7 @@ def first_messages(
     Chunks are taken in order of their first log time, only those holding a topic still
     short of its messages, until no chunk left can hold an earlier one: a log's first
     chunk for a topic's first message, where ``mcap``'s reader parsed every record of it in
-    Python (20-40 ms for a 1 MB chunk; docs/logs.md, "Speed").
+    Python (20-40 ms for a 1 MB chunk; docs/how-to/logs.md, "Speed").
 
     Raises:
         LogError: unreadable or damaged.

@@ -1,5 +1,5 @@
 """The tick grid of a log (t_k = t0 + k T), the offset between its two clocks, and what
-became of each role's messages (docs/logs.md, "Timing")."""
+became of each role's messages (docs/how-to/logs.md, "Timing")."""
 
 from __future__ import annotations
 

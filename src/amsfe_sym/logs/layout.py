@@ -1,5 +1,5 @@
 """Payload layouts: what lets the bulk decoders of :mod:`amsfe_sym.logs.decode` read a
-topic's messages all at once (docs/logs.md, "Speed").
+topic's messages all at once (docs/how-to/logs.md, "Speed").
 
 A topic's messages almost always share one layout: the same frame_id, joint names and
 value counts, only the stamp and the values change.  One payload is walked in Python (the

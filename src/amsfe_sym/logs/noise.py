@@ -1,4 +1,4 @@
-"""The encoder noise of a log, measured from the log itself (docs/logs.md, "The encoder
+"""The encoder noise of a log, measured from the log itself (docs/how-to/logs.md, "The encoder
 noise from the log"): a robust noise floor per channel from high-order differences.
 
 For white noise of standard deviation sigma on a sampled channel x[k], the m-th difference

@@ -1,5 +1,5 @@
 """Which topic plays which role in a log, decided from its metadata and the first message
-of a few topics, before anything is read in full or compiled (docs/logs.md, "Which topic
+of a few topics, before anything is read in full or compiled (docs/how-to/logs.md, "Which topic
 plays which role").
 
 A role the topic spec names is taken as named (its type checked); otherwise its default topic
@@ -108,7 +108,7 @@ def check_type(path: Path, role: str, info: TopicInfo) -> None:
             f"messages of type {' or '.join(types)}",
             info.msgtype or "no type (a channel without a schema)",
             f"name the log's {role} topic in a topic spec's [topics] {role} (--log-spec; "
-            "docs/topics.md)",
+            "docs/reference/topics.md)",
         )
     info.payload_encoding(path)  # a JSON-encoded channel: refused here, by name
 
@@ -228,7 +228,7 @@ def plan_log(
                 f"a JointState topic with the positions of {list(names)} (the encoders)",
                 f"JointState topics {seen}" if seen else f"none among {sorted(topics)}",
                 "name the encoder topic ([topics] encoders) and the log's joint names "
-                "([joints] names) in a topic spec (--log-spec; docs/topics.md)",
+                "([joints] names) in a topic spec (--log-spec; docs/reference/topics.md)",
             )
         if len(cands) > 1:
             raise refuse(

@@ -1,4 +1,4 @@
-"""A recorded log -> the estimator's inputs on its tick grid (docs/logs.md, "Topics" and
+"""A recorded log -> the estimator's inputs on its tick grid (docs/how-to/logs.md, "Topics" and
 "Timing").
 
 Two steps, both before anything is compiled:

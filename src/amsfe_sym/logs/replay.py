@@ -1,9 +1,9 @@
 """An estimator over a read log, tick by tick as the closed loop runs it: at tick k the
 estimator goes k-1 -> k with the torque of tick k-1, the encoder sample of tick k (none in a
-gap: a predict only) and the frames that arrived at tick k (docs/logs.md).
+gap: a predict only) and the frames that arrived at tick k (docs/how-to/logs.md).
 
 Two paths give the same numbers (tests/test_log_batch.py): a compiled estimator runs the whole
-log in one C call per chunk of ticks (``amsfe_est_run``, docs/logs.md "Speed"); any other
+log in one C call per chunk of ticks (``amsfe_est_run``, docs/how-to/logs.md "Speed"); any other
 estimator, or a log the batch cannot take, is stepped from Python tick by tick.
 """
 
@@ -124,7 +124,8 @@ def estimate_log(
         progress: Show a progress bar; None: for logs of at least
             :data:`PROGRESS_MIN_TICKS` ticks.
         states: The robot's state size N (eq. 2) when ``est`` carries more (the input
-            states of an effort of kind ``joint_torque`` or ``none``, docs/effort.md): the
+            states of an effort of kind ``joint_torque`` or ``none``, docs/explanation/effort.md):
+            the
             estimates, their variances and the NEES are of the first N; None: all of them.
     """
     bar = _progress(log, est, progress)

@@ -1,4 +1,4 @@
-"""The effort, the camera frames and the truth of a log on its tick grid (docs/logs.md,
+"""The effort, the camera frames and the truth of a log on its tick grid (docs/how-to/logs.md,
 "Timing"): the effort held by stamp (zero-order hold to the nearest tick), each frame at its
 exposure step and its arrival tick, the truth at its log time; every message not used is
 counted by reason in its role's :class:`~amsfe_sym.logs.grid.RoleUse`."""

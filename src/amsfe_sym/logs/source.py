@@ -1,4 +1,4 @@
-"""The payloads of a recorded log, without ROS, topic by topic (docs/logs.md, "Containers").
+"""The payloads of a recorded log, without ROS, topic by topic (docs/how-to/logs.md, "Containers").
 
 Containers: a ROS 1 ``.bag`` (``rosbags``' AnyReader; payloads in the ROS 1 wire format), a
 rosbag2 folder in MCAP or sqlite3 storage (``rosbags``), a plain ``.mcap`` file (``mcap``,
@@ -160,7 +160,10 @@ def _kind(path: Path) -> str:
     }.get(path.suffix, f"a {path.suffix or 'extension-less'} file starting with {head[:8]!r}")
     fix = {
         ".db3": "pass the folder holding it and its metadata.yaml",
-    }.get(path.suffix, "convert it to a ROS 1 .bag, a rosbag2 folder or an .mcap (docs/logs.md)")
+    }.get(
+        path.suffix,
+        "convert it to a ROS 1 .bag, a rosbag2 folder or an .mcap (docs/how-to/logs.md)",
+    )
     raise LogError(
         describe(
             f"log {path}", "a ROS 1 .bag, a rosbag2 folder (MCAP or sqlite3) or an .mcap", what, fix
@@ -202,7 +205,7 @@ def _direct_mcap(path: Path, kind: str) -> Path | None:
     """The MCAP file of a rosbag2 folder that holds exactly one (and no sqlite3 database),
     read with ``mcap`` as a plain ``.mcap``: opening the folder with ``rosbags``'
     AnyReader (its import, ``metadata.yaml`` and every connection) took 40-150 ms each time
-    the topics or a first message were looked up (docs/logs.md, "Speed").  None otherwise
+    the topics or a first message were looked up (docs/how-to/logs.md, "Speed").  None otherwise
     (``rosbags`` reads it, as before)."""
     if kind != "rosbag2" or any(path.glob("*.db3")):
         return None

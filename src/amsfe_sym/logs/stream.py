@@ -1,4 +1,4 @@
-"""A log's topics as decoded columns, read in bounded memory (docs/logs.md, "Speed").
+"""A log's topics as decoded columns, read in bounded memory (docs/how-to/logs.md, "Speed").
 
 :func:`read_topics` is what the log reader calls instead of iterating messages one by one:
 it returns, per topic, the message type, the log times and the payloads decoded in bulk

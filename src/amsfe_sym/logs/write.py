@@ -1,7 +1,7 @@
-"""A simulated run -> a rosbag2 in MCAP storage that opens in Foxglove (docs/logs.md).
+"""A simulated run -> a rosbag2 in MCAP storage that opens in Foxglove (docs/how-to/logs.md).
 
 Topics (stamps in seconds from the run's start; log time = when the loop had the data; the
-table with the message fields is in docs/logs.md): ``/motor_encoders`` (JointState: qm, qmd
+table with the message fields is in docs/how-to/logs.md): ``/motor_encoders`` (JointState: qm, qmd
 as the loop read them), ``/motor_torque`` (JointState effort: the applied torque),
 ``/camera/marker`` (PointStamped: pixel u, v; stamp = exposure, logged at arrival),
 ``/joint_states`` (true q, qd), ``/amsfe/estimate`` (estimated q, qd), ``/amsfe/truth``

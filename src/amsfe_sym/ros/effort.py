@@ -1,4 +1,5 @@
-"""The effort topic of a live node by its kind (docs/ros.md, "Effort"; docs/effort.md).
+"""The effort topic of a live node by its kind (docs/how-to/ros.md, "Effort";
+docs/explanation/effort.md).
 
 ``applied``: the torque the arm applied, the estimator's input (:meth:`LiveLoop.applied
 <amsfe_sym.ros.live.LiveLoop.applied>`).  ``joint_torque``: a measured joint torque

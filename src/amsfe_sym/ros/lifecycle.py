@@ -1,4 +1,5 @@
-"""``amsfe node --managed``: the node as a ROS 2 lifecycle node (docs/ros.md, "Managed node").
+"""``amsfe node --managed``: the node as a ROS 2 lifecycle node (docs/how-to/ros.md,
+"Managed node").
 
 The transitions drive the node's own object (``ros/node.py``'s, :class:`Managed`):
 ``configure`` builds it (spec parameters, estimator, subscriptions), ``activate`` starts

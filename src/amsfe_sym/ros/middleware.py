@@ -50,7 +50,7 @@ def load_rclpy() -> ModuleType:
                 "ROS 2 (rclpy)",
                 "the ROS 2 Python wheels",
                 f"none importable ({exc})",
-                'pip install -e ".[ros]" (no ROS installation needed; docs/ros.md)',
+                'pip install -e ".[ros]" (no ROS installation needed; docs/how-to/ros.md)',
             )
         ) from exc
     return rclpy

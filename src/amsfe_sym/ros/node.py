@@ -1,5 +1,5 @@
 """``amsfe node``: the generated estimator (and controller) of a scenario as the ROS 2 node
-``amsfe_node`` (docs/ros.md).
+``amsfe_node`` (docs/how-to/ros.md).
 
 It subscribes the encoders, the camera, the effort (its kind: :mod:`amsfe_sym.ros.effort`)
 and, when it records, the truth of a simulated arm, on the topics of the topic spec (ROS
@@ -8,7 +8,7 @@ sample goes through :class:`amsfe_sym.ros.live.LiveLoop` by its header stamp; th
 publishes the estimate (JointState q, qd), its standard deviations, theta, the command (with
 a controller; Float64MultiArray) and diagnostics (JSON: frames fused, refused, skipped, NIS).
 
-Fail-safe (docs/ros.md, "Hold"): when a watchdog trips (docs/watchdogs.md; the spec's
+Fail-safe (docs/how-to/ros.md, "Hold"): when a watchdog trips (docs/watchdogs.md; the spec's
 ``[watchdog]``) it publishes the hold command (:data:`~amsfe_sym.ros.live.HoldKind`), says
 why in one line (``hold: <reason>: ...``) and returns :data:`EXIT_HOLD`; on Ctrl-C or
 SIGTERM it publishes the hold command and the interrupt goes on (the command line exits 130 /
@@ -82,7 +82,7 @@ class NodeOptions:
             command [s] (a command published before a subscriber matched is lost).
         managed: A lifecycle node: it reads the spec and builds the estimator on
             ``configure``, processes samples only while ``active``, holds on ``deactivate``
-            and stops on ``shutdown`` (docs/ros.md, "Managed node").
+            and stops on ``shutdown`` (docs/how-to/ros.md, "Managed node").
         std_every: Publish ``estimate_std`` and ``theta`` at every ``std_every``-th tick
             (tick 0, k % std_every == 0, the last tick of ``duration``, and the last
             estimate when the node stops); the estimate and the command go out at every

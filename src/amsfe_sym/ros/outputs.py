@@ -1,5 +1,5 @@
 """The estimate's standard deviations and theta of ``amsfe node``, published at a lower rate
-than the estimate (docs/ros.md: every :data:`DEFAULT_STD_EVERY`-th tick by default), with one
+than the estimate (docs/how-to/ros.md: every :data:`DEFAULT_STD_EVERY`-th tick by default), with one
 message object a topic filled in each time (rclpy serializes at ``publish``).
 """
 

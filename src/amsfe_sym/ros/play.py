@@ -10,7 +10,7 @@ order deliveries across topics, so with ``ordered`` a group's camera and effort 
 are acknowledged by every reader (reliable QoS) before its encoder sample goes out, the
 writers heartbeating every 1 ms (:func:`~amsfe_sym.ros.middleware.use_lockstep_profile`):
 a node then has them when the sample arrives, at the cost of the recorded pace
-(docs/ros.md).
+(docs/how-to/ros.md).
 """
 
 from __future__ import annotations

@@ -118,7 +118,7 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
             within ``command_timeout``; rclpy missing.
     """
     arm = SimArm(sc, lib)
-    if options.lockstep:  # the frames' acknowledgement within ms (docs/ros.md)
+    if options.lockstep:  # the frames' acknowledgement within ms (docs/how-to/ros.md)
         use_lockstep_profile()
     ctx = start(list(options.ros_args), options.domain_id)
     from amsfe_sym.ros import messages as m

@@ -1,4 +1,4 @@
-"""The topic spec's ``[filter]`` on a live node (docs/ros.md, "Topic spec"): the same keys
+"""The topic spec's ``[filter]`` on a live node (docs/how-to/ros.md, "Topic spec"): the same keys
 as a scenario's ``[filter]``, applied over the scenario's key by key by
 :func:`~amsfe_sym.scenario.with_filter`, as ``amsfe estimate`` applies a log spec's, so that
 one spec means one filter on a log and live."""

@@ -4,7 +4,7 @@
 (:class:`~amsfe_sym.estimation.base.Estimator`: ``step(u, z_encoder, frames) -> StepReport``,
 ``x``, ``P``, ``k``) and the same input checks (it inherits them), but every number is
 computed by the library's C runtime (``runtime/c/amsfe_runtime.{c,h}`` over the generated
-``est_*`` functions, docs/runtime-c.md): a step is one ``amsfe_est_tick`` (predict, eqs.
+``est_*`` functions, docs/how-to/runtime-c.md): a step is one ``amsfe_est_tick`` (predict, eqs.
 13-14, encoder update, 15-17) and one ``amsfe_est_camera_frame`` per usable frame, in
 increasing exposure step.  The Python estimators stay the reference; the tests require both
 to agree to 1e-8 with the same decisions.
@@ -109,7 +109,7 @@ class CompiledEstimator(Estimator):
     Args:
         model: A :class:`~amsfe_sym.runtime.models.CompiledTransition` (its diagonal ``Qw``),
             or an :class:`~amsfe_sym.estimation.effort_models.InputStateTransition` around
-            one (a log without the applied torque: the input as states, docs/effort.md).
+            one (a log without the applied torque: the input as states, docs/explanation/effort.md).
         encoder: An :class:`~amsfe_sym.runtime.models.EncoderMeasurement` of the same library,
             or a :class:`~amsfe_sym.estimation.effort_models.SpringTorqueMeasurement`
             (``joint_torque``); padded with input states.
@@ -227,7 +227,8 @@ class CompiledEstimator(Estimator):
                     f"compiled {bad} on a log without the applied torque",
                     "oosm with backward_map 'linearised', or another estimator",
                     bad,
-                    "use 'replay' (docs/effort.md), or the Python estimator (amsfe estimate "
+                    "use 'replay' (docs/explanation/effort.md), or the Python estimator "
+                    "(amsfe estimate "
                     "--runtime python; compiled = False)",
                 )
             )

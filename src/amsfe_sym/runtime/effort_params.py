@@ -1,4 +1,4 @@
-"""What the C runtime needs of a log's kind of effort (docs/effort.md, "Compiled").
+"""What the C runtime needs of a log's kind of effort (docs/explanation/effort.md, "Compiled").
 
 The Python estimators take the models :func:`~amsfe_sym.estimation.effort_models.wrap_models`
 builds for an :class:`~amsfe_sym.estimation.effort.EffortSpec`; the C runtime takes the same

@@ -1,5 +1,5 @@
 """A whole recorded log through a compiled estimator in one C call per chunk of ticks
-(``amsfe_est_run`` of ``runtime/c/amsfe_runtime.h``; docs/logs.md, "Speed"): the numbers of
+(``amsfe_est_run`` of ``runtime/c/amsfe_runtime.h``; docs/how-to/logs.md, "Speed"): the numbers of
 :meth:`CompiledEstimator.step` called tick by tick (tests/test_log_batch.py), without a
 Python step per tick."""
 

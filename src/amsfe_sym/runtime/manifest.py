@@ -3,7 +3,7 @@
 :class:`Manifest` is the runtime's only reader of the manifest document; every other module
 reads its typed fields (``lib.manifest.camera.delay``, ``lib.manifest.theta[0].unit``)
 instead of string keys.  The document itself stays available as :attr:`Manifest.raw` for
-tools that show or copy it.  The field list is the contract of docs/architecture.md
+tools that show or copy it.  The field list is the contract of docs/explanation/architecture.md
 ("Generated-function contract").
 """
 
@@ -92,7 +92,7 @@ class Actuators:
 
 @dataclass(frozen=True)
 class Manifest:
-    """A generated library's ``manifest.json``, typed (see docs/architecture.md).
+    """A generated library's ``manifest.json``, typed (see docs/explanation/architecture.md).
 
     Attributes:
         name: Library (robot) name.
@@ -151,7 +151,7 @@ class Manifest:
             raise CodegenError(
                 describe(
                     where,
-                    "a manifest with every key of docs/architecture.md",
+                    "a manifest with every key of docs/explanation/architecture.md",
                     f"{type(exc).__name__}: {exc}",
                     "regenerate the library (`amsfe generate --force`)",
                 )

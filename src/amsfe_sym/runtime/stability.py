@@ -76,7 +76,8 @@ STABILITY_MARGIN = 2.0
 #: seeds diverged) at w h = 1.93, 1.22 at 0.96, 1.10 at 0.64 and at 0.48: a stable model that
 #: damps the modes the truth keeps (|R|^m down to 0.15 per period at w h = 1.93) makes the
 #: filter overconfident.  0.5 keeps the consistent 0.64 even for a mode 19 % faster than the
-#: sampled maximum (docs/codegen.md, "Joint modes and other sampling intervals").  At 1 kHz,
+#: sampled maximum (docs/explanation/codegen.md, "Joint modes and other sampling intervals").  At 1
+#: kHz,
 #: where the encoders observe the modes, it is conservative: one step at w h 0.92 gives 1.02.
 DEFAULT_MARGIN = 0.5
 #: A mode past its limit is reported only when it grows faster than this [1/s]: the paper's

@@ -1,7 +1,7 @@
 """Scenarios: everything a simulation run needs beyond the robot, in one TOML file.
 
 Shipped scenarios live in ``scenarios/`` (``paper-sim``, ``paper-exp``); copy one and edit
-it.  Every key is documented in ``docs/scenarios.md``.  A run saves its resolved scenario
+it.  Every key is documented in ``docs/reference/scenarios.md``.  A run saves its resolved scenario
 as ``config.toml``, which ``amsfe simulate <run>/config.toml`` re-runs exactly.
 
 The package: ``model`` (the :class:`Scenario` value objects), ``read``

@@ -1,4 +1,4 @@
-"""The scenario's value objects: a resolved, validated scenario (docs/scenarios.md)."""
+"""The scenario's value objects: a resolved, validated scenario (docs/reference/scenarios.md)."""
 
 from __future__ import annotations
 
@@ -82,7 +82,7 @@ class FilterSettings:
             ``"paper"``, eqs. (1a)-(1d)): the link and motor torque standard deviations [N m]
             the filter assumes instead (0: the two above).  The explicit map's systematic
             T^2/2 acceleration error per step is model error the plant's white torques do
-            not cover (docs/control.md, "The paper's integrator in the loop").
+            not cover (docs/explanation/control.md, "The paper's integrator in the loop").
         encoder_q_std, encoder_qd_std, camera_pixel_std: R [rad, rad/s, px]; 0 means
             "the sensor's true noise, including quantization and rounding".
         gate_probability: Chi-square gate on camera innovations (0 disables).
@@ -107,7 +107,7 @@ class FilterSettings:
 
 @dataclass(frozen=True)
 class Scenario:
-    """A complete simulation set-up (see ``docs/scenarios.md``).
+    """A complete simulation set-up (see ``docs/reference/scenarios.md``).
 
     ``integrator`` overrides the robot spec's discrete model for the estimator ("" keeps the
     robot's); the library is then generated under ``<robot>_<integrator>``.

@@ -1,5 +1,5 @@
 """``--set KEY=VALUE``: one scenario key changed from the command line, re-validated with
-the scenario's own checks (docs/scenarios.md)."""
+the scenario's own checks (docs/reference/scenarios.md)."""
 
 from __future__ import annotations
 

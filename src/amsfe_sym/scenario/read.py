@@ -1,4 +1,4 @@
-"""Reading a scenario: find it, parse its TOML, check every value (docs/scenarios.md)."""
+"""Reading a scenario: find it, parse its TOML, check every value (docs/reference/scenarios.md)."""
 
 from __future__ import annotations
 
@@ -88,7 +88,7 @@ def load_scenario(name_or_path: str | os.PathLike[str]) -> Scenario:
 def parse_scenario(data: Mapping[str, Any], path: Path) -> Scenario:
     """Build a :class:`Scenario` from parsed TOML."""
     where = str(path)
-    check_known_keys(where, data, _TOP, "remove or rename them (docs/scenarios.md)")
+    check_known_keys(where, data, _TOP, "remove or rename them (docs/reference/scenarios.md)")
     for key in ("robot", "plant", "estimate0", "trajectory"):
         if key not in data:
             raise ConfigError(describe(where, f"a {key!r} entry", "none", f"add {key}"))
@@ -103,7 +103,7 @@ def parse_scenario(data: Mapping[str, Any], path: Path) -> Scenario:
                     f"{where} [{key}]",
                     f"keys among {sorted(fields)}",
                     f"unknown {bad}",
-                    "remove or rename them (docs/scenarios.md)",
+                    "remove or rename them (docs/reference/scenarios.md)",
                 )
             )
         types = {f.name: str(f.type) for f in dataclasses.fields(cls)}

@@ -202,7 +202,7 @@ def build_estimator(
         z0: The first encoder sample [qm, qmd] (``[estimate0] motor = "encoders"``).
         compiled: Build the library's C estimator (same arguments, same numbers) instead
             of the Python reference.
-        effort: What the log's effort is (docs/effort.md); ``None``: the applied torque.
+        effort: What the log's effort is (docs/explanation/effort.md); ``None``: the applied torque.
             ``joint_torque``: the encoder model is
             :class:`~amsfe_sym.estimation.effort.SpringTorqueMeasurement` (``z = [qm, qmd,
             tau_J]``); ``joint_torque`` and ``none`` add the input's
@@ -213,7 +213,7 @@ def build_estimator(
     Raises:
         ConfigError: an unknown estimator, a singular camera R, bad initial values, or the
             compiled estimator asked for what it does not compute (oosm's inverse backward
-            map with input states or a net torque input; docs/effort.md).
+            map with input states or a net torque input; docs/explanation/effort.md).
     """
     n, p = lib.n, lib.p
     f = sc.filter

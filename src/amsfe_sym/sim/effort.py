@@ -98,7 +98,7 @@ def effort_estimator(
     spec: EffortSpec,
     compiled: bool = False,
 ) -> EffortEstimator:
-    """The estimator of ``sc`` for a log with effort ``spec.kind`` (docs/effort.md).
+    """The estimator of ``sc`` for a log with effort ``spec.kind`` (docs/explanation/effort.md).
 
     Args:
         sc: The scenario (``estimator``, ``[filter]``, ``[estimate0]``).
@@ -110,7 +110,7 @@ def effort_estimator(
         spec: What the effort is.
         compiled: The library's C estimator instead of the Python reference (not oosm's
             inverse backward map with input states or a net torque input:
-            :class:`~amsfe_sym.errors.ConfigError`; docs/effort.md).
+            :class:`~amsfe_sym.errors.ConfigError`; docs/explanation/effort.md).
     """
     n = lib.n
     e0 = None if effort is None or spec.kind != "joint_torque" else effort[0]

@@ -62,7 +62,7 @@ def run(
         progress: Show a progress bar.
         runtime: ``"python"``: the readable reference loop below; ``"compiled"``: the same
             loop in the library's C runtime (:func:`amsfe_sym.sim.compiled.run_compiled`),
-            which reproduces it (docs/runtime-c.md says how closely).
+            which reproduces it (docs/how-to/runtime-c.md says how closely).
         compiled_estimator: Python loop only: use the library's C estimator (isolates the
             loop from the estimators' arithmetic when comparing the two runtimes).
 

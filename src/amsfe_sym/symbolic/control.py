@@ -30,7 +30,8 @@ Functions (every gain is an input, so changing a gain never recompiles):
     ``Lt = 0`` (then ``v_t = qd_d`` and ``sigma = e_dot``), on the raw motor encoders
     ``z = [qm, qmd]`` read as the link (q = qm, qd = qmd) and the given theta.
 ``control_amsfe``
-    The working variant (docs/control.md): the terminal sliding law of (31)-(37) designed on the
+    The working variant (docs/explanation/control.md): the terminal sliding law of (31)-(37)
+    designed on the
     rigid-link part of the model with the spring torque as the virtual input,
     ``qd(k+1) = qd + T M^-1 (tau - b)``, which gives
     ``tau_d = b + (M/T) [v_t(k+1) - v_t(k) + lam e^p - lam e(k+1)^p - T (h s + eps sat(s/phi))]``
@@ -117,7 +118,7 @@ def build_control_functions(tree: RigidBodyTree, tr: Transition) -> list[ca.Func
     Code size: every product ``M(q) w`` is one RNEA pass (``rnea(q, 0, w)`` without gravity)
     and ``b + M a`` is ``rnea(q, qd, a)``, never an assembled M (n passes); the baselines and
     the cascade's motor reference are MX calls of one emitted function each, so nothing is
-    generated twice (the 6-DOF UR5: see docs/codegen.md).
+    generated twice (the 6-DOF UR5: see docs/explanation/codegen.md).
     """
     robot = tree.robot
     n, p_, T = tree.n, tree.p, float(robot.spec.model.T)

@@ -1,4 +1,4 @@
-"""The estimators' numerics as generated functions (the compiled runtime, docs/runtime-c.md).
+"""The estimators' numerics as generated functions (the compiled runtime, docs/how-to/runtime-c.md).
 
 Each function is an MX graph over the robot's own ``transition_step`` and ``camera_measure``
 (so the model is emitted once, whatever the integrator) with dense matrix products emitted as
@@ -47,7 +47,8 @@ __all__ = ["EXPANDED", "EXPAND_MAX_STATES", "estimator_functions"]
 #: (straight-line C without MX call and loop overhead; paper_2link, pure C at -O1:
 #: est_camera_update 5.1 -> 1.0 us, at 3-4x the lines).  The tick's algebra (predict, encoder
 #: update, Cholesky check, eq. 23) and the A1 retrodiction run in the C kernels instead
-#: (docs/runtime-c.md); ``est_predict`` and ``est_oosm_accumulate`` stay for cloning and tests.
+#: (docs/how-to/runtime-c.md); ``est_predict`` and ``est_oosm_accumulate`` stay for cloning and
+#: tests.
 EXPAND_MAX_STATES = 10
 #: The functions expanded (``est_oosm_correct`` holds a QR solve, which has no SX form; the
 #: cloning updates on the augmented state grow as ``Na^3``: 22k lines for the 2-link arm).

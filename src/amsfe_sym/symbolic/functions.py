@@ -1,6 +1,6 @@
 """The one way a named SX function of the contract is built: named inputs and outputs, dense
 outputs (the C buffers are plain column-major arrays), common subexpressions eliminated as
-the Function is built (measured: it pays there, not at codegen; docs/codegen.md)."""
+the Function is built (measured: it pays there, not at codegen; docs/explanation/codegen.md)."""
 
 from __future__ import annotations
 

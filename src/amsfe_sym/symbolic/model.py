@@ -1,6 +1,7 @@
 """Assemble every symbolic function of one robot (the generated-function contract).
 
-:func:`build_functions` returns CasADi Functions named and shaped as docs/architecture.md's
+:func:`build_functions` returns CasADi Functions named and shaped as
+docs/explanation/architecture.md's
 contract table says; :mod:`amsfe_sym.codegen` turns them into one C library.  All outputs
 are dense so the C buffers are plain column-major arrays.
 """
@@ -150,7 +151,7 @@ def build_functions(robot: Robot, parts: tuple[str, ...] = PARTS) -> SymbolicMod
     if spec.integrator == "rk4" and n > EXPAND_MAX_JOINTS:
         # the C chain over the generated stage (runtime/c/amsfe_model.c); up to
         # EXPAND_MAX_JOINTS the expanded step is faster (2-link: 0.78 against 1.55 us a call,
-        # docs/codegen.md) and small, and the C estimators call it directly
+        # docs/explanation/codegen.md) and small, and the C estimators call it directly
         stage_rhs, stage_jac = tr.rk4_stage_split_functions()
         model.internal = {"rk4_stage_rhs": stage_rhs, "rk4_stage_jac": stage_jac}
         model.chained = {"transition_step_chain": "transition_step"}

@@ -1,7 +1,7 @@
 """The ``rk4`` model's fused step ``transition_step`` and the split stage it and the C chain
 (``runtime/c/amsfe_model.c``) are built on: the stage without its dense solves with the mass
 matrix, which are done in loops (CasADi's ``ldl`` linear solver in the MX graph, an LDL^T in
-C in the chain) instead of unrolled in the generated code (issue 18, docs/codegen.md).
+C in the chain) instead of unrolled in the generated code (issue 18, docs/explanation/codegen.md).
 Called through :class:`.transition.Transition` (``tr`` below; not imported: it imports
 this module), which caches what they build."""
 
@@ -102,7 +102,7 @@ def plant_rhs_over_stage(tr: Any) -> ca.Function:
     the motor torque ``u + tau_m`` is the stage's input, the link rows ``rhs + tau_l`` are
     solved with the stage's M by ``rk4_mass_solve``, the unrolled LDL^T of
     :func:`.linalg.ldl_solve` as a small SX function (CasADi's ``ldl`` linear solver made
-    ``plant_step`` 37 % slower on the Panda, this 10 %; issue 18, docs/codegen.md).  The
+    ``plant_step`` 37 % slower on the Panda, this 10 %; issue 18, docs/explanation/codegen.md).  The
     same operations in the same order as :meth:`.Transition.plant_rhs`, so equal to it to
     rounding."""
     n, p = tr.tree.n, tr.tree.p

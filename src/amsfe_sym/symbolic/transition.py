@@ -26,7 +26,7 @@ over T with u held, the impulses w applied at the start of the step.  Both Euler
 above move positions by T times the old (or new) velocity and so make a *systematic*
 position error of T^2/2 times the acceleration every step; with a known, large motor
 torque that bias is far above any white process noise and an EKF built on them lags its
-own encoders (docs/estimation.md).  RK4 is 4th order, explicit, stable for w T < 2.8.
+own encoders (docs/explanation/estimation.md).  RK4 is 4th order, explicit, stable for w T < 2.8.
 
 The inverse solves the same equations for x given x+ exactly in the motor and q parts and
 by a fixed number of unrolled chord (simplified Newton) steps for qd, whose contraction
@@ -68,7 +68,8 @@ STAGE_DERIVATIVES = ("analytic", "reverse_ad")
 #: Up to this many joints the rk4 ``transition_step`` is expanded into SX (straight-line C)
 #: and the C estimators call it; beyond, it is an MX graph over the generated stage (the
 #: contract's function, small) and the C estimators call the chain of
-#: ``runtime/c/amsfe_model.c``.  Measured (tools/codegen_sizes.py, docs/codegen.md): 2-link
+#: ``runtime/c/amsfe_model.c``.  Measured (tools/codegen_sizes.py, docs/explanation/codegen.md):
+#: 2-link
 #: expanded 0.78 us against 1.55 us chained; UR5 chained 20.5 us against 67 us as MX (and
 #: 42 us expanded, in 60k lines).
 EXPAND_MAX_JOINTS = 2

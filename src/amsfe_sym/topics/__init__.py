@@ -1,6 +1,6 @@
 """What a topic means: one definition shared by recorded logs (``logs/``) and live ROS 2
 nodes (``ros/``), so that a recorded session and a live one are the same run
-(docs/topics.md).
+(docs/reference/topics.md).
 
 Modules: ``roles`` (every role a topic can play for the estimator and the controller: its
 message types, the fields used and their units, which stamp is the sample time, and the

@@ -1,12 +1,12 @@
 """The roles a topic plays for amsfe, in one table (robot_localization's habit: each input
 declared once, by topic, with the fields it contributes).  Recorded logs and live nodes read
-and write these roles the same way (docs/topics.md).
+and write these roles the same way (docs/reference/topics.md).
 
 Inputs (what the estimator and the controller consume): ``encoders`` (required), ``effort``,
 ``camera``, ``truth`` and ``config``; outputs (what amsfe publishes live and writes into its
 own bags): ``estimate``, ``estimate_std``, ``theta``, ``diagnostics``, ``commands`` and
 ``clock``.  :data:`ROLES` holds each one's default topic, message types, stamp and meaning;
-docs/topics.md has the table.
+docs/reference/topics.md has the table.
 
 A driver's ``/joint_states`` (position, velocity and effort of every joint) plays the roles
 ``encoders`` and ``effort`` at once: one topic may serve several roles.

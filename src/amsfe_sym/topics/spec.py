@@ -1,7 +1,7 @@
 """The topic spec: which topic plays which role (:mod:`amsfe_sym.topics.roles`), the log's
 joint names, what its effort is, the timing tolerances and the QoS of live topics.  Every key
 has a default; a small TOML file overrides any of them, and the same file serves
-``amsfe estimate`` on a recording and ``amsfe node`` live (docs/topics.md).
+``amsfe estimate`` on a recording and ``amsfe node`` live (docs/reference/topics.md).
 
 ```toml
 [topics]                          # any role of topics.roles.ROLES; unset: the default topic,
@@ -16,7 +16,7 @@ names = ["joint1", "joint2"]      # JointState names in the robot's q order (def
 kind = "joint_torque"             # "applied" | "joint_torque" | "none" (default: by shape)
 
 [filter]                          # the filter's R and Q: the scenario's [filter] keys and units
-encoder_q_std = 1e-5              # [rad]; "log": measured from the log (docs/logs.md)
+encoder_q_std = 1e-5              # [rad]; "log": measured from the log (docs/how-to/logs.md)
 link_torque_std = 0.5             # [N m]; over estimate --robot's defaults and a scenario's
 
 [timing]
@@ -67,14 +67,15 @@ class TopicSpec:
         positions: What the encoder positions are: ``"motor"``, the motor angle qm of eq. (2)
             (amsfe's own logs), or ``"link"``, the link angle q (franka_ros' ``/joint_states``:
             libfranka's ``q``); with a joint torque the estimator is given
-            ``qm = q + tau_J / Ks`` (docs/effort.md).
+            ``qm = q + tau_J / Ks`` (docs/explanation/effort.md).
         effort_kind: What the effort is (None: the default for the message's shape, decided
-            by the reader: docs/topics.md).
+            by the reader: docs/reference/topics.md).
         effort_options: The other ``[effort]`` keys as written (``joint_torque_std``,
             ``input_model``, ``input_rate_std``, ``input_std0``), checked by the estimator's
-            ``effort_spec`` (docs/effort.md).
+            ``effort_spec`` (docs/explanation/effort.md).
         filter_options: The ``[filter]`` keys as written, type-checked (:data:`FILTER_KEYS`:
-            the scenario's ``[filter]``, docs/scenarios.md); ``amsfe estimate`` applies them
+            the scenario's ``[filter]``, docs/reference/scenarios.md); ``amsfe estimate`` applies
+            them
             over ``--robot``'s defaults and over a scenario's ``[filter]`` (the log spec wins,
             key by key) and the scenario's own checks judge the result.  ``encoder_q_std``
             and ``encoder_qd_std`` may be :data:`FROM_LOG`: measured from the log.
@@ -129,7 +130,7 @@ class TopicSpec:
 
 
 #: ``[effort]`` keys passed on to the estimator's effort model (``estimation.effort``'s
-#: ``effort_spec`` checks their values; docs/effort.md): noise and input model.
+#: ``effort_spec`` checks their values; docs/explanation/effort.md): noise and input model.
 _EFFORT_NOISE_KEYS = ("joint_torque_std", "input_model", "input_rate_std", "input_std0")
 
 #: The ``[filter]`` keys: the scenario's (``scenario.model.FilterSettings``' fields, same
@@ -222,7 +223,10 @@ def parse_topic_spec(data: dict[str, Any], where: str = "topic spec") -> TopicSp
         if bad:
             fix = "drop them"
             if section == "filter":
-                fix = "rename or drop them (the scenario's [filter] keys: docs/scenarios.md)"
+                fix = (
+                    "rename or drop them (the scenario's [filter] keys: "
+                    "docs/reference/scenarios.md)"
+                )
             raise ConfigError(
                 describe(f"{where} [{section}]", f"keys among {list(keys)}", str(bad), fix)
             )

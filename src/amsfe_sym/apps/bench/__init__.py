@@ -1,6 +1,7 @@
 """``amsfe bench``: what generation, one model call and one estimator tick cost.
 
-Three main sections, side by side (docs/performance.md shows the numbers and explains them):
+Three main sections, side by side (docs/explanation/performance.md shows the numbers and explains
+them):
 
 1. **generation**: a cold ``generate(force=True)`` into a temporary folder and a cached
    second call, each in a fresh Python process as a user runs ``amsfe generate`` twice;
@@ -14,7 +15,7 @@ Three main sections, side by side (docs/performance.md shows the numbers and exp
 
 and further sections (``--skip`` leaves any out): one tick three ways, the closed loop,
 scaling with joints, and ``amsfe estimate`` over recorded logs in fresh processes
-(``logs``, :mod:`amsfe_sym.apps.bench.logs`; docs/logs.md, "The command, end to end").
+(``logs``, :mod:`amsfe_sym.apps.bench.logs`; docs/how-to/logs.md, "The command, end to end").
 
 Optionally (``--compare-cflags``) the robot's generated C is recompiled with several flag
 sets to show the compile-time / call-time trade-off behind the ``-O1`` default.

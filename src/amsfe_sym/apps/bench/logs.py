@@ -1,5 +1,5 @@
 """A section of ``amsfe bench``: ``amsfe estimate`` over a recorded log, as a user runs it
-(docs/logs.md, "Speed").
+(docs/how-to/logs.md, "Speed").
 
 Each log is a scenario simulated for its duration with the ``amsfe`` controller, seed 1,
 written by ``amsfe simulate --bag`` (a rosbag2 in MCAP, as ``tools/log_speed.py`` writes
@@ -33,7 +33,7 @@ from amsfe_sym.errors import ConfigError, describe
 
 __all__ = ["DEFAULT_LOGS", "LogCase", "bench_log_estimate", "log_case"]
 
-#: The phases of ``summary.json``'s ``timing`` (docs/logs.md, "Speed").
+#: The phases of ``summary.json``'s ``timing`` (docs/how-to/logs.md, "Speed").
 PHASES = ("startup_s", "setup_s", "library_s", "read_s", "estimate_s", "write_s", "wall_s")
 
 

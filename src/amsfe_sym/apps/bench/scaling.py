@@ -3,7 +3,7 @@
 Deterministic arm-like serial chains of ``n`` revolute joints (axes cycling z, y, y, x, y,
 x; box inertias, masses and centres of mass from ``numpy.random.default_rng(n)``, as
 ``tests/test_random_chains.py`` builds its chains), each with the ``rk4`` estimator model the
-arm scenarios use and the defaults of a bare URDF (docs/robot-spec.md), then the shipped
+arm scenarios use and the defaults of a bare URDF (docs/reference/robot-spec.md), then the shipped
 Panda (robots/panda, 7 joints).  Per row: a cold ``generate(force=True)`` in a fresh process
 into a temporary folder (wall time, lines of generated C, peak memory of the process and its
 compiler; the compile prints a progress line every few seconds), the pure C ``oosm`` tick

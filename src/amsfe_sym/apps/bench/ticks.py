@@ -26,7 +26,7 @@ def timing_scenario(lib: ModelLibrary, duration: float, scenario: str | None = N
     0.05 rad off with theta at its true value.  The latter is a timing set-up only, not an
     estimation study: with theta starting at its spec's initial value (payload 0 kg for the
     UR5, true 2 kg) every estimator on the UR5 became overconfident and failed within 1.4 s
-    under paper-sim's noise settings (docs/performance.md).
+    under paper-sim's noise settings (docs/explanation/performance.md).
     """
     from amsfe_sym.scenario import load_scenario
 

@@ -11,7 +11,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from amsfe_sym.apps.plots.run import estimation_error_axes
+from amsfe_sym.apps.plots.run import (
+    RATE_PANELS_UP_TO,
+    controller_label,
+    error_rows,
+    estimation_error_axes,
+)
+from amsfe_sym.apps.plots.style import envelope, joint_grid, pyplot, save, title
 
 if TYPE_CHECKING:
     from amsfe_sym.apps.reproduce import Comparison
@@ -23,27 +29,17 @@ _COLORS = ["tab:blue", "tab:orange", "tab:red", "tab:green", "tab:purple", "tab:
 
 
 def _plt() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    return pyplot()
 
 
 def _label(name: str, res: RunResult) -> str:
-    est = res.scenario.estimator if name in ("amsfe", "amsfe-paper", "dtsmc-ekf") else None
-    tag = f"{name} ({est})" if est else name
-    if res.diverged_at is not None:
-        tag += f", diverged at {res.diverged_at:.2f} s"
-    return tag
+    """The legend of a controller's run: its law and what it acts on
+    (:func:`~amsfe_sym.apps.plots.run.controller_label`)."""
+    return controller_label(res, name)
 
 
 def _save(fig: Any, path: Path, paths: list[Path]) -> None:
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    _plt().close(fig)
-    paths.append(path)
+    save(fig, path, paths)
 
 
 def plot_comparison(cmp: Comparison, out: Path) -> list[Path]:
@@ -62,11 +58,13 @@ def _simulation_figures(cmp: Comparison, out: Path) -> list[Path]:
     name0, res0 = next(iter(cmp.results.items()))
     n, L = res0.lib.n, res0.lib.layout
     est = res0.scenario.estimator
-    fig, axes = plt.subplots(2, n, figsize=(5 * n, 6), squeeze=False)
-    estimation_error_axes(res0, axes)
-    fig.suptitle(
-        f"Fig. 4: estimation errors of q and qd ({est} fusion estimate, {name0} in the loop, "
-        f"seed {res0.scenario.seed})"
+    fig, cells = joint_grid(n, (3.8, 1.9), rows_per_joint=error_rows(n))
+    estimation_error_axes(res0, cells)
+    title(
+        fig,
+        f"Fig. 4: estimation errors of {'q and qd' if error_rows(n) == 2 else 'q'} "
+        f"({est} fusion estimate; "
+        f"{_label(name0, res0)}; seed {res0.scenario.seed}); axes set by the last 80 %",
     )
     _save(fig, out / "fig04_estimation_errors.png", paths)
 
@@ -74,9 +72,12 @@ def _simulation_figures(cmp: Comparison, out: Path) -> list[Path]:
         fig, ax = plt.subplots(figsize=(7, 3.5))
         for i, th in enumerate(res0.lib.manifest.theta):
             c = L["theta"].start + i
-            ax.plot(res0.t, res0.x_true[:, c] - res0.x_hat[:, c], label=f"{th.name} error")
             sd = np.sqrt(np.maximum(res0.P_diag[:, c], 0.0))
-            ax.fill_between(res0.t, -2 * sd, 2 * sd, color="0.85", label="±2σ (filter)")
+            tc, lo, hi, err = envelope(
+                res0.t, -2 * sd, 2 * sd, res0.x_true[:, c] - res0.x_hat[:, c]
+            )
+            ax.fill_between(tc, lo, hi, color="0.85", lw=0, label="±2σ of the filter")
+            ax.plot(tc, err, label=f"{th.name}: true − estimate", rasterized=True)
         ax.set_xlabel("t [s]")
         ax.set_ylabel(f"theta error (true − estimate) [{th.unit}]")
         ax.grid(alpha=0.3)
@@ -84,13 +85,19 @@ def _simulation_figures(cmp: Comparison, out: Path) -> list[Path]:
         ax.set_title(f"Fig. 5: estimation error of theta ({est})")
         _save(fig, out / "fig05_theta_error.png", paths)
 
+    if n > 2:  # an arm: one panel per joint (the paper's Figs. 6-7 are its two joints)
+        return [*paths, _tracking_grid(cmp, out)]
     for j in range(n):
         fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
         axes[0].plot(res0.t, res0.q_des[:, j], "k--", lw=1.2, label="desired")
         for (name, res), color in zip(cmp.results.items(), _COLORS, strict=False):
-            q = res.x_true[:, L["q"].start + j]
-            axes[0].plot(res.t, q, color=color, lw=0.9, label=_label(name, res))
-            axes[1].plot(res.t, q - res.q_des[:, j], color=color, lw=0.9, label=_label(name, res))
+            tc, q, dq = envelope(
+                res.t,
+                res.x_true[:, L["q"].start + j],
+                res.x_true[:, L["q"].start + j] - res.q_des[:, j],
+            )
+            axes[0].plot(tc, q, color=color, lw=0.9, label=_label(name, res), rasterized=True)
+            axes[1].plot(tc, dq, color=color, lw=0.9, label=_label(name, res), rasterized=True)
         axes[0].set_ylabel(f"q{j + 1} [rad]")
         axes[1].set_ylabel(f"q{j + 1} − q{j + 1},d [rad]")
         axes[1].set_xlabel("t [s]")
@@ -99,13 +106,29 @@ def _simulation_figures(cmp: Comparison, out: Path) -> list[Path]:
             ax.grid(alpha=0.3)
         axes[0].legend(fontsize=8)
         axes[0].set_ylim(*_span(res0.q_des[:, j]))
-        if j < 2:  # the paper's Figs. 6-7 are its two joints
-            fig.suptitle(f"Fig. {6 + j}: tracking of joint {j + 1}, proposed vs DTSMC")
-            _save(fig, out / f"fig{6 + j:02d}_joint{j + 1}_tracking.png", paths)
-        else:
-            fig.suptitle(f"Tracking of joint {j + 1}, proposed vs DTSMC")
-            _save(fig, out / f"tracking_joint{j + 1}.png", paths)
+        title(fig, f"Fig. {6 + j}: tracking of joint {j + 1}, proposed vs DTSMC")
+        _save(fig, out / f"fig{6 + j:02d}_joint{j + 1}_tracking.png", paths)
     return paths
+
+
+def _tracking_grid(cmp: Comparison, out: Path) -> Path:
+    """``tracking.png``: one panel per joint, each controller's tracking error q − q_d
+    (symlog: linear within 1 mrad)."""
+    res0 = next(iter(cmp.results.values()))
+    n, L = res0.lib.n, res0.lib.layout
+    fig, cells = joint_grid(n, (3.8, 2.4))
+    for j, (ax,) in enumerate(cells):
+        for (name, res), color in zip(cmp.results.items(), _COLORS, strict=False):
+            tc, dq = envelope(res.t, res.x_true[:, L["q"].start + j] - res.q_des[:, j])
+            ax.plot(tc, dq, color=color, lw=0.7, label=_label(name, res), rasterized=True)
+        ax.set_yscale("symlog", linthresh=1e-3)
+        ax.set_ylabel(f"q{j + 1} − q{j + 1},d [rad]", fontsize=8)
+        ax.set_xlabel("t [s]", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    cells[0][0].legend(fontsize=6)
+    title(fig, "Tracking error of each joint (symlog: linear within 1 mrad)")
+    return save(fig, out / "tracking.png")
 
 
 def _span(v: np.ndarray) -> tuple[float, float]:
@@ -152,12 +175,12 @@ def _experiment_figures(cmp: Comparison, out: Path) -> list[Path]:
     for ax in axes:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
-    fig.suptitle(f"Fig. 12: encoder vs vision vs fused joint angle ({name0} in the loop)")
+    title(fig, f"Fig. 12: encoder vs vision vs fused joint angle ({name0} in the loop)")
     _save(fig, out / "fig12_encoder_vision_fused.png", paths)
 
-    fig, axes = plt.subplots(2, 1, figsize=(8, 5), squeeze=False)
-    estimation_error_axes(res0, axes)
-    fig.suptitle(f"Fig. 13: estimation error of the fused estimate ({res0.scenario.estimator})")
+    fig, cells = joint_grid(1, (8.0, 2.4), rows_per_joint=2)
+    estimation_error_axes(res0, cells)
+    title(fig, f"Fig. 13: estimation error of the fused estimate ({res0.scenario.estimator})")
     _save(fig, out / "fig13_estimation_error.png", paths)
 
     l1 = float(cmp.scenario.trajectory.get("l1", 0.6))
@@ -177,39 +200,49 @@ def _experiment_figures(cmp: Comparison, out: Path) -> list[Path]:
 
 
 def _control_figures(cmp: Comparison, out: Path, n: int) -> list[Path]:
-    plt = _plt()
     paths: list[Path] = []
-    fig, axes = plt.subplots(n, 1, figsize=(8, 2.8 * n + 0.6), sharex=True, squeeze=False)
+    fig, cells = joint_grid(n, (3.8, 2.2))
     for (name, res), color in zip(cmp.results.items(), _COLORS, strict=False):
-        for j in range(n):
-            axes[j][0].plot(res.t, res.s[:, j], color=color, lw=0.8, label=_label(name, res))
-    for j in range(n):
-        axes[j][0].set_ylabel(f"s{j + 1} [rad/s]")
-        axes[j][0].set_yscale("symlog", linthresh=1e-2)
-        axes[j][0].grid(alpha=0.3)
-    axes[-1][0].set_xlabel("t [s]")
-    axes[0][0].legend(fontsize=8)
-    fig.suptitle("Sliding variable s(k) of eq. (33)")
+        for j, (ax,) in enumerate(cells):
+            tc, s = envelope(res.t, res.s[:, j])
+            ax.plot(tc, s, color=color, lw=0.7, label=_label(name, res), rasterized=True)
+    for j, (ax,) in enumerate(cells):
+        ax.set_ylabel(f"s{j + 1} [rad/s]", fontsize=8)
+        ax.set_yscale("symlog", linthresh=1e-2)
+        ax.set_xlabel("t [s]", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    cells[0][0].legend(fontsize=6)
+    title(fig, "Sliding variable s(k) of eq. (33) (symlog: linear within 0.01)")
     _save(fig, out / "sliding_surface.png", paths)
 
-    fig, axes = plt.subplots(n, 2, figsize=(12, 2.8 * n + 0.6), squeeze=False)
-    # the zoom: the last 0.25 s of the longest run (a diverged run ends earlier: not shown)
+    # the zoom: the last 0.25 s of the longest run (a diverged run ends earlier: not shown),
+    # for the paper's arms (an arm's grid: the whole run alone, half the panels to draw)
+    zoomed = n <= RATE_PANELS_UP_TO
+    fig, cells = joint_grid(n, (3.8, 1.8), rows_per_joint=2 if zoomed else 1, sharex=False)
     t_end = max(float(res.t[-1]) for res in cmp.results.values())
     for (name, res), color in zip(cmp.results.items(), _COLORS, strict=False):
         t = res.t
         zoom = t >= t_end - 0.25
-        for j in range(n):
-            axes[j][0].plot(t, res.u[:, j], color=color, lw=0.7, label=_label(name, res))
-            if np.any(zoom):
-                axes[j][1].plot(t[zoom], res.u[zoom, j], color=color, lw=0.8)
-    for j in range(n):
-        axes[j][0].set_ylabel(f"u{j + 1} [N m]")
-        axes[j][1].set_ylabel(f"u{j + 1} [N m] (last 0.25 s)")
-        axes[j][1].set_xlim(t_end - 0.25, t_end)
-        for ax in axes[j]:
+        for j, axes in enumerate(cells):
+            tc, u = envelope(t, res.u[:, j])
+            axes[0].plot(tc, u, color=color, lw=0.6, label=_label(name, res), rasterized=True)
+            if zoomed and np.any(zoom):
+                axes[1].plot(t[zoom], res.u[zoom, j], color=color, lw=0.8)
+    for j, axes in enumerate(cells):
+        axes[0].set_ylabel(f"u{j + 1} [N m]", fontsize=8)
+        if zoomed:
+            axes[1].set_ylabel(f"u{j + 1}, last 0.25 s", fontsize=8)
+            axes[1].set_xlim(t_end - 0.25, t_end)
+        for ax in axes:
             ax.grid(alpha=0.3)
-            ax.set_xlabel("t [s]")
-    axes[0][0].legend(fontsize=8)
-    fig.suptitle("Motor torque u(k): whole run (left) and a zoom showing the chattering (right)")
+        axes[-1].set_xlabel("t [s]", fontsize=8)
+    cells[0][0].legend(fontsize=6)
+    title(
+        fig,
+        "Motor torque u(k): the whole run (upper) and its last 0.25 s (lower: the chattering)"
+        if zoomed
+        else "Motor torque u(k)",
+    )
     _save(fig, out / "torque.png", paths)
     return paths

@@ -19,6 +19,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from amsfe_sym.apps.plots.style import (
+    converged_limit,
+    envelope,
+    joint_grid,
+    pyplot,
+    save,
+    title,
+)
 from amsfe_sym.sim.record import nees_band, window
 
 if TYPE_CHECKING:
@@ -26,89 +34,132 @@ if TYPE_CHECKING:
     from amsfe_sym.scenario import Scenario
     from amsfe_sym.sim.result import RunResult
 
-__all__ = ["estimation_error_axes", "plot_run", "plot_study"]
+__all__ = [
+    "RATE_PANELS_UP_TO",
+    "controller_label",
+    "error_rows",
+    "estimation_error_axes",
+    "plot_run",
+    "plot_study",
+]
+
+#: What each controller's law acts on, for a legend (``{est}``: the run's estimator).
+_LAWS = {
+    "amsfe": "amsfe law on the {est} estimate",
+    "amsfe-paper": "amsfe-paper law (37) on the {est} estimate",
+    "dtsmc": "dtsmc law (54) on the motor encoders",
+    "dtsmc-ekf": "dtsmc law (54) on the {est} estimate",
+    "dtsmc-paper": "dtsmc-paper law (54) on the motor encoders",
+    "truth": "amsfe law on the true state (oracle)",
+    "truth-ct": "computed torque on the true state (oracle)",
+}
 
 
-def estimation_error_axes(res: RunResult, axes: Any) -> None:
-    """Fill a 2 x n grid of axes with the q (top) and qd (bottom) estimation errors of every
-    joint and the filter's +-2 sigma band (the paper's Fig. 4 / 13)."""
+def controller_label(res: RunResult, name: str | None = None) -> str:
+    """What a run's controller is, for a legend: its law and what the law acts on (``truth``
+    is the amsfe law on the true state, not the truth), and where the run diverged."""
+    sc = res.scenario
+    name = name or sc.controller
+    text = _LAWS.get(name, f"{name} law").format(est=sc.estimator)
+    if sc.gains_for(name).get("state") == "true":
+        text = text.replace(f"the {sc.estimator} estimate", "the true state (oracle)")
+    if res.diverged_at is not None:
+        text += f", diverged at {res.diverged_at:.2f} s"
+    return text
+
+
+#: Arms with more joints than this get the link-angle errors alone in the estimation-error
+#: figures (the paper's two-joint figures have q and qd): half the panels to draw.
+RATE_PANELS_UP_TO = 2
+
+
+def error_rows(n: int) -> int:
+    """Axes a joint's panel of estimation errors has: q and qd up to
+    :data:`RATE_PANELS_UP_TO` joints, q alone above."""
+    return 2 if n <= RATE_PANELS_UP_TO else 1
+
+
+def estimation_error_axes(res: RunResult, cells: list[list[Any]]) -> None:
+    """Fill one panel per joint (``cells[j]`` = [q axes] or [q axes, qd axes],
+    :func:`joint_grid` with :func:`error_rows` rows a joint) with the q (and qd) estimation
+    errors and the filter's +-2 sigma band (the paper's Fig. 4 / 13).  Each axis is set by
+    the converged part (the last 80 %): the start transient is clipped, the band is
+    visible."""
     t, L = res.t, res.lib.layout
     e = res.x_true - res.x_hat
     sd = np.sqrt(np.maximum(res.P_diag, 0.0))
-    for j in range(res.lib.n):
-        for row, (block, unit) in enumerate((("q", "rad"), ("qd", "rad/s"))):
+    for j, axes in enumerate(cells):
+        for ax, (block, unit) in zip(axes, (("q", "rad"), ("qd", "rad/s")), strict=False):
             c = L[block].start + j
-            ax = axes[row][j]
-            ax.fill_between(t, -2 * sd[:, c], 2 * sd[:, c], color="0.85", label="±2σ (filter)")
-            ax.plot(t, e[:, c], lw=0.8, label="true − estimate")
-            ax.set_ylabel(f"{block}{j + 1} error [{unit}]")
-            ax.grid(alpha=0.3)
-            lim = max(5 * float(np.percentile(np.abs(e[len(t) // 5 :, c]), 99)), 1e-6)
+            tc, lo, hi, err = envelope(t, -2 * sd[:, c], 2 * sd[:, c], e[:, c])
+            ax.fill_between(tc, lo, hi, color="0.85", lw=0, label="±2σ of the filter")
+            ax.plot(tc, err, lw=0.7, label="true − estimate", rasterized=True)
+            lim = converged_limit(e[:, c], 2 * sd[:, c])
             ax.set_ylim(-lim, lim)
-        axes[1][j].set_xlabel("t [s]")
-    axes[0][0].legend(loc="upper right", fontsize=8)
+            ax.set_ylabel(f"{block}{j + 1} error [{unit}]", fontsize=8)
+            ax.tick_params(labelsize=7)
+            ax.grid(alpha=0.3)
+        axes[-1].set_xlabel("t [s]", fontsize=8)
+    cells[0][0].legend(loc="upper right", fontsize=7)
 
 
 def plot_run(res: RunResult, out: Path) -> list[Path]:
     """Write the run's figures to ``out``; returns their paths."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     lib, t = res.lib, res.t
     n, L = lib.n, lib.layout
     sd = np.sqrt(np.maximum(res.P_diag, 0.0))
-    paths = []
-    title = f"{res.scenario.name}: estimator {res.scenario.estimator}, seed {res.scenario.seed}"
+    paths: list[Path] = []
+    sc = res.scenario
+    what = f"{sc.name}: estimator {sc.estimator}, {controller_label(res)}, seed {sc.seed}"
 
-    fig, axes = plt.subplots(2, n, figsize=(5 * n, 6), sharex=True, squeeze=False)
-    estimation_error_axes(res, axes)
-    fig.suptitle(f"Estimation errors (paper Fig. 4) — {title}")
-    fig.tight_layout()
-    paths.append(out / "estimation_errors.png")
-    fig.savefig(paths[-1], dpi=110)
-    plt.close(fig)
+    fig, cells = joint_grid(n, (3.8, 1.9), rows_per_joint=error_rows(n))
+    estimation_error_axes(res, cells)
+    which = "q and qd" if error_rows(n) == 2 else "link angles q"
+    title(fig, f"Estimation errors of {which} (paper Fig. 4), axes set by the last 80 % — {what}")
+    save(fig, out / "estimation_errors.png", paths)
 
     if lib.p:
-        fig, axes = plt.subplots(1, lib.p, figsize=(6 * lib.p, 3.5), squeeze=False)
+        cols = min(lib.p, 3)
+        rows = -(-lib.p // cols)
+        fig, axes = plt.subplots(rows, cols, figsize=(4.5 * cols, 2.8 * rows), squeeze=False)
+        for ax in axes.flat[lib.p :]:
+            ax.set_visible(False)
         for i, th in enumerate(lib.manifest.theta):
             c = L["theta"].start + i
-            ax = axes[0][i]
-            ax.fill_between(
+            ax = axes.flat[i]
+            tc, lo, hi, est, true = envelope(
                 t,
                 res.x_hat[:, c] - 2 * sd[:, c],
                 res.x_hat[:, c] + 2 * sd[:, c],
-                color="0.85",
-                label="±2σ",
+                res.x_hat[:, c],
+                res.x_true[:, c],
             )
-            ax.plot(t, res.x_hat[:, c], label="estimate")
-            ax.plot(t, res.x_true[:, c], "k--", label="true")
-            ax.set_xlabel("t [s]")
-            ax.set_ylabel(f"{th.name} ({th.kind}) [{th.unit}]")
+            ax.fill_between(tc, lo, hi, color="0.85", lw=0, label="±2σ of the filter")
+            ax.plot(tc, est, lw=0.9, label="estimate", rasterized=True)
+            ax.plot(tc, true, "k--", lw=0.8, label="true value (the plant's)")
+            ax.set_xlabel("t [s]", fontsize=8)
+            ax.set_ylabel(f"{th.name} ({th.kind}) [{th.unit}]", fontsize=8)
+            ax.tick_params(labelsize=7)
             ax.grid(alpha=0.3)
-            ax.legend(fontsize=8)
-        fig.suptitle(f"theta (paper Fig. 5) — {title}")
-        fig.tight_layout()
-        paths.append(out / "theta.png")
-        fig.savefig(paths[-1], dpi=110)
-        plt.close(fig)
+        axes.flat[0].legend(fontsize=7)
+        title(fig, f"theta (paper Fig. 5) — {what}")
+        save(fig, out / "theta.png", paths)
 
-    fig, axes = plt.subplots(n, 1, figsize=(8, 2.8 * n), sharex=True, squeeze=False)
-    for j in range(n):
-        ax = axes[j][0]
-        ax.plot(t, res.q_des[:, j], "k--", label="desired")
-        ax.plot(t, res.x_true[:, L["q"].start + j], label="true link angle")
-        ax.plot(t, res.x_hat[:, L["q"].start + j], lw=0.8, alpha=0.8, label="estimate")
-        ax.set_ylabel(f"q{j + 1} [rad]")
+    fig, cells = joint_grid(n, (3.8, 2.4))
+    for j, (ax,) in enumerate(cells):
+        c = L["q"].start + j
+        tc, des, true, est = envelope(t, res.q_des[:, j], res.x_true[:, c], res.x_hat[:, c])
+        ax.plot(tc, des, "k--", lw=1.0, label="desired link angle")
+        ax.plot(tc, true, lw=0.9, label="true link angle (plant)", rasterized=True)
+        ax.plot(tc, est, lw=0.7, alpha=0.8, label=f"{sc.estimator} estimate", rasterized=True)
+        ax.set_ylabel(f"q{j + 1} [rad]", fontsize=8)
+        ax.set_xlabel("t [s]", fontsize=8)
+        ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
-    axes[0][0].legend(fontsize=8)
-    axes[-1][0].set_xlabel("t [s]")
-    fig.suptitle(f"Tracking (paper Figs. 6-7), controller {res.scenario.controller}")
-    fig.tight_layout()
-    paths.append(out / "tracking.png")
-    fig.savefig(paths[-1], dpi=110)
-    plt.close(fig)
+    cells[0][0].legend(fontsize=7)
+    title(fig, f"Tracking (paper Figs. 6-7) — {what}")
+    save(fig, out / "tracking.png", paths)
     return paths
 
 

@@ -1,4 +1,5 @@
-"""The claim table (docs/reproduction.md): the controller x estimator rows the paper's claims
+"""The claim table (docs/explanation/reproduction.md): the controller x estimator rows the paper's
+claims
 rest on, over any seed range, on the compiled loop, with their spread and paired tests.
 
 ``amsfe study paper-sim --claims --first-seed 1000 --seeds 200`` prints it and writes

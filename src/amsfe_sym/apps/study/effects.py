@@ -1,6 +1,6 @@
 """Claims as effect sizes: paired differences with bootstrap intervals, on two seed blocks.
 
-A claim of docs/reproduction.md compares two rows of the claim table (a vs b, the same
+A claim of docs/explanation/reproduction.md compares two rows of the claim table (a vs b, the same
 seeds). Its effect on one block of seeds is the median over seeds of the paired difference
 of tracking RMSE, a - b [rad], with a bootstrap 95 % interval (2000 resamples of the seeds,
 fixed generator). A diverged run counts as +inf RMSE, never dropped: a seed where only a

@@ -5,7 +5,7 @@ controllers and seeds; :func:`run_sweep` runs every combination (on a
 ``distributed.LocalCluster``, or a cluster by address) and writes ``results.parquet``
 (one row per run, :func:`~amsfe_sym.apps.sweep.jobs.run_job`) and ``sweep.json``;
 :mod:`~amsfe_sym.apps.sweep.report` aggregates over seeds into tables and figures.
-docs/sweeps.md has the format and the findings.
+docs/how-to/sweeps.md has the format and the findings.
 
 May import every room before apps (it runs simulations and builds their libraries), never
 the command line.

@@ -3,7 +3,7 @@
 :func:`run_sweep` expands the grid, drops the runs the folder already holds (resume),
 groups the rest by library (:func:`~amsfe_sym.apps.sweep.jobs.library_key`) and cuts each group
 into batches (one Dask task runs a batch, so the scheduler's per-task cost is spread over
-its runs; docs/sweeps.md measures it), submits them, and writes each finished batch as a
+its runs; docs/how-to/sweeps.md measures it), submits them, and writes each finished batch as a
 part of the table at once (an interrupted sweep keeps what it finished).  At the end it
 merges the table (``results.parquet``) and writes ``sweep.json``: the sweep, its resolved
 base scenario, counts, wall time, throughput and provenance.

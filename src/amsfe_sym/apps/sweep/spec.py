@@ -23,7 +23,7 @@ A sweep file reads::
     y = ""
 
 Axis keys are the keys ``amsfe simulate --set`` takes (``camera.delay``, ``filter.*``,
-``controller_gains.NAME.K``, ...: docs/scenarios.md) plus the robot keys of
+``controller_gains.NAME.K``, ...: docs/reference/scenarios.md) plus the robot keys of
 :mod:`amsfe_sym.apps.sweep.robot_axes` (``robot.theta.NAME.true``, ``robot.stiffness_error``).
 Every combination's scenario is built and validated here, before anything runs, so a bad
 key or value stops the sweep with one line.
@@ -295,8 +295,10 @@ def parse_sweep(data: Mapping[str, Any], path: Path | None = None) -> SweepSpec:
         (data.get("report", {}), _REPORT_KEYS),
     ):
         if not isinstance(table, Mapping):
-            raise _bad(where, "tables [sweep], [axes], [report]", table, "see docs/sweeps.md")
-        check_known_keys(where, table, allowed, "remove or rename them (docs/sweeps.md)")
+            raise _bad(
+                where, "tables [sweep], [axes], [report]", table, "see docs/how-to/sweeps.md"
+            )
+        check_known_keys(where, table, allowed, "remove or rename them (docs/how-to/sweeps.md)")
     sw = dict(data.get("sweep", {}))
     scenario_ref = sw.get("scenario", "paper-sim")
     if not isinstance(scenario_ref, str):
@@ -338,7 +340,9 @@ def parse_sweep(data: Mapping[str, Any], path: Path | None = None) -> SweepSpec:
         )
     axes_raw = data.get("axes", {})
     if not isinstance(axes_raw, Mapping):
-        raise _bad(f"{where}: [axes]", "a table of axis = values", axes_raw, "see docs/sweeps.md")
+        raise _bad(
+            f"{where}: [axes]", "a table of axis = values", axes_raw, "see docs/how-to/sweeps.md"
+        )
     axes = {str(k): _axis_values(str(k), v) for k, v in axes_raw.items()}
     for key, values in axes.items():
         if key.startswith(ROBOT_PREFIX):
@@ -397,7 +401,7 @@ def _check_names(spec: SweepSpec) -> None:
                 f"[sweep] {kind}",
                 f"names among {list(known)}",
                 bad,
-                "use the names of docs/scenarios.md",
+                "use the names of docs/reference/scenarios.md",
             )
 
 

@@ -12,7 +12,7 @@
  *   the Joseph update) have an AVX2 clone without FMA (KERNEL_CLONES): same result on every
  *   x86-64 CPU.
  *
- * The structure they use (docs/runtime-c.md, "Cost"):
+ * The structure they use (docs/how-to/runtime-c.md, "Cost"):
  * - P is symmetric: every symmetric result is computed on its lower triangle and mirrored;
  *   the prediction uses the Cholesky factor of P that the positive-definiteness check of the
  *   previous step computed anyway: A P A^T = (A L)(A L)^T, A L costs N^3/2 (L triangular)
@@ -24,7 +24,7 @@
  *   Bucy and Joseph 1968; no N x N x N product).
  *
  * Cost (callgrind, instructions per amsfe_est_tick of oosm on a recorded closed-loop run,
- * tick_timer.c; docs/runtime-c.md has the command): Panda N = 29, ne = 14: 222.5k, of which
+ * tick_timer.c; docs/how-to/runtime-c.md has the command): Panda N = 29, ne = 14: 222.5k, of which
  * the rk4 transition_step 121k (generated stages and amsfe_model.c's chain), these kernels ~98k
  * (A P A^T 35k, the encoder update 48k, the Cholesky check 15k);
  * paper_2link N = 9: 16.7k.  A late frame (eq. 23 over a 33-step lag on the Panda) 2.7M.
@@ -369,7 +369,7 @@ KERNEL_CLONES int amsfe_a1_retrodict(int M, int m, const int *restrict rows,
 /* The Joseph-form update of amsfe_joseph_select for a measurement whose jacobian H (m x M) is
  * given by its rows' nonzeros: row a holds hval[e] at column hcol[e], hrow[a] <= e <
  * hrow[a + 1] (ekf.joseph_update with that H; the joint torque sensors' Ks (qm - q) and the
- * camera of a state with input states, docs/effort.md).  The innovation nu [m] is given:
+ * camera of a state with input states, docs/explanation/effort.md).  The innovation nu [m] is given:
  * PHt = P H^T, S = sym(H PHt) + diag(r), x+ = x + PHt S^-1 nu, P+ the Joseph form evaluated as
  * amsfe_joseph_select does.  Returns 0 when S is not positive definite.  w:
  * AMSFE_JOSEPH_WORK(M, m) doubles. */

@@ -1,5 +1,5 @@
 /* amsfe_loop.c: controllers, the real-time tick and the closed-loop simulation in C
- * (amsfe_loop.h, docs/runtime-c.md).
+ * (amsfe_loop.h, docs/how-to/runtime-c.md).
  *
  * Control flow and bookkeeping: every model number comes from the robot's generated
  * functions (control_*, plant_step, camera_measure, mass_matrix, bias) compiled into the

@@ -1,5 +1,5 @@
 /* amsfe_loop.h: the controllers and the closed loop of amsfe_sym as plain C
- * (docs/runtime-c.md).
+ * (docs/how-to/runtime-c.md).
  *
  * Compiled into every full generated robot library beside amsfe_runtime.{c,h} (the
  * estimators).  Three layers, each usable alone:
@@ -57,7 +57,7 @@ typedef struct {
   const double *Ks;          /* nominal stiffness [N m/rad] */
   const int *ks_theta;       /* [n]: index of theta holding joint j's stiffness, or -1 */
   const double *theta_initial; /* [p] (the encoder-only laws use it) */
-  /* the cascades' start-up (docs/control.md, "Start-up"): 0 = the filter starts at rest on
+  /* the cascades' start-up (docs/explanation/control.md, "Start-up"): 0 = the filter starts at rest on
    * the first command; 1 = wait until every link angle's and rate's posterior standard
    * deviation (amsfe_ctrl_observe) is below these (and the filter consistent: ready_nis), the
    * motor held meanwhile (hold_motor), then start at rest on the first trusted command */

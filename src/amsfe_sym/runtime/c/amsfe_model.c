@@ -1,5 +1,5 @@
 /* amsfe_model.c: the rk4 transition step chained from one generated stage (part of every
- * rk4 library; see docs/codegen.md, "Structure kept through generation").
+ * rk4 library; see docs/explanation/codegen.md, "Structure kept through generation").
  *
  * transition_step_chain(x, u) -> (x_next, A, Gamma) computes exactly what the generated
  * `transition_step` of the rk4 model computes (m = AMSFE_MODEL_SUBSTEPS classical
@@ -25,7 +25,7 @@
  * (its point is x).  The sensitivities are held row-major (row r of S, B and D contiguous over
  * the N columns) and Jr's pattern is read by rows, so D_i is nnz(Jr) contiguous axpys of length
  * N and the solve n^2 more (issue 18 item 2: the jacobian's identity and diagonal motor rows
- * are single-nonzero rows, i.e. copies and scalings of rows of S; measured in docs/codegen.md).
+ * are single-nonzero rows, i.e. copies and scalings of rows of S; measured in docs/explanation/codegen.md).
  *
  * It follows CasADi's calling convention and exports the symbols `casadi.external` needs
  * (the names and sparsity of the generated `transition_step`), so Python and C callers use

@@ -1,4 +1,4 @@
-/* amsfe_runtime.c: the hand-written glue of the compiled estimators (docs/runtime-c.md).
+/* amsfe_runtime.c: the hand-written glue of the compiled estimators (docs/how-to/runtime-c.md).
  *
  * Control flow and bookkeeping: history ring buffers, the loops over a lag, gating decisions,
  * statuses.  The model's numbers (x+, A, Gamma, the inverse, the camera) come from the
@@ -7,7 +7,7 @@
  * A P A^T + Gamma Qw Gamma^T, the encoder update whose H selects qm and qmd, the Cholesky
  * check, the eq. 23 accumulation) is the small set of loops in "dense kernels" below, the C
  * counterpart of the numpy lines of the Python reference: CasADi's MX matrix products cost
- * 6-12 ns per multiply-add in generated code and SX expansion grows as N^3 (docs/performance.md).
+ * 6-12 ns per multiply-add in generated code and SX expansion grows as N^3 (docs/explanation/performance.md).
  * Each branch mirrors the Python reference in estimation/ (named per function).
  */
 #define _POSIX_C_SOURCE 200112L /* posix_memalign */
@@ -27,7 +27,7 @@
 #include "amsfe_internal.h"
 
 #define AMSFE_MAX_ENCODERS 256 /* 2n: up to 128 joints */
-/* The effort paths (docs/effort.md section 7) stay out of line: the applied path's tick is
+/* The effort paths (docs/explanation/effort.md section 7) stay out of line: the applied path's tick is
  * compiled as before (the same inlining), whatever they add. */
 #if defined(__GNUC__)
 #define EFFORT_PATH __attribute__((noinline))
@@ -62,7 +62,7 @@ struct amsfe_est {
   amsfe_params par; /* pointers in it point into this block */
   amsfe_dims d;     /* the filter's: N = M (the model's N + input_states), nw and ne with them */
   int Nm, ni, jt, net; /* the model's N, input states, joint torque sensors, net torque input
-                          (docs/effort.md) */
+                          (docs/explanation/effort.md) */
   int B, R, F, S, max_delay; /* oosm ring B, replay ring R = B + 1, frames per step, slots */
   long k;
   int failed, last_error;

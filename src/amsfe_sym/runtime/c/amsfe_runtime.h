@@ -1,4 +1,4 @@
-/* amsfe_runtime.h: the estimators of amsfe_sym as plain C (docs/runtime-c.md).
+/* amsfe_runtime.h: the estimators of amsfe_sym as plain C (docs/how-to/runtime-c.md).
  *
  * Compiled into every generated robot library together with the robot's generated
  * functions (transition_step, est_camera_update, ...); a program links only that library and
@@ -10,7 +10,7 @@
  * paper eqs. 13-14, then the encoder sample taken at k+1, eqs. 15-17), followed by one
  * amsfe_est_camera_frame per camera frame delivered at k+1 (in increasing exposure step, as
  * the Python reference sorts them).  The control law will be appended to the tick (encoder
- * sample in, torque out): see docs/runtime-c.md.
+ * sample in, torque out): see docs/how-to/runtime-c.md.
  *
  * Matrices are dense, column-major (symmetric ones read the same either way).
  */
@@ -96,7 +96,7 @@ typedef struct {
   long k0;                /* step index of x0 */
   int backward_map;       /* oosm's backward map of eq. 24: enum amsfe_backward_map (0, the
                              zero of a memset block, is the linearised one) */
-  /* ---- a log without the applied torque (docs/effort.md; every field 0/NULL: the applied
+  /* ---- a log without the applied torque (docs/explanation/effort.md; every field 0/NULL: the applied
    * torque, as before).  input_states = n: the unknown input carried as n random-walk states
    * (effort_models.InputStateTransition): the state is [x, u] of M = N + n entries (x0 [M],
    * P0 [M*M]), the transition [F(x, u), u] with jacobian [[A, B], [0, I]], B = (A[:, qmd] +
@@ -174,7 +174,7 @@ int amsfe_est_set_inverse_tolerance(amsfe_est *est, double tol);
  * either pointer may be NULL). */
 void amsfe_est_inverse_residual(const amsfe_est *est, double *residual, double *limit);
 
-/* ---- a whole recorded log in one call (logs/replay.py's batch path; docs/logs.md, "Speed").
+/* ---- a whole recorded log in one call (logs/replay.py's batch path; docs/how-to/logs.md, "Speed").
  * Tick k of the log is step k of the estimator's posterior x(k|k) (k0 = 0 for a log read from
  * its first encoder sample). */
 typedef struct {

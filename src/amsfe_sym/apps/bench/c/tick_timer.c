@@ -33,7 +33,7 @@ typedef struct {
   const double *qw, *r_encoder, *r_camera, *x0, *P0;
   long k0;
   int backward_map; /* amsfe_params.backward_map: 0, the linearised map */
-  /* amsfe_params' effort fields (docs/effort.md section 7): all 0, the applied torque */
+  /* amsfe_params' effort fields (docs/explanation/effort.md section 7): all 0, the applied torque */
   int input_states;
   const double *input_gain;
   int joint_torque;

@@ -1,2 +1,0 @@
-export PYTHONPATH=/work/wt-lead/src
-PY=/work/main/.venv/bin/python

@@ -1,0 +1,153 @@
+"""Figures of an estimate over a recorded log (``amsfe estimate``): ``estimate.png`` and
+``nis.png`` (docs/how-to/logs.md, "Consistency without truth").
+
+``estimate.png`` has one panel per joint.  A log with the truth (a simulated one) shows the
+link-angle error with the filter's +-2 sigma band.  Any other log shows what can be judged
+without the truth: the spring deflection the estimator infers (q_hat - qm, the encoder's
+motor angle) and the encoder residual (qm - qm_hat), each with the 2-sigma band of the
+estimate.  Every axis is set by the converged part (the last 80 %), so the start transient
+does not hide the band.  ``nis.png`` shows the encoder and camera NIS over time with their
+chi-square 95 % bands.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amsfe_sym.apps.plots.style import (
+    converged_limit,
+    envelope,
+    joint_grid,
+    pyplot,
+    save,
+    title,
+)
+from amsfe_sym.logs.read import RobotLog
+
+__all__ = ["plot_log"]
+
+FloatArray = NDArray[np.float64]
+
+
+def plot_log(
+    log: RobotLog,
+    x_hat: FloatArray,
+    P_diag: FloatArray,
+    estimator: str,
+    nis: Mapping[str, Mapping[str, Any]],
+    encoder_nis: FloatArray | None,
+    frame_nis: tuple[FloatArray, FloatArray] | None,
+    folder: Path,
+) -> list[Path]:
+    """Write ``estimate.png`` and ``nis.png`` of an estimate over ``log``.
+
+    Args:
+        log: The read log (its grid, encoder samples, frames, truth).
+        x_hat: x(k|k) per tick (eq. 2), (K, N).
+        P_diag: diag P(k|k), (K, N).
+        estimator: The estimator's name (for the titles).
+        nis: Per channel (``encoders``, ``camera``): ``dof`` and ``band_95``
+            (:func:`~amsfe_sym.apps.estimate_report.nis_report`); empty: no ``nis.png``.
+        encoder_nis: The encoder NIS per tick, (K,), or None.
+        frame_nis: (arrival step, NIS) of each frame, or None.
+        folder: Where the PNGs go.
+
+    Returns:
+        The paths written.
+    """
+    n = log.u.shape[1]
+    t = log.t
+    sd = np.sqrt(np.maximum(P_diag, 0.0))
+    arrivals = np.array([fr.delivery_step * log.T for fr in log.frames], dtype=float)
+    fig, cells = joint_grid(n, (3.8, 2.3))
+    for j, (ax,) in enumerate(cells):
+        band = 2 * sd[:, j]
+        if log.truth is not None:
+            err = log.truth[:, j] - x_hat[:, j]
+            tc, lo, hi, e = envelope(t, -band, band, err)
+            ax.fill_between(tc, lo, hi, color="0.85", lw=0, label="±2σ of the filter")
+            ax.plot(tc, e, lw=0.7, label="true − estimated link angle", rasterized=True)
+            lim = converged_limit(err, band)
+            ax.set_ylabel(f"q{j + 1} error [rad]", fontsize=8)
+        else:
+            deflection = x_hat[:, j] - log.z[:, j]
+            residual = log.z[:, j] - x_hat[:, 2 * n + j]
+            tc, lo, hi, d, r = envelope(
+                t, deflection - band, deflection + band, deflection, residual
+            )
+            ax.fill_between(tc, lo, hi, color="0.85", lw=0, label="±2σ of the link angle")
+            ax.plot(tc, d, lw=0.8, label="spring deflection q̂ − qm (encoder)", rasterized=True)
+            ax.plot(tc, r, lw=0.6, label="encoder residual qm − q̂m", rasterized=True)
+            center = float(np.nanmedian(deflection[len(t) // 5 :])) if len(t) else 0.0
+            lim = converged_limit(
+                np.column_stack([deflection - center, residual]), band[:, None]
+            ) + abs(center)
+            ax.set_ylabel(f"joint {j + 1} [rad]", fontsize=8)
+        ax.set_ylim(-lim, lim)
+        if arrivals.size:  # one collection: an axvline each took 12 of 15 s for 1818 x 7
+            ax.vlines(
+                arrivals,
+                0,
+                0.04,
+                transform=ax.get_xaxis_transform(),
+                color="k",
+                lw=0.3,
+                alpha=0.5,
+                rasterized=True,
+            )
+        ax.set_xlabel("t [s]", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    cells[0][0].legend(loc="upper right", fontsize=6)
+    title(
+        fig,
+        f"{estimator} on {log.path.name}; axes set by the last 80 %; ticks at the bottom: "
+        "camera frames' arrivals",
+    )
+    paths = [save(fig, folder / "estimate.png")]
+    if nis:
+        paths.append(_nis_figure(log, estimator, nis, encoder_nis, frame_nis, folder))
+    return paths
+
+
+def _nis_figure(
+    log: RobotLog,
+    estimator: str,
+    nis: Mapping[str, Mapping[str, Any]],
+    encoder_nis: FloatArray | None,
+    frame_nis: tuple[FloatArray, FloatArray] | None,
+    folder: Path,
+) -> Path:
+    """``nis.png``: NIS of the encoder updates and of the camera frames over time, with
+    their chi-square 95 % bands (nothing drawn where no NIS was recorded)."""
+    plt = pyplot()
+    fig, axes = plt.subplots(len(nis), 1, figsize=(8, 2.3 * len(nis) + 0.6), squeeze=False)
+    for ax, (what, r) in zip(axes[:, 0], nis.items(), strict=True):
+        if what == "encoders" and encoder_nis is not None:
+            t, v = log.t, np.asarray(encoder_nis, dtype=np.float64)
+            w = max(1, len(v) // 100)  # its running mean over 1 % of the log
+            ok = np.isfinite(v)
+            mean = np.convolve(np.where(ok, v, 0), np.ones(w), "same") / np.maximum(
+                np.convolve(ok, np.ones(w), "same"), 1
+            )
+            tc, vc, mc = envelope(t, v, mean)
+            ax.plot(tc, vc, lw=0.3, alpha=0.5, label="encoder update", rasterized=True)
+            ax.plot(tc, mc, lw=1.0, color="k", label=f"running mean ({w} ticks)")
+        elif frame_nis is not None:
+            arrival, v = frame_nis
+            ax.plot(arrival * log.T, v, ".", ms=3, label="camera frame (at its arrival)")
+        lo, hi = r["band_95"]
+        ax.axhspan(lo, hi, color="g", alpha=0.12, label=f"chi²({r['dof']}) 95 % band")
+        ax.axhline(r["dof"], color="g", lw=0.6)
+        ax.set_yscale("log")
+        ax.set_ylabel(f"NIS {what}", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.legend(loc="upper right", fontsize=7)
+    axes[-1, 0].set_xlabel("t [s]")
+    title(fig, f"consistency without truth: NIS of {estimator} on {log.path.name}")
+    return save(fig, folder / "nis.png")

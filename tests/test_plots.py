@@ -1,0 +1,153 @@
+"""Figures a user reads (apps/plots): one panel per joint in a grid of sane size for any arm,
+error axes set by the converged part with the 2-sigma band inside them, long lines cut to
+the pixels without losing a spike, legends that say what a line is, and the ``--no-plots``
+hint when the figures take more than a quarter of a command."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from amsfe_sym.apps.plots.cost import SHARE, FigureClock, hint_line
+from amsfe_sym.apps.plots.style import (
+    DPI,
+    converged_limit,
+    envelope,
+    joint_grid,
+    pyplot,
+    save,
+    window_start,
+)
+
+
+@pytest.mark.parametrize("n", [1, 2, 6, 7, 12])
+def test_one_panel_per_joint_in_a_grid_of_sane_size(n: int, tmp_path: Path) -> None:
+    """7 joints: 4 + 3 panels (not 14 in two rows); a PNG of at most 1600 px a side."""
+    fig, cells = joint_grid(n, (3.8, 1.9), rows_per_joint=2)
+    assert len(cells) == n and all(len(c) == 2 for c in cells)
+    cols = min(n, 4)
+    rows = -(-n // cols)
+    assert len(fig.axes) == 2 * n
+    for j, (top, _bottom) in enumerate(cells):
+        spec = top.get_subplotspec()
+        assert spec.colspan.start == j % cols and spec.rowspan.start == 2 * (j // cols)
+        assert spec.get_gridspec().nrows == 2 * rows
+    path = save(fig, tmp_path / "grid.png")
+    img = pyplot().imread(path)
+    h, w = img.shape[:2]
+    assert w <= 1600 and h <= 1600 and w == round(fig.get_figwidth() * DPI)
+
+
+def test_the_error_axis_is_set_by_the_converged_part() -> None:
+    """A start transient 1000x the converged error does not set the axis: the limit covers
+    the 2nd-98th percentile of the last 80 % and the 2-sigma band there, and no more than
+    1.3x the larger of them."""
+    rng = np.random.default_rng(0)
+    K = 5000
+    e = 1e-4 * rng.standard_normal(K)
+    e[:50] = 0.1 * np.exp(-np.arange(50) / 10)  # the start
+    band = np.full(K, 3e-4)
+    band[:100] = 1.0
+    lim = converged_limit(e, band)
+    w = window_start(K)
+    late = float(np.percentile(np.abs(e[w:]), 98))
+    assert lim >= max(late, 3e-4) and lim <= 1.3 * max(late, 3e-4) * (1 + 1e-12)
+    assert np.mean(np.abs(e[w:]) <= lim) >= 0.98
+    assert lim < 1e-2 < float(np.max(np.abs(e)))
+    assert converged_limit(np.zeros(10)) > 0  # an all-zero line stays drawable
+    assert converged_limit(np.full(10, np.nan)) > 0
+
+
+def test_envelope_keeps_every_spike_and_cuts_to_the_pixels() -> None:
+    t = np.arange(60001) * 1e-3
+    rng = np.random.default_rng(1)
+    y = rng.standard_normal(t.size)
+    y[12345], y[40000] = 50.0, -70.0  # one-tick spikes
+    y2 = np.cos(t)
+    y2[7] = np.nan
+    tc, yc, y2c = envelope(t, y, y2, pixels=800)
+    assert tc.size == yc.size == y2c.size == 1600
+    assert np.nanmax(yc) == 50.0 and np.nanmin(yc) == -70.0
+    assert np.all(np.diff(tc) >= 0)
+    assert np.nanmax(y2c) == pytest.approx(np.nanmax(y2)) and np.isfinite(y2c).all()
+    short = np.arange(100.0)
+    out = envelope(short, short, pixels=800)
+    assert out[0] is short and out[1] is short
+
+
+def test_legends_name_the_law_not_truth() -> None:
+    """``truth`` in a legend is the amsfe law on the true state; every controller's label
+    says what its law acts on."""
+    from types import SimpleNamespace
+
+    from amsfe_sym.apps.plots.run import controller_label
+    from amsfe_sym.scenario import load_scenario
+
+    sc = load_scenario("paper-sim")
+    res = SimpleNamespace(scenario=sc, diverged_at=None)
+    assert controller_label(res, "truth") == "amsfe law on the true state (oracle)"  # type: ignore[arg-type]
+    assert "oosm estimate" in controller_label(res, "amsfe")  # type: ignore[arg-type]
+    assert "motor encoders" in controller_label(res, "dtsmc")  # type: ignore[arg-type]
+    res.diverged_at = 0.89
+    assert controller_label(res, "dtsmc").endswith("diverged at 0.89 s")  # type: ignore[arg-type]
+
+
+def test_the_no_plots_hint_past_a_quarter() -> None:
+    assert SHARE == 0.25
+    line = hint_line(3.0, 4.0)
+    assert line is not None and "--no-plots" in line and "3.0 of 4.0 s (75 %)" in line
+    assert hint_line(0.9, 4.0) is None
+    clock = FigureClock(started_s=1000.0)  # a long command: figures a small share
+    assert clock.timed(lambda x: x + 1)(1) == 2 and clock.seconds >= 0.0
+    assert clock.hint() is None
+
+
+def test_run_figures_of_a_simulation(tmp_path: Path) -> None:
+    """``plot_run`` of a 1 s paper-sim run: the three PNGs; each q-error axis is set by the
+    converged part (it clips the start) and holds the 2-sigma band of the last 80 %."""
+    from amsfe_sym.apps.plots.run import error_rows, estimation_error_axes, plot_run
+    from amsfe_sym.codegen import library_for
+    from amsfe_sym.scenario import load_scenario
+    from amsfe_sym.sim.loop import run
+
+    sc = load_scenario("paper-sim").with_overrides(controller="amsfe", duration=1.0, seed=4)
+    res = run(sc, library_for(sc), runtime="compiled")
+    paths = plot_run(res, tmp_path)
+    assert sorted(p.name for p in paths) == ["estimation_errors.png", "theta.png", "tracking.png"]
+    n = res.lib.n
+    fig, cells = joint_grid(n, rows_per_joint=error_rows(n))
+    estimation_error_axes(res, cells)
+    L = res.lib.layout
+    w = window_start(res.t.size)
+    for j, axes in enumerate(cells):
+        c = L["q"].start + j
+        lo, hi = axes[0].get_ylim()
+        e = res.x_true[:, c] - res.x_hat[:, c]
+        band = 2 * np.sqrt(res.P_diag[w:, c])
+        assert hi == -lo and hi >= float(np.percentile(band, 98))
+        assert hi < float(np.max(np.abs(e)))  # the start transient is clipped
+    pyplot().close(fig)
+
+
+def test_log_figures_without_truth_show_deflection_and_residual(tmp_path: Path) -> None:
+    """A driver's log (no truth): ``estimate.png`` has a panel per joint with the spring
+    deflection and the encoder residual, and ``nis.png`` the chi-square bands."""
+    from amsfe_sym.apps.plots.log import plot_log
+    from amsfe_sym.codegen import library_for
+    from amsfe_sym.logs.read import RobotLog
+    from amsfe_sym.logs.replay import estimate_log
+    from amsfe_sym.scenario import load_scenario
+    from amsfe_sym.sim.builders import build_run
+    from amsfe_sym.sim.loop import run
+
+    sc = load_scenario("paper-sim").with_overrides(controller="amsfe", duration=1.0, seed=6)
+    lib = library_for(sc)
+    res = run(sc, lib, runtime="compiled")
+    log = RobotLog(Path("drive.bag"), lib.T, 0, res.z_enc, res.u, [])
+    est = estimate_log(log, build_run(sc, lib, compiled=True).estimator, progress=False)
+    nis = {"encoders": {"dof": 4, "band_95": [0.48, 11.14]}}
+    paths = plot_log(log, est.x_hat, est.P_diag, "oosm", nis, est.encoder_nis, None, tmp_path)
+    assert [p.name for p in paths] == ["estimate.png", "nis.png"]
+    assert all(p.stat().st_size > 10_000 for p in paths)
