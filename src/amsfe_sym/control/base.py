@@ -13,7 +13,7 @@ from amsfe_sym.errors import ConfigError, check_known_keys, describe
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.signals.trajectory import Trajectory
 
-__all__ = ["CONTROLLERS", "Controller", "LawInputs", "make_controller", "register"]
+__all__ = ["CONTROLLERS", "Controller", "LawInputs", "handed_over", "make_controller", "register"]
 
 FloatArray = NDArray[np.float64]
 
@@ -106,10 +106,31 @@ class Controller(ABC):
         ref = self.trajectory.evaluate(t)
         return ref.q, ref.qd, ref.qdd
 
+    def handed_over(self, k: int) -> bool:
+        """The law tracks q_d itself at tick ``k`` (its start-up, if any, is over): a live
+        node's tracking watchdog judges |q_d - q_hat| from then on (ros/watchdog.py).  Laws
+        without a start-up: always."""
+        return True
+
     @abstractmethod
     def torque(self, tick: LawInputs) -> FloatArray:
         """u(k) [N m], before saturation, from what the law may read at tick k
         (:class:`LawInputs`)."""
+
+
+def handed_over(
+    startup: str, started: bool, blend: tuple[Any, ...] | None, k: int, T: float
+) -> bool:
+    """A cascade's start-up handed over at tick ``k``: ``startup`` is not ``"converged"``, or
+    the estimate was trusted (``started``) and the blended start ``blend`` = (k0, s0, Tb, ...)
+    of control/blend.py ended, (k - k0) T + s0 >= Tb [s] (the test the law makes; the C's
+    ``amsfe_ctrl_handed_over``)."""
+    if startup != "converged":
+        return True
+    if not started or blend is None:
+        return started
+    k0, s0, tb = blend[:3]
+    return not ((k - k0) * T + s0 < tb)
 
 
 CONTROLLERS: dict[str, type[Controller]] = {}

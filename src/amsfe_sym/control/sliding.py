@@ -32,7 +32,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from amsfe_sym.control.base import Controller, FloatArray, LawInputs, register
+from amsfe_sym.control.base import Controller, FloatArray, LawInputs, handed_over, register
 from amsfe_sym.control.blend import blend_offsets, blend_through, blend_time, blend_weight
 from amsfe_sym.errors import ConfigError, check_known_keys, describe
 from amsfe_sym.runtime.library import ModelLibrary
@@ -347,6 +347,9 @@ class _Cascade(_SlidingBase):
                 and consistent
             )
         return self._ready
+
+    def handed_over(self, k: int) -> bool:  # C: amsfe_ctrl_handed_over
+        return handed_over(self.gains["startup"], self._started, self._blend, k, self.lib.T)
 
     def _gain(self, key: str, size: int) -> FloatArray:
         if key == "tau_max" and self.gains.get("tau_max") is None:

@@ -303,10 +303,10 @@ def waiting_line(node: Any, topic: str, msgtype: str, seconds: float) -> str:
 def spec_parameters(node: Any, spec: TopicSpec, joints: tuple[str, ...]) -> TopicSpec:
     """The topic spec as ROS parameters of ``node`` (declared with ``spec``'s values as
     defaults: ``topics.<role>``, ``joints.names``, ``joints.positions``, ``effort.kind``,
-    ``timing.*``, ``qos.reliability``, ``qos.depth``; the ``[effort]`` noise keys and the
-    ``[filter]`` keys are the spec's), read back and checked as a spec file is: a value of
-    another type, or ``joints.names`` of another count than ``joints``, refused in one line
-    (:func:`check_parameters` refuses the names declared nowhere).
+    ``timing.*``, ``qos.reliability``, ``qos.depth``, ``watchdog.*``; the ``[effort]`` noise
+    keys and the ``[filter]`` keys are the spec's), read back and checked as a spec file is: a
+    value of another type, or ``joints.names`` of another count than ``joints``, refused in
+    one line (:func:`check_parameters` refuses the names declared nowhere).
 
     Raises:
         ConfigError: a parameter the spec refuses (a topic without '/', an unknown kind, a
@@ -314,6 +314,7 @@ def spec_parameters(node: Any, spec: TopicSpec, joints: tuple[str, ...]) -> Topi
     """
     from amsfe_sym.topics import ROLES
     from amsfe_sym.topics.spec import parse_topic_spec
+    from amsfe_sym.topics.watchdog import WATCHDOG_COUNTS, WATCHDOG_KEYS
 
     data: dict[str, dict[str, Any]] = {s: {} for s in ("topics", "joints", "effort")}
     data["timing"], data["qos"] = {}, {}
@@ -350,6 +351,16 @@ def spec_parameters(node: Any, spec: TopicSpec, joints: tuple[str, ...]) -> Topi
         node, "qos.reliability", spec.reliability, "'reliable' or 'best_effort'", "reliable"
     )
     data["qos"]["depth"] = _declared(node, "qos.depth", spec.depth, "an integer >= 1", "100")
+    data["watchdog"] = {  # topics.watchdog: watchdog.<key>
+        key: _declared(
+            node,
+            f"watchdog.{key}",
+            getattr(spec.watchdog, key),
+            "an integer" if key in WATCHDOG_COUNTS else "a number (.inf: off)",
+            "50" if key in WATCHDOG_COUNTS else "0.1",
+        )
+        for key in WATCHDOG_KEYS
+    }
     if spec.filter_options:  # the [filter] keys: the file's (as the [effort] noise keys)
         data["filter"] = dict(spec.filter_options)
     parsed = parse_topic_spec(data, f"ROS parameters of {node.get_name()}")

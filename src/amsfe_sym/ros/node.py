@@ -8,12 +8,12 @@ sample goes through :class:`amsfe_sym.ros.live.LiveLoop` by its header stamp; th
 publishes the estimate (JointState q, qd), its standard deviations, theta, the command (with
 a controller; Float64MultiArray) and diagnostics (JSON: frames fused, refused, skipped, NIS).
 
-Fail-safe (docs/how-to/ros.md, "Hold"): on encoder silence longer than ``encoder_timeout`` (after
-the first sample), a non-finite estimate or an estimator failure it publishes the hold
-command (:data:`~amsfe_sym.ros.live.HoldKind`), says why in one line and returns exit code
-:data:`EXIT_HOLD`; on Ctrl-C or SIGTERM it publishes the hold command and the interrupt goes
-on (the command line exits 130 / 143); at the end of ``duration`` it publishes the hold
-command and returns 0.  A record (``--record``) is written on every one of these exits.
+Fail-safe (docs/how-to/ros.md, "Hold"): when a watchdog trips (docs/watchdogs.md; the spec's
+``[watchdog]``) it publishes the hold command (:data:`~amsfe_sym.ros.live.HoldKind`), says
+why in one line (``hold: <reason>: ...``) and returns :data:`EXIT_HOLD`; on Ctrl-C or
+SIGTERM it publishes the hold command and the interrupt goes on (the command line exits 130 /
+143); at the end of ``duration`` it publishes the hold command and returns 0.  A record
+(``--record``) is written on every one of these exits, saying why (``/amsfe/config`` ``stop``).
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 from amsfe_sym.core.interrupts import DeferredSignals
 from amsfe_sym.errors import AmsfeError
 from amsfe_sym.ros.effort import effort_values, live_effort
+from amsfe_sym.ros.lifecycle import lifecycle_node
 from amsfe_sym.ros.live import HoldKind, LiveLoop, TickOut
 from amsfe_sym.ros.middleware import (
     check_parameters,
@@ -53,6 +54,7 @@ from amsfe_sym.ros.outputs import (
 )
 from amsfe_sym.ros.record import NodeRecord
 from amsfe_sym.ros.spec_filter import live_filter
+from amsfe_sym.ros.watchdog import Reason
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.topics import TopicSpec, joint_order
@@ -67,7 +69,7 @@ FloatArray = NDArray[np.float64]
 WAITING_SAY_S = 10.0
 ENCODER_TYPE = "sensor_msgs/msg/JointState"
 
-#: Exit code of a fail-safe stop (encoder silence, non-finite estimate, estimator failure).
+#: Exit code of a fail-safe stop (a watchdog tripped: docs/watchdogs.md).
 EXIT_HOLD = 3
 
 
@@ -79,7 +81,7 @@ class NodeOptions:
         controller: Run the scenario's controller and publish commands.
         compiled: The library's C estimator (else the Python reference).
         spec: The topic spec (ROS parameters override it).
-        encoder_timeout: Encoder silence that triggers the hold [s, wall].
+        encoder_timeout: Encoder silence that triggers the hold [s, wall]; None: the spec's.
         hold: The hold command's kind.
         duration: Stop after this much of the samples' time [s] (None: run until stopped).
         record: Write a rosbag2 (MCAP) of the session here (None: none).
@@ -100,7 +102,7 @@ class NodeOptions:
     controller: bool = False
     compiled: bool = True
     spec: TopicSpec = field(default_factory=TopicSpec)
-    encoder_timeout: float = 0.5
+    encoder_timeout: float | None = None
     hold: HoldKind = "gravity"
     duration: float | None = None
     record: Path | None = None
@@ -134,11 +136,13 @@ class NodeReport:
 
 @dataclass(frozen=True)
 class _Stop:
-    """Why the node stops: one line, the exit code, the error to raise (bad input)."""
+    """Why the node stops: one line, the exit code, the error to raise (bad input), the
+    watchdog's reason name (``tracking``, ...)."""
 
     reason: str
     code: int
     error: AmsfeError | None = None
+    watchdog: str | None = None
 
 
 class _Node:
@@ -162,6 +166,7 @@ class _Node:
             grid_tolerance=spec.grid_tolerance,
             max_gap_steps=spec.max_gap_steps,
             effort=live_effort(spec),
+            watchdog=spec.watchdog.with_timeout(options.encoder_timeout),
         )
         self.n = lib.n
         self.std_every = std_every_parameter(node, options.std_every)
@@ -262,6 +267,9 @@ class _Node:
     def on_encoders(self, msg: Any, info: Any) -> None:
         if self.stop is not None or not self.active:
             return
+        if self._first_command and self.pub_cmd is not None:
+            self._wait_subscriber()  # before the watchdog's clock starts
+        taken = time.monotonic()
         if (idx := self._order(msg.name)) is None:
             return
         try:
@@ -273,10 +281,15 @@ class _Node:
             ns = self.m.stamp_ns(msg.header.stamp)
             if self.effort_in_encoders and self.effort_kind == "joint_torque":
                 self._effort(ns, effort_values(self.m, msg, idx, self.n))  # of this sample
-            out = self.live.encoders(ns, z, int(info["source_timestamp"]))
+            watched = self.live.watch(
+                ns, z, int(info["source_timestamp"]), taken=taken, clock=time.monotonic
+            )
         except AmsfeError as exc:
             self.stop = _Stop(f"hold: the estimator stopped: {exc}", EXIT_HOLD)
             return
+        if self._held(watched.reason):
+            return
+        out = watched.out
         if out is None:
             return
         applied = self.effort_in_encoders and self.effort_kind == "applied"
@@ -286,18 +299,24 @@ class _Node:
         self.last_rx = time.monotonic()  # after the work: a slow first tick is no silence
 
     # ---------------------------------------------------------------- outputs
+    def _held(self, reason: Reason) -> bool:
+        """Stop on the watchdog's hold, if any (its line, :data:`EXIT_HOLD`)."""
+        hold = self.live.watchdog.hold
+        if reason != Reason.NONE and hold is not None:
+            self.stop = _Stop(hold.line(), EXIT_HOLD, watchdog=hold.name)
+        return self.stop is not None
+
+    def idle(self) -> None:
+        """The watchdog's idle call (the encoders' publishers counted only when silent)."""
+        count = self.node.count_publishers
+        self._held(
+            self.live.watchdog.idle_counting(time.monotonic(), lambda: count(self.spec.encoders))
+        )
+
     def _publish(self, out: TickOut, z: FloatArray, sent: int) -> None:
         m, n, ns = self.m, self.n, out.stamp_ns
-        if not np.all(np.isfinite(out.x_hat)) or not np.all(np.isfinite(out.P_diag)):
-            self.stop = _Stop(f"hold: non-finite estimate at t = {out.t:.3f} s", EXIT_HOLD)
-            return
-        if out.u is not None and not np.all(np.isfinite(out.u)):
-            self.stop = _Stop(f"hold: non-finite command at t = {out.t:.3f} s", EXIT_HOLD)
-            return
         self.last = out
         if out.u is not None and self.pub_cmd is not None:  # first: the arm waits for it
-            if self._first_command:
-                self._wait_subscriber()
             self._msg_cmd.data = m.doubles(out.u)
             self.pub_cmd.publish(self._msg_cmd)
         x = out.x_hat
@@ -368,6 +387,21 @@ class _Node:
             d["encoder_nis"] = out.report.encoder_nis
         return d
 
+    def activate(self) -> None:
+        """Lifecycle ``activate``: process samples (the watchdog's clock from the next)."""
+        self.live.watchdog.reset()
+        self.active = True
+
+    def deactivate(self) -> None:
+        """Lifecycle ``deactivate``: publish the hold and stop processing."""
+        self.active, self.last_rx = False, None
+        self.hold()
+
+    def shut_down(self) -> None:
+        """Lifecycle ``shutdown``: stop the node."""
+        self.active = False
+        self.stop = _Stop("shut down by its lifecycle manager", 0)
+
     def hold(self) -> FloatArray | None:
         """Publish the last estimate's ``estimate_std`` and ``theta`` if they are not out
         yet, then the hold command (with a controller): returns it."""
@@ -407,7 +441,7 @@ def run_node(
     holder: list[_Node] = []
     down: list[bool] = []  # a managed node's shutdown transition happened
     if options.managed:
-        node = _managed(ctx, lambda n: _Node(ctx, sc, lib, options, n), holder, down)
+        node = lifecycle_node(ctx, lambda n: _Node(ctx, sc, lib, options, n), holder, down)
     else:
         node = rclpy.create_node("amsfe_node", context=ctx)
     state: _Node | None = None
@@ -420,9 +454,8 @@ def run_node(
         ex.add_node(node)
         gc.collect()
         gc.freeze()  # the startup's objects (rclpy, numpy, the library): never rescanned
-        wait = options.encoder_timeout  # signals raised between spins, not inside rclpy's C++
-        quiet_since, said = time.monotonic(), 0.0  # nothing received yet: said every 30 s
-        with DeferredSignals() as signals:
+        quiet_since, said = time.monotonic(), 0.0  # nothing received yet: said every 10 s
+        with DeferredSignals() as signals:  # raised between spins, not inside rclpy's C++
             while ctx.ok() and not down and (not holder or holder[-1].stop is None):
                 ex.spin_once(timeout_sec=0.05)
                 signals.check()
@@ -432,18 +465,16 @@ def run_node(
                 if state and state.active and last is None and silent > said + WAITING_SAY_S:
                     said = silent - silent % WAITING_SAY_S
                     say(waiting_line(node, state.spec.encoders, ENCODER_TYPE, round(silent)))
-                if state and last is not None and time.monotonic() - last > wait:
-                    state.stop = _Stop(
-                        f"hold: no encoder sample on {state.spec.encoders} for {wait:g} s "
-                        f"(last tick {state.live.k})",
-                        EXIT_HOLD,
-                    )
+                if state is not None and state.active and state.stop is None:
+                    state.idle()  # the watchdog: silence, the node stalled
         state = holder[-1] if holder else None
         if state is None:  # a managed node shut down before it was configured
             say("node: shut down before it was configured")
             return NodeReport(0, "shutdown", 0, None, {}, None)
         if state.stop is not None:
             reason, code = state.stop.reason, state.stop.code
+        if state.record is not None:
+            state.record.stopped(reason, code, None if state.stop is None else state.stop.watchdog)
         hold = state.hold()
         bad_input = state.stop is not None and state.stop.error is not None
         say(
@@ -454,6 +485,8 @@ def run_node(
     except KeyboardInterrupt:
         state = holder[-1] if holder else None
         if state is not None:
+            if state.record is not None:
+                state.record.stopped("hold: interrupted", None, None)
             hold = state.hold()
             say("node: hold: interrupted" + _held(hold))
         raise
@@ -475,44 +508,3 @@ def _held(hold: FloatArray | None) -> str:
     if hold is None:
         return ""
     return f"; hold command {[round(float(v), 6) for v in hold]} N m published"
-
-
-def _managed(ctx: Any, build: Callable[[Any], _Node], holder: list[_Node], down: list[bool]) -> Any:
-    """The lifecycle node ``amsfe_node``: ``configure`` builds the :class:`_Node` (spec
-    parameters, estimator, subscriptions) into ``holder``, ``activate`` starts processing,
-    ``deactivate`` publishes the hold and stops processing, ``shutdown`` stops the node."""
-    from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
-
-    ok, failed = TransitionCallbackReturn.SUCCESS, TransitionCallbackReturn.FAILURE
-
-    class Managed(LifecycleNode):
-        def on_configure(self, state: Any) -> Any:
-            if holder:
-                return ok
-            try:
-                holder.append(build(self))
-            except AmsfeError as exc:
-                self.get_logger().error(str(exc))
-                return failed
-            return ok
-
-        def on_activate(self, state: Any) -> Any:
-            holder[-1].active = True
-            return ok
-
-        def on_deactivate(self, state: Any) -> Any:
-            holder[-1].active, holder[-1].last_rx = False, None
-            holder[-1].hold()
-            return ok
-
-        def on_cleanup(self, state: Any) -> Any:
-            return ok
-
-        def on_shutdown(self, state: Any) -> Any:
-            down.append(True)
-            if holder:
-                holder[-1].active = False
-                holder[-1].stop = _Stop("shut down by its lifecycle manager", 0)
-            return ok
-
-    return Managed("amsfe_node", context=ctx)

@@ -35,6 +35,9 @@ dictionary = "DICT_APRILTAG_36h11"
 id = 0
 size = 0.05                       # [m]
 point = "centre"                  # or a corner: "top_left", ...
+
+[watchdog]                        # the bounds past which a live node holds (topics.watchdog)
+tracking_error = 0.1              # [rad]; every key: docs/watchdogs.md
 ```
 
 The key ``[topics] torque`` of older log specs is read as ``effort``.
@@ -58,6 +61,7 @@ from amsfe_sym.core.values import (
 )
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.topics.roles import EFFORT_KINDS, ROLES, EffortKind
+from amsfe_sym.topics.watchdog import WATCHDOG_KEYS, WatchdogBounds, parse_watchdog
 from amsfe_sym.vision.spec import MarkerSpec, parse_camera_section, parse_marker
 
 __all__ = ["FILTER_KEYS", "FROM_LOG", "TopicSpec", "parse_topic_spec", "read_topic_spec"]
@@ -98,6 +102,8 @@ class TopicSpec:
         depth: QoS history depth of live topics (KEEP_LAST).
         camera_info: The CameraInfo topic of an image camera topic (None: the log's one).
         marker: The marker an image camera topic is searched for.
+        watchdog: The bounds of a live node's watchdogs (``[watchdog]``,
+            :class:`~amsfe_sym.topics.watchdog.WatchdogBounds`).
         source: The file read (None: the defaults).
     """
 
@@ -124,6 +130,7 @@ class TopicSpec:
     depth: int = 100
     camera_info: str | None = None
     marker: MarkerSpec = field(default_factory=MarkerSpec)
+    watchdog: WatchdogBounds = field(default_factory=WatchdogBounds)
     source: Path | None = field(default=None, compare=False)
 
     def topic(self, role: str) -> str:
@@ -179,6 +186,7 @@ _SECTIONS = {
     "qos": ("reliability", "depth"),
     "camera": ("info",),
     "marker": ("dictionary", "id", "size", "point", "pixel_std"),
+    "watchdog": WATCHDOG_KEYS,
 }
 
 
@@ -275,6 +283,9 @@ def parse_topic_spec(data: dict[str, Any], where: str = "topic spec") -> TopicSp
             raise ConfigError(
                 describe(f"{where} [{section}]", f"keys among {list(keys)}", str(bad), fix)
             )
+        if section == "watchdog":
+            out["watchdog"] = parse_watchdog(table, f"{where} [watchdog]")
+            continue
         for key, value in table.items():
             at = f"{where} [{section}] {key}"
             if section == "topics":
