@@ -82,14 +82,24 @@ def add_sim_node_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--rate", type=SECONDS, default=1.0, help="free running: speed of the wall clock"
     )
+    p.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="KIND@T[=VALUE]",
+        help="break the arm at T [s]: encoder_frozen, encoder_jump=RAD, torque_loss "
+        "(docs/live-load.md)",
+    )
 
 
 def sim_node_from_args(args: argparse.Namespace) -> int:
     """``amsfe sim-node`` from its parsed options."""
     from amsfe_sym.codegen import library_for
+    from amsfe_sym.ros.faults import FaultPlan, parse_fault
     from amsfe_sym.ros.sim_node import SimNodeOptions, run_sim_node
     from amsfe_sym.topics import read_topic_spec
 
+    faults = tuple(parse_fault(f) for f in args.fault)
     sc = _scenario(args)
     spec = read_topic_spec(args.topic_spec)
     lib = library_for(sc)
@@ -101,9 +111,12 @@ def sim_node_from_args(args: argparse.Namespace) -> int:
         rate=args.rate,
         ros_args=tuple(args.ros_args),
         domain_id=_domain(),
+        faults=faults,
     )
+    FaultPlan(faults, lib.T, lib.n)  # the same kind twice: refused before rclpy starts
     mode = "lockstep" if args.lockstep else "free running"
-    print(f"sim-node: {sc.name} seed {sc.seed}, {sc.duration:g} s, {mode}", flush=True)
+    broken = "".join(f", fault {f.label()}" for f in faults)
+    print(f"sim-node: {sc.name} seed {sc.seed}, {sc.duration:g} s, {mode}{broken}", flush=True)
     rep = run_sim_node(sc, lib, opts)
     line = f"sim-node: {rep.ticks} ticks in {rep.wall_s:.2f} s wall, {rep.commands} commands"
     if not args.lockstep:

@@ -14,6 +14,12 @@ deliveries across topics; the writers' heartbeat period is 1 ms in lockstep,
 :func:`~amsfe_sym.ros.middleware.use_lockstep_profile`, or each wait takes seconds).
 Without it the plant runs on the wall clock (one tick every T) and applies the latest
 command it has when a tick ends (real latency, real drops).
+
+A lockstep arm follows one controller: commands from a second publisher of the command topic
+(another GID than the first command's) stop the run in one line naming both nodes (issue 37:
+two controllers interleaved gave each tick another's command); another node named
+``amsfe_sim`` on the domain is warned of.  ``faults``: the arm breaks at a stated time
+(:mod:`amsfe_sym.ros.faults`; the effort topic publishes the torque actually applied).
 """
 
 from __future__ import annotations
@@ -28,6 +34,8 @@ from numpy.typing import NDArray
 from amsfe_sym.core.interrupts import DeferredSignals
 from amsfe_sym.errors import RosError, describe
 from amsfe_sym.ros.arm import SimArm
+from amsfe_sym.ros.faults import Fault, FaultPlan
+from amsfe_sym.ros.graph import duplicate_name_warning, gid_key, publisher_names
 from amsfe_sym.ros.middleware import (
     executor,
     qos_profile,
@@ -60,6 +68,7 @@ class SimNodeOptions:
             machine that cannot keep up with the robot's rate).
         ros_args: ``--ros-args`` for rclpy (parameters, remaps).
         domain_id: ROS_DOMAIN_ID (None: the environment's).
+        faults: Faults of the arm (:mod:`amsfe_sym.ros.faults`).
     """
 
     lockstep: bool = False
@@ -69,6 +78,7 @@ class SimNodeOptions:
     rate: float = 1.0
     ros_args: tuple[str, ...] = ()
     domain_id: int | None = None
+    faults: tuple[Fault, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -118,6 +128,7 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
             within ``command_timeout``; rclpy missing.
     """
     arm = SimArm(sc, lib)
+    plan = FaultPlan(options.faults, lib.T, lib.n)
     if options.lockstep:  # the frames' acknowledgement within ms (docs/ros.md)
         use_lockstep_profile()
     ctx = start(list(options.ros_args), options.domain_id)
@@ -138,9 +149,18 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         pub_clock = node.create_publisher(m.Clock, spec.clock, qos_profile(spec, depth=1))
         commands: list[FloatArray] = []
         n = lib.n
+        controller: list[bytes] = []  # the GID of the first command's publisher
+        intruders: list[bytes] = []
 
         def on_command(msg: m.Float64MultiArray, info: Any) -> None:
             u = m.values(msg.data)
+            gid = gid_key(info.get("publisher_gid"))
+            if options.lockstep and gid:
+                if not controller:
+                    controller.append(gid)
+                elif gid != controller[0]:
+                    intruders.append(gid)  # not applied: the run stops at this tick
+                    return
             cmd_at.append(int(info["received_timestamp"]))
             if u.size == n and np.all(np.isfinite(u)):
                 commands.append(u)
@@ -162,6 +182,11 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         ex = executor(ctx)
         ex.add_node(node)
         _wait_peers(ex, pub_enc, sub if options.lockstep else None, options.start_timeout)
+        if (dup := duplicate_name_warning(node)) is not None:
+            node.get_logger().warning(dup)
+            print(f"sim-node: warning: {dup}", flush=True)
+        if options.lockstep:
+            _one_controller(node, spec.commands, None)
         T_ns = round(lib.T * 1e9)
         u = np.zeros(n)
         late = stale = 0
@@ -169,6 +194,8 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         with DeferredSignals() as signals:  # Ctrl-C / SIGTERM raised here, not in rclpy's C++
             for k in range(arm.K):
                 s = arm.sense()
+                for kind in plan.started(k):
+                    print(f"sim-node: fault {kind} at t = {k * lib.T:.3f} s (tick {k})", flush=True)
                 ns = k * T_ns
                 pub_clock.publish(m.clock(ns))
                 pub_truth.publish(m.float64_array(s.x_true))
@@ -180,7 +207,8 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
                         f"{options.command_timeout:g} s: the node may fuse it a tick late"
                     )
                 sent_at[k] = time.time_ns()
-                pub_enc.publish(m.joint_state(ns, names, s.z[:n], s.z[n:]))
+                z = plan.encoders(k, s.z)
+                pub_enc.publish(m.joint_state(ns, names, z[:n], z[n:]))
                 if k and k % round(1.0 / lib.T) == 0:
                     print(f"sim-node: t = {k * lib.T:.1f} s", flush=True)
                 if options.lockstep or k == 0:  # free running starts on the first command
@@ -199,6 +227,8 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
                             )
                         ex.spin_once(timeout_sec=min(left, 0.05))
                         signals.check()
+                    if intruders:  # (one may have come with the command of tick k)
+                        _one_controller(node, spec.commands, (controller[0], intruders[0]))
                     u = commands[k]
                     t0 = time.perf_counter() - lib.T / options.rate if k == 0 else t0
                 else:
@@ -214,9 +244,10 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
                     stale += int(len(commands) == before)
                     if commands:
                         u = commands[-1]
-                pub_eff.publish(m.joint_state(ns, names, effort=u))
+                applied = plan.torque(k, u)
+                pub_eff.publish(m.joint_state(ns, names, effort=applied))
                 if k + 1 < arm.K:
-                    arm.advance(u)
+                    arm.advance(applied)
         wall = time.perf_counter() - t0
         _acked(pub_eff, 1.0)
         ex.spin_once(timeout_sec=0.05)  # the last tick's estimate
@@ -230,6 +261,31 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         )
     finally:
         stop(ctx, *([node] if node is not None else []))
+
+
+def _one_controller(node: Any, topic: str, gids: tuple[bytes, bytes] | None) -> None:
+    """Raise when a lockstep arm sees two controllers: two publishers of ``topic`` on the
+    graph (``gids`` None, at the start) or commands from the two publishers ``gids``.
+
+    Raises:
+        RosError: one line naming both nodes.
+    """
+    names = publisher_names(node, topic)
+    if gids is None:
+        if len(names) <= 1:
+            return
+        found = " and ".join(sorted(names.values()))
+    else:
+        found = " and ".join(names.get(g, f"a publisher (GID {g.hex()})") for g in gids)
+    raise RosError(
+        describe(
+            f"sim-node --lockstep commands on {topic}",
+            "one controller (a lockstep arm applies the k-th command received at tick k)",
+            f"commands from {found}",
+            "stop all but one controller on this ROS_DOMAIN_ID (or give each arm its own "
+            "topics or domain)",
+        )
+    )
 
 
 def _acked(pub: object, timeout: float) -> bool:
