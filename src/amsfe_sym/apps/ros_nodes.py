@@ -181,6 +181,9 @@ def node_from_args(args: argparse.Namespace) -> int:
     if record is not None:
         # before anything runs: nothing there is replaced, and no input is written over
         inputs = [p for p in (args.scenario, args.topic_spec) if p and Path(p).exists()]
+        from amsfe_sym.ros.record import refuse_locked
+
+        refuse_locked(record)  # another node's record, being written or left unfinished
         check_output(record, option="--record", kind="folder", inputs=inputs)
     spec = read_topic_spec(args.topic_spec)
     note = estimator_note(spec.effort_kind or "applied", sc.estimator)

@@ -156,13 +156,16 @@ class _Node:
         )
         self.n = lib.n
         self.std_every = std_every_parameter(node, options.std_every)
-        self.record = None if options.record is None else NodeRecord(sc, lib, spec, self.names)
+        self.record = (  # the folder claimed now: a second writer is refused before it starts
+            None
+            if options.record is None
+            else NodeRecord(sc, lib, spec, self.names, out=options.record)
+        )
         self.last: TickOut | None = None
         self.last_rx: float | None = None
         self.stop: _Stop | None = None
         self.end_k = None if options.duration is None else round(options.duration / lib.T)
         self._orders: dict[tuple[str, ...], list[int]] = {}
-        self._truth: FloatArray | None = None
         self._first_command = True
         self._rx_frames: list[tuple[int, FloatArray, int]] = []
         # one message object a topic, filled in each tick (publish serializes at once)
@@ -230,8 +233,9 @@ class _Node:
         if self.record is not None:  # before the first sample too: see LiveLoop.frame
             self._rx_frames.append((ns, pixel, sent))
 
-    def on_truth(self, msg: Any) -> None:
-        self._truth = self.m.values(msg.data)
+    def on_truth(self, msg: Any, info: Any) -> None:
+        if self.record is not None:  # matched to its tick by its source timestamp
+            self.record.truth_sent(int(info["source_timestamp"]), self.m.values(msg.data))
 
     def on_effort(self, msg: Any) -> None:
         if self.stop is not None or not self.active:
@@ -309,7 +313,7 @@ class _Node:
         rec = self.record
         assert rec is not None
         ns = out.stamp_ns
-        rec.encoders(ns, z)
+        rec.encoders(ns, z, sent)
         keep = []
         if out.k == 0:  # sent before the first sample: skipped by the loop, not recorded
             self._rx_frames = [f for f in self._rx_frames if f[2] > sent]
@@ -319,8 +323,6 @@ class _Node:
             else:
                 keep.append((exposure_ns, pixel, frame_sent))
         self._rx_frames = keep
-        if self._truth is not None:
-            rec.truth(ns, self._truth)
         L = self.lib.layout
         std = np.sqrt(np.maximum(out.P_diag, 0.0))
         rec.outputs(ns, out.x_hat, std, out.x_hat[L["theta"]], out.u)
@@ -434,6 +436,7 @@ def run_node(
             else f"node: {reason}" + _held(hold)
         )
     except KeyboardInterrupt:
+        reason = "hold: interrupted (SIGINT or SIGTERM)"
         state = holder[-1] if holder else None
         if state is not None:
             hold = state.hold()
@@ -442,7 +445,7 @@ def run_node(
     finally:
         if state is not None and state.record is not None and options.record is not None:
             try:
-                state.record.write(options.record)
+                state.record.write(options.record, reason=reason)
             finally:
                 stop(ctx, node)
         else:
