@@ -167,6 +167,10 @@ class _Node:
         self.end_k = None if options.duration is None else round(options.duration / lib.T)
         self._orders: dict[tuple[str, ...], list[int]] = {}
         self._first_command = True
+        #: Per command: its publication minus the middleware's receipt of the sample it
+        #: answers (system clock [ns]): the node's own latency (docs/live-load.md).
+        self.latency_ns: list[int] = []
+        self._rx_ns = 0
         self._rx_frames: list[tuple[int, FloatArray, int]] = []
         # one message object a topic, filled in each tick (publish serializes at once)
         self._msg_est = m.joint_state(0, self.names)
@@ -253,6 +257,7 @@ class _Node:
     def on_encoders(self, msg: Any, info: Any) -> None:
         if self.stop is not None or not self.active:
             return
+        self._rx_ns = int(info["received_timestamp"])
         if (idx := self._order(msg.name)) is None:
             return
         try:
@@ -291,6 +296,7 @@ class _Node:
                 self._wait_subscriber()
             self._msg_cmd.data = m.doubles(out.u)
             self.pub_cmd.publish(self._msg_cmd)
+            self.latency_ns.append(time.time_ns() - self._rx_ns)
         x = out.x_hat
         est = self._msg_est
         est.header.stamp.sec, est.header.stamp.nanosec = divmod(ns, 1_000_000_000)
@@ -452,8 +458,20 @@ def run_node(
             stop(ctx, node)
     if state.stop is not None and state.stop.error is not None:
         raise state.stop.error
+    if state.latency_ns:
+        say(latency_line(np.asarray(state.latency_ns, dtype=float) * 1e-9))
     counters = {**state.live.counters, **state.live.skipped}
     return NodeReport(state.live.k + 1, reason, code, hold, counters, options.record)
+
+
+def latency_line(lat: FloatArray) -> str:
+    """The node's latency line (``amsfe bench --ros`` reads it): sample received by the
+    middleware -> command published, p50 / p99 / max [ms] over the run's commands."""
+    p50, p99 = np.percentile(lat, [50, 99]) * 1e3
+    return (
+        f"node: latency sample received -> command published p50 {p50:.3f} p99 {p99:.3f} "
+        f"max {lat.max() * 1e3:.3f} ms over {lat.size} commands"
+    )
 
 
 def _held(hold: FloatArray | None) -> str:
