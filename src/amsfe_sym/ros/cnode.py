@@ -347,6 +347,7 @@ def write_params(
     lines = [
         f"dims {n} {N} {lib.p} {est.dims.ne}",
         f"T_ns {round(lib.T * 1e9)}",
+        f"T {float(lib.T)!r}",
         f"grid_tolerance {spec.grid_tolerance!r}",
         f"max_gap_steps {spec.max_gap_steps}",
         f"controller {int(controller)}",

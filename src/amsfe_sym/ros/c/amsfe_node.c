@@ -179,6 +179,7 @@ typedef struct {
   live_loop L;
   int n, N, p, recording, std_every, hold_zero, effort_in_encoders, read_effort;
   long end_k;
+  double T; /* [s] the library's (t_k = k T as the Python node prints it) */
   double encoder_timeout, subscriber_wait;
   const char *topic[16];
   const char *names[MAX_JOINTS];
@@ -254,6 +255,7 @@ static void configure(node_t *s, const char *path) {
   live_loop *L = &s->L;
   L->n = n, L->N = N;
   L->T_ns = pf_long(pf, "T_ns");
+  s->T = pf_double(pf, "T");
   L->tol = pf_double(pf, "grid_tolerance");
   L->max_gap = (int)pf_long(pf, "max_gap_steps");
   L->controller = (int)pf_long(pf, "controller");
@@ -443,7 +445,7 @@ static void diagnostics_json(node_t *s, int with_tick) {
   size_t cap = DIAG_CAP;
   int len = 0;
 #define PUT(...) (len += snprintf(b + len, cap > (size_t)len ? cap - (size_t)len : 0, __VA_ARGS__))
-  if (with_tick) PUT("{\"k\": %ld, \"t\": %.17g, ", L->k, (double)L->k * (double)L->T_ns * 1e-9);
+  if (with_tick) PUT("{\"k\": %ld, \"t\": %.17g, ", L->k, (double)L->k * s->T);
   else PUT("{\"k\": null, \"t\": null, ");
   PUT("\"frames_fused\": %ld, \"frames_refused\": %ld, \"refused\": {", L->c.frames_applied,
       L->c.frames_rejected);
@@ -567,7 +569,7 @@ static void publish_tick(node_t *s, long long ns, const double *z, long long sen
   for (int i = 0; i < N; ++i)
     if (!isfinite(L->x[i]) || !isfinite(L->P_diag[i])) {
       snprintf(s->stop_line, sizeof s->stop_line, "hold: non-finite estimate at t = %.3f s",
-               (double)L->k * (double)L->T_ns * 1e-9);
+               (double)L->k * s->T);
       s->stop_code = EXIT_HOLD;
       return;
     }
@@ -575,7 +577,7 @@ static void publish_tick(node_t *s, long long ns, const double *z, long long sen
     for (int j = 0; j < n; ++j)
       if (!isfinite(L->u[j])) {
         snprintf(s->stop_line, sizeof s->stop_line, "hold: non-finite command at t = %.3f s",
-                 (double)L->k * (double)L->T_ns * 1e-9);
+                 (double)L->k * s->T);
         s->stop_code = EXIT_HOLD;
         return;
       }
@@ -601,7 +603,7 @@ static void publish_tick(node_t *s, long long ns, const double *z, long long sen
   if (s->recording) record_tick(s, ns, z, sent);
   if (s->end_k >= 0 && L->k >= s->end_k) {
     snprintf(s->stop_line, sizeof s->stop_line, "done: %ld ticks (%.3f s of samples)", L->k + 1,
-             (double)L->k * (double)L->T_ns * 1e-9);
+             (double)L->k * s->T);
     s->stop_code = 0;
   }
 }
@@ -629,7 +631,7 @@ static void on_encoders(node_t *s, long long sent, double taken) {
              "max_gap_steps = %d missing samples before it, found %d missing. Fix: the arm's "
              "encoders stalled: check the driver (or raise [timing] max_gap_steps in the topic "
              "spec)",
-             (double)(L->k + L->gap + 1) * (double)L->T_ns * 1e-9, L->max_gap, L->gap);
+             (double)(L->k + L->gap + 1) * s->T, L->max_gap, L->gap);
     s->stop_code = EXIT_HOLD;
     return;
   }
