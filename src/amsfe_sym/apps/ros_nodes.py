@@ -161,6 +161,13 @@ def add_node_arguments(p: argparse.ArgumentParser) -> None:
         default="gravity",
         help="the fail-safe command: g(q_hat) or zero (docs/ros.md)",
     )
+    p.add_argument(
+        "--impl",
+        choices=("auto", "c", "python"),
+        default="auto",
+        help="the per-sample path: the C node on rcl (auto: when it builds and runs this "
+        "configuration) or the Python reference (docs/live-control.md)",
+    )
 
 
 def node_from_args(args: argparse.Namespace) -> int:
@@ -204,12 +211,53 @@ def node_from_args(args: argparse.Namespace) -> int:
         domain_id=_domain(),
     )
     ctrl = f", controller {sc.controller}" if opts.controller else ""
+    impl = _node_impl(args.impl, sc, lib, opts)
+    if impl == "c":
+        from amsfe_sym.ros.cnode import run_c_node
+
+        print(f"node: {sc.name}, estimator {sc.estimator}{ctrl}; the C node", flush=True)
+        crun = run_c_node(sc, lib, opts, say=lambda line: print(line, flush=True))
+        if crun.record is not None:
+            print(f"node: record {crun.record} (amsfe estimate {crun.record})", flush=True)
+        return crun.exit_code
     wait = "configure and activate" if args.managed else "encoders"
     print(f"node: {sc.name}, estimator {sc.estimator}{ctrl}; waiting for {wait}", flush=True)
     rep = run_node(sc, lib, opts, say=lambda line: print(line, flush=True))
     if rep.record is not None:
         print(f"node: record {rep.record} (amsfe estimate {rep.record})", flush=True)
     return rep.exit_code
+
+
+def _node_impl(asked: str, sc: Any, lib: Any, opts: Any) -> str:
+    """``c`` or ``python``: ``--impl auto`` runs the C node when this configuration is one
+    it runs and it builds (else the Python node, saying why in one line); ``--impl c``
+    refuses (one line) what it cannot run."""
+    if asked == "python":
+        return "python"
+    from amsfe_sym.errors import AmsfeError
+    from amsfe_sym.ros.cnode import build_node, c_node_refusal
+
+    why = c_node_refusal(sc, opts.spec, opts.managed, opts.controller)
+    if why is None:
+        try:
+            build_node(lib)
+        except AmsfeError as exc:
+            if asked == "c":
+                raise
+            why = f"the C node did not build ({str(exc).split('. Fix:')[0]})"
+    if why is None:
+        return "c"
+    if asked == "c":
+        raise ConfigError(
+            describe(
+                "amsfe node --impl c",
+                "a configuration the C node runs",
+                why,
+                "run amsfe node --impl python",
+            )
+        )
+    print(f"node: the Python node: {why}", flush=True)
+    return "python"
 
 
 def add_play_arguments(p: argparse.ArgumentParser) -> None:

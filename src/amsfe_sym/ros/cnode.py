@@ -1,0 +1,604 @@
+"""``amsfe node --impl c``: the node's per-sample path in C on rcl (``ros/c/amsfe_node.c``),
+built against the ROS 2 wheels of the venv and the robot's generated library, configured
+from Python, started and waited for (docs/live-control.md).
+
+- :func:`build_node` compiles ``ros/c/*.c`` against the wheels' rcl (headers under
+  ``<prefix>/include/<pkg>/<pkg>/``, libraries in ``<prefix>/lib/`` and the wheels' bundled
+  ones in ``site-packages/ros_<pkg>.libs/``, reached through an old-style RPATH:
+  ``-Wl,--disable-new-dtags``, since RUNPATH does not reach librcl's own dependencies) and
+  the generated library, cached by content in ``$AMSFE_GENERATED_DIR/amsfe_node/<hash>/``
+  like the libraries (the same sources, library, compiler, flags and rcl compile once).
+  librcl's wheel links the Python type support of every message package; of its Python
+  symbols two are data resolved at load (``PyExc_RuntimeError``, ``_Py_TrueStruct``), which
+  ``amsfe_pystub.c`` defines, the functions are never called and bound lazily: no
+  libpython, no interpreter in the node.
+- :func:`write_params` writes what the C node reads: the estimator's and the controller's
+  parameter blocks as :func:`amsfe_sym.sim.compiled.run_compiled` builds them (the same
+  builders), the reference per tick (a binary file), and the topic spec resolved (topics,
+  joint order, QoS depths, the rates) with the node's options.
+- :func:`run_c_node` resolves the spec's ROS parameters (``-p``) with rclpy as the Python
+  node does, starts the C node with the ``--ros-args`` (rcl applies the remaps), forwards
+  Ctrl-C / SIGTERM, returns its exit code and, with ``--record``, writes the record from the
+  arrays the C node wrote at its stop (:class:`~amsfe_sym.ros.record.NodeRecord`, the Python
+  node's writer): the sample path stays free of Python.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import shlex
+import signal
+import subprocess
+import sys
+import sysconfig
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amsfe_sym.codegen.cache import build_lock, compiler, default_out_dir
+from amsfe_sym.errors import ConfigError, RosError, describe
+from amsfe_sym.ros.middleware import DEFAULT_RMW
+from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.scenario import Scenario
+from amsfe_sym.topics import TopicSpec
+
+__all__ = [
+    "CNODE_CFLAGS",
+    "CNodeBuild",
+    "CNodeRun",
+    "build_node",
+    "c_node_refusal",
+    "queue_depths",
+    "read_record_arrays",
+    "ros_paths",
+    "run_c_node",
+    "write_params",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: The C sources of the node (this package's ``ros/c/``).
+C_DIR = Path(__file__).with_name("c")
+#: Flags of the node's build (-O1 as the generated libraries: the node's own code is small).
+CNODE_CFLAGS: tuple[str, ...] = ("-O1", "-std=gnu11")
+#: The message packages the node's topics use (their C type support is linked).
+_MSG_PACKAGES = ("sensor_msgs", "geometry_msgs", "std_msgs", "builtin_interfaces")
+#: The Python type support's data symbols librcl's wheel needs at load (amsfe_pystub.c).
+_PY_DATA_SYMBOLS = ("PyExc_RuntimeError", "_Py_TrueStruct")
+#: SCHED_FIFO priority the node asks for (above every normal task; ros2_control's real-time
+#: loop uses 50 too).
+SCHED_PRIORITY = 50
+#: The longest lag the node catches up from without losing a sample [s] (its queues hold
+#: this much of each topic; longer silences hold: ``--encoder-timeout``).
+CATCH_UP_S = 2.0
+
+
+@dataclass(frozen=True)
+class RosPaths:
+    """Where the ROS 2 wheels put rcl's C side.
+
+    Attributes:
+        include: ``-I`` folders (``<prefix>/include/<pkg>``, each holding ``<pkg>/``).
+        lib: ``<prefix>/lib`` (librcl, the message libraries).
+        bundled: ``site-packages/ros_<pkg>.libs`` (the wheels' bundled libraries).
+        rcl_version: The ``ros-rcl`` distribution's version (hashed into the cache key).
+    """
+
+    include: tuple[Path, ...]
+    lib: Path
+    bundled: tuple[Path, ...]
+    rcl_version: str
+
+
+def ros_paths(prefix: Path | None = None) -> RosPaths:
+    """rcl's headers and libraries in the environment ``prefix`` (default this Python's).
+
+    Raises:
+        RosError: the ROS 2 wheels (the ``[ros]`` extra) are not installed there.
+    """
+    root = Path(prefix or sys.prefix)
+    header = root / "include" / "rcl" / "rcl" / "rcl.h"
+    lib = root / "lib"
+    if not header.is_file() or not (lib / "librcl.so").is_file():
+        raise RosError(
+            describe(
+                "the C node's build",
+                f"rcl's C headers and librcl.so from the ROS 2 wheels under {root}",
+                f"no {header if not header.is_file() else lib / 'librcl.so'}",
+                'pip install -e ".[ros]" (or run the Python node: amsfe node --impl python)',
+            )
+        )
+    include = tuple(sorted(d for d in (root / "include").iterdir() if (d / d.name).is_dir()))
+    purelib = Path(sysconfig.get_paths(vars={"base": str(root), "platbase": str(root)})["purelib"])
+    bundled = tuple(sorted(purelib.glob("ros_*.libs")))
+    try:
+        version = metadata.version("ros-rcl")
+    except metadata.PackageNotFoundError:
+        version = "unknown"
+    return RosPaths(include, lib, bundled, version)
+
+
+@dataclass(frozen=True)
+class CNodeBuild:
+    """A built C node.
+
+    Attributes:
+        path: The executable.
+        key: Its content hash.
+        compiled: Whether this call compiled it (False: reused from the cache).
+    """
+
+    path: Path
+    key: str
+    compiled: bool
+
+
+def _sources() -> list[Path]:
+    """The node's C sources (``ros/c/*.c``) and headers, sorted."""
+    return sorted([*C_DIR.glob("*.c"), *C_DIR.glob("*.h")])
+
+
+def _watchdog_sources(lib: ModelLibrary) -> list[Path]:
+    """``amsfe_watchdog.c`` of the runtime, when this checkout has it (compiled into the
+    node: it is robot-independent)."""
+    c = Path(__file__).resolve().parent.parent / "runtime" / "c" / "amsfe_watchdog.c"
+    return [c] if c.is_file() else []
+
+
+def build_node(lib: ModelLibrary, out_dir: Path | None = None) -> CNodeBuild:
+    """The C node of ``lib``'s robot, compiled once per content (sources, the library's
+    content hash and file, compiler, flags, rcl's version) under ``out_dir``
+    (default ``$AMSFE_GENERATED_DIR``, else the generated libraries' folder) /
+    ``amsfe_node/<hash>/``.
+
+    Raises:
+        RosError: the ROS 2 wheels are missing, or the compiler failed (its last lines).
+    """
+    ros = ros_paths()
+    cc = compiler()
+    wd = _watchdog_sources(lib)
+    srcs = [*(p for p in _sources() if p.suffix == ".c"), *wd]
+    gen = hashlib.sha256()
+    for path in [*_sources(), *wd, *(p.with_suffix(".h") for p in wd)]:
+        if path.is_file():
+            gen.update(path.name.encode() + b"\0" + path.read_bytes())
+    inputs = {
+        "sources": gen.hexdigest(),
+        "library": lib.manifest.raw.get("content_hash"),
+        "library_sha256": lib.manifest.raw.get("library_sha256"),
+        "library_path": str(lib.library_path),
+        "compiler": _compiler_line(cc),
+        "cflags": list(CNODE_CFLAGS),
+        "rcl": ros.rcl_version,
+        "prefix": str(sys.prefix),
+    }
+    key = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:20]
+    folder = (out_dir or default_out_dir()) / "amsfe_node" / key
+    exe = folder / "amsfe_node"
+    if exe.is_file() and os.access(exe, os.X_OK):
+        return CNodeBuild(exe, key, False)
+    with build_lock(folder.parent / f"{key}.lock"):
+        if exe.is_file():
+            return CNodeBuild(exe, key, False)
+        folder.mkdir(parents=True, exist_ok=True)
+        tmp = folder / f"amsfe_node.tmp{os.getpid()}"
+        cmd = _command(cc, lib, ros, srcs, tmp, wd)
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        if proc.returncode != 0 or not tmp.is_file():
+            tmp.unlink(missing_ok=True)
+            tail = " | ".join((proc.stderr or proc.stdout).strip().splitlines()[-3:])
+            raise RosError(
+                describe(
+                    "the C node's build",
+                    "a compiled amsfe_node",
+                    f"{cc} exit {proc.returncode}: {tail}",
+                    "check the compiler and the [ros] extra, or run amsfe node --impl python",
+                )
+            )
+        (folder / "build.json").write_text(
+            json.dumps({**inputs, "command": shlex.join(cmd)}, indent=1)
+        )
+        tmp.replace(exe)
+    return CNodeBuild(exe, key, True)
+
+
+def _compiler_line(cc: str) -> str:
+    try:
+        out = subprocess.run([cc, "--version"], capture_output=True, text=True, check=True)
+    except (OSError, subprocess.CalledProcessError) as exc:
+        raise RosError(
+            describe("C compiler", f"a working {cc!r}", str(exc), "install gcc or set $CC")
+        ) from exc
+    return out.stdout.splitlines()[0] if out.stdout else cc
+
+
+def _command(
+    cc: str, lib: ModelLibrary, ros: RosPaths, srcs: list[Path], out: Path, wd: list[Path]
+) -> list[str]:
+    """The compile-and-link command of the node."""
+    gen_dir = lib.library_path.parent
+    name = lib.library_path.name.removeprefix("lib").removesuffix(".so")
+    libs = ["rcl", "rcutils", "rmw", "rosidl_runtime_c"]
+    for pkg in _MSG_PACKAGES:
+        libs += [f"{pkg}__rosidl_generator_c", f"{pkg}__rosidl_typesupport_c"]
+    rpaths = [gen_dir, ros.lib, *ros.bundled]
+    cmd = [cc, *CNODE_CFLAGS, *map(str, srcs), f"-I{C_DIR}", f"-I{gen_dir}"]
+    cmd += [f"-I{d}" for d in ros.include]
+    if wd:
+        cmd += ["-DAMSFE_HAVE_WATCHDOG", f"-I{wd[0].parent}"]
+    cmd += [f"-L{gen_dir}", f"-l{name}", f"-L{ros.lib}", *(f"-l{x}" for x in libs), "-lm"]
+    cmd += ["-Wl,--disable-new-dtags", *(f"-Wl,-rpath,{d}" for d in rpaths)]
+    # the Python type support librcl's wheel links: functions bound lazily (never called),
+    # its two data symbols defined by amsfe_pystub.c and exported to the libraries
+    cmd += ["-Wl,--allow-shlib-undefined", "-Wl,-z,lazy"]
+    cmd += [f"-Wl,--export-dynamic-symbol={s}" for s in _PY_DATA_SYMBOLS]
+    return [*cmd, "-o", str(out)]
+
+
+# ---------------------------------------------------------------------- configuration
+def c_node_refusal(
+    sc: Scenario, spec: TopicSpec, managed: bool, controller: bool = False
+) -> str | None:
+    """Why the C node cannot run this configuration (None: it can): the C node reads an
+    effort topic of kind ``applied`` only (the estimators of a joint torque or of an
+    unknown input are the Python node's), runs the controllers the C runtime has, and has
+    no lifecycle states."""
+    from amsfe_sym.runtime.compiled_loop import CONTROLLER_CODES
+
+    if controller and sc.controller not in CONTROLLER_CODES:
+        return f"controller {sc.controller!r} (not in the C runtime)"
+    kind = spec.effort_kind or "applied"
+    if kind != "applied":
+        return f"effort kind {kind!r} (the C node reads the applied torque only)"
+    if managed:
+        return "--managed (the C node has no lifecycle states)"
+    return None
+
+
+def queue_depths(spec: TopicSpec, T: float, camera_period: int, camera_delay: int,
+                 encoder_timeout: float) -> tuple[int, int]:  # fmt: skip
+    """History depths of the encoder (and effort) and camera subscriptions: the spec's
+    ``qos.depth``, or more when the rates need it: the samples of the longest lag the node
+    catches up from (``min(encoder_timeout, CATCH_UP_S)``; a longer silence holds) at the
+    encoder rate 1 / T, and the frames of that lag plus the camera's delay at its rate
+    1 / (l T)."""
+    lag = min(encoder_timeout, CATCH_UP_S)
+    enc = max(spec.depth, math.ceil(lag / T) + 1)
+    cam = max(spec.depth, math.ceil((lag + camera_delay * T) / (max(camera_period, 1) * T)) + 2)
+    return enc, cam
+
+
+def _numbers(values: Any) -> str:
+    return " ".join(repr(float(v)) for v in np.asarray(values, dtype=float).ravel())
+
+
+def write_params(
+    folder: Path,
+    sc: Scenario,
+    lib: ModelLibrary,
+    spec: TopicSpec,
+    *,
+    controller: bool,
+    options: dict[str, Any],
+) -> Path:
+    """Write the C node's parameter file (and its reference) into ``folder``.
+
+    Args:
+        folder: Where (a temporary folder of the run).
+        sc: The scenario, the spec's ``[filter]`` applied.
+        lib: Its library.
+        spec: The topic spec, its ROS parameters resolved.
+        controller: Run the controller.
+        options: ``end_k`` (-1: none), ``std_every``, ``hold``, ``encoder_timeout``,
+            ``subscriber_wait`` [s], ``record`` (a path or None), ``sched_priority``.
+
+    Returns:
+        The parameter file.
+
+    Raises:
+        ConfigError: a controller without a C counterpart, or an estimator the C node does
+            not run (input states).
+    """
+    from amsfe_sym.runtime.compiled_estimator import CompiledEstimator
+    from amsfe_sym.scenario import run_ticks
+    from amsfe_sym.sim.builders import build_run
+    from amsfe_sym.sim.compiled import controller_params, simulation_inputs
+
+    n, N = lib.n, lib.N
+    parts = build_run(sc, lib, compiled=True)  # the builders of `amsfe simulate`
+    est = parts.estimator
+    if not isinstance(est, CompiledEstimator):  # pragma: no cover - compiled=True builds it
+        raise ConfigError(
+            describe("C node estimator", "the library's C one", type(est).__name__, "")
+        )
+    p = est._params
+    if p.input_states or p.joint_torque or p.net_torque:
+        raise ConfigError(
+            describe(
+                "the estimator of the C node",
+                "an estimator of the applied torque",
+                "input states or a joint torque",
+                "run amsfe node --impl python",
+            )
+        )
+    qw, re, rc, x0, P0 = est._arrays[:5]
+    timing = parts.timing
+    enc_depth, cam_depth = queue_depths(
+        spec, lib.T, int(timing.period), int(timing.delay), float(options["encoder_timeout"])
+    )
+    names = list(spec.joint_names or lib.manifest.joints)
+    bad = [x for x in names if not x or any(c.isspace() for c in x)]
+    if bad or any(any(c.isspace() for c in spec.topic(r)) for r in ("encoders", "camera")):
+        raise ConfigError(
+            describe("joint names and topics", "names without spaces", repr(bad), "rename them")
+        )
+    limit = np.array(lib.manifest.actuators.u_max or (np.inf,) * n, dtype=float)
+    inverse_tol = float(getattr(est.effort.model, "inverse_tol", 1e-10))
+    kind = spec.effort_kind or "applied"
+    lines = [
+        f"dims {n} {N} {lib.p} {est.dims.ne}",
+        f"T_ns {round(lib.T * 1e9)}",
+        f"T {float(lib.T)!r}",
+        f"grid_tolerance {spec.grid_tolerance!r}",
+        f"max_gap_steps {spec.max_gap_steps}",
+        f"controller {int(controller)}",
+        f"end_k {options['end_k']}",
+        f"std_every {options['std_every']}",
+        f"hold {options['hold']}",
+        f"encoder_timeout {float(options['encoder_timeout'])!r}",
+        f"subscriber_wait {float(options['subscriber_wait'])!r}",
+        f"effort_in_encoders {int(spec.effort == spec.encoders)}",
+        f"read_effort {int(kind != 'none')}",
+        f"qos {spec.reliability} {spec.depth} {enc_depth} {cam_depth}",
+        f"sched_priority {int(options['sched_priority'])}",
+        f"joints {' '.join(names)}",
+        f"est {p.estimator} {p.buffer_steps} {p.camera_iterations} {p.camera_period} "
+        f"{p.camera_phase} {p.camera_max_delay} {p.max_frames_per_step} "
+        f"{p.gate_camera!r} {p.gate_encoder!r} {p.k0} {p.backward_map}",
+        f"qw {_numbers(qw)}",
+        f"r_encoder {_numbers(re)}",
+        f"r_camera {_numbers(rc)}",
+        f"x0 {_numbers(x0)}",
+        f"P0 {_numbers(P0)}",
+        f"x0_motor_from_encoders {int(sc.estimate0.motor == 'encoders')}",
+        f"inverse_tol {inverse_tol!r}",
+        f"hold_limit {_numbers(limit)}",
+    ]
+    for role, key in (("encoders", "encoders"), ("camera", "camera"), ("effort", "effort"),
+                      ("truth", "truth"), ("estimate", "estimate"),
+                      ("estimate_std", "estimate_std"), ("theta", "theta"),
+                      ("diagnostics", "diagnostics"), ("commands", "commands")):  # fmt: skip
+        lines.append(f"topic_{key} {spec.topic(role)}")
+    if options.get("record") is not None:
+        lines.append(f"record {options['record']} 1")
+    if controller:
+        cp = controller_params(parts.controller, lib)
+        lines.append(
+            f"ctrl {_ctrl_code(cp.name)} {cp.T!r} {cp.p!r} {int(cp.qmd_next_hold)} "
+            f"{int(cp.state_true)} {cp.link_bandwidth!r} {cp.motor_bandwidth!r} "
+            f"{int(cp.startup_converged)} {cp.ready_q_std!r} {cp.ready_qd_std!r} "
+            f"{cp.blend_accel!r} {cp.blend_rate!r} {cp.ready_nis!r} {cp.ready_nis_window!r} "
+            f"{int(cp.hold_motor)} {cp.blend_wf!r}"
+        )
+        lines.append(f"ctrl2 {cp.headroom_tau!r} {cp.blend_lead!r}")
+        for key in ("h", "lam", "Lt", "eps", "phi", "wm", "tau_max", "wf", "vmax"):
+            lines.append(f"{key} {_numbers(cp.gains.get(key, np.zeros(n)))}")
+        for key in ("u_max", "Mm", "Fm", "Ks", "theta_initial"):
+            lines.append(f"{key} {_numbers(getattr(cp, key))}")
+        lines.append("ks_theta " + " ".join(str(int(v)) for v in cp.ks_theta))
+        K = run_ticks(sc, lib.T, n, N)
+        inputs, _ = simulation_inputs(sc, lib, K, parts)
+        ref_path = folder / "reference.f64"
+        np.ascontiguousarray(inputs.ref, dtype="<f8").tofile(ref_path)
+        lines.append(f"ref_file {ref_path} {K}")
+    path = folder / "params.txt"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _ctrl_code(name: str) -> int:
+    from amsfe_sym.runtime.compiled_loop import CONTROLLER_CODES
+
+    return int(CONTROLLER_CODES[name])
+
+
+# ---------------------------------------------------------------------- the run
+@dataclass(frozen=True)
+class CNodeRun:
+    """How a C node run ended.
+
+    Attributes:
+        exit_code: The C node's (0 done, 2 bad input, 3 hold, 130 / 143 signals).
+        record: The record written (None: none).
+        build: The build it ran.
+    """
+
+    exit_code: int
+    record: Path | None
+    build: CNodeBuild
+
+
+def _resolved_spec(spec: TopicSpec, joints: tuple[str, ...], ros_args: tuple[str, ...],
+                   domain_id: int | None, std_every: int) -> tuple[TopicSpec, int]:  # fmt: skip
+    """The spec with its ROS parameters (``-p``) applied, and ``publish.std_every``: read
+    by a short-lived rclpy node of the same name and arguments, as the Python node reads
+    them (one definition, the same checks)."""
+    from amsfe_sym.ros.middleware import spec_parameters, start, stop
+    from amsfe_sym.ros.outputs import std_every_parameter
+
+    ctx = start(list(ros_args), domain_id)
+    import rclpy
+
+    node = rclpy.create_node("amsfe_node_parameters", context=ctx)
+    try:
+        resolved = spec_parameters(node, spec, joints)
+        every = std_every_parameter(node, std_every)
+    finally:
+        stop(ctx, node)
+    return resolved, every
+
+
+def run_c_node(
+    sc: Scenario,
+    lib: ModelLibrary,
+    options: Any,
+    say: Callable[[str], None] = print,
+) -> CNodeRun:
+    """Build (once) and run the C node of ``sc`` with the Python node's options
+    (:class:`~amsfe_sym.ros.node.NodeOptions`); its lines go to this process's stdout.
+
+    Raises:
+        KeyboardInterrupt: Ctrl-C or SIGTERM (forwarded to the C node, which published its
+            hold; the record written).
+        RosError: the wheels missing, the build failing, rclpy failing to start.
+        ConfigError: what the C node cannot run (:func:`c_node_refusal`), bad parameters.
+    """
+    from amsfe_sym.ros.spec_filter import live_filter
+
+    why = c_node_refusal(sc, options.spec, options.managed, options.controller)
+    if why is not None:
+        raise ConfigError(
+            describe(
+                "amsfe node --impl c",
+                "a configuration the C node runs",
+                why,
+                "run amsfe node --impl python",
+            )
+        )
+    build = build_node(lib)
+    if build.compiled:
+        say(f"node: built the C node {build.path}")
+    spec, every = _resolved_spec(
+        options.spec,
+        tuple(lib.manifest.joints),
+        options.ros_args,
+        options.domain_id,
+        options.std_every,
+    )
+    why = c_node_refusal(sc, spec, options.managed, options.controller)
+    if why is not None:
+        raise ConfigError(
+            describe(
+                "amsfe node --impl c",
+                "a configuration the C node runs",
+                why,
+                "run amsfe node --impl python",
+            )
+        )
+    sc_live = live_filter(sc, spec)
+    end_k = -1 if options.duration is None else round(options.duration / lib.T)
+    with tempfile.TemporaryDirectory(prefix="amsfe_cnode_") as tmp:
+        folder = Path(tmp)
+        arrays = folder / "record.bin" if options.record is not None else None
+        params = write_params(
+            folder,
+            sc_live,
+            lib,
+            spec,
+            controller=options.controller,
+            options={
+                "end_k": end_k,
+                "std_every": every,
+                "hold": options.hold,
+                "encoder_timeout": options.encoder_timeout,
+                "subscriber_wait": options.subscriber_wait,
+                "record": arrays,
+                "sched_priority": SCHED_PRIORITY,
+            },
+        )
+        env = dict(os.environ)
+        env.setdefault("RMW_IMPLEMENTATION", DEFAULT_RMW)
+        env.pop("LD_BIND_NOW", None)  # the Python type support is bound lazily (module doc)
+        if options.domain_id is not None:
+            env["ROS_DOMAIN_ID"] = str(options.domain_id)
+        cmd = [str(build.path), str(params)]
+        if options.ros_args:
+            cmd += ["--ros-args", *options.ros_args]
+        sys.stdout.flush()
+        proc = subprocess.Popen(cmd, env=env)
+        interrupt: KeyboardInterrupt | None = None
+        while True:
+            try:
+                code = proc.wait()
+                break
+            except KeyboardInterrupt as exc:  # Ctrl-C / SIGTERM of this process
+                interrupt = exc
+                sig = signal.SIGINT if type(exc) is KeyboardInterrupt else signal.SIGTERM
+                if proc.poll() is None:
+                    proc.send_signal(sig)
+        record = None
+        if options.record is not None and arrays is not None and arrays.is_file():
+            record = _write_record(
+                sc_live, lib, spec, read_record_arrays(arrays, lib), options.record
+            )
+        if interrupt is not None or code in (130, 143):
+            raise interrupt if interrupt is not None else KeyboardInterrupt()
+    return CNodeRun(code, record, build)
+
+
+def read_record_arrays(path: Path, lib: ModelLibrary) -> dict[str, NDArray[Any]]:
+    """The arrays the C node wrote at its stop (sections ``name type rows cols data``)."""
+    raw = path.read_bytes()
+    out: dict[str, NDArray[Any]] = {}
+    pos = 0
+    kinds = {"d": "<f8", "q": "<i8", "c": "u1"}
+    while pos < len(raw):
+        name = raw[pos : pos + 14].rstrip(b"\0").decode()
+        kind = chr(raw[pos + 15])
+        rows, cols = np.frombuffer(raw, "<i8", 2, pos + 16)
+        pos += 32
+        dtype = np.dtype(kinds[kind])
+        count = int(rows) * int(cols)
+        out[name] = np.frombuffer(raw, dtype, count, pos).reshape(int(rows), int(cols)).copy()
+        pos += count * dtype.itemsize
+    return out
+
+
+def _write_record(
+    sc: Scenario, lib: ModelLibrary, spec: TopicSpec, a: dict[str, NDArray[Any]], out: Path
+) -> Path:
+    """The rosbag2 of ``--record`` from the C node's arrays, in the Python node's order
+    (each tick: its diagnostics, encoders, the frames fused at it, the truth, the
+    outputs; then the torques stamped up to it; the hold command last)."""
+    from amsfe_sym.ros.record import NodeRecord
+
+    names = list(spec.joint_names or lib.manifest.joints)
+    rec = NodeRecord(sc, lib, spec, names)
+    L = lib.layout
+    text = bytes(a["diag_text"].ravel())
+    starts = [0, *[i + 1 for i, b in enumerate(text) if b == 0][:-1]]
+    diags = [text[s : text.index(b"\0", s)].decode() for s in starts] if text else []
+    diag_ns = a["diag_ns"].ravel()
+    fr_ns, eff_ns = a["fr_ns"].ravel(), a["eff_ns"].ravel()
+    d = f = e = 0
+    for t, ns in enumerate(int(v) for v in a["ns"].ravel()):
+        while d < len(diag_ns) and diag_ns[d] == ns:
+            rec.diagnostics(ns, diags[d])
+            d += 1
+        rec.encoders(ns, a["z"][t])
+        while f < len(fr_ns) and fr_ns[f] == ns:
+            rec.frame(ns, int(a["fr_exp"][f, 0]), a["fr_z"][f])
+            f += 1
+        if np.all(np.isfinite(a["truth"][t])):
+            rec.truth(ns, a["truth"][t])
+        x = a["x"][t]
+        u = a["u"][t] if np.all(np.isfinite(a["u"][t])) else None
+        rec.outputs(ns, x, a["std"][t], x[L["theta"]], u)
+        while e < len(eff_ns) and eff_ns[e] <= ns:
+            rec.applied(int(eff_ns[e]), a["eff_u"][e])
+            e += 1
+    while e < len(eff_ns):
+        rec.applied(int(eff_ns[e]), a["eff_u"][e])
+        e += 1
+    if a["hold_ns"].size:
+        rec.hold(int(a["hold_ns"][0, 0]), a["hold_u"][0])
+    return rec.write(out)

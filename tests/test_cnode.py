@@ -1,0 +1,145 @@
+"""The C node (``amsfe node --impl c``, ``ros/c/amsfe_node.c``; docs/live-control.md).
+
+Over real DDS (marker ``ros``; each test on its own domain and topics, every process bounded,
+as tests/test_ros.py does): ``sim-node --lockstep`` + the C node reproduce ``amsfe simulate``
+(the compiled loop) bit for bit on paper-sim and the Panda, and equal the Python node's run;
+the build is cached by content (a second build compiles nothing); the wheels missing is one
+line.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from amsfe_sym.codegen import library_for
+from amsfe_sym.errors import RosError
+from amsfe_sym.scenario import load_scenario
+from amsfe_sym.sim.loop import run
+from tests.test_node_record import _bag
+from tests.test_ros import PATIENT_ARM, PATIENT_NODE, SRC, _finish, _ros_env, _start
+
+
+def _lockstep(tmp_path: Path, scenario: str, impl: str, duration: float = 2.0) -> dict[str, Any]:
+    """``sim-node --lockstep`` + ``node --impl IMPL --controller amsfe --record`` for
+    ``duration`` s: both exit 0; the record's topics and the node's output."""
+    env = _ros_env(tmp_path)
+    rec = tmp_path / f"rec-{impl}"
+    d = f"{duration:g}"
+    procs = []
+    try:
+        procs.append(_start(env, "node", scenario, "--controller", "amsfe", "--impl", impl,
+                            "--duration", d, "--record", str(rec), *PATIENT_NODE))  # fmt: skip
+        procs.append(_start(env, "sim-node", scenario, "--lockstep", "--duration", d,
+                            *PATIENT_ARM))  # fmt: skip
+    finally:
+        results = _finish(procs, 180.0)
+    for code, text in results:
+        assert code == 0, text
+    got: dict[str, Any] = dict(_bag(rec))
+    got["_text"] = results[0][1]
+    return got
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario", ["paper-sim", "panda-control"])
+def test_c_node_lockstep_is_simulate(scenario: str, tmp_path: Path) -> None:
+    """The C node over DDS in lockstep: its estimates, theta and commands (from its record,
+    every tick) equal ``amsfe simulate``'s compiled loop of the same seed bit for bit, its
+    frames fused and refused are the loop's, and it ends with the hold command."""
+    sc = load_scenario(scenario).with_overrides(duration=2.0)
+    lib = library_for(sc)
+    got = _lockstep(tmp_path, scenario, "c")
+    assert "the C node" in got["_text"] and "done: 2001 ticks" in got["_text"], got["_text"]
+    ref = run(sc, lib, runtime="compiled")
+    n = lib.n
+    est = np.array([np.r_[m.position, m.velocity] for m in got["/amsfe/estimate"]])
+    cmd = np.array([m.data for m in got["/effort_controller/commands"]])
+    theta = np.array([m.data for m in got["/amsfe/theta"]])
+    assert est.shape == (ref.t.size, 2 * n)
+    np.testing.assert_array_equal(est, ref.x_hat[:, : 2 * n])
+    np.testing.assert_array_equal(theta, ref.x_hat[:, 4 * n :])
+    np.testing.assert_array_equal(cmd[:-1], ref.u)  # the last: the hold
+    std = np.array([np.r_[m.position, m.velocity] for m in got["/amsfe/estimate_std"]])
+    np.testing.assert_array_equal(std, np.sqrt(ref.P_diag[:, : 2 * n]))
+    assert len(got["/camera/marker"]) == ref.counters["frames_delivered"] > 0
+    diag = json.loads(got["/amsfe/diagnostics"][-1].data)
+    assert diag["frames_fused"] == ref.counters["frames_applied"] > 0
+    assert diag["frames_refused"] == ref.counters["frames_rejected"]
+    truth = np.array([m.data for m in got["/amsfe/truth"]])
+    assert truth.shape == ref.x_true.shape
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_c_node_equals_the_python_node(tmp_path: Path) -> None:
+    """The same lockstep run with the C node and with the Python node (the readable
+    reference): the same estimates, standard deviations, theta and commands (1e-12), the same
+    diagnostics counters."""
+    c = _lockstep(tmp_path / "c", "paper-sim", "c", 1.0)
+    py = _lockstep(tmp_path / "py", "paper-sim", "python", 1.0)
+    for topic in ("/amsfe/estimate", "/amsfe/estimate_std"):
+        a = np.array([np.r_[m.position, m.velocity] for m in c[topic]])
+        b = np.array([np.r_[m.position, m.velocity] for m in py[topic]])
+        assert a.shape == b.shape and a.shape[0] == 1001
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+    for topic in ("/amsfe/theta", "/effort_controller/commands"):
+        a = np.array([m.data for m in c[topic]])
+        b = np.array([m.data for m in py[topic]])
+        assert a.shape == b.shape
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+    dc = json.loads(c["/amsfe/diagnostics"][-1].data)
+    dp = json.loads(py["/amsfe/diagnostics"][-1].data)
+    for key in ("k", "frames_fused", "frames_refused", "refused", "skipped"):
+        assert dc[key] == dp[key], key
+
+
+def test_build_is_cached_by_content(tmp_path: Path) -> None:
+    """Building the node twice compiles once: the second build reuses the executable (same
+    key, same file, not rewritten)."""
+    pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (pip install -e '.[ros]')")
+    from amsfe_sym.ros.cnode import build_node
+
+    lib = library_for(load_scenario("paper-sim"))
+    first = build_node(lib, tmp_path)
+    assert first.compiled and first.path.is_file()
+    stamp = first.path.stat().st_mtime_ns
+    second = build_node(lib, tmp_path)
+    assert not second.compiled
+    assert (second.path, second.key) == (first.path, first.key)
+    assert second.path.stat().st_mtime_ns == stamp
+    made = json.loads((first.path.parent / "build.json").read_text())
+    assert "-O1" in made["cflags"] and "--disable-new-dtags" in made["command"]
+
+
+def test_missing_wheels_is_one_line(tmp_path: Path) -> None:
+    """Without rcl's headers and libraries (the [ros] extra) the C node's build says so in
+    one line naming the fix; ``amsfe node --impl c`` then exits 2 with that one line and
+    writes nothing."""
+    from amsfe_sym.ros.cnode import ros_paths
+
+    with pytest.raises(RosError, match=r"rcl's C headers.*Fix: pip install"):
+        ros_paths(tmp_path)
+    block = (
+        "import sys; sys.prefix = sys.argv[1]; from amsfe_sym.apps.cli import main; "
+        "sys.exit(main(['node', 'paper-sim', '--impl', 'c']))"
+    )
+    env = {**os.environ, "PYTHONPATH": str(SRC)}
+    empty = tmp_path / "empty-prefix"
+    empty.mkdir()
+    node = subprocess.run(
+        [sys.executable, "-c", block, str(empty)],
+        env=env, capture_output=True, text=True, timeout=300, cwd=tmp_path,
+    )  # fmt: skip
+    assert node.returncode == 2, node.stderr
+    lines = [x for x in node.stderr.splitlines() if x.startswith("error:")]
+    assert len(lines) == 1 and ".[ros]" in lines[0] and "librcl" in lines[0], node.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["empty-prefix"]
