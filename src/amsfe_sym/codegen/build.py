@@ -288,6 +288,8 @@ def _build(
         if set(parts) == set(ALL_PARTS):  # the loop calls the laws, the plant, the estimators
             shutil.copy(RUNTIME_C / "amsfe_loop.h", tmp)
             units.append(runtime_unit("amsfe_loop.c"))
+            shutil.copy(RUNTIME_C / "amsfe_watchdog.h", tmp)  # a live node's watchdogs
+            units.append(runtime_unit("amsfe_watchdog.c"))
         if "estimator" in parts:  # the dense kernels of the estimators and the loop (O3 pragma)
             units.append(runtime_unit("amsfe_kernels.c"))
         # --force rebuilds the shared objects too (and refreshes them in the cache)

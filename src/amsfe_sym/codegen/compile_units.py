@@ -7,10 +7,10 @@ O3 kernels), measured unit by unit on a 2-core AMD EPYC (docs/codegen.md).  Here
 is its own unit (``cc -c``), the units run ``jobs`` at a time (default: the CPUs this process
 may use), the largest first, and the objects are linked into the shared library.
 
-The robot-independent units (:data:`SHARED_UNITS`: the estimator kernels and the closed
-loop, which include no generated header) are compiled once per content: their object is kept
-in ``<parent>/.objects/<key>.o``, the key a sha256 of the compiler's version, the flags, the
-CPU kind when the flags name ``native``, the unit's source and every header of
+The robot-independent units (:data:`SHARED_UNITS`: the estimator kernels, the closed loop
+and the watchdogs, which include no generated header) are compiled once per content: their
+object is kept in ``<parent>/.objects/<key>.o``, the key a sha256 of the compiler's version,
+the flags, the CPU kind when the flags name ``native``, the unit's source and every header of
 ``runtime/c``.  A later library in the same parent folder (another robot, another
 integrator; the test suite builds a dozen) links that object instead of compiling it again.
 A damaged or missing object is simply compiled again; the object is written under a
@@ -51,7 +51,7 @@ __all__ = [
 RUNTIME_C = Path(__file__).resolve().parent.parent / "runtime" / "c"
 
 #: The files of ``runtime/c`` whose object does not depend on the robot.
-SHARED_UNITS = ("amsfe_kernels.c", "amsfe_loop.c")
+SHARED_UNITS = ("amsfe_kernels.c", "amsfe_loop.c", "amsfe_watchdog.c")
 
 #: The object cache's folder, in the parent folder of the libraries.
 OBJECT_CACHE = ".objects"

@@ -106,6 +106,12 @@ class Controller(ABC):
         ref = self.trajectory.evaluate(t)
         return ref.q, ref.qd, ref.qdd
 
+    def handed_over(self, k: int) -> bool:
+        """The law tracks q_d itself at tick ``k`` (its start-up, if any, is over): a live
+        node's tracking watchdog judges |q_d - q_hat| from then on (ros/watchdog.py).  Laws
+        without a start-up: always."""
+        return True
+
     @abstractmethod
     def torque(self, tick: LawInputs) -> FloatArray:
         """u(k) [N m], before saturation, from what the law may read at tick k

@@ -345,6 +345,13 @@ class _Cascade(_SlidingBase):
             )
         return self._ready
 
+    def handed_over(self, k: int) -> bool:
+        """Converged start-up: trusted, blend over at ``k`` (C: amsfe_ctrl_handed_over)."""
+        if self.gains["startup"] != "converged" or self._blend is None:
+            return self.gains["startup"] != "converged" or self._started
+        k0, s0, tb, _, _ = self._blend
+        return self._started and not ((k - k0) * self.lib.T + s0 < tb)
+
     def _gain(self, key: str, size: int) -> FloatArray:
         if key == "tau_max" and self.gains.get("tau_max") is None:
             return self.u_max.copy()

@@ -17,6 +17,8 @@ The tick-0 estimate is built from the first sample (``[estimate0] motor = "encod
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -29,8 +31,11 @@ from amsfe_sym.errors import ConfigError, EstimatorError, describe
 from amsfe_sym.estimation import Estimator
 from amsfe_sym.estimation.base import StepReport
 from amsfe_sym.estimation.effort import EffortSpec, encoder_row
+from amsfe_sym.estimation.ekf import gate_threshold
 from amsfe_sym.ros.effort import TorqueHold
+from amsfe_sym.ros.watchdog import Reason, Watchdog, WatchdogConfig, WatchdogTick
 from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.runtime.stability import STATUS_NOT_PD
 from amsfe_sym.scenario import Scenario, run_ticks
 from amsfe_sym.sim.builders import (
     build_controller,
@@ -40,8 +45,9 @@ from amsfe_sym.sim.builders import (
     scenario_timing,
 )
 from amsfe_sym.sim.result import DECISION_COUNTERS, count_decisions
+from amsfe_sym.topics.watchdog import WatchdogBounds
 
-__all__ = ["ORACLES", "HoldKind", "LiveLoop", "TickOut", "hold_command"]
+__all__ = ["ORACLES", "HoldKind", "LiveLoop", "TickOut", "Watched", "hold_command"]
 
 FloatArray = NDArray[np.float64]
 
@@ -80,6 +86,22 @@ class TickOut:
     predicted: int = 0
 
 
+@dataclass(frozen=True)
+class Watched:
+    """An encoder sample through :meth:`LiveLoop.watch`.
+
+    Attributes:
+        out: What it produced (None: skipped, or the estimator failed).
+        reason: The watchdog's decision (:attr:`~amsfe_sym.ros.watchdog.Reason.NONE`: go
+            on and publish ``out``; else hold).
+        tick: What the watchdog judged (None: the sample was skipped, nothing judged).
+    """
+
+    out: TickOut | None
+    reason: Reason
+    tick: WatchdogTick | None = None
+
+
 @dataclass
 class _Frames:
     pending: list[CameraFrame] = field(default_factory=list)
@@ -102,6 +124,8 @@ class LiveLoop:
             estimator is ``amsfe estimate``'s for a log of that kind (the input as states,
             each sample's row :func:`~amsfe_sym.estimation.effort.encoder_row` of the sample
             and the joint torque held at its tick, :meth:`joint_torque`); None: ``applied``.
+        watchdog: The watchdogs' bounds (:meth:`watch` judges each sample by them); None:
+            the defaults.
 
     Raises:
         ConfigError: an oracle controller (it reads the true state), or what the builders
@@ -118,6 +142,7 @@ class LiveLoop:
         grid_tolerance: float = 0.25,
         max_gap_steps: int = 5,
         effort: EffortSpec | None = None,
+        watchdog: WatchdogBounds | None = None,
     ) -> None:
         self.sc, self.lib = sc, lib
         self.n, self.N, self.T = lib.n, lib.N, lib.T
@@ -165,6 +190,19 @@ class LiveLoop:
         self.counters: dict[str, int] = dict.fromkeys(DECISION_COUNTERS, 0)
         self.skipped: dict[str, int] = {}
         self._nan = np.full(4 * lib.n, np.nan)
+        joint_torque = self.effort_spec is not None and self.effort_spec.kind == "joint_torque"
+        #: The watchdogs (:meth:`watch`; ros/watchdog.py).
+        self.watchdog = Watchdog(
+            WatchdogConfig(
+                lib.n,
+                lib.N,
+                (3 if joint_torque else 2) * lib.n,
+                lib.T,
+                watchdog or WatchdogBounds(),
+                max_gap_steps,
+            )
+        )
+        self._gate_camera = gate_threshold(sc.filter.gate_probability or None, 2)
 
     def _skip(self, reason: str, count: int = 1) -> None:
         self.skipped[reason] = self.skipped.get(reason, 0) + count
@@ -343,6 +381,72 @@ class LiveLoop:
         report = self.est.step(self._u_for(k - 1), zk, self._due())
         count_decisions(self.counters, report)
         return self._control(stamp_ns, row[: 2 * self.n], report, gap)
+
+    def watch(
+        self,
+        stamp_ns: int,
+        z: FloatArray,
+        sent_ns: int | None = None,
+        *,
+        taken: float,
+        clock: Callable[[], float],
+    ) -> Watched:
+        """:meth:`encoders`, then the watchdogs' decision on it (ros/watchdog.py): the
+        sample was taken at wall clock ``taken`` [s], ``clock()`` [s] (the same clock) is read
+        when its command is computed.  An estimator failure, or more than ``max_gap_steps``
+        samples missing, is judged as such (a hold) rather than raised; a skipped sample is
+        not judged.  The watchdog's stamp is ``sent_ns`` when known (the deadline is this
+        node's delay, whatever the arm's clock), else ``stamp_ns``."""
+        k_before = self.k
+        k_new = self.tick_of(stamp_ns)
+        status = 0
+        try:
+            out = self.encoders(stamp_ns, z, sent_ns)
+        except EstimatorError:
+            out, status = None, self._status()
+        done = clock()
+        sent = stamp_ns if sent_ns is None else sent_ns
+        if out is None and status == 0:
+            return Watched(None, self.watchdog.reason)
+        if out is None:  # failed: at the tick of the sample, with the gap it had
+            k = k_before + 1 if k_new is None else k_new
+            tick = WatchdogTick(k, k - k_before - 1, sent, taken, done, status)
+            return Watched(None, self.watchdog.sample(tick), tick)
+        rep = out.report
+        q_des = handed = None
+        if self.ctrl is not None:
+            q_des = self.ctrl.reference(out.k, out.t)[0]
+            handed = self.ctrl.handed_over(out.k)
+        enc = math.nan
+        if rep is not None and rep.encoder_accepted and rep.encoder_nis is not None:
+            enc = float(rep.encoder_nis)
+        frames = () if rep is None else tuple(v for v in rep.frame_nis if v <= self._gate_camera)
+        tick = WatchdogTick(
+            out.k,
+            out.predicted,
+            sent,
+            taken,
+            done,
+            0,
+            out.x_hat,
+            out.P_diag,
+            q_des,
+            out.u,
+            bool(handed),
+            enc,
+            frames,
+        )
+        return Watched(out, self.watchdog.sample(tick), tick)
+
+    def _status(self) -> int:
+        """The estimator's error status (the C runtime's; the Python reference's failures
+        are a covariance that lost definiteness: AMSFE_ERR_NOT_PD)."""
+        diagnostics = getattr(self.est, "diagnostics", None)
+        if diagnostics is not None:
+            status = int(diagnostics().last_error)
+            if status < 0:
+                return status
+        return STATUS_NOT_PD
 
     def _due(self) -> list[CameraFrame]:
         """The pending frames exposed at or before the current tick and sent before its

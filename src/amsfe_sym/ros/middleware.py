@@ -199,14 +199,15 @@ def lean_events(node: Any) -> tuple[Any, Any]:
 def spec_parameters(node: Any, spec: TopicSpec, joints: tuple[str, ...]) -> TopicSpec:
     """The topic spec as ROS parameters of ``node`` (declared with ``spec``'s values as
     defaults: ``topics.<role>``, ``joints.names``, ``joints.positions``, ``effort.kind``,
-    ``timing.*``, ``qos.reliability``, ``qos.depth``; the ``[effort]`` noise keys and the
-    ``[filter]`` keys are the spec's), read back and checked as a spec file is.
+    ``timing.*``, ``qos.reliability``, ``qos.depth``, ``watchdog.*``; the ``[effort]`` noise
+    keys and the ``[filter]`` keys are the spec's), read back and checked as a spec file is.
 
     Raises:
         ConfigError: a parameter the spec refuses (a topic without '/', an unknown kind...).
     """
     from amsfe_sym.topics import ROLES
     from amsfe_sym.topics.spec import parse_topic_spec
+    from amsfe_sym.topics.watchdog import WATCHDOG_KEYS
 
     data: dict[str, dict[str, Any]] = {s: {} for s in ("topics", "joints", "effort")}
     data["timing"], data["qos"] = {}, {}
@@ -226,6 +227,10 @@ def spec_parameters(node: Any, spec: TopicSpec, joints: tuple[str, ...]) -> Topi
     ).value
     data["qos"]["reliability"] = node.declare_parameter("qos.reliability", spec.reliability).value
     data["qos"]["depth"] = node.declare_parameter("qos.depth", spec.depth).value
+    data["watchdog"] = {  # topics.watchdog: watchdog.<key>
+        key: node.declare_parameter(f"watchdog.{key}", getattr(spec.watchdog, key)).value
+        for key in WATCHDOG_KEYS
+    }
     if spec.filter_options:  # the [filter] keys: the file's (as the [effort] noise keys)
         data["filter"] = dict(spec.filter_options)
     parsed = parse_topic_spec(data, f"ROS parameters of {node.get_name()}")

@@ -5,8 +5,9 @@ are declared once, in C.  :func:`header_fields` turns a ``typedef struct { ... }
 those headers into a ctypes ``_fields_`` list, so the Python side cannot drift from the C
 side when a field is added (a hand-copied list that missed one would shift every later
 field silently).  The headers are ours and use a small subset of C: scalar ``int``,
-``long``, ``double``, ``size_t``, ``unsigned char``, pointers to any of them (passed as
-``void *``), fixed arrays (``double z[2]``), several names per declaration and comments.
+``long``, ``long long``, ``double``, ``size_t``, ``unsigned char``, pointers to any of them
+(passed as ``void *``), fixed arrays (``double z[2]``), several names per declaration and
+comments.
 Anything else is refused with :class:`~amsfe_sym.errors.ConfigError` when the module that
 uses it is imported (a test imports them all).
 """
@@ -29,6 +30,7 @@ C_DIR = Path(__file__).resolve().parent / "c"
 _SCALARS: dict[str, Any] = {
     "int": ctypes.c_int,
     "long": ctypes.c_long,
+    "long long": ctypes.c_longlong,
     "double": ctypes.c_double,
     "size_t": ctypes.c_size_t,
     "unsigned char": ctypes.c_ubyte,
@@ -64,7 +66,9 @@ def header_fields(header: str, struct: str) -> list[tuple[str, Any]]:
     for decl in (d.strip() for d in body.split(";")):
         if not decl:
             continue
-        m = re.match(r"^(?:const\s+)?(unsigned char|int|long|double|size_t)\b(.*)$", decl, re.S)
+        m = re.match(
+            r"^(?:const\s+)?(unsigned char|long long|int|long|double|size_t)\b(.*)$", decl, re.S
+        )
         if m is None:
             raise ConfigError(
                 describe(f"{header}: {struct}", "a scalar type the reader knows", decl, "extend it")

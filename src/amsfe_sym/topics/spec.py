@@ -26,6 +26,9 @@ max_gap_steps = 5                 # missing encoder samples predicted through; m
 [qos]                             # live topics (amsfe node, sim-node, play)
 reliability = "reliable"          # or "best_effort" (what most drivers' sensor topics use)
 depth = 100                       # history depth (KEEP_LAST)
+
+[watchdog]                        # the bounds past which a live node holds (topics.watchdog)
+tracking_error = 0.5              # [rad]; every key: docs/watchdogs.md
 ```
 
 The key ``[topics] torque`` of older log specs is read as ``effort``.
@@ -42,6 +45,7 @@ from amsfe_sym.core.toml import read_toml
 from amsfe_sym.core.values import BACKWARD_MAPS, read_int, read_number
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.topics.roles import EFFORT_KINDS, ROLES, EffortKind
+from amsfe_sym.topics.watchdog import WATCHDOG_KEYS, WatchdogBounds, parse_watchdog
 
 __all__ = ["FILTER_KEYS", "FROM_LOG", "TopicSpec", "parse_topic_spec", "read_topic_spec"]
 
@@ -78,6 +82,8 @@ class TopicSpec:
         max_gap_steps: Missing encoder samples in a row the estimator predicts through.
         reliability: QoS reliability of live topics: ``reliable`` or ``best_effort``.
         depth: QoS history depth of live topics (KEEP_LAST).
+        watchdog: The bounds of a live node's watchdogs (``[watchdog]``,
+            :class:`~amsfe_sym.topics.watchdog.WatchdogBounds`).
         source: The file read (None: the defaults).
     """
 
@@ -102,6 +108,7 @@ class TopicSpec:
     max_gap_steps: int = 5
     reliability: Literal["reliable", "best_effort"] = "reliable"
     depth: int = 100
+    watchdog: WatchdogBounds = field(default_factory=WatchdogBounds)
     source: Path | None = field(default=None, compare=False)
 
     def topic(self, role: str) -> str:
@@ -152,6 +159,7 @@ _SECTIONS = {
     "filter": FILTER_KEYS,
     "timing": ("grid_tolerance", "max_gap_steps"),
     "qos": ("reliability", "depth"),
+    "watchdog": WATCHDOG_KEYS,
 }
 
 
@@ -218,6 +226,9 @@ def parse_topic_spec(data: dict[str, Any], where: str = "topic spec") -> TopicSp
             raise ConfigError(
                 describe(f"{where} [{section}]", f"keys among {list(keys)}", str(bad), fix)
             )
+        if section == "watchdog":
+            out["watchdog"] = parse_watchdog(table, f"{where} [watchdog]")
+            continue
         for key, value in table.items():
             at = f"{where} [{section}] {key}"
             if section == "topics":

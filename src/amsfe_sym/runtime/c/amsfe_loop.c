@@ -522,6 +522,14 @@ static int cascade(amsfe_ctrl *c, long k, const double *lead0, const double *lea
   return AMSFE_OK;
 }
 
+int amsfe_ctrl_handed_over(const amsfe_ctrl *c, long k) {
+  if (!c) return 0;
+  if (!c->par.startup_converged) return 1;
+  if (!c->started) return 0;
+  double sb = (double)(k - c->blend_k0) * c->par.T + c->blend_s0;
+  return !(sb < c->blend_tb);
+}
+
 /* _Printed.torque: (37) / (54) as printed, with qmd(k+1) predicted by (1c) or held. */
 static int printed(amsfe_ctrl *c, const double *x, const double *z, const double *ref, double *u,
                    amsfe_ctrl_out *out) {

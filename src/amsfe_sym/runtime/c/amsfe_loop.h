@@ -125,6 +125,12 @@ void amsfe_ctrl_observe_nis(amsfe_ctrl *ctrl, double nis);
 int amsfe_ctrl_torque(amsfe_ctrl *ctrl, long k, const double *ref, const double *x_hat,
                       const double *z, const double *x_true, double *u, amsfe_ctrl_out *out);
 
+/* 1 when the law tracks q_d itself at tick k (after amsfe_ctrl_torque of that tick): without
+ * startup_converged always; with it, once the estimate was trusted and the blended start
+ * ended ((k - k0) T + s0 >= Tb).  A live node's tracking watchdog (amsfe_watchdog.h) judges
+ * from then on.  control/sliding.py's handed_over. */
+int amsfe_ctrl_handed_over(const amsfe_ctrl *ctrl, long k);
+
 /* ------------------------------------------------------------------ the real-time tick */
 typedef struct {
   long exposure_step; /* kappa: the step the frame was exposed at */

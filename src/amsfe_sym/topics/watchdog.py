@@ -1,0 +1,100 @@
+"""The ``[watchdog]`` table of the topic spec: the bounds past which a live node holds
+(docs/watchdogs.md says what each watches, its cause and fix, and how each default was
+measured).
+
+```toml
+[watchdog]
+tracking_error = 0.5       # [rad] max_j |q_d - q_hat| once the start-up handed over
+innovation_nis = 20.0      # mean of NIS / dimension over the window [-]
+innovation_window = 50     # fused updates (encoder samples and camera frames)
+deadline = 0.05            # [s] a sample processed later than this after its stamp is late
+deadline_misses = 50       # hold when more than this many of the window are late
+deadline_window = 1000     # [samples]
+compute_budget = 0.1       # [s] one tick's computation
+encoder_timeout = 0.5      # [s] wall clock without an encoder sample
+```
+
+A bound of ``inf`` (``tracking_error = inf`` in TOML) switches its check off.  The node's
+``--encoder-timeout`` and the ROS parameters ``watchdog.<key>`` override the file.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any
+
+from amsfe_sym.errors import ConfigError, describe
+
+__all__ = ["WATCHDOG_COUNTS", "WATCHDOG_KEYS", "WatchdogBounds", "parse_watchdog"]
+
+
+@dataclass(frozen=True)
+class WatchdogBounds:
+    """The bounds of the watchdogs (the ``[watchdog]`` keys, same names and units).
+
+    Attributes:
+        tracking_error: Largest link tracking error max_j |q_d,j - q_hat,j| [rad], judged
+            once the controller's start-up handed over (the blend ended); inf: off.
+        innovation_nis: Largest mean of NIS / dimension over the last ``innovation_window``
+            fused updates (encoder samples: dimension 2n or 3n; camera frames: 2) [-]; inf:
+            off.
+        innovation_window: Fused updates in that mean (the check starts once it is full).
+        deadline: A sample processed (command computed) later than this after its stamp
+            (on the node's wall clock, the stamps shifted by the first sample's offset) is
+            late [s]; inf: off.
+        deadline_misses: Hold when more than this many of the last ``deadline_window``
+            samples were late.
+        deadline_window: Samples in that count.
+        compute_budget: Longest computation of one tick (sample taken -> command ready)
+            [s]; inf: off.
+        encoder_timeout: Longest wall-clock silence of the encoders, and longest gap
+            between two calls of the node's own loop [s].
+    """
+
+    tracking_error: float = 0.5
+    innovation_nis: float = 20.0
+    innovation_window: int = 50
+    deadline: float = 0.05
+    deadline_misses: int = 50
+    deadline_window: int = 1000
+    compute_budget: float = 0.1
+    encoder_timeout: float = 0.5
+
+
+#: The keys of ``[watchdog]`` (the fields of :class:`WatchdogBounds`).
+WATCHDOG_KEYS = tuple(f.name for f in fields(WatchdogBounds))
+#: The keys that are counts (integers); the others are numbers > 0 (inf: off).
+WATCHDOG_COUNTS = ("innovation_window", "deadline_misses", "deadline_window")
+_AT_LEAST = {"innovation_window": 1, "deadline_misses": 0, "deadline_window": 1}
+
+
+def parse_watchdog(table: dict[str, Any], where: str = "[watchdog]") -> WatchdogBounds:
+    """The bounds of a parsed ``[watchdog]`` table (missing keys: the defaults).
+
+    Raises:
+        ConfigError: an unknown key, a count that is not an integer at or above its least
+            value, a bound that is not a number > 0 (inf allowed, except for
+            ``encoder_timeout``).
+    """
+    bad = sorted(set(table) - set(WATCHDOG_KEYS))
+    if bad:
+        raise ConfigError(
+            describe(where, f"keys among {list(WATCHDOG_KEYS)}", str(bad), "drop them")
+        )
+    out: dict[str, Any] = {}
+    for key, value in table.items():
+        at = f"{where} {key}"
+        if key in WATCHDOG_COUNTS:
+            lo = _AT_LEAST[key]
+            if isinstance(value, bool) or not isinstance(value, int) or value < lo:
+                raise ConfigError(describe(at, f"an integer >= {lo}", repr(value), "fix it"))
+            out[key] = int(value)
+        else:
+            finite = key == "encoder_timeout"
+            ok = isinstance(value, int | float) and not isinstance(value, bool) and value > 0
+            if not ok or (finite and math.isinf(value)):
+                expected = "a number > 0 [s]" if finite else "a number > 0 (inf: off)"
+                raise ConfigError(describe(at, expected, repr(value), "fix it"))
+            out[key] = float(value)
+    return WatchdogBounds(**out)
