@@ -567,29 +567,34 @@ def _write_record(
     sc: Scenario, lib: ModelLibrary, spec: TopicSpec, a: dict[str, NDArray[Any]], out: Path
 ) -> Path:
     """The rosbag2 of ``--record`` from the C node's arrays, in the Python node's order
-    (each tick: its diagnostics, encoders, the frames fused at it, the truth, the
-    outputs; then the torques stamped up to it; the hold command last)."""
+    (each tick: its diagnostics, encoders, the frames fused at it, the truth, the outputs;
+    then the torques stamped up to it; the hold command last).  A tick's truth is the last
+    one sent after the previous tick's encoder sample and not after its own (their DDS
+    source timestamps: never the previous tick's)."""
     from amsfe_sym.ros.record import NodeRecord
 
     names = list(spec.joint_names or lib.manifest.joints)
     rec = NodeRecord(sc, lib, spec, names)
     L = lib.layout
     text = bytes(a["diag_text"].ravel())
-    starts = [0, *[i + 1 for i, b in enumerate(text) if b == 0][:-1]]
-    diags = [text[s : text.index(b"\0", s)].decode() for s in starts] if text else []
+    diags = text.split(b"\0")[:-1] if text else []
     diag_ns = a["diag_ns"].ravel()
     fr_ns, eff_ns = a["fr_ns"].ravel(), a["eff_ns"].ravel()
+    sent, truth_sent = a["sent"].ravel(), a["truth_sent"].ravel()
     d = f = e = 0
+    prev = np.iinfo(np.int64).min
     for t, ns in enumerate(int(v) for v in a["ns"].ravel()):
         while d < len(diag_ns) and diag_ns[d] == ns:
-            rec.diagnostics(ns, diags[d])
+            rec.diagnostics(ns, diags[d].decode())
             d += 1
         rec.encoders(ns, a["z"][t])
         while f < len(fr_ns) and fr_ns[f] == ns:
             rec.frame(ns, int(a["fr_exp"][f, 0]), a["fr_z"][f])
             f += 1
-        if np.all(np.isfinite(a["truth"][t])):
-            rec.truth(ns, a["truth"][t])
+        mine = np.flatnonzero((truth_sent > prev) & (truth_sent <= sent[t]))
+        if mine.size:
+            rec.truth(ns, a["truth_x"][mine[np.argmax(truth_sent[mine])]])
+        prev = int(sent[t])
         x = a["x"][t]
         u = a["u"][t] if np.all(np.isfinite(a["u"][t])) else None
         rec.outputs(ns, x, a["std"][t], x[L["theta"]], u)

@@ -395,7 +395,8 @@ class LiveLoop:
         sample was taken at wall clock ``taken`` [s], ``clock()`` [s] (the same clock) is read
         when its command is computed.  An estimator failure, or more than ``max_gap_steps``
         samples missing, is judged as such (a hold) rather than raised; a skipped sample is
-        not judged."""
+        not judged.  The watchdog's stamp is ``sent_ns`` when known (the deadline is this
+        node's delay, whatever the arm's clock), else ``stamp_ns``."""
         k_before = self.k
         k_new = self.tick_of(stamp_ns)
         status = 0
@@ -404,11 +405,12 @@ class LiveLoop:
         except EstimatorError:
             out, status = None, self._status()
         done = clock()
+        sent = stamp_ns if sent_ns is None else sent_ns
         if out is None and status == 0:
             return Watched(None, self.watchdog.reason)
         if out is None:  # failed: at the tick of the sample, with the gap it had
             k = k_before + 1 if k_new is None else k_new
-            tick = WatchdogTick(k, k - k_before - 1, stamp_ns, taken, done, status)
+            tick = WatchdogTick(k, k - k_before - 1, sent, taken, done, status)
             return Watched(None, self.watchdog.sample(tick), tick)
         rep = out.report
         q_des = handed = None
@@ -422,7 +424,7 @@ class LiveLoop:
         tick = WatchdogTick(
             out.k,
             out.predicted,
-            stamp_ns,
+            sent,
             taken,
             done,
             0,

@@ -24,7 +24,7 @@ The checks, in the order that decides which reason a sample that trips several g
 5. ``compute``: the tick's computation (taken -> done) took longer than ``compute_budget``;
 6. ``deadline``: more than ``deadline_misses`` of the last ``deadline_window`` samples were
    processed later than ``deadline`` after their stamp (lateness = done - (stamp + offset),
-   the offset = taken - stamp of the first sample);
+   the offset = taken - stamp of the first sample; the stamp is the send time when known);
 7. ``innovation``: the mean of NIS / dimension over the last ``innovation_window`` fused
    updates (encoder samples and camera frames) above ``innovation_nis``;
 8. ``tracking``: max_j |q_d,j - q_hat,j| above ``tracking_error``, once the start-up handed
@@ -213,7 +213,9 @@ class WatchdogTick:
     Attributes:
         k: Its tick.
         gap: Samples missing just before it.
-        stamp_ns: Its header stamp [ns].
+        stamp_ns: When it was sent [ns]: its source timestamp (the publisher's clock: a
+            lockstep arm slower than real time is then not "late"), or its header stamp
+            when unknown (one kind for a whole run).
         taken: Wall clock when it was taken from the queue [s].
         done: Wall clock when its command was computed [s].
         status: The estimator's status of this tick (0, or an ``AMSFE_ERR_*`` < 0).

@@ -71,6 +71,12 @@ static double mono_s(void) {
   return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
 }
 
+static long long wall_ns(void) { /* the clock of the middleware's receive stamps */
+  struct timespec t;
+  clock_gettime(CLOCK_REALTIME, &t);
+  return (long long)t.tv_sec * 1000000000LL + t.tv_nsec;
+}
+
 static void *must(void *p, const char *what) {
   if (!p) {
     fprintf(stderr, "error: amsfe_node: out of memory for %s\n", what);
@@ -141,8 +147,11 @@ static void out_fill(out_msg *m, size_t at, const double *v, int n) {
  * start) and written at the stop as sections "name type rows cols data". */
 typedef struct {
   long cap, ticks;
-  long long *ns;
-  double *z, *x, *std, *u, *truth;   /* [cap x 2n], [cap x N] x 2, [cap x n], [cap x N] */
+  long long *ns, *sent;              /* each tick's stamp, its sample's source timestamp */
+  double *z, *x, *std, *u;           /* [cap x 2n], [cap x N] x 2, [cap x n] */
+  long cap_truth, n_truth;           /* every truth received: its source timestamp, x */
+  long long *truth_sent;
+  double *truth_x;
   long cap_eff, n_eff;
   long long *eff_ns;
   double *eff_u;
@@ -185,7 +194,6 @@ typedef struct {
   const char *names[MAX_JOINTS];
   int idx[MAX_JOINTS];
   double *pos, *vel, *eff, *z, *u_hold, *hold_limit, *stdv, *theta_buf, *truth;
-  int has_truth;
   /* rcl */
   rcl_context_t ctx;
   rcl_node_t node;
@@ -210,7 +218,7 @@ typedef struct {
   const char *stop_reason;
   char stop_line[2048];
   int stop_code;
-  double *lat;  /* [cap] sample taken -> command published [s] */
+  double *lat;  /* [cap] sample received by the middleware -> command published [s] */
   long n_lat, cap_lat;
   record_t rec;
 } node_t;
@@ -515,12 +523,11 @@ static void record_tick(node_t *s, long long ns, const double *z, long long sent
     return;
   }
   long t = R->ticks++;
-  R->ns[t] = ns;
+  R->ns[t] = ns, R->sent[t] = sent;
   memcpy(R->z + t * 2 * n, z, sizeof(double) * 2 * (size_t)n);
   memcpy(R->x + t * N, L->x, sizeof(double) * (size_t)N);
   for (int i = 0; i < N; ++i) R->std[t * N + i] = sqrt(L->P_diag[i] > 0.0 ? L->P_diag[i] : 0.0);
   for (int j = 0; j < n; ++j) R->u[t * n + j] = L->controller ? L->u[j] : NAN;
-  for (int i = 0; i < N; ++i) R->truth[t * N + i] = s->has_truth ? s->truth[i] : NAN;
 }
 
 static void record_effort(node_t *s, long long ns, const double *u) {
@@ -608,8 +615,9 @@ static void publish_tick(node_t *s, long long ns, const double *z, long long sen
   }
 }
 
-/* One encoder sample in s->in (sent at `sent`, taken at `taken`). */
-static void on_encoders(node_t *s, long long sent, double taken) {
+/* One encoder sample in s->in (sent at `sent`, received by the middleware at `received`,
+ * system clock [ns]). */
+static void on_encoders(node_t *s, long long sent, long long received) {
   live_loop *L = &s->L;
   int n = s->n;
   long long ns;
@@ -649,10 +657,10 @@ static void on_encoders(node_t *s, long long sent, double taken) {
   }
   publish_tick(s, ns, s->z, sent);
   double done = mono_s();
+  if (L->controller && s->n_lat < s->cap_lat) s->lat[s->n_lat++] = 1e-9 * (double)(wall_ns() - received);
 #ifdef AMSFE_HAVE_WATCHDOG
   /* TODO(watchdog): amsfe_watchdog_sample(s->wd, &sample) here, the hold if it says so */
 #endif
-  if (s->n_lat < s->cap_lat) s->lat[s->n_lat++] = done - taken;
   s->last_rx = done; /* after the work: a slow first tick is no silence */
   s->started = 1;
 }
@@ -690,13 +698,21 @@ static void take_efforts(node_t *s) {
 
 static void take_truth(node_t *s) {
   rmw_message_info_t info;
+  record_t *R = &s->rec;
   while (rcl_take_serialized_message(&s->sub_truth, &s->in, &info, NULL) == RCL_RET_OK) {
     cdr_in r;
     cdr_in_init(&r, s->in.buffer, s->in.buffer_length);
     (void)cdr_u32(&r), (void)cdr_u32(&r); /* layout: no dims expected */
     int count;
     cdr_doubles(&r, s->truth, s->N, &count);
-    s->has_truth = r.ok && count == s->N;
+    if (!r.ok || count != s->N) continue;
+    if (R->n_truth >= R->cap_truth) { /* matched to its tick when written (cnode.py) */
+      ++R->lost;
+      continue;
+    }
+    R->truth_sent[R->n_truth] = info.source_timestamp;
+    memcpy(R->truth_x + R->n_truth * s->N, s->truth, sizeof(double) * (size_t)s->N);
+    ++R->n_truth;
   }
 }
 
@@ -723,6 +739,14 @@ static void realtime(int priority) {
 static int cmp_double(const void *a, const void *b) {
   double x = *(const double *)a, y = *(const double *)b;
   return (x > y) - (x < y);
+}
+
+/* numpy's default percentile (linear between the two nearest ranks) of sorted v. */
+static double percentile(const double *v, long n, double q) {
+  double at = q * (double)(n - 1);
+  long lo = (long)floor(at);
+  long hi = lo + 1 < n ? lo + 1 : lo;
+  return v[lo] + (at - (double)lo) * (v[hi] - v[lo]);
 }
 
 static void print_hold_list(const double *u, int n, char *out, size_t cap) {
@@ -755,7 +779,9 @@ static void write_record(node_t *s, const char *path) {
   rec_section(f, "x", 'd', R->ticks, N, R->x, 8);
   rec_section(f, "std", 'd', R->ticks, N, R->std, 8);
   rec_section(f, "u", 'd', R->ticks, n, R->u, 8);
-  rec_section(f, "truth", 'd', R->ticks, N, R->truth, 8);
+  rec_section(f, "sent", 'q', R->ticks, 1, R->sent, 8);
+  rec_section(f, "truth_sent", 'q', R->n_truth, 1, R->truth_sent, 8);
+  rec_section(f, "truth_x", 'd', R->n_truth, N, R->truth_x, 8);
   rec_section(f, "eff_ns", 'q', R->n_eff, 1, R->eff_ns, 8);
   rec_section(f, "eff_u", 'd', R->n_eff, n, R->eff_u, 8);
   rec_section(f, "fr_ns", 'q', R->n_fr, 1, R->fr_ns, 8);
@@ -819,7 +845,9 @@ int main(int argc, char **argv) {
     R->cap = cap;
     R->ns = ALLOC(long long, cap), R->z = ALLOC(double, cap * 2 * n);
     R->x = ALLOC(double, cap * N), R->std = ALLOC(double, cap * N);
-    R->u = ALLOC(double, cap * n), R->truth = ALLOC(double, cap * N);
+    R->u = ALLOC(double, cap * n), R->sent = ALLOC(long long, cap);
+    R->cap_truth = cap + 64, R->truth_sent = ALLOC(long long, R->cap_truth);
+    R->truth_x = ALLOC(double, R->cap_truth * N);
     R->cap_eff = 2 * cap, R->eff_ns = ALLOC(long long, R->cap_eff);
     R->eff_u = ALLOC(double, R->cap_eff * n);
     R->cap_fr = cap, R->fr_ns = ALLOC(long long, cap), R->fr_exp = ALLOC(long long, cap);
@@ -905,7 +933,7 @@ int main(int argc, char **argv) {
     /* every sample there, in their order: a late burst is caught up, not held */
     while (s->stop_code < 0 && !g_signal &&
            rcl_take_serialized_message(&s->sub_enc, &s->in, &info, NULL) == RCL_RET_OK)
-      on_encoders(s, info.source_timestamp, mono_s());
+      on_encoders(s, info.source_timestamp, info.received_timestamp);
     if (s->stop_code < 0 && s->started && mono_s() - s->last_rx > s->encoder_timeout) {
 #ifdef AMSFE_HAVE_WATCHDOG
       /* TODO(watchdog): amsfe_watchdog_idle(s->wd, now, publishers) decides this */
@@ -946,12 +974,12 @@ int main(int argc, char **argv) {
   } else {
     printf("node: %s%s\n", s->stop_line, held);
   }
-  if (s->n_lat > 0) { /* the node's own latency: sample taken -> command published */
+  if (s->n_lat > 0) { /* the node's own latency (the Python node's line: bench --ros reads it) */
     double *l = s->lat;
     qsort(l, (size_t)s->n_lat, sizeof(double), cmp_double); /* at the stop */
-    printf("node: %ld ticks; sample taken -> command published p50 %.1f us, p99 %.1f us, "
-           "max %.1f us\n", s->n_lat, 1e6 * l[s->n_lat / 2],
-           1e6 * l[(long)(0.99 * (double)(s->n_lat - 1))], 1e6 * l[s->n_lat - 1]);
+    printf("node: latency sample received -> command published p50 %.3f p99 %.3f max %.3f ms "
+           "over %ld commands\n", 1e3 * percentile(l, s->n_lat, 0.5),
+           1e3 * percentile(l, s->n_lat, 0.99), 1e3 * l[s->n_lat - 1], s->n_lat);
   }
   fflush(stdout);
   if (s->recording) write_record(s, record_path);

@@ -15,9 +15,9 @@
  * "hold: <name>: <text> (<value> ...)" and exit with the hold code.  A hold is latched: every
  * later call returns the same reason until amsfe_watchdog_reset.
  *
- * Times: stamps are the samples' header stamps [ns]; wall-clock times are one monotonic
- * clock's [s] (CLOCK_MONOTONIC; Python's time.monotonic()).  Checks that a bound of INFINITY
- * (or a count of 0) switches off are said below.
+ * Times: stamps are the samples' send times [ns] (see stamp_ns); wall-clock times are one
+ * monotonic clock's [s] (CLOCK_MONOTONIC; Python's time.monotonic()).  A bound of INFINITY
+ * switches its check off (not encoder_timeout).
  */
 #ifndef AMSFE_WATCHDOG_H
 #define AMSFE_WATCHDOG_H
@@ -88,7 +88,9 @@ typedef struct {
   long k;               /* its tick (k = round((stamp - stamp_0) / T)) */
   long gap;             /* samples missing just before it (predicted through, or more than
                            max_gap_steps: then the estimator was not run, x_hat may be NULL) */
-  long long stamp_ns;   /* its header stamp [ns] */
+  long long stamp_ns;   /* when it was sent [ns]: its DDS source timestamp (the publisher's
+                           clock; so a lockstep arm slower than real time is not "late"), or
+                           its header stamp when that is unknown; one kind for a whole run */
   double taken;         /* wall clock when it was taken from the queue [s] */
   double done;          /* wall clock when its command was computed [s] */
   int status;           /* the estimator's status of this tick: AMSFE_OK (0) or < 0 */

@@ -1,0 +1,158 @@
+"""How the watchdogs' defaults were chosen (docs/watchdogs.md, docs/data/watchdog-bounds.json).
+
+Three parts, each on the in-process free-running node of
+:func:`amsfe_sym.ros.watchdog_runs.run_watched` (the arm on a simulated wall clock, the node
+taking ``--compute`` seconds a sample):
+
+1. ``measure``: clean runs of every scenario on the seeds ``--first-seed`` ..
+   ``+ --seeds``, every bound off (inf) so each watched quantity is seen over the whole run:
+   the largest value of each per scenario (the defaults are set above these);
+2. ``verify``: clean runs on a disjoint block (``--verify-first-seed``) with the defaults:
+   the holds (there must be none) and the largest values again;
+3. ``faults``: each fault of :data:`~amsfe_sym.ros.watchdog_runs.FAULTS` at ``--fault-at``
+   on ``--fault-seeds`` seeds with the defaults: the reason and the delay from the fault (or
+   from the node's resumption after a stall) to the hold [s of wall clock].
+
+Run:  .venv/bin/python tools/watchdog_bounds.py --out docs/data/watchdog-bounds.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import platform
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+from amsfe_sym.codegen import library_for
+from amsfe_sym.ros.watchdog_runs import FAULTS, Fault, WatchRun, run_watched
+from amsfe_sym.scenario import load_scenario
+from amsfe_sym.topics.watchdog import WatchdogBounds
+
+OFF = WatchdogBounds(
+    tracking_error=math.inf,
+    innovation_nis=math.inf,
+    deadline=math.inf,
+    compute_budget=math.inf,
+)
+#: The fault sizes: a 10 mrad encoder jump, a 300 ms stall (the issue's), an 80 ms lag.
+SIZES = {"jump": 0.01, "stall": 0.3, "lag": 0.08}
+SEEN = (
+    "max_tracking",
+    "max_innovation",
+    "max_lateness",
+    "max_late_in_window",
+    "max_compute",
+    "max_wall_gap",
+)
+
+
+def _seen(run: WatchRun) -> dict[str, float]:
+    d = dataclasses.asdict(run.seen)
+    return {k: d[k] for k in SEEN} | {"true_error": run.true_error}
+
+
+def _machine() -> str:
+    try:
+        out = subprocess.run(["lscpu"], capture_output=True, text=True, check=True).stdout
+        for line in out.splitlines():
+            if line.startswith("Model name"):
+                return line.split(":", 1)[1].strip()
+    except (OSError, subprocess.CalledProcessError):
+        pass
+    return platform.processor()
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenarios", nargs="+", default=["paper-sim", "panda-control"])
+    ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--seeds", type=int, default=50)
+    ap.add_argument("--verify-first-seed", type=int, default=1000)
+    ap.add_argument("--verify-seeds", type=int, default=20)
+    ap.add_argument("--fault-seeds", type=int, default=5)
+    ap.add_argument("--fault-at", type=float, default=2.0)
+    ap.add_argument("--compute", type=float, default=2e-4)
+    ap.add_argument("--parts", nargs="+", default=["measure", "verify", "faults"])
+    ap.add_argument("--out", type=Path, required=True)
+    args = ap.parse_args(argv)
+    out: dict[str, Any] = {
+        "command": "tools/watchdog_bounds.py " + " ".join(argv or sys.argv[1:]),
+        "machine": _machine(),
+        "defaults": dataclasses.asdict(WatchdogBounds()),
+        "compute": args.compute,
+        "scenarios": {},
+    }
+    for name in args.scenarios:
+        sc0 = load_scenario(name)
+        lib = library_for(sc0)
+        res: dict[str, Any] = {"T": lib.T, "duration": sc0.duration}
+        if "measure" in args.parts:
+            rows = []
+            for seed in range(args.first_seed, args.first_seed + args.seeds):
+                r = run_watched(
+                    sc0.with_overrides(seed=seed), lib, bounds=OFF, compute=args.compute
+                )
+                rows.append(
+                    _seen(r) | {"seed": seed, "hold": None if r.hold is None else r.hold.name}
+                )
+                print(name, "measure", rows[-1], flush=True)
+            res["measure"] = {
+                "seeds": [args.first_seed, args.first_seed + args.seeds],
+                "max": {k: max(row[k] for row in rows) for k in (*SEEN, "true_error")},
+                "holds": sum(row["hold"] is not None for row in rows),
+            }
+        if "verify" in args.parts:
+            rows = []
+            first = args.verify_first_seed
+            for seed in range(first, first + args.verify_seeds):
+                r = run_watched(sc0.with_overrides(seed=seed), lib, compute=args.compute)
+                rows.append(
+                    _seen(r) | {"seed": seed, "hold": None if r.hold is None else r.hold.line()}
+                )
+                print(name, "verify", rows[-1], flush=True)
+            res["verify"] = {
+                "seeds": [first, first + args.verify_seeds],
+                "max": {k: max(row[k] for row in rows) for k in (*SEEN, "true_error")},
+                "holds": [row["hold"] for row in rows if row["hold"] is not None],
+            }
+        if "faults" in args.parts:
+            faults: dict[str, Any] = {}
+            duration = args.fault_at + 1.0
+            for kind in FAULTS:
+                rows = []
+                for seed in range(args.fault_seeds):
+                    sc = sc0.with_overrides(seed=seed, duration=duration)
+                    f = Fault(kind, args.fault_at, SIZES.get(kind, 0.0))
+                    r = run_watched(sc, lib, f, compute=args.compute)
+                    delay = None if r.hold_wall is None else r.hold_wall - r.resumed
+                    rows.append(
+                        {
+                            "seed": seed,
+                            "reason": None if r.hold is None else r.hold.name,
+                            "delay": delay,
+                            "true_error": r.true_error,
+                        }
+                    )
+                    print(name, kind, rows[-1], flush=True)
+                delays = [row["delay"] for row in rows if row["delay"] is not None]
+                faults[kind] = {
+                    "size": SIZES.get(kind, 0.0),
+                    "reasons": sorted({str(row["reason"]) for row in rows}),
+                    "max_delay": max(delays) if len(delays) == len(rows) else None,
+                    "runs": rows,
+                }
+            res["faults"] = faults
+        out["scenarios"][name] = res
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(out, indent=1) + "\n")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
