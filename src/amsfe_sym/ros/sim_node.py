@@ -13,7 +13,8 @@ encoder sample goes out, so a node has them when the sample arrives (DDS does no
 deliveries across topics; the writers' heartbeat period is 1 ms in lockstep,
 :func:`~amsfe_sym.ros.middleware.use_lockstep_profile`, or each wait takes seconds).
 Without it the plant runs on the wall clock (one tick every T) and applies the latest
-command it has when a tick ends (real latency, real drops).
+command it has when a tick ends (real latency, real drops); it prints the wall clock of tick 0
+(epoch [s]), so a harness knows the tick of any wall time.
 
 A lockstep arm follows one controller: commands from a second publisher of the command topic
 (another GID than the first command's) stop the run in one line naming both nodes (issue 37:
@@ -230,7 +231,11 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
                     if intruders:  # (one may have come with the command of tick k)
                         _one_controller(node, spec.commands, (controller[0], intruders[0]))
                     u = commands[k]
-                    t0 = time.perf_counter() - lib.T / options.rate if k == 0 else t0
+                    if k == 0:
+                        t0 = time.perf_counter() - lib.T / options.rate
+                        if not options.lockstep:  # where the harness finds a tick's wall time
+                            epoch = time.time() - (time.perf_counter() - t0)
+                            print(f"sim-node: tick 0 at wall clock {epoch:.6f} s", flush=True)
                 else:
                     before = len(commands)
                     end = t0 + (k + 1) * lib.T / options.rate
