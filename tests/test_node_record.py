@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import time
 from pathlib import Path
 from typing import Any
 
@@ -171,6 +172,10 @@ def test_a_streamed_record_is_the_record_in_memory(paper: Any, tmp_path: Path) -
         _fill_tick(paper, streamed, k)
         most = max(most, len(streamed._rows))
     assert most <= (30 + LAG_TICKS + 1) * 12  # (12 rows a tick at most here)
+    assert streamed._bag is not None
+    deadline = time.monotonic() + 120.0  # (bounded: the writer thread writes them)
+    while streamed._bag._written < 2 and time.monotonic() < deadline:
+        time.sleep(0.01)
     assert len(list((tmp_path / "s").glob("*.mcap"))) >= 2  # written on the way
     path = streamed.write(reason="hold: tracking: test")
     a, b = _bag(one), _bag(path)
@@ -223,7 +228,7 @@ def test_a_truth_that_never_comes_leaves_its_tick_without_one(paper: Any, tmp_pa
 
 
 _KILLED = """
-import os, signal, sys
+import os, signal, sys, time
 import numpy as np
 from amsfe_sym.codegen import library_for
 from amsfe_sym.ros.record import NodeRecord
@@ -239,6 +244,8 @@ for k in range(res.t.size):
     rec.truth_sent(10 * k + 1, res.x_true[k])
     rec.encoders(k * T, res.z_enc[k], 10 * k + 5)
     rec.outputs(k * T, res.x_hat[k], np.zeros(lib.N), res.x_hat[k, 4 * lib.n:], res.u[k])
+while rec._bag._written < 2:  # two segments on disk (the writer thread's), then the kill
+    time.sleep(0.01)
 os.kill(os.getpid(), signal.SIGKILL)
 """
 
