@@ -742,7 +742,7 @@ def test_faults_hold_and_clean_exits(tmp_path: Path) -> None:
         procs += [node, sim]
         sim.wait_for("t = 1.0 s", 60.0)
         killed = sim.kill(signal.SIGKILL)
-        node.wait_for("hold: no encoder sample on /motor_encoders for 2 s", 30.0)
+        node.wait_for("hold: encoder_stall: ", 30.0)  # the driver silent, or gone
         held = time.monotonic() - killed
         assert held < 2.0 + 2.5, held
         assert "hold command" in node.text

@@ -9,7 +9,10 @@ taking ``--compute`` seconds a sample):
    the largest value of each per scenario (the defaults are set above these);
 2. ``verify``: clean runs on a disjoint block (``--verify-first-seed``) with the defaults:
    the holds (there must be none) and the largest values again;
-3. ``faults``: each fault of :data:`~amsfe_sym.ros.watchdog_runs.FAULTS` at ``--fault-at``
+3. ``compute``: clean runs on ``--compute-seeds`` seeds of the verify block where each
+   sample takes the wall clock its processing really took here (the Python node's own
+   compute time, and the lateness it causes through the queue);
+4. ``faults``: each fault of :data:`~amsfe_sym.ros.watchdog_runs.FAULTS` at ``--fault-at``
    on ``--fault-seeds`` seeds with the defaults: the reason and the delay from the fault (or
    from the node's resumption after a stall) to the hold [s of wall clock].
 
@@ -75,9 +78,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--verify-first-seed", type=int, default=1000)
     ap.add_argument("--verify-seeds", type=int, default=20)
     ap.add_argument("--fault-seeds", type=int, default=5)
+    ap.add_argument("--compute-seeds", type=int, default=3)
     ap.add_argument("--fault-at", type=float, default=2.0)
     ap.add_argument("--compute", type=float, default=2e-4)
-    ap.add_argument("--parts", nargs="+", default=["measure", "verify", "faults"])
+    ap.add_argument("--parts", nargs="+", default=["measure", "verify", "compute", "faults"])
     ap.add_argument("--out", type=Path, required=True)
     args = ap.parse_args(argv)
     out: dict[str, Any] = {
@@ -117,6 +121,20 @@ def main(argv: list[str] | None = None) -> int:
                 print(name, "verify", rows[-1], flush=True)
             res["verify"] = {
                 "seeds": [first, first + args.verify_seeds],
+                "max": {k: max(row[k] for row in rows) for k in (*SEEN, "true_error")},
+                "holds": [row["hold"] for row in rows if row["hold"] is not None],
+            }
+        if "compute" in args.parts:
+            rows = []
+            first = args.verify_first_seed
+            for seed in range(first, first + args.compute_seeds):
+                r = run_watched(sc0.with_overrides(seed=seed), lib, real_compute=True)
+                rows.append(
+                    _seen(r) | {"seed": seed, "hold": None if r.hold is None else r.hold.line()}
+                )
+                print(name, "compute", rows[-1], flush=True)
+            res["compute"] = {
+                "seeds": [first, first + args.compute_seeds],
                 "max": {k: max(row[k] for row in rows) for k in (*SEEN, "true_error")},
                 "holds": [row["hold"] for row in rows if row["hold"] is not None],
             }

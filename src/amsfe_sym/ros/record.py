@@ -136,6 +136,7 @@ class NodeRecord:
         }
         self.out: Path | None = None
         self._bag: _SegmentedBag | None = None
+        self._stop_meta: dict[str, str] = {}
         if out is not None:
             self.open(out)
 
@@ -229,6 +230,17 @@ class NodeRecord:
         """The hold command published when the node stopped (logged at ``ns``, the last
         tick's stamp)."""
         self._add(self.spec.commands, F64, ns, np.array(u, dtype=float))
+
+    def stopped(self, line: str, exit_code: int | None, watchdog: str | None) -> None:
+        """How the node stopped: its one line, the exit code (None: a signal) and the
+        watchdog's reason name (None: not a watchdog's hold; docs/watchdogs.md).  Into the
+        metadata (``amsfe.exit_code``, ``amsfe.watchdog``) and, when no segment is written
+        yet (a run shorter than :data:`SEGMENT_TICKS`), ``/amsfe/config`` (``stop``)."""
+        self.config["stop"] = {"line": line, "exit_code": exit_code, "watchdog": watchdog}
+        self._stop_meta = {
+            "amsfe.exit_code": "signal" if exit_code is None else str(exit_code),
+            "amsfe.watchdog": watchdog or "",
+        }
 
     # ------------------------------------------------------------------ writing
     def _flush(self, cut_ns: int | None) -> None:
@@ -338,7 +350,8 @@ class NodeRecord:
                 )
             )
         self._flush(None)
-        self._bag.finish(reason, {"amsfe.truth_missing": str(self.truth_missing)})
+        extra = {"amsfe.truth_missing": str(self.truth_missing), **self._stop_meta}
+        self._bag.finish(reason, extra)
         note_written([self._bag.path])
         return self._bag.path
 
