@@ -84,7 +84,9 @@ def test_c_node_lockstep_is_simulate(scenario: str, tmp_path: Path) -> None:
 def test_c_node_equals_the_python_node(tmp_path: Path) -> None:
     """The same lockstep run with the C node and with the Python node (the readable
     reference): the same estimates, standard deviations, theta and commands (1e-12), the same
-    diagnostics counters."""
+    estimator decisions.  (Not the skipped messages: whether a torque sample arrives before
+    or after the next encoder sample is DDS's timing, and in lockstep either way the step
+    uses the same torque, the command.)"""
     c = _lockstep(tmp_path / "c", "paper-sim", "c", 1.0)
     py = _lockstep(tmp_path / "py", "paper-sim", "python", 1.0)
     for topic in ("/amsfe/estimate", "/amsfe/estimate_std"):
@@ -99,7 +101,7 @@ def test_c_node_equals_the_python_node(tmp_path: Path) -> None:
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
     dc = json.loads(c["/amsfe/diagnostics"][-1].data)
     dp = json.loads(py["/amsfe/diagnostics"][-1].data)
-    for key in ("k", "frames_fused", "frames_refused", "refused", "skipped"):
+    for key in ("k", "frames_fused", "frames_refused", "refused"):
         assert dc[key] == dp[key], key
 
 

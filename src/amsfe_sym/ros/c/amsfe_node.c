@@ -47,9 +47,7 @@
 #include "amsfe_cdr.h"
 #include "amsfe_live.h"
 #include "amsfe_node_params.h"
-#ifdef AMSFE_HAVE_WATCHDOG
 #include "amsfe_watchdog.h"
-#endif
 
 /* the generated library's gravity g(q, theta) (casadi's calling convention) */
 extern int gravity(const double **arg, double **res, long long *iw, double *w, int mem);
@@ -221,6 +219,8 @@ typedef struct {
   double *lat;  /* [cap] sample received by the middleware -> command published [s] */
   long n_lat, cap_lat;
   record_t rec;
+  amsfe_watchdog *wd;  /* the watchdogs (amsfe_watchdog.h): their reasons are the holds */
+  double *frame_nis;   /* [LIVE_MAX_FRAMES] NIS of the frames fused at the tick */
 } node_t;
 
 enum { T_ENC, T_CAM, T_EFF, T_TRUTH, T_EST, T_STD, T_THETA, T_DIAG, T_CMD, T_N };
@@ -352,6 +352,18 @@ static void configure(node_t *s, const char *path) {
   }
   s->hold_limit = ALLOC(double, n);
   pf_doubles(pf, "hold_limit", s->hold_limit, n);
+  /* the watchdogs: the [watchdog] keys of the spec, in amsfe_watchdog_config's order */
+  double w[8];
+  pf_doubles(pf, "watchdog", w, 8);
+  amsfe_watchdog_config wc = {n, N, d.ne, s->T, w[0], w[1], (int)w[2], w[3], (int)w[4],
+                              (int)w[5], w[6], w[7], L->max_gap};
+  size_t wsize = amsfe_watchdog_memory_size(&wc);
+  void *wmem = NULL;
+  if (!wsize || posix_memalign(&wmem, 64, wsize) != 0 ||
+      amsfe_watchdog_init(&s->wd, &wc, wmem, wsize) != AMSFE_OK)
+    pf_fail(pf, "watchdog", "bounds the watchdogs accept (amsfe_watchdog_init)", "a refusal");
+  s->encoder_timeout = w[7];
+  s->frame_nis = ALLOC(double, LIVE_MAX_FRAMES);
 }
 
 static void take_frames(node_t *s);
@@ -617,7 +629,7 @@ static void publish_tick(node_t *s, long long ns, const double *z, long long sen
 
 /* One encoder sample in s->in (sent at `sent`, received by the middleware at `received`,
  * system clock [ns]). */
-static void on_encoders(node_t *s, long long sent, long long received) {
+static void on_encoders(node_t *s, long long sent, long long received, double taken) {
   live_loop *L = &s->L;
   int n = s->n;
   long long ns;
@@ -632,8 +644,36 @@ static void on_encoders(node_t *s, long long sent, long long received) {
   if (s->read_effort && !s->effort_in_encoders) take_efforts(s);
   if (s->recording) take_truth(s);
   int r = live_encoders(L, ns, s->z, sent);
-  if (r == 0) return;
-  if (r == -1) {
+  if (r == 0) return; /* skipped (counted): not judged */
+  double done = mono_s();
+  /* the watchdogs judge the tick (or the failure) before its command goes out */
+  amsfe_watchdog_tick tick;
+  memset(&tick, 0, sizeof tick);
+  tick.k = r == -1 ? L->k + L->gap + 1 : L->k;
+  tick.gap = L->gap;
+  tick.stamp_ns = sent; /* the DDS source timestamp: this node's delay, not the arm's pace */
+  tick.taken = taken, tick.done = done;
+  tick.encoder_nis = NAN;
+  if (r < 0) {
+    tick.status = r == -1 ? AMSFE_ERR_NOT_PD : L->status; /* as LiveLoop.watch judges them */
+  } else {
+    tick.x_hat = L->x, tick.P_diag = L->P_diag;
+    if (L->controller) {
+      tick.q_des = live_ref(L, L->k), tick.u = L->u;
+      tick.handed_over = amsfe_ctrl_handed_over(L->ctrl, L->k);
+    }
+    if (L->k > 0 && L->encoder_accepted) tick.encoder_nis = L->encoder_nis;
+    int nf = 0;
+    for (int i = 0; i < L->n_due; ++i)
+      if (L->due_status[i] == AMSFE_OK) s->frame_nis[nf++] = L->due_nis[i];
+    tick.frame_nis = s->frame_nis, tick.n_frames = nf;
+  }
+  if (amsfe_watchdog_sample(s->wd, &tick) != AMSFE_WD_NONE) {
+    amsfe_watchdog_format(s->wd, s->stop_line, sizeof s->stop_line);
+    s->stop_code = EXIT_HOLD;
+    return;
+  }
+  if (r == -1) { /* not held (a watchdog off): the Python node's line */
     snprintf(s->stop_line, sizeof s->stop_line,
              "hold: the estimator stopped: encoder sample at t = %.3f s: expected at most "
              "max_gap_steps = %d missing samples before it, found %d missing. Fix: the arm's "
@@ -656,12 +696,8 @@ static void on_encoders(node_t *s, long long sent, long long received) {
     record_effort(s, ns, s->eff);
   }
   publish_tick(s, ns, s->z, sent);
-  double done = mono_s();
   if (L->controller && s->n_lat < s->cap_lat) s->lat[s->n_lat++] = 1e-9 * (double)(wall_ns() - received);
-#ifdef AMSFE_HAVE_WATCHDOG
-  /* TODO(watchdog): amsfe_watchdog_sample(s->wd, &sample) here, the hold if it says so */
-#endif
-  s->last_rx = done; /* after the work: a slow first tick is no silence */
+  s->last_rx = mono_s(); /* after the work: a slow first tick is no silence */
   s->started = 1;
 }
 
@@ -930,18 +966,23 @@ int main(int argc, char **argv) {
     if (sub_eff) take_efforts(s);
     if (s->recording) take_truth(s);
     rmw_message_info_t info;
+    long got = 0;
     /* every sample there, in their order: a late burst is caught up, not held */
     while (s->stop_code < 0 && !g_signal &&
            rcl_take_serialized_message(&s->sub_enc, &s->in, &info, NULL) == RCL_RET_OK)
-      on_encoders(s, info.source_timestamp, info.received_timestamp);
-    if (s->stop_code < 0 && s->started && mono_s() - s->last_rx > s->encoder_timeout) {
-#ifdef AMSFE_HAVE_WATCHDOG
-      /* TODO(watchdog): amsfe_watchdog_idle(s->wd, now, publishers) decides this */
-#endif
-      snprintf(s->stop_line, sizeof s->stop_line,
-               "hold: no encoder sample on %s for %g s (last tick %ld)", s->topic[T_ENC],
-               s->encoder_timeout, L->k);
-      s->stop_code = EXIT_HOLD;
+      on_encoders(s, info.source_timestamp, info.received_timestamp, mono_s()), ++got;
+    if (s->stop_code < 0 && !g_signal && got == 0) { /* no sample: the stall watchdogs */
+      size_t publishers = 0;
+      int known = rcl_subscription_get_publisher_count(&s->sub_enc, &publishers) == RCL_RET_OK;
+      if (amsfe_watchdog_idle(s->wd, mono_s(), known ? (int)publishers : -1) != AMSFE_WD_NONE) {
+        /* the Python node's line, then the watchdog's reason and cause */
+        char why[1536];
+        amsfe_watchdog_format(s->wd, why, sizeof why);
+        snprintf(s->stop_line, sizeof s->stop_line,
+                 "hold: no encoder sample on %s for %g s (last tick %ld); %s", s->topic[T_ENC],
+                 s->encoder_timeout, L->k, strncmp(why, "hold: ", 6) == 0 ? why + 6 : why);
+        s->stop_code = EXIT_HOLD;
+      }
     }
   }
   /* ---- the stop: the last estimate's std and theta, then the hold command */
