@@ -146,3 +146,30 @@ def test_missing_wheels_is_one_line(tmp_path: Path) -> None:
     lines = [x for x in node.stderr.splitlines() if x.startswith("error:")]
     assert len(lines) == 1 and ".[ros]" in lines[0] and "librcl" in lines[0], node.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["empty-prefix"]
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_amsfe_live_is_simulate(tmp_path: Path) -> None:
+    """``amsfe live --lockstep`` (the arm and the C node in one command) exits 0 and its
+    record equals ``amsfe simulate`` bit for bit."""
+    sc = load_scenario("paper-sim").with_overrides(duration=1.0)
+    lib = library_for(sc)
+    env = _ros_env(tmp_path)
+    rec = tmp_path / "rec"
+    procs = []
+    try:
+        procs.append(_start(env, "live", "paper-sim", "--controller", "amsfe", "--lockstep",
+                            "--duration", "1", "--impl", "c", "--record", str(rec),
+                            "--encoder-timeout", "20", "--command-timeout", "60"))  # fmt: skip
+    finally:
+        results = _finish(procs, 180.0)
+    code, text = results[0]
+    assert code == 0, text
+    assert "sim-node: 1001 ticks" in text and "node: done: 1001 ticks" in text, text
+    ref = run(sc, lib, runtime="compiled")
+    got = _bag(rec)
+    est = np.array([np.r_[m.position, m.velocity] for m in got["/amsfe/estimate"]])
+    np.testing.assert_array_equal(est, ref.x_hat[:, : 2 * lib.n])
+    cmd = np.array([m.data for m in got["/effort_controller/commands"]])
+    np.testing.assert_array_equal(cmd[:-1], ref.u)

@@ -304,6 +304,15 @@ def add_live_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--impl", choices=("auto", "c", "python"), default="auto")
     p.add_argument("--record", default=None, metavar="DIR", help="the node's record")
     p.add_argument("--topic-spec", default=None, metavar="FILE")
+    p.add_argument(
+        "--encoder-timeout", type=SECONDS, default=None, help="the node's encoder silence [s]"
+    )
+    p.add_argument(
+        "--command-timeout",
+        type=SECONDS,
+        default=None,
+        help="the arm's wait for the node and for a lockstep command [s]",
+    )
     p.add_argument("--ros-args", nargs=argparse.REMAINDER, default=[], help="to both nodes")
 
 
@@ -323,5 +332,7 @@ def live_from_args(args: argparse.Namespace) -> int:
             record=args.record,
             topic_spec=args.topic_spec,
             ros_args=tuple(args.ros_args),
+            encoder_timeout=args.encoder_timeout,
+            command_timeout=args.command_timeout,
         )
     )

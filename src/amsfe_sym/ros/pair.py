@@ -33,6 +33,9 @@ class PairOptions:
         record: The node's record folder (None: none).
         topic_spec: A topic spec file for both (None: the defaults).
         ros_args: ``--ros-args`` for both.
+        encoder_timeout: The node's ``--encoder-timeout`` [s] (None: its default).
+        command_timeout: The arm's ``--command-timeout`` and ``--start-timeout`` [s] (None:
+            its defaults).
     """
 
     scenario: str = "paper-sim"
@@ -45,6 +48,8 @@ class PairOptions:
     record: str | None = None
     topic_spec: str | None = None
     ros_args: tuple[str, ...] = ()
+    encoder_timeout: float | None = None
+    command_timeout: float | None = None
 
 
 def pair_commands(opts: PairOptions) -> tuple[list[str], list[str]]:
@@ -60,7 +65,12 @@ def pair_commands(opts: PairOptions) -> tuple[list[str], list[str]]:
     node += ["--impl", opts.impl, *common]
     if opts.record is not None:
         node += ["--record", opts.record]
+    if opts.encoder_timeout is not None:
+        node += ["--encoder-timeout", f"{opts.encoder_timeout:g}"]
     arm = ["sim-node", opts.scenario, *common]
+    if opts.command_timeout is not None:
+        t = f"{opts.command_timeout:g}"
+        arm += ["--command-timeout", t, "--start-timeout", t]
     arm += ["--lockstep"] if opts.lockstep else ["--rate", f"{opts.rate:g}"]
     ros = ["--ros-args", *opts.ros_args] if opts.ros_args else []
     return [*node, *ros], [*arm, *ros]
