@@ -317,8 +317,14 @@ def add_live_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def live_from_args(args: argparse.Namespace) -> int:
-    """``amsfe live`` from its parsed options (ros/pair.py)."""
+    """``amsfe live`` from its parsed options (ros/pair.py); ``--record`` is checked as
+    ``amsfe node`` checks it, before either process starts."""
+    from amsfe_sym.core.outputs import check_output
     from amsfe_sym.ros.pair import PairOptions, run_pair
+
+    if args.record is not None:
+        inputs = [p for p in (args.scenario, args.topic_spec) if p and Path(p).exists()]
+        check_output(Path(args.record), option="--record", kind="folder", inputs=inputs)
 
     return run_pair(
         PairOptions(
