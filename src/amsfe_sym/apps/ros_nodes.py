@@ -229,7 +229,7 @@ def _node_impl(asked: str, sc: Any, lib: Any, opts: Any) -> str:
     if asked == "python":
         return "python"
     from amsfe_sym.errors import AmsfeError
-    from amsfe_sym.ros.cnode import build_node, c_node_refusal
+    from amsfe_sym.ros.cnode import build_node, c_node_refusal, refuse_c_node
 
     why = c_node_refusal(sc, opts.spec, opts.managed, opts.controller)
     if why is None:
@@ -242,14 +242,7 @@ def _node_impl(asked: str, sc: Any, lib: Any, opts: Any) -> str:
     if why is None:
         return "c"
     if asked == "c":
-        raise ConfigError(
-            describe(
-                "amsfe node --impl c",
-                "a configuration the C node runs",
-                why,
-                "run amsfe node --impl python",
-            )
-        )
+        refuse_c_node(why)
     print(f"node: the Python node: {why}", flush=True)
     return "python"
 

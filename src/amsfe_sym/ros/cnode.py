@@ -62,6 +62,7 @@ __all__ = [
     "c_node_refusal",
     "queue_depths",
     "read_record_arrays",
+    "refuse_c_node",
     "ros_paths",
     "run_c_node",
     "write_params",
@@ -268,6 +269,23 @@ def c_node_refusal(
     if managed:
         return "--managed (the C node has no lifecycle states)"
     return None
+
+
+def refuse_c_node(why: str | None) -> None:
+    """Raise the one-line refusal of ``--impl c`` for ``why`` (None: nothing to refuse).
+
+    Raises:
+        ConfigError: ``why`` is not None.
+    """
+    if why is not None:
+        raise ConfigError(
+            describe(
+                "amsfe node --impl c",
+                "a configuration the C node runs",
+                why,
+                "run amsfe node --impl python",
+            )
+        )
 
 
 def queue_depths(spec: TopicSpec, T: float, camera_period: int, camera_delay: int,
@@ -483,16 +501,7 @@ def run_c_node(
     """
     from amsfe_sym.ros.spec_filter import live_filter
 
-    why = c_node_refusal(sc, options.spec, options.managed, options.controller)
-    if why is not None:
-        raise ConfigError(
-            describe(
-                "amsfe node --impl c",
-                "a configuration the C node runs",
-                why,
-                "run amsfe node --impl python",
-            )
-        )
+    refuse_c_node(c_node_refusal(sc, options.spec, options.managed, options.controller))
     if exe is not None and not (exe.is_file() and os.access(exe, os.X_OK)):
         raise ConfigError(
             describe("--node-exe", "an executable C node", str(exe), "give colcon's amsfe_node")
@@ -507,16 +516,7 @@ def run_c_node(
         options.domain_id,
         options.std_every,
     )
-    why = c_node_refusal(sc, spec, options.managed, options.controller)
-    if why is not None:
-        raise ConfigError(
-            describe(
-                "amsfe node --impl c",
-                "a configuration the C node runs",
-                why,
-                "run amsfe node --impl python",
-            )
-        )
+    refuse_c_node(c_node_refusal(sc, spec, options.managed, options.controller))
     sc_live = live_filter(sc, spec)
     end_k = -1 if options.duration is None else round(options.duration / lib.T)
     with tempfile.TemporaryDirectory(prefix="amsfe_cnode_") as tmp:
