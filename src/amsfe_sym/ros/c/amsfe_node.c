@@ -835,6 +835,54 @@ static void write_record(node_t *s, const char *path) {
     fprintf(stderr, "error: amsfe_node: cannot write the record %s\n", path);
 }
 
+/* --replay EVENTS: the live loop alone, without rcl, on messages from a text file, one a
+ * line ("frame EXPOSURE_NS U V SENT", "applied STAMP_NS U1..Un", "enc STAMP_NS SENT Z1..Z2n";
+ * stamps in ns); prints per encoder sample "tick K X1..XN U1..Un" (17 digits), "skip" or
+ * "stop R", then "skipped REASON COUNT" and "counters APPLIED REJECTED ENC_REJECTED".
+ * tests/test_cnode.py compares it with the Python LiveLoop on the same messages. */
+static int replay(node_t *s, const char *path) {
+  live_loop *L = &s->L;
+  int n = s->n, N = s->N;
+  FILE *f = fopen(path, "r");
+  if (!f) return EXIT_BAD_INPUT;
+  char line[8192];
+  double v[3 * MAX_JOINTS + 8];
+  while (fgets(line, sizeof line, f)) {
+    char *tok = strtok(line, " \n");
+    if (!tok) continue;
+    int kind = strcmp(tok, "frame") == 0 ? 0 : strcmp(tok, "applied") == 0 ? 1 : 2;
+    long long a = strtoll(strtok(NULL, " \n"), NULL, 10), b = 0;
+    if (kind == 2) b = strtoll(strtok(NULL, " \n"), NULL, 10);
+    int m = 0, cap = kind == 0 ? 2 : kind == 1 ? n : 2 * n;
+    for (char *t; m < cap && (t = strtok(NULL, " \n"));) v[m++] = strtod(t, NULL);
+    if (kind == 0) {
+      char *t = strtok(NULL, " \n");
+      live_frame_in(L, a, v, t ? strtoll(t, NULL, 10) : 0);
+    } else if (kind == 1) {
+      live_applied(L, a, v);
+    } else {
+      int r = live_encoders(L, a, v, b);
+      if (r == 0) {
+        printf("skip\n");
+      } else if (r < 0) {
+        printf("stop %d\n", r);
+        break;
+      } else {
+        printf("tick %ld", L->k);
+        for (int i = 0; i < N; ++i) printf(" %.17g", L->x[i]);
+        for (int j = 0; j < n; ++j) printf(" %.17g", L->controller ? L->u[j] : NAN);
+        printf("\n");
+      }
+    }
+  }
+  fclose(f);
+  for (int i = 0; i < SKIP_REASONS; ++i)
+    if (L->skipped[i]) printf("skipped %s|%ld\n", LIVE_SKIP_TEXT[i], L->skipped[i]);
+  printf("counters %ld %ld %ld\n", L->c.frames_applied, L->c.frames_rejected,
+         L->c.encoder_rejected);
+  return 0;
+}
+
 int main(int argc, char **argv) {
   if (argc < 2 || argv[1][0] == '-') {
     fprintf(stderr, "usage: %s PARAMS [--ros-args ...]  (run by amsfe node --impl c)\n", argv[0]);
@@ -849,6 +897,7 @@ int main(int argc, char **argv) {
   live_loop *L = &s->L;
   int n = s->n, N = s->N;
   if (live_init(L) != AMSFE_OK) return 1;
+  if (argc == 4 && strcmp(argv[2], "--replay") == 0) return replay(s, argv[3]);
   params_file *pf = &s->pf;
   const char *qos_tok[4];
   if (pf_tokens(pf, "qos", qos_tok, 4, 0) != 4)
