@@ -156,6 +156,9 @@ def get_argument_parser() -> argparse.ArgumentParser:
     ros_nodes.add_sim_node_arguments(sub.add_parser("sim-node", help="the simulated arm on ROS 2"))
     ros_nodes.add_node_arguments(sub.add_parser("node", help="estimator/controller on ROS 2"))
     ros_nodes.add_play_arguments(sub.add_parser("play", help="a log's sensor topics on ROS 2"))
+    ros_nodes.add_live_arguments(
+        sub.add_parser("live", help="sim-node + node of a scenario in one command (ROS 2)")
+    )
     add_bench_arguments(
         sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
     )
@@ -214,6 +217,7 @@ def _main(argv: Sequence[str] | None) -> int:
         "sim-node": ros_nodes.sim_node_from_args,
         "node": ros_nodes.node_from_args,
         "play": ros_nodes.play_from_args,
+        "live": ros_nodes.live_from_args,
     }
     with ledger() as book:
         try:

@@ -18,9 +18,11 @@ from amsfe_sym.apps.arguments import DURATION, SEED, number_type
 from amsfe_sym.errors import ConfigError, describe
 
 __all__ = [
+    "add_live_arguments",
     "add_node_arguments",
     "add_play_arguments",
     "add_sim_node_arguments",
+    "live_from_args",
     "node_from_args",
     "play_from_args",
     "sim_node_from_args",
@@ -172,6 +174,13 @@ def add_node_arguments(p: argparse.ArgumentParser) -> None:
         help="the per-sample path: the C node on rcl (auto: when it builds and runs this "
         "configuration) or the Python reference (docs/live-control.md)",
     )
+    p.add_argument(
+        "--node-exe",
+        default=None,
+        metavar="FILE",
+        help="the C node built elsewhere (colcon: install/amsfe_node/lib/amsfe_node/amsfe_node) "
+        "instead of the wheel build",
+    )
 
 
 def node_from_args(args: argparse.Namespace) -> int:
@@ -215,12 +224,13 @@ def node_from_args(args: argparse.Namespace) -> int:
         domain_id=_domain(),
     )
     ctrl = f", controller {sc.controller}" if opts.controller else ""
-    impl = _node_impl(args.impl, sc, lib, opts)
+    impl = "c" if args.node_exe is not None else _node_impl(args.impl, sc, lib, opts)
     if impl == "c":
         from amsfe_sym.ros.cnode import run_c_node
 
         print(f"node: {sc.name}, estimator {sc.estimator}{ctrl}; the C node", flush=True)
-        crun = run_c_node(sc, lib, opts, say=lambda line: print(line, flush=True))
+        exe = None if args.node_exe is None else Path(args.node_exe)
+        crun = run_c_node(sc, lib, opts, say=lambda line: print(line, flush=True), exe=exe)
         if crun.record is not None:
             print(f"node: record {crun.record} (amsfe estimate {crun.record})", flush=True)
         return crun.exit_code
@@ -239,7 +249,7 @@ def _node_impl(asked: str, sc: Any, lib: Any, opts: Any) -> str:
     if asked == "python":
         return "python"
     from amsfe_sym.errors import AmsfeError
-    from amsfe_sym.ros.cnode import build_node, c_node_refusal
+    from amsfe_sym.ros.cnode import build_node, c_node_refusal, refuse_c_node
 
     why = c_node_refusal(sc, opts.spec, opts.managed, opts.controller)
     if why is None:
@@ -252,14 +262,7 @@ def _node_impl(asked: str, sc: Any, lib: Any, opts: Any) -> str:
     if why is None:
         return "c"
     if asked == "c":
-        raise ConfigError(
-            describe(
-                "amsfe node --impl c",
-                "a configuration the C node runs",
-                why,
-                "run amsfe node --impl python",
-            )
-        )
+        refuse_c_node(why)
     print(f"node: the Python node: {why}", flush=True)
     return "python"
 
@@ -297,3 +300,58 @@ def play_from_args(args: argparse.Namespace) -> int:
     sent = ", ".join(f"{t} {c}" for t, c in rep.messages.items())
     print(f"play: {rep.log_s:.2f} s of log in {rep.wall_s:.2f} s wall: {sent}", flush=True)
     return 0
+
+
+def add_live_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``amsfe live`` (the arm and the node in one command)."""
+    p.add_argument("scenario", nargs="?", default="paper-sim", help="scenario name or .toml")
+    p.add_argument(
+        "--controller", default="", help="the node's controller (default the scenario's)"
+    )
+    p.add_argument("--lockstep", action="store_true", help="the arm waits for each command (exact)")
+    p.add_argument("--duration", type=DURATION, default=None, help="[s] of sample time")
+    p.add_argument("--seed", type=SEED, default=None)
+    p.add_argument(
+        "--rate", type=SECONDS, default=1.0, help="free running: speed of the arm's clock"
+    )
+    p.add_argument("--impl", choices=("auto", "c", "python"), default="auto")
+    p.add_argument("--record", default=None, metavar="DIR", help="the node's record")
+    p.add_argument("--topic-spec", default=None, metavar="FILE")
+    p.add_argument(
+        "--encoder-timeout", type=SECONDS, default=None, help="the node's encoder silence [s]"
+    )
+    p.add_argument(
+        "--command-timeout",
+        type=SECONDS,
+        default=None,
+        help="the arm's wait for the node and for a lockstep command [s]",
+    )
+    p.add_argument("--ros-args", nargs=argparse.REMAINDER, default=[], help="to both nodes")
+
+
+def live_from_args(args: argparse.Namespace) -> int:
+    """``amsfe live`` from its parsed options (ros/pair.py); ``--record`` is checked as
+    ``amsfe node`` checks it, before either process starts."""
+    from amsfe_sym.core.outputs import check_output
+    from amsfe_sym.ros.pair import PairOptions, run_pair
+
+    if args.record is not None:
+        inputs = [p for p in (args.scenario, args.topic_spec) if p and Path(p).exists()]
+        check_output(Path(args.record), option="--record", kind="folder", inputs=inputs)
+
+    return run_pair(
+        PairOptions(
+            scenario=args.scenario,
+            controller=args.controller or None,
+            lockstep=args.lockstep,
+            duration=args.duration,
+            seed=args.seed,
+            rate=args.rate,
+            impl=args.impl,
+            record=args.record,
+            topic_spec=args.topic_spec,
+            ros_args=tuple(args.ros_args),
+            encoder_timeout=args.encoder_timeout,
+            command_timeout=args.command_timeout,
+        )
+    )

@@ -7,7 +7,9 @@ from Python, started and waited for (docs/live-control.md).
   ones in ``site-packages/ros_<pkg>.libs/``, reached through an old-style RPATH:
   ``-Wl,--disable-new-dtags``, since RUNPATH does not reach librcl's own dependencies) and
   the generated library, cached by content in ``$AMSFE_GENERATED_DIR/amsfe_node/<hash>/``
-  like the libraries (the same sources, library, compiler, flags and rcl compile once).
+  like the libraries (the same sources, library, compiler, flags and rcl compile once),
+  with its own copy of the library (a library regenerated in place never changes a built
+  node).
   librcl's wheel links the Python type support of every message package; of its Python
   symbols two are data resolved at load (``PyExc_RuntimeError``, ``_Py_TrueStruct``), which
   ``amsfe_pystub.c`` defines, the functions are never called and bound lazily: no
@@ -30,6 +32,7 @@ import json
 import math
 import os
 import shlex
+import shutil
 import signal
 import subprocess
 import sys
@@ -47,7 +50,7 @@ from numpy.typing import NDArray
 from amsfe_sym.codegen.cache import build_lock, compiler, default_out_dir
 from amsfe_sym.errors import ConfigError, RosError, describe
 from amsfe_sym.ros.middleware import DEFAULT_RMW
-from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.runtime.library import ModelLibrary, file_sha256
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.topics import TopicSpec
 
@@ -59,6 +62,7 @@ __all__ = [
     "c_node_refusal",
     "queue_depths",
     "read_record_arrays",
+    "refuse_c_node",
     "ros_paths",
     "run_c_node",
     "write_params",
@@ -147,13 +151,6 @@ def _sources() -> list[Path]:
     return sorted([*C_DIR.glob("*.c"), *C_DIR.glob("*.h")])
 
 
-def _watchdog_sources(lib: ModelLibrary) -> list[Path]:
-    """``amsfe_watchdog.c`` of the runtime, when this checkout has it (compiled into the
-    node: it is robot-independent)."""
-    c = Path(__file__).resolve().parent.parent / "runtime" / "c" / "amsfe_watchdog.c"
-    return [c] if c.is_file() else []
-
-
 def build_node(lib: ModelLibrary, out_dir: Path | None = None) -> CNodeBuild:
     """The C node of ``lib``'s robot, compiled once per content (sources, the library's
     content hash and file, compiler, flags, rcl's version) under ``out_dir``
@@ -165,12 +162,10 @@ def build_node(lib: ModelLibrary, out_dir: Path | None = None) -> CNodeBuild:
     """
     ros = ros_paths()
     cc = compiler()
-    wd = _watchdog_sources(lib)
-    srcs = [*(p for p in _sources() if p.suffix == ".c"), *wd]
+    srcs = [p for p in _sources() if p.suffix == ".c"]
     gen = hashlib.sha256()
-    for path in [*_sources(), *wd, *(p.with_suffix(".h") for p in wd)]:
-        if path.is_file():
-            gen.update(path.name.encode() + b"\0" + path.read_bytes())
+    for path in _sources():
+        gen.update(path.name.encode() + b"\0" + path.read_bytes())
     inputs = {
         "sources": gen.hexdigest(),
         "library": lib.manifest.raw.get("content_hash"),
@@ -190,8 +185,22 @@ def build_node(lib: ModelLibrary, out_dir: Path | None = None) -> CNodeBuild:
         if exe.is_file():
             return CNodeBuild(exe, key, False)
         folder.mkdir(parents=True, exist_ok=True)
+        # the node's own copy of the library and its headers: a library regenerated in place
+        # later (another scenario's, another checkout's) never changes a built node
+        gen_dir = lib.library_path.parent
+        for src in [lib.library_path, *sorted(gen_dir.glob("*.h"))]:
+            shutil.copy2(src, folder / src.name)
+        if file_sha256(folder / lib.library_path.name) != inputs["library_sha256"]:
+            raise RosError(
+                describe(
+                    "the C node's build",
+                    f"the library {lib.library_path} this run loaded",
+                    "another one in its place (regenerated meanwhile)",
+                    "run the command again",
+                )
+            )
         tmp = folder / f"amsfe_node.tmp{os.getpid()}"
-        cmd = _command(cc, lib, ros, srcs, tmp, wd)
+        cmd = _command(cc, lib, ros, srcs, tmp, folder)
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0 or not tmp.is_file():
             tmp.unlink(missing_ok=True)
@@ -222,10 +231,10 @@ def _compiler_line(cc: str) -> str:
 
 
 def _command(
-    cc: str, lib: ModelLibrary, ros: RosPaths, srcs: list[Path], out: Path, wd: list[Path]
+    cc: str, lib: ModelLibrary, ros: RosPaths, srcs: list[Path], out: Path, gen_dir: Path
 ) -> list[str]:
-    """The compile-and-link command of the node."""
-    gen_dir = lib.library_path.parent
+    """The compile-and-link command of the node, against the library and headers copied
+    into ``gen_dir`` (the node's folder)."""
     name = lib.library_path.name.removeprefix("lib").removesuffix(".so")
     libs = ["rcl", "rcutils", "rmw", "rosidl_runtime_c"]
     for pkg in _MSG_PACKAGES:
@@ -233,8 +242,6 @@ def _command(
     rpaths = [gen_dir, ros.lib, *ros.bundled]
     cmd = [cc, *CNODE_CFLAGS, *map(str, srcs), f"-I{C_DIR}", f"-I{gen_dir}"]
     cmd += [f"-I{d}" for d in ros.include]
-    if wd:
-        cmd += ["-DAMSFE_HAVE_WATCHDOG", f"-I{wd[0].parent}"]
     cmd += [f"-L{gen_dir}", f"-l{name}", f"-L{ros.lib}", *(f"-l{x}" for x in libs), "-lm"]
     cmd += ["-Wl,--disable-new-dtags", *(f"-Wl,-rpath,{d}" for d in rpaths)]
     # the Python type support librcl's wheel links: functions bound lazily (never called),
@@ -262,6 +269,23 @@ def c_node_refusal(
     if managed:
         return "--managed (the C node has no lifecycle states)"
     return None
+
+
+def refuse_c_node(why: str | None) -> None:
+    """Raise the one-line refusal of ``--impl c`` for ``why`` (None: nothing to refuse).
+
+    Raises:
+        ConfigError: ``why`` is not None.
+    """
+    if why is not None:
+        raise ConfigError(
+            describe(
+                "amsfe node --impl c",
+                "a configuration the C node runs",
+                why,
+                "run amsfe node --impl python",
+            )
+        )
 
 
 def queue_depths(spec: TopicSpec, T: float, camera_period: int, camera_delay: int,
@@ -372,6 +396,7 @@ def write_params(
         f"x0_motor_from_encoders {int(sc.estimate0.motor == 'encoders')}",
         f"inverse_tol {inverse_tol!r}",
         f"hold_limit {_numbers(limit)}",
+        "watchdog " + " ".join(repr(float(v)) for v in _watchdog(spec, options)),
     ]
     for role, key in (("encoders", "encoders"), ("camera", "camera"), ("effort", "effort"),
                       ("truth", "truth"), ("estimate", "estimate"),
@@ -403,6 +428,15 @@ def write_params(
     path = folder / "params.txt"
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def _watchdog(spec: TopicSpec, options: dict[str, Any]) -> list[float]:
+    """The ``[watchdog]`` bounds in ``amsfe_watchdog_config``'s order (inf: off), with the
+    node's ``encoder_timeout`` (its ``--encoder-timeout``, as the Python node's)."""
+    w = spec.watchdog
+    return [w.tracking_error, w.innovation_nis, w.innovation_window, w.deadline,
+            w.deadline_misses, w.deadline_window, w.compute_budget,
+            float(options["encoder_timeout"])]  # fmt: skip
 
 
 def _ctrl_code(name: str) -> int:
@@ -452,9 +486,12 @@ def run_c_node(
     lib: ModelLibrary,
     options: Any,
     say: Callable[[str], None] = print,
+    exe: Path | None = None,
 ) -> CNodeRun:
     """Build (once) and run the C node of ``sc`` with the Python node's options
     (:class:`~amsfe_sym.ros.node.NodeOptions`); its lines go to this process's stdout.
+    ``exe``: a C node built elsewhere (``colcon build`` of ``ros/c/CMakeLists.txt``) for
+    ``lib``'s robot, run instead of the wheel build.
 
     Raises:
         KeyboardInterrupt: Ctrl-C or SIGTERM (forwarded to the C node, which published its
@@ -464,17 +501,12 @@ def run_c_node(
     """
     from amsfe_sym.ros.spec_filter import live_filter
 
-    why = c_node_refusal(sc, options.spec, options.managed, options.controller)
-    if why is not None:
+    refuse_c_node(c_node_refusal(sc, options.spec, options.managed, options.controller))
+    if exe is not None and not (exe.is_file() and os.access(exe, os.X_OK)):
         raise ConfigError(
-            describe(
-                "amsfe node --impl c",
-                "a configuration the C node runs",
-                why,
-                "run amsfe node --impl python",
-            )
+            describe("--node-exe", "an executable C node", str(exe), "give colcon's amsfe_node")
         )
-    build = build_node(lib)
+    build = CNodeBuild(exe, "external", False) if exe is not None else build_node(lib)
     if build.compiled:
         say(f"node: built the C node {build.path}")
     spec, every = _resolved_spec(
@@ -484,16 +516,7 @@ def run_c_node(
         options.domain_id,
         options.std_every,
     )
-    why = c_node_refusal(sc, spec, options.managed, options.controller)
-    if why is not None:
-        raise ConfigError(
-            describe(
-                "amsfe node --impl c",
-                "a configuration the C node runs",
-                why,
-                "run amsfe node --impl python",
-            )
-        )
+    refuse_c_node(c_node_refusal(sc, spec, options.managed, options.controller))
     sc_live = live_filter(sc, spec)
     end_k = -1 if options.duration is None else round(options.duration / lib.T)
     with tempfile.TemporaryDirectory(prefix="amsfe_cnode_") as tmp:

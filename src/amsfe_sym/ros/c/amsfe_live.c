@@ -194,6 +194,7 @@ static int step(live_loop *L, const double *z) {
   amsfe_diag d;
   amsfe_est_diagnostics(L->est, &d);
   L->encoder_nis = d.encoder_nis;
+  L->encoder_accepted = d.encoder_accepted;
   if (z && !d.encoder_accepted) L->c.encoder_rejected++;
   if (!z) L->c.encoder_rejected++; /* the reference counts a step without a usable sample */
   /* the due frames, kept in their arrival order, then sorted by exposure (stable) */

@@ -87,6 +87,7 @@ typedef struct {
   /* ---- the last tick's outputs */
   double *x, *P, *P_diag, *u, *ref_hold;
   double encoder_nis;          /* NaN at tick 0 or without a usable sample */
+  int encoder_accepted;        /* its update was applied (not gated) */
   int gap;                     /* samples predicted through before it */
   int tick_applied, tick_rejected; /* frames fused / refused at it */
   int status;                  /* the estimator's status (< 0: failed) */

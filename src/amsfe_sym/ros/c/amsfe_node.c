@@ -47,9 +47,7 @@
 #include "amsfe_cdr.h"
 #include "amsfe_live.h"
 #include "amsfe_node_params.h"
-#ifdef AMSFE_HAVE_WATCHDOG
 #include "amsfe_watchdog.h"
-#endif
 
 /* the generated library's gravity g(q, theta) (casadi's calling convention) */
 extern int gravity(const double **arg, double **res, long long *iw, double *w, int mem);
@@ -221,6 +219,8 @@ typedef struct {
   double *lat;  /* [cap] sample received by the middleware -> command published [s] */
   long n_lat, cap_lat;
   record_t rec;
+  amsfe_watchdog *wd;  /* the watchdogs (amsfe_watchdog.h): their reasons are the holds */
+  double *frame_nis;   /* [LIVE_MAX_FRAMES] NIS of the frames fused at the tick */
 } node_t;
 
 enum { T_ENC, T_CAM, T_EFF, T_TRUTH, T_EST, T_STD, T_THETA, T_DIAG, T_CMD, T_N };
@@ -352,6 +352,18 @@ static void configure(node_t *s, const char *path) {
   }
   s->hold_limit = ALLOC(double, n);
   pf_doubles(pf, "hold_limit", s->hold_limit, n);
+  /* the watchdogs: the [watchdog] keys of the spec, in amsfe_watchdog_config's order */
+  double w[8];
+  pf_doubles(pf, "watchdog", w, 8);
+  amsfe_watchdog_config wc = {n, N, d.ne, s->T, w[0], w[1], (int)w[2], w[3], (int)w[4],
+                              (int)w[5], w[6], w[7], L->max_gap};
+  size_t wsize = amsfe_watchdog_memory_size(&wc);
+  void *wmem = NULL;
+  if (!wsize || posix_memalign(&wmem, 64, wsize) != 0 ||
+      amsfe_watchdog_init(&s->wd, &wc, wmem, wsize) != AMSFE_OK)
+    pf_fail(pf, "watchdog", "bounds the watchdogs accept (amsfe_watchdog_init)", "a refusal");
+  s->encoder_timeout = w[7];
+  s->frame_nis = ALLOC(double, LIVE_MAX_FRAMES);
 }
 
 static void take_frames(node_t *s);
@@ -617,7 +629,7 @@ static void publish_tick(node_t *s, long long ns, const double *z, long long sen
 
 /* One encoder sample in s->in (sent at `sent`, received by the middleware at `received`,
  * system clock [ns]). */
-static void on_encoders(node_t *s, long long sent, long long received) {
+static void on_encoders(node_t *s, long long sent, long long received, double taken) {
   live_loop *L = &s->L;
   int n = s->n;
   long long ns;
@@ -632,8 +644,36 @@ static void on_encoders(node_t *s, long long sent, long long received) {
   if (s->read_effort && !s->effort_in_encoders) take_efforts(s);
   if (s->recording) take_truth(s);
   int r = live_encoders(L, ns, s->z, sent);
-  if (r == 0) return;
-  if (r == -1) {
+  if (r == 0) return; /* skipped (counted): not judged */
+  double done = mono_s();
+  /* the watchdogs judge the tick (or the failure) before its command goes out */
+  amsfe_watchdog_tick tick;
+  memset(&tick, 0, sizeof tick);
+  tick.k = r == -1 ? L->k + L->gap + 1 : L->k;
+  tick.gap = L->gap;
+  tick.stamp_ns = sent; /* the DDS source timestamp: this node's delay, not the arm's pace */
+  tick.taken = taken, tick.done = done;
+  tick.encoder_nis = NAN;
+  if (r < 0) {
+    tick.status = r == -1 ? AMSFE_ERR_NOT_PD : L->status; /* as LiveLoop.watch judges them */
+  } else {
+    tick.x_hat = L->x, tick.P_diag = L->P_diag;
+    if (L->controller) {
+      tick.q_des = live_ref(L, L->k), tick.u = L->u;
+      tick.handed_over = amsfe_ctrl_handed_over(L->ctrl, L->k);
+    }
+    if (L->k > 0 && L->encoder_accepted) tick.encoder_nis = L->encoder_nis;
+    int nf = 0;
+    for (int i = 0; i < L->n_due; ++i)
+      if (L->due_status[i] == AMSFE_OK) s->frame_nis[nf++] = L->due_nis[i];
+    tick.frame_nis = s->frame_nis, tick.n_frames = nf;
+  }
+  if (amsfe_watchdog_sample(s->wd, &tick) != AMSFE_WD_NONE) {
+    amsfe_watchdog_format(s->wd, s->stop_line, sizeof s->stop_line);
+    s->stop_code = EXIT_HOLD;
+    return;
+  }
+  if (r == -1) { /* not held (a watchdog off): the Python node's line */
     snprintf(s->stop_line, sizeof s->stop_line,
              "hold: the estimator stopped: encoder sample at t = %.3f s: expected at most "
              "max_gap_steps = %d missing samples before it, found %d missing. Fix: the arm's "
@@ -656,12 +696,8 @@ static void on_encoders(node_t *s, long long sent, long long received) {
     record_effort(s, ns, s->eff);
   }
   publish_tick(s, ns, s->z, sent);
-  double done = mono_s();
   if (L->controller && s->n_lat < s->cap_lat) s->lat[s->n_lat++] = 1e-9 * (double)(wall_ns() - received);
-#ifdef AMSFE_HAVE_WATCHDOG
-  /* TODO(watchdog): amsfe_watchdog_sample(s->wd, &sample) here, the hold if it says so */
-#endif
-  s->last_rx = done; /* after the work: a slow first tick is no silence */
+  s->last_rx = mono_s(); /* after the work: a slow first tick is no silence */
   s->started = 1;
 }
 
@@ -799,6 +835,54 @@ static void write_record(node_t *s, const char *path) {
     fprintf(stderr, "error: amsfe_node: cannot write the record %s\n", path);
 }
 
+/* --replay EVENTS: the live loop alone, without rcl, on messages from a text file, one a
+ * line ("frame EXPOSURE_NS U V SENT", "applied STAMP_NS U1..Un", "enc STAMP_NS SENT Z1..Z2n";
+ * stamps in ns); prints per encoder sample "tick K X1..XN U1..Un" (17 digits), "skip" or
+ * "stop R", then "skipped REASON COUNT" and "counters APPLIED REJECTED ENC_REJECTED".
+ * tests/test_cnode.py compares it with the Python LiveLoop on the same messages. */
+static int replay(node_t *s, const char *path) {
+  live_loop *L = &s->L;
+  int n = s->n, N = s->N;
+  FILE *f = fopen(path, "r");
+  if (!f) return EXIT_BAD_INPUT;
+  char line[8192];
+  double v[3 * MAX_JOINTS + 8];
+  while (fgets(line, sizeof line, f)) {
+    char *tok = strtok(line, " \n");
+    if (!tok) continue;
+    int kind = strcmp(tok, "frame") == 0 ? 0 : strcmp(tok, "applied") == 0 ? 1 : 2;
+    long long a = strtoll(strtok(NULL, " \n"), NULL, 10), b = 0;
+    if (kind == 2) b = strtoll(strtok(NULL, " \n"), NULL, 10);
+    int m = 0, cap = kind == 0 ? 2 : kind == 1 ? n : 2 * n;
+    for (char *t; m < cap && (t = strtok(NULL, " \n"));) v[m++] = strtod(t, NULL);
+    if (kind == 0) {
+      char *t = strtok(NULL, " \n");
+      live_frame_in(L, a, v, t ? strtoll(t, NULL, 10) : 0);
+    } else if (kind == 1) {
+      live_applied(L, a, v);
+    } else {
+      int r = live_encoders(L, a, v, b);
+      if (r == 0) {
+        printf("skip\n");
+      } else if (r < 0) {
+        printf("stop %d\n", r);
+        break;
+      } else {
+        printf("tick %ld", L->k);
+        for (int i = 0; i < N; ++i) printf(" %.17g", L->x[i]);
+        for (int j = 0; j < n; ++j) printf(" %.17g", L->controller ? L->u[j] : NAN);
+        printf("\n");
+      }
+    }
+  }
+  fclose(f);
+  for (int i = 0; i < SKIP_REASONS; ++i)
+    if (L->skipped[i]) printf("skipped %s|%ld\n", LIVE_SKIP_TEXT[i], L->skipped[i]);
+  printf("counters %ld %ld %ld\n", L->c.frames_applied, L->c.frames_rejected,
+         L->c.encoder_rejected);
+  return 0;
+}
+
 int main(int argc, char **argv) {
   if (argc < 2 || argv[1][0] == '-') {
     fprintf(stderr, "usage: %s PARAMS [--ros-args ...]  (run by amsfe node --impl c)\n", argv[0]);
@@ -813,6 +897,7 @@ int main(int argc, char **argv) {
   live_loop *L = &s->L;
   int n = s->n, N = s->N;
   if (live_init(L) != AMSFE_OK) return 1;
+  if (argc == 4 && strcmp(argv[2], "--replay") == 0) return replay(s, argv[3]);
   params_file *pf = &s->pf;
   const char *qos_tok[4];
   if (pf_tokens(pf, "qos", qos_tok, 4, 0) != 4)
@@ -930,18 +1015,23 @@ int main(int argc, char **argv) {
     if (sub_eff) take_efforts(s);
     if (s->recording) take_truth(s);
     rmw_message_info_t info;
+    long got = 0;
     /* every sample there, in their order: a late burst is caught up, not held */
     while (s->stop_code < 0 && !g_signal &&
            rcl_take_serialized_message(&s->sub_enc, &s->in, &info, NULL) == RCL_RET_OK)
-      on_encoders(s, info.source_timestamp, info.received_timestamp);
-    if (s->stop_code < 0 && s->started && mono_s() - s->last_rx > s->encoder_timeout) {
-#ifdef AMSFE_HAVE_WATCHDOG
-      /* TODO(watchdog): amsfe_watchdog_idle(s->wd, now, publishers) decides this */
-#endif
-      snprintf(s->stop_line, sizeof s->stop_line,
-               "hold: no encoder sample on %s for %g s (last tick %ld)", s->topic[T_ENC],
-               s->encoder_timeout, L->k);
-      s->stop_code = EXIT_HOLD;
+      on_encoders(s, info.source_timestamp, info.received_timestamp, mono_s()), ++got;
+    if (s->stop_code < 0 && !g_signal && got == 0) { /* no sample: the stall watchdogs */
+      size_t publishers = 0;
+      int known = rcl_subscription_get_publisher_count(&s->sub_enc, &publishers) == RCL_RET_OK;
+      if (amsfe_watchdog_idle(s->wd, mono_s(), known ? (int)publishers : -1) != AMSFE_WD_NONE) {
+        /* the Python node's line, then the watchdog's reason and cause */
+        char why[1536];
+        amsfe_watchdog_format(s->wd, why, sizeof why);
+        snprintf(s->stop_line, sizeof s->stop_line,
+                 "hold: no encoder sample on %s for %g s (last tick %ld); %s", s->topic[T_ENC],
+                 s->encoder_timeout, L->k, strncmp(why, "hold: ", 6) == 0 ? why + 6 : why);
+        s->stop_code = EXIT_HOLD;
+      }
     }
   }
   /* ---- the stop: the last estimate's std and theta, then the hold command */
