@@ -532,7 +532,11 @@ def run_c_node(
                 "end_k": end_k,
                 "std_every": every,
                 "hold": options.hold,
-                "encoder_timeout": options.encoder_timeout,
+                # (None: the spec's [watchdog] encoder_timeout, as the Python node; the merge of
+                # the watchdog and cnode branches, loadtest)
+                "encoder_timeout": spec.watchdog.encoder_timeout
+                if options.encoder_timeout is None
+                else options.encoder_timeout,
                 "subscriber_wait": options.subscriber_wait,
                 "record": arrays,
                 "sched_priority": SCHED_PRIORITY,

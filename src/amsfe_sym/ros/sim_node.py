@@ -162,7 +162,7 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
                 elif gid != controller[0]:
                     intruders.append(gid)  # not applied: the run stops at this tick
                     return
-            cmd_at.append(int(info["received_timestamp"]))
+            cmd_at.append(_received(info, len(cmd_at)))
             if u.size == n and np.all(np.isfinite(u)):
                 commands.append(u)
             else:
@@ -171,13 +171,13 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         sub = node.create_subscription(m.Float64MultiArray, spec.commands, on_command, qos)
         # latency by the middleware's receive stamps (system clock [ns]): not delayed by
         # this node's own executor
-        cmd_at: list[int] = []
-        est_at: list[int] = []
+        cmd_at: list[tuple[int, int]] = []  # (publication sequence number, received [ns])
+        est_at: list[tuple[int, int]] = []
         sent_at = np.zeros(arm.K, dtype=np.int64)
         node.create_subscription(
             m.JointState,
             spec.estimate,
-            lambda _msg, info: est_at.append(int(info["received_timestamp"])),
+            lambda _msg, info: est_at.append(_received(info, len(est_at))),
             qos,
         )
         ex = executor(ctx)
@@ -257,15 +257,28 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         _acked(pub_eff, 1.0)
         ex.spin_once(timeout_sec=0.05)  # the last tick's estimate
 
-        def latency(at: list[int]) -> FloatArray:
-            c = min(len(at), arm.K)
-            return np.asarray((np.asarray(at[:c], dtype=np.int64) - sent_at[:c]) * 1e-9, float)
+        def latency(at: list[tuple[int, int]]) -> FloatArray:
+            # the i-th message published answers the i-th sample (a node sends one per
+            # sample); paired by the publisher's sequence number, so a message this arm's
+            # queue dropped shifts nothing
+            pairs = [(seq - 1, t) for seq, t in at if 1 <= seq <= arm.K]
+            if not pairs:
+                return np.zeros(0)
+            i, t = (np.asarray(v, dtype=np.int64) for v in zip(*pairs, strict=True))
+            return np.asarray((t - sent_at[i]) * 1e-9, dtype=float)
 
         return SimNodeReport(
             arm.K, len(commands), wall, late, stale, latency(cmd_at), latency(est_at)
         )
     finally:
         stop(ctx, *([node] if node is not None else []))
+
+
+def _received(info: Any, count: int) -> tuple[int, int]:
+    """(publication sequence number, receive stamp [ns]) of a message; the sequence number
+    is the count of those received so far + 1 when the middleware gives none."""
+    seq = info.get("publication_sequence_number")
+    return (int(seq) if seq else count + 1, int(info["received_timestamp"]))
 
 
 def _one_controller(node: Any, topic: str, gids: tuple[bytes, bytes] | None) -> None:
