@@ -25,6 +25,7 @@ two controllers interleaved gave each tick another's command); another node name
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -130,8 +131,11 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
     """
     arm = SimArm(sc, lib)
     plan = FaultPlan(options.faults, lib.T, lib.n)
-    if options.lockstep:  # the frames' acknowledgement within ms (docs/ros.md)
-        use_lockstep_profile()
+    # a 1 ms reliable heartbeat: lockstep, the frames' acknowledgement within ms
+    # (docs/ros.md); free running, a sample the transport dropped is repaired within ms
+    # instead of Fast DDS's default 3 s, by when the writer's KEEP_LAST history has replaced it
+    # and the node sees it missing (docs/live-load.md)
+    use_lockstep_profile()
     ctx = start(list(options.ros_args), options.domain_id)
     from amsfe_sym.ros import messages as m
 
@@ -143,10 +147,16 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         spec = spec_parameters(node, options.spec, tuple(lib.manifest.joints))
         names = list(spec.joint_names or lib.manifest.joints)
         qos = qos_profile(spec)
-        pub_enc = node.create_publisher(m.JointState, spec.encoders, qos)
-        pub_cam = node.create_publisher(m.PointStamped, spec.camera, qos)
-        pub_eff = node.create_publisher(m.JointState, spec.effort, qos)
-        pub_truth = node.create_publisher(m.Float64MultiArray, spec.truth, qos)
+        # free running, the writers keep 1 s of samples: when this (Python) arm falls behind
+        # the wall clock it catches up in a burst, and a KEEP_LAST history shorter than the
+        # burst replaced samples before the node took them (seen as missing: a false
+        # "encoder stall"); a real driver does not burst
+        second = math.ceil(1.0 / lib.T) + 1
+        out = qos if options.lockstep else qos_profile(spec, depth=max(spec.depth, second))
+        pub_enc = node.create_publisher(m.JointState, spec.encoders, out)
+        pub_cam = node.create_publisher(m.PointStamped, spec.camera, out)
+        pub_eff = node.create_publisher(m.JointState, spec.effort, out)
+        pub_truth = node.create_publisher(m.Float64MultiArray, spec.truth, out)
         pub_clock = node.create_publisher(m.Clock, spec.clock, qos_profile(spec, depth=1))
         commands: list[FloatArray] = []
         n = lib.n
