@@ -361,8 +361,10 @@ def test_a_lockstep_arm_refuses_a_second_controller_by_name(tmp_path: Path) -> N
         procs += [sim, node]
         code = sim.p.wait(timeout=180)
         sim._reader.join(timeout=5)
+        if node.p.poll() is None:  # (its arm refused to run: it waits for samples)
+            node.kill(signal.SIGTERM)
     finally:
-        _finish(procs, 5.0)
+        _finish(procs, 60.0)
         os.killpg(intruder.pid, signal.SIGKILL)
         intruder.wait()
         if intruder.stdout is not None:

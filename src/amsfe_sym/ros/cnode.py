@@ -519,6 +519,12 @@ def run_c_node(
     refuse_c_node(c_node_refusal(sc, spec, options.managed, options.controller))
     sc_live = live_filter(sc, spec)
     end_k = -1 if options.duration is None else round(options.duration / lib.T)
+    claimed = None
+    if options.record is not None:  # one writer a path: claimed before the node starts
+        from amsfe_sym.ros.record import NodeRecord
+
+        names = list(spec.joint_names or lib.manifest.joints)
+        claimed = NodeRecord(sc_live, lib, spec, names, out=options.record)
     with tempfile.TemporaryDirectory(prefix="amsfe_cnode_") as tmp:
         folder = Path(tmp)
         arrays = folder / "record.bin" if options.record is not None else None
@@ -563,10 +569,13 @@ def run_c_node(
                 if proc.poll() is None:
                     proc.send_signal(sig)
         record = None
-        if options.record is not None and arrays is not None and arrays.is_file():
+        end = _end_line(code if interrupt is None else 130)
+        if claimed is not None and arrays is not None and arrays.is_file():
             record = _write_record(
-                sc_live, lib, spec, read_record_arrays(arrays, lib), options.record
+                sc_live, lib, spec, read_record_arrays(arrays, lib), options.record, claimed, end
             )
+        elif claimed is not None:  # no arrays (the node failed): the claim released, said so
+            record = claimed.write(reason=end)
         if interrupt is not None or code in (130, 143):
             raise interrupt if interrupt is not None else KeyboardInterrupt()
     return CNodeRun(code, record, build)
@@ -590,8 +599,23 @@ def read_record_arrays(path: Path, lib: ModelLibrary) -> dict[str, NDArray[Any]]
     return out
 
 
+def _end_line(code: int) -> str:
+    """The record's ``amsfe.end`` for the C node's exit code (its own line says more)."""
+    if code == 0:
+        return "done"
+    if code in (130, 143):
+        return "hold: interrupted (SIGINT or SIGTERM)"
+    return f"hold: the C node exited {code} (its hold line names the reason)"
+
+
 def _write_record(
-    sc: Scenario, lib: ModelLibrary, spec: TopicSpec, a: dict[str, NDArray[Any]], out: Path
+    sc: Scenario,
+    lib: ModelLibrary,
+    spec: TopicSpec,
+    a: dict[str, NDArray[Any]],
+    out: Path,
+    rec: Any = None,
+    end: str = "done",
 ) -> Path:
     """The rosbag2 of ``--record`` from the C node's arrays, in the Python node's order
     (each tick: its diagnostics, encoders, the frames fused at it, the truth, the outputs;
@@ -601,7 +625,7 @@ def _write_record(
     from amsfe_sym.ros.record import NodeRecord
 
     names = list(spec.joint_names or lib.manifest.joints)
-    rec = NodeRecord(sc, lib, spec, names)
+    rec = NodeRecord(sc, lib, spec, names) if rec is None else rec
     L = lib.layout
     text = bytes(a["diag_text"].ravel())
     diags = text.split(b"\0")[:-1] if text else []
@@ -633,4 +657,4 @@ def _write_record(
         e += 1
     if a["hold_ns"].size:
         rec.hold(int(a["hold_ns"][0, 0]), a["hold_u"][0])
-    return rec.write(out)
+    return Path(rec.write(out, reason=end))

@@ -193,11 +193,10 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         ex = executor(ctx)
         ex.add_node(node)
         _wait_peers(ex, pub_enc, sub if options.lockstep else None, options.start_timeout)
-        if (dup := duplicate_name_warning(node)) is not None:
-            node.get_logger().warning(dup)
-            print(f"sim-node: warning: {dup}", flush=True)
+        warned: list[str] = []
+        _warn_duplicate(node, warned)
         if options.lockstep:
-            _one_controller(node, spec.commands, None)
+            _one_controller(node, spec.commands, None, warned)
         T_ns = round(lib.T * 1e9)
         u = np.zeros(n)
         late = stale = 0
@@ -222,6 +221,7 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
                 pub_enc.publish(m.joint_state(ns, names, z[:n], z[n:]))
                 if k and k % round(1.0 / lib.T) == 0:
                     print(f"sim-node: t = {k * lib.T:.1f} s", flush=True)
+                    _warn_duplicate(node, warned)
                 if options.lockstep or k == 0:  # free running starts on the first command
                     deadline = time.monotonic() + options.command_timeout
                     while len(commands) <= k:
@@ -239,7 +239,7 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
                         ex.spin_once(timeout_sec=min(left, 0.05))
                         signals.check()
                     if intruders:  # (one may have come with the command of tick k)
-                        _one_controller(node, spec.commands, (controller[0], intruders[0]))
+                        _one_controller(node, spec.commands, (controller[0], intruders[0]), warned)
                     u = commands[k]
                     if k == 0:
                         t0 = time.perf_counter() - lib.T / options.rate
@@ -291,7 +291,19 @@ def _received(info: Any, count: int) -> tuple[int, int]:
     return (int(seq) if seq else count + 1, int(info["received_timestamp"]))
 
 
-def _one_controller(node: Any, topic: str, gids: tuple[bytes, bytes] | None) -> None:
+def _warn_duplicate(node: Any, warned: list[str]) -> None:
+    """Warn (once) of another node with this one's name on the graph (the graph's node
+    names may come later than its endpoints: asked at the start, at t = 1 s and before a
+    refusal)."""
+    if not warned and (dup := duplicate_name_warning(node)) is not None:
+        warned.append(dup)
+        node.get_logger().warning(dup)
+        print(f"sim-node: warning: {dup}", flush=True)
+
+
+def _one_controller(
+    node: Any, topic: str, gids: tuple[bytes, bytes] | None, warned: list[str]
+) -> None:
     """Raise when a lockstep arm sees two controllers: two publishers of ``topic`` on the
     graph (``gids`` None, at the start) or commands from the two publishers ``gids``.
 
@@ -299,6 +311,7 @@ def _one_controller(node: Any, topic: str, gids: tuple[bytes, bytes] | None) -> 
         RosError: one line naming both nodes.
     """
     names = publisher_names(node, topic)
+    _warn_duplicate(node, warned)
     if gids is None:
         if len(names) <= 1:
             return
