@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from amsfe_sym.apps.bench.ros import node_impls
 from amsfe_sym.codegen import library_for
 from amsfe_sym.errors import ConfigError
 from amsfe_sym.ros.arm import SimArm
@@ -571,18 +572,21 @@ def _finish(procs: list[_Proc], timeout: float) -> list[tuple[int, str]]:
 
 @pytest.mark.ros
 @pytest.mark.slow
-def test_lockstep_reproduces_simulate(paper: Any, tmp_path: Path) -> None:
-    """``sim-node --lockstep`` + ``node --controller amsfe`` on paper-sim for 2 s over DDS:
-    every topic of the node's record (estimates, theta, commands, the truth of each tick...)
-    equals ``amsfe simulate`` of the same seed; the record says it finished, and why."""
+@pytest.mark.parametrize("impl", node_impls())
+def test_lockstep_reproduces_simulate(paper: Any, tmp_path: Path, impl: str) -> None:
+    """``sim-node --lockstep`` + ``node --controller amsfe`` on paper-sim for 2 s over DDS,
+    each node implementation: every topic of the node's record (estimates, theta, commands,
+    the truth of each tick...) equals ``amsfe simulate`` of the same seed; the record says
+    it finished, and why."""
     sc, lib = paper
     env = _ros_env(tmp_path)
     rec = tmp_path / "rec"
     procs = []
+    impl_args = ["--impl", impl] if len(node_impls()) > 1 else []
     try:
         procs.append(
             _start(env, "node", "paper-sim", "--controller", "amsfe", "--duration", "2",
-                   "--record", str(rec), *PATIENT_NODE)
+                   "--record", str(rec), *impl_args, *PATIENT_NODE)
         )  # fmt: skip
         procs.append(_start(env, "sim-node", "paper-sim", "--lockstep", "--duration", "2",
                             *PATIENT_ARM))  # fmt: skip
