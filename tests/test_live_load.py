@@ -151,6 +151,14 @@ def _hold(text: str) -> tuple[str, int] | None:
     return (found[-1][0], int(found[-1][1])) if found else None
 
 
+def _held(code: int, text: str) -> tuple[str, int]:
+    """The node held (exit 3, its hold line): the reason and tick."""
+    assert code == 3, text
+    hold = _hold(text)
+    assert hold is not None, text
+    return hold
+
+
 def _stop_arm(sim: Any, node: Any, timeout: float) -> tuple[int, str]:
     """Wait for the node to end, then stop the arm (SIGTERM: a lockstep arm would wait for
     the command of a node that held): the node's exit code and output."""
@@ -192,11 +200,8 @@ def test_an_arm_fault_holds_with_its_reason_within_100_ms(
         code, text = _stop_arm(sim, node, 180.0)
     finally:
         _finish(procs, 30.0)
-    assert code == 3, text
-    hold = _hold(text)
-    assert hold is not None, text
-    reason, k = hold
-    assert reason in ARM_REASONS and 500 <= k <= 500 + WITHIN_TICKS, (fault, hold)
+    reason, k = _held(code, text)
+    assert reason in ARM_REASONS and 500 <= k <= 500 + WITHIN_TICKS, (fault, reason, k)
     assert "hold command" in text
     bag = _bag(rec)
     cmd = bag["/effort_controller/commands"]
@@ -258,14 +263,11 @@ def test_a_300_ms_stall_of_the_node_holds_within_100_ms(
         code, text = _stop_arm(sim, node, 120.0)
     finally:
         _finish(procs, 30.0)
-    assert code == 3, text
-    hold = _hold(text)
-    assert hold is not None, text
-    reason, k = hold
-    assert reason in BEHIND_REASONS, hold
+    reason, k = _held(code, text)
+    assert reason in BEHIND_REASONS, (reason, k)
     if stalled:
         k_stall = int((at - _wall_tick0(sim)) / 1e-3)
-        assert k <= k_stall + WITHIN_TICKS, (hold, k_stall)
+        assert k <= k_stall + WITHIN_TICKS, (reason, k, k_stall)
     _assert_not_diverged(_bag(rec), max_k=k)
 
 

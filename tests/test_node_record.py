@@ -141,18 +141,9 @@ def _fill(paper: Any, rec: NodeRecord, ticks: int | None = None) -> None:
     """The node's calls for each tick of ``paper``'s run, the truth matched by the source
     timestamps (sample k sent at 10 k + 5; the truth of k sent at 10 k + 1, delivered
     before its sample on even ticks, after it on odd ones, as DDS may)."""
-    _, lib, res = paper
-    T = round(lib.T * 1e9)
-    K = res.t.size if ticks is None else ticks
-    for k in range(K):
-        ns = k * T
-        rec.applied(ns, res.u[k])
-        if k % 2 == 0:
-            rec.truth_sent(10 * k + 1, res.x_true[k])
-        rec.encoders(ns, res.z_enc[k], 10 * k + 5)
-        if k % 2 == 1:
-            rec.truth_sent(10 * k + 1, res.x_true[k])
-        rec.outputs(ns, res.x_hat[k], np.zeros(lib.N), res.x_hat[k, 4 * lib.n :], res.u[k])
+    res = paper[2]
+    for k in range(res.t.size if ticks is None else ticks):
+        _fill_tick(paper, rec, k)
 
 
 def test_a_streamed_record_is_the_record_in_memory(paper: Any, tmp_path: Path) -> None:
