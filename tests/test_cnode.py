@@ -293,3 +293,31 @@ def test_c_live_loop_is_the_python_live_loop(tmp_path: Path) -> None:
     c = loop.counters
     assert (applied, rejected) == (c["frames_applied"], c["frames_rejected"])
     assert enc_rejected == c["encoder_rejected"]
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_c_node_sigterm_holds_and_records(tmp_path: Path) -> None:
+    """SIGTERM to ``amsfe node --impl c`` alone (not its process group): it is forwarded to
+    the C node, which publishes the hold command and says so; ``amsfe node`` exits 143 and
+    its record is written, every tick's estimate with its command, the hold last."""
+    import signal
+
+    env = _ros_env(tmp_path)
+    rec = tmp_path / "rec"
+    procs = []
+    try:
+        node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--impl", "c",
+                      "--record", str(rec), *PATIENT_NODE)  # fmt: skip
+        sim = _start(env, "sim-node", "paper-sim", "--lockstep", "--duration", "30",
+                     "--command-timeout", "20")  # fmt: skip
+        procs += [node, sim]
+        sim.wait_for("t = 1.0 s", 90.0)
+        os.kill(node.p.pid, signal.SIGTERM)
+        assert node.p.wait(timeout=60.0) == 143, node.text
+        sim.kill(signal.SIGTERM)
+    finally:
+        _finish(procs, 60.0)
+    assert "node: hold: interrupted; hold command [" in node.text, node.text
+    got = _bag(rec)
+    assert len(got["/amsfe/estimate"]) == len(got["/effort_controller/commands"]) - 1 >= 1000
