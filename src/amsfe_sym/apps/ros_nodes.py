@@ -129,7 +129,11 @@ def add_node_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--record", default=None, metavar="DIR", help="write a rosbag2 (MCAP) here")
     p.add_argument("--runtime", choices=("compiled", "python"), default="compiled")
     p.add_argument(
-        "--encoder-timeout", type=SECONDS, default=0.5, help="encoder silence -> hold [s]"
+        "--encoder-timeout",
+        type=SECONDS,
+        default=None,
+        help="encoder silence -> hold [s] (default: the topic spec's [watchdog] "
+        "encoder_timeout, 0.5 s)",
     )
     p.add_argument(
         "--std-every",

@@ -8,17 +8,22 @@ sample goes through :class:`amsfe_sym.ros.live.LiveLoop` by its header stamp; th
 publishes the estimate (JointState q, qd), its standard deviations, theta, the command (with
 a controller; Float64MultiArray) and diagnostics (JSON: frames fused, refused, skipped, NIS).
 
-Fail-safe (docs/ros.md, "Hold"): on encoder silence longer than ``encoder_timeout`` (after
-the first sample), a non-finite estimate or an estimator failure it publishes the hold
-command (:data:`~amsfe_sym.ros.live.HoldKind`), says why in one line and returns exit code
-:data:`EXIT_HOLD`; on Ctrl-C or SIGTERM it publishes the hold command and the interrupt goes
-on (the command line exits 130 / 143); at the end of ``duration`` it publishes the hold
-command and returns 0.  A record (``--record``) is written on every one of these exits.
+Fail-safe (docs/ros.md, "Hold"; docs/watchdogs.md): when a watchdog of
+:mod:`amsfe_sym.ros.watchdog` trips (tracking error, innovations, covariance, deadline,
+compute time, encoder stall, the node stalled, a non-finite estimate or command; the bounds
+are the topic spec's ``[watchdog]``) it publishes the hold command
+(:data:`~amsfe_sym.ros.live.HoldKind`), says why in one line (``hold: <reason>: <cause and
+fix> (...)``) and returns exit code :data:`EXIT_HOLD`; on Ctrl-C or SIGTERM it publishes the
+hold command and the interrupt goes on (the command line exits 130 / 143); at the end of
+``duration`` it publishes the hold command and returns 0.  A record (``--record``) is
+written on every one of these exits; its ``/amsfe/config`` says how the node stopped
+(``stop``: the line, the exit code, the watchdog's reason).
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import gc
 import json
 import time
@@ -50,6 +55,7 @@ from amsfe_sym.ros.outputs import (
 )
 from amsfe_sym.ros.record import NodeRecord
 from amsfe_sym.ros.spec_filter import live_filter
+from amsfe_sym.ros.watchdog import Reason
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.topics import TopicSpec, joint_order
@@ -58,7 +64,7 @@ __all__ = ["EXIT_HOLD", "NodeOptions", "NodeReport", "run_node"]
 
 FloatArray = NDArray[np.float64]
 
-#: Exit code of a fail-safe stop (encoder silence, non-finite estimate, estimator failure).
+#: Exit code of a fail-safe stop (a watchdog tripped: docs/watchdogs.md).
 EXIT_HOLD = 3
 
 
@@ -70,7 +76,8 @@ class NodeOptions:
         controller: Run the scenario's controller and publish commands.
         compiled: The library's C estimator (else the Python reference).
         spec: The topic spec (ROS parameters override it).
-        encoder_timeout: Encoder silence that triggers the hold [s, wall].
+        encoder_timeout: Encoder silence that triggers the hold [s, wall] (None: the topic
+            spec's ``[watchdog] encoder_timeout``).
         hold: The hold command's kind.
         duration: Stop after this much of the samples' time [s] (None: run until stopped).
         record: Write a rosbag2 (MCAP) of the session here (None: none).
@@ -91,7 +98,7 @@ class NodeOptions:
     controller: bool = False
     compiled: bool = True
     spec: TopicSpec = field(default_factory=TopicSpec)
-    encoder_timeout: float = 0.5
+    encoder_timeout: float | None = None
     hold: HoldKind = "gravity"
     duration: float | None = None
     record: Path | None = None
@@ -130,6 +137,8 @@ class _Stop:
     reason: str
     code: int
     error: AmsfeError | None = None
+    #: The watchdog's reason name (``tracking``, ...; None: not a watchdog's hold).
+    watchdog: str | None = None
 
 
 class _Node:
@@ -145,6 +154,9 @@ class _Node:
         sc = live_filter(sc, spec)  # the spec's [filter] over the scenario's, as on a log
         self.names = tuple(spec.joint_names or lib.manifest.joints)
         self.effort_kind = spec.effort_kind or "applied"
+        bounds = spec.watchdog
+        if options.encoder_timeout is not None:  # --encoder-timeout over the spec's
+            bounds = dataclasses.replace(bounds, encoder_timeout=options.encoder_timeout)
         self.live = LiveLoop(
             sc,
             lib,
@@ -153,6 +165,7 @@ class _Node:
             grid_tolerance=spec.grid_tolerance,
             max_gap_steps=spec.max_gap_steps,
             effort=live_effort(spec),
+            watchdog=bounds,
         )
         self.n = lib.n
         self.std_every = std_every_parameter(node, options.std_every)
@@ -249,6 +262,9 @@ class _Node:
     def on_encoders(self, msg: Any, info: Any) -> None:
         if self.stop is not None or not self.active:
             return
+        if self._first_command and self.pub_cmd is not None:
+            self._wait_subscriber()  # before the watchdog's clock starts
+        taken = time.monotonic()
         if (idx := self._order(msg.name)) is None:
             return
         try:
@@ -260,10 +276,16 @@ class _Node:
             ns = self.m.stamp_ns(msg.header.stamp)
             if self.effort_in_encoders and self.effort_kind == "joint_torque":
                 self._effort(ns, effort_values(self.m, msg, idx, self.n))  # of this sample
-            out = self.live.encoders(ns, z, int(info["source_timestamp"]))
+            watched = self.live.watch(
+                ns, z, int(info["source_timestamp"]), taken=taken, clock=time.monotonic
+            )
         except AmsfeError as exc:
             self.stop = _Stop(f"hold: the estimator stopped: {exc}", EXIT_HOLD)
             return
+        if watched.reason != Reason.NONE:
+            self.watchdog_stop()
+            return
+        out = watched.out
         if out is None:
             return
         applied = self.effort_in_encoders and self.effort_kind == "applied"
@@ -273,18 +295,26 @@ class _Node:
         self.last_rx = time.monotonic()  # after the work: a slow first tick is no silence
 
     # ---------------------------------------------------------------- outputs
+    def watchdog_stop(self) -> None:
+        """Stop on the watchdog's hold (its line, :data:`EXIT_HOLD`)."""
+        wd = self.live.watchdog
+        if wd.hold is not None:
+            self.stop = _Stop(wd.line(), EXIT_HOLD, watchdog=wd.hold.name)
+
+    def idle(self, now: float) -> None:
+        """The watchdog's idle call (no sample for a spin); the encoders' publishers are
+        counted only when the silence is long enough to matter."""
+        wd = self.live.watchdog
+        last = self.last_rx
+        silent = last is not None and now - last > wd.config.bounds.encoder_timeout
+        pubs = self.node.count_publishers(self.spec.encoders) if silent else -1
+        if wd.idle(now, pubs) != Reason.NONE:
+            self.watchdog_stop()
+
     def _publish(self, out: TickOut, z: FloatArray, sent: int) -> None:
         m, n, ns = self.m, self.n, out.stamp_ns
-        if not np.all(np.isfinite(out.x_hat)) or not np.all(np.isfinite(out.P_diag)):
-            self.stop = _Stop(f"hold: non-finite estimate at t = {out.t:.3f} s", EXIT_HOLD)
-            return
-        if out.u is not None and not np.all(np.isfinite(out.u)):
-            self.stop = _Stop(f"hold: non-finite command at t = {out.t:.3f} s", EXIT_HOLD)
-            return
         self.last = out
         if out.u is not None and self.pub_cmd is not None:  # first: the arm waits for it
-            if self._first_command:
-                self._wait_subscriber()
             self._msg_cmd.data = m.doubles(out.u)
             self.pub_cmd.publish(self._msg_cmd)
         x = out.x_hat
@@ -407,25 +437,22 @@ def run_node(
         ex.add_node(node)
         gc.collect()
         gc.freeze()  # the startup's objects (rclpy, numpy, the library): never rescanned
-        wait = options.encoder_timeout  # signals raised between spins, not inside rclpy's C++
+        # signals raised between spins, not inside rclpy's C++
         with DeferredSignals() as signals:
             while ctx.ok() and not down and (not holder or holder[-1].stop is None):
                 ex.spin_once(timeout_sec=0.05)
                 signals.check()
                 state = holder[-1] if holder else None
-                last = None if state is None or not state.active else state.last_rx
-                if state and last is not None and time.monotonic() - last > wait:
-                    state.stop = _Stop(
-                        f"hold: no encoder sample on {state.spec.encoders} for {wait:g} s "
-                        f"(last tick {state.live.k})",
-                        EXIT_HOLD,
-                    )
+                if state is not None and state.active and state.stop is None:
+                    state.idle(time.monotonic())  # the watchdog: silence, the node stalled
         state = holder[-1] if holder else None
         if state is None:  # a managed node shut down before it was configured
             say("node: shut down before it was configured")
             return NodeReport(0, "shutdown", 0, None, {}, None)
         if state.stop is not None:
             reason, code = state.stop.reason, state.stop.code
+        if state.record is not None:
+            state.record.stopped(reason, code, None if state.stop is None else state.stop.watchdog)
         hold = state.hold()
         bad_input = state.stop is not None and state.stop.error is not None
         say(
@@ -436,6 +463,8 @@ def run_node(
     except KeyboardInterrupt:
         state = holder[-1] if holder else None
         if state is not None:
+            if state.record is not None:
+                state.record.stopped("hold: interrupted", None, None)
             hold = state.hold()
             say("node: hold: interrupted" + _held(hold))
         raise
@@ -479,6 +508,7 @@ def _managed(ctx: Any, build: Callable[[Any], _Node], holder: list[_Node], down:
             return ok
 
         def on_activate(self, state: Any) -> Any:
+            holder[-1].live.watchdog.reset()  # its clock starts again at the next sample
             holder[-1].active = True
             return ok
 

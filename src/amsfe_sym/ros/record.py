@@ -126,6 +126,12 @@ class NodeRecord:
         tick's stamp)."""
         self._add(self.spec.commands, F64, ns, np.array(u, dtype=float))
 
+    def stopped(self, line: str, exit_code: int | None, watchdog: str | None) -> None:
+        """How the node stopped, into ``/amsfe/config`` (``stop``): its one line, the exit
+        code (None: a signal) and the watchdog's reason name (None: not a watchdog's hold;
+        docs/watchdogs.md)."""
+        self.config["stop"] = {"line": line, "exit_code": exit_code, "watchdog": watchdog}
+
     def write(self, out: Path) -> Path:
         """Write the bag folder ``out`` (complete or absent)."""
         from rosbags.rosbag2 import StoragePlugin, Writer

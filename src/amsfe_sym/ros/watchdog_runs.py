@@ -9,8 +9,8 @@ applied torque, stamped t_k, with the next sample).  The node (:class:`LiveLoop`
 :meth:`~amsfe_sym.ros.live.LiveLoop.watch`) takes the samples from a KEEP_LAST queue of
 ``depth`` one at a time (a single server: taken = max(arrival, the previous done)), each
 taking ``compute`` [s] of wall clock, and calls the watchdog's ``idle`` every ``wait`` [s]
-while its queue is empty.  Nothing here reads a real clock: a run is a function of the
-scenario, the seed and the fault.
+while its queue is empty.  Nothing here reads a real clock (unless ``real_compute``): a run
+is a function of the scenario, the seed and the fault.
 
 Faults (:class:`Fault`), from ``at`` [s] on:
 
@@ -27,6 +27,7 @@ Faults (:class:`Fault`), from ``at`` [s] on:
 from __future__ import annotations
 
 import math
+import time
 from collections import deque
 from dataclasses import dataclass, field
 from typing import Literal
@@ -114,6 +115,7 @@ def run_watched(
     depth: int = 100,
     wait: float = 0.05,
     after_hold: float = 0.0,
+    real_compute: bool = False,
 ) -> WatchRun:
     """Run the arm and the node (module docstring) until the scenario's end or a hold
     (``after_hold`` [s] more of the arm then, none judged).
@@ -127,6 +129,9 @@ def run_watched(
         depth: The node's queue (KEEP_LAST) [samples].
         wait: The node's wait for a sample before it calls idle [s].
         after_hold: Keep the arm running this long after the hold [s] (not judged).
+        real_compute: Each sample takes the wall clock its processing really took on this
+            machine (``time.perf_counter``) instead of ``compute``: the Python node's own
+            compute time and the lateness it causes (a measurement, never a test's).
     """
     T = lib.T
     T_ns = round(T * 1e9)
@@ -192,8 +197,9 @@ def run_watched(
                 loop.applied((kq - 1) * T_ns, applied)
             for f in frames:
                 loop.frame(f.exposure_step * T_ns, f.z)
-            done = taken + per_sample
-            w = loop.watch(kq * T_ns, zq, taken=taken, clock=_Clock(done))
+            clock = _Clock(taken + per_sample, taken if real_compute else None)
+            w = loop.watch(kq * T_ns, zq, taken=taken, clock=clock)
+            done = clock.read
             free = done
             if w.tick is not None:
                 run.events.append(WatchEvent(w.tick, taken, -1, w.reason))
@@ -222,10 +228,15 @@ def run_watched(
 
 
 class _Clock:
-    """A clock that reads ``now`` [s] (the simulated wall clock)."""
+    """The simulated wall clock at the end of a sample's processing: ``now`` [s], or, with
+    ``start`` [s], ``start`` plus the real time since the clock was made."""
 
-    def __init__(self, now: float) -> None:
-        self.now = now
+    def __init__(self, now: float, start: float | None = None) -> None:
+        self.now, self.start, self._t0 = now, start, time.perf_counter()
+        self.read = now
 
     def __call__(self) -> float:
+        if self.start is not None:
+            self.now = self.start + (time.perf_counter() - self._t0)
+        self.read = self.now
         return self.now

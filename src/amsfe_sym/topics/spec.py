@@ -28,7 +28,7 @@ reliability = "reliable"          # or "best_effort" (what most drivers' sensor 
 depth = 100                       # history depth (KEEP_LAST)
 
 [watchdog]                        # the bounds past which a live node holds (topics.watchdog)
-tracking_error = 0.5              # [rad]; every key: docs/watchdogs.md
+tracking_error = 0.1              # [rad]; every key: docs/watchdogs.md
 ```
 
 The key ``[topics] torque`` of older log specs is read as ``effort``.

@@ -4,8 +4,8 @@ measured).
 
 ```toml
 [watchdog]
-tracking_error = 0.5       # [rad] max_j |q_d - q_hat| once the start-up handed over
-innovation_nis = 20.0      # mean of NIS / dimension over the window [-]
+tracking_error = 0.1       # [rad] max_j |q_d - q_hat| once the start-up handed over
+innovation_nis = 5.0       # mean of NIS / dimension over the window [-]
 innovation_window = 50     # fused updates (encoder samples and camera frames)
 deadline = 0.05            # [s] a sample processed later than this after its stamp is late
 deadline_misses = 50       # hold when more than this many of the window are late
@@ -52,8 +52,8 @@ class WatchdogBounds:
             between two calls of the node's own loop [s].
     """
 
-    tracking_error: float = 0.5
-    innovation_nis: float = 20.0
+    tracking_error: float = 0.1
+    innovation_nis: float = 5.0
     innovation_window: int = 50
     deadline: float = 0.05
     deadline_misses: int = 50

@@ -1,0 +1,204 @@
+"""The watchdogs of the live node (ros/watchdog.py, docs/watchdogs.md), in process: the node's
+LiveLoop and the simulated arm free running on a simulated wall clock
+(ros/watchdog_runs.py), so nothing here depends on this machine's speed or load.
+
+- each injected fault ends in a hold for its own reason within 100 ms (of the fault, or of the
+  node running again after its own stall; an arm whose torque is reversed: 250 ms, the
+  encoders' silence: the encoder timeout), on several seeds, and the hold line names it;
+- clean runs of the shipped scenarios never hold with the defaults (seeds disjoint from the
+  ones the defaults were measured on: tools/watchdog_bounds.py);
+- the [watchdog] keys: parsed, refused when bad, overridable;
+- the checks one by one on hand-made calls (their order, the causes, the latch).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+
+from amsfe_sym.codegen import library_for
+from amsfe_sym.errors import ConfigError
+from amsfe_sym.ros.watchdog import (
+    Cause,
+    Reason,
+    Watchdog,
+    WatchdogConfig,
+    WatchdogTick,
+)
+from amsfe_sym.ros.watchdog_runs import Fault, run_watched
+from amsfe_sym.scenario import load_scenario
+from amsfe_sym.topics.spec import parse_topic_spec
+from amsfe_sym.topics.watchdog import WatchdogBounds
+
+#: fault -> (its size, the reason it must hold for)
+EXPECTED = {
+    "frozen": (0.0, "innovation"),
+    "jump": (0.01, "innovation"),
+    "torque_loss": (0.0, "innovation"),
+    "reversed": (0.0, "tracking"),
+    "stall": (0.3, "node_stalled"),
+    "lag": (0.08, "deadline"),
+    "silent": (0.0, "encoder_stall"),
+}
+FAULT_AT = 1.6  # [s] after paper-sim's start-up handed over
+
+
+@pytest.fixture(scope="module")
+def paper() -> Any:
+    sc = load_scenario("paper-sim").with_overrides(duration=FAULT_AT + 0.7)
+    return sc, library_for(sc)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [11, 12, 13])
+@pytest.mark.parametrize("kind", list(EXPECTED))
+def test_each_fault_holds_for_its_reason(paper: Any, kind: str, seed: int) -> None:
+    sc, lib = paper
+    size, reason = EXPECTED[kind]
+    run = run_watched(sc.with_overrides(seed=seed), lib, Fault(kind, FAULT_AT, size))  # type: ignore[arg-type]
+    assert run.hold is not None, (kind, seed, run.seen)
+    assert run.hold.name == reason, run.hold.line()
+    assert run.hold.line().startswith(f"hold: {reason}: ")
+    assert run.hold_wall is not None
+    delay = run.hold_wall - run.resumed
+    if kind == "silent":  # by definition: the encoder timeout, plus one wait of the node
+        timeout = WatchdogBounds().encoder_timeout
+        assert timeout - lib.T < delay <= timeout + 0.05 + lib.T, delay
+    elif kind == "reversed":  # the link error grows through the spring: slower
+        assert 0.0 <= delay <= 0.25, (kind, seed, delay, run.hold.line())
+    else:
+        assert 0.0 <= delay <= 0.1, (kind, seed, delay, run.hold.line())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("name", "seeds", "duration"),
+    [("paper-sim", range(200, 206), 4.0), ("panda-control", range(200, 203), 3.0)],
+)
+def test_clean_runs_never_hold(name: str, seeds: range, duration: float) -> None:
+    sc0 = load_scenario(name).with_overrides(duration=duration)
+    lib = library_for(sc0)
+    for seed in seeds:
+        run = run_watched(sc0.with_overrides(seed=seed), lib)
+        assert run.hold is None, (name, seed, run.hold.line())
+        assert run.ticks == round(duration / lib.T) + 1
+        b, s = WatchdogBounds(), run.seen
+        assert s.samples == run.ticks
+        assert 0 < s.max_tracking < b.tracking_error and 0 < s.max_innovation < b.innovation_nis
+
+
+def test_watchdog_keys_parse_and_refuse() -> None:
+    spec = parse_topic_spec({"watchdog": {"tracking_error": 0.1, "deadline_misses": 0}})
+    assert spec.watchdog == WatchdogBounds(tracking_error=0.1, deadline_misses=0)
+    assert (
+        parse_topic_spec({"watchdog": {"innovation_nis": math.inf}}).watchdog.innovation_nis
+        == math.inf
+    )
+    for bad in (
+        {"tracking": 0.1},
+        {"tracking_error": 0.0},
+        {"tracking_error": "0.1"},
+        {"innovation_window": 0},
+        {"deadline_window": 1.5},
+        {"encoder_timeout": math.inf},
+        {"compute_budget": math.nan},
+        {"deadline_misses": True},
+    ):
+        with pytest.raises(ConfigError, match=r"\[watchdog\]"):
+            parse_topic_spec({"watchdog": bad})
+
+
+def _config(**bounds: Any) -> WatchdogConfig:
+    return WatchdogConfig(n=2, N=10, ne=4, T=1e-3, bounds=WatchdogBounds(**bounds))
+
+
+def _tick(k: int, **kw: Any) -> WatchdogTick:
+    """A sample k stamped k ms, taken at k ms, done 0.1 ms later, on its path."""
+    base: dict[str, Any] = {
+        "k": k,
+        "gap": 0,
+        "stamp_ns": k * 1_000_000,
+        "taken": k * 1e-3,
+        "done": k * 1e-3 + 1e-4,
+        "x_hat": np.zeros(10),
+        "P_diag": np.ones(10),
+        "q_des": np.zeros(2),
+        "u": np.zeros(2),
+        "handed_over": True,
+        "encoder_nis": 4.0,
+    }
+    return WatchdogTick(**(base | kw))
+
+
+def test_checks_one_by_one() -> None:
+    """Each check trips on its own quantity, with its cause; the first in the documented
+    order wins; a hold is latched; nothing is judged at the first sample."""
+    wd = Watchdog(_config())
+    assert wd.sample(_tick(0, x_hat=np.full(10, np.nan))) == Reason.NONE  # the first: offset
+    assert wd.sample(_tick(1, q_des=np.array([0.0, 0.6]))) == Reason.TRACKING
+    assert wd.hold is not None and wd.hold.value == 0.6 and wd.hold.k == 1
+    assert wd.sample(_tick(2)) == Reason.TRACKING  # latched
+    wd.reset()
+    wd.sample(_tick(0))
+    assert wd.sample(_tick(1, q_des=np.array([0.0, 0.6]), handed_over=False)) == Reason.NONE
+    # several at once: the covariance (estimator failed) before the tracking; after a gap:
+    # the node fell behind
+    wd.reset()
+    wd.sample(_tick(0))
+    got = wd.sample(_tick(4, gap=2, status=-2, q_des=np.array([0.0, 0.6])))
+    assert got == Reason.COVARIANCE and wd.hold is not None and wd.hold.cause == Cause.BEHIND
+    wd.reset()
+    wd.sample(_tick(0))
+    assert wd.sample(_tick(1, status=-2)) == Reason.COVARIANCE
+    assert wd.hold is not None and wd.hold.cause == Cause.INCONSISTENT
+    # more than max_gap_steps missing: on time -> the driver paused; late -> lost by the node
+    for taken, reason, cause in (
+        (10e-3, Reason.ENCODER_STALL, Cause.GAP),
+        (70e-3, Reason.NODE_STALLED, Cause.LOST),
+    ):
+        wd.reset()
+        wd.sample(_tick(0))
+        tick = _tick(10, gap=9, taken=taken, done=taken + 1e-4, x_hat=None, P_diag=None)
+        assert wd.sample(tick) == reason and wd.hold is not None and wd.hold.cause == cause
+    # compute: 0.2 s for one tick
+    wd.reset()
+    wd.sample(_tick(0))
+    assert wd.sample(_tick(1, done=1e-3 + 0.2)) == Reason.COMPUTE
+    # deadline: 51 late samples (0.06 s behind) of the last 1000
+    wd.reset()
+    wd.sample(_tick(0))
+    for k in range(1, 52):
+        got = wd.sample(_tick(k, taken=k * 1e-3 + 0.06, done=k * 1e-3 + 0.0601))
+        assert got == (Reason.DEADLINE if k == 51 else Reason.NONE), k
+    # innovation: the mean of NIS / 4 over 50 fused updates above 20
+    wd.reset()
+    wd.sample(_tick(0))
+    for k in range(1, 51):
+        got = wd.sample(_tick(k, encoder_nis=84.0))
+        assert got == (Reason.INNOVATION if k == 50 else Reason.NONE), k
+    assert wd.hold is not None and wd.hold.value == 21.0
+    # non-finite: the estimate before the command
+    wd.reset()
+    wd.sample(_tick(0))
+    assert wd.sample(_tick(1, u=np.array([np.nan, 0.0]))) == Reason.NONFINITE
+    assert wd.hold is not None and wd.hold.cause == Cause.COMMAND
+    assert "nan" in wd.line()
+
+
+def test_idle_says_whose_silence() -> None:
+    """Silence with the publisher there: the driver is silent; without: gone; a node whose
+    own loop was not called for the timeout: it was not scheduled."""
+    for calls, pubs, reason, cause in (
+        ([0.3, 0.6], 1, Reason.ENCODER_STALL, Cause.SILENT),
+        ([0.3, 0.6], 0, Reason.ENCODER_STALL, Cause.GONE),
+        ([0.7], 1, Reason.NODE_STALLED, Cause.UNSCHEDULED),
+    ):
+        wd = Watchdog(_config())
+        assert wd.idle(0.2, pubs) == Reason.NONE  # before the first sample: nothing
+        wd.sample(_tick(0))
+        got = [wd.idle(t, pubs) for t in calls]
+        assert got[-1] == reason and wd.hold is not None and wd.hold.cause == cause, got
+        assert all(g == Reason.NONE for g in got[:-1])
