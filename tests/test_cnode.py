@@ -24,7 +24,15 @@ from amsfe_sym.errors import RosError
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
 from tests.test_node_record import _bag
-from tests.test_ros import PATIENT_ARM, PATIENT_NODE, SRC, _finish, _ros_env, _start
+from tests.test_ros import (
+    PATIENT_ARM,
+    PATIENT_NODE,
+    PATIENT_WATCHDOG,
+    SRC,
+    _finish,
+    _ros_env,
+    _start,
+)
 
 
 def _lockstep(tmp_path: Path, scenario: str, impl: str, duration: float = 2.0) -> dict[str, Any]:
@@ -161,7 +169,8 @@ def test_amsfe_live_is_simulate(tmp_path: Path) -> None:
     try:
         procs.append(_start(env, "live", "paper-sim", "--controller", "amsfe", "--lockstep",
                             "--duration", "1", "--impl", "c", "--record", str(rec),
-                            "--encoder-timeout", "20", "--command-timeout", "60"))  # fmt: skip
+                            "--encoder-timeout", "20", "--command-timeout", "60",
+                            "--ros-args", *PATIENT_WATCHDOG))  # fmt: skip
     finally:
         results = _finish(procs, 180.0)
     code, text = results[0]

@@ -325,6 +325,11 @@ def run_c_node(
     )
     refuse_c_node(c_node_refusal(sc, spec, options.managed, options.controller))
     sc_live = live_filter(sc, spec)
+    timeout = (  # --encoder-timeout over the spec's [watchdog] encoder_timeout
+        spec.watchdog.encoder_timeout
+        if options.encoder_timeout is None
+        else float(options.encoder_timeout)
+    )
     end_k = -1 if options.duration is None else round(options.duration / lib.T)
     with tempfile.TemporaryDirectory(prefix="amsfe_cnode_") as tmp:
         folder = Path(tmp)
@@ -339,7 +344,7 @@ def run_c_node(
                 "end_k": end_k,
                 "std_every": every,
                 "hold": options.hold,
-                "encoder_timeout": options.encoder_timeout,
+                "encoder_timeout": timeout,
                 "subscriber_wait": options.subscriber_wait,
                 "record": arrays,
                 "sched_priority": SCHED_PRIORITY,

@@ -79,4 +79,9 @@ def write_record(
         e += 1
     if a["hold_ns"].size:
         rec.hold(int(a["hold_ns"][0, 0]), a["hold_u"][0])
+    if hasattr(rec, "stopped"):  # how the node stopped, into /amsfe/config
+        code = int(a["stop_code"][0, 0])
+        wd = bytes(a["stop_wd"].ravel()).decode()
+        line = bytes(a["stop_line"].ravel()).decode()
+        rec.stopped(line, None if code in (130, 143) else code, wd or None)
     return rec.write(out)

@@ -221,6 +221,7 @@ typedef struct {
   record_t rec;
   amsfe_watchdog *wd;  /* the watchdogs (amsfe_watchdog.h): their reasons are the holds */
   double *frame_nis;   /* [LIVE_MAX_FRAMES] NIS of the frames fused at the tick */
+  int exit_code;       /* the process's, known at the stop */
 } node_t;
 
 enum { T_ENC, T_CAM, T_EFF, T_TRUTH, T_EST, T_STD, T_THETA, T_DIAG, T_CMD, T_N };
@@ -632,6 +633,10 @@ static void publish_tick(node_t *s, long long ns, const double *z, long long sen
 static void on_encoders(node_t *s, long long sent, long long received, double taken) {
   live_loop *L = &s->L;
   int n = s->n;
+  if (s->first_command && L->controller) { /* before the watchdog's clock starts */
+    wait_subscriber(s);
+    taken = mono_s();
+  }
   long long ns;
   int has_eff;
   if (read_joint_state(s, &ns, s->pos, s->vel, s->eff, &has_eff) < 0) {
@@ -829,6 +834,14 @@ static void write_record(node_t *s, const char *path) {
   rec_section(f, "hold_u", 'd', R->has_hold, n, R->hold_u, 8);
   int64_t lost = R->lost;
   rec_section(f, "lost", 'q', 1, 1, &lost, 8);
+  /* how the node stopped: its line, exit code, the watchdog's reason ("" : none) */
+  amsfe_watchdog_state ws;
+  amsfe_watchdog_get_state(s->wd, &ws);
+  const char *wd_name = ws.reason != AMSFE_WD_NONE ? amsfe_watchdog_reason_name(ws.reason) : "";
+  int64_t code = s->exit_code;
+  rec_section(f, "stop_line", 'c', (long)strlen(s->stop_line), 1, s->stop_line, 1);
+  rec_section(f, "stop_code", 'q', 1, 1, &code, 8);
+  rec_section(f, "stop_wd", 'c', (long)strlen(wd_name), 1, wd_name, 1);
   int bad = ferror(f);
   bad |= fclose(f) != 0;
   if (bad || rename(tmp, path) != 0)
@@ -1024,12 +1037,7 @@ int main(int argc, char **argv) {
       size_t publishers = 0;
       int known = rcl_subscription_get_publisher_count(&s->sub_enc, &publishers) == RCL_RET_OK;
       if (amsfe_watchdog_idle(s->wd, mono_s(), known ? (int)publishers : -1) != AMSFE_WD_NONE) {
-        /* the Python node's line, then the watchdog's reason and cause */
-        char why[1536];
-        amsfe_watchdog_format(s->wd, why, sizeof why);
-        snprintf(s->stop_line, sizeof s->stop_line,
-                 "hold: no encoder sample on %s for %g s (last tick %ld); %s", s->topic[T_ENC],
-                 s->encoder_timeout, L->k, strncmp(why, "hold: ", 6) == 0 ? why + 6 : why);
+        amsfe_watchdog_format(s->wd, s->stop_line, sizeof s->stop_line); /* as the Python node */
         s->stop_code = EXIT_HOLD;
       }
     }
@@ -1054,12 +1062,14 @@ int main(int argc, char **argv) {
   }
   if (g_signal && code < 0) {
     printf("node: hold: interrupted%s\n", held);
+    snprintf(s->stop_line, sizeof s->stop_line, "hold: interrupted");
     code = g_signal == SIGTERM ? 143 : 130;
   } else if (code == EXIT_BAD_INPUT) {
     printf("node: stopped on bad input%s\n", held);
     fprintf(stderr, "error: %s\n", s->stop_line);
   } else if (code < 0) {
     printf("node: shutdown%s\n", held);
+    snprintf(s->stop_line, sizeof s->stop_line, "shutdown");
     code = 0;
   } else {
     printf("node: %s%s\n", s->stop_line, held);
@@ -1072,6 +1082,7 @@ int main(int argc, char **argv) {
            1e3 * percentile(l, s->n_lat, 0.99), 1e3 * l[s->n_lat - 1], s->n_lat);
   }
   fflush(stdout);
+  s->exit_code = code;
   if (s->recording) write_record(s, record_path);
   rcl_ret_t fini = rcl_wait_set_fini(&s->ws);
   fini |= rcl_node_fini(&s->node);
