@@ -330,3 +330,30 @@ def test_c_node_sigterm_holds_and_records(tmp_path: Path) -> None:
     assert "node: hold: interrupted; hold command [" in node.text, node.text
     got = _bag(rec)
     assert len(got["/amsfe/estimate"]) == len(got["/effort_controller/commands"]) - 1 >= 1000
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_c_node_managed(tmp_path: Path) -> None:
+    """``amsfe node --impl c --managed``: rcl_lifecycle's services (change_state, get_state)
+    take it to ``inactive`` and ``active``; then it closes the lockstep loop, every tick
+    recorded, and ends at its duration (exit 0)."""
+    from tests.test_ros import _lifecycle
+
+    env = _ros_env(tmp_path)
+    rec = tmp_path / "rec"
+    procs = []
+    try:
+        node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--managed",
+                      "--impl", "c", "--duration", "0.5", "--record", str(rec),
+                      *PATIENT_NODE)  # fmt: skip
+        procs.append(node)
+        assert _lifecycle(env, "amsfe_node", "configure", "activate") == ["inactive", "active"]
+        procs.insert(0, _start(env, "sim-node", "paper-sim", "--lockstep", "--duration", "0.5",
+                               *PATIENT_ARM))  # fmt: skip
+    finally:
+        results = _finish(procs, 120.0)
+    for code, text in results:
+        assert code == 0, text
+    assert "the C node" in node.text and "waiting for configure and activate" in node.text
+    assert len(_bag(rec)["/amsfe/estimate"]) == 501

@@ -64,8 +64,7 @@ def c_node_refusal(
 ) -> str | None:
     """Why the C node cannot run this configuration (None: it can): the C node reads an
     effort topic of kind ``applied`` only (the estimators of a joint torque or of an
-    unknown input are the Python node's), runs the controllers the C runtime has, and has
-    no lifecycle states."""
+    unknown input are the Python node's) and runs the controllers the C runtime has."""
     from amsfe_sym.runtime.compiled_loop import CONTROLLER_CODES
 
     if controller and sc.controller not in CONTROLLER_CODES:
@@ -73,8 +72,6 @@ def c_node_refusal(
     kind = spec.effort_kind or "applied"
     if kind != "applied":
         return f"effort kind {kind!r} (the C node reads the applied torque only)"
-    if managed:
-        return "--managed (the C node has no lifecycle states)"
     return None
 
 
@@ -189,6 +186,7 @@ def write_params(
         f"subscriber_wait {float(options['subscriber_wait'])!r}",
         f"effort_in_encoders {int(spec.effort == spec.encoders)}",
         f"read_effort {int(kind != 'none')}",
+        f"managed {int(options.get('managed', False))}",
         f"qos {spec.reliability} {spec.depth} {enc_depth} {cam_depth}",
         f"sched_priority {int(options['sched_priority'])}",
         f"joints {' '.join(names)}",
@@ -348,6 +346,7 @@ def run_c_node(
                 "subscriber_wait": options.subscriber_wait,
                 "record": arrays,
                 "sched_priority": SCHED_PRIORITY,
+                "managed": options.managed,
             },
         )
         env = dict(os.environ)

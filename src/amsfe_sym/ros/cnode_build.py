@@ -38,7 +38,13 @@ C_DIR = Path(__file__).with_name("c")
 #: Flags of the node's build (-O1 as the generated libraries: the node's own code is small).
 CNODE_CFLAGS: tuple[str, ...] = ("-O1", "-std=gnu11")
 #: The message packages the node's topics use (their C type support is linked).
-_MSG_PACKAGES = ("sensor_msgs", "geometry_msgs", "std_msgs", "builtin_interfaces")
+_MSG_PACKAGES = (
+    "sensor_msgs",
+    "geometry_msgs",
+    "std_msgs",
+    "builtin_interfaces",
+    "lifecycle_msgs",
+)
 #: The Python type support's data symbols librcl's wheel needs at load (amsfe_pystub.c).
 _PY_DATA_SYMBOLS = ("PyExc_RuntimeError", "_Py_TrueStruct")
 
@@ -193,7 +199,7 @@ def _command(
     """The compile-and-link command of the node, against the library and headers copied
     into ``gen_dir`` (the node's folder)."""
     name = lib.library_path.name.removeprefix("lib").removesuffix(".so")
-    libs = ["rcl", "rcutils", "rmw", "rosidl_runtime_c"]
+    libs = ["rcl", "rcl_lifecycle", "rcutils", "rmw", "rosidl_runtime_c"]
     for pkg in _MSG_PACKAGES:
         libs += [f"{pkg}__rosidl_generator_c", f"{pkg}__rosidl_typesupport_c"]
     rpaths = [gen_dir, ros.lib, *ros.bundled]
