@@ -10,6 +10,7 @@ from __future__ import annotations
 import ctypes
 import dataclasses
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -295,3 +296,23 @@ def test_c_controller_hands_over_at_the_python_tick() -> None:
         arm.advance(out.u)
     # it waited, then blended, then handed over once, within the run
     assert [f[1] for f in flips] == [False, True] and 0 < flips[1][0] < arm.K - 1, flips
+
+
+def test_c_watchdog_builds_alone_and_never_allocates(tmp_path: Path) -> None:
+    """amsfe_watchdog.c compiles on its own (C99, every warning an error) and calls nothing
+    but memset and snprintf: no allocation, no clock, no I/O of its own."""
+    import shutil
+    import subprocess
+
+    from amsfe_sym.codegen import compiler
+    from amsfe_sym.runtime.cheader import C_DIR
+
+    cc = compiler()
+    if shutil.which(cc) is None or shutil.which("nm") is None:
+        pytest.skip("no C compiler or nm")
+    obj = tmp_path / "amsfe_watchdog.o"
+    flags = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1", "-c"]
+    subprocess.run([cc, *flags, str(C_DIR / "amsfe_watchdog.c"), "-o", str(obj)], check=True)
+    nm = subprocess.run(["nm", "-u", str(obj)], check=True, capture_output=True, text=True)
+    called = {line.split()[-1] for line in nm.stdout.splitlines() if line.strip()}
+    assert called <= {"memset", "snprintf"}, called

@@ -12,7 +12,9 @@ taking ``--compute`` seconds a sample):
 3. ``compute``: clean runs on ``--compute-seeds`` seeds of the verify block where each
    sample takes the wall clock its processing really took here (the Python node's own
    compute time, and the lateness it causes through the queue);
-4. ``faults``: each fault of :data:`~amsfe_sym.ros.watchdog_runs.FAULTS` at ``--fault-at``
+4. ``cost``: the Python watchdog's own time per call (``Watchdog.sample`` and ``idle`` on
+   the calls of one clean run, median of 5 passes) [us];
+5. ``faults``: each fault of :data:`~amsfe_sym.ros.watchdog_runs.FAULTS` at ``--fault-at``
    on ``--fault-seeds`` seeds with the defaults: the reason and the delay from the fault (or
    from the node's resumption after a stall) to the hold [s of wall clock].
 
@@ -25,13 +27,17 @@ import argparse
 import dataclasses
 import json
 import math
+import os
 import platform
+import statistics
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
 from amsfe_sym.codegen import library_for
+from amsfe_sym.ros.watchdog import Watchdog, WatchdogConfig
 from amsfe_sym.ros.watchdog_runs import FAULTS, Fault, WatchRun, run_watched
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.topics.watchdog import WatchdogBounds
@@ -74,6 +80,21 @@ def _clean(name: str, part: str, sc0: Any, lib: Any, seeds: range, **kw: Any) ->
     }
 
 
+def _cost(lib: Any, events: list[Any]) -> float:
+    """Median over 5 passes of the Python watchdog's mean time per call on ``events`` [us]."""
+    passes = []
+    for _ in range(5):
+        wd = Watchdog(WatchdogConfig(lib.n, lib.N, 2 * lib.n, lib.T))
+        t0 = time.perf_counter()
+        for e in events:
+            if e.tick is None:
+                wd.idle(e.now, e.publishers)
+            else:
+                wd.sample(e.tick)
+        passes.append((time.perf_counter() - t0) / len(events) * 1e6)
+    return statistics.median(passes)
+
+
 def _machine() -> str:
     try:
         out = subprocess.run(["lscpu"], capture_output=True, text=True, check=True).stdout
@@ -96,7 +117,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--compute-seeds", type=int, default=3)
     ap.add_argument("--fault-at", type=float, default=2.0)
     ap.add_argument("--compute", type=float, default=2e-4)
-    ap.add_argument("--parts", nargs="+", default=["measure", "verify", "compute", "faults"])
+    ap.add_argument(
+        "--parts", nargs="+", default=["measure", "verify", "compute", "cost", "faults"]
+    )
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument(
         "--merge", action="store_true", help="update the parts run here in an existing --out"
@@ -125,6 +148,11 @@ def main(argv: list[str] | None = None) -> int:
         if "compute" in args.parts:
             seeds = range(first, first + args.compute_seeds)
             res["compute"] = _clean(name, "compute", sc0, lib, seeds, real_compute=True)
+        if "cost" in args.parts:
+            events = run_watched(sc0.with_overrides(seed=first), lib).events
+            res["cost_us_per_call"] = _cost(lib, events)
+            res["cost_load_average"] = os.getloadavg()[0]  # the machine's, while measured
+            print(name, "cost", res["cost_us_per_call"], flush=True)
         if "faults" in args.parts:
             faults: dict[str, Any] = {}
             duration = args.fault_at + 1.0
