@@ -24,7 +24,15 @@ from amsfe_sym.errors import RosError
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
 from tests.test_node_record import _bag
-from tests.test_ros import PATIENT_ARM, PATIENT_NODE, SRC, _finish, _ros_env, _start
+from tests.test_ros import (
+    PATIENT_ARM,
+    PATIENT_NODE,
+    PATIENT_WATCHDOG,
+    SRC,
+    _finish,
+    _ros_env,
+    _start,
+)
 
 
 def _lockstep(tmp_path: Path, scenario: str, impl: str, duration: float = 2.0) -> dict[str, Any]:
@@ -161,7 +169,8 @@ def test_amsfe_live_is_simulate(tmp_path: Path) -> None:
     try:
         procs.append(_start(env, "live", "paper-sim", "--controller", "amsfe", "--lockstep",
                             "--duration", "1", "--impl", "c", "--record", str(rec),
-                            "--encoder-timeout", "20", "--command-timeout", "60"))  # fmt: skip
+                            "--encoder-timeout", "20", "--command-timeout", "60",
+                            "--ros-args", *PATIENT_WATCHDOG))  # fmt: skip
     finally:
         results = _finish(procs, 180.0)
     code, text = results[0]
@@ -293,3 +302,58 @@ def test_c_live_loop_is_the_python_live_loop(tmp_path: Path) -> None:
     c = loop.counters
     assert (applied, rejected) == (c["frames_applied"], c["frames_rejected"])
     assert enc_rejected == c["encoder_rejected"]
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_c_node_sigterm_holds_and_records(tmp_path: Path) -> None:
+    """SIGTERM to ``amsfe node --impl c`` alone (not its process group): it is forwarded to
+    the C node, which publishes the hold command and says so; ``amsfe node`` exits 143 and
+    its record is written, every tick's estimate with its command, the hold last."""
+    import signal
+
+    env = _ros_env(tmp_path)
+    rec = tmp_path / "rec"
+    procs = []
+    try:
+        node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--impl", "c",
+                      "--record", str(rec), *PATIENT_NODE)  # fmt: skip
+        sim = _start(env, "sim-node", "paper-sim", "--lockstep", "--duration", "30",
+                     "--command-timeout", "20")  # fmt: skip
+        procs += [node, sim]
+        sim.wait_for("t = 1.0 s", 90.0)
+        os.kill(node.p.pid, signal.SIGTERM)
+        assert node.p.wait(timeout=60.0) == 143, node.text
+        sim.kill(signal.SIGTERM)
+    finally:
+        _finish(procs, 60.0)
+    assert "node: hold: interrupted; hold command [" in node.text, node.text
+    got = _bag(rec)
+    assert len(got["/amsfe/estimate"]) == len(got["/effort_controller/commands"]) - 1 >= 1000
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_c_node_managed(tmp_path: Path) -> None:
+    """``amsfe node --impl c --managed``: rcl_lifecycle's services (change_state, get_state)
+    take it to ``inactive`` and ``active``; then it closes the lockstep loop, every tick
+    recorded, and ends at its duration (exit 0)."""
+    from tests.test_ros import _lifecycle
+
+    env = _ros_env(tmp_path)
+    rec = tmp_path / "rec"
+    procs = []
+    try:
+        node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--managed",
+                      "--impl", "c", "--duration", "0.5", "--record", str(rec),
+                      *PATIENT_NODE)  # fmt: skip
+        procs.append(node)
+        assert _lifecycle(env, "amsfe_node", "configure", "activate") == ["inactive", "active"]
+        procs.insert(0, _start(env, "sim-node", "paper-sim", "--lockstep", "--duration", "0.5",
+                               *PATIENT_ARM))  # fmt: skip
+    finally:
+        results = _finish(procs, 120.0)
+    for code, text in results:
+        assert code == 0, text
+    assert "the C node" in node.text and "waiting for configure and activate" in node.text
+    assert len(_bag(rec)["/amsfe/estimate"]) == 501

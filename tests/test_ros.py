@@ -540,10 +540,13 @@ class _Proc:
         return time.monotonic()
 
 
+#: The node's own timing watchdogs off (a lockstep arm waits for the node however late it is;
+#: tests/test_watchdog*.py test them): a ``--ros-args`` block.
+PATIENT_WATCHDOG = ("-p", "watchdog.deadline:=.inf", "-p", "watchdog.compute_budget:=.inf")
 #: Timeouts for a loaded 2-core machine, where a process may stall for seconds: the node's
 #: encoder silence before the hold (the faults test keeps the default 0.5 s it measures), the
 #: arm's wait for a node and for each lockstep command.  Bounded: every run ends in _finish.
-PATIENT_NODE = ("--encoder-timeout", "20")
+PATIENT_NODE = ("--encoder-timeout", "20", "--ros-args", *PATIENT_WATCHDOG)
 PATIENT_ARM = ("--start-timeout", "60", "--command-timeout", "30")
 
 
@@ -701,7 +704,7 @@ def test_faults_hold_and_clean_exits(tmp_path: Path) -> None:
         # 1. SIGKILL of the arm
         rec1 = tmp_path / "rec1"
         node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--record", str(rec1),
-                      "--encoder-timeout", "2")  # fmt: skip
+                      "--encoder-timeout", "2", "--ros-args", *PATIENT_WATCHDOG)  # fmt: skip
         sim = _start(env, "sim-node", "paper-sim", "--lockstep", "--duration", "30",
                      *PATIENT_ARM)  # fmt: skip
         procs += [node, sim]

@@ -202,3 +202,21 @@ def test_idle_says_whose_silence() -> None:
         got = [wd.idle(t, pubs) for t in calls]
         assert got[-1] == reason and wd.hold is not None and wd.hold.cause == cause, got
         assert all(g == Reason.NONE for g in got[:-1])
+
+
+def test_idle_counting_asks_the_graph_only_when_silent() -> None:
+    """The node's idle call reads the publisher count (a graph query) only once the silence
+    is past the timeout, and holds as idle does with that count."""
+    asked: list[float] = []
+
+    def count() -> int:
+        asked.append(1.0)
+        return 0
+
+    wd = Watchdog(_config())
+    assert wd.idle_counting(0.1, count) == Reason.NONE and not asked  # before the first
+    wd.sample(_tick(0))
+    assert wd.idle_counting(0.3, count) == Reason.NONE and not asked
+    assert wd.idle_counting(0.6, count) == Reason.ENCODER_STALL and len(asked) == 1
+    assert wd.hold is not None and wd.hold.cause == Cause.GONE
+    assert wd.idle_counting(0.9, count) == Reason.ENCODER_STALL and len(asked) == 1  # latched

@@ -10,6 +10,7 @@ from __future__ import annotations
 import ctypes
 import dataclasses
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -260,3 +261,58 @@ def test_c_refuses_a_bad_config(runs: dict[str, Any]) -> None:
     assert (
         c.c.amsfe_watchdog_init(ctypes.byref(h), ctypes.byref(c.cfg), c._mem.ctypes.data, 8) == -7
     )
+
+
+@pytest.mark.slow
+def test_c_controller_hands_over_at_the_python_tick() -> None:
+    """amsfe_ctrl_handed_over (what the C node gives its tracking watchdog) is the Python
+    controller's handed_over at every tick of a closed-loop run whose start-up waits and
+    blends (the two controllers on the same inputs, their torques equal to 1e-12)."""
+    from amsfe_sym.ros.arm import SimArm
+    from amsfe_sym.ros.live import LiveLoop
+    from tests.test_startup import controller_pair
+
+    sc = load_scenario("paper-sim").with_overrides(duration=1.6, seed=3)
+    lib = library_for(sc)
+    arm, loop = SimArm(sc, lib), LiveLoop(sc, lib, controller=True)
+    _, cc, ref = controller_pair(sc, lib, arm.K)
+    handed = ctypes.CDLL(str(lib.library_path)).amsfe_ctrl_handed_over
+    handed.restype, handed.argtypes = ctypes.c_int, [ctypes.c_void_p, ctypes.c_long]
+    T_ns, N = round(lib.T * 1e9), lib.N
+    flips = []
+    for k in range(arm.K):
+        s = arm.sense()
+        for f in s.frames:
+            loop.frame(f.exposure_step * T_ns, f.z)
+        out = loop.encoders(k * T_ns, s.z)
+        assert out is not None and out.u is not None and loop.ctrl is not None and loop.est
+        nis = None if out.report is None else out.report.encoder_nis
+        u_c = cc.torque(k, ref[k], out.x_hat, s.z, None, loop.est.P[:N, :N], nis)
+        np.testing.assert_allclose(u_c, out.u, rtol=1e-12, atol=1e-12, err_msg=f"k={k}")
+        py = loop.ctrl.handed_over(k)
+        assert bool(handed(cc.handle, k)) == py, k
+        if not flips or flips[-1][1] != py:
+            flips.append((k, py))
+        arm.advance(out.u)
+    # it waited, then blended, then handed over once, within the run
+    assert [f[1] for f in flips] == [False, True] and 0 < flips[1][0] < arm.K - 1, flips
+
+
+def test_c_watchdog_builds_alone_and_never_allocates(tmp_path: Path) -> None:
+    """amsfe_watchdog.c compiles on its own (C99, every warning an error) and calls nothing
+    but memset and snprintf: no allocation, no clock, no I/O of its own."""
+    import shutil
+    import subprocess
+
+    from amsfe_sym.codegen import compiler
+    from amsfe_sym.runtime.cheader import C_DIR
+
+    cc = compiler()
+    if shutil.which(cc) is None or shutil.which("nm") is None:
+        pytest.skip("no C compiler or nm")
+    obj = tmp_path / "amsfe_watchdog.o"
+    flags = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1", "-c"]
+    subprocess.run([cc, *flags, str(C_DIR / "amsfe_watchdog.c"), "-o", str(obj)], check=True)
+    nm = subprocess.run(["nm", "-u", str(obj)], check=True, capture_output=True, text=True)
+    called = {line.split()[-1] for line in nm.stdout.splitlines() if line.strip()}
+    assert called <= {"memset", "snprintf"}, called

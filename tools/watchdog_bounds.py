@@ -12,7 +12,9 @@ taking ``--compute`` seconds a sample):
 3. ``compute``: clean runs on ``--compute-seeds`` seeds of the verify block where each
    sample takes the wall clock its processing really took here (the Python node's own
    compute time, and the lateness it causes through the queue);
-4. ``faults``: each fault of :data:`~amsfe_sym.ros.watchdog_runs.FAULTS` at ``--fault-at``
+4. ``cost``: the Python watchdog's own time per call (``Watchdog.sample`` and ``idle`` on
+   the calls of one clean run, median of 5 passes) [us];
+5. ``faults``: each fault of :data:`~amsfe_sym.ros.watchdog_runs.FAULTS` at ``--fault-at``
    on ``--fault-seeds`` seeds with the defaults: the reason and the delay from the fault (or
    from the node's resumption after a stall) to the hold [s of wall clock].
 
@@ -25,13 +27,17 @@ import argparse
 import dataclasses
 import json
 import math
+import os
 import platform
+import statistics
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
 from amsfe_sym.codegen import library_for
+from amsfe_sym.ros.watchdog import Watchdog, WatchdogConfig
 from amsfe_sym.ros.watchdog_runs import FAULTS, Fault, WatchRun, run_watched
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.topics.watchdog import WatchdogBounds
@@ -59,6 +65,36 @@ def _seen(run: WatchRun) -> dict[str, float]:
     return {k: d[k] for k in SEEN} | {"true_error": run.true_error}
 
 
+def _clean(name: str, part: str, sc0: Any, lib: Any, seeds: range, **kw: Any) -> dict[str, Any]:
+    """Clean runs of ``sc0`` on ``seeds`` (``run_watched``'s keywords ``kw``): the largest
+    watched quantities and the hold lines."""
+    rows = []
+    for seed in seeds:
+        r = run_watched(sc0.with_overrides(seed=seed), lib, **kw)
+        rows.append(_seen(r) | {"seed": seed, "hold": None if r.hold is None else r.hold.line()})
+        print(name, part, rows[-1], flush=True)
+    return {
+        "seeds": [seeds.start, seeds.stop],
+        "max": {k: max(row[k] for row in rows) for k in (*SEEN, "true_error")},
+        "holds": [row["hold"] for row in rows if row["hold"] is not None],
+    }
+
+
+def _cost(lib: Any, events: list[Any]) -> float:
+    """Median over 5 passes of the Python watchdog's mean time per call on ``events`` [us]."""
+    passes = []
+    for _ in range(5):
+        wd = Watchdog(WatchdogConfig(lib.n, lib.N, 2 * lib.n, lib.T))
+        t0 = time.perf_counter()
+        for e in events:
+            if e.tick is None:
+                wd.idle(e.now, e.publishers)
+            else:
+                wd.sample(e.tick)
+        passes.append((time.perf_counter() - t0) / len(events) * 1e6)
+    return statistics.median(passes)
+
+
 def _machine() -> str:
     try:
         out = subprocess.run(["lscpu"], capture_output=True, text=True, check=True).stdout
@@ -81,63 +117,42 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--compute-seeds", type=int, default=3)
     ap.add_argument("--fault-at", type=float, default=2.0)
     ap.add_argument("--compute", type=float, default=2e-4)
-    ap.add_argument("--parts", nargs="+", default=["measure", "verify", "compute", "faults"])
+    ap.add_argument(
+        "--parts", nargs="+", default=["measure", "verify", "compute", "cost", "faults"]
+    )
     ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument(
+        "--merge", action="store_true", help="update the parts run here in an existing --out"
+    )
     args = ap.parse_args(argv)
-    out: dict[str, Any] = {
-        "command": "tools/watchdog_bounds.py " + " ".join(argv or sys.argv[1:]),
-        "machine": _machine(),
-        "defaults": dataclasses.asdict(WatchdogBounds()),
-        "compute": args.compute,
-        "scenarios": {},
-    }
+    command = "tools/watchdog_bounds.py " + " ".join(argv or sys.argv[1:])
+    out: dict[str, Any] = {"commands": [], "scenarios": {}}
+    if args.merge and args.out.is_file():
+        out = json.loads(args.out.read_text())
+    out["commands"].append(command)
+    out |= {"machine": _machine(), "defaults": dataclasses.asdict(WatchdogBounds())}
+    out["compute"] = args.compute
     for name in args.scenarios:
         sc0 = load_scenario(name)
         lib = library_for(sc0)
-        res: dict[str, Any] = {"T": lib.T, "duration": sc0.duration}
+        res: dict[str, Any] = out["scenarios"].get(name, {})
+        res |= {"T": lib.T, "duration": sc0.duration}
         if "measure" in args.parts:
-            rows = []
-            for seed in range(args.first_seed, args.first_seed + args.seeds):
-                r = run_watched(
-                    sc0.with_overrides(seed=seed), lib, bounds=OFF, compute=args.compute
-                )
-                rows.append(
-                    _seen(r) | {"seed": seed, "hold": None if r.hold is None else r.hold.name}
-                )
-                print(name, "measure", rows[-1], flush=True)
-            res["measure"] = {
-                "seeds": [args.first_seed, args.first_seed + args.seeds],
-                "max": {k: max(row[k] for row in rows) for k in (*SEEN, "true_error")},
-                "holds": sum(row["hold"] is not None for row in rows),
-            }
+            seeds = range(args.first_seed, args.first_seed + args.seeds)
+            m = _clean(name, "measure", sc0, lib, seeds, bounds=OFF, compute=args.compute)
+            res["measure"] = m | {"holds": len(m["holds"])}
+        first = args.verify_first_seed
         if "verify" in args.parts:
-            rows = []
-            first = args.verify_first_seed
-            for seed in range(first, first + args.verify_seeds):
-                r = run_watched(sc0.with_overrides(seed=seed), lib, compute=args.compute)
-                rows.append(
-                    _seen(r) | {"seed": seed, "hold": None if r.hold is None else r.hold.line()}
-                )
-                print(name, "verify", rows[-1], flush=True)
-            res["verify"] = {
-                "seeds": [first, first + args.verify_seeds],
-                "max": {k: max(row[k] for row in rows) for k in (*SEEN, "true_error")},
-                "holds": [row["hold"] for row in rows if row["hold"] is not None],
-            }
+            seeds = range(first, first + args.verify_seeds)
+            res["verify"] = _clean(name, "verify", sc0, lib, seeds, compute=args.compute)
         if "compute" in args.parts:
-            rows = []
-            first = args.verify_first_seed
-            for seed in range(first, first + args.compute_seeds):
-                r = run_watched(sc0.with_overrides(seed=seed), lib, real_compute=True)
-                rows.append(
-                    _seen(r) | {"seed": seed, "hold": None if r.hold is None else r.hold.line()}
-                )
-                print(name, "compute", rows[-1], flush=True)
-            res["compute"] = {
-                "seeds": [first, first + args.compute_seeds],
-                "max": {k: max(row[k] for row in rows) for k in (*SEEN, "true_error")},
-                "holds": [row["hold"] for row in rows if row["hold"] is not None],
-            }
+            seeds = range(first, first + args.compute_seeds)
+            res["compute"] = _clean(name, "compute", sc0, lib, seeds, real_compute=True)
+        if "cost" in args.parts:
+            events = run_watched(sc0.with_overrides(seed=first), lib).events
+            res["cost_us_per_call"] = _cost(lib, events)
+            res["cost_load_average"] = os.getloadavg()[0]  # the machine's, while measured
+            print(name, "cost", res["cost_us_per_call"], flush=True)
         if "faults" in args.parts:
             faults: dict[str, Any] = {}
             duration = args.fault_at + 1.0

@@ -1,67 +1,47 @@
 """``amsfe node --impl c``: the node's per-sample path in C on rcl (``ros/c/amsfe_node.c``),
-built against the ROS 2 wheels of the venv and the robot's generated library, configured
-from Python, started and waited for (docs/live-control.md).
+configured from Python, started and waited for (docs/live-control.md); its build is
+:mod:`amsfe_sym.ros.cnode_build`, its record :mod:`amsfe_sym.ros.cnode_record`.
 
-- :func:`build_node` compiles ``ros/c/*.c`` against the wheels' rcl (headers under
-  ``<prefix>/include/<pkg>/<pkg>/``, libraries in ``<prefix>/lib/`` and the wheels' bundled
-  ones in ``site-packages/ros_<pkg>.libs/``, reached through an old-style RPATH:
-  ``-Wl,--disable-new-dtags``, since RUNPATH does not reach librcl's own dependencies) and
-  the generated library, cached by content in ``$AMSFE_GENERATED_DIR/amsfe_node/<hash>/``
-  like the libraries (the same sources, library, compiler, flags and rcl compile once),
-  with its own copy of the library (a library regenerated in place never changes a built
-  node).
-  librcl's wheel links the Python type support of every message package; of its Python
-  symbols two are data resolved at load (``PyExc_RuntimeError``, ``_Py_TrueStruct``), which
-  ``amsfe_pystub.c`` defines, the functions are never called and bound lazily: no
-  libpython, no interpreter in the node.
 - :func:`write_params` writes what the C node reads: the estimator's and the controller's
   parameter blocks as :func:`amsfe_sym.sim.compiled.run_compiled` builds them (the same
   builders), the reference per tick (a binary file), and the topic spec resolved (topics,
-  joint order, QoS depths, the rates) with the node's options.
+  joint order, QoS depths, the rates, the watchdogs' bounds) with the node's options.
 - :func:`run_c_node` resolves the spec's ROS parameters (``-p``) with rclpy as the Python
   node does, starts the C node with the ``--ros-args`` (rcl applies the remaps), forwards
   Ctrl-C / SIGTERM, returns its exit code and, with ``--record``, writes the record from the
-  arrays the C node wrote at its stop (:class:`~amsfe_sym.ros.record.NodeRecord`, the Python
-  node's writer): the sample path stays free of Python.
+  arrays the C node wrote at its stop: the sample path stays free of Python.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 import os
-import shlex
-import shutil
 import signal
 import subprocess
 import sys
-import sysconfig
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.codegen.cache import build_lock, compiler, default_out_dir
-from amsfe_sym.errors import ConfigError, RosError, describe
+from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.ros.cnode_build import CNodeBuild, build_node, ros_paths
+from amsfe_sym.ros.cnode_record import read_record_arrays, write_record
 from amsfe_sym.ros.middleware import DEFAULT_RMW
-from amsfe_sym.runtime.library import ModelLibrary, file_sha256
+from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.topics import TopicSpec
 
 __all__ = [
-    "CNODE_CFLAGS",
     "CNodeBuild",
     "CNodeRun",
     "build_node",
     "c_node_refusal",
     "queue_depths",
-    "read_record_arrays",
     "refuse_c_node",
     "ros_paths",
     "run_c_node",
@@ -70,14 +50,6 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-#: The C sources of the node (this package's ``ros/c/``).
-C_DIR = Path(__file__).with_name("c")
-#: Flags of the node's build (-O1 as the generated libraries: the node's own code is small).
-CNODE_CFLAGS: tuple[str, ...] = ("-O1", "-std=gnu11")
-#: The message packages the node's topics use (their C type support is linked).
-_MSG_PACKAGES = ("sensor_msgs", "geometry_msgs", "std_msgs", "builtin_interfaces")
-#: The Python type support's data symbols librcl's wheel needs at load (amsfe_pystub.c).
-_PY_DATA_SYMBOLS = ("PyExc_RuntimeError", "_Py_TrueStruct")
 #: SCHED_FIFO priority the node asks for (above every normal task; ros2_control's real-time
 #: loop uses 50 too).
 SCHED_PRIORITY = 50
@@ -86,179 +58,13 @@ SCHED_PRIORITY = 50
 CATCH_UP_S = 2.0
 
 
-@dataclass(frozen=True)
-class RosPaths:
-    """Where the ROS 2 wheels put rcl's C side.
-
-    Attributes:
-        include: ``-I`` folders (``<prefix>/include/<pkg>``, each holding ``<pkg>/``).
-        lib: ``<prefix>/lib`` (librcl, the message libraries).
-        bundled: ``site-packages/ros_<pkg>.libs`` (the wheels' bundled libraries).
-        rcl_version: The ``ros-rcl`` distribution's version (hashed into the cache key).
-    """
-
-    include: tuple[Path, ...]
-    lib: Path
-    bundled: tuple[Path, ...]
-    rcl_version: str
-
-
-def ros_paths(prefix: Path | None = None) -> RosPaths:
-    """rcl's headers and libraries in the environment ``prefix`` (default this Python's).
-
-    Raises:
-        RosError: the ROS 2 wheels (the ``[ros]`` extra) are not installed there.
-    """
-    root = Path(prefix or sys.prefix)
-    header = root / "include" / "rcl" / "rcl" / "rcl.h"
-    lib = root / "lib"
-    if not header.is_file() or not (lib / "librcl.so").is_file():
-        raise RosError(
-            describe(
-                "the C node's build",
-                f"rcl's C headers and librcl.so from the ROS 2 wheels under {root}",
-                f"no {header if not header.is_file() else lib / 'librcl.so'}",
-                'pip install -e ".[ros]" (or run the Python node: amsfe node --impl python)',
-            )
-        )
-    include = tuple(sorted(d for d in (root / "include").iterdir() if (d / d.name).is_dir()))
-    purelib = Path(sysconfig.get_paths(vars={"base": str(root), "platbase": str(root)})["purelib"])
-    bundled = tuple(sorted(purelib.glob("ros_*.libs")))
-    try:
-        version = metadata.version("ros-rcl")
-    except metadata.PackageNotFoundError:
-        version = "unknown"
-    return RosPaths(include, lib, bundled, version)
-
-
-@dataclass(frozen=True)
-class CNodeBuild:
-    """A built C node.
-
-    Attributes:
-        path: The executable.
-        key: Its content hash.
-        compiled: Whether this call compiled it (False: reused from the cache).
-    """
-
-    path: Path
-    key: str
-    compiled: bool
-
-
-def _sources() -> list[Path]:
-    """The node's C sources (``ros/c/*.c``) and headers, sorted."""
-    return sorted([*C_DIR.glob("*.c"), *C_DIR.glob("*.h")])
-
-
-def build_node(lib: ModelLibrary, out_dir: Path | None = None) -> CNodeBuild:
-    """The C node of ``lib``'s robot, compiled once per content (sources, the library's
-    content hash and file, compiler, flags, rcl's version) under ``out_dir``
-    (default ``$AMSFE_GENERATED_DIR``, else the generated libraries' folder) /
-    ``amsfe_node/<hash>/``.
-
-    Raises:
-        RosError: the ROS 2 wheels are missing, or the compiler failed (its last lines).
-    """
-    ros = ros_paths()
-    cc = compiler()
-    srcs = [p for p in _sources() if p.suffix == ".c"]
-    gen = hashlib.sha256()
-    for path in _sources():
-        gen.update(path.name.encode() + b"\0" + path.read_bytes())
-    inputs = {
-        "sources": gen.hexdigest(),
-        "library": lib.manifest.raw.get("content_hash"),
-        "library_sha256": lib.manifest.raw.get("library_sha256"),
-        "library_path": str(lib.library_path),
-        "compiler": _compiler_line(cc),
-        "cflags": list(CNODE_CFLAGS),
-        "rcl": ros.rcl_version,
-        "prefix": str(sys.prefix),
-    }
-    key = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:20]
-    folder = (out_dir or default_out_dir()) / "amsfe_node" / key
-    exe = folder / "amsfe_node"
-    if exe.is_file() and os.access(exe, os.X_OK):
-        return CNodeBuild(exe, key, False)
-    with build_lock(folder.parent / f"{key}.lock"):
-        if exe.is_file():
-            return CNodeBuild(exe, key, False)
-        folder.mkdir(parents=True, exist_ok=True)
-        # the node's own copy of the library and its headers: a library regenerated in place
-        # later (another scenario's, another checkout's) never changes a built node
-        gen_dir = lib.library_path.parent
-        for src in [lib.library_path, *sorted(gen_dir.glob("*.h"))]:
-            shutil.copy2(src, folder / src.name)
-        if file_sha256(folder / lib.library_path.name) != inputs["library_sha256"]:
-            raise RosError(
-                describe(
-                    "the C node's build",
-                    f"the library {lib.library_path} this run loaded",
-                    "another one in its place (regenerated meanwhile)",
-                    "run the command again",
-                )
-            )
-        tmp = folder / f"amsfe_node.tmp{os.getpid()}"
-        cmd = _command(cc, lib, ros, srcs, tmp, folder)
-        proc = subprocess.run(cmd, capture_output=True, text=True)
-        if proc.returncode != 0 or not tmp.is_file():
-            tmp.unlink(missing_ok=True)
-            tail = " | ".join((proc.stderr or proc.stdout).strip().splitlines()[-3:])
-            raise RosError(
-                describe(
-                    "the C node's build",
-                    "a compiled amsfe_node",
-                    f"{cc} exit {proc.returncode}: {tail}",
-                    "check the compiler and the [ros] extra, or run amsfe node --impl python",
-                )
-            )
-        (folder / "build.json").write_text(
-            json.dumps({**inputs, "command": shlex.join(cmd)}, indent=1)
-        )
-        tmp.replace(exe)
-    return CNodeBuild(exe, key, True)
-
-
-def _compiler_line(cc: str) -> str:
-    try:
-        out = subprocess.run([cc, "--version"], capture_output=True, text=True, check=True)
-    except (OSError, subprocess.CalledProcessError) as exc:
-        raise RosError(
-            describe("C compiler", f"a working {cc!r}", str(exc), "install gcc or set $CC")
-        ) from exc
-    return out.stdout.splitlines()[0] if out.stdout else cc
-
-
-def _command(
-    cc: str, lib: ModelLibrary, ros: RosPaths, srcs: list[Path], out: Path, gen_dir: Path
-) -> list[str]:
-    """The compile-and-link command of the node, against the library and headers copied
-    into ``gen_dir`` (the node's folder)."""
-    name = lib.library_path.name.removeprefix("lib").removesuffix(".so")
-    libs = ["rcl", "rcutils", "rmw", "rosidl_runtime_c"]
-    for pkg in _MSG_PACKAGES:
-        libs += [f"{pkg}__rosidl_generator_c", f"{pkg}__rosidl_typesupport_c"]
-    rpaths = [gen_dir, ros.lib, *ros.bundled]
-    cmd = [cc, *CNODE_CFLAGS, *map(str, srcs), f"-I{C_DIR}", f"-I{gen_dir}"]
-    cmd += [f"-I{d}" for d in ros.include]
-    cmd += [f"-L{gen_dir}", f"-l{name}", f"-L{ros.lib}", *(f"-l{x}" for x in libs), "-lm"]
-    cmd += ["-Wl,--disable-new-dtags", *(f"-Wl,-rpath,{d}" for d in rpaths)]
-    # the Python type support librcl's wheel links: functions bound lazily (never called),
-    # its two data symbols defined by amsfe_pystub.c and exported to the libraries
-    cmd += ["-Wl,--allow-shlib-undefined", "-Wl,-z,lazy"]
-    cmd += [f"-Wl,--export-dynamic-symbol={s}" for s in _PY_DATA_SYMBOLS]
-    return [*cmd, "-o", str(out)]
-
-
 # ---------------------------------------------------------------------- configuration
 def c_node_refusal(
     sc: Scenario, spec: TopicSpec, managed: bool, controller: bool = False
 ) -> str | None:
     """Why the C node cannot run this configuration (None: it can): the C node reads an
     effort topic of kind ``applied`` only (the estimators of a joint torque or of an
-    unknown input are the Python node's), runs the controllers the C runtime has, and has
-    no lifecycle states."""
+    unknown input are the Python node's) and runs the controllers the C runtime has."""
     from amsfe_sym.runtime.compiled_loop import CONTROLLER_CODES
 
     if controller and sc.controller not in CONTROLLER_CODES:
@@ -266,8 +72,6 @@ def c_node_refusal(
     kind = spec.effort_kind or "applied"
     if kind != "applied":
         return f"effort kind {kind!r} (the C node reads the applied torque only)"
-    if managed:
-        return "--managed (the C node has no lifecycle states)"
     return None
 
 
@@ -382,6 +186,7 @@ def write_params(
         f"subscriber_wait {float(options['subscriber_wait'])!r}",
         f"effort_in_encoders {int(spec.effort == spec.encoders)}",
         f"read_effort {int(kind != 'none')}",
+        f"managed {int(options.get('managed', False))}",
         f"qos {spec.reliability} {spec.depth} {enc_depth} {cam_depth}",
         f"sched_priority {int(options['sched_priority'])}",
         f"joints {' '.join(names)}",
@@ -518,6 +323,11 @@ def run_c_node(
     )
     refuse_c_node(c_node_refusal(sc, spec, options.managed, options.controller))
     sc_live = live_filter(sc, spec)
+    timeout = (  # --encoder-timeout over the spec's [watchdog] encoder_timeout
+        spec.watchdog.encoder_timeout
+        if options.encoder_timeout is None
+        else float(options.encoder_timeout)
+    )
     end_k = -1 if options.duration is None else round(options.duration / lib.T)
     claimed = None
     if options.record is not None:  # one writer a path: claimed before the node starts
@@ -538,14 +348,11 @@ def run_c_node(
                 "end_k": end_k,
                 "std_every": every,
                 "hold": options.hold,
-                # (None: the spec's [watchdog] encoder_timeout, as the Python node; the merge of
-                # the watchdog and cnode branches, loadtest)
-                "encoder_timeout": spec.watchdog.encoder_timeout
-                if options.encoder_timeout is None
-                else options.encoder_timeout,
+                "encoder_timeout": timeout,
                 "subscriber_wait": options.subscriber_wait,
                 "record": arrays,
                 "sched_priority": SCHED_PRIORITY,
+                "managed": options.managed,
             },
         )
         env = dict(os.environ)
@@ -571,32 +378,13 @@ def run_c_node(
         record = None
         end = _end_line(code if interrupt is None else 130)
         if claimed is not None and arrays is not None and arrays.is_file():
-            record = _write_record(
-                sc_live, lib, spec, read_record_arrays(arrays, lib), options.record, claimed, end
-            )
+            a = read_record_arrays(arrays, lib)
+            record = write_record(sc_live, lib, spec, a, options.record, claimed, end)
         elif claimed is not None:  # no arrays (the node failed): the claim released, said so
             record = claimed.write(reason=end)
         if interrupt is not None or code in (130, 143):
             raise interrupt if interrupt is not None else KeyboardInterrupt()
     return CNodeRun(code, record, build)
-
-
-def read_record_arrays(path: Path, lib: ModelLibrary) -> dict[str, NDArray[Any]]:
-    """The arrays the C node wrote at its stop (sections ``name type rows cols data``)."""
-    raw = path.read_bytes()
-    out: dict[str, NDArray[Any]] = {}
-    pos = 0
-    kinds = {"d": "<f8", "q": "<i8", "c": "u1"}
-    while pos < len(raw):
-        name = raw[pos : pos + 14].rstrip(b"\0").decode()
-        kind = chr(raw[pos + 15])
-        rows, cols = np.frombuffer(raw, "<i8", 2, pos + 16)
-        pos += 32
-        dtype = np.dtype(kinds[kind])
-        count = int(rows) * int(cols)
-        out[name] = np.frombuffer(raw, dtype, count, pos).reshape(int(rows), int(cols)).copy()
-        pos += count * dtype.itemsize
-    return out
 
 
 def _end_line(code: int) -> str:
@@ -606,55 +394,3 @@ def _end_line(code: int) -> str:
     if code in (130, 143):
         return "hold: interrupted (SIGINT or SIGTERM)"
     return f"hold: the C node exited {code} (its hold line names the reason)"
-
-
-def _write_record(
-    sc: Scenario,
-    lib: ModelLibrary,
-    spec: TopicSpec,
-    a: dict[str, NDArray[Any]],
-    out: Path,
-    rec: Any = None,
-    end: str = "done",
-) -> Path:
-    """The rosbag2 of ``--record`` from the C node's arrays, in the Python node's order
-    (each tick: its diagnostics, encoders, the frames fused at it, the truth, the outputs;
-    then the torques stamped up to it; the hold command last).  A tick's truth is the last
-    one sent after the previous tick's encoder sample and not after its own (their DDS
-    source timestamps: never the previous tick's)."""
-    from amsfe_sym.ros.record import NodeRecord
-
-    names = list(spec.joint_names or lib.manifest.joints)
-    rec = NodeRecord(sc, lib, spec, names) if rec is None else rec
-    L = lib.layout
-    text = bytes(a["diag_text"].ravel())
-    diags = text.split(b"\0")[:-1] if text else []
-    diag_ns = a["diag_ns"].ravel()
-    fr_ns, eff_ns = a["fr_ns"].ravel(), a["eff_ns"].ravel()
-    sent, truth_sent = a["sent"].ravel(), a["truth_sent"].ravel()
-    d = f = e = 0
-    prev = np.iinfo(np.int64).min
-    for t, ns in enumerate(int(v) for v in a["ns"].ravel()):
-        while d < len(diag_ns) and diag_ns[d] == ns:
-            rec.diagnostics(ns, diags[d].decode())
-            d += 1
-        rec.encoders(ns, a["z"][t])
-        while f < len(fr_ns) and fr_ns[f] == ns:
-            rec.frame(ns, int(a["fr_exp"][f, 0]), a["fr_z"][f])
-            f += 1
-        mine = np.flatnonzero((truth_sent > prev) & (truth_sent <= sent[t]))
-        if mine.size:
-            rec.truth(ns, a["truth_x"][mine[np.argmax(truth_sent[mine])]])
-        prev = int(sent[t])
-        x = a["x"][t]
-        u = a["u"][t] if np.all(np.isfinite(a["u"][t])) else None
-        rec.outputs(ns, x, a["std"][t], x[L["theta"]], u)
-        while e < len(eff_ns) and eff_ns[e] <= ns:
-            rec.applied(int(eff_ns[e]), a["eff_u"][e])
-            e += 1
-    while e < len(eff_ns):
-        rec.applied(int(eff_ns[e]), a["eff_u"][e])
-        e += 1
-    if a["hold_ns"].size:
-        rec.hold(int(a["hold_ns"][0, 0]), a["hold_u"][0])
-    return Path(rec.write(out, reason=end))

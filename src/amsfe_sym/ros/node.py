@@ -8,22 +8,17 @@ sample goes through :class:`amsfe_sym.ros.live.LiveLoop` by its header stamp; th
 publishes the estimate (JointState q, qd), its standard deviations, theta, the command (with
 a controller; Float64MultiArray) and diagnostics (JSON: frames fused, refused, skipped, NIS).
 
-Fail-safe (docs/ros.md, "Hold"; docs/watchdogs.md): when a watchdog of
-:mod:`amsfe_sym.ros.watchdog` trips (tracking error, innovations, covariance, deadline,
-compute time, encoder stall, the node stalled, a non-finite estimate or command; the bounds
-are the topic spec's ``[watchdog]``) it publishes the hold command
-(:data:`~amsfe_sym.ros.live.HoldKind`), says why in one line (``hold: <reason>: <cause and
-fix> (...)``) and returns exit code :data:`EXIT_HOLD`; on Ctrl-C or SIGTERM it publishes the
-hold command and the interrupt goes on (the command line exits 130 / 143); at the end of
-``duration`` it publishes the hold command and returns 0.  A record (``--record``) is
-written on every one of these exits; its ``/amsfe/config`` says how the node stopped
-(``stop``: the line, the exit code, the watchdog's reason).
+Fail-safe (docs/ros.md, "Hold"): when a watchdog trips (docs/watchdogs.md; the spec's
+``[watchdog]``) it publishes the hold command (:data:`~amsfe_sym.ros.live.HoldKind`), says
+why in one line (``hold: <reason>: ...``) and returns :data:`EXIT_HOLD`; on Ctrl-C or
+SIGTERM it publishes the hold command and the interrupt goes on (the command line exits 130 /
+143); at the end of ``duration`` it publishes the hold command and returns 0.  A record
+(``--record``) is written on every one of these exits, saying why (``/amsfe/config`` ``stop``).
 """
 
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import gc
 import json
 import time
@@ -38,6 +33,7 @@ from numpy.typing import NDArray
 from amsfe_sym.core.interrupts import DeferredSignals
 from amsfe_sym.errors import AmsfeError
 from amsfe_sym.ros.effort import effort_values, live_effort
+from amsfe_sym.ros.lifecycle import lifecycle_node
 from amsfe_sym.ros.live import HoldKind, LiveLoop, TickOut
 from amsfe_sym.ros.middleware import (
     executor,
@@ -76,8 +72,7 @@ class NodeOptions:
         controller: Run the scenario's controller and publish commands.
         compiled: The library's C estimator (else the Python reference).
         spec: The topic spec (ROS parameters override it).
-        encoder_timeout: Encoder silence that triggers the hold [s, wall] (None: the topic
-            spec's ``[watchdog] encoder_timeout``).
+        encoder_timeout: Encoder silence that triggers the hold [s, wall]; None: the spec's.
         hold: The hold command's kind.
         duration: Stop after this much of the samples' time [s] (None: run until stopped).
         record: Write a rosbag2 (MCAP) of the session here (None: none).
@@ -132,12 +127,12 @@ class NodeReport:
 
 @dataclass(frozen=True)
 class _Stop:
-    """Why the node stops: one line, the exit code, the error to raise (bad input)."""
+    """Why the node stops: one line, the exit code, the error to raise (bad input), the
+    watchdog's reason name (``tracking``, ...)."""
 
     reason: str
     code: int
     error: AmsfeError | None = None
-    #: The watchdog's reason name (``tracking``, ...; None: not a watchdog's hold).
     watchdog: str | None = None
 
 
@@ -154,9 +149,6 @@ class _Node:
         sc = live_filter(sc, spec)  # the spec's [filter] over the scenario's, as on a log
         self.names = tuple(spec.joint_names or lib.manifest.joints)
         self.effort_kind = spec.effort_kind or "applied"
-        bounds = spec.watchdog
-        if options.encoder_timeout is not None:  # --encoder-timeout over the spec's
-            bounds = dataclasses.replace(bounds, encoder_timeout=options.encoder_timeout)
         self.live = LiveLoop(
             sc,
             lib,
@@ -165,7 +157,7 @@ class _Node:
             grid_tolerance=spec.grid_tolerance,
             max_gap_steps=spec.max_gap_steps,
             effort=live_effort(spec),
-            watchdog=bounds,
+            watchdog=spec.watchdog.with_timeout(options.encoder_timeout),
         )
         self.n = lib.n
         self.std_every = std_every_parameter(node, options.std_every)
@@ -291,8 +283,7 @@ class _Node:
         except AmsfeError as exc:
             self.stop = _Stop(f"hold: the estimator stopped: {exc}", EXIT_HOLD)
             return
-        if watched.reason != Reason.NONE:
-            self.watchdog_stop()
+        if self._held(watched.reason):
             return
         out = watched.out
         if out is None:
@@ -304,21 +295,19 @@ class _Node:
         self.last_rx = time.monotonic()  # after the work: a slow first tick is no silence
 
     # ---------------------------------------------------------------- outputs
-    def watchdog_stop(self) -> None:
-        """Stop on the watchdog's hold (its line, :data:`EXIT_HOLD`)."""
-        wd = self.live.watchdog
-        if wd.hold is not None:
-            self.stop = _Stop(wd.line(), EXIT_HOLD, watchdog=wd.hold.name)
+    def _held(self, reason: Reason) -> bool:
+        """Stop on the watchdog's hold, if any (its line, :data:`EXIT_HOLD`)."""
+        hold = self.live.watchdog.hold
+        if reason != Reason.NONE and hold is not None:
+            self.stop = _Stop(hold.line(), EXIT_HOLD, watchdog=hold.name)
+        return self.stop is not None
 
-    def idle(self, now: float) -> None:
-        """The watchdog's idle call (no sample for a spin); the encoders' publishers are
-        counted only when the silence is long enough to matter."""
-        wd = self.live.watchdog
-        last = self.last_rx
-        silent = last is not None and now - last > wd.config.bounds.encoder_timeout
-        pubs = self.node.count_publishers(self.spec.encoders) if silent else -1
-        if wd.idle(now, pubs) != Reason.NONE:
-            self.watchdog_stop()
+    def idle(self) -> None:
+        """The watchdog's idle call (the encoders' publishers counted only when silent)."""
+        count = self.node.count_publishers
+        self._held(
+            self.live.watchdog.idle_counting(time.monotonic(), lambda: count(self.spec.encoders))
+        )
 
     def _publish(self, out: TickOut, z: FloatArray, sent: int) -> None:
         m, n, ns = self.m, self.n, out.stamp_ns
@@ -393,6 +382,21 @@ class _Node:
             d["encoder_nis"] = out.report.encoder_nis
         return d
 
+    def activate(self) -> None:
+        """Lifecycle ``activate``: process samples (the watchdog's clock from the next)."""
+        self.live.watchdog.reset()
+        self.active = True
+
+    def deactivate(self) -> None:
+        """Lifecycle ``deactivate``: publish the hold and stop processing."""
+        self.active, self.last_rx = False, None
+        self.hold()
+
+    def shut_down(self) -> None:
+        """Lifecycle ``shutdown``: stop the node."""
+        self.active = False
+        self.stop = _Stop("shut down by its lifecycle manager", 0)
+
     def hold(self) -> FloatArray | None:
         """Publish the last estimate's ``estimate_std`` and ``theta`` if they are not out
         yet, then the hold command (with a controller): returns it."""
@@ -432,7 +436,7 @@ def run_node(
     holder: list[_Node] = []
     down: list[bool] = []  # a managed node's shutdown transition happened
     if options.managed:
-        node = _managed(ctx, lambda n: _Node(ctx, sc, lib, options, n), holder, down)
+        node = lifecycle_node(ctx, lambda n: _Node(ctx, sc, lib, options, n), holder, down)
     else:
         node = rclpy.create_node("amsfe_node", context=ctx)
     state: _Node | None = None
@@ -445,14 +449,13 @@ def run_node(
         ex.add_node(node)
         gc.collect()
         gc.freeze()  # the startup's objects (rclpy, numpy, the library): never rescanned
-        # signals raised between spins, not inside rclpy's C++
-        with DeferredSignals() as signals:
+        with DeferredSignals() as signals:  # raised between spins, not inside rclpy's C++
             while ctx.ok() and not down and (not holder or holder[-1].stop is None):
                 ex.spin_once(timeout_sec=0.05)
                 signals.check()
                 state = holder[-1] if holder else None
                 if state is not None and state.active and state.stop is None:
-                    state.idle(time.monotonic())  # the watchdog: silence, the node stalled
+                    state.idle()  # the watchdog: silence, the node stalled
         state = holder[-1] if holder else None
         if state is None:  # a managed node shut down before it was configured
             say("node: shut down before it was configured")
@@ -507,45 +510,3 @@ def _held(hold: FloatArray | None) -> str:
     if hold is None:
         return ""
     return f"; hold command {[round(float(v), 6) for v in hold]} N m published"
-
-
-def _managed(ctx: Any, build: Callable[[Any], _Node], holder: list[_Node], down: list[bool]) -> Any:
-    """The lifecycle node ``amsfe_node``: ``configure`` builds the :class:`_Node` (spec
-    parameters, estimator, subscriptions) into ``holder``, ``activate`` starts processing,
-    ``deactivate`` publishes the hold and stops processing, ``shutdown`` stops the node."""
-    from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
-
-    ok, failed = TransitionCallbackReturn.SUCCESS, TransitionCallbackReturn.FAILURE
-
-    class Managed(LifecycleNode):
-        def on_configure(self, state: Any) -> Any:
-            if holder:
-                return ok
-            try:
-                holder.append(build(self))
-            except AmsfeError as exc:
-                self.get_logger().error(str(exc))
-                return failed
-            return ok
-
-        def on_activate(self, state: Any) -> Any:
-            holder[-1].live.watchdog.reset()  # its clock starts again at the next sample
-            holder[-1].active = True
-            return ok
-
-        def on_deactivate(self, state: Any) -> Any:
-            holder[-1].active, holder[-1].last_rx = False, None
-            holder[-1].hold()
-            return ok
-
-        def on_cleanup(self, state: Any) -> Any:
-            return ok
-
-        def on_shutdown(self, state: Any) -> Any:
-            down.append(True)
-            if holder:
-                holder[-1].active = False
-                holder[-1].stop = _Stop("shut down by its lifecycle manager", 0)
-            return ok
-
-    return Managed("amsfe_node", context=ctx)

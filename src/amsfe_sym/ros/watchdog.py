@@ -41,6 +41,7 @@ the estimator's build) and nothing is judged before it.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import IntEnum
 
@@ -453,9 +454,16 @@ class Watchdog:
             self.hold = Hold(Reason.ENCODER_STALL, cause, self._last_k, silence, b.encoder_timeout)
         return self.reason
 
+    def idle_counting(self, now: float, publishers: Callable[[], int]) -> Reason:
+        """:meth:`idle`, the encoders' publishers counted (``publishers()``, a graph query)
+        only when the silence since the last sample is past ``encoder_timeout``."""
+        timeout = self.config.bounds.encoder_timeout
+        silent = not self._first and now - self._last_taken > timeout
+        return self.idle(now, publishers() if silent and self.hold is None else -1)
+
 
 def _nonfinite(v: FloatArray | None) -> bool:
-    return v is not None and not bool(np.all(np.isfinite(v)))
+    return v is not None and not bool(np.isfinite(v).all())
 
 
 def _max_abs_diff(a: FloatArray, b: FloatArray) -> float:

@@ -5,8 +5,9 @@ nodes (``ros/``), so that a recorded session and a live one are the same run
 Modules: ``roles`` (every role a topic can play for the estimator and the controller: its
 message types, the fields used and their units, which stamp is the sample time, and the
 meaning of a JointState's effort), ``spec`` (the topic spec: which topic plays which role,
-the log's joint names, the effort's kind, timing tolerances and QoS; TOML, every key with a
-default).
+the log's joint names, the effort's kind, timing tolerances, QoS and a live node's
+watchdog bounds; TOML, every key with a default), ``watchdog`` (the ``[watchdog]`` table's
+keys: docs/watchdogs.md).
 
 May import: errors, core.  Nothing here reads a log or talks to a middleware; no ROS and no
 ``rosbags`` is needed to import it.

@@ -21,7 +21,7 @@ A bound of ``inf`` (``tracking_error = inf`` in TOML) switches its check off.  T
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 from amsfe_sym.errors import ConfigError, describe
@@ -60,6 +60,11 @@ class WatchdogBounds:
     deadline_window: int = 1000
     compute_budget: float = 0.1
     encoder_timeout: float = 0.5
+
+    def with_timeout(self, encoder_timeout: float | None) -> WatchdogBounds:
+        """These bounds with ``encoder_timeout`` [s] (``amsfe node --encoder-timeout``; None:
+        as they are)."""
+        return self if encoder_timeout is None else replace(self, encoder_timeout=encoder_timeout)
 
 
 #: The keys of ``[watchdog]`` (the fields of :class:`WatchdogBounds`).

@@ -45,6 +45,7 @@
 #include <std_msgs/msg/string.h>
 
 #include "amsfe_cdr.h"
+#include "amsfe_lifecycle.h"
 #include "amsfe_live.h"
 #include "amsfe_node_params.h"
 #include "amsfe_watchdog.h"
@@ -221,6 +222,9 @@ typedef struct {
   record_t rec;
   amsfe_watchdog *wd;  /* the watchdogs (amsfe_watchdog.h): their reasons are the holds */
   double *frame_nis;   /* [LIVE_MAX_FRAMES] NIS of the frames fused at the tick */
+  int exit_code;       /* the process's, known at the stop */
+  int managed, active; /* --managed: samples processed only while active (lifecycle) */
+  node_lifecycle lc;
 } node_t;
 
 enum { T_ENC, T_CAM, T_EFF, T_TRUTH, T_EST, T_STD, T_THETA, T_DIAG, T_CMD, T_N };
@@ -274,6 +278,8 @@ static void configure(node_t *s, const char *path) {
   s->subscriber_wait = pf_double(pf, "subscriber_wait");
   s->effort_in_encoders = (int)pf_long(pf, "effort_in_encoders");
   s->read_effort = (int)pf_long(pf, "read_effort");
+  s->managed = (int)pf_long(pf, "managed");
+  s->active = !s->managed;
   for (int i = 0; i < T_N; ++i) s->topic[i] = pf_string(pf, TOPIC_KEYS[i]);
   if (n > MAX_JOINTS) pf_fail(pf, "joints", "at most 64 joints", "more");
   if (pf_tokens(pf, "joints", s->names, MAX_JOINTS, 0) != n)
@@ -367,6 +373,7 @@ static void configure(node_t *s, const char *path) {
 }
 
 static void take_frames(node_t *s);
+static void print_hold_list(const double *u, int n, char *out, size_t cap);
 static void take_efforts(node_t *s);
 static void take_truth(node_t *s);
 
@@ -632,6 +639,11 @@ static void publish_tick(node_t *s, long long ns, const double *z, long long sen
 static void on_encoders(node_t *s, long long sent, long long received, double taken) {
   live_loop *L = &s->L;
   int n = s->n;
+  if (!s->active) return; /* a managed node, not active: the sample is dropped */
+  if (s->first_command && L->controller) { /* before the watchdog's clock starts */
+    wait_subscriber(s);
+    taken = mono_s();
+  }
   long long ns;
   int has_eff;
   if (read_joint_state(s, &ns, s->pos, s->vel, s->eff, &has_eff) < 0) {
@@ -710,7 +722,7 @@ static void take_frames(node_t *s) {
     double z[2];
     z[0] = cdr_f64(&r), z[1] = cdr_f64(&r);
     (void)cdr_f64(&r);
-    if (!r.ok) continue;
+    if (!r.ok || !s->active) continue;
     live_frame_in(&s->L, exposure, z, info.source_timestamp);
     if (s->recording && s->rec.n_rx < LIVE_MAX_FRAMES) {
       live_frame *f = &s->rec.rx[s->rec.n_rx++];
@@ -726,7 +738,7 @@ static void take_efforts(node_t *s) {
     long long ns;
     int has_eff;
     double *pos = s->stdv, *vel = s->stdv + s->n; /* scratch */
-    if (read_joint_state(s, &ns, pos, vel, s->eff, &has_eff) < 0) continue;
+    if (!s->active || read_joint_state(s, &ns, pos, vel, s->eff, &has_eff) < 0) continue;
     live_applied(&s->L, ns, s->eff);
     record_effort(s, ns, s->eff);
   }
@@ -770,6 +782,46 @@ static void realtime(int priority) {
   else
     printf("node: SCHED_FIFO priority %d, memory locked\n", priority);
   fflush(stdout);
+}
+
+/* The last estimate's std and theta if not out yet, then the hold command (with a
+ * controller), acknowledged within 0.5 s; its list for the stop line into `held`. */
+static void publish_hold(node_t *s, char *held, size_t cap) {
+  int n = s->n;
+  held[0] = 0;
+  if (s->have_last && s->std_k != s->last_k)
+    publish_std(s, s->last_ns, s->last_x, s->last_P_diag, s->last_k);
+  if (!s->L.controller) return;
+  gravity_hold(s);
+  out_fill(&s->m_cmd, s->m_cmd.at_a, s->u_hold, n);
+  if (rcl_publish_serialized_message(&s->pub_cmd, &s->m_cmd.ser, NULL) != RCL_RET_OK)
+    ++g_publish_failed;
+  if (rcl_publisher_wait_for_all_acked(&s->pub_cmd, RCL_MS_TO_NS(500)) != RCL_RET_OK)
+    ++g_publish_failed; /* not acknowledged in time (best effort: never) */
+  char list[768];
+  print_hold_list(s->u_hold, n, list, sizeof list);
+  snprintf(held, cap, "; hold command %s N m published", list);
+  if (s->recording) {
+    s->rec.has_hold = 1, s->rec.hold_ns = s->have_last ? s->last_ns : 0;
+    memcpy(s->rec.hold_u, s->u_hold, sizeof(double) * (size_t)n);
+  }
+}
+
+/* A lifecycle transition of a managed node (amsfe_lifecycle.h). */
+static void on_lifecycle(void *ctx, int event) {
+  node_t *s = ctx;
+  char held[1024];
+  if (event == LC_ACTIVATE) {
+    amsfe_watchdog_reset(s->wd); /* its clock starts again at the next sample */
+    s->active = 1, s->started = 0;
+  } else if (event == LC_DEACTIVATE) {
+    s->active = 0, s->started = 0;
+    publish_hold(s, held, sizeof held);
+  } else if (event == LC_SHUTDOWN) {
+    s->active = 0;
+    snprintf(s->stop_line, sizeof s->stop_line, "shut down by its lifecycle manager");
+    s->stop_code = 0;
+  }
 }
 
 static int cmp_double(const void *a, const void *b) {
@@ -829,6 +881,14 @@ static void write_record(node_t *s, const char *path) {
   rec_section(f, "hold_u", 'd', R->has_hold, n, R->hold_u, 8);
   int64_t lost = R->lost;
   rec_section(f, "lost", 'q', 1, 1, &lost, 8);
+  /* how the node stopped: its line, exit code, the watchdog's reason ("" : none) */
+  amsfe_watchdog_state ws;
+  amsfe_watchdog_get_state(s->wd, &ws);
+  const char *wd_name = ws.reason != AMSFE_WD_NONE ? amsfe_watchdog_reason_name(ws.reason) : "";
+  int64_t code = s->exit_code;
+  rec_section(f, "stop_line", 'c', (long)strlen(s->stop_line), 1, s->stop_line, 1);
+  rec_section(f, "stop_code", 'q', 1, 1, &code, 8);
+  rec_section(f, "stop_wd", 'c', (long)strlen(wd_name), 1, wd_name, 1);
   int bad = ferror(f);
   bad |= fclose(f) != 0;
   if (bad || rename(tmp, path) != 0)
@@ -996,9 +1056,12 @@ int main(int argc, char **argv) {
   out_f64_array(&s->m_cmd, n);
   out_alloc(&s->m_diag, DIAG_CAP + 64);
   s->ws = rcl_get_zero_initialized_wait_set();
-  rcl_check(rcl_wait_set_init(&s->ws, 4, 0, 0, 0, 0, 0, &s->ctx, alloc), "wait set");
+  if (s->managed) rcl_check(lifecycle_init(&s->lc, &s->node), "the lifecycle state machine");
+  rcl_check(rcl_wait_set_init(&s->ws, 4, 0, 0, 0, s->managed ? 2 : 0, 0, &s->ctx, alloc),
+            "wait set");
   realtime(priority);
-  printf("node: C node on rcl (%s), waiting for encoders\n", s->topic[T_ENC]);
+  printf("node: C node on rcl (%s), waiting for %s\n", s->topic[T_ENC],
+         s->managed ? "configure and activate" : "encoders");
   fflush(stdout);
   /* ---- the loop: wait, take, tick, publish */
   while (s->stop_code < 0 && !g_signal) {
@@ -1008,9 +1071,11 @@ int main(int argc, char **argv) {
     if (add == RCL_RET_OK && sub_eff) add = rcl_wait_set_add_subscription(&s->ws, &s->sub_eff, NULL);
     if (add == RCL_RET_OK && s->recording)
       add = rcl_wait_set_add_subscription(&s->ws, &s->sub_truth, NULL);
+    if (add == RCL_RET_OK && s->managed) add = lifecycle_wait_add(&s->lc, &s->ws);
     rcl_check(add, "the wait set");
     rcl_ret_t ret = rcl_wait(&s->ws, RCL_MS_TO_NS(50));
     if (ret != RCL_RET_OK && ret != RCL_RET_TIMEOUT) break;
+    if (s->managed) lifecycle_serve(&s->lc, on_lifecycle, s);
     take_frames(s);
     if (sub_eff) take_efforts(s);
     if (s->recording) take_truth(s);
@@ -1020,46 +1085,30 @@ int main(int argc, char **argv) {
     while (s->stop_code < 0 && !g_signal &&
            rcl_take_serialized_message(&s->sub_enc, &s->in, &info, NULL) == RCL_RET_OK)
       on_encoders(s, info.source_timestamp, info.received_timestamp, mono_s()), ++got;
-    if (s->stop_code < 0 && !g_signal && got == 0) { /* no sample: the stall watchdogs */
+    if (s->stop_code < 0 && !g_signal && got == 0 && s->active && s->started) {
+      /* no sample: the stall watchdogs */
       size_t publishers = 0;
       int known = rcl_subscription_get_publisher_count(&s->sub_enc, &publishers) == RCL_RET_OK;
       if (amsfe_watchdog_idle(s->wd, mono_s(), known ? (int)publishers : -1) != AMSFE_WD_NONE) {
-        /* the Python node's line, then the watchdog's reason and cause */
-        char why[1536];
-        amsfe_watchdog_format(s->wd, why, sizeof why);
-        snprintf(s->stop_line, sizeof s->stop_line,
-                 "hold: no encoder sample on %s for %g s (last tick %ld); %s", s->topic[T_ENC],
-                 s->encoder_timeout, L->k, strncmp(why, "hold: ", 6) == 0 ? why + 6 : why);
+        amsfe_watchdog_format(s->wd, s->stop_line, sizeof s->stop_line); /* as the Python node */
         s->stop_code = EXIT_HOLD;
       }
     }
   }
   /* ---- the stop: the last estimate's std and theta, then the hold command */
   int code = s->stop_code;
-  if (s->have_last && s->std_k != s->last_k) publish_std(s, s->last_ns, s->last_x, s->last_P_diag, s->last_k);
   char held[1024] = "";
-  if (L->controller) {
-    gravity_hold(s);
-    out_fill(&s->m_cmd, s->m_cmd.at_a, s->u_hold, n);
-    if (rcl_publish_serialized_message(&s->pub_cmd, &s->m_cmd.ser, NULL) != RCL_RET_OK) ++g_publish_failed;
-    if (rcl_publisher_wait_for_all_acked(&s->pub_cmd, RCL_MS_TO_NS(500)) != RCL_RET_OK)
-      ++g_publish_failed; /* not acknowledged in time (best effort: never) */
-    char list[768];
-    print_hold_list(s->u_hold, n, list, sizeof list);
-    snprintf(held, sizeof held, "; hold command %s N m published", list);
-    if (s->recording) {
-      s->rec.has_hold = 1, s->rec.hold_ns = s->have_last ? s->last_ns : 0;
-      memcpy(s->rec.hold_u, s->u_hold, sizeof(double) * (size_t)n);
-    }
-  }
+  publish_hold(s, held, sizeof held);
   if (g_signal && code < 0) {
     printf("node: hold: interrupted%s\n", held);
+    snprintf(s->stop_line, sizeof s->stop_line, "hold: interrupted");
     code = g_signal == SIGTERM ? 143 : 130;
   } else if (code == EXIT_BAD_INPUT) {
     printf("node: stopped on bad input%s\n", held);
     fprintf(stderr, "error: %s\n", s->stop_line);
   } else if (code < 0) {
     printf("node: shutdown%s\n", held);
+    snprintf(s->stop_line, sizeof s->stop_line, "shutdown");
     code = 0;
   } else {
     printf("node: %s%s\n", s->stop_line, held);
@@ -1072,7 +1121,9 @@ int main(int argc, char **argv) {
            1e3 * percentile(l, s->n_lat, 0.99), 1e3 * l[s->n_lat - 1], s->n_lat);
   }
   fflush(stdout);
+  s->exit_code = code;
   if (s->recording) write_record(s, record_path);
+  if (s->managed) lifecycle_fini(&s->lc, &s->node);
   rcl_ret_t fini = rcl_wait_set_fini(&s->ws);
   fini |= rcl_node_fini(&s->node);
   fini |= rcl_shutdown(&s->ctx);
