@@ -405,6 +405,9 @@ CASES: dict[tuple[str, str], Case] = {
     ("node", "--record"): Case(
         lambda tmp, p: ["node", "--record", str(p), "--duration", "0.05"], "folder", False, None
     ),
+    ("live", "--record"): Case(  # the node's record, checked before either process starts
+        lambda tmp, p: ["live", "--record", str(p), "--duration", "0.05"], "folder", False, None
+    ),
 }
 
 #: Options that name a path the command reads (not an output).
@@ -416,6 +419,8 @@ INPUTS = {
     ("sweep", "spec"),
     ("play", "log"),
     ("node", "--topic-spec"),
+    ("node", "--node-exe"),
+    ("live", "--topic-spec"),
     ("sim-node", "--topic-spec"),
     ("play", "--topic-spec"),
 }

@@ -81,6 +81,9 @@ def get_argument_parser() -> argparse.ArgumentParser:
     ros_nodes.add_camera_node_arguments(
         sub.add_parser("camera-node", help="images -> the marker's pixel topic, live (ROS 2)")
     )
+    ros_nodes.add_live_arguments(
+        sub.add_parser("live", help="sim-node + node of a scenario in one command (ROS 2)")
+    )
     add_bench_arguments(
         sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
     )
@@ -141,6 +144,7 @@ def _main(argv: Sequence[str] | None) -> int:
         "node": ros_nodes.node_from_args,
         "play": ros_nodes.play_from_args,
         "camera-node": ros_nodes.camera_node_from_args,
+        "live": ros_nodes.live_from_args,
     }
     with ledger() as book:
         try:
@@ -313,6 +317,27 @@ def _input_files(*names: str | None) -> tuple[Path, ...]:
     return tuple(Path(n) for n in names if n and Path(n).exists())
 
 
+def _bench_ros(args: argparse.Namespace) -> int:
+    """``amsfe bench --ros`` (:mod:`amsfe_sym.apps.bench.ros`)."""
+    import json
+
+    from amsfe_sym.apps.bench.ros import (
+        bench_ros,
+        format_ros_report,
+        machine_name,
+        ros_report_json,
+    )
+
+    loads = (0, args.ros_load) if args.ros_load else (0,)
+    rows = bench_ros(args.ros_scenario, args.ros_duration, loads)
+    machine = machine_name()
+    print(format_ros_report(rows, machine))
+    if args.json:
+        doc = {"written_by": "amsfe bench --ros", **ros_report_json(rows, machine)}
+        Path(args.json).write_text(json.dumps(doc, indent=1) + "\n")
+    return 0
+
+
 def _bench(args: argparse.Namespace) -> int:
     from amsfe_sym.apps.bench import BenchOptions, run_bench
     from amsfe_sym.apps.bench.logs import log_case
@@ -327,6 +352,8 @@ def _bench(args: argparse.Namespace) -> int:
             force=args.force,
             inputs=_input_files(args.robot),
         )
+    if args.ros:
+        return _bench_ros(args)
     sets = args.compare_cflags
     return run_bench(
         BenchOptions(

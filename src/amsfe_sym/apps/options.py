@@ -111,6 +111,24 @@ def add_bench_arguments(p: argparse.ArgumentParser) -> None:
         help="logs amsfe estimate is timed on, simulated with --bag (default paper-sim:10 "
         "panda-control:60)",
     )
+    p.add_argument(
+        "--ros",
+        action="store_true",
+        help="only the live loop over DDS: sim-node + node free running, idle and under "
+        "--ros-load CPU hogs, each node implementation (docs/live-load.md)",
+    )
+    p.add_argument(
+        "--ros-scenario", default="paper-sim", help="scenario of --ros (default paper-sim)"
+    )
+    p.add_argument(
+        "--ros-duration", type=DURATION, default=2.0, help="arm time of each --ros run [s]"
+    )
+    p.add_argument(
+        "--ros-load",
+        type=number_type(int, 0, True, "pass a count of CPU hogs, e.g. 2", 64),
+        default=2,
+        help="CPU hogs of the loaded --ros runs (default 2; the idle runs have none)",
+    )
 
 
 def add_study_arguments(p: argparse.ArgumentParser) -> None:

@@ -19,10 +19,12 @@ from amsfe_sym.errors import ConfigError, describe
 
 __all__ = [
     "add_camera_node_arguments",
+    "add_live_arguments",
     "add_node_arguments",
     "add_play_arguments",
     "add_sim_node_arguments",
     "camera_node_from_args",
+    "live_from_args",
     "node_from_args",
     "play_from_args",
     "sim_node_from_args",
@@ -93,14 +95,24 @@ def add_sim_node_arguments(p: argparse.ArgumentParser) -> None:
         help="publish each frame as the camera's image (/camera/image_raw) and its CameraInfo "
         "instead of the pixel topic: amsfe camera-node detects them (docs/camera.md)",
     )
+    p.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="KIND@T[=VALUE]",
+        help="break the arm at T [s]: encoder_frozen, encoder_jump=RAD, torque_loss "
+        "(docs/live-load.md)",
+    )
 
 
 def sim_node_from_args(args: argparse.Namespace) -> int:
     """``amsfe sim-node`` from its parsed options."""
     from amsfe_sym.codegen import library_for
+    from amsfe_sym.ros.faults import FaultPlan, parse_fault
     from amsfe_sym.ros.sim_node import SimNodeOptions, run_sim_node
     from amsfe_sym.topics import read_topic_spec
 
+    faults = tuple(parse_fault(f) for f in args.fault)
     sc = _scenario(args)
     spec = read_topic_spec(args.topic_spec)
     lib = library_for(sc)
@@ -113,9 +125,12 @@ def sim_node_from_args(args: argparse.Namespace) -> int:
         ros_args=tuple(args.ros_args),
         domain_id=_domain(),
         images=args.images,
+        faults=faults,
     )
+    FaultPlan(faults, lib.T, lib.n)  # the same kind twice: refused before rclpy starts
     mode = "lockstep" if args.lockstep else "free running"
-    print(f"sim-node: {sc.name} seed {sc.seed}, {sc.duration:g} s, {mode}", flush=True)
+    broken = "".join(f", fault {f.label()}" for f in faults)
+    print(f"sim-node: {sc.name} seed {sc.seed}, {sc.duration:g} s, {mode}{broken}", flush=True)
     rep = run_sim_node(sc, lib, opts)
     line = f"sim-node: {rep.ticks} ticks in {rep.wall_s:.2f} s wall, {rep.commands} commands"
     if not args.lockstep:
@@ -164,6 +179,20 @@ def add_node_arguments(p: argparse.ArgumentParser) -> None:
         default="gravity",
         help="the fail-safe command: g(q_hat) or zero (docs/how-to/ros.md)",
     )
+    p.add_argument(
+        "--impl",
+        choices=("auto", "c", "python"),
+        default="auto",
+        help="the per-sample path: the C node on rcl (auto: when it builds and runs this "
+        "configuration) or the Python reference (docs/live-control.md)",
+    )
+    p.add_argument(
+        "--node-exe",
+        default=None,
+        metavar="FILE",
+        help="the C node built elsewhere (colcon: install/amsfe_node/lib/amsfe_node/amsfe_node) "
+        "instead of the wheel build",
+    )
 
 
 def node_from_args(args: argparse.Namespace) -> int:
@@ -184,6 +213,9 @@ def node_from_args(args: argparse.Namespace) -> int:
     if record is not None:
         # before anything runs: nothing there is replaced, and no input is written over
         inputs = [p for p in (args.scenario, args.topic_spec) if p and Path(p).exists()]
+        from amsfe_sym.ros.record import refuse_locked
+
+        refuse_locked(record)  # another node's record, being written or left unfinished
         check_output(record, option="--record", kind="folder", inputs=inputs)
     spec = read_topic_spec(args.topic_spec)
     note = estimator_note(spec.effort_kind or "applied", sc.estimator)
@@ -204,12 +236,47 @@ def node_from_args(args: argparse.Namespace) -> int:
         domain_id=_domain(),
     )
     ctrl = f", controller {sc.controller}" if opts.controller else ""
+    impl = "c" if args.node_exe is not None else _node_impl(args.impl, sc, lib, opts)
+    if impl == "c":
+        from amsfe_sym.ros.cnode import run_c_node
+
+        print(f"node: {sc.name}, estimator {sc.estimator}{ctrl}; the C node", flush=True)
+        exe = None if args.node_exe is None else Path(args.node_exe)
+        crun = run_c_node(sc, lib, opts, say=lambda line: print(line, flush=True), exe=exe)
+        if crun.record is not None:
+            print(f"node: record {crun.record} (amsfe estimate {crun.record})", flush=True)
+        return crun.exit_code
     wait = "configure and activate" if args.managed else "encoders"
     print(f"node: {sc.name}, estimator {sc.estimator}{ctrl}; waiting for {wait}", flush=True)
     rep = run_node(sc, lib, opts, say=lambda line: print(line, flush=True))
     if rep.record is not None:
         print(f"node: record {rep.record} (amsfe estimate {rep.record})", flush=True)
     return rep.exit_code
+
+
+def _node_impl(asked: str, sc: Any, lib: Any, opts: Any) -> str:
+    """``c`` or ``python``: ``--impl auto`` runs the C node when this configuration is one
+    it runs and it builds (else the Python node, saying why in one line); ``--impl c``
+    refuses (one line) what it cannot run."""
+    if asked == "python":
+        return "python"
+    from amsfe_sym.errors import AmsfeError
+    from amsfe_sym.ros.cnode import build_node, c_node_refusal, refuse_c_node
+
+    why = c_node_refusal(sc, opts.spec, opts.managed, opts.controller)
+    if why is None:
+        try:
+            build_node(lib)
+        except AmsfeError as exc:
+            if asked == "c":
+                raise
+            why = f"the C node did not build ({str(exc).split('. Fix:')[0]})"
+    if why is None:
+        return "c"
+    if asked == "c":
+        refuse_c_node(why)
+    print(f"node: the Python node: {why}", flush=True)
+    return "python"
 
 
 def add_play_arguments(p: argparse.ArgumentParser) -> None:
@@ -286,3 +353,58 @@ def camera_node_from_args(args: argparse.Namespace) -> int:
     )
     run_camera_node(opts, say=lambda line: print(line, flush=True))
     return 0
+
+
+def add_live_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``amsfe live`` (the arm and the node in one command)."""
+    p.add_argument("scenario", nargs="?", default="paper-sim", help="scenario name or .toml")
+    p.add_argument(
+        "--controller", default="", help="the node's controller (default the scenario's)"
+    )
+    p.add_argument("--lockstep", action="store_true", help="the arm waits for each command (exact)")
+    p.add_argument("--duration", type=DURATION, default=None, help="[s] of sample time")
+    p.add_argument("--seed", type=SEED, default=None)
+    p.add_argument(
+        "--rate", type=SECONDS, default=1.0, help="free running: speed of the arm's clock"
+    )
+    p.add_argument("--impl", choices=("auto", "c", "python"), default="auto")
+    p.add_argument("--record", default=None, metavar="DIR", help="the node's record")
+    p.add_argument("--topic-spec", default=None, metavar="FILE")
+    p.add_argument(
+        "--encoder-timeout", type=SECONDS, default=None, help="the node's encoder silence [s]"
+    )
+    p.add_argument(
+        "--command-timeout",
+        type=SECONDS,
+        default=None,
+        help="the arm's wait for the node and for a lockstep command [s]",
+    )
+    p.add_argument("--ros-args", nargs=argparse.REMAINDER, default=[], help="to both nodes")
+
+
+def live_from_args(args: argparse.Namespace) -> int:
+    """``amsfe live`` from its parsed options (ros/pair.py); ``--record`` is checked as
+    ``amsfe node`` checks it, before either process starts."""
+    from amsfe_sym.core.outputs import check_output
+    from amsfe_sym.ros.pair import PairOptions, run_pair
+
+    if args.record is not None:
+        inputs = [p for p in (args.scenario, args.topic_spec) if p and Path(p).exists()]
+        check_output(Path(args.record), option="--record", kind="folder", inputs=inputs)
+
+    return run_pair(
+        PairOptions(
+            scenario=args.scenario,
+            controller=args.controller or None,
+            lockstep=args.lockstep,
+            duration=args.duration,
+            seed=args.seed,
+            rate=args.rate,
+            impl=args.impl,
+            record=args.record,
+            topic_spec=args.topic_spec,
+            ros_args=tuple(args.ros_args),
+            encoder_timeout=args.encoder_timeout,
+            command_timeout=args.command_timeout,
+        )
+    )

@@ -171,14 +171,21 @@ class _Node:
         self.n = lib.n
         self.std_every = std_every_parameter(node, options.std_every)
         check_parameters(node)  # every parameter declared: a mistyped -p name is refused
-        self.record = None if options.record is None else NodeRecord(sc, lib, spec, self.names)
+        self.record = (  # the folder claimed now: a second writer is refused before it starts
+            None
+            if options.record is None
+            else NodeRecord(sc, lib, spec, self.names, out=options.record)
+        )
         self.last: TickOut | None = None
         self.last_rx: float | None = None
         self.stop: _Stop | None = None
         self.end_k = None if options.duration is None else round(options.duration / lib.T)
         self._orders: dict[tuple[str, ...], list[int]] = {}
-        self._truth: FloatArray | None = None
         self._first_command = True
+        #: Per command: its publication minus the middleware's receipt of the sample it
+        #: answers (system clock [ns]): the node's own latency (docs/live-load.md).
+        self.latency_ns: list[int] = []
+        self._rx_ns = 0
         self._rx_frames: list[tuple[int, FloatArray, int]] = []
         # one message object a topic, filled in each tick (publish serializes at once)
         self._msg_est = m.joint_state(0, self.names)
@@ -248,8 +255,9 @@ class _Node:
         if self.record is not None:  # before the first sample too: see LiveLoop.frame
             self._rx_frames.append((ns, pixel, sent))
 
-    def on_truth(self, msg: Any) -> None:
-        self._truth = self.m.values(msg.data)
+    def on_truth(self, msg: Any, info: Any) -> None:
+        if self.record is not None:  # matched to its tick by its source timestamp
+            self.record.truth_sent(int(info["source_timestamp"]), self.m.values(msg.data))
 
     def on_effort(self, msg: Any) -> None:
         if self.stop is not None or not self.active:
@@ -270,6 +278,7 @@ class _Node:
         if self._first_command and self.pub_cmd is not None:
             self._wait_subscriber()  # before the watchdog's clock starts
         taken = time.monotonic()
+        self._rx_ns = int(info["received_timestamp"])
         if (idx := self._order(msg.name)) is None:
             return
         try:
@@ -319,6 +328,7 @@ class _Node:
         if out.u is not None and self.pub_cmd is not None:  # first: the arm waits for it
             self._msg_cmd.data = m.doubles(out.u)
             self.pub_cmd.publish(self._msg_cmd)
+            self.latency_ns.append(time.time_ns() - self._rx_ns)
         x = out.x_hat
         est = self._msg_est
         est.header.stamp.sec, est.header.stamp.nanosec = divmod(ns, 1_000_000_000)
@@ -341,7 +351,7 @@ class _Node:
         rec = self.record
         assert rec is not None
         ns = out.stamp_ns
-        rec.encoders(ns, z)
+        rec.encoders(ns, z, sent)
         keep = []
         if out.k == 0:  # sent before the first sample: skipped by the loop, not recorded
             self._rx_frames = [f for f in self._rx_frames if f[2] > sent]
@@ -351,8 +361,6 @@ class _Node:
             else:
                 keep.append((exposure_ns, pixel, frame_sent))
         self._rx_frames = keep
-        if self._truth is not None:
-            rec.truth(ns, self._truth)
         L = self.lib.layout
         std = np.sqrt(np.maximum(out.P_diag, 0.0))
         rec.outputs(ns, out.x_hat, std, out.x_hat[L["theta"]], out.u)
@@ -483,6 +491,7 @@ def run_node(
             else f"node: {reason}" + _held(hold)
         )
     except KeyboardInterrupt:
+        reason = "hold: interrupted (SIGINT or SIGTERM)"
         state = holder[-1] if holder else None
         if state is not None:
             if state.record is not None:
@@ -493,15 +502,27 @@ def run_node(
     finally:
         if state is not None and state.record is not None and options.record is not None:
             try:
-                state.record.write(options.record)
+                state.record.write(options.record, reason=reason)
             finally:
                 stop(ctx, node)
         else:
             stop(ctx, node)
     if state.stop is not None and state.stop.error is not None:
         raise state.stop.error
+    if state.latency_ns:
+        say(latency_line(np.asarray(state.latency_ns, dtype=float) * 1e-9))
     counters = {**state.live.counters, **state.live.skipped}
     return NodeReport(state.live.k + 1, reason, code, hold, counters, options.record)
+
+
+def latency_line(lat: FloatArray) -> str:
+    """The node's latency line (``amsfe bench --ros`` reads it): sample received by the
+    middleware -> command published, p50 / p99 / max [ms] over the run's commands."""
+    p50, p99 = np.percentile(lat, [50, 99]) * 1e3
+    return (
+        f"node: latency sample received -> command published p50 {p50:.3f} p99 {p99:.3f} "
+        f"max {lat.max() * 1e3:.3f} ms over {lat.size} commands"
+    )
 
 
 def _held(hold: FloatArray | None) -> str:

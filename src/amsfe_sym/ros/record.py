@@ -13,28 +13,54 @@ estimate_std, theta, diagnostics, commands (the hold command last), and ``/tf`` 
 ``simulate --bag`` has it (world -> every link of the estimated arm, ``est/``-prefixed, and
 of the true one when a simulated arm sends its truth; at
 :data:`~amsfe_sym.logs.write.TF_RATE_HZ`, by Pinocchio when the record is written, with a
-URDF).  Kept in memory, written when the node stops (complete or absent:
-:func:`amsfe_sym.core.folders.write_folder`).
+URDF).
+
+**Every topic is the value of its own tick.**  The truth carries no stamp (a
+Float64MultiArray) and DDS does not order deliveries across topics, so a truth is matched to
+its tick by the publishers' source timestamps, as the frames are: the simulated arm sends the
+truth of tick k after the encoder sample of k - 1 and before the one of k
+(:meth:`NodeRecord.truth_sent`).  A truth that arrives after its tick's sample waits for it;
+one that never comes leaves its tick without a truth (counted in the metadata), never with
+another tick's.
+
+**Streamed to disk, one writer** (issue 37 items 2 and 7).  :meth:`NodeRecord.open` claims
+the folder before the node starts: it is created (refused in one line when it exists) and
+holds a lock file made with ``O_EXCL`` holding the writer's pid, so a second node naming the
+same path is refused before it starts, also when the first one died (its lock stays: a dead
+writer's record is not reused, it is named as unfinished).  Every :data:`SEGMENT_TICKS` ticks
+the ticks older than :data:`LAG_TICKS` are written as one complete MCAP file of the bag
+(``<name>_<i>.mcap``) and ``metadata.yaml`` is rewritten atomically to list it, so memory is
+bounded and a SIGKILL leaves a bag readable up to the last segment, its metadata saying
+``amsfe.record: unfinished``.  :meth:`NodeRecord.write` (every exit of the node: the end, a
+hold, a signal) writes the rest and says ``finished`` with the reason the node stopped
+(``amsfe.end``).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
-from collections.abc import Iterator, Sequence
+import os
+import queue
+import shutil
+import threading
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.core.folders import write_folder
+from amsfe_sym.core.folders import MARKER
+from amsfe_sym.core.ledger import note_written, resolved
 from amsfe_sym.core.toml import dump_toml
+from amsfe_sym.errors import RunFolderError, describe
 from amsfe_sym.logs.write import TF_RATE_HZ
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.topics import TopicSpec
 
-__all__ = ["NodeRecord"]
+__all__ = ["LAG_TICKS", "LOCK", "SEGMENT_TICKS", "NodeRecord", "record_state", "refuse_locked"]
 
 FloatArray = NDArray[np.float64]
 
@@ -45,26 +71,60 @@ STR = "std_msgs/msg/String"
 TF = "tf2_msgs/msg/TFMessage"
 
 
+#: Ticks kept in memory before they are written as one segment of the bag.
+SEGMENT_TICKS = 2000
+
+#: Ticks held back at a segment's cut (a truth or an effort of a tick may still arrive).
+LAG_TICKS = 100
+
+#: The lock file of a record being written (holds the writer's pid).
+LOCK = ".amsfe-record.lock"
+
+Row = tuple[str, str, int, tuple[Any, ...]]
+
+#: Builds the message (``rosbags`` type) of a row's type and data.
+Message = Callable[[str, tuple[Any, ...]], Any]
+
+
 class NodeRecord:
-    """The messages of one node run, by topic, with their log times [ns].
+    """The messages of one node run, by topic, with their log times [ns], streamed to the
+    bag folder in segments (module docstring).
 
     Args:
         sc: The scenario the node runs (written as ``/amsfe/config``).
         lib: Its library.
         spec: The node's topics.
         names: The joint names of the JointStates (the robot's q order).
+        out: The bag folder, claimed now (:meth:`open`); None: claimed by :meth:`open` or
+            :meth:`write` later (everything kept in memory until then).
+        segment_ticks: Ticks a segment holds (:data:`SEGMENT_TICKS`).
+
+    Raises:
+        RunFolderError: ``out`` exists (another writer's, or any folder).
     """
 
     def __init__(
-        self, sc: Scenario, lib: ModelLibrary, spec: TopicSpec, names: Sequence[str]
+        self,
+        sc: Scenario,
+        lib: ModelLibrary,
+        spec: TopicSpec,
+        names: Sequence[str],
+        out: Path | None = None,
+        segment_ticks: int = SEGMENT_TICKS,
     ) -> None:
         self.spec, self.names, self.n, self.lib = spec, list(names), lib.n, lib
         self._tf_every = max(1, round(1.0 / (TF_RATE_HZ * lib.T)))
+        self._T_ns = round(lib.T * 1e9)
+        self._segment_ticks, self._since_flush = max(1, segment_ticks), 0
         self._ticks = 0
-        self._truth: tuple[int, FloatArray] | None = None  # the last truth: (ns, q)
+        self._truth_q: dict[int, FloatArray] = {}  # the true q of a tick (its /tf), by ns
+        self._sent: tuple[int, int] | None = None  # the last tick's (ns, sample sent) [ns]
+        self._truths: list[tuple[int, FloatArray]] = []  # (sent, x) not yet matched
+        self._awaiting: list[tuple[int, int, int]] = []  # ticks (ns, prev sent, sent) without
+        self.truth_missing = 0  # ticks written without their truth (it never came in time)
         urdf = Path(lib.manifest.urdf) if lib.manifest.urdf else None
         self.urdf = urdf.read_text() if urdf is not None and urdf.is_file() else None
-        self._rows: list[tuple[str, str, int, tuple[Any, ...]]] = []
+        self._rows: list[Row] = []
         self.config = {
             "tool": "amsfe_sym",
             "robot": lib.manifest.spec or lib.manifest.urdf,
@@ -74,13 +134,57 @@ class NodeRecord:
             "estimator": sc.estimator,
             "T": lib.T,
         }
+        self.out: Path | None = None
+        self._bag: _SegmentedBag | None = None
+        self._stop_meta: dict[str, str] = {}
+        if out is not None:
+            self.open(out)
 
+    # ------------------------------------------------------------------ the path
+    def open(self, out: Path) -> None:
+        """Claim the bag folder ``out`` (module docstring): created with its lock file and an
+        empty, unfinished ``metadata.yaml``.
+
+        Raises:
+            RunFolderError: ``out`` exists: a record being written (the writer's pid), an
+                unfinished one of a writer that died, or any other folder or file.
+        """
+        self._bag = _SegmentedBag.claim(Path(out))
+        self.out = self._bag.path
+
+    # ------------------------------------------------------------------ the ticks
     def _add(self, topic: str, msgtype: str, ns: int, *data: Any) -> None:
         self._rows.append((topic, msgtype, ns, data))
 
-    def encoders(self, ns: int, z: FloatArray) -> None:
-        """An encoder sample [qm, qmd] stamped ``ns``."""
+    def encoders(self, ns: int, z: FloatArray, sent_ns: int | None = None) -> None:
+        """An encoder sample [qm, qmd] stamped ``ns``, sent by its publisher at ``sent_ns``
+        (its source timestamp [ns]: a truth sent since the previous sample's is this tick's,
+        :meth:`truth_sent`)."""
         self._add(self.spec.encoders, JS, ns, ns, None, z[: self.n], z[self.n :], None)
+        if sent_ns is None:
+            return
+        prev = -1 if self._sent is None else self._sent[1]
+        self._sent = (ns, sent_ns)
+        mine = [x for s, x in self._truths if prev < s <= sent_ns]
+        self._truths = [(s, x) for s, x in self._truths if s > sent_ns]  # a later tick's
+        if mine:
+            self.truth(ns, mine[-1])
+        else:
+            self._awaiting.append((ns, prev, sent_ns))
+
+    def truth_sent(self, sent_ns: int, x: FloatArray) -> None:
+        """A truth message [q, qd, qm, qmd, theta] as received, sent at ``sent_ns`` (its
+        source timestamp [ns]): recorded at the tick whose encoder sample was the first sent
+        after it (now, if that sample is already in; else when it comes)."""
+        x = np.array(x, dtype=float)
+        for i, (ns, prev, sent) in enumerate(self._awaiting):
+            if prev < sent_ns <= sent:
+                del self._awaiting[i]
+                self.truth(ns, x)
+                return
+        if self._sent is None or sent_ns > self._sent[1]:
+            self._truths.append((sent_ns, x))
+            del self._truths[:-LAG_TICKS]  # bounded: a truth with no tick is dropped
 
     def frame(self, arrival_ns: int, exposure_ns: int, z: FloatArray) -> None:
         """A camera frame exposed at ``exposure_ns`` and fused at the tick ``arrival_ns``."""
@@ -95,7 +199,7 @@ class NodeRecord:
         ``amsfe simulate --bag`` has it, the true q, qd on ``/joint_states``, unless the
         encoders or the effort are on that topic: it is theirs)."""
         n = self.n
-        self._truth = (ns, np.array(x[:n], dtype=float))
+        self._truth_q[ns] = np.array(x[:n], dtype=float)
         self._add(self.spec.truth, F64, ns, np.array(x, dtype=float))
         if "/joint_states" not in (self.spec.encoders, self.spec.effort):
             self._add("/joint_states", JS, ns, ns, None, x[:n], x[n : 2 * n], None)
@@ -103,7 +207,8 @@ class NodeRecord:
     def outputs(
         self, ns: int, x_hat: FloatArray, std: FloatArray, theta: FloatArray, u: FloatArray | None
     ) -> None:
-        """What the node published for the tick stamped ``ns``."""
+        """What the node published for the tick stamped ``ns`` (its last call of a tick: a
+        segment may be written here)."""
         n = self.n
         self._add(self.spec.estimate, JS, ns, ns, None, x_hat[:n], x_hat[n : 2 * n], None)
         self._add(self.spec.estimate_std, JS, ns, ns, None, std[:n], std[n : 2 * n], None)
@@ -111,11 +216,11 @@ class NodeRecord:
         if u is not None:
             self._add(self.spec.commands, F64, ns, np.array(u, dtype=float))
         if self.urdf is not None and self._ticks % self._tf_every == 0:
-            arms = [("est/", np.array(x_hat[:n], dtype=float))]
-            if self._truth is not None and self._truth[0] == ns:
-                arms.insert(0, ("", self._truth[1]))
-            self._add("/tf", TF, ns, ns, arms)  # drawn when written
+            self._add("/tf", TF, ns, ns, np.array(x_hat[:n], dtype=float))  # drawn when written
         self._ticks += 1
+        self._since_flush += 1
+        if self._bag is not None and self._since_flush >= self._segment_ticks:
+            self._flush(ns - LAG_TICKS * self._T_ns)
 
     def diagnostics(self, ns: int, text: str) -> None:
         """A diagnostics JSON the node published at the tick ``ns``."""
@@ -127,34 +232,73 @@ class NodeRecord:
         self._add(self.spec.commands, F64, ns, np.array(u, dtype=float))
 
     def stopped(self, line: str, exit_code: int | None, watchdog: str | None) -> None:
-        """How the node stopped, into ``/amsfe/config`` (``stop``): its one line, the exit
-        code (None: a signal) and the watchdog's reason name (None: not a watchdog's hold;
-        docs/watchdogs.md)."""
+        """How the node stopped: its one line, the exit code (None: a signal) and the
+        watchdog's reason name (None: not a watchdog's hold; docs/watchdogs.md).  Into the
+        metadata (``amsfe.exit_code``, ``amsfe.watchdog``) and, when no segment is written
+        yet (a run shorter than :data:`SEGMENT_TICKS`), ``/amsfe/config`` (``stop``)."""
         self.config["stop"] = {"line": line, "exit_code": exit_code, "watchdog": watchdog}
+        self._stop_meta = {
+            "amsfe.exit_code": "signal" if exit_code is None else str(exit_code),
+            "amsfe.watchdog": watchdog or "",
+        }
 
-    def write(self, out: Path) -> Path:
-        """Write the bag folder ``out`` (complete or absent)."""
-        from rosbags.rosbag2 import StoragePlugin, Writer
+    # ------------------------------------------------------------------ writing
+    def _flush(self, cut_ns: int | None) -> None:
+        """Write the rows stamped before ``cut_ns`` (None: all) as one segment."""
+        assert self._bag is not None
+        self._since_flush = 0
+        if cut_ns is None:
+            rows, self._rows = self._rows, []
+            self.truth_missing += len(self._awaiting)
+            self._awaiting = []
+        else:
+            rows = [r for r in self._rows if r[2] < cut_ns]
+            self._rows = [r for r in self._rows if r[2] >= cut_ns]
+            self.truth_missing += sum(1 for a in self._awaiting if a[0] < cut_ns)
+            self._awaiting = [a for a in self._awaiting if a[0] >= cut_ns]
+        if not rows:
+            return
+        rows.sort(key=lambda r: r[2])  # stable: a tick's rows keep their order
+        if self._bag.segments == 0:
+            start = rows[0][2]
+            head = [(self.spec.config, STR, start, (json.dumps(self.config),))]
+            if self.urdf is not None:  # Foxglove draws the arm from it
+                head.append(("/robot_description", STR, start, (self.urdf,)))
+            rows = [*head, *rows]
+        tf_rows = []
+        for topic, msgtype, ns, data in rows:
+            if msgtype == TF:
+                arms = [("est/", data[1])]
+                truth = self._truth_q.get(ns)
+                if truth is not None:
+                    arms.insert(0, ("", truth))
+                tf_rows.append((topic, msgtype, ns, (ns, arms)))
+            else:
+                tf_rows.append((topic, msgtype, ns, data))
+        if cut_ns is None:
+            self._truth_q.clear()
+        else:
+            self._truth_q = {k: v for k, v in self._truth_q.items() if k >= cut_ns}
+        self._bag.write_segment(_one_joint_state_a_tick(tf_rows, self.spec), self._message_maker)
 
+    def _message_maker(self) -> Message:
+        """Builds a message of a row (``rosbags`` types)."""
         from amsfe_sym.logs.source import typestore
 
-        store = typestore()
-        ts = store.types
-        start = min((r[2] for r in self._rows), default=0)
+        ts = typestore().types
+        empty = np.zeros(0)
+        tf = None
+        if self.urdf is not None:
+            from amsfe_sym.logs.write import tf_builder
+
+            tf = tf_builder(self.lib)
+        layout = ts["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0)
 
         def header(ns: int, frame: str = "") -> Any:
             t = ts["builtin_interfaces/msg/Time"](
                 sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000
             )
             return ts["std_msgs/msg/Header"](stamp=t, frame_id=frame)
-
-        empty = np.zeros(0)
-        tf = None
-        if any(r[1] == TF for r in self._rows):
-            from amsfe_sym.logs.write import tf_builder
-
-            tf = tf_builder(self.lib)
-        layout = ts["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0)
 
         def message(msgtype: str, data: tuple[Any, ...]) -> Any:
             if msgtype == JS:
@@ -176,33 +320,258 @@ class NodeRecord:
                 return tf(*data)
             return ts[STR](data=data[0])
 
-        def inner(tmp: Path) -> None:
-            bag_dir = tmp / out.name
-            writer = Writer(bag_dir, version=9, storage_plugin=StoragePlugin.MCAP)
-            writer.open()
-            conns: dict[str, Any] = {}
-            try:
-                head = [(self.spec.config, STR, start, (json.dumps(self.config),))]
-                if self.urdf is not None:  # Foxglove draws the arm from it
-                    head.append(("/robot_description", STR, start, (self.urdf,)))
-                rows = [*head, *_one_joint_state_a_tick(self._rows, self.spec)]
-                for topic, msgtype, ns, data in rows:
-                    if topic not in conns:
-                        conns[topic] = writer.add_connection(topic, msgtype, typestore=store)
-                    raw = store.serialize_cdr(message(msgtype, data), msgtype)
-                    writer.write(conns[topic], ns, raw)
-            finally:
-                writer.close()
-            for p in bag_dir.iterdir():
-                p.rename(tmp / p.name)
-            bag_dir.rmdir()
+        return message
 
-        return write_folder(out, inner)
+    def write(self, out: Path | None = None, reason: str = "done") -> Path:
+        """Write what is left, mark the bag finished with ``reason`` (why the node stopped,
+        one line) and release the folder: the bag folder.
+
+        Args:
+            out: The folder, when :meth:`open` was not called (claimed now).
+            reason: The metadata's ``amsfe.end``.
+
+        Raises:
+            RunFolderError: ``out`` differs from the folder claimed, or cannot be claimed.
+        """
+        if self._bag is None:
+            if out is None:
+                raise RunFolderError(
+                    describe("node record", "a folder to write", "none", "pass --record DIR")
+                )
+            self.open(out)
+        assert self._bag is not None
+        if out is not None and resolved(out) != self._bag.path:
+            raise RunFolderError(
+                describe(
+                    "node record",
+                    f"the folder it claimed ({self._bag.path})",
+                    str(out),
+                    "write it where it was opened",
+                )
+            )
+        self._flush(None)
+        extra = {"amsfe.truth_missing": str(self.truth_missing), **self._stop_meta}
+        self._bag.finish(reason, extra)
+        note_written([self._bag.path])
+        return self._bag.path
 
 
-def _one_joint_state_a_tick(
-    rows: Sequence[tuple[str, str, int, tuple[Any, ...]]], spec: TopicSpec
-) -> Iterator[tuple[str, str, int, tuple[Any, ...]]]:
+class _SegmentedBag:
+    """A rosbag2 folder (MCAP) written as a series of complete MCAP files, its
+    ``metadata.yaml`` rewritten atomically after each (module docstring)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.segments = 0  # segments handed to the writer
+        self._written = 0  # segments written
+        self._jobs: queue.Queue[tuple[list[Row], Callable[[], Message]] | None]
+        self._jobs = queue.Queue(maxsize=2)  # bounded: the node waits rather than piling up
+        self._error: BaseException | None = None
+        self._thread: threading.Thread | None = None
+        self._files: list[dict[str, Any]] = []
+        self._topics: dict[str, dict[str, Any]] = {}  # name -> topic_metadata + count
+        self._custom = {"amsfe.record": "unfinished", "amsfe.writer_pid": str(os.getpid())}
+
+    @classmethod
+    def claim(cls, out: Path) -> _SegmentedBag:
+        """Create ``out`` with its lock file (``O_EXCL``, the pid) and an empty metadata."""
+        path = resolved(out)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            path.mkdir()
+        except FileExistsError:
+            raise RunFolderError(_taken(path)) from None
+        try:
+            fd = os.open(path / LOCK, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:  # (created between the two: another writer's)
+            raise RunFolderError(_taken(path)) from None
+        with os.fdopen(fd, "w") as fh:
+            fh.write(f"{os.getpid()}\n")
+        (path / MARKER).write_text("written by amsfe_sym (amsfe node --record)\n")
+        bag = cls(path)
+        bag._write_metadata()
+        return bag
+
+    def write_segment(self, rows: Iterable[Row], maker: Callable[[], Message]) -> None:
+        """Hand ``rows`` to the writer thread, which writes them as the next MCAP file and
+        then the metadata listing it (serializing a tick costs ~0.8 ms of Python: done
+        beside the node's loop, not in it; at most two segments wait); ``maker()`` builds
+        the message builder (once, in the writer thread: the /tf one loads the robot)."""
+        if self._error is not None:
+            raise self._error
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._work, name="amsfe-record", daemon=True)
+            self._thread.start()
+        self.segments += 1
+        self._jobs.put((list(rows), maker))
+
+    def _work(self) -> None:
+        message: Message | None = None
+        while (job := self._jobs.get()) is not None:
+            if self._error is None:
+                try:
+                    rows, maker = job
+                    message = maker() if message is None else message
+                    self._write(rows, message)
+                except BaseException as exc:  # raised in the node's thread, at its next call
+                    self._error = exc
+
+    def _drain(self) -> None:
+        """Wait for the writer thread to write every segment handed to it."""
+        if self._thread is not None:
+            self._jobs.put(None)
+            self._thread.join()
+            self._thread = None
+        if self._error is not None:
+            raise self._error
+
+    def _write(self, rows: list[Row], message: Message) -> None:
+        """Write ``rows`` as the next MCAP file, then the metadata listing it."""
+        from rosbags.rosbag2 import StoragePlugin, Writer
+        from rosbags.rosbag2.metadata import dump_qos_v9
+
+        from amsfe_sym.logs.source import typestore
+
+        store = typestore()
+        name = f"{self.path.name}_{self._written}"
+        tmp = self.path / f".{name}.tmp"
+        if tmp.exists():
+            shutil.rmtree(tmp)
+        writer = Writer(tmp, version=9, storage_plugin=StoragePlugin.MCAP)
+        writer.open()
+        conns: dict[str, Any] = {}
+        counts: dict[str, int] = {}
+        t_min, t_max = 2**63 - 1, 0
+        try:
+            for topic, msgtype, ns, data in rows:
+                if topic not in conns:
+                    conns[topic] = writer.add_connection(topic, msgtype, typestore=store)
+                writer.write(conns[topic], ns, store.serialize_cdr(message(msgtype, data), msgtype))
+                counts[topic] = counts.get(topic, 0) + 1
+                t_min, t_max = min(t_min, ns), max(t_max, ns)
+        finally:
+            writer.close()
+        mcap = self.path / f"{name}.mcap"
+        (tmp / f"{tmp.name}.mcap").replace(mcap)
+        shutil.rmtree(tmp)
+        for topic, c in conns.items():
+            entry = self._topics.setdefault(
+                topic,
+                {
+                    "topic_metadata": {
+                        "name": topic,
+                        "type": c.msgtype,
+                        "serialization_format": "cdr",
+                        "offered_qos_profiles": dump_qos_v9([]),
+                        "type_description_hash": c.digest,
+                    },
+                    "message_count": 0,
+                },
+            )
+            entry["message_count"] += counts[topic]
+        total = sum(counts.values())
+        self._files.append(
+            {
+                "path": mcap.name,
+                "starting_time": {"nanoseconds_since_epoch": t_min if total else 0},
+                "duration": {"nanoseconds": max(0, t_max - t_min)},
+                "message_count": total,
+            }
+        )
+        self._written += 1
+        self._write_metadata()
+
+    def finish(self, reason: str, extra: dict[str, str]) -> None:
+        """Wait for the segments handed over, mark the bag finished with ``reason`` and
+        remove the lock."""
+        self._drain()
+        self._custom.update({"amsfe.record": "finished", "amsfe.end": reason, **extra})
+        self._write_metadata()
+        with contextlib.suppress(FileNotFoundError):
+            (self.path / LOCK).unlink()
+
+    def _write_metadata(self) -> None:
+        starts = [
+            f["starting_time"]["nanoseconds_since_epoch"] for f in self._files if f["message_count"]
+        ]
+        ends = [
+            f["starting_time"]["nanoseconds_since_epoch"] + f["duration"]["nanoseconds"]
+            for f in self._files
+            if f["message_count"]
+        ]
+        start = min(starts, default=0)
+        info = {
+            "version": 9,
+            "storage_identifier": "mcap",
+            "relative_file_paths": [f["path"] for f in self._files],
+            "duration": {"nanoseconds": max(ends, default=0) - start},
+            "starting_time": {"nanoseconds_since_epoch": start},
+            "message_count": sum(f["message_count"] for f in self._files),
+            "topics_with_message_count": list(self._topics.values()),
+            "compression_format": "",
+            "compression_mode": "",
+            "files": self._files,
+            "custom_data": self._custom,
+            "ros_distro": "rosbags",
+        }
+        tmp = self.path / "metadata.yaml.tmp"
+        # JSON is YAML (1.2): rosbag2 and rosbags read it
+        tmp.write_text(json.dumps({"rosbag2_bagfile_information": info}, indent=1) + "\n")
+        tmp.replace(self.path / "metadata.yaml")
+
+
+def _taken(path: Path) -> str:
+    """The one line refusing a record path that exists."""
+    lock = path / LOCK
+    pid = None
+    with contextlib.suppress(OSError, ValueError):
+        pid = int(lock.read_text().split()[0])
+    if pid is not None and _pid_alive(pid):
+        found = f"a record being written there by process {pid}"
+        fix = "give each node its own --record folder"
+    elif pid is not None:
+        found = f"an unfinished record of process {pid}, which is no longer running"
+        fix = "keep it (it is readable up to its last segment) and choose another --record"
+    else:
+        found = "an existing folder or file"
+        fix = "choose another --record (a record is never written over)"
+    return describe(f"--record {path}", "a new folder, one writer", found, fix)
+
+
+def refuse_locked(path: Path) -> None:
+    """Refuse, in one line, a ``--record`` path holding a record's lock file (a writer at
+    work, or one that died: :func:`_taken`); anything else is left to
+    :func:`~amsfe_sym.core.outputs.check_output`.
+
+    Raises:
+        RunFolderError: the lock file is there.
+    """
+    if (Path(path) / LOCK).exists():
+        raise RunFolderError(_taken(resolved(path)))
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, another user's
+        return True
+    return True
+
+
+def record_state(path: Path) -> dict[str, str]:
+    """The ``amsfe.*`` keys of a record's metadata (``amsfe.record``: ``finished`` or
+    ``unfinished``; ``amsfe.end``: why the node stopped); {} for a bag without them."""
+    try:
+        doc = json.loads((Path(path) / "metadata.yaml").read_text())
+    except (OSError, ValueError):
+        return {}
+    custom = doc.get("rosbag2_bagfile_information", {}).get("custom_data") or {}
+    return {k: str(v) for k, v in custom.items() if str(k).startswith("amsfe.")}
+
+
+def _one_joint_state_a_tick(rows: Sequence[Row], spec: TopicSpec) -> Iterator[Row]:
     """``rows`` as written: with the effort on the encoders' topic (``spec.effort ==
     spec.encoders``, a driver's ``/joint_states``), the effort of a tick goes into the
     JointState of that tick's encoder sample (position, velocity and effort in one message,

@@ -13,11 +13,19 @@ encoder sample goes out, so a node has them when the sample arrives (DDS does no
 deliveries across topics; the writers' heartbeat period is 1 ms in lockstep,
 :func:`~amsfe_sym.ros.middleware.use_lockstep_profile`, or each wait takes seconds).
 Without it the plant runs on the wall clock (one tick every T) and applies the latest
-command it has when a tick ends (real latency, real drops).
+command it has when a tick ends (real latency, real drops); it prints the wall clock of tick 0
+(epoch [s]), so a harness knows the tick of any wall time.
+
+A lockstep arm follows one controller: commands from a second publisher of the command topic
+(another GID than the first command's) stop the run in one line naming both nodes (issue 37:
+two controllers interleaved gave each tick another's command); another node named
+``amsfe_sim`` on the domain is warned of.  ``faults``: the arm breaks at a stated time
+(:mod:`amsfe_sym.ros.faults`; the effort topic publishes the torque actually applied).
 """
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -28,6 +36,8 @@ from numpy.typing import NDArray
 from amsfe_sym.core.interrupts import DeferredSignals
 from amsfe_sym.errors import RosError, describe
 from amsfe_sym.ros.arm import SimArm
+from amsfe_sym.ros.faults import Fault, FaultPlan
+from amsfe_sym.ros.graph import duplicate_name_warning, gid_key, publisher_names
 from amsfe_sym.ros.middleware import (
     check_parameters,
     executor,
@@ -65,6 +75,7 @@ class SimNodeOptions:
             (``/camera/image_raw``, mono8) and its ``/camera/camera_info``, at the frame's
             delivery, stamped with its exposure, instead of the pixel topic (docs/camera.md:
             ``amsfe camera-node`` turns them into it).
+        faults: Faults of the arm (:mod:`amsfe_sym.ros.faults`).
     """
 
     lockstep: bool = False
@@ -75,6 +86,7 @@ class SimNodeOptions:
     ros_args: tuple[str, ...] = ()
     domain_id: int | None = None
     images: bool = False
+    faults: tuple[Fault, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -124,8 +136,12 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
             within ``command_timeout``; rclpy missing.
     """
     arm = SimArm(sc, lib)
-    if options.lockstep:  # the frames' acknowledgement within ms (docs/how-to/ros.md)
-        use_lockstep_profile()
+    plan = FaultPlan(options.faults, lib.T, lib.n)
+    # a 1 ms reliable heartbeat: lockstep, the frames' acknowledgement within ms
+    # (docs/how-to/ros.md); free running, a sample the transport dropped is repaired within ms
+    # instead of Fast DDS's default 3 s, by when the writer's KEEP_LAST history has replaced it
+    # and the node sees it missing (docs/live-load.md)
+    use_lockstep_profile()
     ctx = start(list(options.ros_args), options.domain_id)
     from amsfe_sym.ros import messages as m
 
@@ -138,18 +154,33 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         check_parameters(node)  # a mistyped -p name: refused, not ignored
         names = list(spec.joint_names or lib.manifest.joints)
         qos = qos_profile(spec)
-        pub_enc = node.create_publisher(m.JointState, spec.encoders, qos)
-        pub_cam = node.create_publisher(m.PointStamped, spec.camera, qos)
-        pub_eff = node.create_publisher(m.JointState, spec.effort, qos)
-        pub_truth = node.create_publisher(m.Float64MultiArray, spec.truth, qos)
+        # free running, the writers keep 1 s of samples: when this (Python) arm falls behind
+        # the wall clock it catches up in a burst, and a KEEP_LAST history shorter than the
+        # burst replaced samples before the node took them (seen as missing: a false
+        # "encoder stall"); a real driver does not burst
+        second = math.ceil(1.0 / lib.T) + 1
+        out = qos if options.lockstep else qos_profile(spec, depth=max(spec.depth, second))
+        pub_enc = node.create_publisher(m.JointState, spec.encoders, out)
+        pub_cam = node.create_publisher(m.PointStamped, spec.camera, out)
+        pub_eff = node.create_publisher(m.JointState, spec.effort, out)
+        pub_truth = node.create_publisher(m.Float64MultiArray, spec.truth, out)
         pub_clock = node.create_publisher(m.Clock, spec.clock, qos_profile(spec, depth=1))
         images = _Images(node, lib, sc.seed, qos) if options.images else None
         commands: list[FloatArray] = []
         n = lib.n
+        controller: list[bytes] = []  # the GID of the first command's publisher
+        intruders: list[bytes] = []
 
         def on_command(msg: m.Float64MultiArray, info: Any) -> None:
             u = m.values(msg.data)
-            cmd_at.append(int(info["received_timestamp"]))
+            gid = gid_key(info.get("publisher_gid"))
+            if options.lockstep and gid:
+                if not controller:
+                    controller.append(gid)
+                elif gid != controller[0]:
+                    intruders.append(gid)  # not applied: the run stops at this tick
+                    return
+            cmd_at.append(_received(info, len(cmd_at)))
             if u.size == n and np.all(np.isfinite(u)):
                 commands.append(u)
             else:
@@ -158,18 +189,22 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         sub = node.create_subscription(m.Float64MultiArray, spec.commands, on_command, qos)
         # latency by the middleware's receive stamps (system clock [ns]): not delayed by
         # this node's own executor
-        cmd_at: list[int] = []
-        est_at: list[int] = []
+        cmd_at: list[tuple[int, int]] = []  # (publication sequence number, received [ns])
+        est_at: list[tuple[int, int]] = []
         sent_at = np.zeros(arm.K, dtype=np.int64)
         node.create_subscription(
             m.JointState,
             spec.estimate,
-            lambda _msg, info: est_at.append(int(info["received_timestamp"])),
+            lambda _msg, info: est_at.append(_received(info, len(est_at))),
             qos,
         )
         ex = executor(ctx)
         ex.add_node(node)
         _wait_peers(ex, pub_enc, sub if options.lockstep else None, options.start_timeout)
+        warned: list[str] = []
+        _warn_duplicate(node, warned)
+        if options.lockstep:
+            _one_controller(node, spec.commands, None, warned)
         T_ns = round(lib.T * 1e9)
         u = np.zeros(n)
         late = stale = 0
@@ -177,6 +212,8 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         with DeferredSignals() as signals:  # Ctrl-C / SIGTERM raised here, not in rclpy's C++
             for k in range(arm.K):
                 s = arm.sense()
+                for kind in plan.started(k):
+                    print(f"sim-node: fault {kind} at t = {k * lib.T:.3f} s (tick {k})", flush=True)
                 ns = k * T_ns
                 pub_clock.publish(m.clock(ns))
                 pub_truth.publish(m.float64_array(s.x_true))
@@ -194,9 +231,11 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
                         f"{options.command_timeout:g} s: the node may fuse it a tick late"
                     )
                 sent_at[k] = time.time_ns()
-                pub_enc.publish(m.joint_state(ns, names, s.z[:n], s.z[n:]))
+                z = plan.encoders(k, s.z)
+                pub_enc.publish(m.joint_state(ns, names, z[:n], z[n:]))
                 if k and k % round(1.0 / lib.T) == 0:
                     print(f"sim-node: t = {k * lib.T:.1f} s", flush=True)
+                    _warn_duplicate(node, warned)
                 if options.lockstep or k == 0:  # free running starts on the first command
                     deadline = time.monotonic() + options.command_timeout
                     while len(commands) <= k:
@@ -213,8 +252,14 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
                             )
                         ex.spin_once(timeout_sec=min(left, 0.05))
                         signals.check()
+                    if intruders:  # (one may have come with the command of tick k)
+                        _one_controller(node, spec.commands, (controller[0], intruders[0]), warned)
                     u = commands[k]
-                    t0 = time.perf_counter() - lib.T / options.rate if k == 0 else t0
+                    if k == 0:
+                        t0 = time.perf_counter() - lib.T / options.rate
+                        if not options.lockstep:  # where the harness finds a tick's wall time
+                            epoch = time.time() - (time.perf_counter() - t0)
+                            print(f"sim-node: tick 0 at wall clock {epoch:.6f} s", flush=True)
                 else:
                     before = len(commands)
                     end = t0 + (k + 1) * lib.T / options.rate
@@ -228,22 +273,74 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
                     stale += int(len(commands) == before)
                     if commands:
                         u = commands[-1]
-                pub_eff.publish(m.joint_state(ns, names, effort=u))
+                applied = plan.torque(k, u)
+                pub_eff.publish(m.joint_state(ns, names, effort=applied))
                 if k + 1 < arm.K:
-                    arm.advance(u)
+                    arm.advance(applied)
         wall = time.perf_counter() - t0
         _acked(pub_eff, 1.0)
         ex.spin_once(timeout_sec=0.05)  # the last tick's estimate
 
-        def latency(at: list[int]) -> FloatArray:
-            c = min(len(at), arm.K)
-            return np.asarray((np.asarray(at[:c], dtype=np.int64) - sent_at[:c]) * 1e-9, float)
+        def latency(at: list[tuple[int, int]]) -> FloatArray:
+            # the i-th message published answers the i-th sample (a node sends one per
+            # sample); paired by the publisher's sequence number, so a message this arm's
+            # queue dropped shifts nothing
+            pairs = [(seq - 1, t) for seq, t in at if 1 <= seq <= arm.K]
+            if not pairs:
+                return np.zeros(0)
+            i, t = (np.asarray(v, dtype=np.int64) for v in zip(*pairs, strict=True))
+            return np.asarray((t - sent_at[i]) * 1e-9, dtype=float)
 
         return SimNodeReport(
             arm.K, len(commands), wall, late, stale, latency(cmd_at), latency(est_at)
         )
     finally:
         stop(ctx, *([node] if node is not None else []))
+
+
+def _received(info: Any, count: int) -> tuple[int, int]:
+    """(publication sequence number, receive stamp [ns]) of a message; the sequence number
+    is the count of those received so far + 1 when the middleware gives none."""
+    seq = info.get("publication_sequence_number")
+    return (int(seq) if seq else count + 1, int(info["received_timestamp"]))
+
+
+def _warn_duplicate(node: Any, warned: list[str]) -> None:
+    """Warn (once) of another node with this one's name on the graph (the graph's node
+    names may come later than its endpoints: asked at the start, at t = 1 s and before a
+    refusal)."""
+    if not warned and (dup := duplicate_name_warning(node)) is not None:
+        warned.append(dup)
+        node.get_logger().warning(dup)
+        print(f"sim-node: warning: {dup}", flush=True)
+
+
+def _one_controller(
+    node: Any, topic: str, gids: tuple[bytes, bytes] | None, warned: list[str]
+) -> None:
+    """Raise when a lockstep arm sees two controllers: two publishers of ``topic`` on the
+    graph (``gids`` None, at the start) or commands from the two publishers ``gids``.
+
+    Raises:
+        RosError: one line naming both nodes.
+    """
+    names = publisher_names(node, topic)
+    _warn_duplicate(node, warned)
+    if gids is None:
+        if len(names) <= 1:
+            return
+        found = " and ".join(sorted(names.values()))
+    else:
+        found = " and ".join(names.get(g, f"a publisher (GID {g.hex()})") for g in gids)
+    raise RosError(
+        describe(
+            f"sim-node --lockstep commands on {topic}",
+            "one controller (a lockstep arm applies the k-th command received at tick k)",
+            f"commands from {found}",
+            "stop all but one controller on this ROS_DOMAIN_ID (or give each arm its own "
+            "topics or domain)",
+        )
+    )
 
 
 def _acked(pub: object, timeout: float) -> bool:

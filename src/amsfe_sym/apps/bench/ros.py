@@ -1,0 +1,226 @@
+"""``amsfe bench --ros``: the live loop over real DDS, the same run idle and under a stated
+CPU load, for each node implementation side by side (docs/live-load.md).
+
+One run: ``amsfe sim-node SCENARIO`` free running on the wall clock (1 kHz for paper-sim)
+and ``amsfe node SCENARIO --controller amsfe [--impl IMPL]``, two processes on a fresh
+ROS_DOMAIN_ID, localhost only, with ``load`` CPU hogs (:class:`~amsfe_sym.core.cpu_load.
+CpuHogs`) beside them.  Reported, from the two processes' own lines:
+
+- the node's own latency: the sample received by the middleware -> the command published,
+  p50 / p99 / max [ms] (the node's ``node: latency ...`` line);
+- the end-to-end latency through DDS: the arm publishes a sample -> the arm receives the
+  command answering it (the sim-node's receive stamps; ``encoder -> command``);
+- deadline misses: ticks of the arm that ended without a new command (the previous one was
+  applied again), and ticks that started late (the arm itself behind);
+- how the node stopped (``done``, or the hold line with its reason).
+
+Nothing here is asserted by a test (a test checks the report's shape): the numbers are this
+machine's, at this moment.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import time
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from amsfe_sym.core.cpu_load import CpuHogs
+
+__all__ = [
+    "RosBenchRun",
+    "bench_ros",
+    "format_ros_report",
+    "machine_name",
+    "node_impls",
+    "parse_run",
+    "ros_report_json",
+]
+
+_NUM = r"([0-9.]+|nan)"
+_NODE_LAT = re.compile(
+    rf"node: latency sample received -> command published p50 {_NUM} p99 {_NUM} max {_NUM} ms "
+    r"over (\d+) commands"
+)
+_E2E = re.compile(rf"encoder -> command p50 {_NUM} p99 {_NUM} max {_NUM} ms")
+_TICKS = re.compile(
+    r"sim-node: (\d+) ticks in ([0-9.]+) s wall, (\d+) commands, (\d+) late ticks, "
+    r"(\d+) without a new command"
+)
+_STOP = re.compile(r"^node: ((?:done|hold)[^;\n]*)", re.M)
+
+
+@dataclass(frozen=True)
+class RosBenchRun:
+    """One run of the live loop (module docstring); latencies [ms], None when not reported.
+
+    Attributes:
+        impl: The node's implementation (``c`` or ``python``).
+        load: CPU hogs beside the two processes.
+        node_p50, node_p99, node_max: The node's own latency [ms].
+        commands: Commands the node timed.
+        e2e_p50, e2e_p99, e2e_max: Arm publishes -> arm receives the command [ms].
+        ticks: Ticks the arm ran.
+        late_ticks: Ticks that started late (the arm behind the wall clock).
+        missed: Deadline misses: ticks without a new command.
+        stopped: How the node stopped (one line: ``done ...`` or ``hold: <reason>: ...``).
+        codes: Exit codes (sim-node, node).
+    """
+
+    impl: str
+    load: int
+    node_p50: float | None
+    node_p99: float | None
+    node_max: float | None
+    commands: int
+    e2e_p50: float | None
+    e2e_p99: float | None
+    e2e_max: float | None
+    ticks: int
+    late_ticks: int
+    missed: int
+    stopped: str
+    codes: tuple[int, int]
+
+
+def _f(text: str) -> float:
+    return float(text)
+
+
+def parse_run(
+    impl: str, load: int, sim_out: str, node_out: str, codes: tuple[int, int]
+) -> RosBenchRun:
+    """A :class:`RosBenchRun` from the two processes' output."""
+    node = _NODE_LAT.search(node_out)
+    e2e = _E2E.search(sim_out)
+    ticks = _TICKS.search(sim_out)
+    stops = _STOP.findall(node_out)
+    return RosBenchRun(
+        impl=impl,
+        load=load,
+        node_p50=_f(node.group(1)) if node else None,
+        node_p99=_f(node.group(2)) if node else None,
+        node_max=_f(node.group(3)) if node else None,
+        commands=int(node.group(4)) if node else 0,
+        e2e_p50=_f(e2e.group(1)) if e2e else None,
+        e2e_p99=_f(e2e.group(2)) if e2e else None,
+        e2e_max=_f(e2e.group(3)) if e2e else None,
+        ticks=int(ticks.group(1)) if ticks else 0,
+        late_ticks=int(ticks.group(4)) if ticks else 0,
+        missed=int(ticks.group(5)) if ticks else 0,
+        stopped=stops[-1].strip() if stops else "no stop line (exit code only)",
+        codes=codes,
+    )
+
+
+def _one_run(
+    scenario: str, duration: float, impl: str, load: int, domain: int, timeout: float
+) -> RosBenchRun:
+    """Both processes (and ``load`` hogs) for ``duration`` [s] of the arm's time."""
+    env = dict(os.environ)
+    env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    amsfe = [sys.executable, "-m", "amsfe_sym"]
+    d = f"{duration:g}"
+    impl_args = ["--impl", impl] if len(node_impls()) > 1 else []
+    with CpuHogs(load, limit_s=timeout + 60.0):
+        node = subprocess.Popen(
+            [*amsfe, "node", scenario, "--controller", "amsfe", "--duration", d, *impl_args],
+            env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        )  # fmt: skip
+        try:
+            sim = subprocess.run(
+                [*amsfe, "sim-node", scenario, "--duration", d, "--start-timeout", "120"],
+                env=env, capture_output=True, text=True, timeout=timeout,
+            )  # fmt: skip
+            node_out, _ = node.communicate(timeout=60)
+        finally:
+            if node.poll() is None:
+                node.kill()
+                node.communicate()
+    return parse_run(
+        impl, load, sim.stdout + sim.stderr, node_out, (sim.returncode, node.returncode)
+    )
+
+
+def bench_ros(
+    scenario: str = "paper-sim",
+    duration: float = 2.0,
+    loads: tuple[int, ...] = (0, 2),
+    impls: tuple[str, ...] | None = None,
+    say: Any = print,
+) -> list[RosBenchRun]:
+    """Each implementation (None: every one :func:`node_impls` offers) idle and under each
+    load, one run each (module docstring)."""
+    impls = node_impls() if impls is None else impls
+    rows = []
+    base = 60 + (os.getpid() % 30)  # a domain of its own per run: no run hears another
+    for i, (load, impl) in enumerate((ld, im) for ld in loads for im in impls):
+        t0 = time.perf_counter()
+        row = _one_run(scenario, duration, impl, load, base + i, timeout=300.0 + 10 * duration)
+        say(
+            f"bench --ros: {impl} node, {load} hogs: {row.stopped} "
+            f"({time.perf_counter() - t0:.0f} s)"
+        )
+        rows.append(row)
+    return rows
+
+
+def _short(line: str, width: int = 72) -> str:
+    """A stop line cut to ``width`` characters (the JSON has it whole)."""
+    return line if len(line) <= width else line[: width - 3] + "..."
+
+
+def _ms(v: float | None) -> str:
+    return "-" if v is None else f"{v:.3f}"
+
+
+def format_ros_report(rows: list[RosBenchRun], machine: str = "") -> str:
+    """The runs as a table (latencies [ms])."""
+    head = (
+        "| node | hogs | node p50 | node p99 | node max | DDS e2e p50 | e2e p99 | e2e max "
+        "| ticks | missed | late | stopped |"
+    )
+    lines = [f"live loop over DDS{f' ({machine})' if machine else ''}", head, "|" + "---|" * 12]
+    for r in rows:
+        lines.append(
+            f"| {r.impl} | {r.load} | {_ms(r.node_p50)} | {_ms(r.node_p99)} | "
+            f"{_ms(r.node_max)} | {_ms(r.e2e_p50)} | {_ms(r.e2e_p99)} | {_ms(r.e2e_max)} | "
+            f"{r.ticks} | {r.missed} | {r.late_ticks} | {_short(r.stopped)} |"
+        )
+    return "\n".join(lines)
+
+
+def ros_report_json(rows: list[RosBenchRun], machine: str = "") -> dict[str, Any]:
+    """The runs as JSON (``--json``)."""
+    return {"machine": machine, "runs": [asdict(r) for r in rows]}
+
+
+def machine_name() -> str:
+    """The CPU's model name (``lscpu``'s), or ""."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    return f"{line.split(':', 1)[1].strip()}, {os.cpu_count()} cores"
+    except OSError:
+        pass
+    return ""
+
+
+def node_impls() -> tuple[str, ...]:
+    """The implementations ``amsfe node`` offers (``--impl``'s choices; only the Python
+    node when it has no such option)."""
+    import argparse
+
+    from amsfe_sym.apps.ros_nodes import add_node_arguments
+
+    p = argparse.ArgumentParser()
+    add_node_arguments(p)
+    action = p._option_string_actions.get("--impl")
+    if action is None or not action.choices:
+        return ("python",)
+    return tuple(c for c in ("c", "python") if c in action.choices)

@@ -1,0 +1,34 @@
+/* amsfe_lifecycle.h: `amsfe node --managed` for the C node: the ROS 2 lifecycle state
+ * machine of rcl_lifecycle (its services change_state, get_state, ... under the node's
+ * name) driving when samples are processed, as the Python managed node (ros/node.py):
+ * configure (the node is configured from its parameter file at start: nothing more to do),
+ * activate (samples processed from then on, the watchdogs' clocks restarted), deactivate
+ * (the hold command published, samples dropped), cleanup, shutdown (the node stops, exit 0).
+ * The services are served from the node's wait set between samples; a request allocates
+ * (rcl's typed take), a transition is not on the sample path. */
+#ifndef AMSFE_LIFECYCLE_H
+#define AMSFE_LIFECYCLE_H
+
+#include <rcl/rcl.h>
+#include <rcl_lifecycle/rcl_lifecycle.h>
+
+/* What a served transition asks of the node. */
+enum lifecycle_event { LC_NONE = 0, LC_ACTIVATE, LC_DEACTIVATE, LC_SHUTDOWN };
+
+typedef struct {
+  rcl_lifecycle_state_machine_t sm;
+  int enabled;
+} node_lifecycle;
+
+/* The state machine and its services on `node` (0 or an rcl error). */
+rcl_ret_t lifecycle_init(node_lifecycle *lc, rcl_node_t *node);
+/* Its services into the wait set (cleared by the caller). */
+rcl_ret_t lifecycle_wait_add(node_lifecycle *lc, rcl_wait_set_t *ws);
+/* Serve every pending request; each transition that succeeded is reported to `on` (the
+ * node's reaction: activate, deactivate, shutdown) before its response is sent. */
+void lifecycle_serve(node_lifecycle *lc, void (*on)(void *ctx, int event), void *ctx);
+/* Its label ("unconfigured", "inactive", "active", "finalized", ...). */
+const char *lifecycle_state(const node_lifecycle *lc);
+void lifecycle_fini(node_lifecycle *lc, rcl_node_t *node);
+
+#endif /* AMSFE_LIFECYCLE_H */

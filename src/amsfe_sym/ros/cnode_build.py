@@ -1,0 +1,214 @@
+"""The C node's build (``amsfe node --impl c``; docs/live-control.md, "The build"):
+``ros/c/*.c`` compiled against the ROS 2 wheels' rcl (headers under
+``<prefix>/include/<pkg>/<pkg>/``, libraries in ``<prefix>/lib/`` and the wheels' bundled ones
+in ``site-packages/ros_<pkg>.libs/``, reached through an old-style RPATH:
+``-Wl,--disable-new-dtags``, since RUNPATH does not reach librcl's own dependencies) and the
+robot's generated library, cached by content in ``$AMSFE_GENERATED_DIR/amsfe_node/<hash>/``
+like the libraries (the same sources, library, compiler, flags and rcl compile once), with
+its own copy of the library (a library regenerated in place never changes a built node).
+
+librcl's wheel links the Python type support of every message package; of its Python symbols
+two are data resolved at load (``PyExc_RuntimeError``, ``_Py_TrueStruct``), which
+``amsfe_pystub.c`` defines; the functions are never called and are bound lazily: no
+libpython, no interpreter in the node.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shlex
+import shutil
+import subprocess
+import sys
+import sysconfig
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+
+from amsfe_sym.codegen.cache import build_lock, compiler, default_out_dir
+from amsfe_sym.errors import RosError, describe
+from amsfe_sym.runtime.library import ModelLibrary, file_sha256
+
+__all__ = ["CNODE_CFLAGS", "C_DIR", "CNodeBuild", "RosPaths", "build_node", "ros_paths"]
+
+#: The C sources of the node (this package's ``ros/c/``).
+C_DIR = Path(__file__).with_name("c")
+#: Flags of the node's build (-O1 as the generated libraries: the node's own code is small).
+CNODE_CFLAGS: tuple[str, ...] = ("-O1", "-std=gnu11")
+#: The message packages the node's topics use (their C type support is linked).
+_MSG_PACKAGES = (
+    "sensor_msgs",
+    "geometry_msgs",
+    "std_msgs",
+    "builtin_interfaces",
+    "lifecycle_msgs",
+)
+#: The Python type support's data symbols librcl's wheel needs at load (amsfe_pystub.c).
+_PY_DATA_SYMBOLS = ("PyExc_RuntimeError", "_Py_TrueStruct")
+
+
+@dataclass(frozen=True)
+class RosPaths:
+    """Where the ROS 2 wheels put rcl's C side.
+
+    Attributes:
+        include: ``-I`` folders (``<prefix>/include/<pkg>``, each holding ``<pkg>/``).
+        lib: ``<prefix>/lib`` (librcl, the message libraries).
+        bundled: ``site-packages/ros_<pkg>.libs`` (the wheels' bundled libraries).
+        rcl_version: The ``ros-rcl`` distribution's version (hashed into the cache key).
+    """
+
+    include: tuple[Path, ...]
+    lib: Path
+    bundled: tuple[Path, ...]
+    rcl_version: str
+
+
+def ros_paths(prefix: Path | None = None) -> RosPaths:
+    """rcl's headers and libraries in the environment ``prefix`` (default this Python's).
+
+    Raises:
+        RosError: the ROS 2 wheels (the ``[ros]`` extra) are not installed there.
+    """
+    root = Path(prefix or sys.prefix)
+    header = root / "include" / "rcl" / "rcl" / "rcl.h"
+    lib = root / "lib"
+    if not header.is_file() or not (lib / "librcl.so").is_file():
+        raise RosError(
+            describe(
+                "the C node's build",
+                f"rcl's C headers and librcl.so from the ROS 2 wheels under {root}",
+                f"no {header if not header.is_file() else lib / 'librcl.so'}",
+                'pip install -e ".[ros]" (or run the Python node: amsfe node --impl python)',
+            )
+        )
+    include = tuple(sorted(d for d in (root / "include").iterdir() if (d / d.name).is_dir()))
+    purelib = Path(sysconfig.get_paths(vars={"base": str(root), "platbase": str(root)})["purelib"])
+    bundled = tuple(sorted(purelib.glob("ros_*.libs")))
+    try:
+        version = metadata.version("ros-rcl")
+    except metadata.PackageNotFoundError:
+        version = "unknown"
+    return RosPaths(include, lib, bundled, version)
+
+
+@dataclass(frozen=True)
+class CNodeBuild:
+    """A built C node.
+
+    Attributes:
+        path: The executable.
+        key: Its content hash.
+        compiled: Whether this call compiled it (False: reused from the cache).
+    """
+
+    path: Path
+    key: str
+    compiled: bool
+
+
+def _sources() -> list[Path]:
+    """The node's C sources (``ros/c/*.c``) and headers, sorted."""
+    return sorted([*C_DIR.glob("*.c"), *C_DIR.glob("*.h")])
+
+
+def build_node(lib: ModelLibrary, out_dir: Path | None = None) -> CNodeBuild:
+    """The C node of ``lib``'s robot, compiled once per content (sources, the library's
+    content hash and file, compiler, flags, rcl's version) under ``out_dir``
+    (default ``$AMSFE_GENERATED_DIR``, else the generated libraries' folder) /
+    ``amsfe_node/<hash>/``.
+
+    Raises:
+        RosError: the ROS 2 wheels are missing, or the compiler failed (its last lines).
+    """
+    ros = ros_paths()
+    cc = compiler()
+    srcs = [p for p in _sources() if p.suffix == ".c"]
+    gen = hashlib.sha256()
+    for path in _sources():
+        gen.update(path.name.encode() + b"\0" + path.read_bytes())
+    inputs = {
+        "sources": gen.hexdigest(),
+        "library": lib.manifest.raw.get("content_hash"),
+        "library_sha256": lib.manifest.raw.get("library_sha256"),
+        "library_path": str(lib.library_path),
+        "compiler": _compiler_line(cc),
+        "cflags": list(CNODE_CFLAGS),
+        "rcl": ros.rcl_version,
+        "prefix": str(sys.prefix),
+    }
+    key = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:20]
+    folder = (out_dir or default_out_dir()) / "amsfe_node" / key
+    exe = folder / "amsfe_node"
+    if exe.is_file() and os.access(exe, os.X_OK):
+        return CNodeBuild(exe, key, False)
+    with build_lock(folder.parent / f"{key}.lock"):
+        if exe.is_file():
+            return CNodeBuild(exe, key, False)
+        folder.mkdir(parents=True, exist_ok=True)
+        # the node's own copy of the library and its headers: a library regenerated in place
+        # later (another scenario's, another checkout's) never changes a built node
+        gen_dir = lib.library_path.parent
+        for src in [lib.library_path, *sorted(gen_dir.glob("*.h"))]:
+            shutil.copy2(src, folder / src.name)
+        if file_sha256(folder / lib.library_path.name) != inputs["library_sha256"]:
+            raise RosError(
+                describe(
+                    "the C node's build",
+                    f"the library {lib.library_path} this run loaded",
+                    "another one in its place (regenerated meanwhile)",
+                    "run the command again",
+                )
+            )
+        tmp = folder / f"amsfe_node.tmp{os.getpid()}"
+        cmd = _command(cc, lib, ros, srcs, tmp, folder)
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        if proc.returncode != 0 or not tmp.is_file():
+            tmp.unlink(missing_ok=True)
+            tail = " | ".join((proc.stderr or proc.stdout).strip().splitlines()[-3:])
+            raise RosError(
+                describe(
+                    "the C node's build",
+                    "a compiled amsfe_node",
+                    f"{cc} exit {proc.returncode}: {tail}",
+                    "check the compiler and the [ros] extra, or run amsfe node --impl python",
+                )
+            )
+        (folder / "build.json").write_text(
+            json.dumps({**inputs, "command": shlex.join(cmd)}, indent=1)
+        )
+        tmp.replace(exe)
+    return CNodeBuild(exe, key, True)
+
+
+def _compiler_line(cc: str) -> str:
+    try:
+        out = subprocess.run([cc, "--version"], capture_output=True, text=True, check=True)
+    except (OSError, subprocess.CalledProcessError) as exc:
+        raise RosError(
+            describe("C compiler", f"a working {cc!r}", str(exc), "install gcc or set $CC")
+        ) from exc
+    return out.stdout.splitlines()[0] if out.stdout else cc
+
+
+def _command(
+    cc: str, lib: ModelLibrary, ros: RosPaths, srcs: list[Path], out: Path, gen_dir: Path
+) -> list[str]:
+    """The compile-and-link command of the node, against the library and headers copied
+    into ``gen_dir`` (the node's folder)."""
+    name = lib.library_path.name.removeprefix("lib").removesuffix(".so")
+    libs = ["rcl", "rcl_lifecycle", "rcutils", "rmw", "rosidl_runtime_c"]
+    for pkg in _MSG_PACKAGES:
+        libs += [f"{pkg}__rosidl_generator_c", f"{pkg}__rosidl_typesupport_c"]
+    rpaths = [gen_dir, ros.lib, *ros.bundled]
+    cmd = [cc, *CNODE_CFLAGS, *map(str, srcs), f"-I{C_DIR}", f"-I{gen_dir}"]
+    cmd += [f"-I{d}" for d in ros.include]
+    cmd += [f"-L{gen_dir}", f"-l{name}", f"-L{ros.lib}", *(f"-l{x}" for x in libs), "-lm"]
+    cmd += ["-Wl,--disable-new-dtags", *(f"-Wl,-rpath,{d}" for d in rpaths)]
+    # the Python type support librcl's wheel links: functions bound lazily (never called),
+    # its two data symbols defined by amsfe_pystub.c and exported to the libraries
+    cmd += ["-Wl,--allow-shlib-undefined", "-Wl,-z,lazy"]
+    cmd += [f"-Wl,--export-dynamic-symbol={s}" for s in _PY_DATA_SYMBOLS]
+    return [*cmd, "-o", str(out)]

@@ -1,0 +1,100 @@
+"""``amsfe live``: the simulated arm (``amsfe sim-node``) and the node (``amsfe node``) of one
+scenario started together, for a first live run in one command (docs/live-control.md); what
+``launch/amsfe_live.launch.py`` starts for users with a ROS 2 installation.
+
+Both are child processes of this one, with their own output lines (``node: ...``,
+``sim-node: ...``); the node starts first (the arm waits for it). Ctrl-C / SIGTERM reach
+both (the node publishes its hold command first); the exit code is the node's when it is
+not 0, else the arm's.
+"""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+from dataclasses import dataclass
+
+__all__ = ["PairOptions", "pair_commands", "run_pair"]
+
+
+@dataclass(frozen=True)
+class PairOptions:
+    """What ``amsfe live`` starts.
+
+    Attributes:
+        scenario: Scenario name or .toml.
+        controller: The node's controller (None: the scenario's; "": the scenario's too).
+        lockstep: The arm advances only when its command arrived (deterministic).
+        duration: [s] of sample time (None: the scenario's).
+        seed: The arm's seed (None: the scenario's).
+        rate: Free running: the arm's wall-clock speed factor.
+        impl: The node's per-sample path: ``auto``, ``c`` or ``python``.
+        record: The node's record folder (None: none).
+        topic_spec: A topic spec file for both (None: the defaults).
+        ros_args: ``--ros-args`` for both.
+        encoder_timeout: The node's ``--encoder-timeout`` [s] (None: its default).
+        command_timeout: The arm's ``--command-timeout`` and ``--start-timeout`` [s] (None:
+            its defaults).
+    """
+
+    scenario: str = "paper-sim"
+    controller: str | None = None
+    lockstep: bool = False
+    duration: float | None = None
+    seed: int | None = None
+    rate: float = 1.0
+    impl: str = "auto"
+    record: str | None = None
+    topic_spec: str | None = None
+    ros_args: tuple[str, ...] = ()
+    encoder_timeout: float | None = None
+    command_timeout: float | None = None
+
+
+def pair_commands(opts: PairOptions) -> tuple[list[str], list[str]]:
+    """The ``amsfe`` arguments of the node and of the arm."""
+    common: list[str] = []
+    if opts.duration is not None:
+        common += ["--duration", f"{opts.duration:g}"]
+    if opts.seed is not None:
+        common += ["--seed", str(opts.seed)]
+    if opts.topic_spec is not None:
+        common += ["--topic-spec", opts.topic_spec]
+    node = ["node", opts.scenario, "--controller", *([opts.controller] if opts.controller else [])]
+    node += ["--impl", opts.impl, *common]
+    if opts.record is not None:
+        node += ["--record", opts.record]
+    if opts.encoder_timeout is not None:
+        node += ["--encoder-timeout", f"{opts.encoder_timeout:g}"]
+    arm = ["sim-node", opts.scenario, *common]
+    if opts.command_timeout is not None:
+        t = f"{opts.command_timeout:g}"
+        arm += ["--command-timeout", t, "--start-timeout", t]
+    arm += ["--lockstep"] if opts.lockstep else ["--rate", f"{opts.rate:g}"]
+    ros = ["--ros-args", *opts.ros_args] if opts.ros_args else []
+    return [*node, *ros], [*arm, *ros]
+
+
+def run_pair(opts: PairOptions) -> int:
+    """Start the node, then the arm; wait for both; the exit code (module docstring).
+
+    Raises:
+        KeyboardInterrupt: Ctrl-C or SIGTERM (forwarded to both, both waited for).
+    """
+    node_args, arm_args = pair_commands(opts)
+    exe = [sys.executable, "-m", "amsfe_sym"]
+    sys.stdout.flush()
+    procs = [subprocess.Popen([*exe, *node_args])]
+    try:
+        procs.append(subprocess.Popen([*exe, *arm_args]))
+        codes = [p.wait() for p in procs]
+    except KeyboardInterrupt as exc:
+        sig = signal.SIGINT if type(exc) is KeyboardInterrupt else signal.SIGTERM
+        for p in procs:
+            if p.poll() is None:
+                p.send_signal(sig)
+        for p in procs:
+            p.wait()
+        raise
+    return codes[0] or codes[1]

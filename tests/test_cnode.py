@@ -1,0 +1,359 @@
+"""The C node (``amsfe node --impl c``, ``ros/c/amsfe_node.c``; docs/live-control.md).
+
+Over real DDS (marker ``ros``; each test on its own domain and topics, every process bounded,
+as tests/test_ros.py does): ``sim-node --lockstep`` + the C node reproduce ``amsfe simulate``
+(the compiled loop) bit for bit on paper-sim and the Panda, and equal the Python node's run;
+the build is cached by content (a second build compiles nothing); the wheels missing is one
+line.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from amsfe_sym.codegen import library_for
+from amsfe_sym.errors import RosError
+from amsfe_sym.scenario import load_scenario
+from amsfe_sym.sim.loop import run
+from tests.test_node_record import _bag
+from tests.test_ros import (
+    PATIENT_ARM,
+    PATIENT_NODE,
+    PATIENT_WATCHDOG,
+    SRC,
+    _finish,
+    _ros_env,
+    _start,
+)
+
+
+def _lockstep(tmp_path: Path, scenario: str, impl: str, duration: float = 2.0) -> dict[str, Any]:
+    """``sim-node --lockstep`` + ``node --impl IMPL --controller amsfe --record`` for
+    ``duration`` s: both exit 0; the record's topics and the node's output."""
+    env = _ros_env(tmp_path)
+    rec = tmp_path / f"rec-{impl}"
+    d = f"{duration:g}"
+    procs = []
+    try:
+        procs.append(_start(env, "node", scenario, "--controller", "amsfe", "--impl", impl,
+                            "--duration", d, "--record", str(rec), *PATIENT_NODE))  # fmt: skip
+        procs.append(_start(env, "sim-node", scenario, "--lockstep", "--duration", d,
+                            *PATIENT_ARM))  # fmt: skip
+    finally:
+        results = _finish(procs, 180.0)
+    for code, text in results:
+        assert code == 0, text
+    got: dict[str, Any] = dict(_bag(rec))
+    got["_text"] = results[0][1]
+    return got
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario", ["paper-sim", "panda-control"])
+def test_c_node_lockstep_is_simulate(scenario: str, tmp_path: Path) -> None:
+    """The C node over DDS in lockstep: its estimates, theta and commands (from its record,
+    every tick) equal ``amsfe simulate``'s compiled loop of the same seed bit for bit, its
+    frames fused and refused are the loop's, and it ends with the hold command."""
+    sc = load_scenario(scenario).with_overrides(duration=2.0)
+    lib = library_for(sc)
+    got = _lockstep(tmp_path, scenario, "c")
+    assert "the C node" in got["_text"] and "done: 2001 ticks" in got["_text"], got["_text"]
+    ref = run(sc, lib, runtime="compiled")
+    n = lib.n
+    est = np.array([np.r_[m.position, m.velocity] for m in got["/amsfe/estimate"]])
+    cmd = np.array([m.data for m in got["/effort_controller/commands"]])
+    theta = np.array([m.data for m in got["/amsfe/theta"]])
+    assert est.shape == (ref.t.size, 2 * n)
+    np.testing.assert_array_equal(est, ref.x_hat[:, : 2 * n])
+    np.testing.assert_array_equal(theta, ref.x_hat[:, 4 * n :])
+    np.testing.assert_array_equal(cmd[:-1], ref.u)  # the last: the hold
+    std = np.array([np.r_[m.position, m.velocity] for m in got["/amsfe/estimate_std"]])
+    np.testing.assert_array_equal(std, np.sqrt(ref.P_diag[:, : 2 * n]))
+    assert len(got["/camera/marker"]) == ref.counters["frames_delivered"] > 0
+    diag = json.loads(got["/amsfe/diagnostics"][-1].data)
+    assert diag["frames_fused"] == ref.counters["frames_applied"] > 0
+    assert diag["frames_refused"] == ref.counters["frames_rejected"]
+    truth = np.array([m.data for m in got["/amsfe/truth"]])  # each tick's own
+    np.testing.assert_array_equal(truth, ref.x_true)
+    assert "latency sample received -> command published" in got["_text"]
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_c_node_equals_the_python_node(tmp_path: Path) -> None:
+    """The same lockstep run with the C node and with the Python node (the readable
+    reference): the same estimates, standard deviations, theta and commands (1e-12), the same
+    estimator decisions.  (Not the skipped messages: whether a torque sample arrives before
+    or after the next encoder sample is DDS's timing, and in lockstep either way the step
+    uses the same torque, the command.)"""
+    c = _lockstep(tmp_path / "c", "paper-sim", "c", 1.0)
+    py = _lockstep(tmp_path / "py", "paper-sim", "python", 1.0)
+    for topic in ("/amsfe/estimate", "/amsfe/estimate_std"):
+        a = np.array([np.r_[m.position, m.velocity] for m in c[topic]])
+        b = np.array([np.r_[m.position, m.velocity] for m in py[topic]])
+        assert a.shape == b.shape and a.shape[0] == 1001
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+    for topic in ("/amsfe/theta", "/effort_controller/commands"):
+        a = np.array([m.data for m in c[topic]])
+        b = np.array([m.data for m in py[topic]])
+        assert a.shape == b.shape
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+    dc = json.loads(c["/amsfe/diagnostics"][-1].data)
+    dp = json.loads(py["/amsfe/diagnostics"][-1].data)
+    for key in ("k", "frames_fused", "frames_refused", "refused"):
+        assert dc[key] == dp[key], key
+
+
+def test_build_is_cached_by_content(tmp_path: Path) -> None:
+    """Building the node twice compiles once: the second build reuses the executable (same
+    key, same file, not rewritten)."""
+    pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (pip install -e '.[ros]')")
+    from amsfe_sym.ros.cnode import build_node
+
+    lib = library_for(load_scenario("paper-sim"))
+    first = build_node(lib, tmp_path)
+    assert first.compiled and first.path.is_file()
+    stamp = first.path.stat().st_mtime_ns
+    second = build_node(lib, tmp_path)
+    assert not second.compiled
+    assert (second.path, second.key) == (first.path, first.key)
+    assert second.path.stat().st_mtime_ns == stamp
+    made = json.loads((first.path.parent / "build.json").read_text())
+    assert "-O1" in made["cflags"] and "--disable-new-dtags" in made["command"]
+
+
+def test_missing_wheels_is_one_line(tmp_path: Path) -> None:
+    """Without rcl's headers and libraries (the [ros] extra) the C node's build says so in
+    one line naming the fix; ``amsfe node --impl c`` then exits 2 with that one line and
+    writes nothing."""
+    from amsfe_sym.ros.cnode import ros_paths
+
+    with pytest.raises(RosError, match=r"rcl's C headers.*Fix: pip install"):
+        ros_paths(tmp_path)
+    block = (
+        "import sys; sys.prefix = sys.argv[1]; from amsfe_sym.apps.cli import main; "
+        "sys.exit(main(['node', 'paper-sim', '--impl', 'c']))"
+    )
+    env = {**os.environ, "PYTHONPATH": str(SRC)}
+    empty = tmp_path / "empty-prefix"
+    empty.mkdir()
+    node = subprocess.run(
+        [sys.executable, "-c", block, str(empty)],
+        env=env, capture_output=True, text=True, timeout=300, cwd=tmp_path,
+    )  # fmt: skip
+    assert node.returncode == 2, node.stderr
+    lines = [x for x in node.stderr.splitlines() if x.startswith("error:")]
+    assert len(lines) == 1 and ".[ros]" in lines[0] and "librcl" in lines[0], node.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["empty-prefix"]
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_amsfe_live_is_simulate(tmp_path: Path) -> None:
+    """``amsfe live --lockstep`` (the arm and the C node in one command) exits 0 and its
+    record equals ``amsfe simulate`` bit for bit."""
+    sc = load_scenario("paper-sim").with_overrides(duration=1.0)
+    lib = library_for(sc)
+    env = _ros_env(tmp_path)
+    rec = tmp_path / "rec"
+    procs = []
+    try:
+        procs.append(_start(env, "live", "paper-sim", "--controller", "amsfe", "--lockstep",
+                            "--duration", "1", "--impl", "c", "--record", str(rec),
+                            "--encoder-timeout", "20", "--command-timeout", "60",
+                            "--ros-args", *PATIENT_WATCHDOG))  # fmt: skip
+    finally:
+        results = _finish(procs, 180.0)
+    code, text = results[0]
+    assert code == 0, text
+    assert "sim-node: 1001 ticks" in text and "node: done: 1001 ticks" in text, text
+    ref = run(sc, lib, runtime="compiled")
+    got = _bag(rec)
+    est = np.array([np.r_[m.position, m.velocity] for m in got["/amsfe/estimate"]])
+    np.testing.assert_array_equal(est, ref.x_hat[:, : 2 * lib.n])
+    cmd = np.array([m.data for m in got["/effort_controller/commands"]])
+    np.testing.assert_array_equal(cmd[:-1], ref.u)
+
+
+def _messy_messages(sc: Any, lib: Any) -> list[tuple[Any, ...]]:
+    """The messages of a closed-loop run of the Python LiveLoop with the arm, as a driver and
+    a late DDS would deliver them (source timestamps from a counter): a frame and a torque
+    before the first sample, samples duplicated, off the grid and missing (a gap of 3),
+    frames duplicated, with a NaN pixel, off the grid and sent after the sample of their
+    tick, torque samples of some ticks (slightly off the command), one late."""
+    from amsfe_sym.ros.arm import SimArm
+    from amsfe_sym.ros.live import LiveLoop
+
+    arm, loop = SimArm(sc, lib), LiveLoop(sc, lib, controller=True)
+    T = round(lib.T * 1e9)
+    sent = iter(range(1, 10**9))
+    msgs: list[tuple[Any, ...]] = []
+
+    def send(*m: Any) -> None:
+        msgs.append(m)
+        if m[0] == "frame":
+            loop.frame(m[1], np.array(m[2:4]), m[4])
+        elif m[0] == "applied":
+            loop.applied(m[1], np.array(m[2]))
+        else:
+            out = loop.encoders(m[1], np.array(m[3]), m[2])
+            if out is not None:
+                last[0] = out
+
+    last: list[Any] = [None]
+    send("frame", 0, 100.0, 100.0, next(sent))  # before the first sample: skipped
+    send("applied", 0, np.full(lib.n, 0.5))  # before the first sample: waits for it
+    late: list[tuple[Any, ...]] = []
+    for k in range(arm.K):
+        s = arm.sense()
+        for f in s.frames:
+            m = ("frame", f.exposure_step * T, float(f.z[0]), float(f.z[1]), next(sent))
+            if k % 7 == 3:
+                late.append(m)  # sent after this tick's sample: fused at the next one
+            else:
+                send(*m)
+            if k % 5 == 0:
+                send(*m[:4], next(sent))  # the same exposure again: a duplicate
+        if k == 40:
+            send("frame", 40 * T + T // 2, 1.0, 1.0, next(sent))  # exposure off the grid
+            send("frame", 39 * T, float("nan"), 1.0, next(sent))  # a NaN pixel
+        if k not in (60, 61, 62):  # a gap of 3: predicted through
+            send("enc", k * T, next(sent), s.z)
+        if k % 11 == 0:
+            send("enc", k * T, next(sent), s.z)  # duplicated
+        if k == 30:
+            send("enc", k * T + T // 2, next(sent), s.z)  # off the grid
+        for m in late:
+            send(*m[:4], next(sent))
+        late.clear()
+        out = last[0]
+        assert out is not None and out.u is not None
+        u = out.u + (1e-3 if k % 13 == 0 else 0.0)
+        if k % 3 == 0:
+            send("applied", k * T, u)  # what the arm applied (else: the command)
+        if k == 90:
+            send("applied", 80 * T, u)  # after its tick was estimated: skipped
+        if k + 1 < arm.K:
+            arm.advance(u if k % 13 == 0 else out.u)
+    return msgs
+
+
+def test_c_live_loop_is_the_python_live_loop(tmp_path: Path) -> None:
+    """The C node's live loop (``amsfe_live.c``, run by ``amsfe_node --replay`` without rcl)
+    and the Python LiveLoop on the same messy message stream (early, duplicated, off-grid,
+    missing, NaN and late messages): the same estimates and commands at every tick (1e-9),
+    the same ticks skipped, the same skip counts by reason and the same decisions."""
+    pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (pip install -e '.[ros]')")
+    from amsfe_sym.ros.cnode import build_node, write_params
+    from amsfe_sym.ros.live import LiveLoop
+    from amsfe_sym.topics import TopicSpec
+
+    sc = load_scenario("paper-sim").with_overrides(duration=0.3)
+    lib = library_for(sc)
+    msgs = _messy_messages(sc, lib)
+    lines = []
+    for m in msgs:
+        if m[0] == "frame":
+            lines.append(f"frame {m[1]} {m[2]!r} {m[3]!r} {m[4]}")
+        elif m[0] == "applied":
+            lines.append(f"applied {m[1]} " + " ".join(repr(float(v)) for v in m[2]))
+        else:
+            lines.append(f"enc {m[1]} {m[2]} " + " ".join(repr(float(v)) for v in m[3]))
+    events = tmp_path / "events.txt"
+    events.write_text("\n".join(lines) + "\n")
+    opts = {"end_k": -1, "std_every": 10, "hold": "gravity", "encoder_timeout": 0.5,
+            "subscriber_wait": 1.0, "record": None, "sched_priority": 0}  # fmt: skip
+    params = write_params(tmp_path, sc, lib, TopicSpec(), controller=True, options=opts)
+    exe = build_node(lib).path
+    done = subprocess.run([str(exe), str(params), "--replay", str(events)],
+                          capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    out = done.stdout.splitlines()
+    # the Python reference on the same messages
+    loop = LiveLoop(sc, lib, controller=True)
+    want: list[str | np.ndarray] = []
+    for m in msgs:
+        if m[0] == "frame":
+            loop.frame(m[1], np.array(m[2:4]), m[4])
+        elif m[0] == "applied":
+            loop.applied(m[1], np.array(m[2]))
+        else:
+            tick = loop.encoders(m[1], np.array(m[3]), m[2])
+            want.append("skip" if tick is None else np.r_[tick.k, tick.x_hat, tick.u])
+    got = [ln for ln in out if ln == "skip" or ln.startswith("tick")]
+    assert len(got) == len(want)
+    assert [g == "skip" for g in got] == [isinstance(w, str) for w in want]
+    ticks = [np.array(g.split()[1:], dtype=float) for g in got if g != "skip"]
+    ref = [w for w in want if not isinstance(w, str)]
+    np.testing.assert_allclose(np.array(ticks), np.array(ref), rtol=0, atol=1e-9)
+    skipped = dict(ln[len("skipped ") :].rsplit("|", 1) for ln in out if ln.startswith("skipped"))
+    assert {k: int(v) for k, v in skipped.items()} == loop.skipped
+    assert len(loop.skipped) >= 6  # every kind of mess above was seen
+    applied, rejected, enc_rejected = (int(x) for x in out[-1].split()[1:])
+    c = loop.counters
+    assert (applied, rejected) == (c["frames_applied"], c["frames_rejected"])
+    assert enc_rejected == c["encoder_rejected"]
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_c_node_sigterm_holds_and_records(tmp_path: Path) -> None:
+    """SIGTERM to ``amsfe node --impl c`` alone (not its process group): it is forwarded to
+    the C node, which publishes the hold command and says so; ``amsfe node`` exits 143 and
+    its record is written, every tick's estimate with its command, the hold last."""
+    import signal
+
+    env = _ros_env(tmp_path)
+    rec = tmp_path / "rec"
+    procs = []
+    try:
+        node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--impl", "c",
+                      "--record", str(rec), *PATIENT_NODE)  # fmt: skip
+        sim = _start(env, "sim-node", "paper-sim", "--lockstep", "--duration", "30",
+                     "--command-timeout", "20")  # fmt: skip
+        procs += [node, sim]
+        sim.wait_for("t = 1.0 s", 90.0)
+        os.kill(node.p.pid, signal.SIGTERM)
+        assert node.p.wait(timeout=60.0) == 143, node.text
+        sim.kill(signal.SIGTERM)
+    finally:
+        _finish(procs, 60.0)
+    assert "node: hold: interrupted; hold command [" in node.text, node.text
+    got = _bag(rec)
+    assert len(got["/amsfe/estimate"]) == len(got["/effort_controller/commands"]) - 1 >= 1000
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_c_node_managed(tmp_path: Path) -> None:
+    """``amsfe node --impl c --managed``: rcl_lifecycle's services (change_state, get_state)
+    take it to ``inactive`` and ``active``; then it closes the lockstep loop, every tick
+    recorded, and ends at its duration (exit 0)."""
+    from tests.test_ros import _lifecycle
+
+    env = _ros_env(tmp_path)
+    rec = tmp_path / "rec"
+    procs = []
+    try:
+        node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--managed",
+                      "--impl", "c", "--duration", "0.5", "--record", str(rec),
+                      *PATIENT_NODE)  # fmt: skip
+        procs.append(node)
+        assert _lifecycle(env, "amsfe_node", "configure", "activate") == ["inactive", "active"]
+        procs.insert(0, _start(env, "sim-node", "paper-sim", "--lockstep", "--duration", "0.5",
+                               *PATIENT_ARM))  # fmt: skip
+    finally:
+        results = _finish(procs, 120.0)
+    for code, text in results:
+        assert code == 0, text
+    assert "the C node" in node.text and "waiting for configure and activate" in node.text
+    assert len(_bag(rec)["/amsfe/estimate"]) == 501
