@@ -357,3 +357,26 @@ def test_c_node_managed(tmp_path: Path) -> None:
         assert code == 0, text
     assert "the C node" in node.text and "waiting for configure and activate" in node.text
     assert len(_bag(rec)["/amsfe/estimate"]) == 501
+
+
+def test_what_the_c_node_refuses_and_its_queues() -> None:
+    """``--impl auto`` picks the Python node, saying why, for what the C node does not run
+    (an effort kind other than ``applied``, ``--runtime python``); the C node's queues hold
+    the samples of the lag it catches up from at the rates: min(encoder_timeout, 2 s) of
+    encoder samples, and of frames plus the camera's delay (never fewer than qos.depth)."""
+    from dataclasses import replace
+
+    from amsfe_sym.ros.cnode import c_node_refusal, queue_depths
+    from amsfe_sym.topics import TopicSpec
+
+    sc = load_scenario("paper-sim")
+    spec = TopicSpec()
+    assert c_node_refusal(sc, spec, managed=True, controller=True) is None
+    assert "joint_torque" in str(
+        c_node_refusal(sc, replace(spec, effort_kind="joint_torque"), False)
+    )
+    assert "--runtime python" in str(c_node_refusal(sc, spec, False, True, compiled=False))
+    small = replace(spec, depth=10)
+    assert queue_depths(small, 1e-3, 10, 5, 0.5) == (501, 53)  # ceil(0.505 / 0.01) + 2
+    assert queue_depths(small, 1e-3, 10, 5, 20.0) == (2001, 203)  # the lag capped at 2 s
+    assert queue_depths(spec, 1e-3, 10, 5, 0.05) == (100, 100)  # qos.depth is the least

@@ -263,7 +263,7 @@ def _node_impl(asked: str, sc: Any, lib: Any, opts: Any) -> str:
     from amsfe_sym.errors import AmsfeError
     from amsfe_sym.ros.cnode import build_node, c_node_refusal, refuse_c_node
 
-    why = c_node_refusal(sc, opts.spec, opts.managed, opts.controller)
+    why = c_node_refusal(sc, opts.spec, opts.managed, opts.controller, opts.compiled)
     if why is None:
         try:
             build_node(lib)

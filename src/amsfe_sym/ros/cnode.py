@@ -60,13 +60,16 @@ CATCH_UP_S = 2.0
 
 # ---------------------------------------------------------------------- configuration
 def c_node_refusal(
-    sc: Scenario, spec: TopicSpec, managed: bool, controller: bool = False
+    sc: Scenario, spec: TopicSpec, managed: bool, controller: bool = False, compiled: bool = True
 ) -> str | None:
     """Why the C node cannot run this configuration (None: it can): the C node reads an
     effort topic of kind ``applied`` only (the estimators of a joint torque or of an
-    unknown input are the Python node's) and runs the controllers the C runtime has."""
+    unknown input are the Python node's) and runs the controllers the C runtime has, on the
+    library's C estimator (``--runtime python``, the Python estimator: the Python node)."""
     from amsfe_sym.runtime.compiled_loop import CONTROLLER_CODES
 
+    if not compiled:
+        return "--runtime python (the C node runs the library's C estimator)"
     if controller and sc.controller not in CONTROLLER_CODES:
         return f"controller {sc.controller!r} (not in the C runtime)"
     kind = spec.effort_kind or "applied"
@@ -306,7 +309,9 @@ def run_c_node(
     """
     from amsfe_sym.ros.spec_filter import live_filter
 
-    refuse_c_node(c_node_refusal(sc, options.spec, options.managed, options.controller))
+    refuse_c_node(
+        c_node_refusal(sc, options.spec, options.managed, options.controller, options.compiled)
+    )
     if exe is not None and not (exe.is_file() and os.access(exe, os.X_OK)):
         raise ConfigError(
             describe("--node-exe", "an executable C node", str(exe), "give colcon's amsfe_node")
@@ -321,7 +326,7 @@ def run_c_node(
         options.domain_id,
         options.std_every,
     )
-    refuse_c_node(c_node_refusal(sc, spec, options.managed, options.controller))
+    refuse_c_node(c_node_refusal(sc, spec, options.managed, options.controller, options.compiled))
     sc_live = live_filter(sc, spec)
     timeout = (  # --encoder-timeout over the spec's [watchdog] encoder_timeout
         spec.watchdog.encoder_timeout
