@@ -99,6 +99,46 @@ def test_torque_loss_holds_for_actuation(name: str, seeds: tuple[int, ...]) -> N
 
 
 @pytest.mark.slow
+def test_a_report_too_late_for_the_estimator_is_judged(paper: Any) -> None:
+    """The arm's applied torque of tick k-1 reaching the node after it estimated tick k (DDS
+    does not order two topics): the estimator skips it (counted), the watchdog still judges
+    it at the next sample; a torque loss is then held for ``actuation`` 6 ticks after it (the
+    loss's first report judged a tick later)."""
+    from amsfe_sym.ros.arm import SimArm
+    from amsfe_sym.ros.faults import Fault as ArmFault
+    from amsfe_sym.ros.faults import FaultPlan
+    from amsfe_sym.ros.live import LiveLoop
+
+    sc, lib = paper
+    sc = sc.with_overrides(seed=4)
+    # innovation off: the estimator, given its own command for the late ticks, would see the
+    # loss too (a tick before actuation's fifth mismatch)
+    bounds = WatchdogBounds(innovation_nis=math.inf)
+    arm, loop = SimArm(sc, lib), LiveLoop(sc, lib, controller=True, watchdog=bounds)
+    plan = FaultPlan((ArmFault("torque_loss", FAULT_AT),), lib.T, lib.n)
+    T_ns, k_f = round(lib.T * 1e9), round(FAULT_AT / lib.T)
+    prev = np.zeros(lib.n)
+    for k in range(arm.K):
+        s = arm.sense()
+        for f in s.frames:
+            loop.frame(f.exposure_step * T_ns, f.z)
+        t = k * lib.T
+        w = loop.watch(k * T_ns, s.z, taken=t, clock=lambda t=t: t + 1e-4)
+        if w.reason != Reason.NONE:
+            break
+        assert w.out is not None and w.out.u is not None
+        applied = plan.torque(k, w.out.u)
+        if k:
+            loop.applied((k - 1) * T_ns, prev)  # after tick k was estimated: late
+        prev = applied
+        arm.advance(applied)
+    assert loop.watchdog.hold is not None and loop.watchdog.hold.name == "actuation"
+    assert loop.watchdog.hold.k == k_f + 6, loop.watchdog.hold.line()
+    assert loop.skipped["torque sample after its tick was estimated"] == k - 1
+    assert loop.watchdog.seen.actuation_judged == k - 1  # samples 2..k (tick 0 at 2)
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("name", "seeds", "duration"),
     [("paper-sim", range(200, 206), 4.0), ("panda-control", range(200, 203), 3.0)],
