@@ -158,7 +158,7 @@ void amsfe_watchdog_reset(amsfe_watchdog *wd);
  * actuation: the arm applies over tick j one of the node's commands of ticks <= j (late ones
  * arrive late: then an older one; before the first, zero), never an older one than before.
  * Candidates: the command last seen applied (zero at first), then the kept commands (the
- * last AMSFE_WD_ACTUATION_RING ticks' u) after it up to applied_k, oldest first; distance
+ * last AMSFE_WD_ACTUATION_RING ticks' u) after it up to applied_k; distance
  * max_j |applied_j - c_j| / s_j.  The nearest (the oldest of equals) within actuation_error is
  * the one applied (it becomes the last seen); none: a mismatch (value: the smallest
  * distance), actuation_ticks in a row hold. */
