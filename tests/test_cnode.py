@@ -184,17 +184,24 @@ def test_amsfe_live_is_simulate(tmp_path: Path) -> None:
     np.testing.assert_array_equal(cmd[:-1], ref.u)
 
 
+#: The stamps' origin in the messy stream: the system clock of a driver (ns since 1970).
+EPOCH_NS = 1_700_000_000 * 10**9
+
+
 def _messy_messages(sc: Any, lib: Any) -> list[tuple[Any, ...]]:
     """The messages of a closed-loop run of the Python LiveLoop with the arm, as a driver and
-    a late DDS would deliver them (source timestamps from a counter): a frame and a torque
-    before the first sample, samples duplicated, off the grid and missing (a gap of 3),
-    frames duplicated, with a NaN pixel, off the grid and sent after the sample of their
-    tick, torque samples of some ticks (slightly off the command), one late."""
+    a late DDS would deliver them (stamps on the system clock, source timestamps from a
+    counter): a frame and a torque before the first sample, samples duplicated, off the grid
+    and missing (a gap of 3), frames duplicated, with a NaN pixel, off the grid and sent
+    after the sample of their tick, torque samples of some ticks (slightly off the command),
+    one late; and issue 37's bad stamps, each skipped by name: one sample stamped 1 h ahead,
+    two with a zero stamp, two 0.3 s back (a clock step back and forth)."""
     from amsfe_sym.ros.arm import SimArm
     from amsfe_sym.ros.live import LiveLoop
 
     arm, loop = SimArm(sc, lib), LiveLoop(sc, lib, controller=True)
     T = round(lib.T * 1e9)
+    bad = {50: 3600 * 10**9, 75: None, 76: None, 85: -3 * 10**8, 86: -3 * 10**8}
     sent = iter(range(1, 10**9))
     msgs: list[tuple[Any, ...]] = []
 
@@ -210,28 +217,32 @@ def _messy_messages(sc: Any, lib: Any) -> list[tuple[Any, ...]]:
                 last[0] = out
 
     last: list[Any] = [None]
-    send("frame", 0, 100.0, 100.0, next(sent))  # before the first sample: skipped
-    send("applied", 0, np.full(lib.n, 0.5))  # before the first sample: waits for it
+    send("frame", EPOCH_NS, 100.0, 100.0, next(sent))  # before the first sample: skipped
+    send("applied", EPOCH_NS, np.full(lib.n, 0.5))  # before the first sample: waits for it
     late: list[tuple[Any, ...]] = []
     for k in range(arm.K):
         s = arm.sense()
         for f in s.frames:
-            m = ("frame", f.exposure_step * T, float(f.z[0]), float(f.z[1]), next(sent))
+            m = ("frame", EPOCH_NS + f.exposure_step * T, *map(float, f.z), next(sent))
             if k % 7 == 3:
                 late.append(m)  # sent after this tick's sample: fused at the next one
             else:
                 send(*m)
             if k % 5 == 0:
                 send(*m[:4], next(sent))  # the same exposure again: a duplicate
+        stamp = EPOCH_NS + k * T
         if k == 40:
-            send("frame", 40 * T + T // 2, 1.0, 1.0, next(sent))  # exposure off the grid
-            send("frame", 39 * T, float("nan"), 1.0, next(sent))  # a NaN pixel
-        if k not in (60, 61, 62):  # a gap of 3: predicted through
-            send("enc", k * T, next(sent), s.z)
+            send("frame", stamp + T // 2, 1.0, 1.0, next(sent))  # exposure off the grid
+            send("frame", stamp - T, float("nan"), 1.0, next(sent))  # a NaN pixel
+        if k in bad:  # skipped by name; the next good sample predicts through
+            step = bad[k]
+            send("enc", 0 if step is None else stamp + step, next(sent), s.z)
+        elif k not in (60, 61, 62):  # a gap of 3: predicted through
+            send("enc", stamp, next(sent), s.z)
         if k % 11 == 0:
-            send("enc", k * T, next(sent), s.z)  # duplicated
+            send("enc", stamp, next(sent), s.z)  # duplicated
         if k == 30:
-            send("enc", k * T + T // 2, next(sent), s.z)  # off the grid
+            send("enc", stamp + T // 2, next(sent), s.z)  # off the grid
         for m in late:
             send(*m[:4], next(sent))
         late.clear()
@@ -239,27 +250,19 @@ def _messy_messages(sc: Any, lib: Any) -> list[tuple[Any, ...]]:
         assert out is not None and out.u is not None
         u = out.u + (1e-3 if k % 13 == 0 else 0.0)
         if k % 3 == 0:
-            send("applied", k * T, u)  # what the arm applied (else: the command)
+            send("applied", stamp, u)  # what the arm applied (else: the command)
         if k == 90:
-            send("applied", 80 * T, u)  # after its tick was estimated: skipped
+            send("applied", EPOCH_NS + 80 * T, u)  # after its tick was estimated: skipped
         if k + 1 < arm.K:
             arm.advance(u if k % 13 == 0 else out.u)
     return msgs
 
 
-def test_c_live_loop_is_the_python_live_loop(tmp_path: Path) -> None:
-    """The C node's live loop (``amsfe_live.c``, run by ``amsfe_node --replay`` without rcl)
-    and the Python LiveLoop on the same messy message stream (early, duplicated, off-grid,
-    missing, NaN and late messages): the same estimates and commands at every tick (1e-9),
-    the same ticks skipped, the same skip counts by reason and the same decisions."""
-    pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (pip install -e '.[ros]')")
+def _replay(tmp_path: Path, sc: Any, lib: Any, msgs: list[tuple[Any, ...]]) -> list[str]:
+    """The C node's live loop (``amsfe_node --replay``, no rcl) on ``msgs``: its lines."""
     from amsfe_sym.ros.cnode import build_node, write_params
-    from amsfe_sym.ros.live import LiveLoop
     from amsfe_sym.topics import TopicSpec
 
-    sc = load_scenario("paper-sim").with_overrides(duration=0.3)
-    lib = library_for(sc)
-    msgs = _messy_messages(sc, lib)
     lines = []
     for m in msgs:
         if m[0] == "frame":
@@ -277,7 +280,22 @@ def test_c_live_loop_is_the_python_live_loop(tmp_path: Path) -> None:
     done = subprocess.run([str(exe), str(params), "--replay", str(events)],
                           capture_output=True, text=True, timeout=120)  # fmt: skip
     assert done.returncode == 0, done.stderr
-    out = done.stdout.splitlines()
+    return done.stdout.splitlines()
+
+
+def test_c_live_loop_is_the_python_live_loop(tmp_path: Path) -> None:
+    """The C node's live loop (``amsfe_live.c``, run by ``amsfe_node --replay`` without rcl)
+    and the Python LiveLoop on the same messy message stream (early, duplicated, off-grid,
+    missing, NaN and late messages, zero stamps, stamps 1 h ahead and 0.3 s back): the same
+    estimates and commands at every tick (1e-9), the same ticks skipped, the same skip counts
+    by reason and the same decisions."""
+    pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (pip install -e '.[ros]')")
+    from amsfe_sym.ros.live import LiveLoop
+
+    sc = load_scenario("paper-sim").with_overrides(duration=0.3)
+    lib = library_for(sc)
+    msgs = _messy_messages(sc, lib)
+    out = _replay(tmp_path, sc, lib, msgs)
     # the Python reference on the same messages
     loop = LiveLoop(sc, lib, controller=True)
     want: list[str | np.ndarray] = []
@@ -297,11 +315,56 @@ def test_c_live_loop_is_the_python_live_loop(tmp_path: Path) -> None:
     np.testing.assert_allclose(np.array(ticks), np.array(ref), rtol=0, atol=1e-9)
     skipped = dict(ln[len("skipped ") :].rsplit("|", 1) for ln in out if ln.startswith("skipped"))
     assert {k: int(v) for k, v in skipped.items()} == loop.skipped
-    assert len(loop.skipped) >= 6  # every kind of mess above was seen
+    assert len(loop.skipped) >= 9  # every kind of mess above was seen
+    assert loop.skipped["encoder sample with a zero header stamp (unstamped)"] == 2
+    assert loop.skipped["encoder stamp behind the last one (a clock step back)"] == 2
+    ahead = "encoder stamp ahead of its send time (a clock step or a corrupt stamp)"
+    assert loop.skipped[ahead] == 1
     applied, rejected, enc_rejected = (int(x) for x in out[-1].split()[1:])
     c = loop.counters
     assert (applied, rejected) == (c["frames_applied"], c["frames_rejected"])
     assert enc_rejected == c["encoder_rejected"]
+
+
+@pytest.mark.parametrize(
+    ("step_ns", "words"),
+    [
+        (None, "zero header stamp"),
+        (3600 * 10**9, "ahead of its send time"),
+        (-3 * 10**8, "a clock step back"),
+    ],
+)
+def test_c_live_loop_holds_bad_stamps_by_name(
+    tmp_path: Path, step_ns: int | None, words: str
+) -> None:
+    """More than max_gap_steps bad stamps in a row (issue 37): the C live loop stops with
+    the Python LiveLoop's EstimatorError word for word (what the C node holds with), not as
+    a stall; the samples before them are the same ticks."""
+    pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (pip install -e '.[ros]')")
+    from amsfe_sym.errors import EstimatorError
+    from amsfe_sym.ros.live import LiveLoop
+    from amsfe_sym.topics import TopicSpec
+
+    sc = load_scenario("paper-sim").with_overrides(duration=0.1)
+    lib = library_for(sc)
+    T = round(lib.T * 1e9)
+    z = np.zeros(2 * lib.n)
+    msgs = []
+    for k in range(40):  # a clock step at tick 30: every stamp after it is off
+        stamp = EPOCH_NS + k * T
+        if k >= 30:
+            stamp = 0 if step_ns is None else stamp + step_ns
+        msgs.append(("enc", stamp, 5 * 10**9 + k * T, z))
+    loop = LiveLoop(sc, lib, controller=True)
+    with pytest.raises(EstimatorError) as info:
+        for m in msgs:
+            loop.encoders(m[1], m[3], m[2])
+    out = _replay(tmp_path, sc, lib, msgs)
+    stop = [ln for ln in out if ln.startswith("stop")]
+    assert stop == [f"stop -2 {info.value}"]
+    assert words in stop[0] and "stalled" not in stop[0]
+    assert sum(ln.startswith("tick") for ln in out) == 30
+    assert out.count("skip") == TopicSpec().max_gap_steps  # then the hold
 
 
 @pytest.mark.ros

@@ -19,6 +19,9 @@ const char *const LIVE_SKIP_TEXT[SKIP_REASONS] = {
     "encoder sample duplicated",
     "encoder samples missing (predicted through)",
     "frame not kept (more than 64 pending)",
+    "encoder sample with a zero header stamp (unstamped)",
+    "encoder stamp behind the last one (a clock step back)",
+    "encoder stamp ahead of its send time (a clock step or a corrupt stamp)",
 };
 
 static void *zalloc(size_t size) {
@@ -253,6 +256,46 @@ static int control(live_loop *L, const double *z, int with_nis) {
   return AMSFE_OK;
 }
 
+/* Why an encoder sample's header stamp is not used (-1: it is; LiveLoop._bad_stamp, issue 37):
+ * a zero stamp; a stamp more than max_gap + 1 ticks behind the last used one (a clock step
+ * back); that many ahead of it while the send times advanced less than a quarter as much (a
+ * clock step ahead or a corrupt stamp: a stall delays both).  Skipped and counted; the run of
+ * them in L->bad_run. */
+static int bad_stamp(live_loop *L, long long stamp_ns, long long sent) {
+  int why = -1;
+  double size = 0.0;
+  long long span = (long long)(L->max_gap + 1) * L->T_ns;
+  long long d = stamp_ns - (L->t0_ns + (long long)L->k * L->T_ns);
+  if (stamp_ns == 0) {
+    why = SKIP_ENCODER_ZERO_STAMP;
+  } else if (d < -span) {
+    why = SKIP_ENCODER_STEP_BACK, size = (double)-d * 1e-9;
+  } else if (d > span && sent != 0 && L->last_sent != 0 && d > 4 * (sent - L->last_sent)) {
+    why = SKIP_ENCODER_AHEAD, size = (double)d * 1e-9;
+  }
+  if (why < 0) {
+    L->bad_run = 0;
+    L->last_sent = sent;
+    return -1;
+  }
+  skip(L, why, 1);
+  ++L->bad_run;
+  L->bad_why = why, L->bad_size = size;
+  return why;
+}
+
+void live_bad_stamp_line(const live_loop *L, char *out, size_t cap) {
+  char size[96] = "";
+  if (L->bad_size != 0.0)
+    snprintf(size, sizeof size, ", the last %.4g s from the last used stamp", L->bad_size);
+  snprintf(out, cap,
+           "encoder stamps at t = %.3f s: expected header stamps on the clock the node started "
+           "on, found %s: %d samples in a row after tick %ld%s. Fix: fix the driver's stamping "
+           "clock (slew, do not step; stamp every sample) and restart the node",
+           (double)L->k * ((double)L->T_ns * 1e-9), LIVE_SKIP_TEXT[L->bad_why], L->bad_run, L->k,
+           size);
+}
+
 int live_encoders(live_loop *L, long long stamp_ns, const double *z, long long sent) {
   int n = L->n;
   L->sent = sent;
@@ -261,6 +304,7 @@ int live_encoders(live_loop *L, long long stamp_ns, const double *z, long long s
   L->gap = 0;
   if (L->k < 0) { /* the first sample: x(0|0) from it, no estimator step */
     L->t0_ns = stamp_ns, L->k = 0, L->sent0 = sent, L->have_sent0 = 1;
+    L->last_sent = sent;
     if (L->x0_from_encoders) {
       memcpy(L->x0 + 2 * n, z, sizeof(double) * (size_t)n);
       memcpy(L->x0 + 3 * n, z + n, sizeof(double) * (size_t)n);
@@ -282,6 +326,8 @@ int live_encoders(live_loop *L, long long stamp_ns, const double *z, long long s
     int cs = control(L, z, 0);
     return cs < 0 ? cs - 100 : 1;
   }
+  if (bad_stamp(L, stamp_ns, sent) >= 0) /* issue 37: named, not "stalled" */
+    return L->bad_run > L->max_gap ? LIVE_BAD_STAMPS : 0;
   int ok;
   long k = live_tick_of(L, stamp_ns, &ok);
   if (!ok) {

@@ -34,6 +34,9 @@ enum live_skip {
   SKIP_ENCODER_DUPLICATE,
   SKIP_ENCODER_MISSING,
   SKIP_FRAMES_OVERFLOW,
+  SKIP_ENCODER_ZERO_STAMP, /* issue 37's live stamp rules (LiveLoop._bad_stamp) */
+  SKIP_ENCODER_STEP_BACK,
+  SKIP_ENCODER_AHEAD,
   SKIP_REASONS
 };
 extern const char *const LIVE_SKIP_TEXT[SKIP_REASONS];
@@ -71,6 +74,10 @@ typedef struct {
   long k;                /* the current tick (-1: no sample yet) */
   long long t0_ns, sent0, sent;
   int have_sent0;
+  long long last_sent;         /* the last used sample's send time (0: unknown) */
+  int bad_run;                 /* encoder samples with a bad stamp in a row */
+  int bad_why;                 /* the last one's reason (a SKIP_ENCODER_* of a stamp) */
+  double bad_size;             /* its distance from the last used stamp [s] (0: none) */
   live_frame pending[LIVE_MAX_FRAMES], early[LIVE_MAX_FRAMES], due_info[LIVE_MAX_FRAMES];
   int n_pending, n_early;
   long seen[LIVE_RING];        /* exposures seen, by kappa % LIVE_RING (-1: none) */
@@ -104,10 +111,15 @@ int live_init(live_loop *L);
 long live_tick_of(const live_loop *L, long long stamp_ns, int *ok);
 void live_frame_in(live_loop *L, long long exposure_ns, const double z[2], long long sent);
 void live_applied(live_loop *L, long long stamp_ns, const double *u);
-/* An encoder sample z [2n]: 1 a tick computed (L->k, x, P_diag, u), 0 skipped (counted),
- * -1 more than max_gap missing (L->gap says how many), < -1: the estimator's error status
- * - 100 (L->status holds it). */
+/* An encoder sample z [2n] sent at `sent` (its DDS source timestamp [ns]; 0: unknown): 1 a
+ * tick computed (L->k, x, P_diag, u), 0 skipped (counted), -1 more than max_gap missing (L->gap
+ * says how many), LIVE_BAD_STAMPS more than max_gap samples in a row with a bad header stamp
+ * (a zero stamp, a clock step back or ahead: live_bad_stamp_line says which), < -100: the
+ * estimator's error status - 100 (L->status holds it). */
+#define LIVE_BAD_STAMPS (-2)
 int live_encoders(live_loop *L, long long stamp_ns, const double *z, long long sent);
+/* The message of LIVE_BAD_STAMPS (LiveLoop._bad_stamp's EstimatorError, word for word). */
+void live_bad_stamp_line(const live_loop *L, char *out, size_t cap);
 /* The reference row of tick k (the last row's angles, at rest, past the end). */
 const double *live_ref(const live_loop *L, long k);
 

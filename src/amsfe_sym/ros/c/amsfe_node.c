@@ -658,6 +658,13 @@ static void on_encoders(node_t *s, long long sent, long long received, double ta
   if (s->recording) take_truth(s);
   int r = live_encoders(L, ns, s->z, sent);
   if (r == 0) return; /* skipped (counted): not judged */
+  if (r == LIVE_BAD_STAMPS) { /* issue 37: held by the stamps' name, not as a stall */
+    char why[768];
+    live_bad_stamp_line(L, why, sizeof why);
+    snprintf(s->stop_line, sizeof s->stop_line, "hold: the estimator stopped: %s", why);
+    s->stop_code = EXIT_HOLD;
+    return;
+  }
   double done = mono_s();
   /* the watchdogs judge the tick (or the failure) before its command goes out */
   amsfe_watchdog_tick tick;
@@ -928,6 +935,11 @@ static int replay(node_t *s, const char *path) {
       int r = live_encoders(L, a, v, b);
       if (r == 0) {
         printf("skip\n");
+      } else if (r == LIVE_BAD_STAMPS) {
+        char why[768];
+        live_bad_stamp_line(L, why, sizeof why);
+        printf("stop %d %s\n", r, why);
+        break;
       } else if (r < 0) {
         printf("stop %d\n", r);
         break;
