@@ -184,6 +184,57 @@ def test_amsfe_live_is_simulate(tmp_path: Path) -> None:
     np.testing.assert_array_equal(cmd[:-1], ref.u)
 
 
+def test_amsfe_live_gives_both_the_same_duration() -> None:
+    """``amsfe live`` without ``--duration``: the node and the arm both get the scenario's
+    (exactly), so the arm's last tick is the node's end; with it, both get it."""
+    from amsfe_sym.ros.pair import PairOptions, pair_commands
+
+    for opts, want in [
+        (PairOptions("paper-sim", "amsfe", lockstep=True), load_scenario("paper-sim").duration),
+        (PairOptions("paper-sim", "amsfe", duration=0.1234567), 0.1234567),
+    ]:
+        for args in pair_commands(opts):
+            assert args.count("--duration") == 1, args
+            assert float(args[args.index("--duration") + 1]) == want, args
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("impl", "mode"),
+    [("c", "--lockstep"), ("python", "--lockstep"), ("c", "free"), ("python", "free")],
+)
+def test_amsfe_live_ends_with_the_data(tmp_path: Path, impl: str, mode: str) -> None:
+    """``amsfe live SCENARIO --controller amsfe`` with no ``--duration`` (docs/live-control.md's
+    first block, on a 0.5 s copy of paper-sim): at the arm's last tick the node says ``done``
+    and the command exits 0, in lockstep and free running (the arm at a quarter of real time
+    with the timing watchdogs off: a loaded machine), for the C and the Python node.  It held
+    with ``encoder_stall`` (exit 3) once the arm had ended: the node had no duration."""
+    import re
+
+    text, count = re.subn(
+        r"(?m)^duration = [0-9.]+", "duration = 0.5", (SRC.parent / "scenarios/paper-sim.toml")
+        .read_text()
+    )  # fmt: skip
+    assert count == 1
+    short = tmp_path / "short.toml"
+    short.write_text(text)
+    env = _ros_env(tmp_path)
+    timing = ["--lockstep"] if mode == "--lockstep" else ["--rate", "0.25"]
+    procs = []
+    try:
+        procs.append(_start(env, "live", str(short), "--controller", "amsfe", "--impl", impl,
+                            *timing, "--encoder-timeout", "20", "--command-timeout", "60",
+                            "--ros-args", *PATIENT_WATCHDOG))  # fmt: skip
+    finally:
+        results = _finish(procs, 180.0)
+    code, out = results[0]
+    assert code == 0, out
+    node = [x for x in out.splitlines() if x.startswith("node: ") and "latency" not in x]
+    assert node[-1].startswith("node: done: 501 ticks (0.500 s of samples)"), out
+    assert "sim-node: 501 ticks" in out and "encoder_stall" not in out, out
+
+
 #: The stamps' origin in the messy stream: the system clock of a driver (ns since 1970).
 EPOCH_NS = 1_700_000_000 * 10**9
 

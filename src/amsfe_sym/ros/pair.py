@@ -6,6 +6,11 @@ Both are child processes of this one, with their own output lines (``node: ...``
 ``sim-node: ...``); the node starts first (the arm waits for it). Ctrl-C / SIGTERM reach
 both (the node publishes its hold command first); the exit code is the node's when it is
 not 0, else the arm's.
+
+Both run for the same duration (``--duration``, else the scenario's), so the arm's last tick
+is the node's end (``done``, exit 0): a node without a duration runs until stopped, and when
+the arm ended after its scenario's duration the node held with ``encoder_stall`` (its
+driver gone) and exit 3 -- the normal end of the data taken for a crash.
 """
 
 from __future__ import annotations
@@ -14,6 +19,8 @@ import signal
 import subprocess
 import sys
 from dataclasses import dataclass
+
+from amsfe_sym.scenario import load_scenario
 
 __all__ = ["PairOptions", "pair_commands", "run_pair"]
 
@@ -26,7 +33,7 @@ class PairOptions:
         scenario: Scenario name or .toml.
         controller: The node's controller (None: the scenario's; "": the scenario's too).
         lockstep: The arm advances only when its command arrived (deterministic).
-        duration: [s] of sample time (None: the scenario's).
+        duration: [s] of sample time, for both (None: the scenario's, for both).
         seed: The arm's seed (None: the scenario's).
         rate: Free running: the arm's wall-clock speed factor.
         impl: The node's per-sample path: ``auto``, ``c`` or ``python``.
@@ -53,10 +60,15 @@ class PairOptions:
 
 
 def pair_commands(opts: PairOptions) -> tuple[list[str], list[str]]:
-    """The ``amsfe`` arguments of the node and of the arm."""
-    common: list[str] = []
-    if opts.duration is not None:
-        common += ["--duration", f"{opts.duration:g}"]
+    """The ``amsfe`` arguments of the node and of the arm: both with the run's duration
+    (the node stops at the arm's last tick, module docstring).
+
+    Raises:
+        ConfigError: no duration given and the scenario does not load (what either
+            process would refuse).
+    """
+    duration = load_scenario(opts.scenario).duration if opts.duration is None else opts.duration
+    common: list[str] = ["--duration", repr(float(duration))]  # exact: the same last tick
     if opts.seed is not None:
         common += ["--seed", str(opts.seed)]
     if opts.topic_spec is not None:
