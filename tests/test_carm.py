@@ -1,0 +1,182 @@
+"""The C arm (``amsfe sim-node --impl c``, ``ros/c/amsfe_arm.c``; docs/live-load.md, "The C
+arm").
+
+Over real DDS (marker ``ros``; each test on its own domain and topics, every process bounded,
+tests/test_ros.py's harness): in lockstep the C arm and the C node reproduce ``amsfe
+simulate`` (the compiled loop) bit for bit, and the C arm sends the Python arm's messages
+(the same samples, frames, truth and torques, stamped the same); free running at 1 kHz
+beside two CPU hogs the C node on the C arm tracks as in process or holds saying it is
+behind.  Outcomes, never times.  Without DDS: what the arm refuses is one line.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from amsfe_sym.codegen import library_for
+from amsfe_sym.core.cpu_load import CpuHogs
+from amsfe_sym.scenario import load_scenario
+from amsfe_sym.sim.loop import run
+from tests.test_live_load import BEHIND_REASONS, _assert_not_diverged, _hold, _stop_arm
+from tests.test_node_record import _bag
+from tests.test_ros import PATIENT_ARM, PATIENT_NODE, SRC, _finish, _ros_env, _start
+
+
+def _lockstep(tmp_path: Path, arm: str, duration: float = 2.0) -> dict[str, Any]:
+    """``sim-node --lockstep --impl ARM`` + ``node --impl c --controller amsfe --record``
+    on paper-sim for ``duration`` s: both exit 0; the record's topics, the arm's output."""
+    env = _ros_env(tmp_path)
+    rec = tmp_path / f"rec-{arm}"
+    d = f"{duration:g}"
+    procs = []
+    try:
+        procs.append(_start(env, "node", "paper-sim", "--controller", "amsfe", "--impl", "c",
+                            "--duration", d, "--record", str(rec), *PATIENT_NODE))  # fmt: skip
+        procs.append(_start(env, "sim-node", "paper-sim", "--lockstep", "--duration", d,
+                            "--impl", arm, *PATIENT_ARM))  # fmt: skip
+    finally:
+        results = _finish(procs, 180.0)
+    for code, text in results:
+        assert code == 0, text
+    got: dict[str, Any] = dict(_bag(rec))
+    got["_arm"] = results[1][1]
+    return got
+
+
+def _stamps(msgs: list[Any]) -> np.ndarray:
+    return np.array([m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in msgs])
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_c_arm_lockstep_is_simulate(tmp_path: Path) -> None:
+    """The C arm and the C node in lockstep: the truth the arm sent, the samples, the frames,
+    the node's estimates and commands (its record, every tick) equal ``amsfe simulate``'s
+    compiled loop of the same seed bit for bit."""
+    sc = load_scenario("paper-sim").with_overrides(duration=2.0)
+    lib = library_for(sc)
+    got = _lockstep(tmp_path, "c")
+    assert "(c arm)" in got["_arm"] and "2001 ticks" in got["_arm"], got["_arm"]
+    ref = run(sc, lib, runtime="compiled")
+    n = lib.n
+    truth = np.array([m.data for m in got["/amsfe/truth"]])
+    np.testing.assert_array_equal(truth, ref.x_true)
+    z = np.array([np.r_[m.position, m.velocity] for m in got["/motor_encoders"]])
+    np.testing.assert_array_equal(z, ref.z_enc)
+    est = np.array([np.r_[m.position, m.velocity] for m in got["/amsfe/estimate"]])
+    np.testing.assert_array_equal(est, ref.x_hat[:, : 2 * n])
+    cmd = np.array([m.data for m in got["/effort_controller/commands"]])
+    np.testing.assert_array_equal(cmd[:-1], ref.u)  # the last: the node's hold
+    applied = np.array([m.effort for m in got["/motor_torque"]])
+    np.testing.assert_array_equal(applied, ref.u[: applied.shape[0]])
+    frames = got["/camera/marker"]
+    assert len(frames) == ref.counters["frames_delivered"] > 0
+    diag = json.loads(got["/amsfe/diagnostics"][-1].data)
+    assert diag["frames_fused"] == ref.counters["frames_applied"] > 0
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_c_arm_sends_the_python_arms_messages(tmp_path: Path) -> None:
+    """The same lockstep run with the C arm and with the Python arm (the readable
+    reference): the node received the same encoder samples, frames (pixels and exposure
+    stamps), truth and applied torques, stamped the same, and answered the same commands."""
+    c = _lockstep(tmp_path / "c", "c", 1.0)
+    py = _lockstep(tmp_path / "py", "python", 1.0)
+    assert "(c arm)" in c["_arm"] and "(python arm)" in py["_arm"]
+    for topic in ("/motor_encoders", "/camera/marker", "/motor_torque", "/joint_states"):
+        assert c[topic] and len(c[topic]) == len(py[topic]), topic
+        np.testing.assert_array_equal(_stamps(c[topic]), _stamps(py[topic]))
+    for topic in ("/motor_encoders", "/motor_torque"):
+        for field in ("position", "velocity", "effort"):
+            a = np.array([getattr(m, field) for m in c[topic]])
+            b = np.array([getattr(m, field) for m in py[topic]])
+            np.testing.assert_array_equal(a, b)
+        assert all(m.name == ["joint1", "joint2"] for m in c[topic])
+    a = np.array([[m.point.x, m.point.y, m.point.z] for m in c["/camera/marker"]])
+    b = np.array([[m.point.x, m.point.y, m.point.z] for m in py["/camera/marker"]])
+    np.testing.assert_array_equal(a, b)
+    assert {m.header.frame_id for m in c["/camera/marker"]} == {"camera"}
+    for topic in ("/amsfe/truth", "/effort_controller/commands"):
+        np.testing.assert_array_equal(
+            np.array([m.data for m in c[topic]]), np.array([m.data for m in py[topic]])
+        )
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.parametrize("repeat", [1, 2, 3])
+def test_free_running_c_arm_under_load_tracks_or_holds_for_being_behind(
+    tmp_path: Path, repeat: int
+) -> None:
+    """Two CPU hogs (:class:`~amsfe_sym.core.cpu_load.CpuHogs`) beside the C arm and the C
+    node, free running at 1 kHz for 2 s: the node tracks as in process (exit 0, no hold; the
+    link tracking RMSE over the run's window at most twice the in-process one of the same
+    seed plus a margin of 0.05 rad, for the latency of one period a free-running command
+    has), or holds (exit 3) with a reason saying it is behind; never an arm reason
+    (``innovation``: the torque the arm applied is the one the node uses), never an encoder
+    stall (the arm's clock never stopped)."""
+    from amsfe_sym.sim.record import window
+
+    env = _ros_env(tmp_path)
+    rec = tmp_path / "rec"
+    procs: list[Any] = []
+    with CpuHogs(2, limit_s=600):
+        try:
+            node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--duration", "2",
+                          "--record", str(rec), "--impl", "c")  # fmt: skip
+            sim = _start(env, "sim-node", "paper-sim", "--duration", "2", "--impl", "c",
+                         "--start-timeout", "120")  # fmt: skip
+            procs += [node, sim]
+            code, text = _stop_arm(sim, node, 300.0)
+        finally:
+            _finish(procs, 60.0)
+    bag = _bag(rec)
+    hold = _hold(text)
+    print("outcome:", "held" if hold else "tracked", hold, sim.text.splitlines()[-2:])
+    if code == 3:
+        assert hold is not None and hold[0] in BEHIND_REASONS, text
+        _assert_not_diverged(bag, max_k=hold[1])
+        return
+    assert code == 0 and hold is None, text
+    sc = load_scenario("paper-sim").with_overrides(duration=2.0)
+    ref = run(sc, library_for(sc), runtime="compiled")
+    n, T = ref.lib.n, round(ref.lib.T * 1e9)
+    js = bag["/joint_states"]
+    ks = _stamps(js) // T
+    assert ks.size > ref.t.size // 2
+    w = ks >= window(ref.t.size).start
+    q = np.array([m.position for m in js])[w]
+    got = np.sqrt(np.mean((q - ref.q_des[ks[w]]) ** 2, axis=0))
+    want = np.sqrt(np.mean((ref.x_true[ks[w], :n] - ref.q_des[ks[w]]) ** 2, axis=0))
+    assert np.all(got <= 2 * want + 0.05), (got, want)
+    _assert_not_diverged(bag)
+
+
+def _sim_node(*args: str, env: dict[str, str]) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "amsfe_sym", "sim-node", "paper-sim", *args],
+        env=env, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+
+
+@pytest.mark.ros
+def test_c_arm_without_a_node_is_one_line(tmp_path: Path) -> None:
+    """No node on the domain: the C arm gives up after --start-timeout in one line (the
+    Python arm's), exit 2; ``--impl c --images`` is refused in one line before it starts."""
+    env = _ros_env(tmp_path)
+    env["PYTHONPATH"] = str(SRC)
+    out = _sim_node("--impl", "c", "--duration", "0.1", "--start-timeout", "0.5", env=env)
+    errors = [x for x in out.stderr.splitlines() if x.startswith("error:")]
+    assert out.returncode == 2 and len(errors) == 1, out.stdout + out.stderr
+    assert "a subscriber of /motor_encoders" in errors[0] and "Fix:" in errors[0]
+    out = _sim_node("--impl", "c", "--images", "--duration", "0.1", env=env)
+    errors = [x for x in out.stderr.splitlines() if x.startswith("error:")]
+    assert out.returncode == 2 and len(errors) == 1 and "--images" in errors[0], out.stderr
