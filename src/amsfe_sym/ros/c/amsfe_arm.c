@@ -774,6 +774,10 @@ int main(int argc, char **argv) {
   sa.sa_handler = on_signal;
   sigaction(SIGINT, &sa, NULL);
   sigaction(SIGTERM, &sa, NULL);
+  /* before rcl_init: the middleware's threads (Fast DDS's receive and event threads) inherit
+   * the policy, so a sample's path through this process is real-time too, not only the
+   * tick (a reception thread at normal priority beside CPU hogs delays the commands) */
+  realtime(priority);
   rcl_allocator_t alloc = rcl_get_default_allocator();
   rcl_init_options_t io = rcl_get_zero_initialized_init_options();
   rcl_check(rcl_init_options_init(&io, alloc), "rcl_init_options_init");
@@ -820,7 +824,6 @@ int main(int argc, char **argv) {
   out_clock(&s->m_clock);
   s->ws = rcl_get_zero_initialized_wait_set();
   rcl_check(rcl_wait_set_init(&s->ws, 2, 0, 0, 0, 0, 0, &s->ctx, alloc), "wait set");
-  realtime(priority);
   int code = run(s);
   rcl_ret_t fini = rcl_wait_set_fini(&s->ws);
   fini |= rcl_node_fini(&s->node);
