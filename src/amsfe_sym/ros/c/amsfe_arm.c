@@ -416,7 +416,8 @@ static void gid_text(const rmw_gid_t *g, char *out) {
 static void publisher_names(arm_t *s, const rmw_gid_t *gids, char *out, size_t cap) {
   rcl_allocator_t a = rcl_get_default_allocator();
   rmw_topic_endpoint_info_array_t info = rmw_get_zero_initialized_topic_endpoint_info_array();
-  int ok = rcl_get_publishers_info_by_topic(&s->node, &a, s->t_cmd, false, &info) == RCL_RET_OK;
+  const char *topic = rcl_subscription_get_topic_name(&s->sub_cmd); /* remapped, resolved */
+  int ok = topic && rcl_get_publishers_info_by_topic(&s->node, &a, topic, false, &info) == RCL_RET_OK;
   if (!ok) rcutils_reset_error();
   out[0] = 0;
   size_t len = 0;
@@ -442,6 +443,7 @@ static void publisher_names(arm_t *s, const rmw_gid_t *gids, char *out, size_t c
     len += (size_t)snprintf(out + len, len < cap ? cap - len : 0, "%s%s", i ? " and " : "", name);
   }
   if (ok) rmw_topic_endpoint_info_array_fini(&info, &a);
+  if (!out[0]) snprintf(out, cap, "two publishers (the graph names neither)");
 }
 
 /* Warn (once) of another node with this one's name on the graph (graph.py's
@@ -475,8 +477,14 @@ static void warn_duplicate(arm_t *s) {
 
 static int two_controllers(arm_t *s, const rmw_gid_t *gids) {
   char names[1024], line[1600];
+  /* the graph may know the endpoints before their nodes' names: up to 3 s for them */
+  for (int i = 0; i < 30; ++i) {
+    publisher_names(s, gids, names, sizeof names);
+    if (!strstr(names, "_UNKNOWN_")) break;
+    struct timespec ts = {0, 100000000};
+    nanosleep(&ts, NULL);
+  }
   warn_duplicate(s);
-  publisher_names(s, gids, names, sizeof names);
   snprintf(line, sizeof line,
            "sim-node --lockstep commands on %s: expected one controller (a lockstep arm applies "
            "the k-th command received at tick k), found commands from %s. Fix: stop all but one "
