@@ -180,3 +180,102 @@ def test_c_arm_without_a_node_is_one_line(tmp_path: Path) -> None:
     out = _sim_node("--impl", "c", "--images", "--duration", "0.1", env=env)
     errors = [x for x in out.stderr.splitlines() if x.startswith("error:")]
     assert out.returncode == 2 and len(errors) == 1 and "--images" in errors[0], out.stderr
+
+
+#: A lockstep arm in Python that applies half of each command (so the torque it applied is
+#: not the node's command) and publishes the torque of tick k-1 before sample k (argv[1]
+#: "before") or right after it ("after").  No camera: the encoders and the effort only.
+_HALF_ARM = """
+import sys, time
+import numpy as np
+import rclpy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from amsfe_sym.codegen import library_for
+from amsfe_sym.ros import messages as m
+from amsfe_sym.ros.arm import SimArm
+from amsfe_sym.scenario import load_scenario
+
+order = sys.argv[1]
+sc = load_scenario("paper-sim").with_overrides(duration=float(sys.argv[2]))
+lib = library_for(sc)
+rclpy.init(args=["half_arm", "--ros-args", *sys.argv[3:]])
+node = rclpy.create_node("amsfe_sim")
+qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+enc = node.create_publisher(m.JointState, "/motor_encoders", qos)
+eff = node.create_publisher(m.JointState, "/motor_torque", qos)
+cmds = []
+node.create_subscription(m.Float64MultiArray, "/effort_controller/commands",
+                         lambda msg: cmds.append(m.values(msg.data)), qos)
+end = time.monotonic() + 60
+while enc.get_subscription_count() < 1 or eff.get_subscription_count() < 1:
+    rclpy.spin_once(node, timeout_sec=0.05)
+    assert time.monotonic() < end, "no node"
+arm, T_ns, names = SimArm(sc, lib), round(lib.T * 1e9), ["joint1", "joint2"]
+applied = None
+for k in range(arm.K):
+    z = arm.sense().z
+    sample = m.joint_state(k * T_ns, names, z[:2], z[2:])
+    torque = None if applied is None else m.joint_state((k - 1) * T_ns, names, effort=applied)
+    if order == "before" and torque is not None:
+        eff.publish(torque)
+    enc.publish(sample)
+    if order == "after" and torque is not None:
+        eff.publish(torque)
+    end = time.monotonic() + 60
+    while len(cmds) <= k:
+        rclpy.spin_once(node, timeout_sec=0.05)
+        assert time.monotonic() < end, f"no command {k}"
+    applied = 0.5 * cmds[k]
+    if k + 1 < arm.K:
+        arm.advance(applied)
+print("half arm done", flush=True)
+"""
+
+
+def _half_arm_run(tmp_path: Path, order: str) -> tuple[np.ndarray, str]:
+    """The C node on :data:`_HALF_ARM` (0.3 s, lockstep): its estimates and its output."""
+    from tests.test_ros import _remaps
+
+    env = _ros_env(tmp_path)
+    rec = tmp_path / "rec"
+    procs: list[Any] = []
+    arm = subprocess.Popen(
+        [sys.executable, "-c", _HALF_ARM, order, "0.3", *_remaps(env)], env=env,
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
+    )  # fmt: skip
+    try:
+        procs.append(_start(env, "node", "paper-sim", "--controller", "amsfe", "--impl", "c",
+                            "--duration", "0.3", "--record", str(rec), *PATIENT_NODE))  # fmt: skip
+        out, _ = arm.communicate(timeout=180)
+    finally:
+        if arm.poll() is None:
+            arm.kill()
+            arm.communicate()
+        results = _finish(procs, 60.0)
+    assert arm.returncode == 0 and "half arm done" in out, out
+    code, text = results[0]
+    assert code == 0, text
+    est = np.array([np.r_[m.position, m.velocity] for m in _bag(rec)["/amsfe/estimate"]])
+    return est, text
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_the_node_waits_for_the_torque_of_the_previous_tick(tmp_path: Path) -> None:
+    """An arm that applies half of each command and sends the torque of tick k-1 right after
+    sample k (the order DDS may deliver two topics in): the C node waits for it (counted)
+    and estimates exactly what it estimates when the torque comes first, the torque the arm
+    applied, not its own command.  (A wait that ran out, on a machine too loaded to deliver
+    the torque within T/2, is counted, and the node used its command there: then the test
+    skips, saying so.)"""
+    import re
+
+    first, _ = _half_arm_run(tmp_path / "before", "before")
+    late, text_late = _half_arm_run(tmp_path / "after", "after")
+    waits = re.findall(r"waited for the torque applied over the previous tick at (\d+) samples "
+                       r"\((\d+) not within T/2", text_late)  # fmt: skip
+    assert waits and int(waits[0][0]) > 0, text_late
+    if int(waits[0][1]) > 0:
+        pytest.skip(f"{waits[0][1]} torques came later than T/2 (a loaded machine)")
+    assert first.shape == late.shape == (301, 4)
+    np.testing.assert_array_equal(late, first)

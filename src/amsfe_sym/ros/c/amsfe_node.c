@@ -742,14 +742,21 @@ static void take_frames(node_t *s) {
  * "Torque and sample"): an arm publishes it on the effort topic just before sample k, DDS
  * does not order two topics, and without it the step k-1 -> k takes this node's command of
  * k-1, not the older one a free-running arm may have applied (a false innovation).  Waited
- * for, up to half a period, when the effort stream is live (the effort of k-2 came) and
- * that of k-1 did not yet; counted, and in vain counted too (the command is used then).
+ * for, up to half a period, when the effort stream is live (the effort of k-2 came; at ticks
+ * 1 and 2 before any came: the topic has a publisher) and that of k-1 did not yet; counted,
+ * and in vain counted too (the command is used then).
  * 1 when it waited. */
 static int await_effort(node_t *s, long long ns) {
   live_loop *L = &s->L;
   int ok;
   long k = live_tick_of(L, ns, &ok);
-  if (L->k < 1 || !ok || k != L->k + 1 || s->eff_last >= k - 1 || s->eff_last < k - 2) return 0;
+  if (L->k < 0 || !ok || k != L->k + 1 || s->eff_last >= k - 1) return 0;
+  if (s->eff_last < k - 2) { /* not live; at the start: live when the topic has a publisher */
+    size_t pubs = 0;
+    if (s->eff_last >= 0 || k > 2 ||
+        rcl_subscription_get_publisher_count(&s->sub_eff, &pubs) != RCL_RET_OK || pubs < 1)
+      return 0;
+  }
   ++s->eff_waits;
   double until = mono_s() + 0.5 * s->T;
   while (s->eff_last < k - 1 && !g_signal && s->stop_code < 0) {
