@@ -34,7 +34,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 RUN_LANGS = {"bash": "bash", "sh": "bash", "shell": "bash", "python": "python", "py": "python"}
-LINKED = ("robots", "scenarios", "sweeps", "tools", "examples", "docs")
+LINKED = ("robots", "scenarios", "sweeps", "tools", "examples", "docs", "tests")
 _FENCE = re.compile(r"^(\s*)(`{3,}|~{3,})\s*([^`\s{]*)\s*(\{.*\})?\s*$")
 _CI = re.compile(r"^\{ci=(run|slow|ros|skip)(?::\s*(.*))?\}$")
 BLOCK_TIMEOUT_S = 600  # a hung block fails instead of hanging CI; not a timing assertion

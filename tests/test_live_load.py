@@ -110,7 +110,7 @@ def test_faults_parse_and_the_same_kind_twice_is_refused(paper: Any) -> None:
 HOLD = re.compile(r"hold: (\w+): .*at tick (\d+), (\d+) missing\)")
 
 #: The reasons that name the arm (its encoders, its torque, its path): an arm fault's.
-ARM_REASONS = ("innovation", "tracking")
+ARM_REASONS = ("innovation", "tracking", "actuation")
 
 #: The reasons that name this node being behind (CPU load, priority, a stall).
 BEHIND_REASONS = ("deadline", "node_stalled", "compute")
@@ -120,15 +120,6 @@ WITHIN_TICKS = 100
 
 #: The node implementations ``amsfe node`` offers (``--impl``), each tested.
 IMPLS = node_impls()
-
-#: Why a torque loss is not held within 100 ms today (measured; the watchdogs' to fix).
-TORQUE_LOSS = (
-    "no watchdog compares the torque the arm says it applied (effort topic) with the "
-    "command: the estimator, given the zero torque applied, stays consistent; only the "
-    "tracking error holds, after the start-up's hand-over, 288-330 ms after the loss (in "
-    "process, seeds 0-2, loss at 1.5 s); at 0.5 s the C node never held, the Python node "
-    "held 448 ms after (innovation)"
-)
 
 #: Why a stall of the C node does not always hold for being behind today (measured with the
 #: C arm, docs/live-load.md, "The C arm": 4 of 10 runs passed; the Python node 10 of 10).
@@ -183,7 +174,7 @@ def _stop_arm(sim: Any, node: Any, timeout: float) -> tuple[int, str]:
     [
         "encoder_frozen@0.5",
         "encoder_jump@0.5=0.2",
-        pytest.param("torque_loss@0.5", marks=pytest.mark.xfail(strict=True, reason=TORQUE_LOSS)),
+        "torque_loss@0.5",
     ],
 )
 def test_an_arm_fault_holds_with_its_reason_within_100_ms(
@@ -191,7 +182,8 @@ def test_an_arm_fault_holds_with_its_reason_within_100_ms(
 ) -> None:
     """A frozen encoder, an encoder jump of 0.2 rad, a torque loss at t = 0.5 s (lockstep,
     so every run is the same run): the node holds with a reason naming the arm (the
-    innovations or the tracking error) within 100 ms of the arm's time, publishes its hold
+    innovations or the tracking error; the torque loss: ``actuation``, the torque the arm
+    reports applying is not the command) within 100 ms of the arm's time, publishes its hold
     command and exits 3; its record ends at the hold and says why; the arm had not left its
     path by more than the in-process run's largest error plus 0.1 rad before it."""
     env = _ros_env(tmp_path)
@@ -208,6 +200,8 @@ def test_an_arm_fault_holds_with_its_reason_within_100_ms(
         _finish(procs, 30.0)
     reason, k = _held(code, text)
     assert reason in ARM_REASONS and 500 <= k <= 500 + WITHIN_TICKS, (fault, reason, k)
+    if fault.startswith("torque_loss"):
+        assert reason == "actuation", (fault, reason, k)
     assert "hold command" in text
     bag = _bag(rec)
     cmd = bag["/effort_controller/commands"]

@@ -177,7 +177,7 @@ def test_spec_at_period_is_derived_in_memory(panda: Robot) -> None:
     assert spec.model.plant_substeps == 16  # stable, w h <= 2.0 (the robot's own 2 are not)
     assert toml.read_bytes() == before and spec.spec_path == toml.resolve()
     assert period_fix("panda", T_LOG, loaded=panda).startswith(
-        f"amsfe generate panda --period 0.0333333 (its own library, model_substeps = {k} "
+        f"amsfe generate panda --period {T_LOG:.12g} (its own library, model_substeps = {k} "
     )
     # a paper-integrator robot its Euler form cannot integrate at T becomes rk4
     one = spec_at_period("paper_1link", 0.2)

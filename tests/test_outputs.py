@@ -423,6 +423,7 @@ INPUTS = {
     ("live", "--topic-spec"),
     ("sim-node", "--topic-spec"),
     ("play", "--topic-spec"),
+    ("camera-node", "--topic-spec"),
 }
 
 
@@ -621,8 +622,8 @@ def test_an_interrupted_simulate_bag_keeps_neither(
 
     real = amsfe_sym.logs.write.run_bag_filler
 
-    def interrupted(res, urdf_text=None):
-        fill = real(res, urdf_text)
+    def interrupted(res, urdf_text=None, images=None):
+        fill = real(res, urdf_text, images)
 
         def go(path: Path) -> None:
             fill(path)

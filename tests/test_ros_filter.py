@@ -42,7 +42,7 @@ def test_the_node_parameters_keep_the_spec_filter() -> None:
     file's ``[filter]`` keys, as it keeps the ``[effort]`` noise keys."""
 
     class FakeNode:
-        def declare_parameter(self, name: str, value: Any) -> Any:
+        def declare_parameter(self, name: str, value: Any, descriptor: Any = None) -> Any:
             return SimpleNamespace(value=value)
 
         def get_name(self) -> str:

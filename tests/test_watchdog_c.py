@@ -35,7 +35,11 @@ Tick = c_struct("Tick", "amsfe_watchdog.h", "amsfe_watchdog_tick")
 State = c_struct("State", "amsfe_watchdog.h", "amsfe_watchdog_state")
 
 OFF = WatchdogBounds(
-    tracking_error=math.inf, innovation_nis=math.inf, deadline=math.inf, compute_budget=math.inf
+    tracking_error=math.inf,
+    innovation_nis=math.inf,
+    deadline=math.inf,
+    compute_budget=math.inf,
+    actuation_error=math.inf,
 )
 #: Bounds under which the sequences trip at other ticks and for other reasons.
 BOUNDS = (
@@ -46,6 +50,8 @@ BOUNDS = (
     WatchdogBounds(compute_budget=1.5e-4),
     WatchdogBounds(encoder_timeout=0.07),
     WatchdogBounds(innovation_nis=1.05, innovation_window=1, tracking_error=0.0045),
+    WatchdogBounds(actuation_error=1e-3, actuation_ticks=1),
+    WatchdogBounds(actuation_error=0.5, actuation_ticks=40, innovation_nis=math.inf),
 )
 SIZES = {"jump": 0.01, "stall": 0.3, "lag": 0.08}
 
@@ -84,7 +90,12 @@ class CWatchdog:
             compute_budget=b.compute_budget,
             encoder_timeout=b.encoder_timeout,
             max_gap_steps=config.max_gap_steps,
+            actuation_error=b.actuation_error,
+            actuation_ticks=b.actuation_ticks,
         )
+        self._u_max = np.ascontiguousarray(config.u_max, dtype=float)
+        if config.u_max:
+            self.cfg.u_max = self._u_max.ctypes.data
         size = c.amsfe_watchdog_memory_size(ctypes.byref(self.cfg))
         assert size > 0
         self._mem = np.zeros(size + 16, dtype=np.uint8)
@@ -118,6 +129,8 @@ class CWatchdog:
             encoder_nis=t.encoder_nis,
             frame_nis=ptr(t.frame_nis) if t.frame_nis else None,
             n_frames=len(t.frame_nis),
+            applied=ptr(t.applied),
+            applied_k=t.applied_k,
         )
         return int(self.c.amsfe_watchdog_sample(self.h, ctypes.byref(tick)))
 
@@ -150,6 +163,13 @@ def runs() -> dict[str, Any]:
     return out
 
 
+def _u_max(lib: Any) -> tuple[float, ...]:
+    """paper-sim's actuator limits, one joint's dropped (inf: the 1 N m scale exercised)."""
+    u = list(lib.manifest.actuators.u_max)
+    u[-1] = math.inf
+    return tuple(u)
+
+
 def _injected(events: list[WatchEvent], what: str) -> list[WatchEvent]:
     """A clean sequence with a non-finite command or an estimator failure after missing
     samples injected half-way."""
@@ -168,7 +188,7 @@ def _injected(events: list[WatchEvent], what: str) -> list[WatchEvent]:
 
 
 def _compare(lib: Any, events: list[WatchEvent], bounds: WatchdogBounds) -> list[int]:
-    config = WatchdogConfig(lib.n, lib.N, 2 * lib.n, lib.T, bounds)
+    config = WatchdogConfig(lib.n, lib.N, 2 * lib.n, lib.T, bounds, 5, _u_max(lib))
     py, c = Watchdog(config), CWatchdog(str(lib.library_path), config)
     reasons = []
     for i, e in enumerate(events):
@@ -182,6 +202,7 @@ def _compare(lib: Any, events: list[WatchEvent], bounds: WatchdogBounds) -> list
         for name in ("max_tracking", "max_innovation", "max_lateness", "max_compute"):
             assert getattr(s, name) == getattr(seen, name), (i, name)
         assert s.max_wall_gap == seen.max_wall_gap
+        assert (s.max_actuation, s.actuation_judged) == (seen.max_actuation, seen.actuation_judged)
         if py.hold is not None:
             h = py.hold
             assert (s.reason, s.cause, s.k, s.gap) == (h.reason, h.cause, h.k, h.gap)
@@ -206,7 +227,7 @@ def test_c_watchdog_decides_as_python(runs: dict[str, Any]) -> None:
             held = [r for r in reasons if r]
             if held:
                 seen.add(held[0])
-                config = WatchdogConfig(lib.n, lib.N, 2 * lib.n, lib.T, bounds)
+                config = WatchdogConfig(lib.n, lib.N, 2 * lib.n, lib.T, bounds, 5, _u_max(lib))
                 c = CWatchdog(str(lib.library_path), config)
                 for e in events:
                     if (c.idle(e.now, e.publishers) if e.tick is None else c.sample(e.tick)) != 0:
@@ -300,7 +321,7 @@ def test_c_controller_hands_over_at_the_python_tick() -> None:
 
 def test_c_watchdog_builds_alone_and_never_allocates(tmp_path: Path) -> None:
     """amsfe_watchdog.c compiles on its own (C99, every warning an error) and calls nothing
-    but memset and snprintf: no allocation, no clock, no I/O of its own."""
+    but memset, memcpy and snprintf: no allocation, no clock, no I/O of its own."""
     import shutil
     import subprocess
 
@@ -315,4 +336,4 @@ def test_c_watchdog_builds_alone_and_never_allocates(tmp_path: Path) -> None:
     subprocess.run([cc, *flags, str(C_DIR / "amsfe_watchdog.c"), "-o", str(obj)], check=True)
     nm = subprocess.run(["nm", "-u", str(obj)], check=True, capture_output=True, text=True)
     called = {line.split()[-1] for line in nm.stdout.splitlines() if line.strip()}
-    assert called <= {"memset", "snprintf"}, called
+    assert called <= {"memset", "memcpy", "snprintf"}, called

@@ -14,9 +14,15 @@ taking ``--compute`` seconds a sample):
    compute time, and the lateness it causes through the queue);
 4. ``cost``: the Python watchdog's own time per call (``Watchdog.sample`` and ``idle`` on
    the calls of one clean run, median of 5 passes) [us];
-5. ``faults``: each fault of :data:`~amsfe_sym.ros.watchdog_runs.FAULTS` at ``--fault-at``
-   on ``--fault-seeds`` seeds with the defaults: the reason and the delay from the fault (or
-   from the node's resumption after a stall) to the hold [s of wall clock].
+5. ``faults``: each fault of :data:`~amsfe_sym.ros.watchdog_runs.FAULTS` (or
+   ``--fault-kinds``) at ``--fault-at`` on ``--fault-seeds`` seeds with the defaults: the
+   reason and the delay from the fault (or from the node's resumption after a stall) to the
+   hold [s of wall clock], and the largest ``actuation`` mismatch judged (late commands
+   during a stall or a lag included).
+
+``max_actuation`` (the ``actuation`` check, docs/watchdogs.md): the largest distance of a
+reported applied torque to the nearest command the arm may have applied [fraction of u_max];
+with ``actuation_error`` off (``measure``) every tick is judged and matched to its nearest.
 
 Run:  .venv/bin/python tools/watchdog_bounds.py --out docs/data/watchdog-bounds.json
 """
@@ -47,6 +53,7 @@ OFF = WatchdogBounds(
     innovation_nis=math.inf,
     deadline=math.inf,
     compute_budget=math.inf,
+    actuation_error=math.inf,
 )
 #: The fault sizes: a 10 mrad encoder jump, a 300 ms stall (the issue's), an 80 ms lag.
 SIZES = {"jump": 0.01, "stall": 0.3, "lag": 0.08}
@@ -57,6 +64,7 @@ SEEN = (
     "max_late_in_window",
     "max_compute",
     "max_wall_gap",
+    "max_actuation",
 )
 
 
@@ -117,6 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--compute-seeds", type=int, default=3)
     ap.add_argument("--fault-at", type=float, default=2.0)
     ap.add_argument("--compute", type=float, default=2e-4)
+    ap.add_argument("--fault-kinds", nargs="+", default=list(FAULTS), choices=FAULTS)
     ap.add_argument(
         "--parts", nargs="+", default=["measure", "verify", "compute", "cost", "faults"]
     )
@@ -156,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
         if "faults" in args.parts:
             faults: dict[str, Any] = {}
             duration = args.fault_at + 1.0
-            for kind in FAULTS:
+            for kind in args.fault_kinds:
                 rows = []
                 for seed in range(args.fault_seeds):
                     sc = sc0.with_overrides(seed=seed, duration=duration)
@@ -169,6 +178,8 @@ def main(argv: list[str] | None = None) -> int:
                             "reason": None if r.hold is None else r.hold.name,
                             "delay": delay,
                             "true_error": r.true_error,
+                            "max_actuation": r.seen.max_actuation,
+                            "actuation_judged": r.seen.actuation_judged,
                         }
                     )
                     print(name, kind, rows[-1], flush=True)
@@ -179,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
                     "max_delay": max(delays) if len(delays) == len(rows) else None,
                     "runs": rows,
                 }
-            res["faults"] = faults
+            res["faults"] = res.get("faults", {}) | faults
         out["scenarios"][name] = res
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(out, indent=1) + "\n")

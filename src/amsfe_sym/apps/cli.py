@@ -319,8 +319,6 @@ def _input_files(*names: str | None) -> tuple[Path, ...]:
 
 def _bench_ros(args: argparse.Namespace) -> int:
     """``amsfe bench --ros`` (:mod:`amsfe_sym.apps.bench.ros`)."""
-    import json
-
     from amsfe_sym.apps.bench.ros import (
         bench_ros,
         format_ros_report,
@@ -333,8 +331,9 @@ def _bench_ros(args: argparse.Namespace) -> int:
     machine = machine_name()
     print(format_ros_report(rows, machine))
     if args.json:
-        doc = {"written_by": "amsfe bench --ros", **ros_report_json(rows, machine)}
-        Path(args.json).write_text(json.dumps(doc, indent=1) + "\n")
+        from amsfe_sym.core.jsonfile import write_json
+
+        write_json(Path(args.json), ros_report_json(rows, machine), 1, own="amsfe bench --ros")
     return 0
 
 

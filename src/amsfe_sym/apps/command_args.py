@@ -127,7 +127,7 @@ def add_simulate_arguments(s: argparse.ArgumentParser) -> None:
         const="mono8",
         default=None,
         choices=("mono8", "jpeg", "png"),
-        help="with --bag: the camera writes images of the marker (default mono8; or jpeg, png "
-        "compressed) and its CameraInfo instead of its pixel topic (docs/camera.md)",
+        help="with --bag: the camera's frames are images of the marker (default mono8; or jpeg, "
+        "png compressed) with its CameraInfo, instead of its pixel topic (docs/camera.md)",
     )
     add_set(s)

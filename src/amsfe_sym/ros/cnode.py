@@ -244,7 +244,8 @@ def _watchdog(spec: TopicSpec, options: dict[str, Any]) -> list[float]:
     w = spec.watchdog
     return [w.tracking_error, w.innovation_nis, w.innovation_window, w.deadline,
             w.deadline_misses, w.deadline_window, w.compute_budget,
-            float(options["encoder_timeout"])]  # fmt: skip
+            float(options["encoder_timeout"]), w.actuation_error,
+            w.actuation_ticks]  # fmt: skip
 
 
 def _ctrl_code(name: str) -> int:

@@ -202,8 +202,12 @@ class LiveLoop:
                 lib.T,
                 watchdog or WatchdogBounds(),
                 max_gap_steps,
+                tuple(lib.manifest.actuators.u_max),
             )
         )
+        #: The newest (by tick) applied torque received since the last watched sample: the
+        #: watchdog's ``actuation`` check (also when it came too late for the estimator).
+        self._wd_applied: tuple[int, FloatArray] | None = None
         self._gate_camera = gate_threshold(sc.filter.gate_probability or None, 2)
 
     def _skip(self, reason: str, count: int = 1) -> None:
@@ -314,9 +318,16 @@ class LiveLoop:
         elif np.size(u) != self.n or not np.all(np.isfinite(u)):
             self._skip("torque sample not n finite values")
         elif j < self.k:
+            self._for_watchdog(j, u)
             self._skip("torque sample after its tick was estimated")
         else:
             self._effort[j] = np.array(u, dtype=float)
+            self._for_watchdog(j, u)
+
+    def _for_watchdog(self, j: int, u: FloatArray) -> None:
+        """Keep the applied torque of tick ``j`` for the watchdog if it is the newest."""
+        if j >= 0 and (self._wd_applied is None or j >= self._wd_applied[0]):
+            self._wd_applied = (j, np.array(u, dtype=float))
 
     def effort(self, stamp_ns: int, values: FloatArray) -> None:
         """An effort sample stamped ``stamp_ns`` [ns]: :meth:`joint_torque` for kind
@@ -464,6 +475,8 @@ class LiveLoop:
         sent = stamp_ns if sent_ns is None else sent_ns
         if out is None and status == 0:
             return Watched(None, self.watchdog.reason)
+        # the newest applied torque since the last judged sample (the C node's order)
+        applied, self._wd_applied = self._wd_applied, None
         if out is None:  # failed: at the tick of the sample, with the gap it had
             k = k_before + 1 if k_new is None else k_new
             tick = WatchdogTick(k, k - k_before - 1, sent, taken, done, status)
@@ -491,6 +504,8 @@ class LiveLoop:
             bool(handed),
             enc,
             frames,
+            None if applied is None else applied[1],
+            -1 if applied is None else applied[0],
         )
         return Watched(out, self.watchdog.sample(tick), tick)
 

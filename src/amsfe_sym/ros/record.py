@@ -52,6 +52,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.core.folders import MARKER
+from amsfe_sym.core.jsonfile import to_json
 from amsfe_sym.core.ledger import note_written, resolved
 from amsfe_sym.core.toml import dump_toml
 from amsfe_sym.errors import RunFolderError, describe
@@ -516,7 +517,7 @@ class _SegmentedBag:
         }
         tmp = self.path / "metadata.yaml.tmp"
         # JSON is YAML (1.2): rosbag2 and rosbags read it
-        tmp.write_text(json.dumps({"rosbag2_bagfile_information": info}, indent=1) + "\n")
+        tmp.write_text(to_json({"rosbag2_bagfile_information": info}, indent=1) + "\n")
         tmp.replace(self.path / "metadata.yaml")
 
 

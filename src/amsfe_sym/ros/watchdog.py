@@ -25,11 +25,32 @@ The checks, in the order that decides which reason a sample that trips several g
 6. ``deadline``: more than ``deadline_misses`` of the last ``deadline_window`` samples were
    processed later than ``deadline`` after their stamp (lateness = done - (stamp + offset),
    the offset = taken - stamp of the first sample; the stamp is the send time when known);
-7. ``innovation``: the mean of NIS / dimension over the last ``innovation_window`` fused
+7. ``actuation``: the torque the arm reports applying over tick j (``WatchdogTick.applied``,
+   the effort topic of kind ``applied``) is none of the commands it may have applied, on
+   ``actuation_ticks`` judged samples in a row (below);
+8. ``innovation``: the mean of NIS / dimension over the last ``innovation_window`` fused
    updates (encoder samples and camera frames) above ``innovation_nis``;
-8. ``tracking``: max_j |q_d,j - q_hat,j| above ``tracking_error``, once the start-up handed
+9. ``tracking``: max_j |q_d,j - q_hat,j| above ``tracking_error``, once the start-up handed
    over (the blend of control/blend.py ended: before it the law tracks the blended
    reference, not q_d).
+
+Which command the arm applied (``actuation``).  A command reaches the arm late, or not at
+all, in free running: the arm then applies the newest one it has (an older one), or holds
+zero before the first; what it applied over tick j is one of the node's commands of ticks
+<= j, and never an older one than it applied before (one publisher, in order).  So the
+watchdog keeps the commands of the last :data:`ACTUATION_RING` ticks (each sample's ``u``)
+and the command the arm was last seen applying (zero before the first match); the
+candidates for the torque a reported over tick j are that one and the kept commands after
+it up to tick j.  The distance of a candidate c is max_j |a_j - c_j| / s_j, s_j the joint's
+actuator limit u_max,j (1 N m without one).  The nearest candidate (the oldest of equals)
+within ``actuation_error`` is the command applied (it becomes the last seen); none within:
+a mismatch, its value the smallest distance.  A hold after ``actuation_ticks`` mismatches in
+a row.  Judged only when the sample has a command
+(the node publishes commands) and a reported torque (new since the last sample, finite), and
+the candidates are those kept: a command more than :data:`ACTUATION_RING` ticks older than
+the node's newest is not one the arm may still apply (the node itself is then that far
+behind, which the ``deadline`` check holds long before).  The search is short: the last
+seen command follows the arm, so the candidates are the commands still on their way to it.
 
 :meth:`Watchdog.idle` holds when no sample came for ``encoder_timeout``: ``node_stalled``
 when the node's own previous call is that old (it was not scheduled, nothing tells about the
@@ -52,6 +73,7 @@ from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.topics.watchdog import WatchdogBounds
 
 __all__ = [
+    "ACTUATION_RING",
     "CAUSE_TEXT",
     "REASON_NAMES",
     "Cause",
@@ -64,6 +86,9 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+
+#: Ticks of commands the ``actuation`` check keeps (``AMSFE_WD_ACTUATION_RING``).
+ACTUATION_RING = 1024
 
 
 class Reason(IntEnum):
@@ -78,6 +103,7 @@ class Reason(IntEnum):
     ENCODER_STALL = 6
     NODE_STALLED = 7
     NONFINITE = 8
+    ACTUATION = 9
 
 
 #: The stable names of the reasons (the hold line's, tests match them).
@@ -91,6 +117,7 @@ REASON_NAMES = (
     "encoder_stall",
     "node_stalled",
     "nonfinite",
+    "actuation",
 )
 
 
@@ -161,6 +188,11 @@ CAUSE_TEXT: dict[tuple[Reason, Cause], str] = {
     (Reason.NONFINITE, Cause.COMMAND): (
         "the command turned NaN or inf; check the gains and the reference"
     ),
+    (Reason.ACTUATION, Cause.NONE): (
+        "the arm does not apply the command (drive fault, e-stop, brakes): the torque it "
+        "reports differs from every command it may have applied by more than "
+        "actuation_error; check the drives"
+    ),
 }
 
 
@@ -175,6 +207,8 @@ class WatchdogConfig:
         T: Tick [s].
         bounds: The ``[watchdog]`` keys.
         max_gap_steps: Missing samples the estimator predicts through (``[timing]``).
+        u_max: The actuator limits [n] [N m] (inf or empty: none; the ``actuation`` scale
+            is 1 N m then).
     """
 
     n: int
@@ -183,6 +217,13 @@ class WatchdogConfig:
     T: float
     bounds: WatchdogBounds = field(default_factory=WatchdogBounds)
     max_gap_steps: int = 5
+    u_max: tuple[float, ...] = ()
+
+    def scale(self) -> list[float]:
+        """The ``actuation`` scale per joint: u_max,j, or 1 N m where it is not a finite
+        number > 0."""
+        u = list(self.u_max) or [math.inf] * self.n
+        return [v if math.isfinite(v) and v > 0 else 1.0 for v in u]
 
     def check(self) -> None:
         """Refuse what the C refuses (``amsfe_watchdog_memory_size`` returns 0).
@@ -193,6 +234,8 @@ class WatchdogConfig:
         b = self.bounds
         ok = (
             min(self.n, self.N, self.ne, b.innovation_window, b.deadline_window) >= 1
+            and b.actuation_ticks >= 1
+            and len(self.u_max) in (0, self.n)
             and min(b.deadline_misses, self.max_gap_steps) >= 0
             and self.T > 0
             and b.tracking_error > 0
@@ -200,6 +243,7 @@ class WatchdogConfig:
             and b.deadline > 0
             and b.compute_budget > 0
             and b.encoder_timeout > 0
+            and b.actuation_error > 0
         )
         if not ok:
             raise ConfigError(
@@ -227,6 +271,10 @@ class WatchdogTick:
         handed_over: The start-up handed over (tracking is judged).
         encoder_nis: NIS of the encoder update fused this tick (NaN: none).
         frame_nis: NIS of each camera frame fused this tick.
+        applied: The torque the arm reports applying over tick ``applied_k`` [n] [N m] (the
+            effort topic of kind ``applied``: the newest by tick received since the last
+            sample; None: none new, or another kind).
+        applied_k: Its tick (>= 0).
     """
 
     k: int
@@ -242,6 +290,8 @@ class WatchdogTick:
     handed_over: bool = False
     encoder_nis: float = math.nan
     frame_nis: tuple[float, ...] = ()
+    applied: FloatArray | None = None
+    applied_k: int = -1
 
 
 @dataclass
@@ -256,6 +306,8 @@ class WatchdogSeen:
     max_late_in_window: int = 0
     max_compute: float = 0.0
     max_wall_gap: float = 0.0
+    max_actuation: float = 0.0
+    actuation_judged: int = 0
 
 
 @dataclass(frozen=True)
@@ -322,6 +374,7 @@ class Watchdog:
         b = config.bounds
         self._nis = [0.0] * b.innovation_window
         self._late = [0] * b.deadline_window
+        self._scale = config.scale()
         self.reset()
 
     def reset(self) -> None:
@@ -338,6 +391,12 @@ class Watchdog:
         self._late_pos, self._late_count, self._late_filled = 0, 0, 0
         self._nis[:] = [0.0] * len(self._nis)
         self._late[:] = [0] * len(self._late)
+        self._ring_k = [-1] * ACTUATION_RING  # the tick of each kept command, by k % RING
+        self._ring_u: list[list[float]] = [[0.0] * self.config.n] * ACTUATION_RING
+        self._cmd_newest = -1
+        self._matched = [0.0] * self.config.n  # the command last seen applied (zero first)
+        self._matched_k = -1
+        self._act_run = 0
 
     @property
     def reason(self) -> Reason:
@@ -371,6 +430,7 @@ class Watchdog:
             self._last_call = self._last_taken = tick.taken
             self._last_k = tick.k
             s.samples += 1
+            self._keep_command(tick)
             return Reason.NONE
         s.samples += 1
         rel = float(tick.stamp_ns - self._stamp0) * 1e-9
@@ -413,7 +473,11 @@ class Watchdog:
             trips.append(
                 Hold(Reason.DEADLINE, Cause.NONE, k, misses, float(b.deadline_misses), gap)
             )
-        if math.isfinite(tick.encoder_nis):  # 7
+        mismatch = self._actuation(tick)  # 7
+        if mismatch is not None and self._act_run >= b.actuation_ticks:
+            trips.append(Hold(Reason.ACTUATION, Cause.NONE, k, mismatch, b.actuation_error, gap))
+        self._keep_command(tick)
+        if math.isfinite(tick.encoder_nis):  # 8
             self._push_nis(tick.encoder_nis / c.ne)
         for v in tick.frame_nis:
             if math.isfinite(v):
@@ -423,7 +487,7 @@ class Watchdog:
             s.max_innovation = max(s.max_innovation, mean)
             if mean > b.innovation_nis:
                 trips.append(Hold(Reason.INNOVATION, Cause.NONE, k, mean, b.innovation_nis, gap))
-        if tick.handed_over and tick.q_des is not None and tick.x_hat is not None:  # 8
+        if tick.handed_over and tick.q_des is not None and tick.x_hat is not None:  # 9
             err = _max_abs_diff(tick.q_des, tick.x_hat[: c.n])
             s.max_tracking = max(s.max_tracking, err)
             if err > b.tracking_error:
@@ -432,6 +496,53 @@ class Watchdog:
             self.hold = trips[0]
             return self.hold.reason
         return Reason.NONE
+
+    def _keep_command(self, tick: WatchdogTick) -> None:
+        """The sample's command into the ring (none: nothing)."""
+        if tick.u is None or tick.k < 0:
+            return
+        slot = tick.k % ACTUATION_RING
+        self._ring_k[slot] = tick.k
+        self._ring_u[slot] = [float(v) for v in tick.u]
+        self._cmd_newest = max(self._cmd_newest, tick.k)
+
+    def _distance(self, a: list[float], c: list[float]) -> float:
+        """max_j |a_j - c_j| / s_j (the C's loop: the first joint, then larger ones)."""
+        d = abs(a[0] - c[0]) / self._scale[0]
+        for j in range(1, self.config.n):
+            dj = abs(a[j] - c[j]) / self._scale[j]
+            if dj > d:
+                d = dj
+        return d
+
+    def _actuation(self, tick: WatchdogTick) -> float | None:
+        """Judge the reported torque (module docstring): None when not judged or matched
+        (the run of mismatches reset), else the mismatch (the run counted)."""
+        if tick.u is None or tick.applied is None or tick.applied_k < 0:
+            return None
+        a = [float(v) for v in tick.applied]
+        if len(a) != self.config.n or not all(math.isfinite(v) for v in a):
+            return None
+        newest = self._cmd_newest
+        s, bound = self.seen, self.config.bounds.actuation_error
+        s.actuation_judged += 1
+        last = min(tick.applied_k, newest)
+        best, best_k, best_c = self._distance(a, self._matched), self._matched_k, self._matched
+        i = max(self._matched_k + 1, newest - ACTUATION_RING + 1)
+        while i <= last:
+            slot = i % ACTUATION_RING
+            if self._ring_k[slot] == i:
+                d = self._distance(a, self._ring_u[slot])
+                if d < best:
+                    best, best_k, best_c = d, i, self._ring_u[slot]
+            i += 1
+        s.max_actuation = max(s.max_actuation, best)
+        if best <= bound:  # the command applied: the nearest (the oldest of equals)
+            self._matched, self._matched_k = best_c, best_k
+            self._act_run = 0
+            return None
+        self._act_run += 1
+        return best
 
     def idle(self, now: float, publishers: int = -1) -> Reason:
         """The wait for a sample timed out at wall clock ``now`` [s]; ``publishers``: the

@@ -16,8 +16,12 @@ Faults (:class:`Fault`), from ``at`` [s] on:
 
 - ``frozen``: the encoders repeat the sample of ``at`` (a frozen driver);
 - ``jump``: the encoder angles jump by ``size`` [rad] (a slipped encoder);
-- ``torque_loss``: the actuators apply nothing while the arm reports the command;
-- ``reversed``: the actuators apply -u and report it (a diverging arm);
+- ``torque_loss``: the actuators apply nothing and the arm reports it (``sim-node``'s
+  ``torque_loss``: its effort topic publishes the torque applied);
+- ``torque_misreported``: the actuators apply nothing while the arm reports the command (a
+  drive that reports its setpoint, not its current);
+- ``reversed``: the actuators apply -u while the drive reports u (a motor mounted or wired
+  with the wrong sign: the drive reports its own setpoint; a diverging arm);
 - ``stall``: the node is not scheduled for ``size`` [s] (its queue fills: ``depth``);
 - ``lag``: the node is not scheduled for ``size`` [s], then needs ``0.99 T`` a sample, so it
   stays that far behind (a deadline burst that never catches up);
@@ -30,7 +34,7 @@ import math
 import time
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 from numpy.typing import NDArray
@@ -47,17 +51,19 @@ __all__ = ["FAULTS", "Fault", "FaultKind", "WatchEvent", "WatchRun", "run_watche
 
 FloatArray = NDArray[np.float64]
 
-FaultKind = Literal["none", "frozen", "jump", "torque_loss", "reversed", "stall", "lag", "silent"]
-#: The faults :func:`run_watched` injects.
-FAULTS: tuple[FaultKind, ...] = (
+FaultKind = Literal[
+    "none",
     "frozen",
     "jump",
     "torque_loss",
+    "torque_misreported",
     "reversed",
     "stall",
     "lag",
     "silent",
-)
+]
+#: The faults :func:`run_watched` injects (every kind but ``none``).
+FAULTS: tuple[FaultKind, ...] = tuple(k for k in get_args(FaultKind) if k != "none")
 
 
 @dataclass(frozen=True)
@@ -216,11 +222,13 @@ def run_watched(
         while commands and commands[0][0] <= t + T:  # the newest command ready by t_k+1
             u_arm = commands.popleft()[1]
         u_apply = u_arm
-        if faulty and fault.kind == "torque_loss":
+        if faulty and fault.kind in ("torque_loss", "torque_misreported"):
             u_apply = np.zeros(n)
         elif faulty and fault.kind == "reversed":
             u_apply = -u_arm
-        applied_prev = u_apply if fault.kind != "torque_loss" else u_arm
+        # a drive that reports its setpoint: the command, whatever reaches the joint
+        reports_setpoint = fault.kind in ("torque_misreported", "reversed")
+        applied_prev = u_arm if reports_setpoint and faulty else u_apply
         arm.advance(u_apply)
     run.hold = loop.watchdog.hold
     run.seen = loop.watchdog.seen

@@ -12,6 +12,8 @@ deadline_misses = 50       # hold when more than this many of the window are lat
 deadline_window = 1000     # [samples]
 compute_budget = 0.1       # [s] one tick's computation
 encoder_timeout = 0.5      # [s] wall clock without an encoder sample
+actuation_error = 0.01     # [-] |applied - command| / u_max per joint ([N m] without a limit)
+actuation_ticks = 5        # consecutive judged ticks past actuation_error
 ```
 
 A bound of ``inf`` (``tracking_error = inf`` in TOML) switches its check off.  The node's
@@ -50,6 +52,12 @@ class WatchdogBounds:
             [s]; inf: off.
         encoder_timeout: Longest wall-clock silence of the encoders, and longest gap
             between two calls of the node's own loop [s].
+        actuation_error: Largest difference between the torque the arm reports applying
+            (effort kind ``applied``) and the command it applied, per joint, as a fraction
+            of the joint's actuator limit u_max [-] (a joint without a limit: in [N m]);
+            the command is the one of the node's commands up to the effort's tick that
+            the arm applied (ros/watchdog.py); inf: off.
+        actuation_ticks: Hold when that many judged ticks in a row are past it.
     """
 
     tracking_error: float = 0.1
@@ -60,6 +68,8 @@ class WatchdogBounds:
     deadline_window: int = 1000
     compute_budget: float = 0.1
     encoder_timeout: float = 0.5
+    actuation_error: float = 0.01
+    actuation_ticks: int = 5
 
     def with_timeout(self, encoder_timeout: float | None) -> WatchdogBounds:
         """These bounds with ``encoder_timeout`` [s] (``amsfe node --encoder-timeout``; None:
@@ -70,8 +80,13 @@ class WatchdogBounds:
 #: The keys of ``[watchdog]`` (the fields of :class:`WatchdogBounds`).
 WATCHDOG_KEYS = tuple(f.name for f in fields(WatchdogBounds))
 #: The keys that are counts (integers); the others are numbers > 0 (inf: off).
-WATCHDOG_COUNTS = ("innovation_window", "deadline_misses", "deadline_window")
-_AT_LEAST = {"innovation_window": 1, "deadline_misses": 0, "deadline_window": 1}
+WATCHDOG_COUNTS = ("innovation_window", "deadline_misses", "deadline_window", "actuation_ticks")
+_AT_LEAST = {
+    "innovation_window": 1,
+    "deadline_misses": 0,
+    "deadline_window": 1,
+    "actuation_ticks": 1,
+}
 
 
 def parse_watchdog(table: dict[str, Any], where: str = "[watchdog]") -> WatchdogBounds:

@@ -54,13 +54,16 @@ int live_init(live_loop *L) {
   L->early_eff_ns = zalloc(sizeof(long long) * LIVE_MAX_FRAMES);
   L->early_eff_u = zalloc(sizeof(double) * LIVE_MAX_FRAMES * (size_t)n);
   L->u_in = zalloc(sizeof(double) * (size_t)n);
+  L->wd_applied = zalloc(sizeof(double) * (size_t)n);
+  L->wd_applied_k = -1;
   L->x = zalloc(sizeof(double) * (size_t)N);
   L->P = zalloc(sizeof(double) * (size_t)N * (size_t)N);
   L->P_diag = zalloc(sizeof(double) * (size_t)N);
   L->u = zalloc(sizeof(double) * (size_t)n);
   L->ref_hold = zalloc(sizeof(double) * 5 * (size_t)n);
   if (!L->est_mem || !L->ctrl_mem || !L->x0 || !L->eff_u || !L->cmd_u || !L->u_in || !L->x ||
-      !L->P || !L->P_diag || !L->u || !L->ref_hold || !L->early_eff_ns || !L->early_eff_u)
+      !L->P || !L->P_diag || !L->u || !L->ref_hold || !L->early_eff_ns || !L->early_eff_u ||
+      !L->wd_applied)
     return AMSFE_ERR_MEMORY;
   for (int i = 0; i < LIVE_RING; ++i) L->seen[i] = L->eff_j[i] = L->cmd_j[i] = -1;
   if (L->K_ref > 0) /* past the reference: its last angles, at rest */
@@ -143,11 +146,17 @@ void live_applied(live_loop *L, long long stamp_ns, const double *u) {
     skip(L, SKIP_TORQUE_OFF_GRID, 1);
   } else if (!u || !all_finite(u, n)) {
     skip(L, SKIP_TORQUE_NOT_FINITE, 1);
-  } else if (j < L->k) {
-    skip(L, SKIP_TORQUE_LATE, 1);
   } else {
-    L->eff_j[j % LIVE_RING] = j;
-    memcpy(L->eff_u + (j % LIVE_RING) * n, u, sizeof(double) * (size_t)n);
+    if (j < L->k) {
+      skip(L, SKIP_TORQUE_LATE, 1);
+    } else {
+      L->eff_j[j % LIVE_RING] = j;
+      memcpy(L->eff_u + (j % LIVE_RING) * n, u, sizeof(double) * (size_t)n);
+    }
+    if (j >= 0 && j >= L->wd_applied_k) { /* the watchdog's (LiveLoop._for_watchdog) */
+      L->wd_applied_k = j;
+      memcpy(L->wd_applied, u, sizeof(double) * (size_t)n);
+    }
   }
 }
 

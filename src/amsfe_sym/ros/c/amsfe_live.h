@@ -80,6 +80,10 @@ typedef struct {
   double *early_eff_u;
   int n_early_eff;
   double *u_in;                /* [n] the torque applied over the last tick */
+  double *wd_applied;          /* [n] the newest (by tick) applied torque received since the
+                                  last sample, for the watchdog (also one too late for the
+                                  estimator); wd_applied_k its tick, -1: none */
+  long wd_applied_k;
   amsfe_frame due[LIVE_MAX_FRAMES];
   int due_status[LIVE_MAX_FRAMES];
   double due_nis[LIVE_MAX_FRAMES];

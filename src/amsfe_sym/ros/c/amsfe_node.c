@@ -362,10 +362,11 @@ static void configure(node_t *s, const char *path) {
   s->hold_limit = ALLOC(double, n);
   pf_doubles(pf, "hold_limit", s->hold_limit, n);
   /* the watchdogs: the [watchdog] keys of the spec, in amsfe_watchdog_config's order */
-  double w[8];
-  pf_doubles(pf, "watchdog", w, 8);
+  double w[10];
+  pf_doubles(pf, "watchdog", w, 10);
   amsfe_watchdog_config wc = {n, N, d.ne, s->T, w[0], w[1], (int)w[2], w[3], (int)w[4],
-                              (int)w[5], w[6], w[7], L->max_gap};
+                              (int)w[5], w[6], w[7], L->max_gap, w[8], (int)w[9],
+                              s->hold_limit /* u_max (inf: none) */};
   size_t wsize = amsfe_watchdog_memory_size(&wc);
   void *wmem = NULL;
   if (!wsize || posix_memalign(&wmem, 64, wsize) != 0 ||
@@ -673,6 +674,9 @@ static void on_encoders(node_t *s, long long sent, long long received, double ta
   tick.stamp_ns = sent; /* the DDS source timestamp: this node's delay, not the arm's pace */
   tick.taken = taken, tick.done = done;
   tick.encoder_nis = NAN;
+  tick.applied_k = -1; /* the newest applied torque since the last sample (LiveLoop.watch) */
+  if (L->wd_applied_k >= 0) tick.applied = L->wd_applied, tick.applied_k = L->wd_applied_k;
+  L->wd_applied_k = -1;
   if (r < 0) {
     tick.status = r == -1 ? AMSFE_ERR_NOT_PD : L->status; /* as LiveLoop.watch judges them */
   } else {

@@ -29,7 +29,16 @@ struct amsfe_watchdog {
   int nis_pos, nis_count;
   unsigned char *late;    /* [deadline_window] 1: that sample was late, a ring */
   int late_pos, late_count;
+  double *scale;          /* [n] the actuation scale per joint */
+  long *ring_k;           /* [AMSFE_WD_ACTUATION_RING] the tick of each kept command (-1) */
+  double *ring_u;         /* [AMSFE_WD_ACTUATION_RING x n] the commands */
+  double *matched;        /* [n] the command last seen applied (zero first) */
+  long matched_k, cmd_newest;
+  int act_run;            /* judged mismatches in a row */
 };
+
+/* Python's max(a, b): b only when b > a */
+static double pymax(double a, double b) { return b > a ? b : a; }
 
 static size_t align16(size_t x) { return (x + 15u) & ~(size_t)15u; }
 
@@ -37,17 +46,20 @@ static int config_ok(const amsfe_watchdog_config *c) {
   if (!c) return 0;
   if (c->n < 1 || c->N < 1 || c->ne < 1 || c->innovation_window < 1 || c->deadline_window < 1)
     return 0;
-  if (c->deadline_misses < 0 || c->max_gap_steps < 0) return 0;
+  if (c->deadline_misses < 0 || c->max_gap_steps < 0 || c->actuation_ticks < 1) return 0;
   /* written so that NaN fails */
   return c->T > 0 && c->tracking_error > 0 && c->innovation_nis > 0 && c->deadline > 0 &&
-         c->compute_budget > 0 && c->encoder_timeout > 0;
+         c->compute_budget > 0 && c->encoder_timeout > 0 && c->actuation_error > 0;
 }
 
 size_t amsfe_watchdog_memory_size(const amsfe_watchdog_config *config) {
   if (!config_ok(config)) return 0;
+  size_t n = (size_t)config->n;
   return align16(sizeof(struct amsfe_watchdog)) +
          align16(sizeof(double) * (size_t)config->innovation_window) +
-         align16((size_t)config->deadline_window);
+         align16((size_t)config->deadline_window) + 2 * align16(sizeof(double) * n) +
+         align16(sizeof(long) * AMSFE_WD_ACTUATION_RING) +
+         align16(sizeof(double) * AMSFE_WD_ACTUATION_RING * n);
 }
 
 int amsfe_watchdog_init(amsfe_watchdog **out, const amsfe_watchdog_config *config,
@@ -63,6 +75,20 @@ int amsfe_watchdog_init(amsfe_watchdog **out, const amsfe_watchdog_config *confi
   wd->nis = (double *)p;
   p += align16(sizeof(double) * (size_t)config->innovation_window);
   wd->late = p;
+  p += align16((size_t)config->deadline_window);
+  size_t n = (size_t)config->n;
+  wd->scale = (double *)p;
+  p += align16(sizeof(double) * n);
+  wd->matched = (double *)p;
+  p += align16(sizeof(double) * n);
+  wd->ring_k = (long *)p;
+  p += align16(sizeof(long) * AMSFE_WD_ACTUATION_RING);
+  wd->ring_u = (double *)p;
+  for (size_t j = 0; j < n; ++j) { /* as WatchdogConfig.scale */
+    double v = config->u_max ? config->u_max[j] : INFINITY;
+    wd->scale[j] = isfinite(v) && v > 0 ? v : 1.0;
+  }
+  wd->c.u_max = NULL; /* not kept: the caller's */
   amsfe_watchdog_reset(wd);
   *out = wd;
   return AMSFE_OK;
@@ -82,6 +108,65 @@ void amsfe_watchdog_reset(amsfe_watchdog *wd) {
   wd->late_pos = wd->late_count = 0;
   memset(wd->nis, 0, sizeof(double) * (size_t)wd->c.innovation_window);
   memset(wd->late, 0, (size_t)wd->c.deadline_window);
+  memset(wd->matched, 0, sizeof(double) * (size_t)wd->c.n);
+  for (int i = 0; i < AMSFE_WD_ACTUATION_RING; ++i) wd->ring_k[i] = -1;
+  wd->matched_k = wd->cmd_newest = -1;
+  wd->act_run = 0;
+}
+
+/* The sample's command into the ring (none: nothing). */
+static void keep_command(amsfe_watchdog *wd, const amsfe_watchdog_tick *t) {
+  if (!t->u || t->k < 0) return;
+  long slot = t->k % AMSFE_WD_ACTUATION_RING;
+  wd->ring_k[slot] = t->k;
+  memcpy(wd->ring_u + slot * wd->c.n, t->u, sizeof(double) * (size_t)wd->c.n);
+  if (t->k > wd->cmd_newest) wd->cmd_newest = t->k;
+}
+
+/* max_j |a_j - c_j| / s_j */
+static double distance(const amsfe_watchdog *wd, const double *a, const double *c) {
+  double d = fabs(a[0] - c[0]) / wd->scale[0];
+  for (int j = 1; j < wd->c.n; ++j) {
+    double dj = fabs(a[j] - c[j]) / wd->scale[j];
+    if (dj > d) d = dj;
+  }
+  return d;
+}
+
+/* The actuation check (amsfe_watchdog_sample's comment): 1 a mismatch (*value: the smallest
+ * distance; the run counted), 0 matched or not judged. */
+static int actuation(amsfe_watchdog *wd, const amsfe_watchdog_tick *t, double *value) {
+  int n = wd->c.n;
+  if (!t->u || !t->applied || t->applied_k < 0) return 0;
+  for (int j = 0; j < n; ++j)
+    if (!isfinite(t->applied[j])) return 0;
+  amsfe_watchdog_state *s = &wd->s;
+  double bound = wd->c.actuation_error;
+  const double *a = t->applied;
+  long newest = wd->cmd_newest;
+  s->actuation_judged += 1;
+  long last = t->applied_k < newest ? t->applied_k : newest;
+  double best = distance(wd, a, wd->matched);
+  const double *best_c = NULL; /* NULL: the last seen itself */
+  long best_k = wd->matched_k;
+  long i = wd->matched_k + 1;
+  if (newest - AMSFE_WD_ACTUATION_RING + 1 > i) i = newest - AMSFE_WD_ACTUATION_RING + 1;
+  for (; i <= last; ++i) {
+    long slot = i % AMSFE_WD_ACTUATION_RING;
+    if (wd->ring_k[slot] != i) continue;
+    double d = distance(wd, a, wd->ring_u + slot * n);
+    if (d < best) best = d, best_k = i, best_c = wd->ring_u + slot * n;
+  }
+  s->max_actuation = pymax(s->max_actuation, best);
+  if (best <= bound) { /* the command applied: the nearest (the oldest of equals) */
+    if (best_c) memcpy(wd->matched, best_c, sizeof(double) * (size_t)n);
+    wd->matched_k = best_k;
+    wd->act_run = 0;
+    return 0;
+  }
+  wd->act_run += 1;
+  *value = best;
+  return 1;
 }
 
 /* the first trip of a sample wins (set only while no reason is set yet) */
@@ -102,9 +187,6 @@ static int nonfinite(const double *v, int m) {
     if (!isfinite(v[i])) return 1;
   return 0;
 }
-
-/* Python's max(a, b): b only when b > a */
-static double pymax(double a, double b) { return b > a ? b : a; }
 
 static void push_nis(amsfe_watchdog *wd, double v) {
   int W = wd->c.innovation_window;
@@ -131,6 +213,7 @@ int amsfe_watchdog_sample(amsfe_watchdog *wd, const amsfe_watchdog_tick *t) {
     wd->last_call = wd->last_taken = t->taken;
     wd->last_k = t->k;
     s->samples += 1;
+    keep_command(wd, t);
     return AMSFE_WD_NONE;
   }
   s->samples += 1;
@@ -173,7 +256,11 @@ int amsfe_watchdog_sample(amsfe_watchdog *wd, const amsfe_watchdog_tick *t) {
   if (wd->late_count > c->deadline_misses)
     trip(s, AMSFE_WD_DEADLINE, AMSFE_WD_CAUSE_NONE, k, (double)wd->late_count,
          (double)c->deadline_misses, gap);
-  if (isfinite(t->encoder_nis)) push_nis(wd, t->encoder_nis / (double)c->ne); /* 7 */
+  double mismatch = 0.0; /* 7 */
+  if (actuation(wd, t, &mismatch) && wd->act_run >= c->actuation_ticks)
+    trip(s, AMSFE_WD_ACTUATION, AMSFE_WD_CAUSE_NONE, k, mismatch, c->actuation_error, gap);
+  keep_command(wd, t);
+  if (isfinite(t->encoder_nis)) push_nis(wd, t->encoder_nis / (double)c->ne); /* 8 */
   for (int i = 0; t->frame_nis && i < t->n_frames; ++i)
     if (isfinite(t->frame_nis[i])) push_nis(wd, t->frame_nis[i] / 2.0);
   if (wd->nis_count == c->innovation_window) {
@@ -182,7 +269,7 @@ int amsfe_watchdog_sample(amsfe_watchdog *wd, const amsfe_watchdog_tick *t) {
     if (mean > c->innovation_nis)
       trip(s, AMSFE_WD_INNOVATION, AMSFE_WD_CAUSE_NONE, k, mean, c->innovation_nis, gap);
   }
-  if (t->handed_over && t->q_des && t->x_hat) { /* 8: numpy's max (NaN wins) */
+  if (t->handed_over && t->q_des && t->x_hat) { /* 9: numpy's max (NaN wins) */
     double err = fabs(t->q_des[0] - t->x_hat[0]);
     for (int j = 1; j < c->n; ++j) {
       double d = fabs(t->q_des[j] - t->x_hat[j]);
@@ -219,7 +306,7 @@ void amsfe_watchdog_get_state(const amsfe_watchdog *wd, amsfe_watchdog_state *st
 
 static const char *const NAMES[AMSFE_WD_REASONS] = {
     "none",     "tracking",      "innovation",   "covariance", "deadline",
-    "compute",  "encoder_stall", "node_stalled", "nonfinite"};
+    "compute",  "encoder_stall", "node_stalled", "nonfinite",  "actuation"};
 
 const char *amsfe_watchdog_reason_name(int reason) {
   return reason >= 0 && reason < AMSFE_WD_REASONS ? NAMES[reason] : "unknown";
@@ -269,6 +356,10 @@ const char *amsfe_watchdog_cause_text(int reason, int cause) {
       if (cause == AMSFE_WD_CAUSE_COMMAND)
         return "the command turned NaN or inf; check the gains and the reference";
       return "the estimate turned NaN or inf; check the encoder values and the robot spec";
+    case AMSFE_WD_ACTUATION:
+      return "the arm does not apply the command (drive fault, e-stop, brakes): the torque it "
+             "reports differs from every command it may have applied by more than "
+             "actuation_error; check the drives";
     default:
       return "";
   }

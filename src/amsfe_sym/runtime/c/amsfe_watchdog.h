@@ -30,7 +30,7 @@ extern "C" {
 
 /* Why the node holds.  The stable names (amsfe_watchdog_reason_name) are what a hold line
  * prints and what tests match: "tracking", "innovation", "covariance", "deadline",
- * "compute", "encoder_stall", "node_stalled", "nonfinite". */
+ * "compute", "encoder_stall", "node_stalled", "nonfinite", "actuation". */
 enum amsfe_watchdog_reason {
   AMSFE_WD_NONE = 0,          /* no hold */
   AMSFE_WD_TRACKING = 1,      /* max_j |q_d - q_hat| > tracking_error after the hand-over */
@@ -43,9 +43,14 @@ enum amsfe_watchdog_reason {
   AMSFE_WD_COMPUTE = 5,       /* one tick's computation took longer than compute_budget */
   AMSFE_WD_ENCODER_STALL = 6, /* no encoder sample (the driver silent or gone) */
   AMSFE_WD_NODE_STALLED = 7,  /* the node itself was not scheduled (its own wall-clock gap) */
-  AMSFE_WD_NONFINITE = 8      /* the estimate or the command holds NaN or inf */
+  AMSFE_WD_NONFINITE = 8,     /* the estimate or the command holds NaN or inf */
+  AMSFE_WD_ACTUATION = 9      /* the torque the arm reports applying is none of the commands
+                                 it may have applied, actuation_ticks judged samples in a row */
 };
-#define AMSFE_WD_REASONS 9
+#define AMSFE_WD_REASONS 10
+
+/* Ticks of commands kept for the actuation check (ros/watchdog.py's ACTUATION_RING). */
+#define AMSFE_WD_ACTUATION_RING 1024
 
 /* Which cause of a reason (the text differs; the reason name does not). */
 enum amsfe_watchdog_cause {
@@ -81,6 +86,10 @@ typedef struct {
   double compute_budget;    /* [s] one tick's computation; INFINITY = off */
   double encoder_timeout;   /* [s] wall clock without a sample (and without a call) */
   int max_gap_steps;        /* missing samples predicted through; more: stall (>= 0) */
+  double actuation_error;   /* [-] max_j |applied_j - command_j| / s_j, s_j = u_max[j] (1 N m
+                               where u_max is NULL or not finite > 0); INFINITY = off */
+  int actuation_ticks;      /* hold after this many judged mismatches in a row (>= 1) */
+  const double *u_max;      /* [n] the actuator limits [N m] (NULL: none); copied by init */
 } amsfe_watchdog_config;
 
 /* One encoder sample as processed. */
@@ -102,6 +111,11 @@ typedef struct {
   double encoder_nis;   /* NIS of the encoder update of this tick; NaN: none fused */
   const double *frame_nis; /* [n_frames] NIS of the camera frames fused this tick */
   int n_frames;
+  const double *applied;   /* [n] the torque the arm reports applying over tick applied_k
+                              [N m] (the effort topic of kind "applied": the newest by tick
+                              received since the previous sample); NULL: none new, or the
+                              effort is of another kind.  Judged (actuation) only with u. */
+  long applied_k;          /* its tick (>= 0) */
 } amsfe_watchdog_tick;
 
 /* What the watchdog holds for, and what it has seen (the largest value of each monitored
@@ -119,6 +133,8 @@ typedef struct {
   int max_late_in_window; /* most late samples in one window */
   double max_compute;    /* [s] */
   double max_wall_gap;   /* [s] between two calls */
+  double max_actuation;  /* [-] largest distance of a judged applied torque to its command */
+  long actuation_judged; /* applied torques judged */
 } amsfe_watchdog_state;
 
 typedef struct amsfe_watchdog amsfe_watchdog;
@@ -135,8 +151,17 @@ void amsfe_watchdog_reset(amsfe_watchdog *wd);
 /* Judge one processed sample: returns the reason to hold, or AMSFE_WD_NONE.  Order of the
  * checks (the first that trips wins): stall (gap > max_gap_steps), node_stalled (no call for
  * encoder_timeout), covariance (status < 0), nonfinite, compute (done - taken), deadline
- * (lateness = done - (stamp + offset), offset = taken - stamp of the first sample), innovation,
- * tracking.  The first sample only sets the offset (no compute or deadline check). */
+ * (lateness = done - (stamp + offset), offset = taken - stamp of the first sample), actuation,
+ * innovation, tracking.  The first sample only sets the offset (no compute or deadline check)
+ * and keeps its command.
+ *
+ * actuation: the arm applies over tick j one of the node's commands of ticks <= j (late ones
+ * arrive late: then an older one; before the first, zero), never an older one than before.
+ * Candidates: the command last seen applied (zero at first), then the kept commands (the
+ * last AMSFE_WD_ACTUATION_RING ticks' u) after it up to applied_k; distance
+ * max_j |applied_j - c_j| / s_j.  The nearest (the oldest of equals) within actuation_error is
+ * the one applied (it becomes the last seen); none: a mismatch (value: the smallest
+ * distance), actuation_ticks in a row hold. */
 int amsfe_watchdog_sample(amsfe_watchdog *wd, const amsfe_watchdog_tick *tick);
 
 /* The wait for a sample timed out at wall clock `now` [s]; `publishers` = the encoder topic's
