@@ -21,10 +21,9 @@ import numpy as np
 import pytest
 
 from amsfe_sym.codegen import library_for
-from amsfe_sym.core.cpu_load import CpuHogs
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
-from tests.test_live_load import BEHIND_REASONS, _assert_not_diverged, _hold, _stop_arm
+from tests.test_live_load import free_running_under_load
 from tests.test_node_record import _bag
 from tests.test_ros import PATIENT_ARM, PATIENT_NODE, SRC, _finish, _ros_env, _start
 
@@ -123,41 +122,7 @@ def test_free_running_c_arm_under_load_tracks_or_holds_for_being_behind(
     has), or holds (exit 3) with a reason saying it is behind; never an arm reason
     (``innovation``: the torque the arm applied is the one the node uses), never an encoder
     stall (the arm's clock never stopped)."""
-    from amsfe_sym.sim.record import window
-
-    env = _ros_env(tmp_path)
-    rec = tmp_path / "rec"
-    procs: list[Any] = []
-    with CpuHogs(2, limit_s=600):
-        try:
-            node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--duration", "2",
-                          "--record", str(rec), "--impl", "c")  # fmt: skip
-            sim = _start(env, "sim-node", "paper-sim", "--duration", "2", "--impl", "c",
-                         "--start-timeout", "120")  # fmt: skip
-            procs += [node, sim]
-            code, text = _stop_arm(sim, node, 300.0)
-        finally:
-            _finish(procs, 60.0)
-    bag = _bag(rec)
-    hold = _hold(text)
-    print("outcome:", "held" if hold else "tracked", hold, sim.text.splitlines()[-2:])
-    if code == 3:
-        assert hold is not None and hold[0] in BEHIND_REASONS, text
-        _assert_not_diverged(bag, max_k=hold[1])
-        return
-    assert code == 0 and hold is None, text
-    sc = load_scenario("paper-sim").with_overrides(duration=2.0)
-    ref = run(sc, library_for(sc), runtime="compiled")
-    n, T = ref.lib.n, round(ref.lib.T * 1e9)
-    js = bag["/joint_states"]
-    ks = _stamps(js) // T
-    assert ks.size > ref.t.size // 2
-    w = ks >= window(ref.t.size).start
-    q = np.array([m.position for m in js])[w]
-    got = np.sqrt(np.mean((q - ref.q_des[ks[w]]) ** 2, axis=0))
-    want = np.sqrt(np.mean((ref.x_true[ks[w], :n] - ref.q_des[ks[w]]) ** 2, axis=0))
-    assert np.all(got <= 2 * want + 0.05), (got, want)
-    _assert_not_diverged(bag)
+    free_running_under_load(tmp_path, ["--impl", "c"], ["--impl", "c"])
 
 
 def _sim_node(*args: str, env: dict[str, str]) -> subprocess.CompletedProcess[str]:

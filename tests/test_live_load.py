@@ -281,7 +281,16 @@ def test_free_running_under_load_tracks_or_holds_for_being_behind(
     (no hold, exit 0; the link tracking RMSE over the run's window at most twice the
     in-process one of the same seed plus 0.05 rad), or it holds (exit 3) with a reason
     saying it is behind; never "encoder stall" (the arm's driver never stopped), never an
-    arm diverged without a hold.  (Replaces the timed ``test_free_running_tracks``.)"""
+    arm diverged without a hold.  (Replaces the timed ``test_free_running_tracks``; the arm
+    is ``sim-node``'s default, the C arm when it builds.)"""
+    free_running_under_load(tmp_path, _impl_args(impl), [])
+
+
+def free_running_under_load(tmp_path: Path, node_args: list[str], arm_args: list[str]) -> str:
+    """The run and the assertions of
+    :func:`test_free_running_under_load_tracks_or_holds_for_being_behind` for ``amsfe node
+    ... *node_args`` and ``amsfe sim-node ... *arm_args``; its outcome (``tracked`` or
+    ``held <reason> at <tick>``), and the arm's summary lines, printed."""
     from amsfe_sym.sim.record import window
 
     env = _ros_env(tmp_path)
@@ -290,20 +299,21 @@ def test_free_running_under_load_tracks_or_holds_for_being_behind(
     with CpuHogs(2, limit_s=600):
         try:
             node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--duration", "2",
-                          "--record", str(rec), *_impl_args(impl))  # fmt: skip
+                          "--record", str(rec), *node_args)  # fmt: skip
             sim = _start(env, "sim-node", "paper-sim", "--duration", "2", "--start-timeout",
-                         "120")  # fmt: skip
+                         "120", *arm_args)  # fmt: skip
             procs += [node, sim]
             code, text = _stop_arm(sim, node, 300.0)
         finally:
             _finish(procs, 60.0)
     bag = _bag(rec)
     hold = _hold(text)
-    print(impl, "held" if hold else "tracked", hold)
+    outcome = f"held {hold[0]} at {hold[1]}" if hold else "tracked"
+    print("outcome:", node_args, arm_args, outcome, sim.text.splitlines()[-2:])
     if code == 3:
         assert hold is not None and hold[0] in BEHIND_REASONS, text
         _assert_not_diverged(bag, max_k=hold[1])
-        return
+        return outcome
     assert code == 0 and hold is None and "encoder" not in text.split("node: done")[-1], text
     sc = load_scenario("paper-sim").with_overrides(duration=2.0)
     ref = run(sc, library_for(sc), runtime="compiled")
@@ -317,6 +327,7 @@ def test_free_running_under_load_tracks_or_holds_for_being_behind(
     want = np.sqrt(np.mean((ref.x_true[ks[w], :n] - ref.q_des[ks[w]]) ** 2, axis=0))
     assert np.all(got <= 2 * want + 0.05), (got, want)
     _assert_not_diverged(bag)
+    return outcome
 
 
 _INTRUDER = """

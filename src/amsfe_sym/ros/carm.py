@@ -22,16 +22,13 @@ from __future__ import annotations
 
 import math
 import os
-import signal
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from amsfe_sym.errors import ConfigError, RosError, describe
-from amsfe_sym.ros.cnode_build import CNodeBuild, build_node
+from amsfe_sym.ros.cnode_build import CNodeBuild, build_node, run_program
 from amsfe_sym.ros.faults import FaultPlan
 from amsfe_sym.ros.middleware import DEFAULT_RMW, LOCKSTEP_PROFILE
 from amsfe_sym.ros.sim_node import SimNodeOptions
@@ -166,30 +163,14 @@ def run_c_arm(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> int:
     with tempfile.TemporaryDirectory(prefix="amsfe_carm_") as tmp:
         folder = Path(tmp)
         params = write_arm_params(folder, sc, lib, spec, options)
-        env = dict(os.environ)
-        env.setdefault("RMW_IMPLEMENTATION", DEFAULT_RMW)
-        env.pop("LD_BIND_NOW", None)  # the Python type support is bound lazily (cnode_build)
-        if env["RMW_IMPLEMENTATION"] == DEFAULT_RMW and not env.get(
-            "FASTDDS_DEFAULT_PROFILES_FILE"
-        ):  # the 1 ms heartbeat of the Python sim-node (middleware.use_lockstep_profile)
-            env["FASTDDS_DEFAULT_PROFILES_FILE"] = str(LOCKSTEP_PROFILE)
-        if options.domain_id is not None:
-            env["ROS_DOMAIN_ID"] = str(options.domain_id)
-        cmd = [str(build.path), str(params)]
-        if options.ros_args:
-            cmd += ["--ros-args", *options.ros_args]
-        sys.stdout.flush()
-        proc = subprocess.Popen(cmd, env=env)
-        interrupt: KeyboardInterrupt | None = None
-        while True:
-            try:
-                code = proc.wait()
-                break
-            except KeyboardInterrupt as exc:
-                interrupt = exc
-                sig = signal.SIGINT if type(exc) is KeyboardInterrupt else signal.SIGTERM
-                if proc.poll() is None:
-                    proc.send_signal(sig)
+        profile = {}
+        rmw = os.environ.get("RMW_IMPLEMENTATION", DEFAULT_RMW)
+        if rmw == DEFAULT_RMW and not os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE"):
+            # the 1 ms heartbeat of the Python sim-node (middleware.use_lockstep_profile)
+            profile["FASTDDS_DEFAULT_PROFILES_FILE"] = str(LOCKSTEP_PROFILE)
+        code, interrupt = run_program(
+            build.path, params, options.ros_args, options.domain_id, profile
+        )
         if interrupt is not None or code in (130, 143):
             raise interrupt if interrupt is not None else KeyboardInterrupt()
         error = folder / "error.txt"

@@ -20,6 +20,7 @@ import json
 import os
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
 import sysconfig
@@ -31,7 +32,15 @@ from amsfe_sym.codegen.cache import build_lock, compiler, default_out_dir
 from amsfe_sym.errors import RosError, describe
 from amsfe_sym.runtime.library import ModelLibrary, file_sha256
 
-__all__ = ["CNODE_CFLAGS", "C_DIR", "CNodeBuild", "RosPaths", "build_node", "ros_paths"]
+__all__ = [
+    "CNODE_CFLAGS",
+    "C_DIR",
+    "CNodeBuild",
+    "RosPaths",
+    "build_node",
+    "ros_paths",
+    "run_program",
+]
 
 #: The C sources of the node (this package's ``ros/c/``).
 C_DIR = Path(__file__).with_name("c")
@@ -231,3 +240,41 @@ def _command(
     cmd += ["-Wl,--allow-shlib-undefined", "-Wl,-z,lazy"]
     cmd += [f"-Wl,--export-dynamic-symbol={s}" for s in _PY_DATA_SYMBOLS]
     return [*cmd, "-o", str(out)]
+
+
+def run_program(
+    exe: Path,
+    params: Path,
+    ros_args: tuple[str, ...],
+    domain_id: int | None,
+    env_extra: dict[str, str] | None = None,
+) -> tuple[int, KeyboardInterrupt | None]:
+    """Run a built program (``exe PARAMS [--ros-args ...]``) in this process's environment
+    (the default middleware, lazily bound symbols, ``domain_id``), its output on this
+    process's stdout, forwarding Ctrl-C / SIGTERM to it; waits for it.
+
+    Returns:
+        Its exit code, and the interrupt this process received meanwhile (None: none).
+    """
+    from amsfe_sym.ros.middleware import DEFAULT_RMW
+
+    env = dict(os.environ)
+    env.setdefault("RMW_IMPLEMENTATION", DEFAULT_RMW)
+    env.pop("LD_BIND_NOW", None)  # the Python type support is bound lazily (module doc)
+    env.update(env_extra or {})
+    if domain_id is not None:
+        env["ROS_DOMAIN_ID"] = str(domain_id)
+    cmd = [str(exe), str(params)]
+    if ros_args:
+        cmd += ["--ros-args", *ros_args]
+    sys.stdout.flush()
+    proc = subprocess.Popen(cmd, env=env)
+    interrupt: KeyboardInterrupt | None = None
+    while True:
+        try:
+            return proc.wait(), interrupt
+        except KeyboardInterrupt as exc:  # Ctrl-C / SIGTERM of this process
+            interrupt = exc
+            sig = signal.SIGINT if type(exc) is KeyboardInterrupt else signal.SIGTERM
+            if proc.poll() is None:
+                proc.send_signal(sig)
