@@ -56,7 +56,7 @@ from amsfe_sym.ros.outputs import (
 from amsfe_sym.ros.record import NodeRecord
 from amsfe_sym.ros.spec_filter import live_filter
 from amsfe_sym.ros.tick import HoldKind, TickOut
-from amsfe_sym.ros.watchdog import Reason
+from amsfe_sym.ros.watchdog_reasons import Reason
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.topics import TopicSpec, joint_order

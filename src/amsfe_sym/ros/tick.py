@@ -13,7 +13,8 @@ from numpy.typing import NDArray
 
 from amsfe_sym.control import Controller
 from amsfe_sym.estimation.base import StepReport
-from amsfe_sym.ros.watchdog import Reason, WatchdogTick
+from amsfe_sym.ros.watchdog import WatchdogTick
+from amsfe_sym.ros.watchdog_reasons import Reason
 from amsfe_sym.runtime.library import ModelLibrary
 
 __all__ = ["HoldKind", "TickOut", "Watched", "hold_command"]
@@ -58,7 +59,7 @@ class Watched:
 
     Attributes:
         out: What it produced (None: skipped, or the estimator failed).
-        reason: The watchdog's decision (:attr:`~amsfe_sym.ros.watchdog.Reason.NONE`: go
+        reason: The watchdog's decision (:attr:`~amsfe_sym.ros.watchdog_reasons.Reason.NONE`: go
             on and publish ``out``; else hold).
         tick: What the watchdog judged (None: the sample was skipped, nothing judged).
     """
