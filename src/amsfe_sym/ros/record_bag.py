@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
-from amsfe_sym.core.folders import MARKER
+from amsfe_sym.core.folders import MARKER, pid_alive
 from amsfe_sym.core.jsonfile import to_json
 from amsfe_sym.core.ledger import resolved
 from amsfe_sym.errors import RunFolderError, describe
@@ -205,7 +205,7 @@ def _taken(path: Path) -> str:
     pid = None
     with contextlib.suppress(OSError, ValueError):
         pid = int(lock.read_text().split()[0])
-    if pid is not None and _pid_alive(pid):
+    if pid is not None and pid_alive(pid):
         found = f"a record being written there by process {pid}"
         fix = "give each node its own --record folder"
     elif pid is not None:
@@ -227,16 +227,6 @@ def refuse_locked(path: Path) -> None:
     """
     if (Path(path) / LOCK).exists():
         raise RunFolderError(_taken(resolved(path)))
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # exists, another user's
-        return True
-    return True
 
 
 def record_state(path: Path) -> dict[str, str]:
