@@ -23,6 +23,8 @@ the arm; the equations (AX = ZB) are the same with the roles of camera and marke
    .least_squares``, Huber loss 1 px) through the toolkit's CameraInfo and ``distort``.
    Residuals: median / 95th percentile / max [px] over every corner of every frame.
 
+Writes docs/data/real-images.json and prints it:
+
     PYTHONPATH=src .venv/bin/python tools/real_images.py [--write-info DIR]
 """
 
@@ -266,8 +268,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.write_info is not None:
         print(f"camera_info.yaml: RMS {write_info(args.write_info):.3f} px", file=sys.stderr)
     out = measure()
-    json.dump(out, sys.stdout, indent=1)
-    print()
+    text = json.dumps(out, indent=1) + "\n"
+    (ROOT / "docs/data/real-images.json").write_text(text)
+    sys.stdout.write(text)
     return 0
 
 
