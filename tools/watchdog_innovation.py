@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -26,15 +25,9 @@ import numpy as np
 from amsfe_sym.codegen import library_for
 from amsfe_sym.ros.watchdog_logs import LOG_FAULTS, play_watched
 from amsfe_sym.scenario import load_scenario
-from amsfe_sym.topics.watchdog import WatchdogBounds
+from amsfe_sym.topics.watchdog import MEASURING
 
-OFF = WatchdogBounds(
-    tracking_error=math.inf,
-    innovation_nis=math.inf,
-    deadline=math.inf,
-    compute_budget=math.inf,
-    actuation_error=math.inf,
-)
+OFF = MEASURING
 #: (effort kind, encoders' positions) of the logs.
 KINDS = (
     ("applied", "motor"),

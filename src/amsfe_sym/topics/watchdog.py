@@ -31,6 +31,7 @@ from amsfe_sym.errors import ConfigError, describe
 
 __all__ = [
     "INNOVATION_NIS",
+    "MEASURING",
     "WATCHDOG_COUNTS",
     "WATCHDOG_KEYS",
     "WatchdogBounds",
@@ -85,6 +86,16 @@ class WatchdogBounds:
         as they are)."""
         return self if encoder_timeout is None else replace(self, encoder_timeout=encoder_timeout)
 
+
+#: Every bound that can be switched off, off (inf): the bounds of the runs that measure the
+#: watched quantities over a whole run (tools/watchdog_bounds.py, tools/watchdog_innovation.py).
+MEASURING = WatchdogBounds(
+    tracking_error=math.inf,
+    innovation_nis=math.inf,
+    deadline=math.inf,
+    compute_budget=math.inf,
+    actuation_error=math.inf,
+)
 
 #: The default ``innovation_nis`` per effort kind (``[effort] kind``; docs/watchdogs.md, "The
 #: innovation bound per effort kind", tools/watchdog_innovation.py): the filter given the
