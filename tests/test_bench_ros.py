@@ -31,6 +31,8 @@ def test_bench_ros_reports_both_latencies_and_the_misses(monkeypatch: pytest.Mon
     assert 0 <= row.missed <= row.ticks and 0 <= row.late_ticks <= row.ticks
     assert row.commands >= 1 and row.node_p50 is not None and row.node_max is not None
     assert 0 <= row.node_p50 <= row.node_max and math.isfinite(row.node_max)
+    assert row.arm == "c"  # sim-node --impl auto: the C arm (it builds here)
+    assert row.cpu_busy is not None and 0 < row.cpu_busy <= (os.cpu_count() or 1) + 1e-9
     table = format_ros_report(rows, "test machine").splitlines()
     assert len(table) == 4 and table[3].startswith("| python | 1 | ")
     doc = ros_report_json(rows, "test machine")

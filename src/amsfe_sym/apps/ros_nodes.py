@@ -103,6 +103,13 @@ def add_sim_node_arguments(p: argparse.ArgumentParser) -> None:
         help="break the arm at T [s]: encoder_frozen, encoder_jump=RAD, torque_loss "
         "(docs/live-load.md)",
     )
+    p.add_argument(
+        "--impl",
+        choices=("auto", "c", "python"),
+        default="auto",
+        help="the arm in C on rcl (a real-time clock; auto: when it builds) or in Python "
+        '(docs/live-load.md, "The C arm")',
+    )
 
 
 def sim_node_from_args(args: argparse.Namespace) -> int:
@@ -130,7 +137,15 @@ def sim_node_from_args(args: argparse.Namespace) -> int:
     FaultPlan(faults, lib.T, lib.n)  # the same kind twice: refused before rclpy starts
     mode = "lockstep" if args.lockstep else "free running"
     broken = "".join(f", fault {f.label()}" for f in faults)
-    print(f"sim-node: {sc.name} seed {sc.seed}, {sc.duration:g} s, {mode}{broken}", flush=True)
+    impl = _arm_impl(args.impl, lib, opts)
+    print(
+        f"sim-node: {sc.name} seed {sc.seed}, {sc.duration:g} s, {mode}{broken} ({impl} arm)",
+        flush=True,
+    )
+    if impl == "c":
+        from amsfe_sym.ros.carm import run_c_arm
+
+        return run_c_arm(sc, lib, opts)
     rep = run_sim_node(sc, lib, opts)
     line = f"sim-node: {rep.ticks} ticks in {rep.wall_s:.2f} s wall, {rep.commands} commands"
     if not args.lockstep:
@@ -138,6 +153,33 @@ def sim_node_from_args(args: argparse.Namespace) -> int:
     print(line, flush=True)
     print(f"sim-node: {rep.latency_line()}", flush=True)
     return 0
+
+
+def _arm_impl(asked: str, lib: Any, opts: Any) -> str:
+    """``c`` or ``python``: ``--impl auto`` runs the C arm when it runs these options and
+    builds (else the Python arm, saying why in one line); ``--impl c`` refuses (one line)
+    what it cannot run."""
+    if asked == "python":
+        return "python"
+    from amsfe_sym.errors import AmsfeError
+    from amsfe_sym.ros.carm import build_arm, c_arm_refusal
+
+    why = c_arm_refusal(opts)
+    if why is None:
+        try:
+            build_arm(lib)
+        except AmsfeError as exc:
+            if asked == "c":
+                raise
+            why = f"the C arm did not build ({str(exc).split('. Fix:')[0]})"
+    if why is None:
+        return "c"
+    if asked == "c":
+        raise ConfigError(
+            describe("amsfe sim-node --impl c", "options the C arm runs", why, "--impl python")
+        )
+    print(f"sim-node: the Python arm: {why}", flush=True)
+    return "python"
 
 
 def add_node_arguments(p: argparse.ArgumentParser) -> None:

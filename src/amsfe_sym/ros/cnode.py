@@ -16,9 +16,6 @@ from __future__ import annotations
 
 import math
 import os
-import signal
-import subprocess
-import sys
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -29,9 +26,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import ConfigError, describe
-from amsfe_sym.ros.cnode_build import CNodeBuild, build_node, ros_paths
+from amsfe_sym.ros.cnode_build import CNodeBuild, build_node, ros_paths, run_program
 from amsfe_sym.ros.cnode_record import read_record_arrays, write_record
-from amsfe_sym.ros.middleware import DEFAULT_RMW
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.topics import TopicSpec
@@ -361,26 +357,7 @@ def run_c_node(
                 "managed": options.managed,
             },
         )
-        env = dict(os.environ)
-        env.setdefault("RMW_IMPLEMENTATION", DEFAULT_RMW)
-        env.pop("LD_BIND_NOW", None)  # the Python type support is bound lazily (module doc)
-        if options.domain_id is not None:
-            env["ROS_DOMAIN_ID"] = str(options.domain_id)
-        cmd = [str(build.path), str(params)]
-        if options.ros_args:
-            cmd += ["--ros-args", *options.ros_args]
-        sys.stdout.flush()
-        proc = subprocess.Popen(cmd, env=env)
-        interrupt: KeyboardInterrupt | None = None
-        while True:
-            try:
-                code = proc.wait()
-                break
-            except KeyboardInterrupt as exc:  # Ctrl-C / SIGTERM of this process
-                interrupt = exc
-                sig = signal.SIGINT if type(exc) is KeyboardInterrupt else signal.SIGTERM
-                if proc.poll() is None:
-                    proc.send_signal(sig)
+        code, interrupt = run_program(build.path, params, options.ros_args, options.domain_id)
         record = None
         end = _end_line(code if interrupt is None else 130)
         if claimed is not None and arrays is not None and arrays.is_file():

@@ -20,6 +20,7 @@ import json
 import os
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
 import sysconfig
@@ -31,7 +32,15 @@ from amsfe_sym.codegen.cache import build_lock, compiler, default_out_dir
 from amsfe_sym.errors import RosError, describe
 from amsfe_sym.runtime.library import ModelLibrary, file_sha256
 
-__all__ = ["CNODE_CFLAGS", "C_DIR", "CNodeBuild", "RosPaths", "build_node", "ros_paths"]
+__all__ = [
+    "CNODE_CFLAGS",
+    "C_DIR",
+    "CNodeBuild",
+    "RosPaths",
+    "build_node",
+    "ros_paths",
+    "run_program",
+]
 
 #: The C sources of the node (this package's ``ros/c/``).
 C_DIR = Path(__file__).with_name("c")
@@ -109,25 +118,37 @@ class CNodeBuild:
     compiled: bool
 
 
-def _sources() -> list[Path]:
-    """The node's C sources (``ros/c/*.c``) and headers, sorted."""
-    return sorted([*C_DIR.glob("*.c"), *C_DIR.glob("*.h")])
+#: The programs built from ``ros/c/``: their own C files (``amsfe_node``: every other one).
+#: ``amsfe_arm`` is the simulated arm of ``amsfe sim-node --impl c`` (:mod:`amsfe_sym.ros.carm`).
+PROGRAMS: dict[str, tuple[str, ...]] = {"amsfe_arm": ("amsfe_arm.c", "amsfe_pystub.c")}
+#: Message packages a program needs besides :data:`_MSG_PACKAGES`.
+_EXTRA_PACKAGES: dict[str, tuple[str, ...]] = {"amsfe_arm": ("rosgraph_msgs",)}
 
 
-def build_node(lib: ModelLibrary, out_dir: Path | None = None) -> CNodeBuild:
-    """The C node of ``lib``'s robot, compiled once per content (sources, the library's
-    content hash and file, compiler, flags, rcl's version) under ``out_dir``
-    (default ``$AMSFE_GENERATED_DIR``, else the generated libraries' folder) /
-    ``amsfe_node/<hash>/``.
+def _sources(program: str = "amsfe_node") -> list[Path]:
+    """The C sources of ``program`` (``ros/c/*.c``) and every header, sorted."""
+    own = PROGRAMS.get(program)
+    others = {name for files in PROGRAMS.values() for name in files if name != "amsfe_pystub.c"}
+    c = [p for p in C_DIR.glob("*.c") if (p.name in own if own else p.name not in others)]
+    return sorted([*c, *C_DIR.glob("*.h")])
+
+
+def build_node(
+    lib: ModelLibrary, out_dir: Path | None = None, program: str = "amsfe_node"
+) -> CNodeBuild:
+    """The C node (or another ``program`` of :data:`PROGRAMS`: ``amsfe_arm``) of ``lib``'s
+    robot, compiled once per content (sources, the library's content hash and file,
+    compiler, flags, rcl's version) under ``out_dir`` (default ``$AMSFE_GENERATED_DIR``, else
+    the generated libraries' folder) / ``<program>/<hash>/``.
 
     Raises:
         RosError: the ROS 2 wheels are missing, or the compiler failed (its last lines).
     """
     ros = ros_paths()
     cc = compiler()
-    srcs = [p for p in _sources() if p.suffix == ".c"]
+    srcs = [p for p in _sources(program) if p.suffix == ".c"]
     gen = hashlib.sha256()
-    for path in _sources():
+    for path in _sources(program):
         gen.update(path.name.encode() + b"\0" + path.read_bytes())
     inputs = {
         "sources": gen.hexdigest(),
@@ -138,10 +159,11 @@ def build_node(lib: ModelLibrary, out_dir: Path | None = None) -> CNodeBuild:
         "cflags": list(CNODE_CFLAGS),
         "rcl": ros.rcl_version,
         "prefix": str(sys.prefix),
+        **({"program": program} if program != "amsfe_node" else {}),
     }
     key = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:20]
-    folder = (out_dir or default_out_dir()) / "amsfe_node" / key
-    exe = folder / "amsfe_node"
+    folder = (out_dir or default_out_dir()) / program / key
+    exe = folder / program
     if exe.is_file() and os.access(exe, os.X_OK):
         return CNodeBuild(exe, key, False)
     with build_lock(folder.parent / f"{key}.lock"):
@@ -162,8 +184,8 @@ def build_node(lib: ModelLibrary, out_dir: Path | None = None) -> CNodeBuild:
                     "run the command again",
                 )
             )
-        tmp = folder / f"amsfe_node.tmp{os.getpid()}"
-        cmd = _command(cc, lib, ros, srcs, tmp, folder)
+        tmp = folder / f"{program}.tmp{os.getpid()}"
+        cmd = _command(cc, lib, ros, srcs, tmp, folder, _EXTRA_PACKAGES.get(program, ()))
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0 or not tmp.is_file():
             tmp.unlink(missing_ok=True)
@@ -171,7 +193,7 @@ def build_node(lib: ModelLibrary, out_dir: Path | None = None) -> CNodeBuild:
             raise RosError(
                 describe(
                     "the C node's build",
-                    "a compiled amsfe_node",
+                    f"a compiled {program}",
                     f"{cc} exit {proc.returncode}: {tail}",
                     "check the compiler and the [ros] extra, or run amsfe node --impl python",
                 )
@@ -194,13 +216,19 @@ def _compiler_line(cc: str) -> str:
 
 
 def _command(
-    cc: str, lib: ModelLibrary, ros: RosPaths, srcs: list[Path], out: Path, gen_dir: Path
+    cc: str,
+    lib: ModelLibrary,
+    ros: RosPaths,
+    srcs: list[Path],
+    out: Path,
+    gen_dir: Path,
+    extra: tuple[str, ...] = (),
 ) -> list[str]:
     """The compile-and-link command of the node, against the library and headers copied
-    into ``gen_dir`` (the node's folder)."""
+    into ``gen_dir`` (the node's folder), linking the message packages ``extra`` too."""
     name = lib.library_path.name.removeprefix("lib").removesuffix(".so")
     libs = ["rcl", "rcl_lifecycle", "rcutils", "rmw", "rosidl_runtime_c"]
-    for pkg in _MSG_PACKAGES:
+    for pkg in (*_MSG_PACKAGES, *extra):
         libs += [f"{pkg}__rosidl_generator_c", f"{pkg}__rosidl_typesupport_c"]
     rpaths = [gen_dir, ros.lib, *ros.bundled]
     cmd = [cc, *CNODE_CFLAGS, *map(str, srcs), f"-I{C_DIR}", f"-I{gen_dir}"]
@@ -212,3 +240,41 @@ def _command(
     cmd += ["-Wl,--allow-shlib-undefined", "-Wl,-z,lazy"]
     cmd += [f"-Wl,--export-dynamic-symbol={s}" for s in _PY_DATA_SYMBOLS]
     return [*cmd, "-o", str(out)]
+
+
+def run_program(
+    exe: Path,
+    params: Path,
+    ros_args: tuple[str, ...],
+    domain_id: int | None,
+    env_extra: dict[str, str] | None = None,
+) -> tuple[int, KeyboardInterrupt | None]:
+    """Run a built program (``exe PARAMS [--ros-args ...]``) in this process's environment
+    (the default middleware, lazily bound symbols, ``domain_id``), its output on this
+    process's stdout, forwarding Ctrl-C / SIGTERM to it; waits for it.
+
+    Returns:
+        Its exit code, and the interrupt this process received meanwhile (None: none).
+    """
+    from amsfe_sym.ros.middleware import DEFAULT_RMW
+
+    env = dict(os.environ)
+    env.setdefault("RMW_IMPLEMENTATION", DEFAULT_RMW)
+    env.pop("LD_BIND_NOW", None)  # the Python type support is bound lazily (module doc)
+    env.update(env_extra or {})
+    if domain_id is not None:
+        env["ROS_DOMAIN_ID"] = str(domain_id)
+    cmd = [str(exe), str(params)]
+    if ros_args:
+        cmd += ["--ros-args", *ros_args]
+    sys.stdout.flush()
+    proc = subprocess.Popen(cmd, env=env)
+    interrupt: KeyboardInterrupt | None = None
+    while True:
+        try:
+            return proc.wait(), interrupt
+        except KeyboardInterrupt as exc:  # Ctrl-C / SIGTERM of this process
+            interrupt = exc
+            sig = signal.SIGINT if type(exc) is KeyboardInterrupt else signal.SIGTERM
+            if proc.poll() is None:
+                proc.send_signal(sig)

@@ -12,7 +12,10 @@ CpuHogs`) beside them.  Reported, from the two processes' own lines:
   command answering it (the sim-node's receive stamps; ``encoder -> command``);
 - deadline misses: ticks of the arm that ended without a new command (the previous one was
   applied again), and ticks that started late (the arm itself behind);
-- how the node stopped (``done``, or the hold line with its reason).
+- how the node stopped (``done``, or the hold line with its reason);
+- which arm ran (``sim-node --impl auto``: the C arm when it builds, ros/carm.py) and the
+  machine's load over the run: the cores busy, from ``/proc/stat`` (every process of the
+  machine, the hogs, the two nodes and anything else running).
 
 Nothing here is asserted by a test (a test checks the report's shape): the numbers are this
 machine's, at this moment.
@@ -25,7 +28,7 @@ import re
 import subprocess
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 from amsfe_sym.core.cpu_load import CpuHogs
@@ -51,6 +54,27 @@ _TICKS = re.compile(
     r"(\d+) without a new command"
 )
 _STOP = re.compile(r"^node: ((?:done|hold)[^;\n]*)", re.M)
+_ARM = re.compile(r"\((c|python) arm\)")
+
+
+def cpu_times() -> tuple[float, float] | None:
+    """(busy, total) jiffies of the machine since boot (``/proc/stat``), None off Linux."""
+    try:
+        with open("/proc/stat", encoding="ascii") as fh:
+            v = [float(x) for x in fh.readline().split()[1:]]
+    except (OSError, ValueError):
+        return None
+    idle = v[3] + (v[4] if len(v) > 4 else 0.0)  # idle + iowait
+    return sum(v[:8]) - idle, sum(v[:8])
+
+
+def busy_cores(
+    before: tuple[float, float] | None, after: tuple[float, float] | None
+) -> float | None:
+    """Cores busy between two :func:`cpu_times` readings (None: unknown)."""
+    if before is None or after is None or after[1] <= before[1]:
+        return None
+    return (after[0] - before[0]) / (after[1] - before[1]) * (os.cpu_count() or 1)
 
 
 @dataclass(frozen=True)
@@ -68,6 +92,8 @@ class RosBenchRun:
         missed: Deadline misses: ticks without a new command.
         stopped: How the node stopped (one line: ``done ...`` or ``hold: <reason>: ...``).
         codes: Exit codes (sim-node, node).
+        arm: The arm's implementation (``c`` or ``python``; "" when it did not say).
+        cpu_busy: Cores busy over the run, the whole machine (``/proc/stat``; None: unknown).
     """
 
     impl: str
@@ -84,6 +110,8 @@ class RosBenchRun:
     missed: int
     stopped: str
     codes: tuple[int, int]
+    arm: str = ""
+    cpu_busy: float | None = None
 
 
 def _f(text: str) -> float:
@@ -112,6 +140,7 @@ def parse_run(
         late_ticks=int(ticks.group(4)) if ticks else 0,
         missed=int(ticks.group(5)) if ticks else 0,
         stopped=stops[-1].strip() if stops else "no stop line (exit code only)",
+        arm=arm.group(1) if (arm := _ARM.search(sim_out)) else "",
         codes=codes,
     )
 
@@ -127,6 +156,7 @@ def _one_run(
     d = f"{duration:g}"
     impl_args = ["--impl", impl] if len(node_impls()) > 1 else []
     with CpuHogs(load, limit_s=timeout + 60.0):
+        before = cpu_times()
         node = subprocess.Popen(
             [*amsfe, "node", scenario, "--controller", "amsfe", "--duration", d, *impl_args],
             env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
@@ -141,9 +171,11 @@ def _one_run(
             if node.poll() is None:
                 node.kill()
                 node.communicate()
-    return parse_run(
+        busy = busy_cores(before, cpu_times())
+    row = parse_run(
         impl, load, sim.stdout + sim.stderr, node_out, (sim.returncode, node.returncode)
     )
+    return replace(row, cpu_busy=busy)
 
 
 def bench_ros(
@@ -182,14 +214,15 @@ def format_ros_report(rows: list[RosBenchRun], machine: str = "") -> str:
     """The runs as a table (latencies [ms])."""
     head = (
         "| node | hogs | node p50 | node p99 | node max | DDS e2e p50 | e2e p99 | e2e max "
-        "| ticks | missed | late | stopped |"
+        "| ticks | missed | late | stopped | arm | busy cores |"
     )
-    lines = [f"live loop over DDS{f' ({machine})' if machine else ''}", head, "|" + "---|" * 12]
+    lines = [f"live loop over DDS{f' ({machine})' if machine else ''}", head, "|" + "---|" * 14]
     for r in rows:
         lines.append(
             f"| {r.impl} | {r.load} | {_ms(r.node_p50)} | {_ms(r.node_p99)} | "
             f"{_ms(r.node_max)} | {_ms(r.e2e_p50)} | {_ms(r.e2e_p99)} | {_ms(r.e2e_max)} | "
-            f"{r.ticks} | {r.missed} | {r.late_ticks} | {_short(r.stopped)} |"
+            f"{r.ticks} | {r.missed} | {r.late_ticks} | {_short(r.stopped)} | {r.arm or '-'} | "
+            f"{'-' if r.cpu_busy is None else f'{r.cpu_busy:.2f}'} |"
         )
     return "\n".join(lines)
 

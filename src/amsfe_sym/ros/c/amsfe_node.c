@@ -199,6 +199,9 @@ typedef struct {
   rcl_subscription_t sub_enc, sub_cam, sub_eff, sub_truth;
   rcl_publisher_t pub_cmd, pub_est, pub_std, pub_theta, pub_diag;
   rcl_wait_set_t ws;
+  rcl_wait_set_t ws_eff; /* the effort subscription alone (await_effort) */
+  long eff_last;         /* the latest tick of an effort received (-1: none) */
+  long eff_waits, eff_missed; /* samples that waited for the previous tick's effort; in vain */
   rcl_serialized_message_t in;
   out_msg m_cmd, m_est, m_std, m_theta, m_diag;
   char *diag;
@@ -376,6 +379,7 @@ static void configure(node_t *s, const char *path) {
 static void take_frames(node_t *s);
 static void print_hold_list(const double *u, int n, char *out, size_t cap);
 static void take_efforts(node_t *s);
+static int await_effort(node_t *s, long long ns);
 static void take_truth(node_t *s);
 
 /* The joints' indices in a JointState's names (-1 and a stop line: one is missing). */
@@ -654,7 +658,10 @@ static void on_encoders(node_t *s, long long sent, long long received, double ta
   for (int j = 0; j < n; ++j) s->z[j] = s->pos[j], s->z[n + j] = s->vel[j];
   /* frames, efforts and the truth sent before this sample (already here: take them now) */
   take_frames(s);
-  if (s->read_effort && !s->effort_in_encoders) take_efforts(s);
+  if (s->read_effort && !s->effort_in_encoders) {
+    take_efforts(s);
+    if (await_effort(s, ns)) taken = mono_s(); /* a wait is not the tick's compute time */
+  }
   if (s->recording) take_truth(s);
   int r = live_encoders(L, ns, s->z, sent);
   if (r == 0) return; /* skipped (counted): not judged */
@@ -735,6 +742,45 @@ static void take_frames(node_t *s) {
   }
 }
 
+/* The torque the arm applied over tick k-1 before sample k is estimated (docs/live-load.md,
+ * "Torque and sample"): an arm publishes it on the effort topic just before sample k, DDS
+ * does not order two topics, and without it the step k-1 -> k takes this node's command of
+ * k-1, not the older one a free-running arm may have applied (a false innovation).  Waited
+ * for, up to half a period, when the effort stream is live (the effort of k-2 came; at ticks
+ * 1 and 2 before any came: the topic has a publisher) and that of k-1 did not yet; counted,
+ * and in vain counted too (the command is used then).
+ * 1 when it waited. */
+static int await_effort(node_t *s, long long ns) {
+  live_loop *L = &s->L;
+  int ok;
+  long k = live_tick_of(L, ns, &ok);
+  if (L->k < 0 || !ok || k != L->k + 1 || s->eff_last >= k - 1) return 0;
+  if (s->eff_last < k - 2) { /* not live; at the start: live when the topic has a publisher */
+    size_t pubs = 0;
+    if (s->eff_last >= 0 || k > 2 ||
+        rcl_subscription_get_publisher_count(&s->sub_eff, &pubs) != RCL_RET_OK || pubs < 1)
+      return 0;
+  }
+  ++s->eff_waits;
+  double until = mono_s() + 0.5 * s->T;
+  while (s->eff_last < k - 1 && !g_signal && s->stop_code < 0) {
+    double left = until - mono_s();
+    if (left <= 0) {
+      ++s->eff_missed;
+      break;
+    }
+    if (rcl_wait_set_clear(&s->ws_eff) != RCL_RET_OK ||
+        rcl_wait_set_add_subscription(&s->ws_eff, &s->sub_eff, NULL) != RCL_RET_OK) {
+      rcutils_reset_error();
+      break;
+    }
+    rcl_ret_t ret = rcl_wait(&s->ws_eff, (int64_t)(left * 1e9) + 1);
+    if (ret != RCL_RET_OK && ret != RCL_RET_TIMEOUT) rcutils_reset_error();
+    take_efforts(s);
+  }
+  return 1;
+}
+
 static void take_efforts(node_t *s) {
   rmw_message_info_t info;
   while (s->stop_code < 0 &&
@@ -743,6 +789,9 @@ static void take_efforts(node_t *s) {
     int has_eff;
     double *pos = s->stdv, *vel = s->stdv + s->n; /* scratch */
     if (!s->active || read_joint_state(s, &ns, pos, vel, s->eff, &has_eff) < 0) continue;
+    int ok;
+    long j = live_tick_of(&s->L, ns, &ok);
+    if (ok && s->L.k >= 0 && j > s->eff_last) s->eff_last = j;
     live_applied(&s->L, ns, s->eff);
     record_effort(s, ns, s->eff);
   }
@@ -1011,6 +1060,10 @@ int main(int argc, char **argv) {
   sa.sa_handler = on_signal;
   sigaction(SIGINT, &sa, NULL);
   sigaction(SIGTERM, &sa, NULL);
+  /* before rcl_init: the middleware's threads (Fast DDS's receive and event threads) inherit
+   * the policy, so a sample's way into this process is real-time too, not only its tick
+   * (reception threads at normal priority beside CPU hogs delayed the commands by ms) */
+  realtime(priority);
   rcl_allocator_t alloc = rcl_get_default_allocator();
   rcl_init_options_t io = rcl_get_zero_initialized_init_options();
   rcl_check(rcl_init_options_init(&io, alloc), "rcl_init_options_init");
@@ -1063,7 +1116,9 @@ int main(int argc, char **argv) {
   if (s->managed) rcl_check(lifecycle_init(&s->lc, &s->node), "the lifecycle state machine");
   rcl_check(rcl_wait_set_init(&s->ws, 4, 0, 0, 0, s->managed ? 2 : 0, 0, &s->ctx, alloc),
             "wait set");
-  realtime(priority);
+  s->ws_eff = rcl_get_zero_initialized_wait_set();
+  s->eff_last = -1;
+  if (sub_eff) rcl_check(rcl_wait_set_init(&s->ws_eff, 1, 0, 0, 0, 0, 0, &s->ctx, alloc), "wait set");
   printf("node: C node on rcl (%s), waiting for %s\n", s->topic[T_ENC],
          s->managed ? "configure and activate" : "encoders");
   fflush(stdout);
@@ -1124,6 +1179,9 @@ int main(int argc, char **argv) {
            "over %ld commands\n", 1e3 * percentile(l, s->n_lat, 0.5),
            1e3 * percentile(l, s->n_lat, 0.99), 1e3 * l[s->n_lat - 1], s->n_lat);
   }
+  if (s->eff_waits > 0)
+    printf("node: waited for the torque applied over the previous tick at %ld samples (%ld not "
+           "within T/2: the command used)\n", s->eff_waits, s->eff_missed);
   fflush(stdout);
   s->exit_code = code;
   if (s->recording) write_record(s, record_path);
