@@ -244,7 +244,7 @@ def test_the_node_waits_for_the_torque_of_the_previous_tick(tmp_path: Path) -> N
     first, _ = _half_arm_run(tmp_path / "before", "before")
     late, text_late = _half_arm_run(tmp_path / "after", "after")
     waits = re.findall(r"waited for the torque applied over the previous tick at (\d+) samples "
-                       r"\((\d+) not within T/2", text_late)  # fmt: skip
+                       r"\((\d+) not within the wait", text_late)  # fmt: skip
     assert waits and int(waits[0][0]) > 0, text_late
     if int(waits[0][1]) > 0:
         pytest.skip(f"{waits[0][1]} torques came later than T/2 (a loaded machine)")

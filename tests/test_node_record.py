@@ -150,7 +150,8 @@ def test_a_streamed_record_is_the_record_in_memory(paper: Any, tmp_path: Path) -
     """Written in segments of 30 ticks while it runs (its memory bounded by them), the record
     reads back as one bag with every message of the record written at the end, the truth of
     each tick its own whatever the delivery order; its metadata says finished, and why."""
-    from amsfe_sym.ros.record import LAG_TICKS, record_state
+    from amsfe_sym.ros.record import LAG_TICKS
+    from amsfe_sym.ros.record_bag import record_state
     from amsfe_sym.topics import TopicSpec
 
     sc, lib, res = paper
@@ -200,7 +201,7 @@ def _fill_tick(paper: Any, rec: NodeRecord, k: int) -> None:
 
 def test_a_truth_that_never_comes_leaves_its_tick_without_one(paper: Any, tmp_path: Path) -> None:
     """No tick gets another tick's truth: a lost one is missing and counted."""
-    from amsfe_sym.ros.record import record_state
+    from amsfe_sym.ros.record_bag import record_state
     from amsfe_sym.topics import TopicSpec
 
     sc, lib, res = paper
@@ -250,7 +251,7 @@ def test_a_killed_writer_leaves_a_readable_unfinished_record(paper: Any, tmp_pat
     import sys
 
     from amsfe_sym.errors import RunFolderError
-    from amsfe_sym.ros.record import LOCK, record_state
+    from amsfe_sym.ros.record_bag import LOCK, record_state
     from amsfe_sym.topics import TopicSpec
 
     sc, lib, res = paper

@@ -29,7 +29,7 @@ from amsfe_sym.codegen import library_for
 from amsfe_sym.errors import ConfigError
 from amsfe_sym.ros.arm import SimArm
 from amsfe_sym.ros.live import LiveLoop
-from amsfe_sym.ros.record import record_state
+from amsfe_sym.ros.record_bag import record_state
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
 from tests.test_node_record import _bag, assert_record_is_run

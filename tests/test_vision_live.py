@@ -218,12 +218,19 @@ def test_sim_node_images_through_camera_node_into_node(tmp_path) -> None:
         assert code == 0, text
     bag = _bag(rec)
     points = bag["/camera/marker"]
-    # 2 s of an 8 Hz camera: 16 images; the last, delivered at the last tick, may be detected
-    # after the node stopped (detection is not in lockstep: it never holds the loop)
-    assert 14 <= len(points) <= 16
+    # 2 s of an 8 Hz camera: 16 images, every one accounted for by the camera node (a point,
+    # or dropped because a newer image came first).  How many points reach the node before
+    # its end depends on the machine: detection is not in lockstep (it never holds the
+    # loop), and a lockstep run faster than real time ends before late detections arrive
+    # (1 of 16 in a run under load 12, 14-16 when the test was written): not asserted.
+    assert points, "no point reached the node"
     stamps = [int(m.header.stamp.sec) * 10**9 + int(m.header.stamp.nanosec) for m in points]
-    assert stamps == [k * 125_000_000 for k in range(len(points))]  # every 125 ticks of 1 ms
+    assert all(s % 125_000_000 == 0 for s in stamps), stamps  # exposure stamps, every 125 ms
+    assert stamps == sorted(set(stamps))
     diag = json.loads(bag["/amsfe/diagnostics"][-1].data)
     assert diag["frames_fused"] > 0
     last = [ln for ln in results_cam[0][1].splitlines() if ln.startswith("camera-node: {")]
-    assert last and json.loads(last[-1].split(": ", 1)[1])["points"] == 16, results_cam
+    assert last, results_cam
+    cam_diag = json.loads(last[-1].split(": ", 1)[1])
+    assert cam_diag["images"] == 16, cam_diag
+    assert cam_diag["points"] + sum(cam_diag["skipped"].values()) == 16, cam_diag

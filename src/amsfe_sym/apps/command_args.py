@@ -12,7 +12,7 @@ from amsfe_sym.apps.arguments import (
     lock_arg,
     number_type,
 )
-from amsfe_sym.apps.options import add_set
+from amsfe_sym.apps.options import add_robot_library, add_runtime, add_set
 from amsfe_sym.core.values import SUBSTEPS_MAX
 
 __all__ = ["add_check_arguments", "add_generate_arguments", "add_simulate_arguments"]
@@ -58,13 +58,7 @@ def add_generate_arguments(g: argparse.ArgumentParser) -> None:
 
 def add_check_arguments(c: argparse.ArgumentParser) -> None:
     """The arguments of ``amsfe check``."""
-    c.add_argument("robot", nargs="?", default="paper_2link")
-    c.add_argument(
-        "--out",
-        default=None,
-        help="parent folder of generated libraries (a missing library is built there; a "
-        "folder of yours at <out>/<robot> is never replaced)",
-    )
+    add_robot_library(c)
     c.add_argument("--lock", nargs="+", type=lock_arg, default=[], metavar="JOINT[=VALUE]")
     c.add_argument("--samples", type=SAMPLES, default=50, help="random states (default 50)")
     c.add_argument("--seed", type=SEED, default=0)
@@ -104,12 +98,7 @@ def add_simulate_arguments(s: argparse.ArgumentParser) -> None:
         help="replace an existing --out (and --bag) that amsfe wrote; never a folder of "
         "yours, never an input",
     )
-    s.add_argument(
-        "--runtime",
-        choices=("compiled", "python"),
-        default="compiled",
-        help="compiled: the loop in generated C (default); python: the readable reference",
-    )
+    add_runtime(s)
     s.add_argument(
         "--bag",
         nargs="?",

@@ -9,7 +9,36 @@ import argparse
 
 from amsfe_sym.apps.arguments import COUNT, DURATION, JOINT_RANGE, SEED, number_type
 
-__all__ = ["add_bench_arguments", "add_set", "add_study_arguments", "add_sweep_arguments"]
+__all__ = [
+    "add_bench_arguments",
+    "add_robot_library",
+    "add_runtime",
+    "add_set",
+    "add_study_arguments",
+    "add_sweep_arguments",
+]
+
+
+def add_robot_library(p: argparse.ArgumentParser) -> None:
+    """The robot (positional, default ``paper_2link``) and ``--out``, where its generated
+    library is found or built."""
+    p.add_argument("robot", nargs="?", default="paper_2link")
+    p.add_argument(
+        "--out",
+        default=None,
+        help="parent folder of generated libraries (a missing library is built there; a "
+        "folder of yours at <out>/<robot> is never replaced)",
+    )
+
+
+def add_runtime(p: argparse.ArgumentParser) -> None:
+    """``--runtime``: the loop in generated C or the Python reference."""
+    p.add_argument(
+        "--runtime",
+        choices=("compiled", "python"),
+        default="compiled",
+        help="compiled: the loop in generated C (default); python: the readable reference",
+    )
 
 
 def add_set(p: argparse.ArgumentParser) -> None:
@@ -27,13 +56,7 @@ def add_set(p: argparse.ArgumentParser) -> None:
 
 def add_bench_arguments(p: argparse.ArgumentParser) -> None:
     """The options of ``amsfe bench``."""
-    p.add_argument("robot", nargs="?", default="paper_2link")
-    p.add_argument(
-        "--out",
-        default=None,
-        help="parent folder of generated libraries (a missing library is built there; a "
-        "folder of yours at <out>/<robot> is never replaced)",
-    )
+    add_robot_library(p)
     p.add_argument("--repeat", type=COUNT, default=20000, help="calls per timing")
     p.add_argument("--rounds", type=COUNT, default=5, help="timing rounds (median reported)")
     p.add_argument(
@@ -176,12 +199,7 @@ def add_study_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="seeds of the second block (default --seeds)",
     )
-    p.add_argument(
-        "--runtime",
-        choices=("compiled", "python"),
-        default="compiled",
-        help="compiled: the loop in generated C (default); python: the reference",
-    )
+    add_runtime(p)
 
 
 def add_sweep_arguments(p: argparse.ArgumentParser) -> None:

@@ -26,6 +26,7 @@ __all__ = [
     "is_run_folder",
     "make_tmp",
     "mark_tmp",
+    "pid_alive",
     "replace_dir",
     "write_folder",
     "write_folders",
@@ -50,7 +51,8 @@ def is_run_folder(path: Path) -> bool:
     return (path / MARKER).is_file()
 
 
-def _pid_alive(pid: int) -> bool:
+def pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (another user's too; a pid no system can have: no)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -116,7 +118,7 @@ def _abandoned(folder: Path, pid: int) -> bool:
     pid_text, _, rest = text[len(head) :].partition("; start ")
     if pid_text != str(pid):  # the name and the marker must agree
         return False
-    if not _pid_alive(pid):
+    if not pid_alive(pid):
         return True
     written = rest.strip()
     now = _start_time(pid)

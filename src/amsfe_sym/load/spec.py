@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Literal
@@ -22,13 +22,21 @@ from amsfe_sym.core.toml import read_toml
 from amsfe_sym.core.values import (
     PERIOD_MAX,
     PERIOD_MIN,
-    SUBSTEPS_MAX,
     read_in_range,
-    read_int,
-    read_number,
 )
-from amsfe_sym.errors import SpecError, check_known_keys, describe
+from amsfe_sym.errors import SpecError, describe
 from amsfe_sym.load.rotation import read_orientation
+from amsfe_sym.load.spec_values import (
+    read_count,
+    read_finite,
+    read_names,
+    read_opt_pos,
+    read_opt_vec,
+    read_steps,
+    read_table,
+    read_vec3,
+    refuse_unknown,
+)
 
 __all__ = [
     "ActuatorSpec",
@@ -289,7 +297,7 @@ _TOP_KEYS = {"name", "urdf", "model", "actuators", "tracked", "camera", "theta"}
 def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
     """Build a :class:`RobotSpec` from parsed TOML ``data`` read from ``path``."""
     where = str(path)
-    _no_unknown(data, _TOP_KEYS, where)
+    refuse_unknown(data, _TOP_KEYS, where)
     if "urdf" not in data:
         raise SpecError(
             describe(where, "a top-level key 'urdf'", "none", 'add urdf = "<file>.urdf"')
@@ -306,8 +314,8 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
         )
     name = _sanitize(str(data.get("name", path.parent.name)))
 
-    m = _table(data, "model", where)
-    _no_unknown(
+    m = read_table(data, "model", where)
+    refuse_unknown(
         m,
         {
             "joints",
@@ -336,53 +344,57 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
     )
     joints = m.get("joints")
     model = ModelSpec(
-        joints=None if joints is None else _names(joints, f"{where} [model] joints"),
+        joints=None if joints is None else read_names(joints, f"{where} [model] joints"),
         locked={
-            str(k): _finite(v, f"{where} [model] locked {k}")
-            for k, v in _table(m, "locked", f"{where} [model]").items()
+            str(k): read_finite(v, f"{where} [model] locked {k}")
+            for k, v in read_table(m, "locked", f"{where} [model]").items()
         },
         T=T,
-        gravity=_vec3(m.get("gravity", (0.0, 0.0, -9.81)), f"{where} [model] gravity"),
+        gravity=read_vec3(m.get("gravity", (0.0, 0.0, -9.81)), f"{where} [model] gravity"),
         integrator=integrator,  # type: ignore[arg-type]
-        inverse_iterations=_steps(m.get("inverse_iterations", 6), f"{where} inverse_iterations"),
-        plant_substeps=_steps(m.get("plant_substeps", 10), f"{where} plant_substeps"),
-        model_substeps=_steps(m.get("model_substeps", 1), f"{where} model_substeps"),
+        inverse_iterations=read_steps(
+            m.get("inverse_iterations", 6), f"{where} inverse_iterations"
+        ),
+        plant_substeps=read_steps(m.get("plant_substeps", 10), f"{where} plant_substeps"),
+        model_substeps=read_steps(m.get("model_substeps", 1), f"{where} model_substeps"),
     )
 
-    a = _table(data, "actuators", where)
-    _no_unknown(a, {"Ks", "Mm", "Fm", "u_max"}, f"{where} [actuators]")
+    a = read_table(data, "actuators", where)
+    refuse_unknown(a, {"Ks", "Mm", "Fm", "u_max"}, f"{where} [actuators]")
     actuators = ActuatorSpec(
-        Ks=_opt_vec(a.get("Ks"), f"{where} [actuators] Ks"),
-        Mm=_opt_vec(a.get("Mm"), f"{where} [actuators] Mm"),
-        Fm=_opt_vec(a.get("Fm"), f"{where} [actuators] Fm", strict=False),
-        u_max=_opt_vec(a.get("u_max"), f"{where} [actuators] u_max"),
+        Ks=read_opt_vec(a.get("Ks"), f"{where} [actuators] Ks"),
+        Mm=read_opt_vec(a.get("Mm"), f"{where} [actuators] Mm"),
+        Fm=read_opt_vec(a.get("Fm"), f"{where} [actuators] Fm", strict=False),
+        u_max=read_opt_vec(a.get("u_max"), f"{where} [actuators] u_max"),
     )
 
-    t = _table(data, "tracked", where)
-    _no_unknown(t, {"frame", "offset"}, f"{where} [tracked]")
+    t = read_table(data, "tracked", where)
+    refuse_unknown(t, {"frame", "offset"}, f"{where} [tracked]")
     tracked = TrackedSpec(
         frame=None if t.get("frame") is None else str(t["frame"]),
-        offset=_vec3(t.get("offset", (0.0, 0.0, 0.0)), f"{where} [tracked] offset"),
+        offset=read_vec3(t.get("offset", (0.0, 0.0, 0.0)), f"{where} [tracked] offset"),
     )
 
-    c = _table(data, "camera", where)
-    _no_unknown(
+    c = read_table(data, "camera", where)
+    refuse_unknown(
         c,
         _CAMERA_KEYS,
         f"{where} [camera]",
     )
     camera = CameraSpec(
-        width=_count(c.get("width", 640), f"{where} [camera] width", 1),
-        height=_count(c.get("height", 512), f"{where} [camera] height", 1),
-        fx=_opt_pos(c.get("fx"), f"{where} [camera] fx"),
-        fy=_opt_pos(c.get("fy"), f"{where} [camera] fy"),
-        cx=None if c.get("cx") is None else _finite(c["cx"], f"{where} [camera] cx"),
-        cy=None if c.get("cy") is None else _finite(c["cy"], f"{where} [camera] cy"),
-        position=None if c.get("position") is None else _vec3(c["position"], f"{where} position"),
-        look_at=None if c.get("look_at") is None else _vec3(c["look_at"], f"{where} look_at"),
-        up=_vec3(c.get("up", (0.0, 0.0, 1.0)), f"{where} [camera] up"),
-        period=_count(c.get("period", 125), f"{where} [camera] period", 1),
-        delay=_count(c.get("delay", 125), f"{where} [camera] delay", 0),
+        width=read_count(c.get("width", 640), f"{where} [camera] width", 1),
+        height=read_count(c.get("height", 512), f"{where} [camera] height", 1),
+        fx=read_opt_pos(c.get("fx"), f"{where} [camera] fx"),
+        fy=read_opt_pos(c.get("fy"), f"{where} [camera] fy"),
+        cx=None if c.get("cx") is None else read_finite(c["cx"], f"{where} [camera] cx"),
+        cy=None if c.get("cy") is None else read_finite(c["cy"], f"{where} [camera] cy"),
+        position=None
+        if c.get("position") is None
+        else read_vec3(c["position"], f"{where} position"),
+        look_at=None if c.get("look_at") is None else read_vec3(c["look_at"], f"{where} look_at"),
+        up=read_vec3(c.get("up", (0.0, 0.0, 1.0)), f"{where} [camera] up"),
+        period=read_count(c.get("period", 125), f"{where} [camera] period", 1),
+        delay=read_count(c.get("delay", 125), f"{where} [camera] delay", 0),
         orientation=read_orientation(c, f"{where} [camera]"),
     )
 
@@ -399,7 +411,7 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
         )
     for i, th in enumerate(raw_theta):
         w = f"{where} [[theta]] #{i + 1}"
-        _no_unknown(th, {"name", "kind", "target", "offset", "true", "initial"}, w)
+        refuse_unknown(th, {"name", "kind", "target", "offset", "true", "initial"}, w)
         for key in ("name", "kind", "target", "true", "initial"):
             if key not in th:
                 raise SpecError(describe(w, f"key {key!r}", "it missing", f"add {key} = ..."))
@@ -415,9 +427,9 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
                 name=str(th["name"]),
                 kind=kind,  # type: ignore[arg-type]
                 target=str(th["target"]),
-                true=_finite(th["true"], f"{w} true"),
-                initial=_finite(th["initial"], f"{w} initial"),
-                offset=_vec3(th.get("offset", (0.0, 0.0, 0.0)), f"{w} offset"),
+                true=read_finite(th["true"], f"{w} true"),
+                initial=read_finite(th["initial"], f"{w} initial"),
+                offset=read_vec3(th.get("offset", (0.0, 0.0, 0.0)), f"{w} offset"),
             )
         )
     names = [t.name for t in thetas]
@@ -441,64 +453,3 @@ def _sanitize(name: str) -> str:
     if not out or out[0].isdigit():
         out = "r_" + out
     return out
-
-
-def _table(data: Mapping[str, Any], key: str, where: str) -> Mapping[str, Any]:
-    val = data.get(key, {})
-    if not isinstance(val, Mapping):
-        raise SpecError(describe(f"{where} {key}", "a table", type(val).__name__, f"write [{key}]"))
-    return val
-
-
-def _no_unknown(data: Mapping[str, Any], allowed: set[str], where: str) -> None:
-    fix = "remove or rename them (see docs/reference/robot-spec.md)"
-    check_known_keys(where, data, allowed, fix, SpecError)
-
-
-def _names(x: Any, where: str) -> tuple[str, ...]:
-    if not isinstance(x, list) or not all(isinstance(v, str) for v in x):
-        raise SpecError(describe(where, "a list of names", repr(x), 'write ["joint1", ...]'))
-    return tuple(x)
-
-
-def _finite(x: Any, where: str) -> float:
-    return read_number(x, where, SpecError)
-
-
-def _positive(x: Any, where: str) -> float:
-    return read_number(x, where, SpecError, low=0.0, strict=True)
-
-
-def _nonneg(x: Any, where: str) -> float:
-    return read_number(x, where, SpecError, low=0.0)
-
-
-def _count(x: Any, where: str, low: int) -> int:
-    return read_int(x, where, SpecError, low)
-
-
-def _steps(x: Any, where: str) -> int:
-    """A count of unrolled steps: 1 .. :data:`~amsfe_sym.core.values.SUBSTEPS_MAX`."""
-    return read_int(x, where, SpecError, 1, SUBSTEPS_MAX)
-
-
-def _opt_pos(x: Any, where: str) -> float | None:
-    return None if x is None else _positive(x, where)
-
-
-def _vec3(x: Any, where: str) -> tuple[float, float, float]:
-    if not isinstance(x, Sequence) or isinstance(x, str) or len(x) != 3:
-        raise SpecError(describe(where, "3 numbers [x, y, z]", repr(x), "write [x, y, z]"))
-    a, b, c = (_finite(v, where) for v in x)
-    return (a, b, c)
-
-
-def _opt_vec(x: Any, where: str, strict: bool = True) -> tuple[float, ...] | None:
-    """An optional per-joint array of numbers > 0 (``strict``) or >= 0."""
-    if x is None:
-        return None
-    if not isinstance(x, Sequence) or isinstance(x, str):
-        raise SpecError(
-            describe(where, "an array of numbers, one per joint", repr(x), "write [..]")
-        )
-    return tuple(read_number(v, where, SpecError, low=0.0, strict=strict) for v in x)

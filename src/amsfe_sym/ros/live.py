@@ -20,7 +20,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,7 +32,9 @@ from amsfe_sym.estimation.base import StepReport
 from amsfe_sym.estimation.effort import EffortSpec, encoder_row
 from amsfe_sym.estimation.ekf import gate_threshold
 from amsfe_sym.ros.effort import TorqueHold
-from amsfe_sym.ros.watchdog import Reason, Watchdog, WatchdogConfig, WatchdogTick
+from amsfe_sym.ros.live_stamps import StampScreen
+from amsfe_sym.ros.tick import HoldKind, TickOut, Watched, hold_command
+from amsfe_sym.ros.watchdog import Watchdog, WatchdogConfig, WatchdogTick
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.runtime.stability import STATUS_NOT_PD
 from amsfe_sym.scenario import Scenario, run_ticks
@@ -47,59 +48,12 @@ from amsfe_sym.sim.builders import (
 from amsfe_sym.sim.result import DECISION_COUNTERS, count_decisions
 from amsfe_sym.topics.watchdog import WatchdogBounds
 
-__all__ = ["ORACLES", "HoldKind", "LiveLoop", "TickOut", "Watched", "hold_command"]
+__all__ = ["ORACLES", "LiveLoop"]
 
 FloatArray = NDArray[np.float64]
 
 #: Controllers that read the true state: no live node can run them.
 ORACLES = ("truth", "truth-ct")
-
-#: What the fail-safe hold commands: ``gravity``: u = g(q_hat, theta_hat) (the torque that
-#: holds the links still where the last finite estimate has them: at rest the motor torque
-#: equals the spring torque equals gravity); ``zero``: u = 0 (for drivers that compensate
-#: gravity themselves, like Franka's).
-HoldKind = Literal["gravity", "zero"]
-
-
-@dataclass(frozen=True)
-class TickOut:
-    """What one encoder sample produced.
-
-    Attributes:
-        k: Its tick.
-        t: t_k = k T from the first sample [s].
-        stamp_ns: Its header stamp [ns].
-        x_hat: x(k|k), shape (N,).
-        P_diag: diag P(k|k), shape (N,).
-        u: The command u_k [N m] (saturated), or None without a controller.
-        report: The estimator's step report (None at tick 0).
-        predicted: Missing ticks predicted through before this one.
-    """
-
-    k: int
-    t: float
-    stamp_ns: int
-    x_hat: FloatArray
-    P_diag: FloatArray
-    u: FloatArray | None
-    report: StepReport | None
-    predicted: int = 0
-
-
-@dataclass(frozen=True)
-class Watched:
-    """An encoder sample through :meth:`LiveLoop.watch`.
-
-    Attributes:
-        out: What it produced (None: skipped, or the estimator failed).
-        reason: The watchdog's decision (:attr:`~amsfe_sym.ros.watchdog.Reason.NONE`: go
-            on and publish ``out``; else hold).
-        tick: What the watchdog judged (None: the sample was skipped, nothing judged).
-    """
-
-    out: TickOut | None
-    reason: Reason
-    tick: WatchdogTick | None = None
 
 
 @dataclass
@@ -187,8 +141,7 @@ class LiveLoop:
         self._early: list[tuple[int, FloatArray]] = []
         self._early_frames: list[tuple[int, FloatArray, int | None]] = []
         self._sent0: int | None = None  # the first encoder sample's source timestamp [ns]
-        self._last_sent: int | None = None  # the last used sample's source timestamp [ns]
-        self._bad_run = 0  # encoder samples with a bad stamp in a row
+        self._stamps = StampScreen(lib.T, self._T_ns, max_gap_steps)  # the encoders' stamps
         self.counters: dict[str, int] = dict.fromkeys(DECISION_COUNTERS, 0)
         self.skipped: dict[str, int] = {}
         self._nan = np.full(4 * lib.n, np.nan)
@@ -212,56 +165,6 @@ class LiveLoop:
 
     def _skip(self, reason: str, count: int = 1) -> None:
         self.skipped[reason] = self.skipped.get(reason, 0) + count
-
-    def _bad_stamp(self, stamp_ns: int, sent_ns: int | None) -> str | None:
-        """Why an encoder sample's header stamp is not used (None: it is), by the log
-        reader's rule (docs/input-rules.md) on what a live node has: a zero stamp; a stamp
-        more than ``max_gap_steps`` + 1 ticks behind the last used one (a clock step back);
-        a stamp that many ticks ahead of it while the send times (DDS source timestamps)
-        advanced less than a quarter as much (a clock step ahead or a corrupt stamp: a
-        stall delays both).  Skipped and counted; more than ``max_gap_steps`` in a row hold
-        the node with the reason (a 1 h stamp was held as "the encoders stalled", zero
-        stamps as encoder silence, a step as hundreds of missing samples).
-
-        Raises:
-            EstimatorError: more than ``max_gap_steps`` bad stamps in a row.
-        """
-        why, size = None, 0.0
-        span = (self._max_gap + 1) * self._T_ns
-        last = self.t0_ns + self.k * self._T_ns  # the last used tick's stamp
-        d_stamp = stamp_ns - last
-        if stamp_ns == 0:
-            why = "encoder sample with a zero header stamp (unstamped)"
-        elif d_stamp < -span:
-            why, size = "encoder stamp behind the last one (a clock step back)", -d_stamp * 1e-9
-        elif (
-            d_stamp > span
-            and sent_ns is not None
-            and self._last_sent is not None
-            and d_stamp > 4 * (sent_ns - self._last_sent)
-        ):
-            why = "encoder stamp ahead of its send time (a clock step or a corrupt stamp)"
-            size = d_stamp * 1e-9
-        if why is None:
-            self._bad_run = 0
-            self._last_sent = sent_ns
-            return None
-        self._skip(why)
-        self._bad_run += 1
-        if self._bad_run > self._max_gap:
-            found = f"{self._bad_run} samples in a row after tick {self.k}"
-            if size:
-                found += f", the last {size:.4g} s from the last used stamp"
-            raise EstimatorError(
-                describe(
-                    f"encoder stamps at t = {self.k * self.T:.3f} s",
-                    "header stamps on the clock the node started on",
-                    f"{why}: {found}",
-                    "fix the driver's stamping clock (slew, do not step; stamp every "
-                    "sample) and restart the node",
-                )
-            )
-        return why
 
     def tick_of(self, stamp_ns: int) -> int | None:
         """The tick of a stamp [ns] (None when it is off the grid by more than the
@@ -392,7 +295,7 @@ class LiveLoop:
                 self._skip("encoder sample before the first joint torque sample")
                 return None
             self.t0_ns, self.k, self._sent0 = stamp_ns, 0, sent_ns
-            self._last_sent = sent_ns
+            self._stamps.last_sent = sent_ns
             self.est = build_estimator(
                 self.sc,
                 self.lib,
@@ -413,7 +316,8 @@ class LiveLoop:
                     self.frame(exposure_ns, zf, sent)
             self._early_frames.clear()
             return self._control(stamp_ns, row[: 2 * self.n], None, 0)
-        bad = self._bad_stamp(stamp_ns, sent_ns)  # issue 37: named, not "stalled"
+        # issue 37: named, not "stalled"
+        bad = self._stamps.check(stamp_ns, sent_ns, self.t0_ns, self.k, self._skip)
         if bad is not None:
             return None
         k = self.tick_of(stamp_ns)
@@ -553,18 +457,3 @@ class LiveLoop:
     def hold_command(self, kind: HoldKind, last: TickOut | None) -> FloatArray:
         """The fail-safe command (:data:`HoldKind`) at the last finite estimate ``last``."""
         return hold_command(self.lib, kind, last, self.ctrl)
-
-
-def hold_command(
-    lib: ModelLibrary, kind: HoldKind, last: TickOut | None, ctrl: Controller | None = None
-) -> FloatArray:
-    """The hold command [N m]: zero, or g(q_hat, theta_hat) at the last finite estimate
-    ``last`` (zero without one), clipped to the actuator limits."""
-    n = lib.n
-    if kind == "zero" or last is None or not np.all(np.isfinite(last.x_hat)):
-        return np.zeros(n)
-    L = lib.layout
-    x = last.x_hat
-    g = np.array(lib.function("gravity")(x[L["q"]], x[L["theta"]])[0], dtype=float)
-    limit = np.array(lib.manifest.actuators.u_max or (np.inf,) * n, dtype=float)
-    return np.asarray(np.clip(g, -limit, limit), dtype=float)

@@ -9,7 +9,7 @@ publishes the estimate (JointState q, qd), its standard deviations, theta, the c
 a controller; Float64MultiArray) and diagnostics (JSON: frames fused, refused, skipped, NIS).
 
 Fail-safe (docs/how-to/ros.md, "Hold"): when a watchdog trips (docs/watchdogs.md; the spec's
-``[watchdog]``) it publishes the hold command (:data:`~amsfe_sym.ros.live.HoldKind`), says
+``[watchdog]``) it publishes the hold command (:data:`~amsfe_sym.ros.tick.HoldKind`), says
 why in one line (``hold: <reason>: ...``) and returns :data:`EXIT_HOLD`; on Ctrl-C or
 SIGTERM it publishes the hold command and the interrupt goes on (the command line exits 130 /
 143); at the end of ``duration`` it publishes the hold command and returns 0.  A record
@@ -34,7 +34,7 @@ from amsfe_sym.core.interrupts import DeferredSignals
 from amsfe_sym.errors import AmsfeError
 from amsfe_sym.ros.effort import effort_values, live_effort
 from amsfe_sym.ros.lifecycle import lifecycle_node
-from amsfe_sym.ros.live import HoldKind, LiveLoop, TickOut
+from amsfe_sym.ros.live import LiveLoop
 from amsfe_sym.ros.middleware import (
     check_parameters,
     depth_for,
@@ -46,6 +46,7 @@ from amsfe_sym.ros.middleware import (
     stop,
     waiting_line,
 )
+from amsfe_sym.ros.node_stop import EXIT_HOLD, NodeReport, Stop, held_line, latency_line
 from amsfe_sym.ros.outputs import (
     DEFAULT_STD_EVERY,
     StdPublisher,
@@ -54,7 +55,8 @@ from amsfe_sym.ros.outputs import (
 )
 from amsfe_sym.ros.record import NodeRecord
 from amsfe_sym.ros.spec_filter import live_filter
-from amsfe_sym.ros.watchdog import Reason
+from amsfe_sym.ros.tick import HoldKind, TickOut
+from amsfe_sym.ros.watchdog_reasons import Reason
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.topics import TopicSpec, joint_order
@@ -68,9 +70,6 @@ FloatArray = NDArray[np.float64]
 #: waiting_line`): it waited forever without a word (issue 37).
 WAITING_SAY_S = 10.0
 ENCODER_TYPE = "sensor_msgs/msg/JointState"
-
-#: Exit code of a fail-safe stop (a watchdog tripped: docs/watchdogs.md).
-EXIT_HOLD = 3
 
 
 @dataclass(frozen=True)
@@ -113,38 +112,6 @@ class NodeOptions:
     std_every: int = DEFAULT_STD_EVERY
 
 
-@dataclass(frozen=True)
-class NodeReport:
-    """How a node run ended.
-
-    Attributes:
-        ticks: Encoder samples processed.
-        reason: Why it stopped (one line).
-        exit_code: 0 (duration reached, shutdown) or :data:`EXIT_HOLD`.
-        hold: The hold command published [N m] (None: none was).
-        counters: The estimator's decisions and the skipped messages by reason.
-        record: The record written (None: none).
-    """
-
-    ticks: int
-    reason: str
-    exit_code: int
-    hold: FloatArray | None
-    counters: dict[str, int]
-    record: Path | None
-
-
-@dataclass(frozen=True)
-class _Stop:
-    """Why the node stops: one line, the exit code, the error to raise (bad input), the
-    watchdog's reason name (``tracking``, ...)."""
-
-    reason: str
-    code: int
-    error: AmsfeError | None = None
-    watchdog: str | None = None
-
-
 class _Node:
     """The rclpy side: subscriptions feed the :class:`LiveLoop`, each tick publishes."""
 
@@ -178,7 +145,7 @@ class _Node:
         )
         self.last: TickOut | None = None
         self.last_rx: float | None = None
-        self.stop: _Stop | None = None
+        self.stop: Stop | None = None
         self.end_k = None if options.duration is None else round(options.duration / lib.T)
         self._orders: dict[tuple[str, ...], list[int]] = {}
         self._first_command = True
@@ -241,7 +208,7 @@ class _Node:
             try:
                 self._orders[key] = joint_order(key, self.names, where)
             except AmsfeError as exc:  # the robot's joints are not all in the message
-                self.stop = _Stop(str(exc), 2, exc)
+                self.stop = Stop(str(exc), 2, exc)
                 return None
         return self._orders[key]
 
@@ -294,7 +261,7 @@ class _Node:
                 ns, z, int(info["source_timestamp"]), taken=taken, clock=time.monotonic
             )
         except AmsfeError as exc:
-            self.stop = _Stop(f"hold: the estimator stopped: {exc}", EXIT_HOLD)
+            self.stop = Stop(f"hold: the estimator stopped: {exc}", EXIT_HOLD)
             return
         if self._held(watched.reason):
             return
@@ -312,7 +279,7 @@ class _Node:
         """Stop on the watchdog's hold, if any (its line, :data:`EXIT_HOLD`)."""
         hold = self.live.watchdog.hold
         if reason != Reason.NONE and hold is not None:
-            self.stop = _Stop(hold.line(), EXIT_HOLD, watchdog=hold.name)
+            self.stop = Stop(hold.line(), EXIT_HOLD, watchdog=hold.name)
         return self.stop is not None
 
     def idle(self) -> None:
@@ -345,7 +312,7 @@ class _Node:
         if self.record is not None:
             self._record(out, z, sent)
         if self.end_k is not None and out.k >= self.end_k:
-            self.stop = _Stop(f"done: {out.k + 1} ticks ({out.t:.3f} s of samples)", 0)
+            self.stop = Stop(f"done: {out.k + 1} ticks ({out.t:.3f} s of samples)", 0)
 
     def _record(self, out: TickOut, z: FloatArray, sent: int) -> None:
         rec = self.record
@@ -408,7 +375,7 @@ class _Node:
     def shut_down(self) -> None:
         """Lifecycle ``shutdown``: stop the node."""
         self.active = False
-        self.stop = _Stop("shut down by its lifecycle manager", 0)
+        self.stop = Stop("shut down by its lifecycle manager", 0)
 
     def hold(self) -> FloatArray | None:
         """Publish the last estimate's ``estimate_std`` and ``theta`` if they are not out
@@ -486,9 +453,9 @@ def run_node(
         hold = state.hold()
         bad_input = state.stop is not None and state.stop.error is not None
         say(
-            "node: stopped on bad input" + _held(hold)
+            "node: stopped on bad input" + held_line(hold)
             if bad_input
-            else f"node: {reason}" + _held(hold)
+            else f"node: {reason}" + held_line(hold)
         )
     except KeyboardInterrupt:
         reason = "hold: interrupted (SIGINT or SIGTERM)"
@@ -497,7 +464,7 @@ def run_node(
             if state.record is not None:
                 state.record.stopped("hold: interrupted", None, None)
             hold = state.hold()
-            say("node: hold: interrupted" + _held(hold))
+            say("node: hold: interrupted" + held_line(hold))
         raise
     finally:
         if state is not None and state.record is not None and options.record is not None:
@@ -513,19 +480,3 @@ def run_node(
         say(latency_line(np.asarray(state.latency_ns, dtype=float) * 1e-9))
     counters = {**state.live.counters, **state.live.skipped}
     return NodeReport(state.live.k + 1, reason, code, hold, counters, options.record)
-
-
-def latency_line(lat: FloatArray) -> str:
-    """The node's latency line (``amsfe bench --ros`` reads it): sample received by the
-    middleware -> command published, p50 / p99 / max [ms] over the run's commands."""
-    p50, p99 = np.percentile(lat, [50, 99]) * 1e3
-    return (
-        f"node: latency sample received -> command published p50 {p50:.3f} p99 {p99:.3f} "
-        f"max {lat.max() * 1e3:.3f} ms over {lat.size} commands"
-    )
-
-
-def _held(hold: FloatArray | None) -> str:
-    if hold is None:
-        return ""
-    return f"; hold command {[round(float(v), 6) for v in hold]} N m published"

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from amsfe_sym.errors import ConfigError, describe
-from amsfe_sym.ros.live import TickOut
+from amsfe_sym.ros.tick import TickOut
 
 __all__ = ["DEFAULT_STD_EVERY", "StdPublisher", "std_due", "std_every_parameter"]
 

@@ -42,7 +42,8 @@ from numpy.typing import NDArray
 from amsfe_sym.core.camera_frame import CameraFrame
 from amsfe_sym.ros.arm import SimArm
 from amsfe_sym.ros.live import LiveLoop
-from amsfe_sym.ros.watchdog import Hold, Reason, WatchdogSeen, WatchdogTick
+from amsfe_sym.ros.watchdog import Hold, WatchdogSeen, WatchdogTick
+from amsfe_sym.ros.watchdog_reasons import Reason
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
 from amsfe_sym.topics.watchdog import WatchdogBounds

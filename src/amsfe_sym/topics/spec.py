@@ -61,7 +61,7 @@ from amsfe_sym.core.values import (
 )
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.topics.roles import EFFORT_KINDS, ROLES, EffortKind
-from amsfe_sym.topics.watchdog import WATCHDOG_KEYS, WatchdogBounds, parse_watchdog
+from amsfe_sym.topics.watchdog import WATCHDOG_KEYS, WatchdogBounds, for_effort, parse_watchdog
 from amsfe_sym.vision.spec import MarkerSpec, parse_camera_section, parse_marker
 
 __all__ = ["FILTER_KEYS", "FROM_LOG", "TopicSpec", "parse_topic_spec", "read_topic_spec"]
@@ -352,6 +352,10 @@ def parse_topic_spec(data: dict[str, Any], where: str = "topic spec") -> TopicSp
                 '= "link" if the positions are the motor\'s',
             )
         )
+    # the innovation bound of the effort kind, unless [watchdog] set it (topics/watchdog.py)
+    set_nis = "innovation_nis" in data.get("watchdog", {})
+    wd = for_effort(out.get("watchdog", WatchdogBounds()), out.get("effort_kind"), set_nis)
+    out["watchdog"] = wd
     return replace(TopicSpec(), explicit=frozenset(explicit), **out)
 
 

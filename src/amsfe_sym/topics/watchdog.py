@@ -5,7 +5,8 @@ measured).
 ```toml
 [watchdog]
 tracking_error = 0.1       # [rad] max_j |q_d - q_hat| once the start-up handed over
-innovation_nis = 5.0       # mean of NIS / dimension over the window [-]
+innovation_nis = 5.0       # mean of NIS / dimension over the window [-] (effort kind
+                           # joint_torque or none: 30.0, INNOVATION_NIS)
 innovation_window = 50     # fused updates (encoder samples and camera frames)
 deadline = 0.05            # [s] a sample processed later than this after its stamp is late
 deadline_misses = 50       # hold when more than this many of the window are late
@@ -28,7 +29,15 @@ from typing import Any
 
 from amsfe_sym.errors import ConfigError, describe
 
-__all__ = ["WATCHDOG_COUNTS", "WATCHDOG_KEYS", "WatchdogBounds", "parse_watchdog"]
+__all__ = [
+    "INNOVATION_NIS",
+    "MEASURING",
+    "WATCHDOG_COUNTS",
+    "WATCHDOG_KEYS",
+    "WatchdogBounds",
+    "for_effort",
+    "parse_watchdog",
+]
 
 
 @dataclass(frozen=True)
@@ -40,7 +49,8 @@ class WatchdogBounds:
             once the controller's start-up handed over (the blend ended); inf: off.
         innovation_nis: Largest mean of NIS / dimension over the last ``innovation_window``
             fused updates (encoder samples: dimension 2n or 3n; camera frames: 2) [-]; inf:
-            off.
+            off.  The default is the effort kind's (:data:`INNOVATION_NIS`, applied by the
+            topic spec's parser through :func:`for_effort`); 5.0 here.
         innovation_window: Fused updates in that mean (the check starts once it is full).
         deadline: A sample processed (command computed) later than this after its stamp
             (on the node's wall clock, the stamps shifted by the first sample's offset) is
@@ -75,6 +85,35 @@ class WatchdogBounds:
         """These bounds with ``encoder_timeout`` [s] (``amsfe node --encoder-timeout``; None:
         as they are)."""
         return self if encoder_timeout is None else replace(self, encoder_timeout=encoder_timeout)
+
+
+#: Every bound that can be switched off, off (inf): the bounds of the runs that measure the
+#: watched quantities over a whole run (tools/watchdog_bounds.py, tools/watchdog_innovation.py).
+MEASURING = WatchdogBounds(
+    tracking_error=math.inf,
+    innovation_nis=math.inf,
+    deadline=math.inf,
+    compute_budget=math.inf,
+    actuation_error=math.inf,
+)
+
+#: The default ``innovation_nis`` per effort kind (``[effort] kind``; docs/watchdogs.md, "The
+#: innovation bound per effort kind", tools/watchdog_innovation.py): the filter given the
+#: applied torque is consistent (clean window means up to 1.5); given a measured joint torque,
+#: or no torque, it carries the input as states and is overconfident (clean window means up
+#: to 19.2 on paper-sim), so its bound sits 1.56x above that; a frozen encoder, a 20 mrad
+#: jump and a misreported torque still cross it within 30 ms.
+INNOVATION_NIS: dict[str, float] = {"applied": 5.0, "joint_torque": 30.0, "none": 30.0}
+
+
+def for_effort(
+    bounds: WatchdogBounds, effort_kind: str | None, explicit: bool = False
+) -> WatchdogBounds:
+    """``bounds`` with the default ``innovation_nis`` of ``effort_kind``
+    (:data:`INNOVATION_NIS`; None: ``applied``), unless the spec set it (``explicit``)."""
+    if explicit:
+        return bounds
+    return replace(bounds, innovation_nis=INNOVATION_NIS[effort_kind or "applied"])
 
 
 #: The keys of ``[watchdog]`` (the fields of :class:`WatchdogBounds`).

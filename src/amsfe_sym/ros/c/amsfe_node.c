@@ -36,6 +36,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include <rcl/graph.h>
 #include <rcl/rcl.h>
 #include <rcutils/error_handling.h>
 #include <rmw/serialized_message.h>
@@ -731,6 +732,65 @@ static void on_encoders(node_t *s, long long sent, long long received, double ta
   s->started = 1;
 }
 
+/* What a node that has received no encoder sample for `seconds` prints (the Python node's
+ * middleware.waiting_line, word for word): the topic it waits on, its type, and what the graph
+ * shows for it: no publisher (and the topics of that type that have one), publishers of another
+ * type (a type mismatch), or publishers of the right type delivering nothing.  Called every
+ * 10 s before the first sample only (it allocates: never on the sample path). */
+static void say_waiting(node_t *s, double seconds) {
+  const char *want = "sensor_msgs/msg/JointState";
+  const char *topic = rcl_subscription_get_topic_name(&s->sub_enc);
+  if (topic == NULL) topic = s->topic[T_ENC];
+  rcl_allocator_t alloc = rcl_get_default_allocator();
+  rmw_topic_endpoint_info_array_t pubs = rmw_get_zero_initialized_topic_endpoint_info_array();
+  if (rcl_get_publishers_info_by_topic(&s->node, &alloc, topic, false, &pubs) != RCL_RET_OK) {
+    rcutils_reset_error();
+    return;
+  }
+  char line[2048];
+  int at = snprintf(line, sizeof line, "node: nothing on %s (%s) for %.0f s", topic, want, seconds);
+  if (pubs.size == 0) {
+    at += snprintf(line + at, sizeof line - (size_t)at, ": no publisher of %s on the graph", topic);
+    rcl_names_and_types_t nt = rmw_get_zero_initialized_names_and_types();
+    if (rcl_get_topic_names_and_types(&s->node, &alloc, false, &nt) == RCL_RET_OK) {
+      int first = 1;
+      for (size_t i = 0; i < nt.names.size && at < (int)sizeof line - 64; ++i) {
+        int same = 0;
+        for (size_t j = 0; j < nt.types[i].size; ++j)
+          same |= strcmp(nt.types[i].data[j], want) == 0;
+        if (!same || strcmp(nt.names.data[i], topic) == 0) continue;
+        at += snprintf(line + at, sizeof line - (size_t)at, "%s'%s'",
+                       first ? "; topics of that type: [" : ", ", nt.names.data[i]);
+        first = 0;
+      }
+      if (!first) at += snprintf(line + at, sizeof line - (size_t)at, "]");
+      rcl_names_and_types_fini(&nt);
+    } else {
+      rcutils_reset_error();
+    }
+    snprintf(line + at, sizeof line - (size_t)at, " (check -r / [topics])");
+  } else {
+    char wrong[1024] = "";
+    int w = 0, n_wrong = 0;
+    for (size_t i = 0; i < pubs.size; ++i) {
+      const char *t = pubs.info_array[i].topic_type;
+      if (t == NULL || strcmp(t, want) == 0 || strstr(wrong, t) != NULL) continue;
+      w += snprintf(wrong + w, sizeof wrong - (size_t)w, "%s'%s'", n_wrong ? ", " : "", t);
+      ++n_wrong;
+    }
+    if (n_wrong)
+      snprintf(line + at, sizeof line - (size_t)at,
+               ": %zu publisher(s) of type [%s], not %s: a type mismatch, no message can pass "
+               "(publish the right type or remap)", pubs.size, wrong, want);
+    else
+      snprintf(line + at, sizeof line - (size_t)at,
+               ": %zu publisher(s) of %s, none delivering (check QoS)", pubs.size, want);
+  }
+  rmw_topic_endpoint_info_array_fini(&pubs, &alloc);
+  printf("%s\n", line);
+  fflush(stdout);
+}
+
 static void take_frames(node_t *s) {
   rmw_message_info_t info;
   while (rcl_take_serialized_message(&s->sub_cam, &s->in, &info, NULL) == RCL_RET_OK) {
@@ -753,9 +813,11 @@ static void take_frames(node_t *s) {
  * "Torque and sample"): an arm publishes it on the effort topic just before sample k, DDS
  * does not order two topics, and without it the step k-1 -> k takes this node's command of
  * k-1, not the older one a free-running arm may have applied (a false innovation).  Waited
- * for, up to half a period, when the effort stream is live (the effort of k-2 came; at ticks
- * 1 and 2 before any came: the topic has a publisher) and that of k-1 did not yet; counted,
- * and in vain counted too (the command is used then).
+ * for, up to half a period (an estimator without a controller, whose wait delays no command:
+ * up to 20 periods, as a log played at its pace needs on a loaded machine), when the effort
+ * stream is live (the effort of k-2 came; at ticks 1 and 2 before any came: the topic has a
+ * publisher) and that of k-1 did not yet; counted, and in vain counted too (the command, or
+ * the last torque, is used then).
  * 1 when it waited. */
 static int await_effort(node_t *s, long long ns) {
   live_loop *L = &s->L;
@@ -769,7 +831,7 @@ static int await_effort(node_t *s, long long ns) {
       return 0;
   }
   ++s->eff_waits;
-  double until = mono_s() + 0.5 * s->T;
+  double until = mono_s() + (L->controller ? 0.5 : 20.0) * s->T;
   while (s->eff_last < k - 1 && !g_signal && s->stop_code < 0) {
     double left = until - mono_s();
     if (left <= 0) {
@@ -1135,6 +1197,7 @@ int main(int argc, char **argv) {
          s->managed ? "configure and activate" : "encoders");
   fflush(stdout);
   /* ---- the loop: wait, take, tick, publish */
+  double quiet_since = mono_s(), said = 0.0; /* before the first sample: said every 10 s */
   while (s->stop_code < 0 && !g_signal) {
     rcl_ret_t add = rcl_wait_set_clear(&s->ws);
     if (add == RCL_RET_OK) add = rcl_wait_set_add_subscription(&s->ws, &s->sub_enc, NULL);
@@ -1156,6 +1219,13 @@ int main(int argc, char **argv) {
     while (s->stop_code < 0 && !g_signal &&
            rcl_take_serialized_message(&s->sub_enc, &s->in, &info, NULL) == RCL_RET_OK)
       on_encoders(s, info.source_timestamp, info.received_timestamp, mono_s()), ++got;
+    if (s->stop_code < 0 && !g_signal && got == 0 && s->active && !s->started) {
+      double silent = mono_s() - quiet_since;
+      if (silent > said + 10.0) {
+        said = silent - fmod(silent, 10.0);
+        say_waiting(s, silent);
+      }
+    }
     if (s->stop_code < 0 && !g_signal && got == 0 && s->active && s->started) {
       /* no sample: the stall watchdogs */
       size_t publishers = 0;
@@ -1193,7 +1263,7 @@ int main(int argc, char **argv) {
   }
   if (s->eff_waits > 0)
     printf("node: waited for the torque applied over the previous tick at %ld samples (%ld not "
-           "within T/2: the command used)\n", s->eff_waits, s->eff_missed);
+           "within the wait: estimated without it)\n", s->eff_waits, s->eff_missed);
   fflush(stdout);
   s->exit_code = code;
   if (s->recording) write_record(s, record_path);
