@@ -89,3 +89,31 @@ def test_a_gap_in_stamps_and_send_times_is_still_a_gap(paper: Any) -> None:
         loop.encoders(EPOCH_NS + k * T, z, SENT0_NS + k * T)
     with pytest.raises(EstimatorError, match="stalled"):
         loop.encoders(EPOCH_NS + 60 * T, z, SENT0_NS + 60 * T)
+
+
+@pytest.mark.parametrize(
+    ("step_s", "words"),
+    [(0.3, "ahead of its send time"), (-0.3, "behind the last one"), (None, "zero header stamp")],
+)
+def test_the_node_path_names_bad_stamps_too(paper: Any, step_s: float | None, words: str) -> None:
+    """Through :meth:`LiveLoop.watch` (what ``amsfe node`` calls) a run of bad stamps raises
+    the stamps' error, which the node prints as its hold line, as the C node does; it was
+    caught as an estimator failure and held as ``covariance`` or ``encoder_stall``."""
+    import time
+
+    sc, lib = paper
+    loop = LiveLoop(sc, lib, controller=False)
+    T = round(lib.T * 1e9)
+    z = np.zeros(2 * lib.n)
+    if step_s is None:
+        stamps = [EPOCH_NS + k * T for k in range(30)] + [0] * 30
+    else:
+        stamps = [EPOCH_NS + k * T + (round(step_s * 1e9) if k >= 30 else 0) for k in range(60)]
+    with pytest.raises(EstimatorError) as info:
+        for k, s in enumerate(stamps):
+            watched = loop.watch(
+                s, z, SENT0_NS + k * T, taken=time.monotonic(), clock=time.monotonic
+            )
+            assert watched.reason is None or watched.reason.name == "NONE", (k, watched)
+    msg = str(info.value)
+    assert words in msg and "stalled" not in msg and "covariance" not in msg, msg

@@ -366,14 +366,18 @@ class LiveLoop:
         sample was taken at wall clock ``taken`` [s], ``clock()`` [s] (the same clock) is read
         when its command is computed.  An estimator failure, or more than ``max_gap_steps``
         samples missing, is judged as such (a hold) rather than raised; a skipped sample is
-        not judged.  The watchdog's stamp is ``sent_ns`` when known (the deadline is this
-        node's delay, whatever the arm's clock), else ``stamp_ns``."""
+        not judged.  More than ``max_gap_steps`` bad stamps in a row raise the stamps'
+        :class:`~amsfe_sym.errors.EstimatorError`, which names them (issue 37).  The
+        watchdog's stamp is ``sent_ns`` when known (the deadline is this node's delay, whatever
+        the arm's clock), else ``stamp_ns``."""
         k_before = self.k
         k_new = self.tick_of(stamp_ns)
         status = 0
         try:
             out = self.encoders(stamp_ns, z, sent_ns)
         except EstimatorError:
+            if self._stamps.bad_run > self._stamps.max_gap:  # the stamps, named (as the C node)
+                raise
             out, status = None, self._status()
         done = clock()
         sent = stamp_ns if sent_ns is None else sent_ns
