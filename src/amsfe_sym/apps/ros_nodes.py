@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import argparse
 import os
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from amsfe_sym.apps.arguments import DURATION, SEED, number_type
 from amsfe_sym.errors import ConfigError, describe
@@ -155,31 +156,47 @@ def sim_node_from_args(args: argparse.Namespace) -> int:
     return 0
 
 
-def _arm_impl(asked: str, lib: Any, opts: Any) -> str:
-    """``c`` or ``python``: ``--impl auto`` runs the C arm when it runs these options and
-    builds (else the Python arm, saying why in one line); ``--impl c`` refuses (one line)
-    what it cannot run."""
-    if asked == "python":
-        return "python"
+def _c_or_python(
+    asked: str,
+    why: str | None,
+    build: Callable[[], object],
+    what: str,
+    refuse: Callable[[str], object],
+) -> str:
+    """``c`` or ``python`` for a program with a C twin (the arm, the node): ``--impl auto``
+    runs the C ``what`` when ``why`` (its refusal of these options) is None and it builds,
+    else the Python one, saying why in one line; ``--impl c`` refuses (``refuse``, one line)
+    what it cannot run and raises a failed build."""
     from amsfe_sym.errors import AmsfeError
-    from amsfe_sym.ros.carm import build_arm, c_arm_refusal
 
-    why = c_arm_refusal(opts)
     if why is None:
         try:
-            build_arm(lib)
+            build()
         except AmsfeError as exc:
             if asked == "c":
                 raise
-            why = f"the C arm did not build ({str(exc).split('. Fix:')[0]})"
+            why = f"the C {what} did not build ({str(exc).split('. Fix:')[0]})"
     if why is None:
         return "c"
     if asked == "c":
+        refuse(why)
+    prog = "sim-node" if what == "arm" else what
+    print(f"{prog}: the Python {what}: {why}", flush=True)
+    return "python"
+
+
+def _arm_impl(asked: str, lib: Any, opts: Any) -> str:
+    """``c`` or ``python`` for ``amsfe sim-node`` (:func:`_c_or_python`)."""
+    if asked == "python":
+        return "python"
+    from amsfe_sym.ros.carm import build_arm, c_arm_refusal
+
+    def refuse(why: str) -> NoReturn:
         raise ConfigError(
             describe("amsfe sim-node --impl c", "options the C arm runs", why, "--impl python")
         )
-    print(f"sim-node: the Python arm: {why}", flush=True)
-    return "python"
+
+    return _c_or_python(asked, c_arm_refusal(opts), lambda: build_arm(lib), "arm", refuse)
 
 
 def add_node_arguments(p: argparse.ArgumentParser) -> None:
@@ -297,28 +314,13 @@ def node_from_args(args: argparse.Namespace) -> int:
 
 
 def _node_impl(asked: str, sc: Any, lib: Any, opts: Any) -> str:
-    """``c`` or ``python``: ``--impl auto`` runs the C node when this configuration is one
-    it runs and it builds (else the Python node, saying why in one line); ``--impl c``
-    refuses (one line) what it cannot run."""
+    """``c`` or ``python`` for ``amsfe node`` (:func:`_c_or_python`)."""
     if asked == "python":
         return "python"
-    from amsfe_sym.errors import AmsfeError
     from amsfe_sym.ros.cnode import build_node, c_node_refusal, refuse_c_node
 
     why = c_node_refusal(sc, opts.spec, opts.managed, opts.controller, opts.compiled)
-    if why is None:
-        try:
-            build_node(lib)
-        except AmsfeError as exc:
-            if asked == "c":
-                raise
-            why = f"the C node did not build ({str(exc).split('. Fix:')[0]})"
-    if why is None:
-        return "c"
-    if asked == "c":
-        refuse_c_node(why)
-    print(f"node: the Python node: {why}", flush=True)
-    return "python"
+    return _c_or_python(asked, why, lambda: build_node(lib), "node", refuse_c_node)
 
 
 def add_play_arguments(p: argparse.ArgumentParser) -> None:
