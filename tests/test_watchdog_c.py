@@ -28,19 +28,13 @@ from amsfe_sym.ros.watchdog import (
 from amsfe_sym.ros.watchdog_runs import FAULTS, Fault, WatchEvent, run_watched
 from amsfe_sym.runtime.cheader import c_struct
 from amsfe_sym.scenario import load_scenario
-from amsfe_sym.topics.watchdog import WatchdogBounds
+from amsfe_sym.topics.watchdog import MEASURING, WatchdogBounds
 
 Config = c_struct("Config", "amsfe_watchdog.h", "amsfe_watchdog_config")
 Tick = c_struct("Tick", "amsfe_watchdog.h", "amsfe_watchdog_tick")
 State = c_struct("State", "amsfe_watchdog.h", "amsfe_watchdog_state")
 
-OFF = WatchdogBounds(
-    tracking_error=math.inf,
-    innovation_nis=math.inf,
-    deadline=math.inf,
-    compute_budget=math.inf,
-    actuation_error=math.inf,
-)
+OFF = MEASURING  # every bound that can be off, off
 #: Bounds under which the sequences trip at other ticks and for other reasons.
 BOUNDS = (
     WatchdogBounds(),
