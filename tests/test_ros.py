@@ -784,13 +784,15 @@ def _lifecycle(env: dict[str, str], node: str, *transitions: str) -> list[str]:
 @pytest.mark.slow
 def test_managed_node(tmp_path: Path) -> None:
     """``amsfe node --managed``: a lifecycle client configures it (``inactive``) and activates
-    it (``active``); then it closes the lockstep loop as the plain node does."""
+    it (``active``); then it closes the lockstep loop as the plain node does.  The Python
+    reference node (the default, the C node, is tests/test_cnode.py's same test)."""
     env = _ros_env(tmp_path)
     rec = tmp_path / "rec"
     procs: list[_Proc] = []
     try:
         node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--managed",
-                      "--duration", "0.5", "--record", str(rec), *PATIENT_NODE)  # fmt: skip
+                      "--impl", "python", "--duration", "0.5", "--record", str(rec),
+                      *PATIENT_NODE)  # fmt: skip
         procs.append(node)
         assert _lifecycle(env, "amsfe_node", "configure", "activate") == ["inactive", "active"]
         procs.insert(0, _start(env, "sim-node", "paper-sim", "--lockstep", "--duration", "0.5",
