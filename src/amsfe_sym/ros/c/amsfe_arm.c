@@ -50,6 +50,7 @@
 #include <std_msgs/msg/float64_multi_array.h>
 
 #include "amsfe_cdr.h"
+#include "amsfe_rt.h"
 #include "amsfe_node_params.h"
 
 /* the generated library's functions (casadi's calling convention) */
@@ -554,24 +555,6 @@ static void wait_messages(arm_t *s, long long timeout_ns) {
   take_estimates(s);
 }
 
-static void realtime(int priority) {
-  if (priority <= 0) return;
-  char why[256] = "";
-  if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0)
-    snprintf(why, sizeof why, "mlockall: %s", strerror(errno));
-  struct sched_param sp = {.sched_priority = priority};
-  if (sched_setscheduler(0, SCHED_FIFO, &sp) != 0) {
-    size_t len = strlen(why);
-    snprintf(why + len, sizeof why - len, "%sSCHED_FIFO %d: %s", len ? "; " : "", priority,
-             strerror(errno));
-  }
-  if (why[0])
-    printf("sim-node: real-time scheduling not permitted (%s): running at normal priority\n", why);
-  else
-    printf("sim-node: SCHED_FIFO priority %d, memory locked\n", priority);
-  fflush(stdout);
-}
-
 static int all_finite_x(const arm_t *s) {
   for (int i = 0; i < 4 * s->n; ++i)
     if (!isfinite(s->x[i])) return 0;
@@ -785,7 +768,7 @@ int main(int argc, char **argv) {
   /* before rcl_init: the middleware's threads (Fast DDS's receive and event threads) inherit
    * the policy, so a sample's path through this process is real-time too, not only the
    * tick (a reception thread at normal priority beside CPU hogs delays the commands) */
-  realtime(priority);
+  amsfe_realtime("sim-node", priority);
   rcl_allocator_t alloc = rcl_get_default_allocator();
   rcl_init_options_t io = rcl_get_zero_initialized_init_options();
   rcl_check(rcl_init_options_init(&io, alloc), "rcl_init_options_init");

@@ -46,6 +46,7 @@
 #include <std_msgs/msg/string.h>
 
 #include "amsfe_cdr.h"
+#include "amsfe_rt.h"
 #include "amsfe_lifecycle.h"
 #include "amsfe_live.h"
 #include "amsfe_node_params.h"
@@ -223,6 +224,7 @@ typedef struct {
   int stop_code;
   double *lat;  /* [cap] sample received by the middleware -> command published [s] */
   long n_lat, cap_lat;
+  long long cmd_wall; /* wall clock when the tick's command was published [ns] (0: none) */
   record_t rec;
   amsfe_watchdog *wd;  /* the watchdogs (amsfe_watchdog.h): their reasons are the holds */
   double *frame_nis;   /* [LIVE_MAX_FRAMES] NIS of the frames fused at the tick */
@@ -620,6 +622,7 @@ static void publish_tick(node_t *s, long long ns, const double *z, long long sen
     if (s->first_command) wait_subscriber(s);
     out_fill(&s->m_cmd, s->m_cmd.at_a, L->u, n);
     if (rcl_publish_serialized_message(&s->pub_cmd, &s->m_cmd.ser, NULL) != RCL_RET_OK) ++g_publish_failed;
+    s->cmd_wall = wall_ns(); /* the latency's end: the command out, as the Python node's */
   }
   out_stamp(&s->m_est, ns);
   out_fill(&s->m_est, s->m_est.at_a, L->x, n);
@@ -726,8 +729,9 @@ static void on_encoders(node_t *s, long long sent, long long received, double ta
     live_applied(L, ns, s->eff);
     record_effort(s, ns, s->eff);
   }
+  s->cmd_wall = 0;
   publish_tick(s, ns, s->z, sent);
-  if (L->controller && s->n_lat < s->cap_lat) s->lat[s->n_lat++] = 1e-9 * (double)(wall_ns() - received);
+  if (s->cmd_wall && s->n_lat < s->cap_lat) s->lat[s->n_lat++] = 1e-9 * (double)(s->cmd_wall - received);
   s->last_rx = mono_s(); /* after the work: a slow first tick is no silence */
   s->started = 1;
 }
@@ -884,26 +888,6 @@ static void take_truth(node_t *s) {
     memcpy(R->truth_x + R->n_truth * s->N, s->truth, sizeof(double) * (size_t)s->N);
     ++R->n_truth;
   }
-}
-
-/* Real-time scheduling and locked memory when permitted; one line when not. */
-static void realtime(int priority) {
-  if (priority <= 0) return;
-  char why[256] = "";
-  if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0)
-    snprintf(why, sizeof why, "mlockall: %s", strerror(errno));
-  struct sched_param sp = {.sched_priority = priority};
-  if (sched_setscheduler(0, SCHED_FIFO, &sp) != 0) {
-    size_t len = strlen(why);
-    snprintf(why + len, sizeof why - len, "%sSCHED_FIFO %d: %s", len ? "; " : "", priority,
-             strerror(errno));
-  }
-  if (why[0])
-    printf("node: real-time scheduling not permitted (%s): running at normal priority "
-           "(docs/live-control.md, \"Scheduling\")\n", why);
-  else
-    printf("node: SCHED_FIFO priority %d, memory locked\n", priority);
-  fflush(stdout);
 }
 
 /* The last estimate's std and theta if not out yet, then the hold command (with a
@@ -1137,7 +1121,7 @@ int main(int argc, char **argv) {
   /* before rcl_init: the middleware's threads (Fast DDS's receive and event threads) inherit
    * the policy, so a sample's way into this process is real-time too, not only its tick
    * (reception threads at normal priority beside CPU hogs delayed the commands by ms) */
-  realtime(priority);
+  amsfe_realtime("node", priority);
   rcl_allocator_t alloc = rcl_get_default_allocator();
   rcl_init_options_t io = rcl_get_zero_initialized_init_options();
   rcl_check(rcl_init_options_init(&io, alloc), "rcl_init_options_init");
