@@ -4,11 +4,15 @@ it expected, what it found and how to fix it (argparse then exits 2)."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
 
 from amsfe_sym.core.values import SEED_MAX
 from amsfe_sym.errors import describe
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 __all__ = [
     "COUNT",
@@ -19,7 +23,10 @@ __all__ = [
     "Parser",
     "lock_arg",
     "number_type",
+    "options_from_args",
 ]
+
+Options = TypeVar("Options", bound="DataclassInstance")
 
 
 def lock_arg(text: str) -> tuple[str, float]:
@@ -92,3 +99,12 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"error: {self.prog}: {message} (see {self.prog} -h)\n")
+
+
+def options_from_args(cls: type[Options], args: argparse.Namespace, **given: Any) -> Options:
+    """A command's options (the dataclass ``cls``) from its parsed ``args``: each field is
+    the option of its name, but for the ``given`` ones (an option that needs converting, or
+    a field no option sets).  A field with neither is an AttributeError (a parser and its
+    options out of step, a bug, not bad input)."""
+    taken = {f.name: getattr(args, f.name) for f in dataclasses.fields(cls) if f.name not in given}
+    return cls(**taken, **given)

@@ -12,12 +12,13 @@ import shlex
 import signal
 import sys
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from amsfe_sym import __version__
 from amsfe_sym.apps import ros_nodes
-from amsfe_sym.apps.arguments import Parser
+from amsfe_sym.apps.arguments import Parser, options_from_args
 from amsfe_sym.apps.calibrate import add_arguments as add_calibrate_arguments
 from amsfe_sym.apps.calibrate import from_args as calibrate_from_args
 from amsfe_sym.apps.command_args import (
@@ -54,49 +55,89 @@ def get_argument_parser() -> argparse.ArgumentParser:
         version=f"amsfe {__version__} (amsfe_sym, Python {sys.version.split()[0]})",
     )
     sub = parser.add_subparsers(dest="command", required=True)
-
-    add_generate_arguments(
-        sub.add_parser("generate", help="URDF/robot -> generated/<name>/ (C, library, manifest)")
-    )
-    add_check_arguments(
-        sub.add_parser("check", help="every generated function vs Pinocchio / finite differences")
-    )
-    add_simulate_arguments(
-        sub.add_parser("simulate", help="run a scenario: plant, sensors, estimator, controller")
-    )
-
-    add_estimate_arguments(
-        sub.add_parser("estimate", help="an estimator over a recorded rosbag2 / MCAP log")
-    )
-    add_calibrate_arguments(
-        sub.add_parser(
-            "calibrate",
-            help="camera pose, marker offset and time offset from a log (docs/calibrate.md)",
-        )
-    )
-
-    ros_nodes.add_sim_node_arguments(sub.add_parser("sim-node", help="the simulated arm on ROS 2"))
-    ros_nodes.add_node_arguments(sub.add_parser("node", help="estimator/controller on ROS 2"))
-    ros_nodes.add_play_arguments(sub.add_parser("play", help="a log's sensor topics on ROS 2"))
-    ros_nodes.add_camera_node_arguments(
-        sub.add_parser("camera-node", help="images -> the marker's pixel topic, live (ROS 2)")
-    )
-    ros_nodes.add_live_arguments(
-        sub.add_parser("live", help="sim-node + node of a scenario in one command (ROS 2)")
-    )
-    add_bench_arguments(
-        sub.add_parser("bench", help="timings: generation, per-call cost, estimator ticks")
-    )
-    add_study_arguments(
-        sub.add_parser("study", help="Monte Carlo over seeds x estimators: tables, NEES, figures")
-    )
-    add_sweep_arguments(
-        sub.add_parser(
-            "sweep",
-            help="scenario grid x estimators x controllers x seeds on Dask (docs/how-to/sweeps.md)",
-        )
-    )
+    for name, command in _commands().items():
+        command.add_arguments(sub.add_parser(name, help=command.help))
     return parser
+
+
+@dataclass(frozen=True)
+class _Command:
+    """One ``amsfe`` command: its ``-h`` line, its options and what runs it (exit code)."""
+
+    help: str
+    add_arguments: Callable[[argparse.ArgumentParser], None]
+    run: Callable[[argparse.Namespace], int]
+
+
+def _commands() -> dict[str, _Command]:
+    """The commands of ``amsfe``, in ``-h`` order."""
+    return {
+        "generate": _Command(
+            "URDF/robot -> generated/<name>/ (C, library, manifest)",
+            add_generate_arguments,
+            _generate,
+        ),
+        "check": _Command(
+            "every generated function vs Pinocchio / finite differences",
+            add_check_arguments,
+            _check,
+        ),
+        "simulate": _Command(
+            "run a scenario: plant, sensors, estimator, controller",
+            add_simulate_arguments,
+            _simulate,
+        ),
+        "estimate": _Command(
+            "an estimator over a recorded rosbag2 / MCAP log",
+            add_estimate_arguments,
+            estimate_from_args,
+        ),
+        "calibrate": _Command(
+            "camera pose, marker offset and time offset from a log (docs/calibrate.md)",
+            add_calibrate_arguments,
+            calibrate_from_args,
+        ),
+        "sim-node": _Command(
+            "the simulated arm on ROS 2",
+            ros_nodes.add_sim_node_arguments,
+            ros_nodes.sim_node_from_args,
+        ),
+        "node": _Command(
+            "estimator/controller on ROS 2",
+            ros_nodes.add_node_arguments,
+            ros_nodes.node_from_args,
+        ),
+        "play": _Command(
+            "a log's sensor topics on ROS 2",
+            ros_nodes.add_play_arguments,
+            ros_nodes.play_from_args,
+        ),
+        "camera-node": _Command(
+            "images -> the marker's pixel topic, live (ROS 2)",
+            ros_nodes.add_camera_node_arguments,
+            ros_nodes.camera_node_from_args,
+        ),
+        "live": _Command(
+            "sim-node + node of a scenario in one command (ROS 2)",
+            ros_nodes.add_live_arguments,
+            ros_nodes.live_from_args,
+        ),
+        "bench": _Command(
+            "timings: generation, per-call cost, estimator ticks",
+            add_bench_arguments,
+            _bench,
+        ),
+        "study": _Command(
+            "Monte Carlo over seeds x estimators: tables, NEES, figures",
+            add_study_arguments,
+            _study,
+        ),
+        "sweep": _Command(
+            "scenario grid x estimators x controllers x seeds on Dask (docs/how-to/sweeps.md)",
+            add_sweep_arguments,
+            sweep_from_args,
+        ),
+    }
 
 
 class Terminated(KeyboardInterrupt):
@@ -131,21 +172,7 @@ def _main(argv: Sequence[str] | None) -> int:
         args = get_argument_parser().parse_args(argv)
     except SystemExit as exc:  # bad arguments (one line, exit 2) or -h (exit 0)
         return int(exc.code or 0) if not isinstance(exc.code, str) else 2
-    commands: dict[str, Callable[[argparse.Namespace], int]] = {
-        "generate": _generate,
-        "check": _check,
-        "simulate": _simulate,
-        "estimate": estimate_from_args,
-        "calibrate": calibrate_from_args,
-        "bench": _bench,
-        "study": _study,
-        "sweep": sweep_from_args,
-        "sim-node": ros_nodes.sim_node_from_args,
-        "node": ros_nodes.node_from_args,
-        "play": ros_nodes.play_from_args,
-        "camera-node": ros_nodes.camera_node_from_args,
-        "live": ros_nodes.live_from_args,
-    }
+    commands = {name: command.run for name, command in _commands().items()}
     with ledger() as book:
         try:
             if args.command in commands:
@@ -354,29 +381,19 @@ def _bench(args: argparse.Namespace) -> int:
     if args.ros:
         return _bench_ros(args)
     sets = args.compare_cflags
-    return run_bench(
-        BenchOptions(
-            robot=str(args.robot),
-            out=args.out,
-            repeat=args.repeat,
-            rounds=args.rounds,
-            json=args.json,
-            skip=tuple(args.skip),
-            duration=args.duration,
-            scenario=args.scenario,
-            estimators=tuple(args.estimators) if args.estimators else None,
-            compare_cflags=None
-            if sets is None
-            else tuple(f.strip() for f in str(sets).split(",") if f.strip()),
-            compile_repeat=args.compile_repeat,
-            joints=args.joints or tuple(range(1, 13)),
-            loop_duration=args.loop_duration,
-            loop_scenarios=tuple(args.loop_scenarios.split(",")) if args.loop_scenarios else None,
-            scaling_panda=not args.no_panda,
-            scaling_loop_duration=args.scaling_loop_duration,
-            logs=tuple(log_case(x) for x in args.logs) if args.logs else None,
-        )
-    )
+    given = {
+        "robot": str(args.robot),
+        "skip": tuple(args.skip),
+        "estimators": tuple(args.estimators) if args.estimators else None,
+        "compare_cflags": None
+        if sets is None
+        else tuple(f.strip() for f in str(sets).split(",") if f.strip()),
+        "joints": args.joints or tuple(range(1, 13)),
+        "loop_scenarios": tuple(args.loop_scenarios.split(",")) if args.loop_scenarios else None,
+        "scaling_panda": not args.no_panda,
+        "logs": tuple(log_case(x) for x in args.logs) if args.logs else None,
+    }
+    return run_bench(options_from_args(BenchOptions, args, **given))
 
 
 def _parse_variant(items: Sequence[str]) -> tuple[str, list[str]]:

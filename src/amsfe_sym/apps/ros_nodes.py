@@ -15,7 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NoReturn
 
-from amsfe_sym.apps.arguments import DURATION, SEED, number_type
+from amsfe_sym.apps.arguments import DURATION, SEED, number_type, options_from_args
 from amsfe_sym.errors import ConfigError, describe
 
 __all__ = [
@@ -57,6 +57,12 @@ def _common(p: argparse.ArgumentParser) -> None:
         default=[],
         help="the rest goes to ROS 2 (e.g. -p topics.encoders:=/joint_states -p qos.depth:=10)",
     )
+
+
+def _impl_argument(p: argparse.ArgumentParser, help: str) -> None:
+    """``--impl auto|c|python``: the C path on rcl, the Python reference, or the C one when
+    it builds and runs this configuration (``auto``, the default)."""
+    p.add_argument("--impl", choices=("auto", "c", "python"), default="auto", help=help)
 
 
 def _scenario(args: argparse.Namespace, **over: Any) -> Any:
@@ -104,11 +110,9 @@ def add_sim_node_arguments(p: argparse.ArgumentParser) -> None:
         help="break the arm at T [s]: encoder_frozen, encoder_jump=RAD, torque_loss "
         "(docs/live-load.md)",
     )
-    p.add_argument(
-        "--impl",
-        choices=("auto", "c", "python"),
-        default="auto",
-        help="the arm in C on rcl (a real-time clock; auto: when it builds) or in Python "
+    _impl_argument(
+        p,
+        "the arm in C on rcl (a real-time clock; auto: when it builds) or in Python "
         '(docs/live-load.md, "The C arm")',
     )
 
@@ -238,11 +242,9 @@ def add_node_arguments(p: argparse.ArgumentParser) -> None:
         default="gravity",
         help="the fail-safe command: g(q_hat) or zero (docs/how-to/ros.md)",
     )
-    p.add_argument(
-        "--impl",
-        choices=("auto", "c", "python"),
-        default="auto",
-        help="the per-sample path: the C node on rcl (auto: when it builds and runs this "
+    _impl_argument(
+        p,
+        "the per-sample path: the C node on rcl (auto: when it builds and runs this "
         "configuration) or the Python reference (docs/live-control.md)",
     )
     p.add_argument(
@@ -411,7 +413,7 @@ def add_live_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--rate", type=SECONDS, default=1.0, help="free running: speed of the arm's clock"
     )
-    p.add_argument("--impl", choices=("auto", "c", "python"), default="auto")
+    _impl_argument(p, "the node's per-sample path, as amsfe node --impl")
     p.add_argument("--record", default=None, metavar="DIR", help="the node's record")
     p.add_argument("--topic-spec", default=None, metavar="FILE")
     p.add_argument(
@@ -436,19 +438,5 @@ def live_from_args(args: argparse.Namespace) -> int:
         inputs = [p for p in (args.scenario, args.topic_spec) if p and Path(p).exists()]
         check_output(Path(args.record), option="--record", kind="folder", inputs=inputs)
 
-    return run_pair(
-        PairOptions(
-            scenario=args.scenario,
-            controller=args.controller or None,
-            lockstep=args.lockstep,
-            duration=args.duration,
-            seed=args.seed,
-            rate=args.rate,
-            impl=args.impl,
-            record=args.record,
-            topic_spec=args.topic_spec,
-            ros_args=tuple(args.ros_args),
-            encoder_timeout=args.encoder_timeout,
-            command_timeout=args.command_timeout,
-        )
-    )
+    given = {"controller": args.controller or None, "ros_args": tuple(args.ros_args)}
+    return run_pair(options_from_args(PairOptions, args, **given))
