@@ -340,3 +340,13 @@ def test_the_api_page_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> N
     for code in blocks:
         exec(compile(code, "docs/api.md", "exec"), ns)
     assert list(tmp_path.iterdir()) == []  # the API wrote nothing here (a temporary bag)
+
+
+def test_the_package_root_names_the_api_and_nothing_else() -> None:
+    """The root's ``__all__`` (written out, so that importing the package imports nothing)
+    is the API's ``__all__`` plus the error base, the version and the two library loaders."""
+    from amsfe_sym import api
+
+    extra = {"AmsfeError", "__version__", "library_for", "load_library"}
+    assert sorted(am.__all__) == sorted({*api.__all__, *extra})
+    assert len(am.__all__) == len(set(am.__all__))

@@ -76,6 +76,9 @@ def test_bench_tick_routes_agree_on_paper_sim(libraries) -> None:
             assert r[route]["ticks"] == 300
             assert 0 < r[route]["median_us"] <= r[route]["p99_us"]
         assert r["compiled_with_law_us"] > r["compiled"]["median_us"]
+    frames = out["rows"][0]["late_frame"]  # oosm's frames, timed in the timer's second run
+    assert 0 < frames["applied"] <= frames["frames"] and frames["median_us"] > 0
+    assert "late_frame" not in out["rows"][1]  # the encoders alone take no frame
 
 
 @pytest.mark.slow

@@ -20,7 +20,6 @@ import signal
 import subprocess
 import sys
 import time
-from types import TracebackType
 
 from amsfe_sym.errors import ConfigError, describe
 
@@ -114,10 +113,5 @@ class CpuHogs:
             self.stop()
             raise
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    def __exit__(self, *exc_info: object) -> None:  # stopped however the block ends
         self.stop()

@@ -147,8 +147,7 @@ def write_params(
         raise ConfigError(
             describe("C node estimator", "the library's C one", type(est).__name__, "")
         )
-    p = est._params
-    if p.input_states or p.joint_torque or p.net_torque:
+    if est.effort.effort:  # input states, a joint torque or a net torque
         raise ConfigError(
             describe(
                 "the estimator of the C node",
@@ -157,6 +156,7 @@ def write_params(
                 "run amsfe node --impl python",
             )
         )
+    p = est._params
     qw, re, rc, x0, P0 = est._arrays[:5]
     timing = parts.timing
     enc_depth, cam_depth = queue_depths(

@@ -152,3 +152,14 @@ class Scenario:
         d = asdict(self)
         d.pop("source")
         return d
+
+
+#: The tables of a scenario's TOML and the value object each is read into (the field of
+#: :class:`Scenario` of the same name).
+SECTIONS: dict[str, Any] = {
+    "plant": PlantConfig,
+    "estimate0": EstimateInit,
+    "encoders": EncoderSettings,
+    "camera": CameraSettings,
+    "filter": FilterSettings,
+}

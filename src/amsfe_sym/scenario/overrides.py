@@ -9,15 +9,13 @@ from typing import Any
 
 from amsfe_sym.core.toml import tomllib
 from amsfe_sym.errors import ConfigError, describe
-from amsfe_sym.scenario.model import (
-    Scenario,
-)
-from amsfe_sym.scenario.read import _ROBOT_DEFAULT, _SECTIONS, validate
+from amsfe_sym.scenario.model import SECTIONS, Scenario
+from amsfe_sym.scenario.read import _ROBOT_DEFAULT, validate
 
 #: Top-level scenario keys ``--set`` may change (``seed`` and ``estimator`` are the study's).
 _TOP_SETTABLE = ("integrator", "duration", "controller")
 #: Dataclass sections of :class:`Scenario`.
-_SET_SECTIONS = tuple(_SECTIONS)
+_SET_SECTIONS = tuple(SECTIONS)
 #: Mapping-valued entries whose existing keys ``--set`` may change.
 _MAPPINGS = ("trajectory", "controller_gains", "estimate0.std")
 #: ``--set`` keys whose value may be ``"robot"`` (None: the robot's value).

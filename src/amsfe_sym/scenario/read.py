@@ -21,14 +21,7 @@ from amsfe_sym.core.values import (
 )
 from amsfe_sym.errors import ConfigError, check_known_keys, describe
 from amsfe_sym.load.spec import INTEGRATORS, data_dir
-from amsfe_sym.scenario.model import (
-    CameraSettings,
-    EncoderSettings,
-    EstimateInit,
-    FilterSettings,
-    PlantConfig,
-    Scenario,
-)
+from amsfe_sym.scenario.model import SECTIONS, Scenario
 
 
 def scenarios_dir() -> Path:
@@ -57,13 +50,6 @@ def find_scenario(name_or_path: str | os.PathLike[str]) -> Path:
     )
 
 
-_SECTIONS: dict[str, Any] = {
-    "plant": PlantConfig,
-    "estimate0": EstimateInit,
-    "encoders": EncoderSettings,
-    "camera": CameraSettings,
-    "filter": FilterSettings,
-}
 #: ``[camera]`` keys whose "the robot's" value is ``None`` (key left out, or ``"robot"``).
 _ROBOT_DEFAULT = ("period", "delay")
 _TOP = {
@@ -78,7 +64,7 @@ _TOP = {
     "controller_gains",
     "compare",
     "description",
-    *_SECTIONS,
+    *SECTIONS,
 }
 
 
@@ -101,7 +87,7 @@ def parse_scenario(data: Mapping[str, Any], path: Path) -> Scenario:
         if key not in data:
             raise ConfigError(describe(where, f"a {key!r} entry", "none", f"add {key}"))
     sections: dict[str, Any] = {}
-    for key, cls in _SECTIONS.items():
+    for key, cls in SECTIONS.items():
         raw = dict(data.get(key, {}))
         fields = {f.name for f in dataclasses.fields(cls)}
         bad = sorted(set(raw) - fields)
@@ -127,7 +113,7 @@ def parse_scenario(data: Mapping[str, Any], path: Path) -> Scenario:
         if k == "seed"
         else _typed(data[k], str(f.type), f"{where}: {k}")
         for f in dataclasses.fields(Scenario)
-        if (k := f.name) in data and k not in _SECTIONS and k != "compare"
+        if (k := f.name) in data and k not in SECTIONS and k != "compare"
     }
     robot = top["robot"]
     if not Path(robot).is_absolute() and (path.parent / robot).exists():

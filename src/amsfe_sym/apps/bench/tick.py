@@ -178,18 +178,25 @@ def build_tick_timer(workdir: Path) -> Path:
     return compile_program(_TIMER_SOURCE, exe, ["-ldl", "-lm"], "the C tick timer")
 
 
+def _run_timer(exe: Path, name: str, inp: TickInputs, workdir: Path, frames: bool) -> list[str]:
+    """The lines the C tick timer prints for estimator ``name`` over ``inp`` (the ticks, the
+    final x and, with ``frames``, the frames' cost: format in ``c/tick_timer.c``)."""
+    kind = "frames" if frames else "tick"
+    data = write_tick_input(workdir / f"{kind}-{name}.bin", name, inp, frames=frames)
+    proc = run_checked(
+        [str(exe), str(inp.lib.library_path), str(data)],
+        f"the C tick timer on {name}{' with frames' if frames else ''}",
+        "exit code 0",
+        "regenerate the library (amsfe generate --force) and retry",
+    )
+    return proc.stdout.split("\n")
+
+
 def compiled_tick(
     exe: Path, name: str, inp: TickInputs, workdir: Path
 ) -> tuple[TickStats, FloatArray]:
     """Per-tick cost of ``amsfe_est_tick`` in pure C; and the final x it printed."""
-    data = write_tick_input(workdir / f"tick-{name}.bin", name, inp)
-    proc = run_checked(
-        [str(exe), str(inp.lib.library_path), str(data)],
-        f"the C tick timer on {name}",
-        "exit code 0",
-        "regenerate the library (amsfe generate --force) and retry",
-    )
-    first, second = proc.stdout.split("\n")[:2]
+    first, second = _run_timer(exe, name, inp, workdir, frames=False)[:2]
     med, p99 = (float(v) / 1e3 for v in first.split())
     x = np.array([float(v) for v in second.split()])
     return TickStats(round(med, 4), round(p99, 4), len(inp.u)), x
@@ -217,14 +224,7 @@ def compiled_frames(exe: Path, name: str, inp: TickInputs, workdir: Path) -> Fra
     delivered after its tick (None when the run has none)."""
     if len(inp.frames) == 0:
         return None
-    data = write_tick_input(workdir / f"frames-{name}.bin", name, inp, frames=True)
-    proc = run_checked(
-        [str(exe), str(inp.lib.library_path), str(data)],
-        f"the C tick timer on {name} with frames",
-        "exit code 0",
-        "regenerate the library (amsfe generate --force) and retry",
-    )
-    med, p99, count, applied = proc.stdout.split("\n")[2].split()
+    med, p99, count, applied = _run_timer(exe, name, inp, workdir, frames=True)[2].split()
     us = round(float(med) / 1e3, 2), round(float(p99) / 1e3, 2)
     return FrameStats(us[0], us[1], int(count), int(applied))
 
