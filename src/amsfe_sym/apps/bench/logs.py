@@ -44,10 +44,6 @@ class LogCase:
     scenario: str
     duration: float
 
-    @property
-    def label(self) -> str:
-        return f"{self.scenario} {self.duration:g} s"
-
 
 #: Issue 26 item 8's logs: a 10 s 1 kHz 2-link log (target >= 100x real time end to end)
 #: and a 60 s 1 kHz Panda log with camera frames (>= 20x).
@@ -125,7 +121,8 @@ def bench_log_estimate(
     env = dict(os.environ)
     if generated is not None:
         env["AMSFE_GENERATED_DIR"] = generated
-    out: dict[str, Any] = {"log": case.label, "scenario": case.scenario}
+    label = f"{case.scenario} {case.duration:g} s"
+    out: dict[str, Any] = {"log": label, "scenario": case.scenario}
     try:
         bag = _write_log(case, folder / "log", env)
         runs = []
