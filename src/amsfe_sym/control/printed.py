@@ -11,7 +11,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from amsfe_sym.control.base import FloatArray, LawInputs, register
+from amsfe_sym.arrays import FloatArray
+from amsfe_sym.control.base import LawInputs, register
 from amsfe_sym.control.sliding import PAPER_GAINS, _SlidingBase
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.runtime.library import ModelLibrary

@@ -32,7 +32,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from amsfe_sym.control.base import Controller, FloatArray, LawInputs, handed_over, register
+from amsfe_sym.arrays import FloatArray
+from amsfe_sym.control.base import Controller, LawInputs, handed_over, register
 from amsfe_sym.control.blend import blend_offsets, blend_through, blend_time, blend_weight
 from amsfe_sym.errors import ConfigError, check_known_keys, describe
 from amsfe_sym.runtime.library import ModelLibrary

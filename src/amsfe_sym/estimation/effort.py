@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.core.values import EFFORT_KINDS
 from amsfe_sym.errors import ConfigError, ShapeError, check_known_keys, describe
 
@@ -65,7 +66,6 @@ __all__ = [
     "reconstruct_input",
 ]
 
-FloatArray = NDArray[np.float64]
 
 #: What a log's effort can be (see the module docstring).
 

@@ -23,8 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg as sla
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.errors import ConfigError, EstimatorError, ShapeError, describe
 from amsfe_sym.estimation.models import MeasurementModel, TransitionModel
 
@@ -42,7 +43,6 @@ __all__ = [
     "validate_spd",
 ]
 
-FloatArray = NDArray[np.float64]
 
 _POTRF, _POTRS = sla.get_lapack_funcs(("potrf", "potrs"), dtype=np.float64)
 

@@ -15,15 +15,13 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray, IntArray
 from amsfe_sym.logs.layout import UnusualError, walk_joint_state
 from amsfe_sym.logs.source import typestore
 
 __all__ = ["encode_joint_states", "reference_joint_states"]
 
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
 
 _NS = 1_000_000_000
 _INT32 = (-(2**31), 2**31 - 1)

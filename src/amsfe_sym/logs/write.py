@@ -22,8 +22,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.core.folders import FolderJob, write_folders
 from amsfe_sym.core.jsonfile import to_json
 from amsfe_sym.core.toml import dump_toml
@@ -46,7 +46,6 @@ __all__ = [
     "write_run_bag",
 ]
 
-FloatArray = NDArray[np.float64]
 
 #: Rate of the ``/tf`` messages [Hz] (enough to watch; the state topics carry every tick).
 TF_RATE_HZ = 100.0

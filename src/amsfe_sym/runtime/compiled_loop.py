@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.runtime.compiled_estimator import (
     CompiledEstimator,
@@ -50,8 +51,6 @@ __all__ = [
     "SimulationState",
     "write_loop_log",
 ]
-
-FloatArray = NDArray[np.float64]
 
 
 def _f64(values: Any, size: int | None = None) -> FloatArray:

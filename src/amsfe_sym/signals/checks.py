@@ -10,14 +10,14 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, TypeGuard
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.errors import ConfigError, MeasurementError, ShapeError, describe
 
 if TYPE_CHECKING:
     pass
 
-FloatArray = NDArray[np.float64]
 StdLike = float | Sequence[float]
 
 

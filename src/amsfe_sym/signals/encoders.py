@@ -13,8 +13,8 @@ from numpy.typing import ArrayLike
 if TYPE_CHECKING:
     pass
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.signals.checks import (
-    FloatArray,
     StdLike,
     _check_std,
     _per_joint,

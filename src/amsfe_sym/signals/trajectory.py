@@ -25,8 +25,9 @@ from collections.abc import Mapping, Sequence
 from typing import Any, Literal, NamedTuple
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.errors import ConfigError, ShapeError, describe
 
 __all__ = [
@@ -40,7 +41,6 @@ __all__ = [
     "tip_circle",
 ]
 
-FloatArray = NDArray[np.float64]
 Reading = Literal["corrected", "printed"]
 
 
