@@ -73,7 +73,7 @@ def test_bulk_equals_rosbags(case: tuple[list[int], list[str], list[Any], str]) 
     rows = [np.zeros((count, 0)) if f is None else f for f in fields]
     want = [_rosbags(s, names, [r[k] for r in rows], frame) for k, s in enumerate(stamps)]
     assert got == want
-    assert enc.reference_joint_states(stamps, names, *fields, frame=frame) == want
+    assert enc._reference_joint_states(stamps, names, rows, frame) == want
 
 
 def test_bulk_path_taken(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -83,7 +83,7 @@ def test_bulk_path_taken(monkeypatch: pytest.MonkeyPatch) -> None:
     def refused(*_: Any, **__: Any) -> Any:
         raise AssertionError("fell back to rosbags")
 
-    monkeypatch.setattr(enc, "reference_joint_states", refused)
+    monkeypatch.setattr(enc, "_reference_joint_states", refused)
     rng = np.random.default_rng(3)
     stamps = rng.integers(-(2**31) * NS, 2**31 * NS - 1, 50)
     p, v = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
@@ -114,7 +114,7 @@ def test_estimate_bag_equals_rosbags_one_by_one(tmp_path) -> None:
     writer it replaced: joint_state(...) through serialize_cdr, estimate and std per tick."""
     from rosbags.rosbag2 import Reader
 
-    from amsfe_sym.logs.write import joint_state, write_estimate_bag
+    from amsfe_sym.logs.write import write_estimate_bag
 
     rng = np.random.default_rng(5)
     K, names, t0 = 40, ["j1", "j2"], 12.345678901
@@ -123,14 +123,13 @@ def test_estimate_bag_equals_rosbags_one_by_one(tmp_path) -> None:
     P = rng.normal(size=(K, 5))  # negative variances: a std of 0, as before
     P[3, 1] = np.nan
     write_estimate_bag(tmp_path / "est", t0, t, names, x_hat, P)
-    ts = typestore()
     want = []
     for k, tk in enumerate(t):
         tt = t0 + float(tk)
         s = np.sqrt(np.maximum(P[k], 0.0))
         for topic, v in (("/amsfe/estimate", x_hat[k]), ("/amsfe/estimate_std", s)):
-            msg = joint_state(tt, names, v[:2], v[2:4])
-            want.append((topic, round(tt * 1e9), bytes(ts.serialize_cdr(msg, msg.__msgtype__))))
+            ns = round(tt * 1e9)
+            want.append((topic, ns, _rosbags(ns, names, [v[:2], v[2:4], np.zeros(0)], "")))
     with Reader(tmp_path / "est") as r:
         got = [(c.topic, tm, bytes(raw)) for c, tm, raw in r.messages()]
     assert got == want

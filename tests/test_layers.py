@@ -65,6 +65,7 @@ def test_the_check_can_fail() -> None:
 #: everywhere, nothing else of the root.
 ALLOWED: dict[str, set[str]] = {
     "errors": set(),
+    "arrays": set(),  # the array types: every room may import them (EVERYONE below)
     "core": {"errors"},
     "load": {"errors", "core"},
     "scenario": {"errors", "core", "load.spec"},
@@ -182,6 +183,9 @@ ALLOWED: dict[str, set[str]] = {
     "__main__": {"apps.cli"},
 }
 
+#: What every room may import besides its ALLOWED rooms: the array types (amsfe_sym.arrays).
+EVERYONE = {"arrays"}
+
 ROOT = Path(amsfe_sym.__file__).parent
 
 
@@ -243,7 +247,7 @@ def test_each_room_imports_only_earlier_ones() -> None:
                 if extra and "" not in ALLOWED[stage]:
                     bad.append(f"{module} imports {extra} from the package root")
                 continue
-            if not _allowed(target, ALLOWED[stage] | {stage}) or (
+            if not _allowed(target, ALLOWED[stage] | {stage} | EVERYONE) or (
                 _allowed(target, {"apps.cli"}) and module not in ("__main__", "apps.cli")
             ):
                 bad.append(f"{module} imports amsfe_sym.{target}")

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -18,12 +19,34 @@ from amsfe_sym.codegen import library_for
 from amsfe_sym.core.camera_frame import CameraFrame
 from amsfe_sym.errors import LogError
 from amsfe_sym.logs.source import typestore
-from amsfe_sym.logs.write import joint_state, write_run_bag
+from amsfe_sym.logs.write import write_run_bag
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.builders import build_estimator, build_sensors, scenario_timing
 from amsfe_sym.sim.loop import run
 
 ESTIMATORS = ("encoders", "naive", "oosm", "replay", "cloning")
+
+
+def joint_state(
+    t: float,
+    names: list[str],
+    position: np.ndarray | None = None,
+    velocity: np.ndarray | None = None,
+    effort: np.ndarray | None = None,
+) -> Any:
+    """A ``sensor_msgs/msg/JointState`` stamped ``t`` [s], built from rosbags' own types (as
+    the message-by-message writer built it; None: an empty field)."""
+    types = typestore().types
+    sec, nanosec = divmod(round(t * 1e9), 1_000_000_000)
+    stamp = types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
+    empty = np.zeros(0)
+    return types["sensor_msgs/msg/JointState"](
+        header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
+        name=list(names),
+        position=np.asarray(position if position is not None else empty, dtype=np.float64),
+        velocity=np.asarray(velocity if velocity is not None else empty, dtype=np.float64),
+        effort=np.asarray(effort if effort is not None else empty, dtype=np.float64),
+    )
 
 
 @pytest.fixture(scope="module")

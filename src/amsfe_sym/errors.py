@@ -96,16 +96,13 @@ class RunFolderError(AmsfeError, FileExistsError):
     or it is a file), or a file in it that the toolkit wrote is damaged (a sweep's part)."""
 
 
-def unknown_name(what: str, name: object, known: Iterable[str]) -> ConfigError:
-    """The error for a name that is not in a registry (``raise unknown_name(...)``): the
-    message lists the known names."""
+def unknown_name(
+    what: str, name: object, known: Iterable[str], fix: str = "pick a name from that list"
+) -> ConfigError:
+    """The error for a name that is not in a registry or not one of a setting's choices
+    (``raise unknown_name(...)``): the message lists the known names."""
     return ConfigError(
-        describe(
-            what,
-            "one of " + ", ".join(repr(n) for n in known),
-            repr(name),
-            "pick a name from that list",
-        )
+        describe(what, "one of " + ", ".join(repr(n) for n in known), repr(name), fix)
     )
 
 

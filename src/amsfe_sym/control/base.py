@@ -7,15 +7,13 @@ from collections.abc import Mapping
 from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
-from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.errors import ConfigError, check_known_keys, describe
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.signals.trajectory import Trajectory
 
 __all__ = ["CONTROLLERS", "Controller", "LawInputs", "handed_over", "make_controller", "register"]
-
-FloatArray = NDArray[np.float64]
 
 
 class LawInputs(NamedTuple):

@@ -28,7 +28,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numpy.typing import NDArray
+
+from amsfe_sym.arrays import FloatArray
 
 __all__ = [
     "A0",
@@ -41,7 +42,6 @@ __all__ = [
     "blend_weight",
 ]
 
-FloatArray = NDArray[np.float64]
 
 #: Coefficients (power basis, t^0 .. t^9) of b0 and b1 (exact rationals).
 B0 = (1.0, 0.0, 0.0, 0.0, 0.0, -126.0, 420.0, -540.0, 315.0, -70.0)

@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["control_metrics", "sliding_conditions"]
+from amsfe_sym.arrays import FloatArray
 
-FloatArray = NDArray[np.float64]
+__all__ = ["control_metrics", "sliding_conditions"]
 
 
 def _per_joint(v: FloatArray) -> list[float]:

@@ -11,9 +11,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from amsfe_sym.control.base import FloatArray, LawInputs, register
+from amsfe_sym.arrays import FloatArray
+from amsfe_sym.control.base import LawInputs, register
 from amsfe_sym.control.sliding import PAPER_GAINS, _SlidingBase
-from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.signals.trajectory import Trajectory
 
@@ -34,15 +34,7 @@ class _Printed(_SlidingBase):
         self, lib: ModelLibrary, trajectory: Trajectory, gains: Mapping[str, Any] | None = None
     ) -> None:
         super().__init__(lib, trajectory, gains)
-        if self.gains["qmd_next"] not in ("predict", "hold"):
-            raise ConfigError(
-                describe(
-                    f"controller {self.name!r} gain qmd_next",
-                    "'predict' or 'hold'",
-                    repr(self.gains["qmd_next"]),
-                    "see docs/explanation/control.md",
-                )
-            )
+        self._choice("qmd_next", ("predict", "hold"), "see docs/explanation/control.md")
         self._u_prev = np.zeros(self.n)
         self._vt_prev: FloatArray | None = None
 
@@ -93,15 +85,11 @@ class AmsfePaper(_Printed):
         self, lib: ModelLibrary, trajectory: Trajectory, gains: Mapping[str, Any] | None = None
     ) -> None:
         super().__init__(lib, trajectory, gains)
-        if self.gains["state"] not in ("estimate", "true"):
-            raise ConfigError(
-                describe(
-                    "controller 'amsfe-paper' gain state",
-                    "'estimate' (the fusion estimate) or 'true' (an oracle)",
-                    repr(self.gains["state"]),
-                    "see docs/explanation/control.md",
-                )
-            )
+        self._choice(
+            "state",
+            ("estimate", "true"),
+            "'estimate' (the fusion estimate) or 'true' (an oracle): docs/explanation/control.md",
+        )
 
     def _pick(self, x_true: FloatArray, theta_true: FloatArray, x_hat: FloatArray) -> FloatArray:
         if self.gains["state"] == "true":  # isolates the law from the estimator

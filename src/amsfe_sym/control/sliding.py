@@ -32,9 +32,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from amsfe_sym.control.base import Controller, FloatArray, LawInputs, handed_over, register
+from amsfe_sym.arrays import FloatArray
+from amsfe_sym.control.base import Controller, LawInputs, handed_over, register
 from amsfe_sym.control.blend import blend_offsets, blend_through, blend_time, blend_weight
-from amsfe_sym.errors import ConfigError, check_known_keys, describe
+from amsfe_sym.errors import ConfigError, check_known_keys, describe, unknown_name
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.signals.trajectory import Trajectory
 
@@ -84,6 +85,12 @@ class _SlidingBase(Controller):
 
     def _extra_gains(self) -> tuple[str, ...]:
         return ()
+
+    def _choice(self, key: str, choices: tuple[str, ...], fix: str) -> None:
+        """Refuse a word-valued gain ``key`` that is not one of ``choices``."""
+        value = self.gains[key]
+        if value not in choices:
+            raise unknown_name(f"controller {self.name!r} gain {key}", value, choices, fix)
 
     def _gain(self, key: str, size: int) -> FloatArray:
         raw = self.gains[key]
@@ -221,15 +228,7 @@ class _Cascade(_SlidingBase):
         self._c_hold: FloatArray | None = None
         self._m_hold: tuple[int, float, FloatArray, FloatArray] | None = None
         self._hold, self._run = np.ones(lib.n), np.zeros(lib.n)  # the law's ``hold`` input
-        if self.gains["startup"] not in self.STARTUPS:
-            raise ConfigError(
-                describe(
-                    f"controller {self.name!r} gain startup",
-                    f"one of {list(self.STARTUPS)}",
-                    repr(self.gains["startup"]),
-                    "see docs/explanation/control.md, Start-up",
-                )
-            )
+        self._choice("startup", self.STARTUPS, "see docs/explanation/control.md, Start-up")
         self._ready_std = (
             self._scalar("ready_q_std"),
             self._scalar("ready_qd_std"),
@@ -237,15 +236,7 @@ class _Cascade(_SlidingBase):
         self._ready_nis = self._scalar("ready_nis")
         self._nis_window = self._scalar("ready_nis_window")
         self._nis_mean, self._nis_count = 0.0, 0
-        if self.gains["hold"] not in self.HOLDS:
-            raise ConfigError(
-                describe(
-                    f"controller {self.name!r} gain hold",
-                    f"one of {list(self.HOLDS)}",
-                    repr(self.gains["hold"]),
-                    "see docs/explanation/control.md, Start-up",
-                )
-            )
+        self._choice("hold", self.HOLDS, "see docs/explanation/control.md, Start-up")
         self._mref = lib.function("control_motor_reference")
         if self.gains["hold"] == "auto":  # the motor hold for the paper's model (long waits)
             self.gains["hold"] = "motor" if lib.manifest.integrator == "paper" else "reference"

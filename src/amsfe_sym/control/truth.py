@@ -21,7 +21,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from amsfe_sym.control.base import Controller, FloatArray, LawInputs, register
+from amsfe_sym.arrays import FloatArray
+from amsfe_sym.control.base import Controller, LawInputs, register
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.signals.trajectory import Trajectory
 

@@ -27,15 +27,13 @@ from __future__ import annotations
 from typing import ClassVar
 
 import numpy as np
-from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.estimation.base import Estimator, StepInputs, StepReport
 from amsfe_sym.estimation.ekf import joseph_update, measure, predict, require_positive_definite
 
 __all__ = ["CloningEstimator"]
-
-FloatArray = NDArray[np.float64]
 
 
 class CloningEstimator(Estimator):

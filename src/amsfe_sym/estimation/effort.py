@@ -47,8 +47,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.core.values import EFFORT_KINDS
-from amsfe_sym.errors import ConfigError, ShapeError, check_known_keys, describe
+from amsfe_sym.errors import ConfigError, ShapeError, check_known_keys, describe, unknown_name
 
 __all__ = [
     "DEFAULT_JOINT_TORQUE_STD",
@@ -65,14 +66,28 @@ __all__ = [
     "reconstruct_input",
 ]
 
-FloatArray = NDArray[np.float64]
-
-#: What a log's effort can be (see the module docstring).
 
 #: How an estimator without the applied torque gets its input (``joint_torque``, ``none``):
 #: ``"state"``: u is n extra states, a random walk (``effort_models.InputStateTransition``);
 #: ``"reconstruct"``: u from the encoders (and tau_J), its noise in Q (module docstring).
 INPUT_MODELS = ("state", "reconstruct")
+
+#: The word-valued settings of :class:`EffortSpec`: where a user writes them, their choices,
+#: and what the choices mean (the fix an error names).
+_CHOICES: dict[str, tuple[str, tuple[str, ...], str]] = {
+    "kind": (
+        "[effort] kind",
+        EFFORT_KINDS,
+        '"applied" (motor torque), "joint_torque" (torque sensors) or "none"',
+    ),
+    "input_model": ("[effort] input_model", INPUT_MODELS, '"state" (the default) or "reconstruct"'),
+    "positions": (
+        "positions",
+        ("motor", "link"),
+        '"link" (the link angle q) for a Franka\'s /joint_states, else leave it out (the motor '
+        "angle qm)",
+    ),
+}
 
 #: Default diffusion of the input random walk [N m / sqrt(s)]: 3.2 N m a step at 1 kHz
 #: (chosen on seed 100 of paper-sim and panda-control, docs/explanation/effort.md).
@@ -122,33 +137,9 @@ class EffortSpec:
         return self.kind != "applied" and self.input_model == "state"
 
     def __post_init__(self) -> None:
-        if self.kind not in EFFORT_KINDS:
-            raise ConfigError(
-                describe(
-                    "[effort] kind",
-                    f"one of {list(EFFORT_KINDS)}",
-                    repr(self.kind),
-                    '"applied" (motor torque), "joint_torque" (torque sensors) or "none"',
-                )
-            )
-        if self.input_model not in INPUT_MODELS:
-            raise ConfigError(
-                describe(
-                    "[effort] input_model",
-                    f"one of {list(INPUT_MODELS)}",
-                    repr(self.input_model),
-                    '"state" (the default) or "reconstruct"',
-                )
-            )
-        if self.positions not in ("motor", "link"):
-            raise ConfigError(
-                describe(
-                    "positions",
-                    "'motor' (the motor angle qm) or 'link' (the link angle q)",
-                    repr(self.positions),
-                    '"link" for a Franka\'s /joint_states, else leave it out',
-                )
-            )
+        for key, (where, known, fix) in _CHOICES.items():
+            if getattr(self, key) not in known:
+                raise unknown_name(where, getattr(self, key), known, fix)
         for name in ("input_rate_std", "input_std0", "scale"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):

@@ -18,8 +18,9 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.estimation.effort import EffortSpec, MotorParams
 
 __all__ = [
@@ -32,8 +33,6 @@ __all__ = [
     "trapezoid_input_gain",
     "wrap_models",
 ]
-
-FloatArray = NDArray[np.float64]
 
 
 class SpringTorqueMeasurement:

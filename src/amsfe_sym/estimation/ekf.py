@@ -23,8 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg as sla
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.errors import ConfigError, EstimatorError, ShapeError, describe
 from amsfe_sym.estimation.models import MeasurementModel, TransitionModel
 
@@ -42,7 +43,6 @@ __all__ = [
     "validate_spd",
 ]
 
-FloatArray = NDArray[np.float64]
 
 _POTRF, _POTRS = sla.get_lapack_funcs(("potrf", "potrs"), dtype=np.float64)
 
@@ -189,6 +189,30 @@ class PredictResult:
     Q: FloatArray
 
 
+def _check_output(
+    what: str,
+    outputs: dict[str, tuple[FloatArray, tuple[int, ...]]],
+    finite: tuple[str, ...],
+    shape_fix: str,
+    finite_fix: str,
+) -> None:
+    """Refuse a model's outputs (name -> (array, expected shape)): a wrong shape raises
+    :class:`ShapeError`, NaN or inf in one of those named in ``finite`` :class:`EstimatorError`."""
+    if any(a.shape != shape for a, shape in outputs.values()):
+        raise ShapeError(
+            describe(
+                what,
+                ", ".join(f"{k} {shape}" for k, (_, shape) in outputs.items()),
+                ", ".join(f"{k} {a.shape}" for k, (a, _) in outputs.items()),
+                shape_fix,
+            )
+        )
+    if not all(np.isfinite(outputs[k][0]).all() for k in finite):
+        raise EstimatorError(
+            describe(what, "finite " + " and ".join(finite), "NaN or inf", finite_fix)
+        )
+
+
 def predict(model: TransitionModel, x: FloatArray, P: FloatArray, u: FloatArray) -> PredictResult:
     """EKF prediction, paper eqs. (13)-(14).
 
@@ -208,24 +232,13 @@ def predict(model: TransitionModel, x: FloatArray, P: FloatArray, u: FloatArray)
     nx = x.shape[0]
     x_next, A = model.step(x, u)
     Q = model.process_noise(x, u)
-    if x_next.shape != (nx,) or A.shape != (nx, nx) or Q.shape != (nx, nx):
-        raise ShapeError(
-            describe(
-                "transition model output",
-                f"x_next ({nx},), A ({nx}, {nx}), Qd ({nx}, {nx})",
-                f"x_next {x_next.shape}, A {A.shape}, Qd {Q.shape}",
-                "make step() and process_noise() return arrays of the model's nx",
-            )
-        )
-    if not (np.isfinite(x_next).all() and np.isfinite(A).all()):
-        raise EstimatorError(
-            describe(
-                "transition model output",
-                "finite x_next and jacobian",
-                "NaN or inf",
-                "check the state and input passed to step() (the state may have diverged)",
-            )
-        )
+    _check_output(
+        "transition model output",
+        {"x_next": (x_next, (nx,)), "A": (A, (nx, nx)), "Qd": (Q, (nx, nx))},
+        ("x_next", "A"),
+        "make step() and process_noise() return arrays of the model's nx",
+        "check the state and input passed to step() (the state may have diverged)",
+    )
     P_next = symmetrize(A @ P @ A.T + Q)
     return PredictResult(x=np.asarray(x_next, dtype=np.float64), P=P_next, A=A, Q=Q)
 
@@ -239,24 +252,13 @@ def measure(model: MeasurementModel, x: FloatArray) -> tuple[FloatArray, FloatAr
     """
     z_hat, H = model.predict(x)
     dim = model.dim
-    if z_hat.shape != (dim,) or H.shape != (dim, x.shape[0]):
-        raise ShapeError(
-            describe(
-                "measurement model output",
-                f"z_hat ({dim},) and H ({dim}, {x.shape[0]})",
-                f"z_hat {z_hat.shape} and H {H.shape}",
-                "make predict() return h(x) and dh/dx of the model's dim",
-            )
-        )
-    if not (np.isfinite(z_hat).all() and np.isfinite(H).all()):
-        raise EstimatorError(
-            describe(
-                "measurement model output",
-                "finite h(x) and dh/dx",
-                "NaN or inf",
-                "check the measurement model at the current state (it may have diverged)",
-            )
-        )
+    _check_output(
+        "measurement model output",
+        {"z_hat": (z_hat, (dim,)), "H": (H, (dim, x.shape[0]))},
+        ("z_hat", "H"),
+        "make predict() return h(x) and dh/dx of the model's dim",
+        "check the measurement model at the current state (it may have diverged)",
+    )
     return z_hat, H
 
 

@@ -19,8 +19,9 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 import scipy.linalg as sla
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.core.camera_frame import CameraFrame
 from amsfe_sym.errors import ModelError, ShapeError, describe
 
@@ -31,8 +32,6 @@ __all__ = [
     "MeasurementModel",
     "TransitionModel",
 ]
-
-FloatArray = NDArray[np.float64]
 
 
 @runtime_checkable

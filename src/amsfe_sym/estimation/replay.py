@@ -20,14 +20,12 @@ from __future__ import annotations
 from typing import ClassVar
 
 import numpy as np
-from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.errors import EstimatorError
 from amsfe_sym.estimation.base import Estimator, StepInputs, StepReport
 
 __all__ = ["ReplayEstimator"]
-
-FloatArray = NDArray[np.float64]
 
 
 class ReplayEstimator(Estimator):

@@ -33,13 +33,12 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.errors import EstimatorError, describe
 
 __all__ = ["FirstFrame", "LinkStart", "balance_candidates", "camera_seed", "static_link_start"]
 
-FloatArray = NDArray[np.float64]
 #: q -> tau(q) [N m]: the torque the springs hold at the first sample (gravity and Coriolis).
 Torque = Callable[[FloatArray], FloatArray]
 #: q -> (pixel y [px], dy/dq [px/rad]).

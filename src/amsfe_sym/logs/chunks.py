@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from amsfe_sym.arrays import IntArray
 from amsfe_sym.errors import LogError, describe
 from amsfe_sym.logs.layout import Payloads
 
@@ -27,8 +28,6 @@ __all__ = [
     "u64",
     "unreadable",
 ]
-
-IntArray = NDArray[np.int64]
 
 
 class NotIndexed(Exception):  # noqa: N818 - a signal to take the other path, not an error

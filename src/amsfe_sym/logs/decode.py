@@ -16,8 +16,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray, IntArray
 from amsfe_sym.errors import LogError, describe
 from amsfe_sym.logs.layout import (
     Encoding,
@@ -47,9 +47,6 @@ __all__ = [
     "deserialize",
     "typestore",
 ]
-
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
 
 
 @dataclass

@@ -15,15 +15,13 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray, IntArray
 from amsfe_sym.logs.layout import UnusualError, walk_joint_state
 from amsfe_sym.logs.source import typestore
 
-__all__ = ["encode_joint_states", "reference_joint_states"]
+__all__ = ["encode_joint_states"]
 
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
 
 _NS = 1_000_000_000
 _INT32 = (-(2**31), 2**31 - 1)
@@ -57,18 +55,12 @@ def _message(
     return bytes(ts.serialize_cdr(msg, JOINT_STATE))
 
 
-def reference_joint_states(
-    stamps_ns: Sequence[int] | IntArray,
-    names: Sequence[str],
-    position: FloatArray | None = None,
-    velocity: FloatArray | None = None,
-    effort: FloatArray | None = None,
-    frame: str = "",
+def _reference_joint_states(
+    stamps_ns: Sequence[int], names: Sequence[str], cols: Sequence[FloatArray], frame: str
 ) -> list[bytes]:
-    """The CDR payloads of the messages, ``rosbags``' ``serialize_cdr`` one by one (the
-    reference of :func:`encode_joint_states`; the same arguments)."""
-    count = len(stamps_ns)
-    cols = [_columns(v, count) for v in (position, velocity, effort)]
+    """The CDR payloads of the messages, ``rosbags``' ``serialize_cdr`` one by one: the
+    reference of :func:`encode_joint_states` and its fallback (``cols``: its position,
+    velocity and effort as (K, m) arrays)."""
     return [_message(int(s), names, [c[k] for c in cols], frame) for k, s in enumerate(stamps_ns)]
 
 
@@ -84,7 +76,8 @@ def encode_joint_states(
     messages k = 0..K-1 stamped ``stamps_ns[k]`` [ns] (sec = floor(ns / 1e9), nanosec = the
     rest, as the bag writer stamps them) with the joint ``names``, header ``frame`` and the
     rows ``position[k]``, ``velocity[k]``, ``effort[k]`` ((K, m) arrays [rad], [rad/s],
-    [N m]; None: an empty field).  The same bytes as :func:`reference_joint_states`."""
+    [N m]; None: an empty field).  The same bytes as ``rosbags``' ``serialize_cdr`` of each
+    message."""
     stamps = [int(s) for s in stamps_ns]
     count = len(stamps)
     cols = [_columns(v, count) for v in (position, velocity, effort)]
@@ -92,15 +85,15 @@ def encode_joint_states(
         return []
     sec = np.array([s // _NS for s in stamps], dtype=object)
     if min(sec) < _INT32[0] or max(sec) > _INT32[1]:
-        return reference_joint_states(stamps, names, cols[0], cols[1], cols[2], frame)
+        return _reference_joint_states(stamps, names, cols, frame)
     template = _message(0, names, [np.zeros(c.shape[1]) for c in cols], frame)
     try:
         layout = walk_joint_state(template, "cdr")
     except UnusualError:
-        return reference_joint_states(stamps, names, cols[0], cols[1], cols[2], frame)
+        return _reference_joint_states(stamps, names, cols, frame)
     counts = [c for _, c in layout.arrays]
     if layout.names != tuple(names) or counts != [c.shape[1] for c in cols]:
-        return reference_joint_states(stamps, names, cols[0], cols[1], cols[2], frame)
+        return _reference_joint_states(stamps, names, cols, frame)
     length = len(template)
     data = np.tile(np.frombuffer(template, dtype=np.uint8), (count, 1))
     at = layout.stamp

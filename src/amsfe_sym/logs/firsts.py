@@ -14,15 +14,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import NDArray
 
+from amsfe_sym.arrays import IntArray
 from amsfe_sym.logs.chunks import NotIndexed, checked_chunks, cut, summary_of
 from amsfe_sym.logs.source import TopicData, TopicInfo, direct_mcap, log_topics
 from amsfe_sym.logs.source import first_payloads as by_message
 
 __all__ = ["first_messages", "first_payloads"]
-
-IntArray = NDArray[np.int64]
 
 
 def first_payloads(

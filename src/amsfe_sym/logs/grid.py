@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from amsfe_sym.arrays import IntArray
 from amsfe_sym.errors import LogError
 
 __all__ = [
@@ -26,7 +27,6 @@ __all__ = [
     "period_digits",
 ]
 
-IntArray = NDArray[np.int64]
 
 #: An encoder stamp whose (log time - stamp) is this far from the median is skipped [s] (a
 #: stamp from another clock or a corrupt one); at least 100 T and 10 x the offset's spread.

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from amsfe_sym.arrays import IntArray
 from amsfe_sym.core.camera_frame import CameraFrame
 from amsfe_sym.errors import LogError, describe
 from amsfe_sym.logs.decode import Points, deserialize
@@ -28,8 +29,6 @@ from amsfe_sym.vision.sim_images import SimulatedCamera
 from amsfe_sym.vision.spec import CAMERA_INFO, MarkerSpec
 
 __all__ = ["CameraInfos", "decoders", "image_frames", "image_messages"]
-
-IntArray = NDArray[np.int64]
 
 
 @dataclass

@@ -23,6 +23,8 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray, IntArray
+
 __all__ = [
     "MAX_LAYOUTS",
     "Encoding",
@@ -37,8 +39,6 @@ __all__ = [
     "walk_point",
 ]
 
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
 
 #: How payloads are serialized: ``cdr`` (ROS 2: rosbag2, MCAP) or ``ros1`` (a ROS 1 ``.bag``).
 Encoding = Literal["cdr", "ros1"]

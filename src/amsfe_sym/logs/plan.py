@@ -19,8 +19,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from amsfe_sym.arrays import IntArray
 from amsfe_sym.errors import AmsfeError, LogError, describe
 from amsfe_sym.logs.decode import JointStates, decode_joint_states, decode_strings
 from amsfe_sym.logs.firsts import first_payloads
@@ -39,7 +39,6 @@ __all__ = [
     "refuse",
 ]
 
-IntArray = NDArray[np.int64]
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 #: The input roles a log is read for (``config`` is read by :func:`read_config`).

@@ -41,8 +41,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray, IntArray
 from amsfe_sym.core.camera_frame import CameraFrame
 from amsfe_sym.errors import describe
 from amsfe_sym.logs.decode import (
@@ -81,9 +81,6 @@ __all__ = [
     "read_config",
     "read_log",
 ]
-
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
 
 
 @dataclass

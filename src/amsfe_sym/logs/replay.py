@@ -17,6 +17,7 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray, IntArray
 from amsfe_sym.core.camera_frame import CameraFrame
 from amsfe_sym.estimation.base import Estimator, StepReport
 from amsfe_sym.logs.read import RobotLog
@@ -24,8 +25,6 @@ from amsfe_sym.sim.result import DECISION_COUNTERS, count_decisions, refusal_kin
 
 __all__ = ["FrameNis", "LogEstimate", "estimate_log"]
 
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
 
 #: Logs shorter than this many ticks get no progress bar.
 PROGRESS_MIN_TICKS = 5000

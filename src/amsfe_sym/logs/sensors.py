@@ -10,17 +10,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray, IntArray
 from amsfe_sym.core.camera_frame import CameraFrame
 from amsfe_sym.logs.grid import VALUE_MAX, ClockOffset, RoleUse, TickGrid, count_skip
 from amsfe_sym.logs.plan import JOINT_STATE, LogPlan, joint_columns, refuse
 from amsfe_sym.logs.spec import LogSpec
 
 __all__ = ["HeldEffort", "OnGrid", "camera_frames", "held_effort", "truth_on_grid"]
-
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
 
 
 @dataclass(frozen=True)

@@ -20,8 +20,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from amsfe_sym.arrays import IntArray
 from amsfe_sym.errors import LogError, describe
 from amsfe_sym.logs.chunks import unreadable
 from amsfe_sym.logs.decode import Encoding, deserialize, typestore
@@ -36,8 +36,6 @@ __all__ = [
     "log_topics",
     "typestore",
 ]
-
-IntArray = NDArray[np.int64]
 
 
 @dataclass(frozen=True)

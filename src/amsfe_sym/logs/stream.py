@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from amsfe_sym.arrays import IntArray
 from amsfe_sym.errors import LogError, describe
 from amsfe_sym.logs.chunks import (
     NotIndexed,
@@ -57,7 +58,6 @@ __all__ = [
     "read_topics",
 ]
 
-IntArray = NDArray[np.int64]
 Decoded = JointStates | Points | Float64Arrays | Strings
 
 #: Messages decoded at once on the message-by-message path (bounds the raw bytes held).

@@ -22,8 +22,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.core.folders import FolderJob, write_folders
 from amsfe_sym.core.jsonfile import to_json
 from amsfe_sym.core.toml import dump_toml
@@ -39,14 +39,12 @@ if TYPE_CHECKING:
 __all__ = [
     "TF_RATE_HZ",
     "bag_job",
-    "joint_state",
     "run_bag_filler",
     "tf_builder",
     "write_estimate_bag",
     "write_run_bag",
 ]
 
-FloatArray = NDArray[np.float64]
 
 #: Rate of the ``/tf`` messages [Hz] (enough to watch; the state topics carry every tick).
 TF_RATE_HZ = 100.0
@@ -64,24 +62,6 @@ def _header_ns(ns: int, frame: str = "") -> Any:
     ts = typestore().types
     stamp = ts["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
     return ts["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
-
-
-def joint_state(
-    t: float,
-    names: Sequence[str],
-    position: FloatArray | None = None,
-    velocity: FloatArray | None = None,
-    effort: FloatArray | None = None,
-) -> Any:
-    """A ``sensor_msgs/msg/JointState`` stamped ``t`` [s]."""
-    empty = np.zeros(0)
-    return typestore().types["sensor_msgs/msg/JointState"](
-        header=_header(t),
-        name=list(names),
-        position=np.asarray(position if position is not None else empty, dtype=np.float64),
-        velocity=np.asarray(velocity if velocity is not None else empty, dtype=np.float64),
-        effort=np.asarray(effort if effort is not None else empty, dtype=np.float64),
-    )
 
 
 class _Bag:

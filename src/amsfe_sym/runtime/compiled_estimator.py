@@ -22,8 +22,8 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
-from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.core.values import BACKWARD_MAPS
 from amsfe_sym.errors import ConfigError, EstimatorError, describe, unknown_name
 from amsfe_sym.estimation.base import Estimator, StepInputs, StepReport
@@ -45,7 +45,6 @@ __all__ = [
     "write_log",
 ]
 
-FloatArray = NDArray[np.float64]
 
 #: Status codes of amsfe_runtime.h.
 STATUS = {

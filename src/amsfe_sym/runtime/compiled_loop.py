@@ -24,7 +24,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.arrays import FloatArray
+from amsfe_sym.errors import ConfigError, describe, unknown_name
 from amsfe_sym.runtime.compiled_estimator import (
     CompiledEstimator,
     estimator_log_lines,
@@ -50,8 +51,6 @@ __all__ = [
     "SimulationState",
     "write_loop_log",
 ]
-
-FloatArray = NDArray[np.float64]
 
 
 def _f64(values: Any, size: int | None = None) -> FloatArray:
@@ -100,13 +99,11 @@ class ControllerParams:
     def struct(self) -> ctypes.Structure:
         """The C struct (its arrays are kept alive by this object)."""
         if self.name not in CONTROLLER_CODES:
-            raise ConfigError(
-                describe(
-                    "compiled controller name",
-                    f"one of {sorted(CONTROLLER_CODES)}",
-                    repr(self.name),
-                    "use a controller the C runtime has, or --runtime python",
-                )
+            raise unknown_name(
+                "compiled controller name",
+                self.name,
+                sorted(CONTROLLER_CODES),
+                "use a controller the C runtime has, or --runtime python",
             )
         n = self.u_max.size
         arrays: dict[str, Any] = {}

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.estimation.effort import MotorParams
 from amsfe_sym.estimation.effort_models import (
@@ -37,8 +38,6 @@ from amsfe_sym.estimation.effort_models import (
 from amsfe_sym.runtime.models import CameraMeasurement, CompiledTransition, EncoderMeasurement
 
 __all__ = ["EffortParts", "effort_parts"]
-
-FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True)

@@ -13,13 +13,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.errors import ConfigError, ShapeError, describe
 from amsfe_sym.runtime.cheader import c_struct
 from amsfe_sym.runtime.compiled_estimator import STATUS, CompiledEstimator
 
 __all__ = ["BatchResult", "run_log"]
 
-FloatArray = NDArray[np.float64]
 
 _Log = c_struct("_Log", "amsfe_runtime.h", "amsfe_est_log")
 _LogOut = c_struct("_LogOut", "amsfe_runtime.h", "amsfe_est_log_out")

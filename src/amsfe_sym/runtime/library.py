@@ -194,12 +194,18 @@ class ModelLibrary:
 
     Args:
         path: ``generated/<name>/`` or its ``manifest.json``.
+
+    Attributes:
+        name, n, p, N, T: The manifest's robot name, joints n, parameters p, state size
+            N = 4n + p and sampling interval T [s].
     """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
         p = Path(path)
         mpath = p / "manifest.json" if p.is_dir() else p
         self.manifest: Manifest = read_manifest(mpath)
+        m = self.manifest
+        self.name, self.n, self.p, self.N, self.T = m.name, m.n, m.p, m.N, m.T
         self.dir = mpath.parent
         self.library_path = self.dir / self.manifest.library
         _verify_library(self.library_path, self.manifest.raw.get("library_sha256"))
@@ -237,26 +243,6 @@ class ModelLibrary:
         import casadi as ca
 
         return ca.external(name, str(self.library_path))
-
-    @property
-    def name(self) -> str:
-        return self.manifest.name
-
-    @property
-    def n(self) -> int:
-        return self.manifest.n
-
-    @property
-    def p(self) -> int:
-        return self.manifest.p
-
-    @property
-    def N(self) -> int:
-        return self.manifest.N
-
-    @property
-    def T(self) -> float:
-        return self.manifest.T
 
     @cached_property
     def layout(self) -> dict[str, slice]:

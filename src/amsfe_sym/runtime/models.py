@@ -9,8 +9,9 @@ compiled C functions through the preallocated ctypes binding.
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.errors import ConfigError, ConvergenceError, ShapeError, describe
 from amsfe_sym.runtime.library import ModelLibrary
 
@@ -21,8 +22,6 @@ __all__ = [
     "inverse_not_converged",
     "noise_covariance",
 ]
-
-FloatArray = NDArray[np.float64]
 
 
 def noise_covariance(

@@ -20,7 +20,8 @@ from amsfe_sym.errors import ConfigError, MeasurementError, ShapeError, describe
 if TYPE_CHECKING:
     from amsfe_sym.load.spec import CameraSpec
 
-from amsfe_sym.signals.checks import FloatArray, _is_int, _positive_int
+from amsfe_sym.arrays import FloatArray
+from amsfe_sym.signals.checks import _is_int, _positive_int
 
 __all__ = ["Camera", "CameraConfig", "CameraFrame", "CameraStats"]
 

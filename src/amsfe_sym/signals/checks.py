@@ -7,17 +7,14 @@ import math
 import numbers
 import operator
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, TypeGuard
+from typing import TypeGuard
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.errors import ConfigError, MeasurementError, ShapeError, describe
 
-if TYPE_CHECKING:
-    pass
-
-FloatArray = NDArray[np.float64]
 StdLike = float | Sequence[float]
 
 
@@ -30,6 +27,32 @@ def _is_int(value: object) -> TypeGuard[numbers.Integral]:
     return isinstance(value, numbers.Integral) and not isinstance(value, bool)
 
 
+def _flat_floats(value: object, what: str) -> FloatArray:
+    """``value``, a number or a flat sequence of numbers, as a non-empty 1-D float array (a
+    number: shape (1,)), not yet checked for finiteness."""
+    try:
+        arr = np.atleast_1d(np.asarray(value, dtype=float))
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(
+            describe(
+                what,
+                "a number or a list of numbers",
+                repr(value),
+                "write a number or a list like [0.0, 0.0] without quotes",
+            )
+        ) from exc
+    if arr.ndim != 1 or arr.size == 0:
+        raise ConfigError(
+            describe(
+                what,
+                "a number or a non-empty flat list (one value per joint)",
+                f"shape {arr.shape}",
+                "write one number, or one number per joint in a flat list",
+            )
+        )
+    return arr
+
+
 def _check_std(value: object, what: str) -> StdLike:
     """Validate a scalar or per-joint standard deviation; return a float or a tuple."""
     if isinstance(value, numbers.Real) and not isinstance(value, bool):
@@ -39,21 +62,7 @@ def _check_std(value: object, what: str) -> StdLike:
                 describe(what, "a finite standard deviation >= 0", repr(value), "use e.g. 1e-4")
             )
         return v
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(
-            describe(what, "a number or a sequence of numbers", repr(value), "use e.g. 1e-4")
-        ) from exc
-    if arr.ndim != 1 or arr.size == 0:
-        raise ConfigError(
-            describe(
-                what,
-                "a scalar or a non-empty 1-D sequence (one value per joint)",
-                f"shape {arr.shape}",
-                "give one number or a list with one number per joint",
-            )
-        )
+    arr = _flat_floats(value, what)
     if not np.all(np.isfinite(arr)) or np.any(arr < 0.0):
         raise ConfigError(
             describe(

@@ -5,22 +5,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-if TYPE_CHECKING:
-    pass
-
-from amsfe_sym.signals.checks import (
-    FloatArray,
-    StdLike,
-    _check_std,
-    _per_joint,
-    _positive_int,
-    _vector,
-)
+from amsfe_sym.arrays import FloatArray
+from amsfe_sym.signals.checks import StdLike, _check_std, _per_joint, _positive_int, _vector
 
 __all__ = ["Disturbance", "EncoderConfig", "Encoders", "TorqueNoise"]
 

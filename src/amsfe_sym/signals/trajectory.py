@@ -25,9 +25,11 @@ from collections.abc import Mapping, Sequence
 from typing import Any, Literal, NamedTuple
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.errors import ConfigError, ShapeError, describe
+from amsfe_sym.signals.checks import _flat_floats
 
 __all__ = [
     "KINDS",
@@ -40,7 +42,6 @@ __all__ = [
     "tip_circle",
 ]
 
-FloatArray = NDArray[np.float64]
 Reading = Literal["corrected", "printed"]
 
 
@@ -124,26 +125,7 @@ class Trajectory(ABC):
 
 def _vector(value: Any, what: str) -> FloatArray:
     """A finite 1-D float vector from a scalar or a sequence (scalars give shape (1,))."""
-    try:
-        arr = np.atleast_1d(np.asarray(value, dtype=float))
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(
-            describe(
-                what,
-                "a number or a list of numbers",
-                repr(value),
-                "write a number or a list like [0.0, 0.0] without quotes",
-            )
-        ) from exc
-    if arr.ndim != 1 or arr.size == 0:
-        raise ConfigError(
-            describe(
-                what,
-                "a number or a non-empty flat list",
-                f"shape {arr.shape}",
-                "write one number per joint in a flat list",
-            )
-        )
+    arr = _flat_floats(value, what)
     if not np.all(np.isfinite(arr)):
         raise ConfigError(
             describe(what, "finite numbers", repr(value), "replace nan/inf by finite numbers")

@@ -41,6 +41,14 @@ static inline void *carve(carver *c, size_t bytes) {
 
 #define DBL(c, count) ((double *)carve((c), sizeof(double) * (size_t)(count)))
 
+/* The carver of an object's layout: the object itself (`head` bytes) is its block's first
+ * piece, the arrays it points to follow. */
+static inline carver carve_object(char *base, size_t head) {
+  carver c = {base, 0};
+  carve(&c, head);
+  return c;
+}
+
 /* Carve the work arrays of the largest of `count` generated functions. */
 static inline void carve_work(carver *c, const cwork *works, size_t count, gwork *g) {
   cint sa = 0, sr = 0, si = 0, sw = 0;

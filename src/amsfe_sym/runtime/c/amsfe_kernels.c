@@ -282,28 +282,32 @@ int amsfe_lu_solve(int N, double *restrict A, double *restrict b) {
   return 1;
 }
 
-/* The Joseph-form update (eqs. 15-17) of (x, P), M x M, with a measurement that selects the
- * states rows[0..m) with noise variances r[m] (ekf.joseph_update with H = I[rows, :]).
- * nu = z - x[rows]; S = P[rows, rows] + diag(r); K = P[:, rows] S^-1;
- * x+ = x + P[:, rows] S^-1 nu; P+ = (I - K H) P (I - K H)^T + K diag(r) K^T, evaluated as
- * P + V K^T + K V^T with V = K S / 2 - P[:, rows] (equal for any K).  Writes x2, P2 (exactly
- * symmetric), *nis, nu[m]; returns 0 when S is not positive definite (then only nu is
- * written).  w: AMSFE_JOSEPH_WORK(M, m) doubles. */
-KERNEL_CLONES int amsfe_joseph_select(int M, int m, const int *restrict rows,
-                                      const double *restrict r, const double *restrict x,
-                                      const double *restrict P, const double *restrict z,
-                                      double *restrict x2, double *restrict P2,
-                                      double *restrict nis, double *restrict nu,
-                                      double *restrict w) {
-  /* W = [V | K | V] (M x 3m): [V | K] and [K | V] are both contiguous column blocks */
-  double *restrict V = w, *restrict K = w + (long)M * m, *restrict V2 = K + (long)M * m;
-  double *restrict Pn = V2 + (long)M * m, *restrict S = Pn + (long)M * m;
-  double *restrict Sh = S + m * m, *restrict Ls = Sh + m * m, *restrict sn = Ls + m * m;
-  for (int a = 0; a < m; ++a) nu[a] = z[a] - x[rows[a]];
-  for (int b = 0; b < m; ++b) /* S = H P H^T + R, symmetrised as the reference does */
+/* The work block w of both Joseph-form updates (AMSFE_JOSEPH_WORK(M, m) doubles):
+ * W = [V | K | V2] (M x 3m: [V | K] and [K | V2] are both contiguous column blocks), Pn (M x
+ * m), then S, Sh, Ls (m x m) and sn [m].  The callers fill Pn and S, joseph_finish the rest. */
+#define JOSEPH_PN(w, M, m) ((w) + 3L * (M) * (m))
+#define JOSEPH_S(w, M, m) ((w) + 4L * (M) * (m))
+
+/* S = sym(X[rows, rows]) + diag(r) (m x m) for the selection H = I[rows, :] of an M x M X. */
+static void select_cov(int M, int m, const int *restrict rows, const double *restrict r,
+                       const double *restrict X, double *restrict S) {
+  for (int b = 0; b < m; ++b) /* symmetrised as the reference does */
     for (int a = 0; a < m; ++a)
-      AT(S, a, b, m) = 0.5 * (AT(P, rows[a], rows[b], M) + AT(P, rows[b], rows[a], M)) +
+      AT(S, a, b, m) = 0.5 * (AT(X, rows[a], rows[b], M) + AT(X, rows[b], rows[a], M)) +
                        (a == b ? r[a] : 0.0);
+}
+
+/* The Joseph-form update once Pn = -P H^T and S = sym(H P H^T) + diag(r) stand in w: S's
+ * Cholesky factor, *nis = nu^T S^-1 nu, x+ = x + P H^T S^-1 nu, and P+ = (I - K H) P (I -
+ * K H)^T + K diag(r) K^T, evaluated as P + V K^T + K V^T with K = P H^T S^-1 and V = K S / 2
+ * - P H^T (equal for any K).  Returns 0 when S is not positive definite (x2, P2 unwritten). */
+KERNEL_CLONES static int joseph_finish(int M, int m, const double *restrict x,
+                                       const double *restrict P, const double *restrict nu,
+                                       double *restrict x2, double *restrict P2,
+                                       double *restrict nis, double *restrict w) {
+  double *restrict V = w, *restrict K = w + (long)M * m, *restrict V2 = K + (long)M * m;
+  double *restrict Pn = JOSEPH_PN(w, M, m), *restrict S = JOSEPH_S(w, M, m);
+  double *restrict Sh = S + m * m, *restrict Ls = Sh + m * m, *restrict sn = Ls + m * m;
   if (!amsfe_cholesky(m, S, Ls)) return 0;
   for (int a = 0; a < m; ++a) sn[a] = nu[a];
   amsfe_chol_solve(m, Ls, sn);
@@ -312,13 +316,9 @@ KERNEL_CLONES int amsfe_joseph_select(int M, int m, const int *restrict rows,
   *nis = s;
   for (int i = 0; i < M; ++i) x2[i] = x[i]; /* x+ = x + P H^T S^-1 nu */
   for (int a = 0; a < m; ++a) {
-    const double *restrict pa = P + (long)rows[a] * M;
-    double *restrict na = Pn + (long)a * M;
+    const double *restrict na = Pn + (long)a * M;
     double f = sn[a];
-    for (int i = 0; i < M; ++i) {
-      x2[i] += pa[i] * f;
-      na[i] = -pa[i]; /* -P H^T */
-    }
+    for (int i = 0; i < M; ++i) x2[i] -= na[i] * f;
   }
   /* K = P H^T S^-1 as one register-tiled product with S^-1 = Li^T Li, Li = Ls^-1 (m^3/2
    * flops on m x m; column solves of K over M rows were 2/3 of this kernel's instructions).
@@ -340,6 +340,29 @@ KERNEL_CLONES int amsfe_joseph_select(int M, int m, const int *restrict rows,
   return 1;
 }
 
+/* The Joseph-form update (eqs. 15-17) of (x, P), M x M, with a measurement that selects the
+ * states rows[0..m) with noise variances r[m] (ekf.joseph_update with H = I[rows, :]).
+ * nu = z - x[rows]; S = P[rows, rows] + diag(r); K = P[:, rows] S^-1;
+ * x+ = x + P[:, rows] S^-1 nu; P+ = (I - K H) P (I - K H)^T + K diag(r) K^T (joseph_finish).
+ * Writes x2, P2 (exactly symmetric), *nis, nu[m]; returns 0 when S is not positive definite
+ * (then only nu is written).  w: AMSFE_JOSEPH_WORK(M, m) doubles. */
+KERNEL_CLONES int amsfe_joseph_select(int M, int m, const int *restrict rows,
+                                      const double *restrict r, const double *restrict x,
+                                      const double *restrict P, const double *restrict z,
+                                      double *restrict x2, double *restrict P2,
+                                      double *restrict nis, double *restrict nu,
+                                      double *restrict w) {
+  double *restrict Pn = JOSEPH_PN(w, M, m);
+  for (int a = 0; a < m; ++a) nu[a] = z[a] - x[rows[a]];
+  for (int a = 0; a < m; ++a) { /* Pn = -P H^T = -P[:, rows] */
+    const double *restrict pa = P + (long)rows[a] * M;
+    double *restrict na = Pn + (long)a * M;
+    for (int i = 0; i < M; ++i) na[i] = -pa[i];
+  }
+  select_cov(M, m, rows, r, P, JOSEPH_S(w, M, m));
+  return joseph_finish(M, m, x, P, nu, x2, P2, nis, w);
+}
+
 /* oosm.a1_retrodict with the encoders' selection H (eqs. 24-27 corrected), M states:
  * W = S^-1 H Q with S = P_prior[rows, rows] + diag(r) (the last encoder update's),
  * x_shift = x - Q H^T S^-1 nu, Pvv = Q - Q H^T W, Pxv = Q - P_prior H^T W,
@@ -359,10 +382,7 @@ KERNEL_CLONES int amsfe_a1_retrodict(int M, int m, const int *restrict rows,
     memcpy(QHt + (long)a * M, Q + (long)rows[a] * M, sizeof(double) * (size_t)M);
     memcpy(PpHt + (long)a * M, Pp + (long)rows[a] * M, sizeof(double) * (size_t)M);
   }
-  for (int b = 0; b < m; ++b)
-    for (int a = 0; a < m; ++a)
-      AT(S, a, b, m) = 0.5 * (AT(Pp, rows[a], rows[b], M) + AT(Pp, rows[b], rows[a], M)) +
-                       (a == b ? r[a] : 0.0);
+  select_cov(M, m, rows, r, Pp, S);
   return amsfe_a1_retrodict_cols(M, m, S, QHt, PpHt, x, P, Q, nu, xs, Mo, C, S + m * m);
 }
 
@@ -379,9 +399,8 @@ KERNEL_CLONES int amsfe_joseph_rows(int M, int m, const int *restrict hrow,
                                     const double *restrict P, const double *restrict nu,
                                     double *restrict x2, double *restrict P2,
                                     double *restrict nis, double *restrict w) {
-  double *restrict V = w, *restrict K = w + (long)M * m, *restrict V2 = K + (long)M * m;
-  double *restrict Pn = V2 + (long)M * m, *restrict S = Pn + (long)M * m;
-  double *restrict Sh = S + m * m, *restrict Ls = Sh + m * m, *restrict sn = Ls + m * m;
+  double *restrict Pn = JOSEPH_PN(w, M, m), *restrict S = JOSEPH_S(w, M, m);
+  double *restrict T = S + m * m; /* T = H P H^T, where joseph_finish's Sh goes */
   for (int a = 0; a < m; ++a) { /* Pn = -P H^T, column a from the nonzeros of row a */
     double *restrict na = Pn + (long)a * M;
     for (int i = 0; i < M; ++i) na[i] = 0.0;
@@ -392,7 +411,6 @@ KERNEL_CLONES int amsfe_joseph_rows(int M, int m, const int *restrict hrow,
     }
     for (int i = 0; i < M; ++i) na[i] = -na[i];
   }
-  double *restrict T = Sh; /* T = H P H^T (Sh is written after S is used) */
   for (int b = 0; b < m; ++b)
     for (int a = 0; a < m; ++a) {
       double v = 0.0;
@@ -402,33 +420,7 @@ KERNEL_CLONES int amsfe_joseph_rows(int M, int m, const int *restrict hrow,
   for (int b = 0; b < m; ++b) /* S = sym(H P H^T) + R, as the reference symmetrises it */
     for (int a = 0; a < m; ++a)
       AT(S, a, b, m) = 0.5 * (AT(T, a, b, m) + AT(T, b, a, m)) + (a == b ? r[a] : 0.0);
-  if (!amsfe_cholesky(m, S, Ls)) return 0;
-  for (int a = 0; a < m; ++a) sn[a] = nu[a];
-  amsfe_chol_solve(m, Ls, sn);
-  double s = 0.0;
-  for (int a = 0; a < m; ++a) s += nu[a] * sn[a];
-  *nis = s;
-  for (int i = 0; i < M; ++i) x2[i] = x[i]; /* x+ = x + P H^T S^-1 nu */
-  for (int a = 0; a < m; ++a) {
-    const double *restrict na = Pn + (long)a * M;
-    double f = sn[a];
-    for (int i = 0; i < M; ++i) x2[i] -= na[i] * f;
-  }
-  double *restrict Li = V, *restrict Si = V2; /* as amsfe_joseph_select */
-  amsfe_tri_inverse(m, Ls, Li);
-  for (int b = 0; b < m; ++b)
-    for (int a = b; a < m; ++a) {
-      double v = 0.0;
-      for (int k = a; k < m; ++k) v += AT(Li, k, a, m) * AT(Li, k, b, m);
-      AT(Si, a, b, m) = v, AT(Si, b, a, m) = v;
-    }
-  tiles_sub(M, m, 0, 0, 0, 0, m, Pn, Si, 1, m, NULL, K); /* K = -(-P H^T) S^-1 */
-  for (int i = 0; i < m * m; ++i) Sh[i] = 0.5 * S[i];
-  tiles(M, m, 0, 0, 0, 0, m, K, Sh, 1, m, Pn, V); /* V = K S / 2 - P H^T */
-  memcpy(V2, V, sizeof(double) * (size_t)M * (size_t)m);
-  tiles(M, M, 0, 1, 0, 0, 2 * m, V, K, M, 1, P, P2); /* lower of P + [V K] [K V]^T */
-  amsfe_mirror_lower(M, P2);
-  return 1;
+  return joseph_finish(M, m, x, P, nu, x2, P2, nis, w);
 }
 
 /* amsfe_a1_retrodict for any encoder H, given through QHt = Q H^T, PpHt = P_prior H^T (M x m

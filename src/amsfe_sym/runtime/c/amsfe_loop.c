@@ -31,6 +31,13 @@ static const cwork WORKS[] = {control_amsfe_work,       control_dtsmc_work,
                               mass_matrix_work,         bias_work,
                               control_motor_reference_work};
 
+/* The library's dimensions (amsfe_dims_get) as a value. */
+static amsfe_dims dims_now(void) {
+  amsfe_dims d;
+  amsfe_dims_get(&d);
+  return d;
+}
+
 /* ================================================================== controller */
 struct amsfe_ctrl {
   amsfe_ctrl_params par; /* its pointers point into this block */
@@ -79,13 +86,11 @@ struct amsfe_ctrl {
 };
 
 static int ctrl_layout(amsfe_ctrl *c, char *base) {
-  amsfe_dims d;
-  amsfe_dims_get(&d);
+  const amsfe_dims d = dims_now();
   long n = d.n, N = d.N;
-  carver cv = {base, 0};
   amsfe_ctrl tmp;
-  if (!c) c = &tmp;
-  carve(&cv, sizeof(amsfe_ctrl));
+  if (!c) c = &tmp; /* only measuring: the pointers go to a scratch object */
+  carver cv = carve_object(base, sizeof(amsfe_ctrl));
   double **vecs[] = {&c->h,  &c->lam,     &c->Lt, &c->eps, &c->phi, &c->wm,
                      &c->tau_max, &c->wf, &c->vmax, &c->u_max, &c->Mm, &c->Fm,
                      &c->Ks, &c->zeros, &c->u_prev, &c->vt_prev, &c->prev_qm_d,
@@ -122,8 +127,7 @@ static int vec_ok(const double *v, int n, double low, int strict, int inf_ok) {
  * within the library's (issue 20: NaN gains or a negative u_max used to run for tens of
  * ticks before failing elsewhere). */
 static int ctrl_params_ok(const amsfe_ctrl_params *p) {
-  amsfe_dims d;
-  amsfe_dims_get(&d);
+  const amsfe_dims d = dims_now();
   int n = d.n;
   if (!p || p->controller < AMSFE_CTRL_AMSFE || p->controller > AMSFE_CTRL_TRUTH_CT) return 0;
   if (!(p->T > 0) || !isfinite(p->T) || !p->ks_theta || !p->theta_initial) return 0;
@@ -723,13 +727,11 @@ struct amsfe_sim {
 };
 
 static size_t sim_layout(amsfe_sim *s, const amsfe_sim_params *p, char *base) {
-  amsfe_dims d;
-  amsfe_dims_get(&d);
+  const amsfe_dims d = dims_now();
   long n = d.n, N = d.N;
-  carver cv = {base, 0};
   amsfe_sim tmp;
-  if (!s) s = &tmp;
-  carve(&cv, sizeof(amsfe_sim));
+  if (!s) s = &tmp; /* only measuring, as ctrl_layout */
+  carver cv = carve_object(base, sizeof(amsfe_sim));
   s->queue = (pending *)carve(&cv, sizeof(pending) * (size_t)p->max_in_flight);
   s->due = (amsfe_frame *)carve(&cv, sizeof(amsfe_frame) * (size_t)p->max_in_flight);
   s->status = (int *)carve(&cv, sizeof(int) * (size_t)p->max_in_flight);

@@ -192,10 +192,9 @@ static size_t layout(amsfe_est *e, const amsfe_params *p, char *base) {
   long B = p->buffer_steps, R = B + 1, F = p->max_frames_per_step;
   long S = d.clone_slots, Na = (1 + S) * N;
   int est = p->estimator;
-  carver c = {base, 0};
   amsfe_est tmp;
-  if (!e) e = &tmp;
-  carve(&c, sizeof(amsfe_est));
+  if (!e) e = &tmp; /* only measuring: the pointers go to a scratch object */
+  carver c = carve_object(base, sizeof(amsfe_est));
   e->seen = (long *)carve(&c, sizeof(long) * (size_t)R);
   e->x = DBL(&c, N), e->P = DBL(&c, NN), e->x0 = DBL(&c, N), e->P0 = DBL(&c, NN);
   e->qw = DBL(&c, d.nw), e->re = DBL(&c, d.ne), e->rc = DBL(&c, d.nc);
