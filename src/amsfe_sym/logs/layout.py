@@ -69,6 +69,12 @@ class Payloads(Sequence[bytes]):
         start = int(self.offsets[i])
         return self.buffer[start : start + int(self.lengths[i])].tobytes()
 
+    def view(self, i: int) -> NDArray[np.uint8]:
+        """Payload ``i`` as a view of the buffer (no copy: an image's pixels stay where the
+        chunk put them)."""
+        start = int(self.offsets[i])
+        return self.buffer[start : start + int(self.lengths[i])]
+
     def rows(self, index: IntArray, length: int) -> NDArray[np.uint8]:
         """Payloads ``index`` (all ``length`` bytes long) as a (len(index), length) array."""
         if length == 0:
