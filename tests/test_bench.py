@@ -36,6 +36,7 @@ def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path
     argv = ["bench", "--repeat", "200", "--rounds", "2", "--duration", "0.2", "--joints", "1"]
     argv += ["--no-panda", "--scaling-loop-duration", "0.2"]
     argv += ["--loop-duration", "0.3", "--loop-scenarios", "paper-sim", "--logs", "paper-sim:0.3"]
+    argv += ["--vision-frames", "4"]  # (tests/test_bench_vision.py checks that section)
     assert main([*argv, "--json", str(out_json)]) == 0
     out = capsys.readouterr().out
     for section in (
@@ -46,6 +47,7 @@ def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path
         "5. sc",
         "closed loop: paper-sim",
         "6. amsfe estimate",
+        "7. camera chain",
     ):
         assert section in out
     for row in ("cold (force", "cached (second", *CALL_FUNCTIONS, "ekf_predict"):

@@ -375,6 +375,7 @@ def _bench(args: argparse.Namespace) -> int:
             scaling_panda=not args.no_panda,
             scaling_loop_duration=args.scaling_loop_duration,
             logs=tuple(log_case(x) for x in args.logs) if args.logs else None,
+            vision_frames=args.vision_frames,
         )
     )
 

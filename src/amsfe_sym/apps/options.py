@@ -74,9 +74,15 @@ def add_bench_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--skip",
         nargs="+",
-        choices=["generation", "calls", "estimators", "tick", "loop", "scaling", "logs"],
+        choices=["generation", "calls", "estimators", "tick", "loop", "scaling", "logs", "vision"],
         default=[],
         help="sections to leave out",
+    )
+    p.add_argument(
+        "--vision-frames",
+        type=COUNT,
+        default=150,
+        help="frames per pass of the camera chain's section (vision; default 150)",
     )
     p.add_argument(
         "--joints",

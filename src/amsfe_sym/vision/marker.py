@@ -61,7 +61,7 @@ class MarkerDetector:
     windows alone.
 
     Sub-pixel refinement: ``CORNER_REFINE_SUBPIX`` (``cornerSubPix`` on each corner,
-    stopping at 0.01 px or 50 iterations) in a half-window of ``relative_window`` of the
+    stopping at 1e-4 px or 100 iterations) in a half-window of ``relative_window`` of the
     marker's module (bit) size, at most ``refine_window`` px.  OpenCV's default 0.3 left
     markers of 20-40 px at 0.5 px RMS on the renders of tests/test_vision_marker.py; 0.8 at
     0.11-0.14 px (docs/camera.md, "Accuracy").
@@ -100,8 +100,9 @@ class MarkerDetector:
         params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
         params.cornerRefinementWinSize = self._window[0]
         params.relativeCornerRefinmentWinSize = self._window[1]  # (OpenCV's spelling)
-        params.cornerRefinementMaxIterations = 50
-        params.cornerRefinementMinAccuracy = 0.01
+        params.cornerRefinementMaxIterations = 100
+        params.cornerRefinementMinAccuracy = 1e-4  # (0.01 left the result 3e-3 px on
+        # where the iteration started: a region of interest's contour starts elsewhere)
         if window is not None:
             params.adaptiveThreshWinSizeMin = int(window)
             params.adaptiveThreshWinSizeMax = int(window)
