@@ -136,9 +136,10 @@ def add_bench_arguments(p: argparse.ArgumentParser) -> None:
         "--logs",
         nargs="+",
         default=None,
-        metavar="SCENARIO:SECONDS",
+        metavar="SCENARIO:SECONDS[:CAMERA]",
         help="logs amsfe estimate is timed on, simulated with --bag (default paper-sim:10 "
-        "panda-control:60)",
+        "panda-control:60); CAMERA: a 30 Hz camera writing 'pixels' or 'images' "
+        "(e.g. paper-sim:60:images)",
     )
     p.add_argument(
         "--ros",
