@@ -104,3 +104,32 @@ def test_bad_payloads_go_to_the_reference_and_are_refused(ros1: bool, cut: str) 
     with pytest.raises(LogError) as err:
         image_message(bad, msgtype, encoding, "topic /cam")  # type: ignore[arg-type]
     assert "\n" not in str(err.value) and "topic /cam" in str(err.value)
+
+
+def test_the_centres_of_a_log_match_one_frame_at_a_time() -> None:
+    """``points_of`` takes every frame's centre at once (:func:`diagonals_meet_many`): the
+    same numbers as :func:`tracked_point` frame by frame, for the centre and a corner."""
+    from amsfe_sym.vision.camera_info import make_camera_info, undistort
+    from amsfe_sym.vision.detections import Detections, points_of
+    from amsfe_sym.vision.marker import tracked_point
+    from amsfe_sym.vision.spec import MarkerSpec
+
+    rng = np.random.default_rng(3)
+    M = 50
+    centre = rng.uniform(100, 400, (M, 1, 2))
+    corners = (
+        centre + rng.normal(0, 3, (M, 4, 2)) + 15 * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]])
+    )
+    reason = np.where(rng.uniform(size=M) < 0.2, 1, 0)
+    corners[reason == 1] = np.nan
+    det = Detections(np.arange(M, dtype=np.int64), corners, reason, np.tile([640, 480], (M, 1)))
+    K = [[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]]
+    info = make_camera_info(640, 480, "plumb_bob", K, (-0.12, 0.04, 0.0005, -0.0003, 0.0))
+    for point in ("centre", "bottom_left"):
+        got = points_of(det, info, MarkerSpec(point=point))  # type: ignore[arg-type]
+        for i in range(M):
+            if reason[i]:
+                assert np.isnan(got[i]).all()
+            else:
+                want = tracked_point(undistort(info, corners[i]), point)
+                assert np.abs(got[i] - want).max() < 1e-9, (point, i)

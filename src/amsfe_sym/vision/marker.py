@@ -17,6 +17,7 @@ __all__ = [
     "Detection",
     "MarkerDetector",
     "diagonals_meet",
+    "diagonals_meet_many",
     "single_threaded",
     "tracked_point",
 ]
@@ -193,6 +194,16 @@ def diagonals_meet(corners: FloatArray) -> FloatArray:
     a, b, c, d = (np.append(p, 1.0) for p in np.asarray(corners, dtype=np.float64))
     x = np.cross(np.cross(a, c), np.cross(b, d))
     out: FloatArray = x[:2] / x[2]
+    return out
+
+
+def diagonals_meet_many(corners: FloatArray) -> FloatArray:
+    """:func:`diagonals_meet` of many quadrilaterals (M, 4, 2) [px] at once -> (M, 2) [px]
+    (the same homogeneous cross products, written out: a log's frames in one pass)."""
+    c = np.asarray(corners, dtype=np.float64)
+    a, b, cc, d = (np.concatenate([c[:, k], np.ones((len(c), 1))], axis=1) for k in range(4))
+    x = np.cross(np.cross(a, cc), np.cross(b, d))
+    out: FloatArray = x[:, :2] / x[:, 2:]
     return out
 
 
