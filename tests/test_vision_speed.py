@@ -133,3 +133,19 @@ def test_the_centres_of_a_log_match_one_frame_at_a_time() -> None:
             else:
                 want = tracked_point(undistort(info, corners[i]), point)
                 assert np.abs(got[i] - want).max() < 1e-9, (point, i)
+
+
+def test_small_slices_join_into_the_same_payloads() -> None:
+    """``Payloads.join`` (the log reader decoding a topic's small slices together, as a log
+    of images cuts them): the same payloads in order, out of buffers it no longer holds."""
+    rng = np.random.default_rng(5)
+    raws = [rng.integers(0, 256, rng.integers(0, 40), dtype=np.uint8).tobytes() for _ in range(30)]
+    parts = []
+    for a, b in ((0, 7), (7, 8), (8, 21), (21, 30)):
+        pad = b"\xff" * 11
+        whole = Payloads.of([pad, *raws[a:b], pad])  # (a chunk's buffer around them)
+        parts.append(Payloads(whole.buffer, whole.offsets[1:-1], whole.lengths[1:-1]))
+    joined = Payloads.join(parts)
+    assert list(joined) == raws
+    assert joined.buffer.size == sum(len(r) for r in raws)
+    assert not any(np.shares_memory(joined.buffer, p.buffer) for p in parts)
