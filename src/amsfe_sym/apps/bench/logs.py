@@ -40,10 +40,12 @@ PHASES = ("startup_s", "setup_s", "library_s", "read_s", "estimate_s", "write_s"
 
 #: A log case's camera besides the scenario's own: a 30 Hz camera (period and delay 33 ticks
 #: of the paper's 1 ms) writing its pixel topic (``pixels``) or its images (``images``,
-#: ``amsfe simulate --images``: mono8 Images + CameraInfo; docs/camera.md, "Speed").
+#: ``amsfe simulate --images``: mono8 Images + CameraInfo; ``jpeg``: jpeg CompressedImages;
+#: docs/camera.md, "Speed").
 CAMERAS: dict[str, list[str]] = {
     "pixels": ["--set", "camera.period=33", "--set", "camera.delay=33"],
     "images": ["--set", "camera.period=33", "--set", "camera.delay=33", "--images"],
+    "jpeg": ["--set", "camera.period=33", "--set", "camera.delay=33", "--images", "jpeg"],
 }
 
 
