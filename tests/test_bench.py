@@ -36,6 +36,7 @@ def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path
     argv = ["bench", "--repeat", "200", "--rounds", "2", "--duration", "0.2", "--joints", "1"]
     argv += ["--no-panda", "--scaling-loop-duration", "0.2"]
     argv += ["--loop-duration", "0.3", "--loop-scenarios", "paper-sim", "--logs", "paper-sim:0.3"]
+    argv += ["--vision-frames", "4"]  # (tests/test_bench_vision.py checks that section)
     assert main([*argv, "--json", str(out_json)]) == 0
     out = capsys.readouterr().out
     for section in (
@@ -46,6 +47,7 @@ def test_bench_prints_every_row_and_the_routes_agree(capsys, libraries, tmp_path
         "5. sc",
         "closed loop: paper-sim",
         "6. amsfe estimate",
+        "7. camera chain",
     ):
         assert section in out
     for row in ("cold (force", "cached (second", *CALL_FUNCTIONS, "ekf_predict"):
@@ -164,7 +166,9 @@ def test_time_calls_sizes_rounds_by_budget() -> None:
     assert 0 < t.min_us <= t.median_us
 
 
-@pytest.mark.parametrize("text", ["paper-sim", "paper-sim:0", "paper-sim:x", ":10", "a:inf"])
+@pytest.mark.parametrize(
+    "text", ["paper-sim", "paper-sim:0", "paper-sim:x", ":10", "a:inf", "paper-sim:images"]
+)
 def test_a_bad_log_case_is_one_line(text: str) -> None:
     from amsfe_sym.apps.bench.logs import log_case
     from amsfe_sym.errors import ConfigError
@@ -173,3 +177,6 @@ def test_a_bad_log_case_is_one_line(text: str) -> None:
         log_case(text)
     assert "\n" not in str(exc.value) and "paper-sim:10" in str(exc.value)
     assert log_case("panda-control:60").duration == 60.0
+    case = log_case("paper-sim:60:images")
+    assert (case.scenario, case.duration, case.camera) == ("paper-sim", 60.0, "images")
+    assert log_case("paper-sim:60:pixels").label == "paper-sim 60 s, 30 Hz pixels"

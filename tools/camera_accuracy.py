@@ -4,8 +4,8 @@
    simulated camera through each lens (blur 0.8 px, noise 4 grey levels), detected,
    undistorted and compared with the generated camera map: RMS per axis, 90th percentile
    and worst error [px], frames missed; for a 10 cm and a 17 cm marker (~27 and ~45 px).
-2. Speed: decoding a 640 x 512 mono8 ``sensor_msgs/Image`` (CDR) + detection + undistortion
-   per frame, median and 90th percentile [ms], one process.
+2. (Speed is ``amsfe bench``'s section 7, ``vision``, and its ``--logs ...:images``:
+   docs/camera.md, "Speed".)
 3. End to end (issue 35's done-when): ``amsfe simulate --controller amsfe --seed S --bag``
    with and without ``--images``, each estimated by ``amsfe estimate BAG --robot
    paper_2link``: link-angle RMSE of both and their ratio per joint.
@@ -15,7 +15,7 @@
 
 Writes docs/data/camera-accuracy.json and prints the tables:
 
-    .venv/bin/python tools/camera_accuracy.py [--frames 60] [--seeds 17 18 19]
+    .venv/bin/python tools/camera_accuracy.py [--frames 60] [--seeds 17 18 19] [--long]
 """
 
 from __future__ import annotations
@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import json
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +30,6 @@ import numpy as np
 from amsfe_sym.codegen import library_for
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.vision.camera_info import make_camera_info, undistort
-from amsfe_sym.vision.images import grey_from_message
 from amsfe_sym.vision.marker import MarkerDetector, tracked_point
 from amsfe_sym.vision.render import ImageNoise, MarkerRenderer, marker_corners
 from amsfe_sym.vision.sim_images import LENSES
@@ -71,55 +69,6 @@ def accuracy(lib, lens: str, size: float, frames: int, seed: int) -> dict:
         "p90_px": round(float(np.percentile(a, 90)), 3),
         "max_px": round(float(a.max()), 3),
     }
-
-
-def speed(lib, frames: int) -> dict:
-    from rosbags.typesys import Stores, get_typestore
-
-    ts = get_typestore(Stores.ROS2_HUMBLE)
-    cam = lib.manifest.camera
-    info = make_camera_info(
-        cam.width, cam.height, *LENSES["plumb_bob"][:1], np.asarray(cam.K), LENSES["plumb_bob"][1]
-    )
-    spec = MarkerSpec(size=0.1)
-    renderer, detector = MarkerRenderer(info, spec, ImageNoise()), MarkerDetector(spec)
-    point = lib.function("tracked_point")
-    rng = np.random.default_rng(1)
-    raws = []
-    for _ in range(frames):
-        r = np.asarray(point(rng.uniform(-1.5, 1.5, lib.n), lib.theta_true)[0]).ravel()
-        img = renderer.render(marker_corners(cam.K, cam.R_cw, cam.position, r, 0.1), rng)
-        stamp = ts.types["builtin_interfaces/msg/Time"](sec=1, nanosec=0)
-        msg = ts.types["sensor_msgs/msg/Image"](
-            header=ts.types["std_msgs/msg/Header"](stamp=stamp, frame_id="camera"),
-            height=img.shape[0], width=img.shape[1], encoding="mono8", is_bigendian=0,
-            step=img.shape[1], data=img.ravel(),
-        )  # fmt: skip
-        raws.append(ts.serialize_cdr(msg, "sensor_msgs/msg/Image"))
-    import os
-
-    out: dict = {"frames": frames, "image": f"{cam.width} x {cam.height} mono8"}
-    out["load_average_1min_before"] = round(os.getloadavg()[0], 2)  # (2 cores shared)
-    # the whole image, then a region of interest around the corners the same image gave
-    # (the log reader's case: the previous frame's corners, a marker that moved little)
-    found: list = []
-    for name in ("full", "roi"):
-        ms = []
-        for i, raw in enumerate(raws):
-            near = found[i] if name == "roi" else None
-            t0 = time.perf_counter()
-            msg = ts.deserialize_cdr(raw, "sensor_msgs/msg/Image")
-            grey = grey_from_message(msg, "sensor_msgs/msg/Image")
-            det = detector.detect(grey.pixels, near)
-            if det.corners is not None:
-                tracked_point(undistort(info, det.corners), "centre")
-            ms.append((time.perf_counter() - t0) * 1e3)
-            if name == "full":
-                found.append(det.corners)
-        out[f"{name}_median_ms"] = round(float(np.median(ms)), 2)
-        out[f"{name}_p90_ms"] = round(float(np.percentile(ms, 90)), 2)
-        out[f"{name}_frames_per_s"] = round(1e3 / float(np.median(ms)), 1)
-    return out
 
 
 def end_to_end(seed: int, tmp: Path) -> dict:
@@ -187,7 +136,6 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=60)
     ap.add_argument("--seeds", type=int, nargs="*", default=[17, 18, 19])
-    ap.add_argument("--speed-only", action="store_true", help="only part 2, into --out's speed")
     ap.add_argument("--long", action="store_true", help="only part 4 (60 s, 30 Hz), into --out")
     ap.add_argument(
         "--out", default=str(Path(__file__).parent.parent / "docs/data/camera-accuracy.json")
@@ -202,13 +150,6 @@ def main() -> None:
         doc = json.loads(path.read_text()) if path.is_file() else {}
         path.write_text(json.dumps({**doc, "long_log": lg}, indent=1) + "\n")
         return
-    if args.speed_only:  # part 2 again, into the stored file (a quieter machine)
-        sp = speed(lib, args.frames)
-        print(sp)
-        path = Path(args.out)
-        doc = json.loads(path.read_text()) if path.is_file() else {}
-        path.write_text(json.dumps({**doc, "speed": sp}, indent=1) + "\n")
-        return
     acc = [
         accuracy(lib, lens, size, args.frames, 100 + i)
         for i, (lens, size) in enumerate((lens, size) for size in (0.1, 0.17) for lens in LENSES)
@@ -220,13 +161,6 @@ def main() -> None:
             f"| {a['lens']} | {a['marker_m']} m | {a['frames']} | {a['missed']} | "
             f"{a['rms_px'][0]}, {a['rms_px'][1]} | {a['p90_px']} | {a['max_px']} |"
         )
-    sp = speed(lib, args.frames)
-    for name in ("full", "roi"):
-        print(
-            f"decode + detect ({name}) + undistort, {sp['image']}: median "
-            f"{sp[name + '_median_ms']} ms, p90 {sp[name + '_p90_ms']} ms "
-            f"({sp[name + '_frames_per_s']} frames/s)"
-        )
     with tempfile.TemporaryDirectory() as d:
         e2e = [end_to_end(s, Path(d)) for s in args.seeds]
     for e in e2e:
@@ -234,9 +168,10 @@ def main() -> None:
             f"seed {e['seed']}: RMSE q pixels {e['rmse_q_pixels']}, images {e['rmse_q_images']}, "
             f"ratio {e['ratio']}, frames {e['frames_pixels']} / {e['frames_images']}"
         )
-    Path(args.out).write_text(
-        json.dumps({"accuracy": acc, "speed": sp, "end_to_end": e2e}, indent=1) + "\n"
-    )
+    path = Path(args.out)
+    doc = json.loads(path.read_text()) if path.is_file() else {}
+    kept = {"long_log": doc["long_log"]} if "long_log" in doc else {}
+    path.write_text(json.dumps({"accuracy": acc, "end_to_end": e2e, **kept}, indent=1) + "\n")
     print(f"wrote {args.out}")
 
 

@@ -74,9 +74,15 @@ def add_bench_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--skip",
         nargs="+",
-        choices=["generation", "calls", "estimators", "tick", "loop", "scaling", "logs"],
+        choices=["generation", "calls", "estimators", "tick", "loop", "scaling", "logs", "vision"],
         default=[],
         help="sections to leave out",
+    )
+    p.add_argument(
+        "--vision-frames",
+        type=COUNT,
+        default=150,
+        help="frames per pass of the camera chain's section (vision; default 150)",
     )
     p.add_argument(
         "--joints",
@@ -130,9 +136,10 @@ def add_bench_arguments(p: argparse.ArgumentParser) -> None:
         "--logs",
         nargs="+",
         default=None,
-        metavar="SCENARIO:SECONDS",
+        metavar="SCENARIO:SECONDS[:CAMERA]",
         help="logs amsfe estimate is timed on, simulated with --bag (default paper-sim:10 "
-        "panda-control:60)",
+        "panda-control:60); CAMERA: a 30 Hz camera writing 'pixels' or 'images' "
+        "(e.g. paper-sim:60:images)",
     )
     p.add_argument(
         "--ros",

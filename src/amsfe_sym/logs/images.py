@@ -21,10 +21,12 @@ from amsfe_sym.core.camera_frame import CameraFrame
 from amsfe_sym.errors import LogError, describe
 from amsfe_sym.logs.decode import Points, deserialize
 from amsfe_sym.logs.grid import RoleUse, count_skip
+from amsfe_sym.logs.image_wire import image_message
 from amsfe_sym.logs.plan import LogPlan
 from amsfe_sym.logs.sensors import OnGrid, camera_frames
 from amsfe_sym.vision.camera_info import CameraInfo, camera_info_from_message
 from amsfe_sym.vision.detections import REASONS, Detections, ImageDecoder, image_sizes, points_of
+from amsfe_sym.vision.marker import single_threaded
 from amsfe_sym.vision.sim_images import SimulatedCamera
 from amsfe_sym.vision.spec import CAMERA_INFO, MarkerSpec
 
@@ -59,12 +61,14 @@ def _decode_infos(raws: Sequence[bytes], encoding: str = "cdr", where: str = "")
 
 def decoders(plan: LogPlan, marker: MarkerSpec) -> dict[str, Any]:
     """The log reader's decoders of an image camera topic and its CameraInfo topic (none
-    for a pixel topic)."""
+    for a pixel topic): images read in place (:mod:`amsfe_sym.logs.image_wire`), OpenCV
+    on one thread (:func:`amsfe_sym.vision.marker.single_threaded`)."""
     if plan.camera_info is None:
         return {}
+    single_threaded()
     image = plan.roles["camera"]
     return {
-        image: ImageDecoder(plan.topics[image].msgtype, marker, deserialize),
+        image: ImageDecoder(plan.topics[image].msgtype, marker, image_message),
         plan.camera_info: _decode_infos,
     }
 

@@ -69,6 +69,26 @@ class Payloads(Sequence[bytes]):
         start = int(self.offsets[i])
         return self.buffer[start : start + int(self.lengths[i])].tobytes()
 
+    @classmethod
+    def join(cls, parts: Sequence[Payloads]) -> Payloads:
+        """Several slices as one, their bytes copied out of their buffers (a chunk's buffer
+        is not held: only the payloads' own bytes)."""
+        lengths = np.concatenate([p.lengths for p in parts]) if parts else np.zeros(0, np.int64)
+        starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)[: lengths.size]
+        pieces = []
+        for p in parts:
+            at = np.concatenate([[0], np.cumsum(p.lengths)[:-1]]).astype(np.int64)
+            gather = np.repeat(p.offsets - at[: p.lengths.size], p.lengths)
+            pieces.append(p.buffer[gather + np.arange(gather.size)])
+        buffer = np.concatenate(pieces) if pieces else np.zeros(0, np.uint8)
+        return cls(buffer, starts, lengths.astype(np.int64))
+
+    def view(self, i: int) -> NDArray[np.uint8]:
+        """Payload ``i`` as a view of the buffer (no copy: an image's pixels stay where the
+        chunk put them)."""
+        start = int(self.offsets[i])
+        return self.buffer[start : start + int(self.lengths[i])]
+
     def rows(self, index: IntArray, length: int) -> NDArray[np.uint8]:
         """Payloads ``index`` (all ``length`` bytes long) as a (len(index), length) array."""
         if length == 0:

@@ -135,19 +135,44 @@ class _Parts:
         self.times: list[IntArray] = []
         self.decoded: list[Any] = []
         self.raw: list[bytes] = []
+        # small slices of a bulk-decoded topic, copied out and decoded together: a log whose
+        # chunks are cut small by large messages (images) would otherwise decode its
+        # encoders ~100 messages a call (bounded as the message path: SLICE, SLICE_BYTES)
+        self._pending: list[Payloads] = []
+        self._held = (0, 0)  # (messages, bytes) pending
+        self._where = ""
 
     def add(self, times: IntArray, payloads: Payloads, where: str) -> None:
         self.times.append(times)
         if self.decoder is not None:
             dec = self.decoder(payloads, self.encoding, where)
+        elif isinstance(payloads, Payloads) and len(payloads) < SLICE:
+            self._pending.append(Payloads.join([payloads]))
+            n, b = self._held
+            self._held = (n + len(payloads), b + int(payloads.lengths.sum()))
+            self._where = where
+            if self._held[0] >= SLICE or self._held[1] >= SLICE_BYTES:
+                self._flush()
+            return
         else:
+            self._flush()
             dec = decode_payloads(self.msgtype, payloads, self.encoding, where)
+        self._keep(dec, payloads)
+
+    def _keep(self, dec: Any, payloads: Payloads) -> None:
         if dec is None:
             self.raw.extend(payloads)
         else:
             self.decoded.append(dec)
 
+    def _flush(self) -> None:
+        if self._pending:
+            joined = Payloads.join(self._pending)
+            self._pending, self._held = [], (0, 0)
+            self._keep(decode_payloads(self.msgtype, joined, self.encoding, self._where), joined)
+
     def topic(self) -> Topic:
+        self._flush()
         times = np.concatenate(self.times) if self.times else np.zeros(0, np.int64)
         order = np.argsort(times, kind="stable")
         sorted_already = bool(np.all(order == np.arange(order.size)))

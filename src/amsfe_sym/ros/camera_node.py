@@ -26,7 +26,7 @@ from amsfe_sym.errors import LogError
 from amsfe_sym.topics.spec import TopicSpec
 from amsfe_sym.vision.camera_info import CameraInfo, camera_info_from_message, undistort
 from amsfe_sym.vision.images import grey_from_message
-from amsfe_sym.vision.marker import MarkerDetector, tracked_point
+from amsfe_sym.vision.marker import MarkerDetector, single_threaded, tracked_point
 from amsfe_sym.vision.spec import MarkerSpec
 
 __all__ = ["DIAGNOSTICS", "CameraNodeOptions", "DetectionWorker", "run_camera_node"]
@@ -86,7 +86,8 @@ class DetectionWorker:
         self._thread = threading.Thread(target=self._run, name="amsfe-detection", daemon=True)
 
     def start(self) -> None:
-        """Start the detection thread."""
+        """Start the detection thread (OpenCV on one thread: :func:`single_threaded`)."""
+        single_threaded()
         self._thread.start()
 
     def stop(self, timeout: float = 5.0) -> None:

@@ -18,8 +18,8 @@ from numpy.typing import NDArray
 
 from amsfe_sym.vision.camera_info import CameraInfo, undistort
 from amsfe_sym.vision.images import grey_from_message
-from amsfe_sym.vision.marker import NO_MARKER, OTHER_ID, MarkerDetector, tracked_point
-from amsfe_sym.vision.spec import MarkerSpec
+from amsfe_sym.vision.marker import NO_MARKER, OTHER_ID, MarkerDetector, diagonals_meet_many
+from amsfe_sym.vision.spec import CORNERS, MarkerSpec
 
 __all__ = ["REASONS", "Detections", "ImageDecoder", "image_sizes", "points_of"]
 
@@ -66,7 +66,9 @@ class ImageDecoder:
         msgtype: ``sensor_msgs/msg/Image`` or ``sensor_msgs/msg/CompressedImage``.
         spec: The marker.
         deserialize: ``deserialize(raw, msgtype, encoding, where)`` -> a message (the log
-            reader's, :func:`amsfe_sym.logs.decode.deserialize`).
+            reader's, :func:`amsfe_sym.logs.image_wire.image_message`); ``raw`` is a
+            payload's bytes, or a uint8 view of them when the payloads have a ``view(i)``
+            (the log reader's :class:`~amsfe_sym.logs.layout.Payloads`: no copy).
 
     Attributes:
         frames: Images decoded so far (for a progress line).
@@ -84,8 +86,9 @@ class ImageDecoder:
         corners = np.full((M, 4, 2), np.nan)
         reason = np.zeros(M, np.int64)
         size = np.zeros((M, 2), np.int64)
+        view = getattr(raws, "view", raws.__getitem__)
         for i in range(M):
-            msg = self.deserialize(raws[i], self.msgtype, encoding, where)
+            msg = self.deserialize(view(i), self.msgtype, encoding, where)
             img = grey_from_message(msg, self.msgtype, where or self.msgtype)
             stamps[i] = img.stamp_ns
             size[i] = img.pixels.shape[1], img.pixels.shape[0]
@@ -107,8 +110,11 @@ def points_of(det: Detections, info: CameraInfo, spec: MarkerSpec) -> FloatArray
     M = det.stamp_ns.size
     und = undistort(info, det.corners.reshape(-1, 2)).reshape(M, 4, 2)
     out = np.full((M, 2), np.nan)
-    for i in np.flatnonzero(det.reason == 0):
-        out[i] = tracked_point(und[i], spec.point)
+    found = np.flatnonzero(det.reason == 0)
+    if spec.point == "centre":  # (all frames at once; tracked_point's maths)
+        out[found] = diagonals_meet_many(und[found])
+    else:
+        out[found] = und[found, CORNERS.index(spec.point)]
     return out
 
 

@@ -64,6 +64,13 @@ def _stamp(msg: Any) -> int:
     return int(sec) * 1_000_000_000 + int(s.nanosec)
 
 
+def _bytes(data: Any) -> U8Array:
+    """A message's ``data`` as uint8 (a numpy array as it is: no copy)."""
+    if isinstance(data, np.ndarray):
+        return np.asarray(data, dtype=np.uint8).ravel()
+    return np.frombuffer(bytes(data), dtype=np.uint8)
+
+
 def grey_from_message(msg: Any, msgtype: str, where: str = "image") -> GreyImage:
     """An ``Image`` or ``CompressedImage`` (rosbags or rclpy message) as a grey image.
 
@@ -84,7 +91,8 @@ def grey_from_message(msg: Any, msgtype: str, where: str = "image") -> GreyImage
                     "record jpeg or png (image_transport's compressed), or raw images",
                 )
             )
-        buf = np.frombuffer(bytes(msg.data), dtype=np.uint8)
+        buf = _bytes(msg.data)
+        # (straight to grey: libjpeg skips the colour planes' upsampling and conversion)
         img = cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE) if buf.size else None
         if img is None:
             raise LogError(
@@ -104,11 +112,7 @@ def grey_from_message(msg: Any, msgtype: str, where: str = "image") -> GreyImage
         )
     ch, code = table[enc]
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
-    data = (
-        np.frombuffer(bytes(msg.data), dtype=np.uint8)
-        if not isinstance(msg.data, np.ndarray)
-        else np.asarray(msg.data, dtype=np.uint8).ravel()
-    )
+    data = _bytes(msg.data)
     if h <= 0 or w <= 0 or step < w * ch or data.size < h * step:
         raise LogError(
             describe(

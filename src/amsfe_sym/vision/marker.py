@@ -12,7 +12,15 @@ from numpy.typing import NDArray
 
 from amsfe_sym.vision.spec import CORNERS, MarkerSpec
 
-__all__ = ["Detection", "MarkerDetector", "diagonals_meet", "tracked_point"]
+__all__ = [
+    "THRESHOLD_WINDOW",
+    "Detection",
+    "MarkerDetector",
+    "diagonals_meet",
+    "diagonals_meet_many",
+    "single_threaded",
+    "tracked_point",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -37,39 +45,68 @@ class Detection:
     ids: tuple[int, ...] = ()
 
 
+#: The adaptive threshold's window [px] of the first search: one window instead of
+#: OpenCV's three (3, 13, 23).  The window of 3 px turns the sensor's noise into thousands of
+#: tiny contours, which cost most of a detection (docs/camera.md, "Speed"); 7 px finds the
+#: 13-213 px markers of the renders as the three do, with the same corners' accuracy.
+THRESHOLD_WINDOW = 7
+
+
 class MarkerDetector:
-    """One ``cv2.aruco.ArucoDetector`` for a :class:`MarkerSpec` (built once, reused).
+    """``cv2.aruco.ArucoDetector`` s for a :class:`MarkerSpec` (built once, reused).
+
+    A search runs OpenCV's detector with one adaptive threshold window of ``threshold_window``
+    px (:data:`THRESHOLD_WINDOW`); only when the marker is not found in the whole image that
+    way is the image searched again with OpenCV's default windows (3, 13, 23 px), which find
+    it on noisier or flatter images at ~5x the cost.  ``threshold_window=None``: the default
+    windows alone.
 
     Sub-pixel refinement: ``CORNER_REFINE_SUBPIX`` (``cornerSubPix`` on each corner,
-    stopping at 0.01 px or 50 iterations) in a half-window of ``relative_window`` of the
+    stopping at 1e-4 px or 100 iterations) in a half-window of ``relative_window`` of the
     marker's module (bit) size, at most ``refine_window`` px.  OpenCV's default 0.3 left
     markers of 20-40 px at 0.5 px RMS on the renders of tests/test_vision_marker.py; 0.8 at
     0.11-0.14 px (docs/camera.md, "Accuracy").
+
+    OpenCV's own threads: the detector's ``parallel_for_`` splits ~1 ms of work per image, so
+    the caller decides (:func:`single_threaded`): the log reader and the camera node run it
+    on one thread.
     """
 
     def __init__(
-        self, spec: MarkerSpec, refine_window: int = 5, relative_window: float = 0.8
+        self,
+        spec: MarkerSpec,
+        refine_window: int = 5,
+        relative_window: float = 0.8,
+        threshold_window: int | None = THRESHOLD_WINDOW,
     ) -> None:
         import cv2
 
         self.spec = spec
         self._dictionary = cv2.aruco.getPredefinedDictionary(_dictionary_id(spec.dictionary))
         self._window = (int(refine_window), float(relative_window))
-        self._params = self._parameters(None)
+        self._threshold = threshold_window
+        self._params = self._parameters(None, threshold_window)
         self._detector: Any = cv2.aruco.ArucoDetector(self._dictionary, self._params)
+        self._fallback: Any = None
+        if threshold_window is not None:  # (OpenCV's windows, when the one window fails)
+            self._fallback = cv2.aruco.ArucoDetector(self._dictionary, self._parameters(None, None))
         self._roi: dict[tuple[int, int], Any] = {}  # (crop side, image side) -> detector
 
-    def _parameters(self, min_perimeter_rate: float | None) -> Any:
-        """The detector's parameters (OpenCV's defaults, sub-pixel refinement; a minimum
-        marker perimeter rate if given)."""
+    def _parameters(self, min_perimeter_rate: float | None, window: int | None) -> Any:
+        """The detector's parameters: OpenCV's defaults, sub-pixel refinement, one adaptive
+        threshold ``window`` [px] if given, a minimum marker perimeter rate if given."""
         import cv2
 
         params = cv2.aruco.DetectorParameters()
         params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
         params.cornerRefinementWinSize = self._window[0]
         params.relativeCornerRefinmentWinSize = self._window[1]  # (OpenCV's spelling)
-        params.cornerRefinementMaxIterations = 50
-        params.cornerRefinementMinAccuracy = 0.01
+        params.cornerRefinementMaxIterations = 100
+        params.cornerRefinementMinAccuracy = 1e-4  # (0.01 left the result 3e-3 px on
+        # where the iteration started: a region of interest's contour starts elsewhere)
+        if window is not None:
+            params.adaptiveThreshWinSizeMin = int(window)
+            params.adaptiveThreshWinSizeMax = int(window)
         if min_perimeter_rate is not None:
             params.minMarkerPerimeterRate = min_perimeter_rate
         return params
@@ -80,14 +117,22 @@ class MarkerDetector:
         ``near``: the marker's corners (4, 2) [px] in a previous image; the marker is first
         searched in a square region of interest around them (3 marker sides, at least 64 px,
         with the detector's minimum marker perimeter kept in pixels), then, if it is not
-        there, in the whole image.  Corners found in the region are those of the whole image
-        to ~1e-3 px (tests/test_vision_marker.py).
+        there, in the whole image (then with OpenCV's default threshold windows if still not
+        found).  Corners found in the region are those of the whole image to ~1e-4 px
+        (float32 offsets; tests/test_vision_marker.py).
         """
         if near is not None and np.isfinite(near).all():
             found = self._near(grey, np.asarray(near, dtype=np.float64).reshape(4, 2))
             if found is not None:
                 return found
-        return self._found(self._detector, grey, 0, 0)
+        return self.whole(grey)
+
+    def whole(self, grey: NDArray[np.uint8]) -> Detection:
+        """The spec's marker searched in the whole image (no region of interest)."""
+        det = self._found(self._detector, grey, 0, 0)
+        if det.corners is None and self._fallback is not None:
+            return self._found(self._fallback, grey, 0, 0)
+        return det
 
     def _found(self, detector: Any, grey: NDArray[np.uint8], x0: int, y0: int) -> Detection:
         corners, ids, _ = detector.detectMarkers(grey)
@@ -114,10 +159,23 @@ class MarkerDetector:
         key = (crop, max(w, h))
         if key not in self._roi:
             rate = self._params.minMarkerPerimeterRate * max(w, h) / crop
-            params = self._parameters(min(rate, 4.0))
+            params = self._parameters(min(rate, 4.0), self._threshold)
             self._roi[key] = cv2.aruco.ArucoDetector(self._dictionary, params)
         det = self._found(self._roi[key], grey[y0 : y0 + crop, x0 : x0 + crop], x0, y0)
         return det if det.corners is not None else None
+
+
+def single_threaded() -> None:
+    """OpenCV on one thread in this process (``cv2.setNumThreads(1)``).
+
+    A detection is ~0.2 ms in a region of interest and ~1-2 ms in a whole 640 x 480 image of
+    CPU time; OpenCV's ``parallel_for_`` over its candidates adds a thread hand-off that,
+    on a loaded machine, costs more wall time than it saves and takes a core from the
+    estimator (docs/camera.md, "Speed").
+    """
+    import cv2
+
+    cv2.setNumThreads(1)
 
 
 def _dictionary_id(name: str) -> int:
@@ -136,6 +194,16 @@ def diagonals_meet(corners: FloatArray) -> FloatArray:
     a, b, c, d = (np.append(p, 1.0) for p in np.asarray(corners, dtype=np.float64))
     x = np.cross(np.cross(a, c), np.cross(b, d))
     out: FloatArray = x[:2] / x[2]
+    return out
+
+
+def diagonals_meet_many(corners: FloatArray) -> FloatArray:
+    """:func:`diagonals_meet` of many quadrilaterals (M, 4, 2) [px] at once -> (M, 2) [px]
+    (the same homogeneous cross products, written out: a log's frames in one pass)."""
+    c = np.asarray(corners, dtype=np.float64)
+    a, b, cc, d = (np.concatenate([c[:, k], np.ones((len(c), 1))], axis=1) for k in range(4))
+    x = np.cross(np.cross(a, cc), np.cross(b, d))
+    out: FloatArray = x[:, :2] / x[:, 2:]
     return out
 
 

@@ -14,8 +14,10 @@ them):
    registered estimator, as wall time per tick and real-time factor;
 
 and further sections (``--skip`` leaves any out): one tick three ways, the closed loop,
-scaling with joints, and ``amsfe estimate`` over recorded logs in fresh processes
-(``logs``, :mod:`amsfe_sym.apps.bench.logs`; docs/how-to/logs.md, "The command, end to end").
+scaling with joints, ``amsfe estimate`` over recorded logs in fresh processes
+(``logs``, :mod:`amsfe_sym.apps.bench.logs`; docs/how-to/logs.md, "The command, end to end"),
+and the camera chain's decoding + detection per frame (``vision``,
+:mod:`amsfe_sym.apps.bench.vision`; docs/camera.md, "Speed").
 
 Optionally (``--compare-cflags``) the robot's generated C is recompiled with several flag
 sets to show the compile-time / call-time trade-off behind the ``-O1`` default.

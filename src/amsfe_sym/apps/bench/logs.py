@@ -1,8 +1,9 @@
 """A section of ``amsfe bench``: ``amsfe estimate`` over a recorded log, as a user runs it
 (docs/how-to/logs.md, "Speed").
 
-Each log is a scenario simulated for its duration with the ``amsfe`` controller, seed 1,
-written by ``amsfe simulate --bag`` (a rosbag2 in MCAP, as ``tools/log_speed.py`` writes
+Each log is a scenario simulated for its duration with the ``amsfe`` controller, seed 1
+(optionally with a 30 Hz camera writing pixels or images, :data:`CAMERAS`), written by
+``amsfe simulate --bag`` (a rosbag2 in MCAP, as ``tools/log_speed.py`` writes
 it).  It is estimated ``rounds`` times, each by a fresh ``python -m amsfe_sym estimate LOG
 --no-plots`` process; from each run come the phases of its ``summary.json`` and the
 process's wall time seen from here (spawn to exit).  A bare ``python -c pass`` is timed
@@ -31,18 +32,36 @@ from typing import Any
 
 from amsfe_sym.errors import ConfigError, describe
 
-__all__ = ["DEFAULT_LOGS", "LogCase", "bench_log_estimate", "log_case"]
+__all__ = ["CAMERAS", "DEFAULT_LOGS", "LogCase", "bench_log_estimate", "log_case"]
 
 #: The phases of ``summary.json``'s ``timing`` (docs/how-to/logs.md, "Speed").
 PHASES = ("startup_s", "setup_s", "library_s", "read_s", "estimate_s", "write_s", "wall_s")
 
 
+#: A log case's camera besides the scenario's own: a 30 Hz camera (period and delay 33 ticks
+#: of the paper's 1 ms) writing its pixel topic (``pixels``) or its images (``images``,
+#: ``amsfe simulate --images``: mono8 Images + CameraInfo; ``jpeg``: jpeg CompressedImages;
+#: docs/camera.md, "Speed").
+CAMERAS: dict[str, list[str]] = {
+    "pixels": ["--set", "camera.period=33", "--set", "camera.delay=33"],
+    "images": ["--set", "camera.period=33", "--set", "camera.delay=33", "--images"],
+    "jpeg": ["--set", "camera.period=33", "--set", "camera.delay=33", "--images", "jpeg"],
+}
+
+
 @dataclass(frozen=True)
 class LogCase:
-    """One log of the section: ``scenario`` simulated for ``duration`` [s]."""
+    """One log of the section: ``scenario`` simulated for ``duration`` [s], with the
+    scenario's camera or one of :data:`CAMERAS` (``camera``)."""
 
     scenario: str
     duration: float
+    camera: str = ""
+
+    @property
+    def label(self) -> str:
+        extra = f", 30 Hz {self.camera}" if self.camera else ""
+        return f"{self.scenario} {self.duration:g} s{extra}"
 
 
 #: Issue 26 item 8's logs: a 10 s 1 kHz 2-link log (target >= 100x real time end to end)
@@ -51,11 +70,16 @@ DEFAULT_LOGS = (LogCase("paper-sim", 10.0), LogCase("panda-control", 60.0))
 
 
 def log_case(text: str) -> LogCase:
-    """``SCENARIO:SECONDS`` (e.g. ``paper-sim:10``) as a :class:`LogCase`.
+    """``SCENARIO:SECONDS[:CAMERA]`` (e.g. ``paper-sim:10``, ``paper-sim:60:images``) as a
+    :class:`LogCase` (CAMERA: one of :data:`CAMERAS`).
 
     Raises:
         ConfigError: not of that form, or a duration that is not a positive number.
     """
+    camera = ""
+    head, _, tail = text.rpartition(":")
+    if tail in CAMERAS:
+        text, camera = head, tail
     name, _, seconds = text.rpartition(":")
     try:
         duration = float(seconds)
@@ -65,12 +89,12 @@ def log_case(text: str) -> LogCase:
         raise ConfigError(
             describe(
                 "--logs",
-                "SCENARIO:SECONDS, e.g. paper-sim:10",
+                f"SCENARIO:SECONDS[:{'|'.join(CAMERAS)}], e.g. paper-sim:10",
                 repr(text),
-                "pass e.g. paper-sim:10",
+                "pass e.g. paper-sim:10 or paper-sim:60:images",
             )
         )
-    return LogCase(name, duration)
+    return LogCase(name, duration, camera)
 
 
 def _process(cmd: list[str], env: dict[str, str]) -> tuple[float, float]:
@@ -95,7 +119,7 @@ def _write_log(case: LogCase, folder: Path, env: dict[str, str]) -> Path:
     cmd = [
         sys.executable, "-m", "amsfe_sym", "simulate", case.scenario, "--controller", "amsfe",
         "--duration", f"{case.duration:g}", "--seed", "1", "--bag", "--out", str(folder),
-        "--no-plots", "--no-progress", "--force",
+        "--no-plots", "--no-progress", "--force", *CAMERAS.get(case.camera, []),
     ]  # fmt: skip
     _process(cmd, env)
     return folder / "bag"
@@ -121,7 +145,7 @@ def bench_log_estimate(
     env = dict(os.environ)
     if generated is not None:
         env["AMSFE_GENERATED_DIR"] = generated
-    label = f"{case.scenario} {case.duration:g} s"
+    label = case.label
     out: dict[str, Any] = {"log": label, "scenario": case.scenario}
     try:
         bag = _write_log(case, folder / "log", env)
@@ -168,21 +192,21 @@ def log_lines(rows: list[dict[str, Any]]) -> list[str]:
         "",
         "6. amsfe estimate LOG --no-plots, a fresh process per run; x real time = the log's "
         "duration / the time",
-        f"   {'log':<22}{'read+est [s]':>13}{'x':>7}{'command [s]':>12}{'x':>7}"
+        f"   {'log':<30}{'read+est [s]':>13}{'x':>7}{'command [s]':>12}{'x':>7}"
         f"{'process [s]':>12}{'x':>7}{'  w/o python start+exit':>24}",
     ]
     for r in rows:
         if "error" in r:
-            lines.append(f"   {r['log']:<22}failed: {r['error']}")
+            lines.append(f"   {r['log']:<30}failed: {r['error']}")
             continue
         m, f = r["median"], r["real_time_factor"]
         lines.append(
-            f"   {r['log']:<22}{m['read_s'] + m['estimate_s']:>13.3f}{f['log']:>7.0f}"
+            f"   {r['log']:<30}{m['read_s'] + m['estimate_s']:>13.3f}{f['log']:>7.0f}"
             f"{m['wall_s']:>12.3f}{f['command']:>7.0f}{m['process_s']:>12.3f}{f['process']:>7.0f}"
             f"{m['process_s'] - m['interpreter_s']:>17.3f} s {f['no_interpreter']:>4.0f}x"
         )
         lines.append(
-            f"   {'':<22}phases: start-up {m['startup_s']:.3f}, setup {m['setup_s']:.3f}, "
+            f"   {'':<30}phases: start-up {m['startup_s']:.3f}, setup {m['setup_s']:.3f}, "
             f"library {m['library_s']:.3f}, read {m['read_s']:.3f}, estimate "
             f"{m['estimate_s']:.3f}, writing {m['write_s']:.3f}; process CPU "
             f"{m['process_cpu_s']:.3f} s = {f['process_cpu']:.0f}x; python -c pass "
@@ -191,6 +215,7 @@ def log_lines(rows: list[dict[str, Any]]) -> list[str]:
         )
     lines.append(
         "   targets (issue 26 item 8): >= 100x for a 10 s 1 kHz 2-link log, >= 20x for a 60 s "
-        "Panda log, end to end"
+        "Panda log, end to end; (issue 35) >= 10x for a 60 s log with 30 Hz images "
+        "(paper-sim:60:images; its pixel-topic twin paper-sim:60:pixels is the floor)"
     )
     return lines

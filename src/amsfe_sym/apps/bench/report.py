@@ -13,6 +13,7 @@ from amsfe_sym.apps.bench.loop import bench_closed_loop
 from amsfe_sym.apps.bench.scaling import bench_scaling
 from amsfe_sym.apps.bench.tick import bench_tick
 from amsfe_sym.apps.bench.ticks import ESTIMATOR_NAMES, bench_estimators, timing_scenario
+from amsfe_sym.apps.bench.vision import bench_vision, vision_lines
 from amsfe_sym.core.jsonfile import write_json
 from amsfe_sym.core.provenance import provenance
 from amsfe_sym.errors import ConfigError, describe
@@ -125,6 +126,8 @@ def format_report(report: dict[str, Any]) -> str:
     lines += _tick_lines(report)
     if report.get("logs"):
         lines += log_lines(report["logs"])
+    if report.get("vision"):
+        lines += vision_lines(report["vision"], m["cpu"])
     flags = report.get("cflags")
     if flags:
         lines += [
@@ -261,7 +264,7 @@ class BenchOptions:
         rounds: Timing rounds (the median is reported).
         json: Also write the report there.
         skip: Sections left out: ``generation``, ``calls``, ``estimators``, ``tick``,
-            ``loop``, ``scaling``, ``logs``.
+            ``loop``, ``scaling``, ``logs``, ``vision``.
         duration: Simulated time per estimator [s].
         scenario: Scenario of the estimator section (None: see :func:`timing_scenario`).
         estimators: Estimators to time (None: all registered).
@@ -277,6 +280,8 @@ class BenchOptions:
         logs: The logs ``amsfe estimate`` is timed on (section 6; None:
             :data:`~amsfe_sym.apps.bench.logs.DEFAULT_LOGS`, a 10 s paper-sim and a 60 s
             panda-control log).
+        vision_frames: Frames per pass of the camera chain's section (``vision``,
+            :mod:`amsfe_sym.apps.bench.vision`).
     """
 
     robot: str = "paper_2link"
@@ -296,6 +301,7 @@ class BenchOptions:
     scaling_panda: bool = True
     scaling_loop_duration: float = 2.0
     logs: tuple[LogCase, ...] | None = None
+    vision_frames: int = 150
 
 
 def run_bench(opts: BenchOptions) -> int:
@@ -390,6 +396,8 @@ def run_bench(opts: BenchOptions) -> int:
                 bench_log_estimate(case, min(rounds, 3), Path(tmp) / f"log{i}", opts.out)
                 for i, case in enumerate(opts.logs or DEFAULT_LOGS)
             ]
+    if "vision" not in opts.skip:  # the camera chain per frame, one core
+        report["vision"] = bench_vision(opts.vision_frames, min(rounds, 3))
     if opts.compare_cflags is not None:
         report["cflags"] = bench_cflags(
             lib,
