@@ -8,8 +8,11 @@ README's main command, reuse them instead of compiling again.
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
+import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -171,6 +174,34 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         if mark is not None:
             why = mark.args[0] if mark.args else "a repeat of a behaviour CI runs once"
             item.add_marker(pytest.mark.skip(reason=f"nightly (--nightly runs it): {why}"))
+
+
+#: With this environment variable set to a file, each test's cost is appended to it as a JSON
+#: line: CPU seconds of the test's process and of the children it waited for (DDS nodes,
+#: compilers, docs blocks), and wall seconds.  CPU time is the cost on a shared, loaded
+#: machine, where wall time is not; tools/test_costs.py sums it by file (docs/how-to/tests.md).
+COSTS_ENV = "AMSFE_TEST_COSTS"
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
+    out = os.environ.get(COSTS_ENV)
+    t0, w0 = os.times(), time.monotonic()
+    yield
+    if not out:
+        return
+    t1, w1 = os.times(), time.monotonic()
+    row = {
+        "test": item.nodeid,
+        "cpu": round(t1.user - t0.user + t1.system - t0.system, 3),
+        "cpu_children": round(
+            t1.children_user - t0.children_user + t1.children_system - t0.children_system, 3
+        ),
+        "wall": round(w1 - w0, 3),
+        "worker": os.environ.get("PYTEST_XDIST_WORKER", "main"),
+    }
+    with open(out, "a") as f:
+        f.write(json.dumps(row) + "\n")
 
 
 # ------------------------------------------------------------- shared lockstep runs over DDS
