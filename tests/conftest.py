@@ -8,9 +8,14 @@ README's main command, reuse them instead of compiling again.
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
 from hypothesis import settings
@@ -148,3 +153,123 @@ def paper_sim() -> tuple[Scenario, ModelLibrary]:
     module that records its own runs defines its own ``paper_sim``."""
     sc = load_scenario("paper-sim")
     return sc, library_for(sc)
+
+
+# ------------------------------------------------------------------ tiers (docs/how-to/tests.md)
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption(
+        "--nightly",
+        action="store_true",
+        help="also run the tests marked nightly (repeats of a scenario CI runs once, docs "
+        "blocks whose commands a named test runs): docs/how-to/tests.md",
+    )
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Without ``--nightly``, a test marked ``nightly`` is skipped with the mark's reason."""
+    if config.getoption("--nightly"):
+        return
+    for item in items:
+        mark = item.get_closest_marker("nightly")
+        if mark is not None:
+            why = mark.args[0] if mark.args else "a repeat of a behaviour CI runs once"
+            item.add_marker(pytest.mark.skip(reason=f"nightly (--nightly runs it): {why}"))
+
+
+#: With this environment variable set to a file, each test's cost is appended to it as a JSON
+#: line: CPU seconds of the test's process and of the children it waited for (DDS nodes,
+#: compilers, docs blocks), and wall seconds.  CPU time is the cost on a shared, loaded
+#: machine, where wall time is not; tools/test_costs.py sums it by file (docs/how-to/tests.md).
+COSTS_ENV = "AMSFE_TEST_COSTS"
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
+    out = os.environ.get(COSTS_ENV)
+    t0, w0 = os.times(), time.monotonic()
+    yield
+    if not out:
+        return
+    t1, w1 = os.times(), time.monotonic()
+    row = {
+        "test": item.nodeid,
+        "cpu": round(t1.user - t0.user + t1.system - t0.system, 3),
+        "cpu_children": round(
+            t1.children_user - t0.children_user + t1.children_system - t0.children_system, 3
+        ),
+        "wall": round(w1 - w0, 3),
+        "worker": os.environ.get("PYTEST_XDIST_WORKER", "main"),
+    }
+    with open(out, "a") as f:
+        f.write(json.dumps(row) + "\n")
+
+
+# ------------------------------------------------------------- shared lockstep runs over DDS
+#: The xdist group of the tests that share :func:`lockstep_runs`' runs (``--dist loadgroup``,
+#: pyproject's addopts): one worker runs them all, so each run is made once per session.
+LOCKSTEP_GROUP = "lockstep-runs"
+
+
+@dataclass(frozen=True)
+class LockstepRun:
+    """One ``amsfe sim-node --lockstep`` + ``amsfe node --controller amsfe --record`` run over
+    real DDS (both exited 0): the record's topics, each process's output, the record."""
+
+    topics: dict[str, list[Any]]
+    node_text: str
+    arm_text: str
+    record: Path
+
+
+class _LockstepRuns:
+    def __init__(self, folder: Path) -> None:
+        self._folder = folder
+        self._runs: dict[tuple[str, str, str | None, float], LockstepRun | BaseException] = {}
+
+    def get(
+        self, scenario: str, node: str, arm: str | None = None, duration: float = 2.0
+    ) -> LockstepRun:
+        """The run of ``amsfe node SCENARIO --impl NODE`` and ``amsfe sim-node SCENARIO
+        --lockstep [--impl ARM]`` (None: the arm's default) for ``duration`` s, made at the
+        first call (a failed run fails every test that asks for it, it is not made again)."""
+        key = (scenario, node, arm, duration)
+        if key not in self._runs:
+            try:
+                self._runs[key] = self._make(*key)
+            except (Exception, pytest.skip.Exception) as err:  # kept, raised to each asker
+                self._runs[key] = err
+        got = self._runs[key]
+        if isinstance(got, BaseException):
+            raise got
+        return got
+
+    def _make(self, scenario: str, node: str, arm: str | None, duration: float) -> LockstepRun:
+        from tests.test_node_record import _bag
+        from tests.test_ros import PATIENT_ARM, PATIENT_NODE, _finish, _ros_env, _start
+
+        folder = self._folder / f"{scenario}-{node}-{arm or 'default'}-{duration:g}"
+        folder.mkdir()
+        env = _ros_env(folder)
+        rec = folder / "rec"
+        d = f"{duration:g}"
+        arm_args = ["--impl", arm] if arm else []
+        procs = []
+        try:
+            procs.append(_start(env, "node", scenario, "--controller", "amsfe", "--impl", node,
+                                "--duration", d, "--record", str(rec), *PATIENT_NODE))  # fmt: skip
+            procs.append(_start(env, "sim-node", scenario, "--lockstep", "--duration", d,
+                                *arm_args, *PATIENT_ARM))  # fmt: skip
+        finally:
+            results = _finish(procs, 180.0)
+        for code, text in results:
+            assert code == 0, text
+        return LockstepRun(_bag(rec), results[0][1], results[1][1], rec)
+
+
+@pytest.fixture(scope="session")
+def lockstep_runs(tmp_path_factory: pytest.TempPathFactory) -> _LockstepRuns:
+    """Lockstep runs over DDS shared by the tests that assert on them (tests/test_ros.py,
+    test_cnode.py, test_carm.py): ``lockstep_runs.get(scenario, node_impl, arm_impl,
+    duration)``, each made once per session; mark a test using it
+    ``@pytest.mark.xdist_group(LOCKSTEP_GROUP)`` so that its runs are this worker's."""
+    return _LockstepRuns(tmp_path_factory.mktemp("lockstep"))

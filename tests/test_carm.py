@@ -23,30 +23,13 @@ import pytest
 from amsfe_sym.codegen import library_for
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
+from tests.conftest import LOCKSTEP_GROUP
 from tests.test_live_load import free_running_under_load
 from tests.test_node_record import _bag
-from tests.test_ros import PATIENT_ARM, PATIENT_NODE, SRC, _finish, _ros_env, _start
+from tests.test_ros import PATIENT_NODE, SRC, _finish, _ros_env, _start
 
-
-def _lockstep(tmp_path: Path, arm: str, duration: float = 2.0) -> dict[str, Any]:
-    """``sim-node --lockstep --impl ARM`` + ``node --impl c --controller amsfe --record``
-    on paper-sim for ``duration`` s: both exit 0; the record's topics, the arm's output."""
-    env = _ros_env(tmp_path)
-    rec = tmp_path / f"rec-{arm}"
-    d = f"{duration:g}"
-    procs = []
-    try:
-        procs.append(_start(env, "node", "paper-sim", "--controller", "amsfe", "--impl", "c",
-                            "--duration", d, "--record", str(rec), *PATIENT_NODE))  # fmt: skip
-        procs.append(_start(env, "sim-node", "paper-sim", "--lockstep", "--duration", d,
-                            "--impl", arm, *PATIENT_ARM))  # fmt: skip
-    finally:
-        results = _finish(procs, 180.0)
-    for code, text in results:
-        assert code == 0, text
-    got: dict[str, Any] = dict(_bag(rec))
-    got["_arm"] = results[1][1]
-    return got
+#: A free-running run repeated for how often it holds: CI runs it once (docs/how-to/tests.md).
+REPEAT = pytest.mark.nightly("a repeat of the free-running run under load CI runs once")
 
 
 def _stamps(msgs: list[Any]) -> np.ndarray:
@@ -55,13 +38,17 @@ def _stamps(msgs: list[Any]) -> np.ndarray:
 
 @pytest.mark.ros
 @pytest.mark.slow
-def test_c_arm_lockstep_is_simulate(tmp_path: Path) -> None:
+@pytest.mark.xdist_group(LOCKSTEP_GROUP)
+def test_c_arm_lockstep_is_simulate(lockstep_runs: Any) -> None:
     """The C arm and the C node in lockstep: the truth the arm sent, the samples, the frames,
     the node's estimates and commands (its record, every tick) equal ``amsfe simulate``'s
-    compiled loop of the same seed bit for bit."""
+    compiled loop of the same seed bit for bit.  (The C arm is ``sim-node``'s default; the
+    run, 2 s, is shared with test_ros.py and test_cnode.py: tests/conftest.py's
+    ``lockstep_runs``.)"""
     sc = load_scenario("paper-sim").with_overrides(duration=2.0)
     lib = library_for(sc)
-    got = _lockstep(tmp_path, "c")
+    run_ = lockstep_runs.get("paper-sim", "c")
+    got = {**run_.topics, "_arm": run_.arm_text}
     assert "(c arm)" in got["_arm"] and "2001 ticks" in got["_arm"], got["_arm"]
     ref = run(sc, lib, runtime="compiled")
     n = lib.n
@@ -83,12 +70,14 @@ def test_c_arm_lockstep_is_simulate(tmp_path: Path) -> None:
 
 @pytest.mark.ros
 @pytest.mark.slow
-def test_c_arm_sends_the_python_arms_messages(tmp_path: Path) -> None:
+@pytest.mark.xdist_group(LOCKSTEP_GROUP)
+def test_c_arm_sends_the_python_arms_messages(lockstep_runs: Any) -> None:
     """The same lockstep run with the C arm and with the Python arm (the readable
     reference): the node received the same encoder samples, frames (pixels and exposure
-    stamps), truth and applied torques, stamped the same, and answered the same commands."""
-    c = _lockstep(tmp_path / "c", "c", 1.0)
-    py = _lockstep(tmp_path / "py", "python", 1.0)
+    stamps), truth and applied torques, stamped the same, and answered the same commands.
+    (2 s runs, the C arm's shared: tests/conftest.py's ``lockstep_runs``.)"""
+    runs = lockstep_runs.get("paper-sim", "c"), lockstep_runs.get("paper-sim", "c", "python")
+    c, py = ({**r.topics, "_arm": r.arm_text} for r in runs)
     assert "(c arm)" in c["_arm"] and "(python arm)" in py["_arm"]
     for topic in ("/motor_encoders", "/camera/marker", "/motor_torque", "/joint_states"):
         assert c[topic] and len(c[topic]) == len(py[topic]), topic
@@ -111,7 +100,7 @@ def test_c_arm_sends_the_python_arms_messages(tmp_path: Path) -> None:
 
 @pytest.mark.ros
 @pytest.mark.slow
-@pytest.mark.parametrize("repeat", [1, 2, 3])
+@pytest.mark.parametrize("repeat", [1, *(pytest.param(r, marks=REPEAT) for r in (2, 3))])
 def test_free_running_c_arm_under_load_tracks_or_holds_for_being_behind(
     tmp_path: Path, repeat: int
 ) -> None:

@@ -23,6 +23,7 @@ from amsfe_sym.codegen import library_for
 from amsfe_sym.errors import RosError
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
+from tests.conftest import LOCKSTEP_GROUP
 from tests.test_node_record import _bag
 from tests.test_ros import (
     PATIENT_ARM,
@@ -35,37 +36,19 @@ from tests.test_ros import (
 )
 
 
-def _lockstep(tmp_path: Path, scenario: str, impl: str, duration: float = 2.0) -> dict[str, Any]:
-    """``sim-node --lockstep`` + ``node --impl IMPL --controller amsfe --record`` for
-    ``duration`` s: both exit 0; the record's topics and the node's output."""
-    env = _ros_env(tmp_path)
-    rec = tmp_path / f"rec-{impl}"
-    d = f"{duration:g}"
-    procs = []
-    try:
-        procs.append(_start(env, "node", scenario, "--controller", "amsfe", "--impl", impl,
-                            "--duration", d, "--record", str(rec), *PATIENT_NODE))  # fmt: skip
-        procs.append(_start(env, "sim-node", scenario, "--lockstep", "--duration", d,
-                            *PATIENT_ARM))  # fmt: skip
-    finally:
-        results = _finish(procs, 180.0)
-    for code, text in results:
-        assert code == 0, text
-    got: dict[str, Any] = dict(_bag(rec))
-    got["_text"] = results[0][1]
-    return got
-
-
 @pytest.mark.ros
 @pytest.mark.slow
+@pytest.mark.xdist_group(LOCKSTEP_GROUP)
 @pytest.mark.parametrize("scenario", ["paper-sim", "panda-control"])
-def test_c_node_lockstep_is_simulate(scenario: str, tmp_path: Path) -> None:
+def test_c_node_lockstep_is_simulate(scenario: str, lockstep_runs: Any) -> None:
     """The C node over DDS in lockstep: its estimates, theta and commands (from its record,
     every tick) equal ``amsfe simulate``'s compiled loop of the same seed bit for bit, its
-    frames fused and refused are the loop's, and it ends with the hold command."""
+    frames fused and refused are the loop's, and it ends with the hold command.  (The run,
+    2 s, is shared: tests/conftest.py's ``lockstep_runs``.)"""
     sc = load_scenario(scenario).with_overrides(duration=2.0)
     lib = library_for(sc)
-    got = _lockstep(tmp_path, scenario, "c")
+    run_ = lockstep_runs.get(scenario, "c")
+    got = {**run_.topics, "_text": run_.node_text}
     assert "the C node" in got["_text"] and "done: 2001 ticks" in got["_text"], got["_text"]
     ref = run(sc, lib, runtime="compiled")
     n = lib.n
@@ -89,18 +72,20 @@ def test_c_node_lockstep_is_simulate(scenario: str, tmp_path: Path) -> None:
 
 @pytest.mark.ros
 @pytest.mark.slow
-def test_c_node_equals_the_python_node(tmp_path: Path) -> None:
+@pytest.mark.xdist_group(LOCKSTEP_GROUP)
+def test_c_node_equals_the_python_node(lockstep_runs: Any) -> None:
     """The same lockstep run with the C node and with the Python node (the readable
     reference): the same estimates, standard deviations, theta and commands (1e-12), the same
     estimator decisions.  (Not the skipped messages: whether a torque sample arrives before
     or after the next encoder sample is DDS's timing, and in lockstep either way the step
-    uses the same torque, the command.)"""
-    c = _lockstep(tmp_path / "c", "paper-sim", "c", 1.0)
-    py = _lockstep(tmp_path / "py", "paper-sim", "python", 1.0)
+    uses the same torque, the command.)  The two 2 s runs of test_ros.py's
+    ``test_lockstep_reproduces_simulate``, shared (tests/conftest.py's ``lockstep_runs``)."""
+    c = lockstep_runs.get("paper-sim", "c").topics
+    py = lockstep_runs.get("paper-sim", "python").topics
     for topic in ("/amsfe/estimate", "/amsfe/estimate_std"):
         a = np.array([np.r_[m.position, m.velocity] for m in c[topic]])
         b = np.array([np.r_[m.position, m.velocity] for m in py[topic]])
-        assert a.shape == b.shape and a.shape[0] == 1001
+        assert a.shape == b.shape and a.shape[0] == 2001
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
     for topic in ("/amsfe/theta", "/effort_controller/commands"):
         a = np.array([m.data for m in c[topic]])

@@ -12,6 +12,9 @@ The fence's info string says what CI does with a block (after the language):
     ```bash                      run in CI
     ```bash {ci=slow}            run in CI, the page's test marked slow (more than a few s)
     ```bash {ci=ros}             run where the [ros] extra is installed (marked ros)
+    ```bash {ci=nightly: TESTS}  run with --nightly only: a test CI runs (TESTS names it,
+                                 tests/FILE.py::test_name, checked to exist) runs the
+                                 same commands (docs/how-to/tests.md)
     ```bash {ci=skip: REASON}    not run; the reason is required and shown as the skip
 
 Blocks in other languages (text, toml, c, ...) are shown, not run.
@@ -36,7 +39,9 @@ ROOT = Path(__file__).resolve().parent.parent
 RUN_LANGS = {"bash": "bash", "sh": "bash", "shell": "bash", "python": "python", "py": "python"}
 LINKED = ("robots", "scenarios", "sweeps", "tools", "examples", "docs", "tests")
 _FENCE = re.compile(r"^(\s*)(`{3,}|~{3,})\s*([^`\s{]*)\s*(\{.*\})?\s*$")
-_CI = re.compile(r"^\{ci=(run|slow|ros|skip)(?::\s*(.*))?\}$")
+_CI = re.compile(r"^\{ci=(run|slow|ros|nightly|skip)(?::\s*(.*))?\}$")
+#: A test a ``{ci=nightly: ...}`` block names: the one that runs its commands in CI.
+_TEST_REF = re.compile(r"tests/[\w/]+\.py::test_\w+")
 BLOCK_TIMEOUT_S = 600  # a hung block fails instead of hanging CI; not a timing assertion
 
 
@@ -45,8 +50,8 @@ class Block:
     page: str  # path relative to the repository
     line: int  # the opening fence's line, 1-based
     lang: str  # "bash" or "python"
-    ci: str  # run, slow, ros or skip
-    reason: str  # why a block is skipped
+    ci: str  # run, slow, ros, nightly or skip
+    reason: str  # why a block is skipped; a nightly block: the tests that run it in CI
     code: str
 
     @property
@@ -79,6 +84,11 @@ def extract(page: Path, root: Path = ROOT) -> list[Block]:
                 ci, reason = a.group(1), (a.group(2) or "").strip()
                 if ci == "skip" and not reason:
                     raise ValueError(f"{where}: {{ci=skip}} needs a reason: {{ci=skip: why}}")
+                if ci == "nightly" and not _TEST_REF.search(reason):
+                    raise ValueError(
+                        f"{where}: {{ci=nightly}} needs the test that runs its commands in CI: "
+                        "{ci=nightly: tests/FILE.py::test_name}"
+                    )
             out.append(
                 Block(
                     str(page.relative_to(root)),
@@ -225,12 +235,14 @@ def _page_params() -> list[object]:
         runnable = [b for b in blocks if b.ci != "skip"]
         if not runnable:
             continue
+        rel = str(page.relative_to(ROOT))
         marks = []
+        if all(b.ci == "nightly" for b in runnable):
+            marks.append(pytest.mark.nightly(f"{rel}: each block's commands run by a test"))
         if any(b.ci == "slow" for b in runnable):
             marks.append(pytest.mark.slow)
         if any(b.ci == "ros" for b in runnable):
             marks.append(pytest.mark.ros)
-        rel = str(page.relative_to(ROOT))
         params.append(pytest.param(rel, marks=marks, id=rel))
     return params
 
@@ -240,12 +252,15 @@ def _skipped() -> list[object]:
 
 
 @pytest.mark.parametrize("page", _page_params())
-def test_the_page_s_blocks_run(page: str, tmp_path: Path) -> None:
+def test_the_page_s_blocks_run(page: str, tmp_path: Path, pytestconfig: pytest.Config) -> None:
     run = PageRun(_workdir(tmp_path))
     ros = _ros_available()
+    nightly = pytestconfig.getoption("--nightly")
     try:
         for block in extract(ROOT / page):
             if block.ci == "skip" or (block.ci == "ros" and not ros):
+                continue
+            if block.ci == "nightly" and not nightly:
                 continue
             ok, output = run.run(block)
             assert ok, f"{block.where} failed\n--- block\n{block.code}--- output\n{output[-5000:]}"
@@ -293,6 +308,25 @@ def test_a_failing_block_is_found_and_a_bad_fence_refused(tmp_path: Path) -> Non
     with pytest.raises(ValueError, match="unknown fence attributes"):
         extract(page, tmp_path)
     shutil.rmtree(cwd)
+
+
+def test_a_nightly_block_names_a_test_that_exists(tmp_path: Path) -> None:
+    """A ``{ci=nightly: ...}`` block (not run in CI) names the test that runs its commands
+    in CI: without one it is refused; every name the docs give is a test of this suite."""
+    page = tmp_path / "p.md"
+    page.write_text("```bash {ci=nightly: the same as a test}\nexit 3\n```\n")
+    with pytest.raises(ValueError, match="needs the test that runs its commands"):
+        extract(page, tmp_path)
+    page.write_text("```bash {ci=nightly: tests/test_x.py::test_y}\nexit 3\n```\n")
+    assert [b.ci for b in extract(page, tmp_path)] == ["nightly"]
+    missing = []
+    for b in (b for p in pages() for b in extract(p) if b.ci == "nightly"):
+        for ref in _TEST_REF.findall(b.reason):
+            file, name = ref.split("::")
+            path = ROOT / file
+            if not path.is_file() or not re.search(rf"^def {name}\(", path.read_text(), re.M):
+                missing.append(f"{b.where}: {ref}")
+    assert not missing, "\n".join(missing)
 
 
 def test_a_page_s_python_blocks_share_one_session(tmp_path: Path) -> None:

@@ -138,6 +138,14 @@ STALL_IMPLS = [
 ]
 
 
+#: A repeat of a free-running run for how often it holds: CI runs it once (docs/how-to/tests.md).
+REPEAT = pytest.mark.nightly("a repeat of a free-running run under load CI runs once")
+
+#: The C node on the C arm (the default arm) under load: test_carm.py's free-running run
+#: (``--impl c`` both), which CI runs; here a repeat of it.
+FREE_IMPLS = [pytest.param(i, marks=REPEAT) if i == "c" else i for i in IMPLS]
+
+
 def _impl_args(impl: str) -> list[str]:
     return ["--impl", impl] if len(IMPLS) > 1 else []
 
@@ -235,7 +243,7 @@ def _wall_tick0(sim: Any) -> float:
 @pytest.mark.ros
 @pytest.mark.slow
 @pytest.mark.parametrize("impl", STALL_IMPLS)
-@pytest.mark.parametrize("repeat", [1, 2])
+@pytest.mark.parametrize("repeat", [1, pytest.param(2, marks=REPEAT)])
 def test_a_300_ms_stall_of_the_node_holds_within_100_ms(
     tmp_path: Path, impl: str, repeat: int
 ) -> None:
@@ -272,7 +280,7 @@ def test_a_300_ms_stall_of_the_node_holds_within_100_ms(
 
 @pytest.mark.ros
 @pytest.mark.slow
-@pytest.mark.parametrize("impl", IMPLS)
+@pytest.mark.parametrize("impl", FREE_IMPLS)
 def test_free_running_under_load_tracks_or_holds_for_being_behind(
     tmp_path: Path, impl: str
 ) -> None:

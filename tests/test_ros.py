@@ -32,6 +32,7 @@ from amsfe_sym.ros.live import LiveLoop
 from amsfe_sym.ros.record_bag import record_state
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
+from tests.conftest import LOCKSTEP_GROUP
 from tests.test_node_record import _bag, assert_record_is_run
 
 SRC = Path(__file__).resolve().parent.parent / "src"
@@ -575,31 +576,18 @@ def _finish(procs: list[_Proc], timeout: float) -> list[tuple[int, str]]:
 
 @pytest.mark.ros
 @pytest.mark.slow
+@pytest.mark.xdist_group(LOCKSTEP_GROUP)
 @pytest.mark.parametrize("impl", node_impls())
-def test_lockstep_reproduces_simulate(paper: Any, tmp_path: Path, impl: str) -> None:
+def test_lockstep_reproduces_simulate(paper: Any, lockstep_runs: Any, impl: str) -> None:
     """``sim-node --lockstep`` + ``node --controller amsfe`` on paper-sim for 2 s over DDS,
     each node implementation: every topic of the node's record (estimates, theta, commands,
     the truth of each tick...) equals ``amsfe simulate`` of the same seed; the record says
-    it finished, and why."""
+    it finished, and why.  (The run is shared: tests/conftest.py's ``lockstep_runs``.)"""
     sc, lib = paper
-    env = _ros_env(tmp_path)
-    rec = tmp_path / "rec"
-    procs = []
-    impl_args = ["--impl", impl] if len(node_impls()) > 1 else []
-    try:
-        procs.append(
-            _start(env, "node", "paper-sim", "--controller", "amsfe", "--duration", "2",
-                   "--record", str(rec), *impl_args, *PATIENT_NODE)
-        )  # fmt: skip
-        procs.append(_start(env, "sim-node", "paper-sim", "--lockstep", "--duration", "2",
-                            *PATIENT_ARM))  # fmt: skip
-    finally:
-        results = _finish(procs, 120.0)
-    for code, text in results:
-        assert code == 0, text
+    got = lockstep_runs.get("paper-sim", impl)
     ref = run(sc, lib, runtime="compiled")
-    assert_record_is_run(_bag(rec), ref)  # every topic, every tick (the truth its own)
-    state = record_state(rec)
+    assert_record_is_run(got.topics, ref)  # every topic, every tick (the truth its own)
+    state = record_state(got.record)
     assert state["amsfe.record"] == "finished" and state["amsfe.end"].startswith("done")
     assert state["amsfe.truth_missing"] == "0"
 
