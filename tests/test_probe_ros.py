@@ -79,15 +79,18 @@ def test_good_parameters_are_taken(monkeypatch: pytest.MonkeyPatch) -> None:
 @pytest.mark.slow
 def test_a_waiting_node_names_the_type_mismatch(tmp_path: Path) -> None:
     """``amsfe node`` whose encoder topic has a publisher of another type (a String): within
-    its first report (10 s) it names the topic, its own type and the publisher's."""
-    from tests.test_ros import _PREFIX, _finish, _ros_env, _start
+    its first report (10 s) it names the topic, its own type and the publisher's.  Each node
+    implementation, side by side on the one topic (one wait for both)."""
+    from amsfe_sym.apps.bench.ros import node_impls
+    from tests.test_ros import _PREFIX, _finish, _impl, _ros_env, _start
 
     env = _ros_env(tmp_path)
     topic = env[_PREFIX] + TopicSpec().encoders
     procs: list[Any] = []
     try:
-        node = _start(env, "node", "paper-sim", "--duration", "1")
-        procs.append(node)
+        nodes = [_start(env, "node", "paper-sim", "--duration", "1", *_impl(impl))
+                 for impl in node_impls()]  # fmt: skip
+        procs += nodes
         import subprocess
         import sys
 
@@ -105,13 +108,15 @@ def test_a_waiting_node_names_the_type_mismatch(tmp_path: Path) -> None:
             [sys.executable, "-c", code, topic], env=env, start_new_session=True
         )
         try:
-            node.wait_for("a type mismatch", 90)
+            for node in nodes:
+                node.wait_for("a type mismatch", 90)
         finally:
             wrong.kill()
             wrong.wait()
-        line = next(ln for ln in node.lines if "a type mismatch" in ln)
-        assert f"nothing on {topic} (sensor_msgs/msg/JointState)" in line, line
-        assert "['std_msgs/msg/String']" in line, line
-        node.kill(2)
+        for node in nodes:
+            line = next(ln for ln in node.lines if "a type mismatch" in ln)
+            assert f"nothing on {topic} (sensor_msgs/msg/JointState)" in line, line
+            assert "['std_msgs/msg/String']" in line, line
+            node.kill(2)
     finally:
         _finish(procs, 30.0)

@@ -592,6 +592,11 @@ def test_lockstep_reproduces_simulate(paper: Any, lockstep_runs: Any, impl: str)
     assert state["amsfe.truth_missing"] == "0"
 
 
+def _impl(impl: str) -> tuple[str, ...]:
+    """``amsfe node``'s ``--impl`` arguments for ``impl`` (none when it has one only)."""
+    return ("--impl", impl) if len(node_impls()) > 1 else ()
+
+
 def _play_into_recording_node(
     tmp_path: Path,
     bag: Path,
@@ -616,20 +621,34 @@ def _play_into_recording_node(
     return _bag(rec)
 
 
-@pytest.mark.ros
-@pytest.mark.slow
-def test_play_into_node_is_estimate(paper: Any, tmp_path: Path) -> None:
-    """``amsfe play`` of a simulated bag into ``amsfe node`` (estimator only, reliable QoS)
-    gives the estimates of ``amsfe estimate`` on that bag; the node's record, estimated
-    again, gives them too."""
+@pytest.fixture(scope="module")
+def played(paper: Any, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Any]:
+    """A simulated bag of paper-sim (2 s) and ``amsfe estimate``'s estimate of it (made once
+    for every node implementation)."""
     from amsfe_sym.apps.estimate import EstimateOptions, estimate_command
     from amsfe_sym.logs.write import write_run_bag
 
     sc, lib = paper
-    bag = write_run_bag(run(sc, lib, runtime="compiled"), tmp_path / "bag")
-    ref = estimate_command(bag, tmp_path / "est", EstimateOptions(plots=False)).estimate
+    tmp = tmp_path_factory.mktemp("played")
+    bag = write_run_bag(run(sc, lib, runtime="compiled"), tmp / "bag")
+    return bag, estimate_command(bag, tmp / "est", EstimateOptions(plots=False)).estimate
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.parametrize("impl", node_impls())
+def test_play_into_node_is_estimate(
+    paper: Any, played: tuple[Path, Any], tmp_path: Path, impl: str
+) -> None:
+    """``amsfe play`` of a simulated bag into ``amsfe node`` (estimator only, reliable QoS),
+    each node implementation, gives the estimates of ``amsfe estimate`` on that bag; the
+    node's record, estimated again, gives them too."""
+    from amsfe_sym.apps.estimate import EstimateOptions, estimate_command
+
+    lib = paper[1]
+    bag, ref = played
     rec = tmp_path / "rec"
-    got = _play_into_recording_node(tmp_path, bag, rec)
+    got = _play_into_recording_node(tmp_path, bag, rec, _impl(impl))
     n = lib.n
     est = np.array([np.r_[m.position, m.velocity] for m in got["/amsfe/estimate"]])
     np.testing.assert_allclose(est, ref.x_hat[:, : 2 * n], rtol=0, atol=1e-9)
@@ -640,16 +659,16 @@ def test_play_into_node_is_estimate(paper: Any, tmp_path: Path) -> None:
 @pytest.mark.ros
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    ("kind", "positions", "shared"),
+    ("kind", "positions", "shared", "impl"),
     [
-        ("joint_torque", "motor", False),
-        ("joint_torque", "link", True),
-        ("applied", "motor", True),
-        ("none", "motor", False),
+        ("joint_torque", "motor", False, "auto"),
+        ("joint_torque", "link", True, "auto"),
+        *[("applied", "motor", True, impl) for impl in node_impls()],
+        ("none", "motor", False, "auto"),
     ],
 )
 def test_play_into_node_with_a_joint_torque_is_estimate(
-    paper: Any, tmp_path: Path, kind: str, positions: str, shared: bool
+    paper: Any, tmp_path: Path, kind: str, positions: str, shared: bool, impl: str
 ) -> None:
     """A simulated bag whose torque topic holds the measured joint torque (a Franka's
     tau_J; or no effort read, ``none``), played by ``amsfe play`` into ``amsfe node
@@ -657,14 +676,16 @@ def test_play_into_node_with_a_joint_torque_is_estimate(
     that bag with that spec (the joint torque fused, the input carried as states); the
     node's record, estimated again with that spec, gives them too.  ``shared``: a Franka's
     ``/joint_states``: link angles, rates and tau_J (or the applied torque) in one
-    JointState, and the record has them so too (tests/test_node_record.py)."""
+    JointState, and the record has them so too (tests/test_node_record.py).  ``impl``: the
+    node implementation (``auto`` runs the Python node for the kinds the C node refuses)."""
     sc, lib = paper
     _, bag, spec = _effort_log(sc, lib, kind, tmp_path, positions, shared)
     ref = _estimate_with(bag, spec, tmp_path / "est")
     rec = tmp_path / "rec"
     spec_args = ("--topic-spec", str(spec))
+    impl_args = () if impl == "auto" else _impl(impl)
     got = _play_into_recording_node(
-        tmp_path, bag, rec, (*spec_args, "--estimator", "replay"), spec_args
+        tmp_path, bag, rec, (*spec_args, *impl_args, "--estimator", "replay"), spec_args
     )
     n = lib.n
     est = np.array([np.r_[m.position, m.velocity] for m in got["/amsfe/estimate"]])
@@ -680,8 +701,10 @@ def test_play_into_node_with_a_joint_torque_is_estimate(
 
 @pytest.mark.ros
 @pytest.mark.slow
-def test_faults_hold_and_clean_exits(tmp_path: Path) -> None:
-    """The encoder publisher killed mid-run: the node holds within its encoder timeout
+@pytest.mark.parametrize("impl", node_impls())
+def test_faults_hold_and_clean_exits(tmp_path: Path, impl: str) -> None:
+    """Each node implementation.  The encoder publisher killed mid-run: the node holds within
+    its encoder timeout
     (2 s here, not the default 0.5 s: a loaded machine can stall the arm half a second; plus
     its 0.05 s spin and a margin for this loaded machine) and exits 3 with a
     readable record; Ctrl-C of the node: hold, exit 130, record readable; SIGTERM of the
@@ -692,7 +715,8 @@ def test_faults_hold_and_clean_exits(tmp_path: Path) -> None:
         # 1. SIGKILL of the arm
         rec1 = tmp_path / "rec1"
         node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--record", str(rec1),
-                      "--encoder-timeout", "2", "--ros-args", *PATIENT_WATCHDOG)  # fmt: skip
+                      *_impl(impl), "--encoder-timeout", "2", "--ros-args",
+                      *PATIENT_WATCHDOG)  # fmt: skip
         sim = _start(env, "sim-node", "paper-sim", "--lockstep", "--duration", "30",
                      *PATIENT_ARM)  # fmt: skip
         procs += [node, sim]
@@ -712,7 +736,8 @@ def test_faults_hold_and_clean_exits(tmp_path: Path) -> None:
         # arm's participant is not yet forgotten by discovery)
         env = _ros_env(tmp_path)
         rec2 = tmp_path / "rec2"
-        node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--record", str(rec2))
+        node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--record", str(rec2),
+                      *_impl(impl))  # fmt: skip
         sim = _start(env, "sim-node", "paper-sim", "--lockstep", "--duration", "30",
                      "--command-timeout", "20")  # fmt: skip
         procs += [node, sim]

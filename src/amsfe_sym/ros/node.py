@@ -4,7 +4,9 @@
 It subscribes the encoders, the camera, the effort (its kind: :mod:`amsfe_sym.ros.effort`)
 and, when it records, the truth of a simulated arm, on the topics of the topic spec (ROS
 parameters override it; its ``[filter]``: :mod:`amsfe_sym.ros.spec_filter`); each encoder
-sample goes through :class:`amsfe_sym.ros.live.LiveLoop` by its header stamp; the node
+sample goes through :class:`amsfe_sym.ros.live.LiveLoop` by its header stamp (after the
+torque applied over the previous tick, waited for as the C node does:
+:mod:`amsfe_sym.ros.torque_wait`); the node
 publishes the estimate (JointState q, qd), its standard deviations, theta, the command (with
 a controller; Float64MultiArray) and diagnostics (JSON: frames fused, refused, skipped, NIS).
 
@@ -56,6 +58,7 @@ from amsfe_sym.ros.outputs import (
 from amsfe_sym.ros.record import NodeRecord
 from amsfe_sym.ros.spec_filter import live_filter
 from amsfe_sym.ros.tick import HoldKind, TickOut
+from amsfe_sym.ros.torque_wait import SubscriptionWait, TorqueWait
 from amsfe_sym.ros.watchdog_reasons import Reason
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
@@ -174,10 +177,17 @@ class _Node:
                 m.Float64MultiArray, spec.truth, self.on_truth, sub_qos, event_callbacks=sub_events
             )
         read = self.effort_kind != "none"
+        #: The wait for the torque applied over the previous tick (ros/torque_wait.py).
+        self.torque_wait = TorqueWait(lib.T, options.controller)
+        self._effort_wait: SubscriptionWait | None = None
         if read and spec.effort != spec.encoders:
-            node.create_subscription(
+            sub_eff = node.create_subscription(
                 m.JointState, spec.effort, self.on_effort, sub_qos, event_callbacks=sub_events
             )
+            if self.effort_kind == "applied":  # the C node's await_effort
+                self._effort_wait = SubscriptionWait(
+                    ctx, sub_eff, lambda msg, _: self.on_effort(msg)
+                )
         self.effort_in_encoders = read and spec.effort == spec.encoders
         node.create_subscription(
             m.JointState, spec.encoders, self.on_encoders, sub_qos, event_callbacks=sub_events
@@ -231,7 +241,9 @@ class _Node:
             return
         if (idx := self._order(msg.name)) is None:
             return
-        self._effort(self.m.stamp_ns(msg.header.stamp), effort_values(self.m, msg, idx, self.n))
+        ns = self.m.stamp_ns(msg.header.stamp)
+        self.torque_wait.received(self.live.tick_of(ns))
+        self._effort(ns, effort_values(self.m, msg, idx, self.n))
 
     def _effort(self, ns: int, eff: FloatArray) -> None:
         """An effort sample [as logged] to the loop by its kind, and to the record."""
@@ -257,6 +269,8 @@ class _Node:
             ns = self.m.stamp_ns(msg.header.stamp)
             if self.effort_in_encoders and self.effort_kind == "joint_torque":
                 self._effort(ns, effort_values(self.m, msg, idx, self.n))  # of this sample
+            if self._effort_wait is not None and self._await_torque(ns):
+                taken = time.monotonic()  # a wait is not the tick's compute time (the C node)
             watched = self.live.watch(
                 ns, z, int(info["source_timestamp"]), taken=taken, clock=time.monotonic
             )
@@ -273,6 +287,19 @@ class _Node:
             self._effort(ns, effort_values(self.m, msg, idx, self.n))
         self._publish(out, z, int(info["source_timestamp"]))
         self.last_rx = time.monotonic()  # after the work: a slow first tick is no silence
+
+    def _await_torque(self, ns: int) -> bool:
+        """Take the torques already received, then wait for the one applied over the tick
+        before the sample stamped ``ns`` when it is due (:class:`TorqueWait`): True when it
+        waited."""
+        waiter = self._effort_wait
+        assert waiter is not None
+        waiter.take()
+        k = self.live.tick_of(ns)
+        if k is None or not self.torque_wait.due(k, self.live.k, lambda: waiter.publishers() > 0):
+            return False
+        self.torque_wait.wait(k, waiter.block, stopped=lambda: self.stop is not None)
+        return True
 
     # ---------------------------------------------------------------- outputs
     def _held(self, reason: Reason) -> bool:
@@ -478,5 +505,7 @@ def run_node(
         raise state.stop.error
     if state.latency_ns:
         say(latency_line(np.asarray(state.latency_ns, dtype=float) * 1e-9))
+    if (waited := state.torque_wait.line()) is not None:  # the C node's line
+        say(waited)
     counters = {**state.live.counters, **state.live.skipped}
     return NodeReport(state.live.k + 1, reason, code, hold, counters, options.record)
