@@ -668,6 +668,9 @@ static void on_encoders(node_t *s, long long sent, long long received, double ta
   }
   if (s->recording) take_truth(s);
   int r = live_encoders(L, ns, s->z, sent);
+  if (r == 1 && L->k == 0) /* the efforts taken before it, placed now: the stream's newest */
+    for (long j = 0; j < LIVE_RING; ++j)
+      if (L->eff_j[j] == j && j > s->eff_last) s->eff_last = j;
   if (r == 0) return; /* skipped (counted): not judged */
   if (r == LIVE_BAD_STAMPS) { /* issue 37: held by the stamps' name, not as a stall */
     char why[768];
@@ -1172,7 +1175,8 @@ int main(int argc, char **argv) {
   out_alloc(&s->m_diag, DIAG_CAP + 64);
   s->ws = rcl_get_zero_initialized_wait_set();
   if (s->managed) rcl_check(lifecycle_init(&s->lc, &s->node), "the lifecycle state machine");
-  rcl_check(rcl_wait_set_init(&s->ws, 4, 0, 0, 0, s->managed ? 2 : 0, 0, &s->ctx, alloc),
+  rcl_check(rcl_wait_set_init(&s->ws, 4, 0, 0, 0, s->managed ? LIFECYCLE_SERVICES : 0, 0, &s->ctx,
+                               alloc),
             "wait set");
   s->ws_eff = rcl_get_zero_initialized_wait_set();
   s->eff_last = -1;
@@ -1248,6 +1252,11 @@ int main(int argc, char **argv) {
   if (s->eff_waits > 0)
     printf("node: waited for the torque applied over the previous tick at %ld samples (%ld not "
            "within the wait: estimated without it)\n", s->eff_waits, s->eff_missed);
+  int any_skip = 0; /* what the loop skipped, by reason (the diagnostics JSON's words) */
+  for (int i = 0; i < SKIP_REASONS; ++i)
+    if (L->skipped[i])
+      printf("%s%s: %ld", any_skip++ ? ", " : "node: skipped: ", LIVE_SKIP_TEXT[i], L->skipped[i]);
+  if (any_skip) printf("\n");
   fflush(stdout);
   s->exit_code = code;
   if (s->recording) write_record(s, record_path);
