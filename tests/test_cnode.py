@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -26,6 +27,7 @@ from amsfe_sym.sim.loop import run
 from tests.conftest import LOCKSTEP_GROUP
 from tests.test_node_record import _bag
 from tests.test_ros import (
+    _PREFIX,
     PATIENT_ARM,
     PATIENT_NODE,
     PATIENT_WATCHDOG,
@@ -362,6 +364,53 @@ def test_c_live_loop_is_the_python_live_loop(tmp_path: Path) -> None:
     assert enc_rejected == c["encoder_rejected"]
 
 
+def test_c_live_loop_keeps_every_effort_before_a_late_first_sample(tmp_path: Path) -> None:
+    """The first encoder sample arriving after 120 torque samples (a reader that matched the
+    encoders' writer late, the efforts flowing meanwhile): the C loop keeps every one (it
+    kept 64 and held the torque from tick 65 on, a false innovation hold of ``amsfe play``),
+    so its estimates are the Python LiveLoop's on the same stream (1e-9), and those of the
+    stream in its order (each torque before its sample), bit for bit."""
+    pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (pip install -e '.[ros]')")
+    from amsfe_sym.ros.arm import SimArm
+    from amsfe_sym.ros.live import LiveLoop
+
+    sc = load_scenario("paper-sim").with_overrides(duration=0.15)
+    lib = library_for(sc)
+    arm, T = SimArm(sc, lib), round(lib.T * 1e9)
+    rng = np.random.default_rng(3)
+    efforts, samples = [], []
+    for k in range(arm.K):
+        u = rng.uniform(-2.0, 2.0, lib.n)  # what the arm applied over tick k
+        samples.append(("enc", EPOCH_NS + k * T, 1000 + 2 * k, arm.sense().z))
+        efforts.append(("applied", EPOCH_NS + k * T, u))
+        if k + 1 < arm.K:
+            arm.advance(u)
+    burst = efforts[:120] + [
+        m for k, e in enumerate(samples) for m in (e, *efforts[120:][k : k + 1])
+    ]
+    in_order = [m for k in range(arm.K) for m in (efforts[k - 1], samples[k]) if k > 0]
+    in_order = [samples[0], *in_order]
+
+    def python(msgs: list[tuple[Any, ...]]) -> np.ndarray:
+        loop, rows = LiveLoop(sc, lib, controller=True), []
+        for m in msgs:
+            if m[0] == "applied":
+                loop.applied(m[1], np.array(m[2]))
+            else:
+                tick = loop.encoders(m[1], np.array(m[3]), m[2])
+                assert tick is not None and tick.u is not None
+                rows.append(np.r_[tick.k, tick.x_hat, tick.u])
+        return np.array(rows)
+
+    want = python(burst)
+    np.testing.assert_array_equal(want[:, : 1 + lib.N], python(in_order)[:, : 1 + lib.N])
+    out = _replay(tmp_path, sc, lib, burst)
+    got = np.array([ln.split()[1:] for ln in out if ln.startswith("tick")], dtype=float)
+    assert got.shape == want.shape == (arm.K, 1 + lib.N + lib.n)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+    assert not [ln for ln in out if ln.startswith("skipped torque")], out[-5:]
+
+
 @pytest.mark.parametrize(
     ("step_ns", "words"),
     [
@@ -456,6 +505,89 @@ def test_c_node_managed(tmp_path: Path) -> None:
         assert code == 0, text
     assert "the C node" in node.text and "waiting for configure and activate" in node.text
     assert len(_bag(rec)["/amsfe/estimate"]) == 501
+
+
+#: A client on the test's domain: an rclpy lifecycle node of its own (the reference) and the
+#: node named in argv[1]; each asked what ``ros2 lifecycle list`` asks (get_available_states,
+#: get_available_transitions; and ``list --all``'s get_transition_graph) unconfigured, then
+#: both configured and asked again: one JSON line {"ref": [...], "node": [...]}.
+_INTROSPECTION_CLIENT = """
+import json, sys, threading
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.lifecycle import LifecycleNode
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState, GetAvailableStates, GetAvailableTransitions
+
+rclpy.init()
+ref = LifecycleNode("amsfe_lifecycle_reference")
+client = rclpy.create_node("lifecycle_introspection")
+ex = SingleThreadedExecutor()
+ex.add_node(ref)
+spinner = threading.Thread(target=ex.spin, daemon=True)
+spinner.start()
+
+def call(name, srv, req):
+    c = client.create_client(srv, name)
+    assert c.wait_for_service(timeout_sec=60.0), name
+    fut = c.call_async(req)
+    rclpy.spin_until_future_complete(client, fut, timeout_sec=30.0)
+    assert fut.result() is not None, name
+    return fut.result()
+
+def ask(node):
+    states = call(f"{node}/get_available_states", GetAvailableStates, GetAvailableStates.Request())
+    out = {"states": [(s.id, s.label) for s in states.available_states]}
+    for what in ("get_available_transitions", "get_transition_graph"):
+        r = call(f"{node}/{what}", GetAvailableTransitions, GetAvailableTransitions.Request())
+        out[what] = [(t.transition.id, t.transition.label, t.start_state.id,
+                      t.start_state.label, t.goal_state.id, t.goal_state.label)
+                     for t in r.available_transitions]
+    return out
+
+nodes = {"ref": "/amsfe_lifecycle_reference", "node": sys.argv[1]}
+got = {k: [ask(v)] for k, v in nodes.items()}
+for k, v in nodes.items():
+    req = ChangeState.Request()
+    req.transition.id = Transition.TRANSITION_CONFIGURE
+    assert call(f"{v}/change_state", ChangeState, req).success, k
+    got[k].append(ask(v))
+print(json.dumps(got), flush=True)
+ex.shutdown()
+spinner.join(timeout=10.0)
+rclpy.shutdown()
+"""
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_c_node_lifecycle_introspection_is_rclpy_s(tmp_path: Path) -> None:
+    """``amsfe node --impl c --managed`` answers what ``ros2 lifecycle list`` asks
+    (get_available_states, get_available_transitions; get_transition_graph for ``--all``)
+    with what an rclpy lifecycle node answers over DDS, unconfigured and configured."""
+    env = _ros_env(tmp_path)
+    procs = []
+    try:
+        node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--managed",
+                      "--impl", "c", *PATIENT_NODE)  # fmt: skip
+        procs.append(node)
+        done = subprocess.run(
+            [sys.executable, "-c", _INTROSPECTION_CLIENT, f"{env[_PREFIX]}/amsfe_node"],
+            env=env, capture_output=True, text=True, timeout=150,
+        )  # fmt: skip
+        node.kill(signal.SIGTERM)
+    finally:
+        _finish(procs, 60.0)
+    assert done.returncode == 0, done.stderr
+    got = json.loads(done.stdout.strip().splitlines()[-1])
+    assert got["node"] == got["ref"], got
+    unconfigured, inactive = got["node"]
+    assert ("unconfigured" in {s[1] for s in unconfigured["states"]}) and len(
+        unconfigured["states"]
+    ) >= 10
+    assert {t[1] for t in unconfigured["get_available_transitions"]} >= {"configure", "shutdown"}
+    assert {t[1] for t in inactive["get_available_transitions"]} >= {"activate", "cleanup"}
+    assert len(inactive["get_transition_graph"]) > len(inactive["get_available_transitions"])
 
 
 def test_what_the_c_node_refuses_and_its_queues() -> None:

@@ -121,22 +121,6 @@ WITHIN_TICKS = 100
 #: The node implementations ``amsfe node`` offers (``--impl``), each tested.
 IMPLS = node_impls()
 
-#: Why a stall of the C node does not always hold for being behind today (measured with the
-#: C arm, docs/live-load.md, "The C arm": 4 of 10 runs passed; the Python node 10 of 10).
-STALL = (
-    "after a 300 ms SIGSTOP the C node catches its backlog up within milliseconds and, on 6 "
-    "of 10 runs (5 repeats, both parametrizations), held with 'innovation' 23-67 ticks after "
-    "the stall began instead of 'deadline' (50 late samples): the arm ran on with the last "
-    "command for 300 ms and the innovations of the backlog judged the arm first; the "
-    "watchdogs' order to fix (the Python node, slower to catch up, held with 'deadline')"
-)
-
-#: The node implementations, the C node's stall marked (:data:`STALL`).
-STALL_IMPLS = [
-    pytest.param(i, marks=pytest.mark.xfail(strict=False, reason=STALL)) if i == "c" else i
-    for i in IMPLS
-]
-
 
 #: A repeat of a free-running run for how often it holds: CI runs it once (docs/how-to/tests.md).
 REPEAT = pytest.mark.nightly("a repeat of a free-running run under load CI runs once")
@@ -242,7 +226,7 @@ def _wall_tick0(sim: Any) -> float:
 
 @pytest.mark.ros
 @pytest.mark.slow
-@pytest.mark.parametrize("impl", STALL_IMPLS)
+@pytest.mark.parametrize("impl", IMPLS)
 @pytest.mark.parametrize("repeat", [1, pytest.param(2, marks=REPEAT)])
 def test_a_300_ms_stall_of_the_node_holds_within_100_ms(
     tmp_path: Path, impl: str, repeat: int

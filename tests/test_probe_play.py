@@ -109,13 +109,6 @@ def test_play_of_a_ros1_bag_into_node_is_estimate(paper: Any, tmp_path: Path) ->
 
 @pytest.mark.ros
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=False,
-    reason="since the watchdogs, the C node may hold for innovation here (window mean 5.6 vs "
-    "5 at tick 75 on a loaded machine; the torque wait did not change it): messages of a log "
-    "time arrive out of order without --ordered, and the estimate then differs from amsfe "
-    "estimate's; cause not found yet (docs/live-load.md)",
-)
 def test_play_at_the_recorded_pace_loses_no_sample(paper: Any, tmp_path: Path) -> None:
     """``amsfe play BAG`` into ``amsfe node`` with neither ``--ordered`` nor ``-p
     qos.depth:=5000`` (tests/test_ros.py passes both): the queues of both ends are sized by

@@ -46,6 +46,8 @@ BOUNDS = (
     WatchdogBounds(innovation_nis=1.05, innovation_window=1, tracking_error=0.0045),
     WatchdogBounds(actuation_error=1e-3, actuation_ticks=1),
     WatchdogBounds(actuation_error=0.5, actuation_ticks=40, innovation_nis=math.inf),
+    # every sample late, never enough of them: what trips is named the lateness (LATE)
+    WatchdogBounds(deadline=1e-4, deadline_misses=5000, deadline_window=5000, tracking_error=0.01),
 )
 SIZES = {"jump": 0.01, "stall": 0.3, "lag": 0.08}
 
@@ -200,6 +202,7 @@ def _compare(lib: Any, events: list[WatchEvent], bounds: WatchdogBounds) -> list
         if py.hold is not None:
             h = py.hold
             assert (s.reason, s.cause, s.k, s.gap) == (h.reason, h.cause, h.k, h.gap)
+            assert s.caused == h.caused
             assert s.bound == h.bound
             assert s.value == h.value or (math.isnan(s.value) and math.isnan(h.value))
         reasons.append(rc)
@@ -231,6 +234,7 @@ def test_c_watchdog_decides_as_python(runs: dict[str, Any]) -> None:
     # every reason and most causes were exercised, so the comparison covered them
     assert seen == set(range(1, len(REASON_NAMES))), sorted(seen)
     expected = {Cause.LOST, Cause.UNSCHEDULED, Cause.SILENT, Cause.BEHIND, Cause.COMMAND}
+    expected |= {Cause.LATE}
     assert expected <= causes, sorted(causes)
 
 

@@ -118,9 +118,13 @@ class CNodeBuild:
     compiled: bool
 
 
-#: The programs built from ``ros/c/``: their own C files (``amsfe_node``: every other one).
-#: ``amsfe_arm`` is the simulated arm of ``amsfe sim-node --impl c`` (:mod:`amsfe_sym.ros.carm`).
-PROGRAMS: dict[str, tuple[str, ...]] = {"amsfe_arm": ("amsfe_arm.c", "amsfe_pystub.c")}
+#: The C files every program of ``ros/c/`` links: the shared rcl set-up and the two data
+#: symbols of librcl's Python type support.
+SHARED: tuple[str, ...] = ("amsfe_rcl.c", "amsfe_pystub.c")
+#: The programs built from ``ros/c/``: their own C files and :data:`SHARED` (``amsfe_node``:
+#: every other one).  ``amsfe_arm`` is the simulated arm of ``amsfe sim-node --impl c``
+#: (:mod:`amsfe_sym.ros.carm`).
+PROGRAMS: dict[str, tuple[str, ...]] = {"amsfe_arm": ("amsfe_arm.c", *SHARED)}
 #: Message packages a program needs besides :data:`_MSG_PACKAGES`.
 _EXTRA_PACKAGES: dict[str, tuple[str, ...]] = {"amsfe_arm": ("rosgraph_msgs",)}
 
@@ -128,7 +132,7 @@ _EXTRA_PACKAGES: dict[str, tuple[str, ...]] = {"amsfe_arm": ("rosgraph_msgs",)}
 def _sources(program: str = "amsfe_node") -> list[Path]:
     """The C sources of ``program`` (``ros/c/*.c``) and every header, sorted."""
     own = PROGRAMS.get(program)
-    others = {name for files in PROGRAMS.values() for name in files if name != "amsfe_pystub.c"}
+    others = {name for files in PROGRAMS.values() for name in files if name not in SHARED}
     c = [p for p in C_DIR.glob("*.c") if (p.name in own if own else p.name not in others)]
     return sorted([*c, *C_DIR.glob("*.h")])
 

@@ -35,6 +35,14 @@ The checks, in the order that decides which reason a sample that trips several g
    over (the blend of control/blend.py ended: before it the law tracks the blended
    reference, not q_d).
 
+A node that is behind is named before what its lateness caused: when the first check that
+trips is 7, 8 or 9 and the sample itself is late (its lateness past ``deadline``), the hold
+is ``deadline`` with the cause :attr:`Cause.LATE` (value: the lateness [s]; the line ends
+``; <check> tripped``).  The arm ran on
+older commands while the node lagged (a stall of 300 ms: 300 ticks on one command), and the
+node catches its backlog up in milliseconds: the innovations and the path of that backlog
+trip long before ``deadline_misses`` late samples are counted (issue 34).
+
 Which command the arm applied (``actuation``).  A command reaches the arm late, or not at
 all, in free running: the arm then applies the newest one it has (an older one), or holds
 zero before the first; what it applied over tick j is one of the node's commands of ticks
@@ -217,6 +225,8 @@ class Hold:
         value: The quantity (units of the key: rad, -, s, samples).
         bound: Its bound.
         gap: Samples missing (covariance, stalls).
+        caused: What the node's lateness caused, the check that tripped first (``deadline``
+            with :attr:`Cause.LATE`; else NONE).
     """
 
     reason: Reason
@@ -225,6 +235,7 @@ class Hold:
     value: float
     bound: float
     gap: int = 0
+    caused: Reason = Reason.NONE
 
     @property
     def name(self) -> str:
@@ -239,9 +250,10 @@ class Hold:
     def line(self) -> str:
         """``hold: <name>: <text> (<value> vs <bound> at tick k)`` (the C's
         ``amsfe_watchdog_format``, character for character)."""
+        caused = f"; {REASON_NAMES[self.caused]} tripped" if self.caused else ""
         return (
             f"hold: {self.name}: {self.text} ({_g(self.value)} vs bound {_g(self.bound)} "
-            f"at tick {self.k}, {self.gap} missing)"
+            f"at tick {self.k}, {self.gap} missing){caused}"
         )
 
 
@@ -388,6 +400,9 @@ class Watchdog:
             s.max_tracking = max(s.max_tracking, err)
             if err > b.tracking_error:
                 trips.append(Hold(Reason.TRACKING, Cause.NONE, k, err, b.tracking_error, gap))
+        if trips and late and trips[0].reason in _CAUSED_BY_LATENESS:  # 10: behind first
+            first = trips[0].reason
+            trips[0] = Hold(Reason.DEADLINE, Cause.LATE, k, lateness, b.deadline, gap, first)
         if trips:
             self.hold = trips[0]
             return self.hold.reason
@@ -467,6 +482,12 @@ class Watchdog:
         timeout = self.config.bounds.encoder_timeout
         silent = not self._first and now - self._last_taken > timeout
         return self.idle(now, publishers() if silent and self.hold is None else -1)
+
+
+#: What a node that is behind causes: the arm runs on older commands meanwhile, so its
+#: torque, its innovations and its path can leave their bounds; on a late sample the hold
+#: names the lateness (``deadline``, :attr:`Cause.LATE`), not the arm.
+_CAUSED_BY_LATENESS = (Reason.ACTUATION, Reason.INNOVATION, Reason.TRACKING)
 
 
 def _nonfinite(v: FloatArray | None) -> bool:

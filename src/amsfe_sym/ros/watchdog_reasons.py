@@ -54,6 +54,7 @@ class Cause(IntEnum):
     UNSCHEDULED = 7
     ESTIMATE = 8
     COMMAND = 9
+    LATE = 10
 
 
 #: One line per (reason, cause): the real cause and its fix (the C's, character for character).
@@ -78,6 +79,11 @@ CAUSE_TEXT: dict[tuple[Reason, Cause], str] = {
     (Reason.DEADLINE, Cause.NONE): (
         "this node is behind (CPU load / priority), not the driver: samples processed later "
         "than deadline after their stamp; give the node CPU (real-time priority, fewer jobs)"
+    ),
+    (Reason.DEADLINE, Cause.LATE): (
+        "this node is behind, not the arm: it processed this sample later than deadline "
+        "after its stamp, and what the arm did meanwhile on older commands (its innovations, "
+        "its path, its torque) left a bound; give the node CPU (real-time priority, fewer jobs)"
     ),
     (Reason.COMPUTE, Cause.NONE): (
         "one tick's computation took longer than compute_budget: the machine is too loaded "

@@ -50,7 +50,7 @@
 #include <std_msgs/msg/float64_multi_array.h>
 
 #include "amsfe_cdr.h"
-#include "amsfe_rt.h"
+#include "amsfe_rcl.h"
 #include "amsfe_node_params.h"
 
 /* the generated library's functions (casadi's calling convention) */
@@ -65,31 +65,7 @@ extern int camera_measure_work(long long *, long long *, long long *, long long 
 #define MAX_JOINTS 64
 #define MSG_CAP 65536
 
-static volatile sig_atomic_t g_signal = 0;
-static void on_signal(int sig) { g_signal = sig; }
-static long g_publish_failed = 0;
 
-static void *must(void *p, const char *what) {
-  if (!p) {
-    fprintf(stderr, "error: amsfe_arm: out of memory for %s\n", what);
-    exit(1);
-  }
-  return p;
-}
-#define ALLOC(type, count) \
-  ((type *)must(calloc((size_t)(count) != 0 ? (size_t)(count) : 1, sizeof(type)), #type))
-
-static long long mono_ns(void) {
-  struct timespec t;
-  clock_gettime(CLOCK_MONOTONIC, &t);
-  return (long long)t.tv_sec * 1000000000LL + t.tv_nsec;
-}
-
-static long long wall_ns(void) { /* the clock of the middleware's receive stamps */
-  struct timespec t;
-  clock_gettime(CLOCK_REALTIME, &t);
-  return (long long)t.tv_sec * 1000000000LL + t.tv_nsec;
-}
 
 /* ------------------------------------------------------------------ a generated function */
 typedef struct {
@@ -115,87 +91,25 @@ static int gcall(gfun *g, const double **in, int n_in, double **out, int n_out) 
   return g->f(g->arg, g->res, g->iw, g->w, 0);
 }
 
-/* ------------------------------------------------------------------ outgoing messages */
-typedef struct {
-  rcl_serialized_message_t ser;
-  size_t at[3]; /* payload offsets of the float64[] fields */
-} out_msg;
-
-static void out_alloc(out_msg *m, size_t cap) {
-  m->ser = rmw_get_zero_initialized_serialized_message();
-  rcutils_allocator_t a = rcutils_get_default_allocator();
-  if (rmw_serialized_message_init(&m->ser, cap, &a) != RMW_RET_OK) must(NULL, "a message");
-}
-
-/* A header (stamp 0, frame_id) at the start of w. */
-static void put_header(cdr_out *w, const char *frame) {
-  cdr_put_u32(w, 0), cdr_put_u32(w, 0), cdr_put_string(w, frame);
-}
-
-/* JointState of `names` with `counts` [3] values in position, velocity, effort (0: empty,
- * as messages.joint_state leaves a field it is not given). */
-static void out_joint_state(out_msg *m, const char *const *names, int n, const int *counts) {
-  size_t cap = 256 + 8 * (size_t)(counts[0] + counts[1] + counts[2]) + 16;
-  for (int j = 0; j < n; ++j) cap += strlen(names[j]) + 8;
-  out_alloc(m, cap);
-  cdr_out w;
-  cdr_out_init(&w, m->ser.buffer, cap);
-  put_header(&w, "");
-  cdr_put_u32(&w, (uint32_t)n);
-  for (int j = 0; j < n; ++j) cdr_put_string(&w, names[j]);
-  for (int i = 0; i < 3; ++i) cdr_put_doubles(&w, NULL, counts[i], &m->at[i]);
-  if (!w.ok) must(NULL, "a JointState");
-  m->ser.buffer_length = cdr_out_size(&w);
-}
-
-static void out_point_stamped(out_msg *m) { /* messages.point_stamped: frame "camera" */
-  out_alloc(m, 128);
+static void out_point_stamped(amsfe_out *m) { /* messages.point_stamped: frame "camera" */
+  amsfe_out_alloc(m, 128);
   cdr_out w;
   cdr_out_init(&w, m->ser.buffer, 128);
-  put_header(&w, "camera");
+  amsfe_put_header(&w, "camera");
   double zero = 0.0;
   cdr_put(&w, &zero, 8, 8);
   m->at[0] = w.pos - 8;
   cdr_put(&w, &zero, 8, 8), cdr_put(&w, &zero, 8, 8);
-  if (!w.ok) must(NULL, "a PointStamped");
+  if (!w.ok) amsfe_must(NULL, "a PointStamped");
   m->ser.buffer_length = cdr_out_size(&w);
 }
 
-static void out_f64_array(out_msg *m, int n) {
-  size_t cap = 64 + 8 * (size_t)n;
-  out_alloc(m, cap);
-  cdr_out w;
-  cdr_out_init(&w, m->ser.buffer, cap);
-  cdr_put_u32(&w, 0), cdr_put_u32(&w, 0); /* layout: no dims, data_offset 0 */
-  cdr_put_doubles(&w, NULL, n, &m->at[0]);
-  if (!w.ok) must(NULL, "a Float64MultiArray");
-  m->ser.buffer_length = cdr_out_size(&w);
-}
-
-static void out_clock(out_msg *m) {
-  out_alloc(m, 16);
+static void out_clock(amsfe_out *m) {
+  amsfe_out_alloc(m, 16);
   cdr_out w;
   cdr_out_init(&w, m->ser.buffer, 16);
   cdr_put_u32(&w, 0), cdr_put_u32(&w, 0);
   m->ser.buffer_length = cdr_out_size(&w);
-}
-
-static void out_stamp(out_msg *m, long long ns) {
-  int32_t sec = (int32_t)(ns / 1000000000LL);
-  uint32_t nsec = (uint32_t)(ns % 1000000000LL);
-  memcpy(m->ser.buffer + 4, &sec, 4);
-  memcpy(m->ser.buffer + 8, &nsec, 4);
-}
-
-static void out_fill(out_msg *m, int field, const double *v, int n) {
-  memcpy(m->ser.buffer + 4 + m->at[field], v, sizeof(double) * (size_t)n);
-}
-
-static void publish(rcl_publisher_t *pub, out_msg *m) {
-  if (rcl_publish_serialized_message(pub, &m->ser, NULL) != RCL_RET_OK) {
-    rcutils_reset_error();
-    ++g_publish_failed;
-  }
 }
 
 /* ------------------------------------------------------------------ the arm */
@@ -234,7 +148,7 @@ typedef struct {
   rcl_subscription_t sub_cmd, sub_est;
   rcl_wait_set_t ws;
   rcl_serialized_message_t in;
-  out_msg m_enc, m_cam, m_eff, m_truth, m_clock;
+  amsfe_out m_enc, m_cam, m_eff, m_truth, m_clock;
   /* the commands */
   long commands;           /* accepted so far */
   long received;           /* taken (accepted or not) */
@@ -251,23 +165,6 @@ static void fail(arm_t *s, const char *line) { /* carm.py raises it: "error: LIN
   FILE *f = s->error_file ? fopen(s->error_file, "w") : NULL;
   if (f) fputs(line, f), fclose(f);
   else fprintf(stderr, "error: %s\n", line);
-}
-
-static void rcl_check(rcl_ret_t ret, const char *what) {
-  if (ret == RCL_RET_OK) return;
-  fprintf(stderr, "error: amsfe_arm: %s: %s\n", what, rcutils_get_error_string().str);
-  rcutils_reset_error();
-  exit(1);
-}
-
-static rmw_qos_profile_t qos_of(const char *reliability, int depth) {
-  rmw_qos_profile_t q = rmw_qos_profile_default;
-  q.history = RMW_QOS_POLICY_HISTORY_KEEP_LAST;
-  q.depth = (size_t)depth;
-  q.reliability = strcmp(reliability, "reliable") == 0 ? RMW_QOS_POLICY_RELIABILITY_RELIABLE
-                                                        : RMW_QOS_POLICY_RELIABILITY_BEST_EFFORT;
-  q.durability = RMW_QOS_POLICY_DURABILITY_VOLATILE;
-  return q;
 }
 
 static void configure(arm_t *s, const char *path) {
@@ -548,7 +445,7 @@ static void wait_messages(arm_t *s, long long timeout_ns) {
   rcl_ret_t add = rcl_wait_set_clear(&s->ws);
   if (add == RCL_RET_OK) add = rcl_wait_set_add_subscription(&s->ws, &s->sub_cmd, NULL);
   if (add == RCL_RET_OK) add = rcl_wait_set_add_subscription(&s->ws, &s->sub_est, NULL);
-  rcl_check(add, "the wait set");
+  amsfe_rcl_check(add, "the wait set");
   rcl_ret_t ret = rcl_wait(&s->ws, timeout_ns > 0 ? timeout_ns : 0);
   if (ret != RCL_RET_OK && ret != RCL_RET_TIMEOUT) rcutils_reset_error();
   take_commands(s);
@@ -588,18 +485,18 @@ static int run(arm_t *s) {
   long K = s->K;
   long late = 0, stale = 0;
   long long period = (long long)llround((double)s->T_ns / s->rate);
-  long long epoch = 0, t_start = mono_ns();
+  long long epoch = 0, t_start = amsfe_mono_ns();
   long second = lround(1.0 / s->T);
   char line[1600];
   /* wait for a subscriber of the encoders (and, in lockstep, a publisher of the commands) */
-  long long deadline = mono_ns() + (long long)(s->start_timeout * 1e9);
+  long long deadline = amsfe_mono_ns() + (long long)(s->start_timeout * 1e9);
   for (;;) {
     size_t subs = 0, pubs = 0;
     rcl_publisher_get_subscription_count(&s->pub_enc, &subs);
     rcl_subscription_get_publisher_count(&s->sub_cmd, &pubs);
     if (subs >= 1 && (!s->lockstep || pubs >= 1)) break;
-    if (g_signal) return 0;
-    if (mono_ns() > deadline) {
+    if (amsfe_signal) return 0;
+    if (amsfe_mono_ns() > deadline) {
       snprintf(line, sizeof line,
                "sim-node start: expected a subscriber of %s%s%s, found none within %g s. Fix: "
                "start `amsfe node SCENARIO` on the same ROS_DOMAIN_ID",
@@ -616,8 +513,8 @@ static int run(arm_t *s) {
     rcl_subscription_get_publisher_count(&s->sub_cmd, &pubs);
     if (pubs > 1) return two_controllers(s, NULL);
   }
-  long long t0 = mono_ns();
-  for (long k = 0; k < K && !g_signal; ++k) {
+  long long t0 = amsfe_mono_ns();
+  for (long k = 0; k < K && !amsfe_signal; ++k) {
     long long ns = k * s->T_ns;
     for (int i = 0; i < 3; ++i) {
       long at = i == 0 ? s->f_frozen : i == 1 ? s->f_jump : s->f_torque;
@@ -635,12 +532,12 @@ static int run(arm_t *s) {
       fail(s, line);
       return EXIT_REFUSED;
     }
-    out_stamp(&s->m_clock, ns);
-    publish(&s->pub_clock, &s->m_clock);
+    amsfe_out_stamp(&s->m_clock, ns);
+    amsfe_publish(&s->pub_clock, &s->m_clock);
     memcpy(s->xt, s->x, sizeof(double) * 4 * (size_t)n);
     memcpy(s->xt + 4 * n, s->theta, sizeof(double) * (size_t)s->p);
-    out_fill(&s->m_truth, 0, s->xt, N);
-    publish(&s->pub_truth, &s->m_truth);
+    amsfe_out_fill(&s->m_truth, 0, s->xt, N);
+    amsfe_publish(&s->pub_truth, &s->m_truth);
     int nf = camera_tick(s, k);
     if (nf < 0) {
       fail(s, "sim-node camera: expected the run's camera draws, found too few (or a full "
@@ -648,9 +545,9 @@ static int run(arm_t *s) {
       return EXIT_REFUSED;
     }
     for (int i = 0; i < nf; ++i) {
-      out_stamp(&s->m_cam, s->due[i].exposure * s->T_ns);
-      out_fill(&s->m_cam, 0, s->due[i].z, 2);
-      publish(&s->pub_cam, &s->m_cam);
+      amsfe_out_stamp(&s->m_cam, s->due[i].exposure * s->T_ns);
+      amsfe_out_fill(&s->m_cam, 0, s->due[i].z, 2);
+      amsfe_publish(&s->pub_cam, &s->m_cam);
     }
     if (s->lockstep && nf > 0 &&
         rcl_publisher_wait_for_all_acked(&s->pub_cam, (long long)(s->command_timeout * 1e9)) !=
@@ -660,11 +557,11 @@ static int run(arm_t *s) {
               "%g s: the node may fuse it a tick late\n", k, s->command_timeout);
     }
     encoders(s, k);
-    s->sent_at[k] = wall_ns();
-    out_stamp(&s->m_enc, ns);
-    out_fill(&s->m_enc, 0, s->zs, n);
-    out_fill(&s->m_enc, 1, s->zs + n, n);
-    publish(&s->pub_enc, &s->m_enc);
+    s->sent_at[k] = amsfe_wall_ns();
+    amsfe_out_stamp(&s->m_enc, ns);
+    amsfe_out_fill(&s->m_enc, 0, s->zs, n);
+    amsfe_out_fill(&s->m_enc, 1, s->zs + n, n);
+    amsfe_publish(&s->pub_enc, &s->m_enc);
     if (k && k % second == 0) {
       printf("sim-node: t = %.1f s\n", (double)k * s->T);
       fflush(stdout);
@@ -672,9 +569,9 @@ static int run(arm_t *s) {
     }
     /* 2. the command applied over [t_k, t_k+1] */
     if (s->lockstep || k == 0) {
-      long long until = mono_ns() + (long long)(s->command_timeout * 1e9);
-      while (s->commands <= k && !g_signal && !s->intruder) {
-        long long left = until - mono_ns();
+      long long until = amsfe_mono_ns() + (long long)(s->command_timeout * 1e9);
+      while (s->commands <= k && !amsfe_signal && !s->intruder) {
+        long long left = until - amsfe_mono_ns();
         if (left <= 0) {
           snprintf(line, sizeof line,
                    "sim-node tick %ld (t = %.3f s): expected its command on %s, found none "
@@ -686,7 +583,7 @@ static int run(arm_t *s) {
         }
         wait_messages(s, left < 50000000LL ? left : 50000000LL);
       }
-      if (g_signal) break;
+      if (amsfe_signal) break;
       if (s->intruder) {
         rmw_gid_t both[2] = {s->controller, s->other};
         return two_controllers(s, both);
@@ -694,19 +591,19 @@ static int run(arm_t *s) {
       memcpy(s->u, s->cmd_last, sizeof(double) * (size_t)n);
       s->cmd_new = 0;
       if (k == 0) {
-        t0 = mono_ns();
+        t0 = amsfe_mono_ns();
         epoch = t0 - period; /* tick 0 ends now: tick k ends at epoch + (k + 1) period */
         if (!s->lockstep) {
           printf("sim-node: tick 0 at wall clock %.6f s\n",
-                 (double)(wall_ns() - (mono_ns() - epoch)) * 1e-9);
+                 (double)(amsfe_wall_ns() - (amsfe_mono_ns() - epoch)) * 1e-9);
           fflush(stdout);
         }
       }
     } else {
       long long end = epoch + (k + 1) * period;
-      if (mono_ns() > end) late++;
+      if (amsfe_mono_ns() > end) late++;
       struct timespec ts = {(time_t)(end / 1000000000LL), (long)(end % 1000000000LL)};
-      while (!g_signal && clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, NULL) == EINTR) {
+      while (!amsfe_signal && clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, NULL) == EINTR) {
       }
       wait_messages(s, 0); /* every command received before the tick's end */
       if (s->cmd_new == 0) stale++;
@@ -716,9 +613,9 @@ static int run(arm_t *s) {
     /* 3. the torque applied (a fault: zero), published; the plant advances */
     int lost = s->f_torque >= 0 && k >= s->f_torque;
     for (int j = 0; j < n; ++j) s->applied[j] = lost ? 0.0 : s->u[j];
-    out_stamp(&s->m_eff, ns);
-    out_fill(&s->m_eff, 2, s->applied, n);
-    publish(&s->pub_eff, &s->m_eff);
+    amsfe_out_stamp(&s->m_eff, ns);
+    amsfe_out_fill(&s->m_eff, 2, s->applied, n);
+    amsfe_publish(&s->pub_eff, &s->m_eff);
     if (k + 1 < K) {
       const double *in[4] = {s->x, s->applied, s->theta, s->tau_d + k * 2 * n};
       double *res[1] = {s->x_next};
@@ -726,12 +623,12 @@ static int run(arm_t *s) {
       memcpy(s->x, s->x_next, sizeof(double) * 4 * (size_t)n);
     }
   }
-  double wall = (double)(mono_ns() - t0) * 1e-9;
+  double wall = (double)(amsfe_mono_ns() - t0) * 1e-9;
   (void)t_start;
   if (rcl_publisher_wait_for_all_acked(&s->pub_eff, 1000000000LL) != RCL_RET_OK)
     rcutils_reset_error();
   wait_messages(s, 50000000LL); /* the last tick's estimate */
-  if (g_signal) return g_signal == SIGTERM ? 143 : 130;
+  if (amsfe_signal) return amsfe_signal == SIGTERM ? 143 : 130;
   printf("sim-node: %ld ticks in %.2f s wall, %ld commands", K, wall, s->commands);
   if (!s->lockstep) printf(", %ld late ticks, %ld without a new command", late, stale);
   printf("\n");
@@ -740,7 +637,7 @@ static int run(arm_t *s) {
   if (len && s->n_cmd_lat) len += snprintf(lat + len, sizeof lat - (size_t)len, "; ");
   len += latency_part(lat + len, sizeof lat - (size_t)len, "command", s->cmd_lat, s->n_cmd_lat);
   printf("sim-node: %s\n", len ? lat : "no latency measured");
-  if (g_publish_failed) printf("sim-node: %ld publishes refused by rcl\n", g_publish_failed);
+  if (amsfe_publish_failed) printf("sim-node: %ld publishes refused by rcl\n", amsfe_publish_failed);
   fflush(stdout);
   return 0;
 }
@@ -752,6 +649,7 @@ int main(int argc, char **argv) {
     return 2;
   }
   static arm_t S;
+  amsfe_program = "amsfe_arm";
   arm_t *s = &S;
   configure(s, argv[1]);
   params_file *pf = &s->pf;
@@ -760,65 +658,44 @@ int main(int argc, char **argv) {
   const char *reliability = qt[0];
   int depth = (int)pf_parse_long(pf, "qos", qt[1]), out_depth = (int)pf_parse_long(pf, "qos", qt[2]);
   int priority = (int)pf_long(pf, "sched_priority");
-  struct sigaction sa;
-  memset(&sa, 0, sizeof sa);
-  sa.sa_handler = on_signal;
-  sigaction(SIGINT, &sa, NULL);
-  sigaction(SIGTERM, &sa, NULL);
-  /* before rcl_init: the middleware's threads (Fast DDS's receive and event threads) inherit
-   * the policy, so a sample's path through this process is real-time too, not only the
-   * tick (a reception thread at normal priority beside CPU hogs delays the commands) */
-  amsfe_realtime("sim-node", priority);
+  amsfe_rcl_start(argc, argv, &s->ctx, &s->node, "amsfe_sim", "sim-node", priority);
   rcl_allocator_t alloc = rcl_get_default_allocator();
-  rcl_init_options_t io = rcl_get_zero_initialized_init_options();
-  rcl_check(rcl_init_options_init(&io, alloc), "rcl_init_options_init");
-  s->ctx = rcl_get_zero_initialized_context();
-  rcl_check(rcl_init(argc, (const char *const *)argv, &io, &s->ctx), "rcl_init (--ros-args)");
-  s->node = rcl_get_zero_initialized_node();
-  rcl_node_options_t no = rcl_node_get_default_options();
-  rcl_check(rcl_node_init(&s->node, "amsfe_sim", "", &s->ctx, &no), "rcl_node_init");
-  const rosidl_message_type_support_t *ts_js = ROSIDL_GET_MSG_TYPE_SUPPORT(sensor_msgs, msg, JointState);
-  const rosidl_message_type_support_t *ts_ps = ROSIDL_GET_MSG_TYPE_SUPPORT(geometry_msgs, msg, PointStamped);
-  const rosidl_message_type_support_t *ts_f64 = ROSIDL_GET_MSG_TYPE_SUPPORT(std_msgs, msg, Float64MultiArray);
+  const amsfe_types ty = amsfe_message_types();
   const rosidl_message_type_support_t *ts_clk = ROSIDL_GET_MSG_TYPE_SUPPORT(rosgraph_msgs, msg, Clock);
   rcl_publisher_options_t po = rcl_publisher_get_default_options();
-  po.qos = qos_of(reliability, out_depth);
+  po.qos = amsfe_qos(reliability, out_depth);
   struct {
     rcl_publisher_t *pub;
     const rosidl_message_type_support_t *ts;
     const char *topic;
-  } pubs[] = {{&s->pub_enc, ts_js, s->t_enc},
-              {&s->pub_cam, ts_ps, s->t_cam},
-              {&s->pub_eff, ts_js, s->t_eff},
-              {&s->pub_truth, ts_f64, s->t_truth}};
+  } pubs[] = {{&s->pub_enc, ty.joint_state, s->t_enc},
+              {&s->pub_cam, ty.point_stamped, s->t_cam},
+              {&s->pub_eff, ty.joint_state, s->t_eff},
+              {&s->pub_truth, ty.f64_array, s->t_truth}};
   for (size_t i = 0; i < sizeof pubs / sizeof pubs[0]; ++i) {
     *pubs[i].pub = rcl_get_zero_initialized_publisher();
-    rcl_check(rcl_publisher_init(pubs[i].pub, &s->node, pubs[i].ts, pubs[i].topic, &po), pubs[i].topic);
+    amsfe_rcl_check(rcl_publisher_init(pubs[i].pub, &s->node, pubs[i].ts, pubs[i].topic, &po), pubs[i].topic);
   }
-  po.qos = qos_of(reliability, 1);
+  po.qos = amsfe_qos(reliability, 1);
   s->pub_clock = rcl_get_zero_initialized_publisher();
-  rcl_check(rcl_publisher_init(&s->pub_clock, &s->node, ts_clk, s->t_clock, &po), "clock publisher");
+  amsfe_rcl_check(rcl_publisher_init(&s->pub_clock, &s->node, ts_clk, s->t_clock, &po), "clock publisher");
   rcl_subscription_options_t so = rcl_subscription_get_default_options();
-  so.qos = qos_of(reliability, depth);
+  so.qos = amsfe_qos(reliability, depth);
   s->sub_cmd = rcl_get_zero_initialized_subscription();
-  rcl_check(rcl_subscription_init(&s->sub_cmd, &s->node, ts_f64, s->t_cmd, &so), "command subscription");
+  amsfe_rcl_check(rcl_subscription_init(&s->sub_cmd, &s->node, ty.f64_array, s->t_cmd, &so), "command subscription");
   s->sub_est = rcl_get_zero_initialized_subscription();
-  rcl_check(rcl_subscription_init(&s->sub_est, &s->node, ts_js, s->t_est, &so), "estimate subscription");
-  s->in = rmw_get_zero_initialized_serialized_message();
-  rcl_check(rmw_serialized_message_init(&s->in, MSG_CAP, &alloc), "a message buffer");
+  amsfe_rcl_check(rcl_subscription_init(&s->sub_est, &s->node, ty.joint_state, s->t_est, &so), "estimate subscription");
+  s->in = amsfe_message_buffer(MSG_CAP);
   int n = s->n;
   int enc_counts[3] = {n, n, 0}, eff_counts[3] = {0, 0, n};
-  out_joint_state(&s->m_enc, s->names, n, enc_counts);
-  out_joint_state(&s->m_eff, s->names, n, eff_counts);
+  amsfe_out_joint_state(&s->m_enc, s->names, n, enc_counts);
+  amsfe_out_joint_state(&s->m_eff, s->names, n, eff_counts);
   out_point_stamped(&s->m_cam);
-  out_f64_array(&s->m_truth, s->N);
+  amsfe_out_f64_array(&s->m_truth, s->N);
   out_clock(&s->m_clock);
   s->ws = rcl_get_zero_initialized_wait_set();
-  rcl_check(rcl_wait_set_init(&s->ws, 2, 0, 0, 0, 0, 0, &s->ctx, alloc), "wait set");
+  amsfe_rcl_check(rcl_wait_set_init(&s->ws, 2, 0, 0, 0, 0, 0, &s->ctx, alloc), "wait set");
   int code = run(s);
-  rcl_ret_t fini = rcl_wait_set_fini(&s->ws);
-  fini |= rcl_node_fini(&s->node);
-  fini |= rcl_shutdown(&s->ctx);
-  (void)fini;
+  amsfe_rcl_stop(&s->ws, &s->node, &s->ctx);
   return code;
 }

@@ -44,19 +44,25 @@ static inline int cdr_align(cdr_in *r, size_t a) {
   return 1;
 }
 
+/* `size` bytes, aligned to `size`, into v (left as it is past the end: r->ok = 0). */
+static inline void cdr_get(cdr_in *r, void *v, size_t size) {
+  if (!cdr_align(r, size) || r->pos + size > r->len) {
+    r->ok = 0;
+    return;
+  }
+  memcpy(v, r->p + r->pos, size);
+  r->pos += size;
+}
+
 static inline uint32_t cdr_u32(cdr_in *r) {
   uint32_t v = 0;
-  if (!cdr_align(r, 4) || r->pos + 4 > r->len) return r->ok = 0, 0;
-  memcpy(&v, r->p + r->pos, 4);
-  r->pos += 4;
+  cdr_get(r, &v, 4);
   return v;
 }
 
 static inline double cdr_f64(cdr_in *r) {
   double v = 0.0;
-  if (!cdr_align(r, 8) || r->pos + 8 > r->len) return r->ok = 0, 0.0;
-  memcpy(&v, r->p + r->pos, 8);
-  r->pos += 8;
+  cdr_get(r, &v, 8);
   return v;
 }
 

@@ -1,6 +1,7 @@
 /* amsfe_lifecycle.h: `amsfe node --managed` for the C node: the ROS 2 lifecycle state
  * machine of rcl_lifecycle (its services change_state, get_state, ... under the node's
- * name) driving when samples are processed, as the Python managed node (ros/node.py):
+ * name, the introspection ones `ros2 lifecycle list` asks included) driving when samples are
+ * processed, as the Python managed node (ros/node.py):
  * configure (the node is configured from its parameter file at start: nothing more to do),
  * activate (samples processed from then on, the watchdogs' clocks restarted), deactivate
  * (the hold command published, samples dropped), cleanup, shutdown (the node stops, exit 0).
@@ -11,6 +12,10 @@
 
 #include <rcl/rcl.h>
 #include <rcl_lifecycle/rcl_lifecycle.h>
+
+/* The services of the state machine served (the wait set's room for them): change_state,
+ * get_state, get_available_states, get_available_transitions, get_transition_graph. */
+#define LIFECYCLE_SERVICES 5
 
 /* What a served transition asks of the node. */
 enum lifecycle_event { LC_NONE = 0, LC_ACTIVATE, LC_DEACTIVATE, LC_SHUTDOWN };

@@ -54,8 +54,8 @@ int live_init(live_loop *L) {
   L->ep.x0 = L->x0;
   L->eff_u = zalloc(sizeof(double) * LIVE_RING * (size_t)n);
   L->cmd_u = zalloc(sizeof(double) * LIVE_RING * (size_t)n);
-  L->early_eff_ns = zalloc(sizeof(long long) * LIVE_MAX_FRAMES);
-  L->early_eff_u = zalloc(sizeof(double) * LIVE_MAX_FRAMES * (size_t)n);
+  L->early_eff_ns = zalloc(sizeof(long long) * LIVE_RING);
+  L->early_eff_u = zalloc(sizeof(double) * LIVE_RING * (size_t)n);
   L->u_in = zalloc(sizeof(double) * (size_t)n);
   L->wd_applied = zalloc(sizeof(double) * (size_t)n);
   L->wd_applied_k = -1;
@@ -136,11 +136,12 @@ void live_frame_in(live_loop *L, long long exposure_ns, const double z[2], long 
 void live_applied(live_loop *L, long long stamp_ns, const double *u) {
   int n = L->n;
   if (L->k < 0) {
-    if (L->n_early_eff < LIVE_MAX_FRAMES) {
-      L->early_eff_ns[L->n_early_eff] = stamp_ns;
-      memcpy(L->early_eff_u + L->n_early_eff * n, u, sizeof(double) * (size_t)n);
-      ++L->n_early_eff;
-    }
+    /* kept until the first sample places them: the newest LIVE_RING ticks (a first sample
+     * that comes late, the efforts flowing meanwhile, needs every one after it) */
+    long slot = L->n_early_eff % LIVE_RING;
+    L->early_eff_ns[slot] = stamp_ns;
+    memcpy(L->early_eff_u + slot * n, u, sizeof(double) * (size_t)n);
+    ++L->n_early_eff;
     return;
   }
   int ok;
@@ -316,8 +317,9 @@ int live_encoders(live_loop *L, long long stamp_ns, const double *z, long long s
       return st - 100;
     }
     L->n_pending = 0; /* the loop uses no frame at tick 0 */
-    for (int i = 0; i < L->n_early_eff; ++i)
-      live_applied(L, L->early_eff_ns[i], L->early_eff_u + i * n);
+    for (long i = L->n_early_eff > LIVE_RING ? L->n_early_eff - LIVE_RING : 0;
+         i < L->n_early_eff; ++i)
+      live_applied(L, L->early_eff_ns[i % LIVE_RING], L->early_eff_u + (i % LIVE_RING) * n);
     L->n_early_eff = 0;
     for (int i = 0; i < L->n_early; ++i)
       live_frame_in(L, L->early[i].exposure_ns, L->early[i].z, L->early[i].sent);

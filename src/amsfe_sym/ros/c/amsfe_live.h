@@ -83,9 +83,9 @@ typedef struct {
   long seen[LIVE_RING];        /* exposures seen, by kappa % LIVE_RING (-1: none) */
   long eff_j[LIVE_RING], cmd_j[LIVE_RING]; /* the tick of each stored torque (-1: none) */
   double *eff_u, *cmd_u;       /* [LIVE_RING x n] */
-  long long *early_eff_ns;     /* efforts before the first sample */
+  long long *early_eff_ns;     /* [LIVE_RING] efforts before the first sample, a ring */
   double *early_eff_u;
-  int n_early_eff;
+  long n_early_eff;            /* received before it (the newest LIVE_RING kept) */
   double *u_in;                /* [n] the torque applied over the last tick */
   double *wd_applied;          /* [n] the newest (by tick) applied torque received since the
                                   last sample, for the watchdog (also one too late for the

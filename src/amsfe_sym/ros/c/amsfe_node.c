@@ -46,7 +46,7 @@
 #include <std_msgs/msg/string.h>
 
 #include "amsfe_cdr.h"
-#include "amsfe_rt.h"
+#include "amsfe_rcl.h"
 #include "amsfe_lifecycle.h"
 #include "amsfe_live.h"
 #include "amsfe_node_params.h"
@@ -62,86 +62,7 @@ extern int gravity_work(long long *sz_arg, long long *sz_res, long long *sz_iw, 
 #define MSG_CAP 65536  /* bytes of one incoming message kept without a resize */
 #define DIAG_CAP 8192
 
-static volatile sig_atomic_t g_signal = 0;
-static long g_publish_failed = 0; /* publishes rcl refused (a context going down) */
-static void on_signal(int sig) { g_signal = sig; }
 
-static double mono_s(void) {
-  struct timespec t;
-  clock_gettime(CLOCK_MONOTONIC, &t);
-  return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
-}
-
-static long long wall_ns(void) { /* the clock of the middleware's receive stamps */
-  struct timespec t;
-  clock_gettime(CLOCK_REALTIME, &t);
-  return (long long)t.tv_sec * 1000000000LL + t.tv_nsec;
-}
-
-static void *must(void *p, const char *what) {
-  if (!p) {
-    fprintf(stderr, "error: amsfe_node: out of memory for %s\n", what);
-    exit(1);
-  }
-  return p;
-}
-#define ALLOC(type, count) \
-  ((type *)must(calloc((size_t)(count) != 0 ? (size_t)(count) : 1, sizeof(type)), #type))
-
-/* ------------------------------------------------------------------ outgoing messages */
-/* A message laid out once: its bytes, and where its stamp and its numbers go. */
-typedef struct {
-  rcl_serialized_message_t ser;
-  size_t at_a, at_b; /* offsets (payload) of the first and second float64[] */
-  int has_stamp;
-} out_msg;
-
-static void out_alloc(out_msg *m, size_t cap) {
-  m->ser = rmw_get_zero_initialized_serialized_message();
-  rcutils_allocator_t a = rcutils_get_default_allocator();
-  if (rmw_serialized_message_init(&m->ser, cap, &a) != RMW_RET_OK) must(NULL, "a message");
-}
-
-/* JointState of `names`, position and velocity n values each (effort empty). */
-static void out_joint_state(out_msg *m, const char *const *names, int n) {
-  size_t cap = 256 + 16 * (size_t)n * 3;
-  for (int j = 0; j < n; ++j) cap += strlen(names[j]) + 8;
-  out_alloc(m, cap);
-  cdr_out w;
-  cdr_out_init(&w, m->ser.buffer, cap);
-  cdr_put_u32(&w, 0), cdr_put_u32(&w, 0), cdr_put_string(&w, "");
-  cdr_put_u32(&w, (uint32_t)n);
-  for (int j = 0; j < n; ++j) cdr_put_string(&w, names[j]);
-  cdr_put_doubles(&w, NULL, n, &m->at_a);
-  cdr_put_doubles(&w, NULL, n, &m->at_b);
-  cdr_put_doubles(&w, NULL, 0, NULL);
-  if (!w.ok) must(NULL, "a JointState");
-  m->ser.buffer_length = cdr_out_size(&w);
-  m->has_stamp = 1;
-}
-
-/* Float64MultiArray of n values (no layout dims). */
-static void out_f64_array(out_msg *m, int n) {
-  size_t cap = 64 + 8 * (size_t)n;
-  out_alloc(m, cap);
-  cdr_out w;
-  cdr_out_init(&w, m->ser.buffer, cap);
-  cdr_put_u32(&w, 0), cdr_put_u32(&w, 0); /* layout: no dims, data_offset 0 */
-  cdr_put_doubles(&w, NULL, n, &m->at_a);
-  if (!w.ok) must(NULL, "a Float64MultiArray");
-  m->ser.buffer_length = cdr_out_size(&w);
-}
-
-static void out_stamp(out_msg *m, long long ns) {
-  int32_t sec = (int32_t)(ns / 1000000000LL);
-  uint32_t nsec = (uint32_t)(ns % 1000000000LL);
-  memcpy(m->ser.buffer + 4, &sec, 4);
-  memcpy(m->ser.buffer + 8, &nsec, 4);
-}
-
-static void out_fill(out_msg *m, size_t at, const double *v, int n) {
-  memcpy(m->ser.buffer + 4 + at, v, sizeof(double) * (size_t)n);
-}
 
 /* ------------------------------------------------------------------ the record */
 /* What the node received and published, kept in arrays of `cap` ticks (allocated at
@@ -205,7 +126,7 @@ typedef struct {
   long eff_last;         /* the latest tick of an effort received (-1: none) */
   long eff_waits, eff_missed; /* samples that waited for the previous tick's effort; in vain */
   rcl_serialized_message_t in;
-  out_msg m_cmd, m_est, m_std, m_theta, m_diag;
+  amsfe_out m_cmd, m_est, m_std, m_theta, m_diag;
   char *diag;
   /* gravity */
   const double **g_arg;
@@ -237,23 +158,6 @@ enum { T_ENC, T_CAM, T_EFF, T_TRUTH, T_EST, T_STD, T_THETA, T_DIAG, T_CMD, T_N }
 static const char *const TOPIC_KEYS[T_N] = {
     "topic_encoders", "topic_camera", "topic_effort", "topic_truth", "topic_estimate",
     "topic_estimate_std", "topic_theta", "topic_diagnostics", "topic_commands"};
-
-static void rcl_check(rcl_ret_t ret, const char *what) {
-  if (ret == RCL_RET_OK) return;
-  fprintf(stderr, "error: amsfe_node: %s: %s\n", what, rcutils_get_error_string().str);
-  rcutils_reset_error();
-  exit(1);
-}
-
-static rmw_qos_profile_t qos_of(const char *reliability, int depth) {
-  rmw_qos_profile_t q = rmw_qos_profile_default;
-  q.history = RMW_QOS_POLICY_HISTORY_KEEP_LAST;
-  q.depth = (size_t)depth;
-  q.reliability = strcmp(reliability, "reliable") == 0 ? RMW_QOS_POLICY_RELIABILITY_RELIABLE
-                                                        : RMW_QOS_POLICY_RELIABILITY_BEST_EFFORT;
-  q.durability = RMW_QOS_POLICY_DURABILITY_VOLATILE;
-  return q;
-}
 
 /* Read the parameter file into the node and its live loop. */
 static void configure(node_t *s, const char *path) {
@@ -464,12 +368,12 @@ static void gravity_hold(node_t *s) {
 static void publish_std(node_t *s, long long ns, const double *x, const double *P_diag, long k) {
   int n = s->n;
   for (int i = 0; i < 2 * n; ++i) s->stdv[i] = sqrt(P_diag[i] > 0.0 ? P_diag[i] : 0.0);
-  out_stamp(&s->m_std, ns);
-  out_fill(&s->m_std, s->m_std.at_a, s->stdv, n);
-  out_fill(&s->m_std, s->m_std.at_b, s->stdv + n, n);
-  if (rcl_publish_serialized_message(&s->pub_std, &s->m_std.ser, NULL) != RCL_RET_OK) ++g_publish_failed;
-  out_fill(&s->m_theta, s->m_theta.at_a, x + 4 * n, s->p);
-  if (rcl_publish_serialized_message(&s->pub_theta, &s->m_theta.ser, NULL) != RCL_RET_OK) ++g_publish_failed;
+  amsfe_out_stamp(&s->m_std, ns);
+  amsfe_out_fill(&s->m_std, 0, s->stdv, n);
+  amsfe_out_fill(&s->m_std, 1, s->stdv + n, n);
+  amsfe_publish(&s->pub_std, &s->m_std);
+  amsfe_out_fill(&s->m_theta, 0, x + 4 * n, s->p);
+  amsfe_publish(&s->pub_theta, &s->m_theta);
   s->std_k = (int)k;
 }
 
@@ -517,7 +421,7 @@ static void publish_diag(node_t *s) {
   cdr_put_string(&w, s->diag);
   if (!w.ok) return;
   s->m_diag.ser.buffer_length = cdr_out_size(&w);
-  if (rcl_publish_serialized_message(&s->pub_diag, &s->m_diag.ser, NULL) != RCL_RET_OK) ++g_publish_failed;
+  amsfe_publish(&s->pub_diag, &s->m_diag);
 }
 
 static void record_tick(node_t *s, long long ns, const double *z, long long sent) {
@@ -584,10 +488,10 @@ static void record_diag(node_t *s, long long ns) {
 
 static void wait_subscriber(node_t *s) {
   s->first_command = 0;
-  double deadline = mono_s() + s->subscriber_wait;
+  double deadline = amsfe_mono_s() + s->subscriber_wait;
   size_t count = 0;
   while (rcl_publisher_get_subscription_count(&s->pub_cmd, &count) == RCL_RET_OK && count < 1 &&
-         mono_s() < deadline && !g_signal) {
+         amsfe_mono_s() < deadline && !amsfe_signal) {
     struct timespec ts = {0, 10000000};
     nanosleep(&ts, NULL);
   }
@@ -620,14 +524,14 @@ static void publish_tick(node_t *s, long long ns, const double *z, long long sen
   s->have_last = 1, s->last_k = L->k, s->last_ns = ns;
   if (L->controller) {
     if (s->first_command) wait_subscriber(s);
-    out_fill(&s->m_cmd, s->m_cmd.at_a, L->u, n);
-    if (rcl_publish_serialized_message(&s->pub_cmd, &s->m_cmd.ser, NULL) != RCL_RET_OK) ++g_publish_failed;
-    s->cmd_wall = wall_ns(); /* the latency's end: the command out, as the Python node's */
+    amsfe_out_fill(&s->m_cmd, 0, L->u, n);
+    amsfe_publish(&s->pub_cmd, &s->m_cmd);
+    s->cmd_wall = amsfe_wall_ns(); /* the latency's end: the command out, as the Python node's */
   }
-  out_stamp(&s->m_est, ns);
-  out_fill(&s->m_est, s->m_est.at_a, L->x, n);
-  out_fill(&s->m_est, s->m_est.at_b, L->x + n, n);
-  if (rcl_publish_serialized_message(&s->pub_est, &s->m_est.ser, NULL) != RCL_RET_OK) ++g_publish_failed;
+  amsfe_out_stamp(&s->m_est, ns);
+  amsfe_out_fill(&s->m_est, 0, L->x, n);
+  amsfe_out_fill(&s->m_est, 1, L->x + n, n);
+  amsfe_publish(&s->pub_est, &s->m_est);
   if (L->k % s->std_every == 0 || (s->end_k >= 0 && L->k >= s->end_k))
     publish_std(s, ns, L->x, L->P_diag, L->k);
   if (L->k == 0 || L->tick_applied || L->tick_rejected) {
@@ -651,7 +555,7 @@ static void on_encoders(node_t *s, long long sent, long long received, double ta
   if (!s->active) return; /* a managed node, not active: the sample is dropped */
   if (s->first_command && L->controller) { /* before the watchdog's clock starts */
     wait_subscriber(s);
-    taken = mono_s();
+    taken = amsfe_mono_s();
   }
   long long ns;
   int has_eff;
@@ -664,10 +568,13 @@ static void on_encoders(node_t *s, long long sent, long long received, double ta
   take_frames(s);
   if (s->read_effort && !s->effort_in_encoders) {
     take_efforts(s);
-    if (await_effort(s, ns)) taken = mono_s(); /* a wait is not the tick's compute time */
+    if (await_effort(s, ns)) taken = amsfe_mono_s(); /* a wait is not the tick's compute time */
   }
   if (s->recording) take_truth(s);
   int r = live_encoders(L, ns, s->z, sent);
+  if (r == 1 && L->k == 0) /* the efforts taken before it, placed now: the stream's newest */
+    for (long j = 0; j < LIVE_RING; ++j)
+      if (L->eff_j[j] == j && j > s->eff_last) s->eff_last = j;
   if (r == 0) return; /* skipped (counted): not judged */
   if (r == LIVE_BAD_STAMPS) { /* issue 37: held by the stamps' name, not as a stall */
     char why[768];
@@ -676,7 +583,7 @@ static void on_encoders(node_t *s, long long sent, long long received, double ta
     s->stop_code = EXIT_HOLD;
     return;
   }
-  double done = mono_s();
+  double done = amsfe_mono_s();
   /* the watchdogs judge the tick (or the failure) before its command goes out */
   amsfe_watchdog_tick tick;
   memset(&tick, 0, sizeof tick);
@@ -732,7 +639,7 @@ static void on_encoders(node_t *s, long long sent, long long received, double ta
   s->cmd_wall = 0;
   publish_tick(s, ns, s->z, sent);
   if (s->cmd_wall && s->n_lat < s->cap_lat) s->lat[s->n_lat++] = 1e-9 * (double)(s->cmd_wall - received);
-  s->last_rx = mono_s(); /* after the work: a slow first tick is no silence */
+  s->last_rx = amsfe_mono_s(); /* after the work: a slow first tick is no silence */
   s->started = 1;
 }
 
@@ -835,9 +742,9 @@ static int await_effort(node_t *s, long long ns) {
       return 0;
   }
   ++s->eff_waits;
-  double until = mono_s() + (L->controller ? 0.5 : 20.0) * s->T;
-  while (s->eff_last < k - 1 && !g_signal && s->stop_code < 0) {
-    double left = until - mono_s();
+  double until = amsfe_mono_s() + (L->controller ? 0.5 : 20.0) * s->T;
+  while (s->eff_last < k - 1 && !amsfe_signal && s->stop_code < 0) {
+    double left = until - amsfe_mono_s();
     if (left <= 0) {
       ++s->eff_missed;
       break;
@@ -899,11 +806,10 @@ static void publish_hold(node_t *s, char *held, size_t cap) {
     publish_std(s, s->last_ns, s->last_x, s->last_P_diag, s->last_k);
   if (!s->L.controller) return;
   gravity_hold(s);
-  out_fill(&s->m_cmd, s->m_cmd.at_a, s->u_hold, n);
-  if (rcl_publish_serialized_message(&s->pub_cmd, &s->m_cmd.ser, NULL) != RCL_RET_OK)
-    ++g_publish_failed;
+  amsfe_out_fill(&s->m_cmd, 0, s->u_hold, n);
+  amsfe_publish(&s->pub_cmd, &s->m_cmd);
   if (rcl_publisher_wait_for_all_acked(&s->pub_cmd, RCL_MS_TO_NS(500)) != RCL_RET_OK)
-    ++g_publish_failed; /* not acknowledged in time (best effort: never) */
+    ++amsfe_publish_failed; /* not acknowledged in time (best effort: never) */
   char list[768];
   print_hold_list(s->u_hold, n, list, sizeof list);
   snprintf(held, cap, "; hold command %s N m published", list);
@@ -1060,6 +966,7 @@ int main(int argc, char **argv) {
     return EXIT_BAD_INPUT;
   }
   static node_t S;
+  amsfe_program = "amsfe_node";
   node_t *s = &S;
   s->stop_code = -1;
   s->first_command = 1;
@@ -1113,76 +1020,60 @@ int main(int argc, char **argv) {
     R->hold_u = ALLOC(double, n);
   }
   /* ---- rcl: context, node, subscriptions, publishers, wait set */
-  struct sigaction sa;
-  memset(&sa, 0, sizeof sa);
-  sa.sa_handler = on_signal;
-  sigaction(SIGINT, &sa, NULL);
-  sigaction(SIGTERM, &sa, NULL);
-  /* before rcl_init: the middleware's threads (Fast DDS's receive and event threads) inherit
-   * the policy, so a sample's way into this process is real-time too, not only its tick
-   * (reception threads at normal priority beside CPU hogs delayed the commands by ms) */
-  amsfe_realtime("node", priority);
+  amsfe_rcl_start(argc, argv, &s->ctx, &s->node, "amsfe_node", "node", priority);
   rcl_allocator_t alloc = rcl_get_default_allocator();
-  rcl_init_options_t io = rcl_get_zero_initialized_init_options();
-  rcl_check(rcl_init_options_init(&io, alloc), "rcl_init_options_init");
-  s->ctx = rcl_get_zero_initialized_context();
-  rcl_check(rcl_init(argc, (const char *const *)argv, &io, &s->ctx), "rcl_init (--ros-args)");
-  s->node = rcl_get_zero_initialized_node();
-  rcl_node_options_t no = rcl_node_get_default_options();
-  rcl_check(rcl_node_init(&s->node, "amsfe_node", "", &s->ctx, &no), "rcl_node_init");
-  const rosidl_message_type_support_t *ts_js = ROSIDL_GET_MSG_TYPE_SUPPORT(sensor_msgs, msg, JointState);
-  const rosidl_message_type_support_t *ts_ps = ROSIDL_GET_MSG_TYPE_SUPPORT(geometry_msgs, msg, PointStamped);
-  const rosidl_message_type_support_t *ts_f64 = ROSIDL_GET_MSG_TYPE_SUPPORT(std_msgs, msg, Float64MultiArray);
+  const amsfe_types ty = amsfe_message_types();
   const rosidl_message_type_support_t *ts_str = ROSIDL_GET_MSG_TYPE_SUPPORT(std_msgs, msg, String);
   rcl_subscription_options_t so = rcl_subscription_get_default_options();
   /* the camera first, as the Python node subscribes it */
-  so.qos = qos_of(reliability, depth_cam);
+  so.qos = amsfe_qos(reliability, depth_cam);
   s->sub_cam = rcl_get_zero_initialized_subscription();
-  rcl_check(rcl_subscription_init(&s->sub_cam, &s->node, ts_ps, s->topic[T_CAM], &so), "camera subscription");
-  so.qos = qos_of(reliability, depth);
+  amsfe_rcl_check(rcl_subscription_init(&s->sub_cam, &s->node, ty.point_stamped, s->topic[T_CAM], &so), "camera subscription");
+  so.qos = amsfe_qos(reliability, depth);
   s->sub_truth = rcl_get_zero_initialized_subscription();
   if (s->recording)
-    rcl_check(rcl_subscription_init(&s->sub_truth, &s->node, ts_f64, s->topic[T_TRUTH], &so), "truth subscription");
-  so.qos = qos_of(reliability, depth_enc);
+    amsfe_rcl_check(rcl_subscription_init(&s->sub_truth, &s->node, ty.f64_array, s->topic[T_TRUTH], &so), "truth subscription");
+  so.qos = amsfe_qos(reliability, depth_enc);
   s->sub_eff = rcl_get_zero_initialized_subscription();
   int sub_eff = s->read_effort && !s->effort_in_encoders;
   if (sub_eff)
-    rcl_check(rcl_subscription_init(&s->sub_eff, &s->node, ts_js, s->topic[T_EFF], &so), "effort subscription");
+    amsfe_rcl_check(rcl_subscription_init(&s->sub_eff, &s->node, ty.joint_state, s->topic[T_EFF], &so), "effort subscription");
   s->sub_enc = rcl_get_zero_initialized_subscription();
-  rcl_check(rcl_subscription_init(&s->sub_enc, &s->node, ts_js, s->topic[T_ENC], &so), "encoder subscription");
+  amsfe_rcl_check(rcl_subscription_init(&s->sub_enc, &s->node, ty.joint_state, s->topic[T_ENC], &so), "encoder subscription");
   rcl_publisher_options_t po = rcl_publisher_get_default_options();
-  po.qos = qos_of(reliability, depth);
+  po.qos = amsfe_qos(reliability, depth);
   s->pub_est = rcl_get_zero_initialized_publisher();
-  rcl_check(rcl_publisher_init(&s->pub_est, &s->node, ts_js, s->topic[T_EST], &po), "estimate publisher");
+  amsfe_rcl_check(rcl_publisher_init(&s->pub_est, &s->node, ty.joint_state, s->topic[T_EST], &po), "estimate publisher");
   s->pub_std = rcl_get_zero_initialized_publisher();
-  rcl_check(rcl_publisher_init(&s->pub_std, &s->node, ts_js, s->topic[T_STD], &po), "estimate_std publisher");
+  amsfe_rcl_check(rcl_publisher_init(&s->pub_std, &s->node, ty.joint_state, s->topic[T_STD], &po), "estimate_std publisher");
   s->pub_theta = rcl_get_zero_initialized_publisher();
-  rcl_check(rcl_publisher_init(&s->pub_theta, &s->node, ts_f64, s->topic[T_THETA], &po), "theta publisher");
+  amsfe_rcl_check(rcl_publisher_init(&s->pub_theta, &s->node, ty.f64_array, s->topic[T_THETA], &po), "theta publisher");
   s->pub_diag = rcl_get_zero_initialized_publisher();
-  rcl_check(rcl_publisher_init(&s->pub_diag, &s->node, ts_str, s->topic[T_DIAG], &po), "diagnostics publisher");
+  amsfe_rcl_check(rcl_publisher_init(&s->pub_diag, &s->node, ts_str, s->topic[T_DIAG], &po), "diagnostics publisher");
   s->pub_cmd = rcl_get_zero_initialized_publisher();
   if (L->controller)
-    rcl_check(rcl_publisher_init(&s->pub_cmd, &s->node, ts_f64, s->topic[T_CMD], &po), "command publisher");
-  s->in = rmw_get_zero_initialized_serialized_message();
-  rcl_check(rmw_serialized_message_init(&s->in, MSG_CAP, &alloc), "a message buffer");
-  out_joint_state(&s->m_est, s->names, n);
-  out_joint_state(&s->m_std, s->names, n);
-  out_f64_array(&s->m_theta, s->p);
-  out_f64_array(&s->m_cmd, n);
-  out_alloc(&s->m_diag, DIAG_CAP + 64);
+    amsfe_rcl_check(rcl_publisher_init(&s->pub_cmd, &s->node, ty.f64_array, s->topic[T_CMD], &po), "command publisher");
+  s->in = amsfe_message_buffer(MSG_CAP);
+  int pos_vel[3] = {n, n, 0}; /* position and velocity, effort empty */
+  amsfe_out_joint_state(&s->m_est, s->names, n, pos_vel);
+  amsfe_out_joint_state(&s->m_std, s->names, n, pos_vel);
+  amsfe_out_f64_array(&s->m_theta, s->p);
+  amsfe_out_f64_array(&s->m_cmd, n);
+  amsfe_out_alloc(&s->m_diag, DIAG_CAP + 64);
   s->ws = rcl_get_zero_initialized_wait_set();
-  if (s->managed) rcl_check(lifecycle_init(&s->lc, &s->node), "the lifecycle state machine");
-  rcl_check(rcl_wait_set_init(&s->ws, 4, 0, 0, 0, s->managed ? 2 : 0, 0, &s->ctx, alloc),
+  if (s->managed) amsfe_rcl_check(lifecycle_init(&s->lc, &s->node), "the lifecycle state machine");
+  amsfe_rcl_check(rcl_wait_set_init(&s->ws, 4, 0, 0, 0, s->managed ? LIFECYCLE_SERVICES : 0, 0, &s->ctx,
+                               alloc),
             "wait set");
   s->ws_eff = rcl_get_zero_initialized_wait_set();
   s->eff_last = -1;
-  if (sub_eff) rcl_check(rcl_wait_set_init(&s->ws_eff, 1, 0, 0, 0, 0, 0, &s->ctx, alloc), "wait set");
+  if (sub_eff) amsfe_rcl_check(rcl_wait_set_init(&s->ws_eff, 1, 0, 0, 0, 0, 0, &s->ctx, alloc), "wait set");
   printf("node: C node on rcl (%s), waiting for %s\n", s->topic[T_ENC],
          s->managed ? "configure and activate" : "encoders");
   fflush(stdout);
   /* ---- the loop: wait, take, tick, publish */
-  double quiet_since = mono_s(), said = 0.0; /* before the first sample: said every 10 s */
-  while (s->stop_code < 0 && !g_signal) {
+  double quiet_since = amsfe_mono_s(), said = 0.0; /* before the first sample: said every 10 s */
+  while (s->stop_code < 0 && !amsfe_signal) {
     rcl_ret_t add = rcl_wait_set_clear(&s->ws);
     if (add == RCL_RET_OK) add = rcl_wait_set_add_subscription(&s->ws, &s->sub_enc, NULL);
     if (add == RCL_RET_OK) add = rcl_wait_set_add_subscription(&s->ws, &s->sub_cam, NULL);
@@ -1190,7 +1081,7 @@ int main(int argc, char **argv) {
     if (add == RCL_RET_OK && s->recording)
       add = rcl_wait_set_add_subscription(&s->ws, &s->sub_truth, NULL);
     if (add == RCL_RET_OK && s->managed) add = lifecycle_wait_add(&s->lc, &s->ws);
-    rcl_check(add, "the wait set");
+    amsfe_rcl_check(add, "the wait set");
     rcl_ret_t ret = rcl_wait(&s->ws, RCL_MS_TO_NS(50));
     if (ret != RCL_RET_OK && ret != RCL_RET_TIMEOUT) break;
     if (s->managed) lifecycle_serve(&s->lc, on_lifecycle, s);
@@ -1200,21 +1091,21 @@ int main(int argc, char **argv) {
     rmw_message_info_t info;
     long got = 0;
     /* every sample there, in their order: a late burst is caught up, not held */
-    while (s->stop_code < 0 && !g_signal &&
+    while (s->stop_code < 0 && !amsfe_signal &&
            rcl_take_serialized_message(&s->sub_enc, &s->in, &info, NULL) == RCL_RET_OK)
-      on_encoders(s, info.source_timestamp, info.received_timestamp, mono_s()), ++got;
-    if (s->stop_code < 0 && !g_signal && got == 0 && s->active && !s->started) {
-      double silent = mono_s() - quiet_since;
+      on_encoders(s, info.source_timestamp, info.received_timestamp, amsfe_mono_s()), ++got;
+    if (s->stop_code < 0 && !amsfe_signal && got == 0 && s->active && !s->started) {
+      double silent = amsfe_mono_s() - quiet_since;
       if (silent > said + 10.0) {
         said = silent - fmod(silent, 10.0);
         say_waiting(s, silent);
       }
     }
-    if (s->stop_code < 0 && !g_signal && got == 0 && s->active && s->started) {
+    if (s->stop_code < 0 && !amsfe_signal && got == 0 && s->active && s->started) {
       /* no sample: the stall watchdogs */
       size_t publishers = 0;
       int known = rcl_subscription_get_publisher_count(&s->sub_enc, &publishers) == RCL_RET_OK;
-      if (amsfe_watchdog_idle(s->wd, mono_s(), known ? (int)publishers : -1) != AMSFE_WD_NONE) {
+      if (amsfe_watchdog_idle(s->wd, amsfe_mono_s(), known ? (int)publishers : -1) != AMSFE_WD_NONE) {
         amsfe_watchdog_format(s->wd, s->stop_line, sizeof s->stop_line); /* as the Python node */
         s->stop_code = EXIT_HOLD;
       }
@@ -1224,10 +1115,10 @@ int main(int argc, char **argv) {
   int code = s->stop_code;
   char held[1024] = "";
   publish_hold(s, held, sizeof held);
-  if (g_signal && code < 0) {
+  if (amsfe_signal && code < 0) {
     printf("node: hold: interrupted%s\n", held);
     snprintf(s->stop_line, sizeof s->stop_line, "hold: interrupted");
-    code = g_signal == SIGTERM ? 143 : 130;
+    code = amsfe_signal == SIGTERM ? 143 : 130;
   } else if (code == EXIT_BAD_INPUT) {
     printf("node: stopped on bad input%s\n", held);
     fprintf(stderr, "error: %s\n", s->stop_line);
@@ -1248,13 +1139,15 @@ int main(int argc, char **argv) {
   if (s->eff_waits > 0)
     printf("node: waited for the torque applied over the previous tick at %ld samples (%ld not "
            "within the wait: estimated without it)\n", s->eff_waits, s->eff_missed);
+  int any_skip = 0; /* what the loop skipped, by reason (the diagnostics JSON's words) */
+  for (int i = 0; i < SKIP_REASONS; ++i)
+    if (L->skipped[i])
+      printf("%s%s: %ld", any_skip++ ? ", " : "node: skipped: ", LIVE_SKIP_TEXT[i], L->skipped[i]);
+  if (any_skip) printf("\n");
   fflush(stdout);
   s->exit_code = code;
   if (s->recording) write_record(s, record_path);
   if (s->managed) lifecycle_fini(&s->lc, &s->node);
-  rcl_ret_t fini = rcl_wait_set_fini(&s->ws);
-  fini |= rcl_node_fini(&s->node);
-  fini |= rcl_shutdown(&s->ctx);
-  (void)fini; /* the process ends: nothing left to release it for */
+  amsfe_rcl_stop(&s->ws, &s->node, &s->ctx);
   return code;
 }

@@ -279,6 +279,15 @@ int amsfe_watchdog_sample(amsfe_watchdog *wd, const amsfe_watchdog_tick *t) {
     if (err > c->tracking_error)
       trip(s, AMSFE_WD_TRACKING, AMSFE_WD_CAUSE_NONE, k, err, c->tracking_error, gap);
   }
+  /* 10: a late sample names the node behind before what its lateness caused (the arm on
+   * older commands: its torque, its innovations, its path) */
+  if (late && (s->reason == AMSFE_WD_ACTUATION || s->reason == AMSFE_WD_INNOVATION ||
+               s->reason == AMSFE_WD_TRACKING)) {
+    int first = s->reason;
+    s->reason = AMSFE_WD_NONE;
+    trip(s, AMSFE_WD_DEADLINE, AMSFE_WD_CAUSE_LATE, k, lateness, c->deadline, gap);
+    s->caused = first;
+  }
   return s->reason;
 }
 
@@ -330,6 +339,11 @@ const char *amsfe_watchdog_cause_text(int reason, int cause) {
       return "model/noise inconsistent: the covariance lost positive definiteness with no "
              "sample missing; check the robot spec's model and the [filter] noise";
     case AMSFE_WD_DEADLINE:
+      if (cause == AMSFE_WD_CAUSE_LATE)
+        return "this node is behind, not the arm: it processed this sample later than "
+               "deadline after its stamp, and what the arm did meanwhile on older commands "
+               "(its innovations, its path, its torque) left a bound; give the node CPU "
+               "(real-time priority, fewer jobs)";
       return "this node is behind (CPU load / priority), not the driver: samples processed "
              "later than deadline after their stamp; give the node CPU (real-time priority, "
              "fewer jobs)";
@@ -381,8 +395,11 @@ int amsfe_watchdog_format(const amsfe_watchdog *wd, char *buf, size_t size) {
   char value[32], bound[32];
   number(value, sizeof value, wd->s.value);
   number(bound, sizeof bound, wd->s.bound);
-  return snprintf(buf, size, "hold: %s: %s (%s vs bound %s at tick %ld, %ld missing)",
+  char caused[48] = "";
+  if (wd->s.caused != AMSFE_WD_NONE)
+    snprintf(caused, sizeof caused, "; %s tripped", amsfe_watchdog_reason_name(wd->s.caused));
+  return snprintf(buf, size, "hold: %s: %s (%s vs bound %s at tick %ld, %ld missing)%s",
                   amsfe_watchdog_reason_name(wd->s.reason),
                   amsfe_watchdog_cause_text(wd->s.reason, wd->s.cause), value, bound,
-                  wd->s.k, wd->s.gap);
+                  wd->s.k, wd->s.gap, caused);
 }

@@ -65,9 +65,11 @@ enum amsfe_watchdog_cause {
                                       at once (the queue overflowed while the node lagged) */
   AMSFE_WD_CAUSE_UNSCHEDULED = 7,  /* node_stalled: no call for longer than encoder_timeout */
   AMSFE_WD_CAUSE_ESTIMATE = 8,     /* nonfinite: the estimate x_hat or diag P */
-  AMSFE_WD_CAUSE_COMMAND = 9       /* nonfinite: the command u */
+  AMSFE_WD_CAUSE_COMMAND = 9,      /* nonfinite: the command u */
+  AMSFE_WD_CAUSE_LATE = 10         /* deadline: actuation, innovation or tracking tripped on
+                                      a sample processed past deadline (the node behind) */
 };
-#define AMSFE_WD_CAUSES 10
+#define AMSFE_WD_CAUSES 11
 
 /* The bounds: the keys of the topic spec's [watchdog] table, same names and units
  * (docs/watchdogs.md gives each default and how it was measured).  Copied by init. */
@@ -135,6 +137,8 @@ typedef struct {
   double max_wall_gap;   /* [s] between two calls */
   double max_actuation;  /* [-] largest distance of a judged applied torque to its command */
   long actuation_judged; /* applied torques judged */
+  int caused;            /* deadline with AMSFE_WD_CAUSE_LATE: the reason that tripped first
+                            (what the lateness caused); else AMSFE_WD_NONE */
 } amsfe_watchdog_state;
 
 typedef struct amsfe_watchdog amsfe_watchdog;
@@ -152,8 +156,11 @@ void amsfe_watchdog_reset(amsfe_watchdog *wd);
  * checks (the first that trips wins): stall (gap > max_gap_steps), node_stalled (no call for
  * encoder_timeout), covariance (status < 0), nonfinite, compute (done - taken), deadline
  * (lateness = done - (stamp + offset), offset = taken - stamp of the first sample), actuation,
- * innovation, tracking.  The first sample only sets the offset (no compute or deadline check)
- * and keeps its command.
+ * innovation, tracking; then, when the sample itself is late (lateness > deadline) and the
+ * reason is actuation, innovation or tracking, deadline with AMSFE_WD_CAUSE_LATE instead
+ * (value: the lateness [s]): the node behind is named before what its lateness caused (the
+ * arm on older commands meanwhile).  The first sample only sets the offset (no compute or
+ * deadline check) and keeps its command.
  *
  * actuation: the arm applies over tick j one of the node's commands of ticks <= j (late ones
  * arrive late: then an older one; before the first, zero), never an older one than before.
@@ -175,7 +182,8 @@ void amsfe_watchdog_get_state(const amsfe_watchdog *wd, amsfe_watchdog_state *st
 const char *amsfe_watchdog_reason_name(int reason);
 /* One line: the real cause and its fix, for a reason and its cause. */
 const char *amsfe_watchdog_cause_text(int reason, int cause);
-/* Write "hold: <name>: <text> (<value> vs <bound> at tick k)" into buf (NUL-terminated,
+/* Write "hold: <name>: <text> (<value> vs <bound> at tick k, m missing)[; <caused> tripped]"
+ * into buf (NUL-terminated,
  * truncated to size).  Returns the length snprintf would write. */
 int amsfe_watchdog_format(const amsfe_watchdog *wd, char *buf, size_t size);
 

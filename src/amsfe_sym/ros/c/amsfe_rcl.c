@@ -1,0 +1,160 @@
+/* amsfe_rcl.c: see amsfe_rcl.h. */
+#define _GNU_SOURCE
+#include "amsfe_rcl.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <stdint.h>
+#include <time.h>
+
+#include <geometry_msgs/msg/point_stamped.h>
+#include <rcutils/error_handling.h>
+#include <sensor_msgs/msg/joint_state.h>
+#include <std_msgs/msg/float64_multi_array.h>
+
+#include "amsfe_rt.h"
+
+const char *amsfe_program = "amsfe";
+volatile sig_atomic_t amsfe_signal = 0;
+
+static void on_signal(int sig) { amsfe_signal = sig; }
+
+void *amsfe_must(void *p, const char *what) {
+  if (!p) {
+    fprintf(stderr, "error: %s: out of memory for %s\n", amsfe_program, what);
+    exit(1);
+  }
+  return p;
+}
+
+static long long clock_ns(clockid_t id) {
+  struct timespec t;
+  clock_gettime(id, &t);
+  return (long long)t.tv_sec * 1000000000LL + t.tv_nsec;
+}
+
+long long amsfe_mono_ns(void) { return clock_ns(CLOCK_MONOTONIC); }
+
+double amsfe_mono_s(void) {
+  struct timespec t;
+  clock_gettime(CLOCK_MONOTONIC, &t);
+  return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+long long amsfe_wall_ns(void) { return clock_ns(CLOCK_REALTIME); }
+
+void amsfe_rcl_check(rcl_ret_t ret, const char *what) {
+  if (ret == RCL_RET_OK) return;
+  fprintf(stderr, "error: %s: %s: %s\n", amsfe_program, what, rcutils_get_error_string().str);
+  rcutils_reset_error();
+  exit(1);
+}
+
+static void catch_signals(void) {
+  struct sigaction sa;
+  memset(&sa, 0, sizeof sa);
+  sa.sa_handler = on_signal;
+  sigaction(SIGINT, &sa, NULL);
+  sigaction(SIGTERM, &sa, NULL);
+}
+
+void amsfe_rcl_start(int argc, char **argv, rcl_context_t *ctx, rcl_node_t *node,
+                     const char *name, const char *who, int priority) {
+  catch_signals();
+  amsfe_realtime(who, priority);
+  rcl_allocator_t alloc = rcl_get_default_allocator();
+  rcl_init_options_t io = rcl_get_zero_initialized_init_options();
+  amsfe_rcl_check(rcl_init_options_init(&io, alloc), "rcl_init_options_init");
+  *ctx = rcl_get_zero_initialized_context();
+  amsfe_rcl_check(rcl_init(argc, (const char *const *)argv, &io, ctx), "rcl_init (--ros-args)");
+  *node = rcl_get_zero_initialized_node();
+  rcl_node_options_t no = rcl_node_get_default_options();
+  amsfe_rcl_check(rcl_node_init(node, name, "", ctx, &no), "rcl_node_init");
+}
+
+rmw_qos_profile_t amsfe_qos(const char *reliability, int depth) {
+  rmw_qos_profile_t q = rmw_qos_profile_default;
+  q.history = RMW_QOS_POLICY_HISTORY_KEEP_LAST;
+  q.depth = (size_t)depth;
+  q.reliability = strcmp(reliability, "reliable") == 0 ? RMW_QOS_POLICY_RELIABILITY_RELIABLE
+                                                        : RMW_QOS_POLICY_RELIABILITY_BEST_EFFORT;
+  q.durability = RMW_QOS_POLICY_DURABILITY_VOLATILE;
+  return q;
+}
+
+rcl_serialized_message_t amsfe_message_buffer(size_t capacity) {
+  rcl_allocator_t alloc = rcl_get_default_allocator();
+  rcl_serialized_message_t m = rmw_get_zero_initialized_serialized_message();
+  amsfe_rcl_check(rmw_serialized_message_init(&m, capacity, &alloc), "a message buffer");
+  return m;
+}
+
+void amsfe_rcl_stop(rcl_wait_set_t *ws, rcl_node_t *node, rcl_context_t *ctx) {
+  rcl_ret_t fini = rcl_wait_set_fini(ws);
+  fini |= rcl_node_fini(node);
+  fini |= rcl_shutdown(ctx);
+  (void)fini; /* the process ends: nothing left to release it for */
+}
+
+long amsfe_publish_failed = 0;
+
+void amsfe_out_alloc(amsfe_out *m, size_t cap) {
+  m->ser = rmw_get_zero_initialized_serialized_message();
+  rcutils_allocator_t a = rcutils_get_default_allocator();
+  if (rmw_serialized_message_init(&m->ser, cap, &a) != RMW_RET_OK) amsfe_must(NULL, "a message");
+}
+
+void amsfe_put_header(cdr_out *w, const char *frame) {
+  cdr_put_u32(w, 0), cdr_put_u32(w, 0), cdr_put_string(w, frame);
+}
+
+void amsfe_out_joint_state(amsfe_out *m, const char *const *names, int n, const int *counts) {
+  size_t cap = 256 + 8 * (size_t)(counts[0] + counts[1] + counts[2]) + 16;
+  for (int j = 0; j < n; ++j) cap += strlen(names[j]) + 8;
+  amsfe_out_alloc(m, cap);
+  cdr_out w;
+  cdr_out_init(&w, m->ser.buffer, cap);
+  amsfe_put_header(&w, "");
+  cdr_put_u32(&w, (uint32_t)n);
+  for (int j = 0; j < n; ++j) cdr_put_string(&w, names[j]);
+  for (int i = 0; i < 3; ++i) cdr_put_doubles(&w, NULL, counts[i], &m->at[i]);
+  if (!w.ok) amsfe_must(NULL, "a JointState");
+  m->ser.buffer_length = cdr_out_size(&w);
+}
+
+void amsfe_out_f64_array(amsfe_out *m, int n) {
+  size_t cap = 64 + 8 * (size_t)n;
+  amsfe_out_alloc(m, cap);
+  cdr_out w;
+  cdr_out_init(&w, m->ser.buffer, cap);
+  cdr_put_u32(&w, 0), cdr_put_u32(&w, 0); /* layout: no dims, data_offset 0 */
+  cdr_put_doubles(&w, NULL, n, &m->at[0]);
+  if (!w.ok) amsfe_must(NULL, "a Float64MultiArray");
+  m->ser.buffer_length = cdr_out_size(&w);
+}
+
+void amsfe_out_stamp(amsfe_out *m, long long ns) {
+  int32_t sec = (int32_t)(ns / 1000000000LL);
+  uint32_t nsec = (uint32_t)(ns % 1000000000LL);
+  memcpy(m->ser.buffer + 4, &sec, 4);
+  memcpy(m->ser.buffer + 8, &nsec, 4);
+}
+
+void amsfe_out_fill(amsfe_out *m, int field, const double *v, int n) {
+  memcpy(m->ser.buffer + 4 + m->at[field], v, sizeof(double) * (size_t)n);
+}
+
+void amsfe_publish(rcl_publisher_t *pub, amsfe_out *m) {
+  if (rcl_publish_serialized_message(pub, &m->ser, NULL) != RCL_RET_OK) {
+    rcutils_reset_error();
+    ++amsfe_publish_failed;
+  }
+}
+
+amsfe_types amsfe_message_types(void) {
+  amsfe_types t = {ROSIDL_GET_MSG_TYPE_SUPPORT(sensor_msgs, msg, JointState),
+                   ROSIDL_GET_MSG_TYPE_SUPPORT(geometry_msgs, msg, PointStamped),
+                   ROSIDL_GET_MSG_TYPE_SUPPORT(std_msgs, msg, Float64MultiArray)};
+  return t;
+}
