@@ -128,6 +128,58 @@ def _cli_estimates(log: Path, out: Path, *args: str) -> np.ndarray:
     return table[cols].to_numpy()
 
 
+def test_model_is_the_librarys_transition_and_camera() -> None:
+    """``Model`` on paper-sim: step is the generated ``transition`` (the contract's function,
+    not the one Model calls), its jacobian and the camera's are central differences of step
+    and of the pixel, Qd is Gamma Qw Gamma^T with the scenario's noise; a wrong shape is one
+    ShapeError line."""
+    model = am.Model.for_scenario("paper-sim", {"filter.link_torque_std": 0.7})
+    lib = library_for(model.scenario)
+    assert (model.n, model.p, model.N) == (lib.n, lib.p, lib.N) and model.T == lib.T
+    assert model.joints == tuple(lib.manifest.joints)
+    rng = np.random.default_rng(5)
+    tr, gain = lib.function("transition"), lib.function("noise_gain")
+    h = 1e-6
+    for _ in range(5):
+        x = np.concatenate([rng.uniform(-1, 1, 4 * model.n), model.theta_true])
+        u = rng.uniform(-3, 3, model.n)
+        xn = model.step(x, u)
+        assert np.max(np.abs(xn - tr(x, u)[0])) <= 1e-12 * max(1.0, float(np.max(np.abs(xn))))
+        fd = np.stack(
+            [
+                (model.step(x + h * e, u) - model.step(x - h * e, u)) / (2 * h)
+                for e in np.eye(x.size)
+            ],
+            axis=1,
+        )
+        assert np.max(np.abs(model.jacobian(x, u) - fd)) <= 1e-6 * max(
+            1.0, float(np.max(np.abs(fd)))
+        )
+        G = gain(x, u)[0]
+        T, n = model.T, model.n
+        Qw = np.diag(
+            [(0.7 * T) ** 2] * n
+            + [(model.scenario.filter.motor_torque_std * T) ** 2] * n
+            + [model.scenario.filter.theta_rate_std**2] * model.p
+        )
+        assert np.allclose(model.process_noise(x, u), G @ Qw @ G.T, rtol=1e-12, atol=1e-30)
+        q = x[model.layout["q"]]
+        y, J = model.camera(q)
+        assert y.shape == (2,) and J.shape == (2, n)
+        fdc = np.stack(
+            [
+                (model.camera(q + h * e)[0] - model.camera(q - h * e)[0]) / (2 * h)
+                for e in np.eye(n)
+            ],
+            axis=1,
+        )
+        assert np.max(np.abs(J - fdc)) <= 1e-5 * max(1.0, float(np.max(np.abs(fdc))))
+    with pytest.raises(ShapeError, match="x"):
+        model.step(np.zeros(model.N + 1), np.zeros(model.n))
+    with pytest.raises(ShapeError, match="q"):
+        model.camera(np.zeros(model.n + 1))
+
+
 @pytest.mark.parametrize("which", ["amsfe", "driver"])
 def test_run_on_a_read_log_is_amsfe_estimate(
     which: str, recording: tuple[Path, Path], tmp_path: Path

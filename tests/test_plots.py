@@ -13,11 +13,15 @@ import pytest
 from amsfe_sym.apps.plots.cost import SHARE, FigureClock, hint_line
 from amsfe_sym.apps.plots.style import (
     DPI,
+    PANEL,
+    Canvas,
     converged_limit,
     envelope,
     joint_grid,
     pyplot,
     save,
+    symlog,
+    title,
     window_start,
 )
 
@@ -38,6 +42,52 @@ def test_one_panel_per_joint_in_a_grid_of_sane_size(n: int, tmp_path: Path) -> N
     img = pyplot().imread(path)
     h, w = img.shape[:2]
     assert w <= 1600 and h <= 1600 and w == round(fig.get_figwidth() * DPI)
+
+
+def _draw_a(cells: list, t: np.ndarray) -> None:
+    """A figure that sets everything a grid can carry: symlog, fixed limits, a legend, a
+    band, labels, a title on one axes."""
+    for j, (ax,) in enumerate(cells):
+        ax.fill_between(t, -1 - j, 1 + j, color="0.85", lw=0, label="band")
+        ax.plot(t, 0.3 * np.sin(7 * t) * 10**-j, label="line")
+        symlog(ax, 1e-3)
+        ax.set_ylim(-5, 5)
+        ax.set_ylabel(f"a{j}")
+        ax.set_title("only in A")
+    cells[0][0].legend()
+
+
+def _draw_b(fig, cells: list, t: np.ndarray) -> None:
+    for j, (ax,) in enumerate(cells):
+        ax.plot(t, (j + 1) * 1e-4 * np.cos(3 * t), lw=0.7)
+        ax.set_ylabel(f"b{j} [rad]", fontsize=8)
+        ax.grid(alpha=0.3)
+    title(fig, "B")
+
+
+def test_a_reused_grid_draws_what_a_new_one_draws(tmp_path: Path) -> None:
+    """Canvas hands the previous grid back emptied: a figure drawn on it after another is
+    the same PNG, pixel for pixel, as the figure drawn on a new grid (no line, band, legend,
+    title, scale or limit of the first is left)."""
+    t = np.linspace(0.0, 5.0, 3000)
+    canvas = Canvas()
+    fig, cells = canvas.joint_grid(7, PANEL)
+    _draw_a(cells, t)
+    save(fig, tmp_path / "a.png")
+    fig2, cells2 = canvas.joint_grid(7, PANEL)
+    assert fig2 is fig  # reused
+    _draw_b(fig2, cells2, t)
+    save(fig2, tmp_path / "b_reused.png")
+    fresh, fresh_cells = Canvas().joint_grid(7, PANEL)
+    assert fresh is not fig
+    _draw_b(fresh, fresh_cells, t)
+    save(fresh, tmp_path / "b_new.png")
+    imread = pyplot().imread
+    reused, new = imread(tmp_path / "b_reused.png"), imread(tmp_path / "b_new.png")
+    assert reused.shape == new.shape
+    assert np.array_equal(reused, new)
+    assert not np.array_equal(imread(tmp_path / "a.png"), new)
+    assert canvas.joint_grid(6, PANEL)[0] is not fig  # another shape: a new grid
 
 
 def test_the_error_axis_is_set_by_the_converged_part() -> None:

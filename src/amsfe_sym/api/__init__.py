@@ -21,11 +21,13 @@ noise), :func:`amsfe_sym.sim.effort.effort_estimator` (an estimator for a log's 
 effort), :func:`amsfe_sym.logs.replay.estimate_log` (an estimator over a read log).
 
 Modules: ``scenarios`` (:func:`generate`, :func:`load_scenario`, :func:`simulate`),
-``recordings`` (:class:`LogArrays`, :func:`read_log`), ``estimator`` (:class:`Estimator`).
+``recordings`` (:class:`LogArrays`, :func:`read_log`), ``estimator`` (:class:`Estimator`),
+``model`` (:class:`Model`: a scenario's transition, its jacobian and noise, the camera map).
 May import every room but the command line (it composes the applications' parts).
 """
 
 from amsfe_sym.api.estimator import EstimateArrays, Estimator, StepResult
+from amsfe_sym.api.model import Model
 from amsfe_sym.api.recordings import LogArrays, read_log
 from amsfe_sym.api.scenarios import Robot, SimResult, generate, load_scenario, simulate
 
@@ -33,6 +35,7 @@ __all__ = [
     "EstimateArrays",
     "Estimator",
     "LogArrays",
+    "Model",
     "Robot",
     "SimResult",
     "StepResult",

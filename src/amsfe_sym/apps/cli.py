@@ -318,6 +318,7 @@ def _simulate(args: argparse.Namespace) -> int:
     compare = tuple(args.compare.split(",")) if args.compare else sc.compare
     options = SimulateOptions(
         plots=not args.no_plots,
+        all_plots=args.all_plots,
         force=args.force,
         progress=not args.no_progress,
         runtime=args.runtime,

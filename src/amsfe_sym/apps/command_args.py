@@ -93,6 +93,12 @@ def add_simulate_arguments(s: argparse.ArgumentParser) -> None:
     s.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     s.add_argument("--no-plots", action="store_true", help="skip the figures")
     s.add_argument(
+        "--all-plots",
+        action="store_true",
+        help="also an arm's sliding-variable and torque figures (drawn by default for the "
+        "paper's 1- and 2-link arms)",
+    )
+    s.add_argument(
         "--force",
         action="store_true",
         help="replace an existing --out (and --bag) that amsfe wrote; never a folder of "

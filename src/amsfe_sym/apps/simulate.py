@@ -46,6 +46,8 @@ class SimulateOptions:
 
     Attributes:
         plots: Draw the figures into the run folder.
+        all_plots: A comparison on an arm of more than two joints also draws the sliding
+            variable and the torque (the paper's arms always do).
         force: Replace an existing run folder (and bag) that this tool wrote.
         progress: Show a progress bar.
         runtime: ``"compiled"`` (the C loop) or ``"python"`` (the reference loop).
@@ -60,6 +62,7 @@ class SimulateOptions:
     """
 
     plots: bool = True
+    all_plots: bool = False
     force: bool = False
     progress: bool = False
     runtime: str = "compiled"
@@ -198,7 +201,8 @@ def simulate_comparison(
     if options.plots:
         from amsfe_sym.apps.plots.paper import plot_comparison
 
-        figures = clock.timed(plot_comparison)
+        every = options.all_plots
+        figures = clock.timed(lambda cmp, out: plot_comparison(cmp, out, every=every))
     inside = options.bag == BAG_IN_RUN
 
     def extra(name: str, res: RunResult, folder: Path) -> None:

@@ -22,8 +22,9 @@ from numpy.typing import NDArray
 from amsfe_sym.apps.plots.style import (
     converged_limit,
     envelope,
+    figure,
     joint_grid,
-    pyplot,
+    logscale,
     save,
     title,
 )
@@ -104,7 +105,6 @@ def plot_log(
                 alpha=0.5,
                 rasterized=True,
             )
-        ax.set_xlabel("t [s]", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
     cells[0][0].legend(loc="upper right", fontsize=6)
@@ -130,8 +130,8 @@ def _nis_figure(
 ) -> Path:
     """``nis.png``: NIS of the encoder updates and of the camera frames over time, with
     their chi-square 95 % bands (nothing drawn where no NIS was recorded)."""
-    plt = pyplot()
-    fig, axes = plt.subplots(len(nis), 1, figsize=(8, 2.3 * len(nis) + 0.6), squeeze=False)
+    fig = figure((8, 2.3 * len(nis) + 0.6))
+    axes = fig.subplots(len(nis), 1, squeeze=False, sharex=True)
     for ax, (what, r) in zip(axes[:, 0], nis.items(), strict=True):
         if what == "encoders" and encoder_nis is not None:
             t, v = log.t, np.asarray(encoder_nis, dtype=np.float64)
@@ -149,7 +149,7 @@ def _nis_figure(
         lo, hi = r["band_95"]
         ax.axhspan(lo, hi, color="g", alpha=0.12, label=f"chi²({r['dof']}) 95 % band")
         ax.axhline(r["dof"], color="g", lw=0.6)
-        ax.set_yscale("log")
+        logscale(ax)
         ax.set_ylabel(f"NIS {what}", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.legend(loc="lower right", fontsize=7, framealpha=0.6)

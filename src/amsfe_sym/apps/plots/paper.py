@@ -17,7 +17,17 @@ from amsfe_sym.apps.plots.run import (
     error_rows,
     estimation_error_axes,
 )
-from amsfe_sym.apps.plots.style import envelope, joint_grid, pyplot, save, title
+from amsfe_sym.apps.plots.style import (
+    PANEL,
+    Canvas,
+    envelope,
+    figure,
+    joint_grid,
+    logscale,
+    save,
+    symlog,
+    title,
+)
 
 if TYPE_CHECKING:
     from amsfe_sym.apps.reproduce import Comparison
@@ -26,10 +36,6 @@ if TYPE_CHECKING:
 __all__ = ["plot_comparison"]
 
 _COLORS = ["tab:blue", "tab:orange", "tab:red", "tab:green", "tab:purple", "tab:brown"]
-
-
-def _plt() -> Any:
-    return pyplot()
 
 
 def _label(name: str, res: RunResult) -> str:
@@ -42,23 +48,34 @@ def _save(fig: Any, path: Path, paths: list[Path]) -> None:
     save(fig, path, paths)
 
 
-def plot_comparison(cmp: Comparison, out: Path) -> list[Path]:
-    """Write the comparison's figures to ``out``; returns their paths."""
-    first = next(iter(cmp.results.values()))
+def plot_comparison(cmp: Comparison, out: Path, every: bool = False) -> list[Path]:
+    """Write the comparison's figures to ``out``; returns their paths.
+
+    Args:
+        cmp: The comparison (its first controller is the proposed one).
+        out: The comparison folder.
+        every: Also the sliding variable and the torque of an arm of more than
+            :data:`~amsfe_sym.apps.plots.run.RATE_PANELS_UP_TO` joints (the paper's arms
+            always get them: they are its figures, and two panels).
+    """
+    n = next(iter(cmp.results.values())).lib.n
+    canvas = Canvas()
     if cmp.scenario.trajectory.get("kind") == "paper_experiment":
         paths = _experiment_figures(cmp, out)
     else:
-        paths = _simulation_figures(cmp, out)
-    return paths + _control_figures(cmp, out, first.lib.n)
+        paths = _simulation_figures(cmp, out, canvas)
+    if every or n <= RATE_PANELS_UP_TO:
+        paths += _control_figures(cmp, out, n, canvas)
+    return paths
 
 
-def _simulation_figures(cmp: Comparison, out: Path) -> list[Path]:
-    plt = _plt()
+def _simulation_figures(cmp: Comparison, out: Path, canvas: Canvas) -> list[Path]:
     paths: list[Path] = []
     name0, res0 = next(iter(cmp.results.items()))
     n, L = res0.lib.n, res0.lib.layout
     est = res0.scenario.estimator
-    fig, cells = joint_grid(n, (3.8, 1.9), rows_per_joint=error_rows(n))
+    rows = error_rows(n)
+    fig, cells = canvas.joint_grid(n, PANEL if rows == 1 else (3.8, 1.9), rows_per_joint=rows)
     estimation_error_axes(res0, cells)
     title(
         fig,
@@ -69,7 +86,8 @@ def _simulation_figures(cmp: Comparison, out: Path) -> list[Path]:
     _save(fig, out / "fig04_estimation_errors.png", paths)
 
     if res0.lib.p:
-        fig, ax = plt.subplots(figsize=(7, 3.5))
+        fig = figure((7, 3.5))
+        ax = fig.subplots()
         for i, th in enumerate(res0.lib.manifest.theta):
             c = L["theta"].start + i
             sd = np.sqrt(np.maximum(res0.P_diag[:, c], 0.0))
@@ -86,9 +104,10 @@ def _simulation_figures(cmp: Comparison, out: Path) -> list[Path]:
         _save(fig, out / "fig05_theta_error.png", paths)
 
     if n > 2:  # an arm: one panel per joint (the paper's Figs. 6-7 are its two joints)
-        return [*paths, _tracking_grid(cmp, out)]
+        return [*paths, _tracking_grid(cmp, out, canvas)]
     for j in range(n):
-        fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+        fig = figure((8, 6))
+        axes = fig.subplots(2, 1, sharex=True)
         axes[0].plot(res0.t, res0.q_des[:, j], "k--", lw=1.2, label="desired")
         for (name, res), color in zip(cmp.results.items(), _COLORS, strict=False):
             tc, q, dq = envelope(
@@ -101,9 +120,10 @@ def _simulation_figures(cmp: Comparison, out: Path) -> list[Path]:
         axes[0].set_ylabel(f"q{j + 1} [rad]")
         axes[1].set_ylabel(f"q{j + 1} − q{j + 1},d [rad]")
         axes[1].set_xlabel("t [s]")
-        axes[1].set_yscale("symlog", linthresh=1e-3)
+        symlog(axes[1], 1e-3)
         for ax in axes:
             ax.grid(alpha=0.3)
+            ax.tick_params(labelsize=8)
         axes[0].legend(fontsize=8)
         axes[0].set_ylim(*_span(res0.q_des[:, j]))
         title(fig, f"Fig. {6 + j}: tracking of joint {j + 1}, proposed vs DTSMC")
@@ -111,19 +131,18 @@ def _simulation_figures(cmp: Comparison, out: Path) -> list[Path]:
     return paths
 
 
-def _tracking_grid(cmp: Comparison, out: Path) -> Path:
+def _tracking_grid(cmp: Comparison, out: Path, canvas: Canvas) -> Path:
     """``tracking.png``: one panel per joint, each controller's tracking error q − q_d
     (symlog: linear within 1 mrad)."""
     res0 = next(iter(cmp.results.values()))
     n, L = res0.lib.n, res0.lib.layout
-    fig, cells = joint_grid(n, (3.8, 2.4))
+    fig, cells = canvas.joint_grid(n, PANEL)
     for j, (ax,) in enumerate(cells):
         for (name, res), color in zip(cmp.results.items(), _COLORS, strict=False):
             tc, dq = envelope(res.t, res.x_true[:, L["q"].start + j] - res.q_des[:, j])
             ax.plot(tc, dq, color=color, lw=0.7, label=_label(name, res), rasterized=True)
-        ax.set_yscale("symlog", linthresh=1e-3)
+        symlog(ax, 1e-3)
         ax.set_ylabel(f"q{j + 1} − q{j + 1},d [rad]", fontsize=8)
-        ax.set_xlabel("t [s]", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
     cells[0][0].legend(fontsize=6)
@@ -153,7 +172,6 @@ def _vision_angle(res: RunResult) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _experiment_figures(cmp: Comparison, out: Path) -> list[Path]:
-    plt = _plt()
     paths: list[Path] = []
     name0, res0 = next(iter(cmp.results.items()))
     L = res0.lib.layout
@@ -161,15 +179,19 @@ def _experiment_figures(cmp: Comparison, out: Path) -> list[Path]:
     q = res0.x_true[:, L["q"].start]
     t_cam, q_cam = _vision_angle(res0)
     enc = res0.z_enc[:, 0]  # the motor encoder (link side of the gear)
-    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
-    axes[0].plot(t, enc, lw=0.8, label="encoder (motor angle)")
+    fig = figure((8, 6))
+    axes = fig.subplots(2, 1, sharex=True)
+    te, enc_c, fused_c, q_c, enc_e, fused_e = envelope(
+        t, enc, res0.x_hat[:, L["q"].start], q, enc - q, res0.x_hat[:, L["q"].start] - q
+    )
+    axes[0].plot(te, enc_c, lw=0.8, label="encoder (motor angle)")
     axes[0].plot(t_cam, q_cam, "o", ms=2.5, label="vision (frame exposure time)")
-    axes[0].plot(t, res0.x_hat[:, L["q"].start], lw=1.0, label=f"fused ({res0.scenario.estimator})")
-    axes[0].plot(t, q, "k--", lw=0.8, label="true link angle")
+    axes[0].plot(te, fused_c, lw=1.0, label=f"fused ({res0.scenario.estimator})")
+    axes[0].plot(te, q_c, "k--", lw=0.8, label="true link angle")
     axes[0].set_ylabel("q [rad]")
-    axes[1].plot(t, enc - q, lw=0.8, label="encoder − true")
+    axes[1].plot(te, enc_e, lw=0.8, label="encoder − true")
     axes[1].plot(t_cam, q_cam - np.interp(t_cam, t, q), "o", ms=2.5, label="vision − true")
-    axes[1].plot(t, res0.x_hat[:, L["q"].start] - q, lw=1.0, label="fused − true")
+    axes[1].plot(te, fused_e, lw=1.0, label="fused − true")
     axes[1].set_ylabel("angle error [rad]")
     axes[1].set_xlabel("t [s]")
     for ax in axes:
@@ -184,12 +206,14 @@ def _experiment_figures(cmp: Comparison, out: Path) -> list[Path]:
     _save(fig, out / "fig13_estimation_error.png", paths)
 
     l1 = float(cmp.scenario.trajectory.get("l1", 0.6))
-    fig, ax = plt.subplots(figsize=(8, 3.8))
+    fig = figure((8, 3.8))
+    ax = fig.subplots()
     for (name, res), color in zip(cmp.results.items(), _COLORS, strict=False):
         dq = res.x_true[:, L["q"].start] - res.q_des[:, 0]
         tip_err = 2.0 * l1 * np.abs(np.sin(dq / 2.0))  # chord between actual and desired tip
-        ax.plot(res.t, 1e3 * tip_err, color=color, lw=0.9, label=_label(name, res))
-    ax.set_yscale("log")
+        tc, tip = envelope(res.t, 1e3 * tip_err)
+        ax.plot(tc, tip, color=color, lw=0.9, label=_label(name, res))
+    logscale(ax)
     ax.set_xlabel("t [s]")
     ax.set_ylabel("tip tracking error [mm]")
     ax.grid(alpha=0.3, which="both")
@@ -199,17 +223,16 @@ def _experiment_figures(cmp: Comparison, out: Path) -> list[Path]:
     return paths
 
 
-def _control_figures(cmp: Comparison, out: Path, n: int) -> list[Path]:
+def _control_figures(cmp: Comparison, out: Path, n: int, canvas: Canvas) -> list[Path]:
     paths: list[Path] = []
-    fig, cells = joint_grid(n, (3.8, 2.2))
+    fig, cells = canvas.joint_grid(n, PANEL)
     for (name, res), color in zip(cmp.results.items(), _COLORS, strict=False):
         for j, (ax,) in enumerate(cells):
             tc, s = envelope(res.t, res.s[:, j])
             ax.plot(tc, s, color=color, lw=0.7, label=_label(name, res), rasterized=True)
     for j, (ax,) in enumerate(cells):
         ax.set_ylabel(f"s{j + 1} [rad/s]", fontsize=8)
-        ax.set_yscale("symlog", linthresh=1e-2)
-        ax.set_xlabel("t [s]", fontsize=8)
+        symlog(ax, 1e-2)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
     cells[0][0].legend(fontsize=6)
@@ -219,7 +242,9 @@ def _control_figures(cmp: Comparison, out: Path, n: int) -> list[Path]:
     # the zoom: the last 0.25 s of the longest run (a diverged run ends earlier: not shown),
     # for the paper's arms (an arm's grid: the whole run alone, half the panels to draw)
     zoomed = n <= RATE_PANELS_UP_TO
-    fig, cells = joint_grid(n, (3.8, 1.8), rows_per_joint=2 if zoomed else 1, sharex=False)
+    fig, cells = canvas.joint_grid(
+        n, (3.8, 1.8) if zoomed else PANEL, rows_per_joint=2 if zoomed else 1, sharex=not zoomed
+    )
     t_end = max(float(res.t[-1]) for res in cmp.results.values())
     for (name, res), color in zip(cmp.results.items(), _COLORS, strict=False):
         t = res.t
@@ -234,9 +259,9 @@ def _control_figures(cmp: Comparison, out: Path, n: int) -> list[Path]:
         if zoomed:
             axes[1].set_ylabel(f"u{j + 1}, last 0.25 s", fontsize=8)
             axes[1].set_xlim(t_end - 0.25, t_end)
+            axes[1].set_xlabel("t [s]", fontsize=8)
         for ax in axes:
             ax.grid(alpha=0.3)
-        axes[-1].set_xlabel("t [s]", fontsize=8)
     cells[0][0].legend(fontsize=6)
     title(
         fig,

@@ -20,10 +20,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from amsfe_sym.apps.plots.style import (
+    PANEL,
+    Canvas,
     converged_limit,
     envelope,
-    joint_grid,
-    pyplot,
+    figure,
     save,
     title,
 )
@@ -99,13 +100,11 @@ def estimation_error_axes(res: RunResult, cells: list[list[Any]]) -> None:
             ax.set_ylabel(f"{block}{j + 1} error [{unit}]", fontsize=8)
             ax.tick_params(labelsize=7)
             ax.grid(alpha=0.3)
-        axes[-1].set_xlabel("t [s]", fontsize=8)
     cells[0][0].legend(loc="upper right", fontsize=7)
 
 
 def plot_run(res: RunResult, out: Path) -> list[Path]:
     """Write the run's figures to ``out``; returns their paths."""
-    plt = pyplot()
     lib, t = res.lib, res.t
     n, L = lib.n, lib.layout
     sd = np.sqrt(np.maximum(res.P_diag, 0.0))
@@ -113,7 +112,9 @@ def plot_run(res: RunResult, out: Path) -> list[Path]:
     sc = res.scenario
     what = f"{sc.name}: estimator {sc.estimator}, {controller_label(res)}, seed {sc.seed}"
 
-    fig, cells = joint_grid(n, (3.8, 1.9), rows_per_joint=error_rows(n))
+    canvas = Canvas()
+    rows = error_rows(n)
+    fig, cells = canvas.joint_grid(n, PANEL if rows == 1 else (3.8, 1.9), rows_per_joint=rows)
     estimation_error_axes(res, cells)
     which = "q and qd" if error_rows(n) == 2 else "link angles q"
     title(fig, f"Estimation errors of {which} (paper Fig. 4), axes set by the last 80 % — {what}")
@@ -122,7 +123,8 @@ def plot_run(res: RunResult, out: Path) -> list[Path]:
     if lib.p:
         cols = min(lib.p, 3)
         rows = -(-lib.p // cols)
-        fig, axes = plt.subplots(rows, cols, figsize=(4.5 * cols, 2.8 * rows), squeeze=False)
+        fig = figure((4.5 * cols, 2.8 * rows))
+        axes = fig.subplots(rows, cols, squeeze=False)
         for ax in axes.flat[lib.p :]:
             ax.set_visible(False)
         for i, th in enumerate(lib.manifest.theta):
@@ -146,7 +148,7 @@ def plot_run(res: RunResult, out: Path) -> list[Path]:
         title(fig, f"theta (paper Fig. 5) — {what}")
         save(fig, out / "theta.png", paths)
 
-    fig, cells = joint_grid(n, (3.8, 2.4))
+    fig, cells = canvas.joint_grid(n, PANEL)
     for j, (ax,) in enumerate(cells):
         c = L["q"].start + j
         tc, des, true, est = envelope(t, res.q_des[:, j], res.x_true[:, c], res.x_hat[:, c])
@@ -154,7 +156,6 @@ def plot_run(res: RunResult, out: Path) -> list[Path]:
         ax.plot(tc, true, lw=0.9, label="true link angle (plant)", rasterized=True)
         ax.plot(tc, est, lw=0.7, alpha=0.8, label=f"{sc.estimator} estimate", rasterized=True)
         ax.set_ylabel(f"q{j + 1} [rad]", fontsize=8)
-        ax.set_xlabel("t [s]", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
     cells[0][0].legend(fontsize=7)

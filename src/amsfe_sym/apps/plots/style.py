@@ -1,11 +1,17 @@
-"""What every figure shares: the Agg backend, one panel per joint in a grid of sane size,
+"""What every figure shares: an Agg canvas, one panel per joint in a grid of sane size,
 long lines cut to the pixels they are drawn on, axis limits set by the converged part of a
 run, and the files written.
 
 Drawing costs: matplotlib's time grows with the points it is given, not with the pixels it
 fills.  A 60 s log at 1 kHz is 60 000 points a line in a panel ~800 px wide: :func:`envelope`
 keeps each pixel column's smallest and largest value (the picture is the same, spikes
-included) and the lines are rasterized in the PNG.
+included).  Past the points, a panel costs its ticks and texts: each tick is three lines
+and two texts, made and laid out at every draw, and a log-scale label is TeX-like math.
+So a figure is a bare :class:`matplotlib.figure.Figure` on an Agg canvas (no ``pyplot``,
+whose import alone costs a third of a 7-joint figure), the panels of a grid share their
+time axis (its labels drawn once a column), a symlog axis has plain labels and no minor
+ticks (:func:`symlog`), and the margins are fixed (no ``tight_layout``, which draws the
+figure once more to measure it).
 """
 
 from __future__ import annotations
@@ -19,11 +25,16 @@ from numpy.typing import NDArray
 
 __all__ = [
     "DPI",
+    "PANEL",
+    "Canvas",
     "converged_limit",
     "envelope",
+    "figure",
     "joint_grid",
+    "logscale",
     "pyplot",
     "save",
+    "symlog",
     "title",
     "window_start",
 ]
@@ -32,6 +43,9 @@ FloatArray = NDArray[np.float64]
 
 #: Resolution of every PNG [dots per inch].
 DPI = 100
+#: Width and height [in] of a joint's panel of one axes (every such grid of a command has
+#: this size, so :class:`Canvas` draws them all on one figure).
+PANEL = (3.8, 2.2)
 #: Joint panels per row of a grid (a 7-joint arm: 4 + 3).
 MAX_COLUMNS = 4
 #: Columns of pixels a line is cut to by :func:`envelope`: a joint's panel is 3.8-4 in wide
@@ -49,6 +63,48 @@ def pyplot() -> Any:
     return plt
 
 
+def figure(size: tuple[float, float]) -> Any:
+    """A figure of ``size`` [in] on its own Agg canvas (no ``pyplot``: nothing to close,
+    nothing kept once it is written)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=size)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def symlog(ax: Any, linthresh: float) -> None:
+    """A symmetric log y axis, linear within ``linthresh``, with plain labels at whole
+    decades ("1e-3", not matplotlib's TeX math, which is parsed for each label) and no
+    minor ticks (matplotlib's default puts eight a decade, each a tick to make)."""
+    from matplotlib.ticker import FuncFormatter, NullLocator, SymmetricalLogLocator
+
+    ax.set_yscale("symlog", linthresh=linthresh)
+    ax.yaxis.set_major_locator(SymmetricalLogLocator(linthresh=linthresh, base=10, subs=[1.0]))
+    ax.yaxis.set_minor_locator(NullLocator())
+    ax.yaxis.set_major_formatter(FuncFormatter(_decade))
+
+
+def logscale(ax: Any) -> None:
+    """A log y axis with plain labels at 1, 2 and 5 times a decade ("0.002", not TeX
+    math; sparser when the axis spans many decades) and no minor ticks."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullLocator
+
+    ax.set_yscale("log")
+    ax.yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0), numticks=7))
+    ax.yaxis.set_minor_locator(NullLocator())
+    ax.yaxis.set_major_formatter(FuncFormatter(_decade))
+
+
+def _decade(v: float, _pos: int | None = None) -> str:
+    """A log or symlog tick's label, short enough for the fixed margin: 0.01 to 1000 as
+    written (0.05, 20), else +-MeK (1e-3)."""
+    if v == 0 or 1e-2 <= abs(v) < 1e4:
+        return f"{v:g}"
+    return f"{v:.0e}".replace("e-0", "e-").replace("e+0", "e")
+
+
 def joint_grid(
     n: int,
     panel: tuple[float, float] = (4.0, 2.6),
@@ -62,35 +118,99 @@ def joint_grid(
         n: Joints.
         panel: Width and height of one joint's panel [in].
         rows_per_joint: Axes stacked in a panel (e.g. 2: q error above, qd error below).
-        sharex: The stacked axes of a panel share their time axis.
+        sharex: Every axes shares one time axis, labelled ("t [s]") on the lowest axes of
+            each column only; False: each axes its own, all labelled by the caller.
 
     Returns:
         The figure and, per joint, its list of axes (top to bottom); panels past ``n`` in
         the last row are hidden.
     """
-    from matplotlib.ticker import MaxNLocator
-
-    plt = pyplot()
     cols = min(n, MAX_COLUMNS)
     rows = math.ceil(n / cols)
-    fig = plt.figure(figsize=(panel[0] * cols, panel[1] * rows * rows_per_joint + 0.7))
+    fig = figure((panel[0] * cols, panel[1] * rows * rows_per_joint + 0.7))
     grid = fig.add_gridspec(rows * rows_per_joint, cols)
     cells: list[list[Any]] = []
+    first: Any = None
     for j in range(n):
         r, c = divmod(j, cols)
-        top = fig.add_subplot(grid[r * rows_per_joint, c])
-        axes = [top] + [
-            fig.add_subplot(grid[r * rows_per_joint + i, c], sharex=top if sharex else None)
-            for i in range(1, rows_per_joint)
-        ]
-        for ax in axes:  # few ticks: each is a text to lay out and draw
-            ax.xaxis.set_major_locator(MaxNLocator(4))
-            ax.yaxis.set_major_locator(MaxNLocator(4))
-            ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 3))  # 1e-4 above the axis
+        axes: list[Any] = []
+        for i in range(rows_per_joint):
+            ax = fig.add_subplot(grid[r * rows_per_joint + i, c], sharex=first)
+            first = first if first is not None or not sharex else ax
+            _few_ticks(ax)
             ax.tick_params(labelsize=7)
             ax.yaxis.get_offset_text().set_fontsize(7)
+            axes.append(ax)
+        if sharex:  # the time labels once a column, on its lowest axes
+            last_row = j + cols >= n
+            for i, ax in enumerate(axes):
+                if last_row and i == len(axes) - 1:
+                    ax.set_xlabel("t [s]", fontsize=8)
+                else:
+                    ax.tick_params(labelbottom=False)
         cells.append(axes)
     return fig, cells
+
+
+def _few_ticks(ax: Any) -> None:
+    """At most 5 ticks an axis (each is lines and texts to make and draw), and a y axis
+    whose small numbers are written once above it (1e-4)."""
+    from matplotlib.ticker import MaxNLocator
+
+    ax.xaxis.set_major_locator(MaxNLocator(4))
+    ax.yaxis.set_major_locator(MaxNLocator(4))
+    ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 3))
+
+
+class Canvas:
+    """The joint grids of one command, drawn one after another on one figure.
+
+    A grid's axes and their ticks cost more than what is drawn in them (a 7-joint grid: 7
+    axes and ~100 ticks to make).  :meth:`joint_grid` hands back the previous grid, emptied
+    (its lines, bands, legends, labels, scales and limits reset), when the shape is the
+    same, and a new one otherwise: the second and later figures of a run cost a third less.
+    Write each figure (:func:`save`) before asking for the next.
+    """
+
+    def __init__(self) -> None:
+        self._key: tuple[Any, ...] | None = None
+        self._grid: tuple[Any, list[list[Any]]] | None = None
+
+    def joint_grid(
+        self,
+        n: int,
+        panel: tuple[float, float] = (4.0, 2.6),
+        rows_per_joint: int = 1,
+        sharex: bool = True,
+    ) -> tuple[Any, list[list[Any]]]:
+        """:func:`joint_grid`'s figure and axes, the previous ones emptied if the same."""
+        key = (n, panel, rows_per_joint, sharex)
+        if self._grid is None or key != self._key:
+            self._key, self._grid = key, joint_grid(n, panel, rows_per_joint, sharex)
+            return self._grid
+        fig, cells = self._grid
+        for ax in (ax for axes in cells for ax in axes):
+            _empty(ax)
+        return fig, cells
+
+
+def _empty(ax: Any) -> None:
+    """``ax`` as :func:`joint_grid` made it, keeping its ticks: no artists, no legend, no
+    y label or title, the colours from the first, a linear y axis with few ticks, limits
+    from the data again."""
+    for artist in [*ax.lines, *ax.collections, *ax.patches, *ax.texts, *ax.images]:
+        artist.remove()
+    if ax.get_legend() is not None:
+        ax.get_legend().remove()
+    ax.set_prop_cycle(None)  # the first line is blue again
+    ax.set_ylabel("")
+    ax.set_title("")
+    if ax.get_yscale() != "linear":
+        ax.set_yscale("linear")
+    _few_ticks(ax)
+    ax.relim()
+    ax.set_autoscale_on(True)
+    ax.autoscale_view()
 
 
 def window_start(K: int) -> int:
@@ -159,8 +279,7 @@ def title(fig: Any, text: str, size: float = 9) -> None:
 def save(fig: Any, path: Path, paths: list[Path] | None = None) -> Path:
     """Lay out ``fig`` with fixed margins [in] (``tight_layout`` draws the figure once more
     to measure it: a third of the time of a 7-joint figure), write it as a PNG at
-    :data:`DPI`, close it; ``paths`` gets it."""
-    plt = pyplot()
+    :data:`DPI`; ``paths`` gets it."""
     w, h = fig.get_size_inches()
     head = 0.3 + 0.17 * (fig._suptitle.get_text().count("\n") if fig._suptitle else 0)
     fig.subplots_adjust(
@@ -172,7 +291,8 @@ def save(fig: Any, path: Path, paths: list[Path] | None = None) -> Path:
         hspace=0.5 / (h / max(1, _rows(fig))),
     )
     fig.savefig(path, dpi=DPI)
-    plt.close(fig)
+    if getattr(fig.canvas, "manager", None) is not None:  # a pyplot figure: let it go
+        pyplot().close(fig)
     if paths is not None:
         paths.append(path)
     return path
