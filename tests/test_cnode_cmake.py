@@ -21,6 +21,7 @@ import pytest
 from amsfe_sym.codegen import library_for
 from amsfe_sym.scenario import load_scenario
 from tests.test_cnode import _lockstep, assert_is_simulate
+from tests.test_ros import SRC
 
 PROGRAMS = ("amsfe_node", "amsfe_arm")
 
@@ -111,3 +112,36 @@ def test_cmake_node_lockstep_is_simulate(cmake_build: Path, tmp_path: Path) -> N
     node = ("--node-exe", str(cmake_build / "amsfe_node"))
     got = _lockstep(tmp_path, "paper-sim", "c", 1.0, node_args=node)
     assert_is_simulate(got, sc, library_for(sc))
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_cmake_node_and_arm_lockstep_is_simulate(cmake_build: Path, tmp_path: Path) -> None:
+    """Both CMake-built programs over DDS in lockstep (``amsfe sim-node --arm-exe
+    BUILD/amsfe_arm`` + ``amsfe node --node-exe BUILD/amsfe_node``): the node's record is
+    ``amsfe simulate``'s compiled loop bit for bit, as with the wheel-built arm."""
+    sc = load_scenario("paper-sim").with_overrides(duration=1.0)
+    node = ("--node-exe", str(cmake_build / "amsfe_node"))
+    arm = ("--arm-exe", str(cmake_build / "amsfe_arm"))
+    got = _lockstep(tmp_path, "paper-sim", "c", 1.0, node_args=node, arm_args=arm)
+    assert_is_simulate(got, sc, library_for(sc))
+
+
+@pytest.mark.parametrize("command", ["node", "sim-node"])
+def test_a_missing_exe_is_one_line(command: str, tmp_path: Path) -> None:
+    """``--node-exe`` / ``--arm-exe`` naming no executable: one error line naming the
+    option, the file and the fix, exit 2, before anything starts."""
+    pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (pip install -e '.[ros]')")
+    option = "--node-exe" if command == "node" else "--arm-exe"
+    missing = tmp_path / "build" / "amsfe_x"
+    args = [command, "paper-sim", option, str(missing), "--duration", "0.01"]
+    env = {**os.environ, "PYTHONPATH": str(SRC)}
+    proc = subprocess.run(
+        [sys.executable, "-m", "amsfe_sym", *args],
+        env=env, capture_output=True, text=True, timeout=300, cwd=tmp_path,
+    )  # fmt: skip
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    lines = [x for x in proc.stderr.splitlines() if x.startswith("error:")]
+    assert len(lines) == 1 and option in lines[0] and str(missing) in lines[0], proc.stderr
+    assert "Fix: give the amsfe_" in lines[0] and "cmake --build" in lines[0], lines
+    assert sorted(p.name for p in tmp_path.iterdir()) == [], proc.stderr
