@@ -77,10 +77,11 @@ def _dynamic(exe: Path) -> tuple[set[str], list[str], list[str]]:
 @pytest.mark.slow
 def test_cmake_builds_what_the_wheel_build_builds(cmake_build: Path) -> None:
     """CMake compiles, for the node and for the arm, exactly the C files the wheel build
-    compiles (``cnode_build.PROGRAMS``: a file added to ``ros/c/`` lands in both or
-    neither), with the wheel build's flags, and links the libraries the wheel-built
-    programs link (no libpython, no system OpenSSL beside the wheels' bundled one), through
-    an old-style RPATH to the wheels' ``lib/`` and ``ros_*.libs`` without an empty entry."""
+    compiles (``cnode_build.PROGRAMS``: a C file added to ``ros/c/``, or given to the arm
+    there, fails here until CMakeLists.txt agrees), with the wheel build's flags, and links
+    the libraries the wheel-built programs link (no libpython, no system OpenSSL beside the
+    wheels' bundled one), through an old-style RPATH to the wheels' ``lib/`` and
+    ``ros_*.libs`` without an empty entry."""
     from amsfe_sym.ros.cnode_build import CNODE_CFLAGS, _sources, build_node, ros_paths
 
     lib = library_for(load_scenario("paper-sim"))
