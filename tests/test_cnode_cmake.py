@@ -40,17 +40,18 @@ def _cmake() -> str:
 
 @pytest.fixture(scope="module")
 def cmake_build(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """``cmake -S ros/c -B BUILD`` for paper-sim's library against this environment's ROS 2
-    wheels (docs/live-control.md's commands), then ``cmake --build BUILD``: the folder."""
+    """``cmake -S ros/c -B BUILD -DCMAKE_PREFIX_PATH=<venv>`` for paper-sim's library against
+    this environment's ROS 2 wheels (docs/live-control.md's commands; no AMENT_PREFIX_PATH,
+    no Python3_EXECUTABLE: the venv's), then ``cmake --build BUILD``: the folder."""
     from amsfe_sym.ros.cnode_build import C_DIR
 
     cmake = _cmake()
     lib = library_for(load_scenario("paper-sim"))
     build = tmp_path_factory.mktemp("cmake") / "build"
-    env = {**os.environ, "AMENT_PREFIX_PATH": sys.prefix}
+    # no ROS installation sourced: the CMakeLists takes ament's index and Python from the venv
+    env = {k: v for k, v in os.environ.items() if k != "AMENT_PREFIX_PATH"}
     configure = [
         cmake, "-S", str(C_DIR), "-B", str(build), f"-DCMAKE_PREFIX_PATH={sys.prefix}",
-        f"-DPython3_EXECUTABLE={sys.executable}",
         f"-DAMSFE_GENERATED_DIR={lib.library_path.parent}", "-DCMAKE_EXPORT_COMPILE_COMMANDS=ON",
     ]  # fmt: skip
     for cmd in (configure, [cmake, "--build", str(build)]):
