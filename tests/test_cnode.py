@@ -38,6 +38,35 @@ from tests.test_ros import (
 )
 
 
+def _lockstep(
+    tmp_path: Path,
+    scenario: str,
+    impl: str,
+    duration: float = 2.0,
+    node_args: tuple[str, ...] = (),
+    arm_args: tuple[str, ...] = (),
+) -> dict[str, Any]:
+    """``sim-node --lockstep ARM_ARGS`` + ``node --impl IMPL --controller amsfe --record
+    NODE_ARGS`` for ``duration`` s: both exit 0; the record's topics and the node's output."""
+    env = _ros_env(tmp_path)
+    rec = tmp_path / f"rec-{impl}"
+    d = f"{duration:g}"
+    procs = []
+    try:
+        procs.append(_start(env, "node", scenario, "--controller", "amsfe", "--impl", impl,
+                            "--duration", d, "--record", str(rec), *node_args,
+                            *PATIENT_NODE))  # fmt: skip
+        procs.append(_start(env, "sim-node", scenario, "--lockstep", "--duration", d,
+                            *arm_args, *PATIENT_ARM))  # fmt: skip
+    finally:
+        results = _finish(procs, 180.0)
+    for code, text in results:
+        assert code == 0, text
+    got: dict[str, Any] = dict(_bag(rec))
+    got["_text"] = results[0][1]
+    return got
+
+
 @pytest.mark.ros
 @pytest.mark.slow
 @pytest.mark.xdist_group(LOCKSTEP_GROUP)
@@ -48,10 +77,16 @@ def test_c_node_lockstep_is_simulate(scenario: str, lockstep_runs: Any) -> None:
     frames fused and refused are the loop's, and it ends with the hold command.  (The run,
     2 s, is shared: tests/conftest.py's ``lockstep_runs``.)"""
     sc = load_scenario(scenario).with_overrides(duration=2.0)
-    lib = library_for(sc)
     run_ = lockstep_runs.get(scenario, "c")
-    got = {**run_.topics, "_text": run_.node_text}
-    assert "the C node" in got["_text"] and "done: 2001 ticks" in got["_text"], got["_text"]
+    assert_is_simulate({**run_.topics, "_text": run_.node_text}, sc, library_for(sc))
+
+
+def assert_is_simulate(got: dict[str, Any], sc: Any, lib: Any) -> None:
+    """A lockstep record ``got`` of the C node (:func:`_lockstep`) is ``amsfe simulate``'s
+    compiled loop of ``sc`` bit for bit: estimates, std, theta, commands and truth every
+    tick, the frames fused and refused, the hold command last."""
+    assert "the C node" in got["_text"], got["_text"]
+    assert f"done: {round(sc.duration / lib.T) + 1} ticks" in got["_text"], got["_text"]
     ref = run(sc, lib, runtime="compiled")
     n = lib.n
     est = np.array([np.r_[m.position, m.velocity] for m in got["/amsfe/estimate"]])

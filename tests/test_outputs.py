@@ -422,6 +422,7 @@ INPUTS = {
     ("node", "--node-exe"),
     ("live", "--topic-spec"),
     ("sim-node", "--topic-spec"),
+    ("sim-node", "--arm-exe"),
     ("play", "--topic-spec"),
     ("camera-node", "--topic-spec"),
 }

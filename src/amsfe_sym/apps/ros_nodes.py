@@ -115,6 +115,13 @@ def add_sim_node_arguments(p: argparse.ArgumentParser) -> None:
         "the arm in C on rcl (a real-time clock; auto: when it builds) or in Python "
         '(docs/live-load.md, "The C arm")',
     )
+    p.add_argument(
+        "--arm-exe",
+        default=None,
+        metavar="FILE",
+        help="the C arm built elsewhere (cmake --build: BUILD/amsfe_arm) instead of the wheel "
+        "build",
+    )
 
 
 def sim_node_from_args(args: argparse.Namespace) -> int:
@@ -142,7 +149,7 @@ def sim_node_from_args(args: argparse.Namespace) -> int:
     FaultPlan(faults, lib.T, lib.n)  # the same kind twice: refused before rclpy starts
     mode = "lockstep" if args.lockstep else "free running"
     broken = "".join(f", fault {f.label()}" for f in faults)
-    impl = _arm_impl(args.impl, lib, opts)
+    impl = "c" if args.arm_exe is not None else _arm_impl(args.impl, lib, opts)
     print(
         f"sim-node: {sc.name} seed {sc.seed}, {sc.duration:g} s, {mode}{broken} ({impl} arm)",
         flush=True,
@@ -150,7 +157,8 @@ def sim_node_from_args(args: argparse.Namespace) -> int:
     if impl == "c":
         from amsfe_sym.ros.carm import run_c_arm
 
-        return run_c_arm(sc, lib, opts)
+        exe = None if args.arm_exe is None else Path(args.arm_exe)
+        return run_c_arm(sc, lib, opts, exe=exe)
     rep = run_sim_node(sc, lib, opts)
     line = f"sim-node: {rep.ticks} ticks in {rep.wall_s:.2f} s wall, {rep.commands} commands"
     if not args.lockstep:
@@ -251,8 +259,8 @@ def add_node_arguments(p: argparse.ArgumentParser) -> None:
         "--node-exe",
         default=None,
         metavar="FILE",
-        help="the C node built elsewhere (colcon: install/amsfe_node/lib/amsfe_node/amsfe_node) "
-        "instead of the wheel build",
+        help="the C node built elsewhere (cmake --build: BUILD/amsfe_node; colcon: "
+        "install/amsfe_node/lib/amsfe_node/amsfe_node) instead of the wheel build",
     )
 
 

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from amsfe_sym.errors import ConfigError, RosError, describe
-from amsfe_sym.ros.cnode_build import CNodeBuild, build_node, run_program
+from amsfe_sym.ros.cnode_build import CNodeBuild, build_node, external_build, run_program
 from amsfe_sym.ros.faults import FaultPlan
 from amsfe_sym.ros.middleware import DEFAULT_RMW, LOCKSTEP_PROFILE
 from amsfe_sym.ros.sim_node import SimNodeOptions
@@ -141,22 +141,27 @@ def _resolved_spec(spec: TopicSpec, joints: tuple[str, ...], options: SimNodeOpt
     return resolved
 
 
-def run_c_arm(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> int:
+def run_c_arm(
+    sc: Scenario, lib: ModelLibrary, options: SimNodeOptions, exe: Path | None = None
+) -> int:
     """Build (once) and run the C arm of ``sc`` for its duration as the node ``amsfe_sim``;
-    its lines (the Python sim-node's) go to this process's stdout.  Returns 0.
+    its lines (the Python sim-node's) go to this process's stdout.  Returns 0.  ``exe``: an
+    arm built elsewhere (``cmake --build`` of ``ros/c/CMakeLists.txt``) for ``lib``'s robot,
+    run instead of the wheel build.
 
     Raises:
         KeyboardInterrupt: Ctrl-C or SIGTERM (forwarded to the arm).
         RosError: the wheels missing, the build failing, no node within ``start_timeout``, a
             lockstep command missing or two controllers (the arm's one line).
-        ConfigError: bad options (:func:`c_arm_refusal`, a fault kind twice).
+        ConfigError: bad options (:func:`c_arm_refusal`, a fault kind twice), ``exe`` not
+            an executable.
     """
     why = c_arm_refusal(options)
     if why is not None:
         raise ConfigError(
             describe("amsfe sim-node --impl c", "options the C arm runs", why, "--impl python")
         )
-    build = build_arm(lib)
+    build = external_build(exe, "--arm-exe") if exe is not None else build_arm(lib)
     if build.compiled:
         print(f"sim-node: built the C arm {build.path}", flush=True)
     spec = _resolved_spec(options.spec, tuple(lib.manifest.joints), options)

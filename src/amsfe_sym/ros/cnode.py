@@ -15,7 +15,6 @@ configured from Python, started and waited for (docs/live-control.md); its build
 from __future__ import annotations
 
 import math
-import os
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -26,7 +25,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import ConfigError, describe
-from amsfe_sym.ros.cnode_build import CNodeBuild, build_node, ros_paths, run_program
+from amsfe_sym.ros.cnode_build import (
+    CNodeBuild,
+    build_node,
+    external_build,
+    ros_paths,
+    run_program,
+)
 from amsfe_sym.ros.cnode_record import read_record_arrays, write_record
 from amsfe_sym.runtime.library import ModelLibrary
 from amsfe_sym.scenario import Scenario
@@ -295,7 +300,7 @@ def run_c_node(
 ) -> CNodeRun:
     """Build (once) and run the C node of ``sc`` with the Python node's options
     (:class:`~amsfe_sym.ros.node.NodeOptions`); its lines go to this process's stdout.
-    ``exe``: a C node built elsewhere (``colcon build`` of ``ros/c/CMakeLists.txt``) for
+    ``exe``: a C node built elsewhere (``cmake --build`` of ``ros/c/CMakeLists.txt``) for
     ``lib``'s robot, run instead of the wheel build.
 
     Raises:
@@ -309,11 +314,7 @@ def run_c_node(
     refuse_c_node(
         c_node_refusal(sc, options.spec, options.managed, options.controller, options.compiled)
     )
-    if exe is not None and not (exe.is_file() and os.access(exe, os.X_OK)):
-        raise ConfigError(
-            describe("--node-exe", "an executable C node", str(exe), "give colcon's amsfe_node")
-        )
-    build = CNodeBuild(exe, "external", False) if exe is not None else build_node(lib)
+    build = external_build(exe, "--node-exe") if exe is not None else build_node(lib)
     if build.compiled:
         say(f"node: built the C node {build.path}")
     spec, every = _resolved_spec(

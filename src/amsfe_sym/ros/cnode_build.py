@@ -29,7 +29,7 @@ from importlib import metadata
 from pathlib import Path
 
 from amsfe_sym.codegen.cache import build_lock, compiler, default_out_dir
-from amsfe_sym.errors import RosError, describe
+from amsfe_sym.errors import ConfigError, RosError, describe
 from amsfe_sym.runtime.library import ModelLibrary, file_sha256
 
 __all__ = [
@@ -38,6 +38,7 @@ __all__ = [
     "CNodeBuild",
     "RosPaths",
     "build_node",
+    "external_build",
     "ros_paths",
     "run_program",
 ]
@@ -207,6 +208,27 @@ def build_node(
         )
         tmp.replace(exe)
     return CNodeBuild(exe, key, True)
+
+
+def external_build(exe: Path, option: str) -> CNodeBuild:
+    """A program built elsewhere (``cmake --build`` or ``colcon build`` of
+    ``ros/c/CMakeLists.txt``), named by ``option`` (``--node-exe``, ``--arm-exe``), run
+    instead of the wheel build.
+
+    Raises:
+        ConfigError: ``exe`` is not an executable file.
+    """
+    if not (exe.is_file() and os.access(exe, os.X_OK)):
+        program = "amsfe_node" if option == "--node-exe" else "amsfe_arm"
+        raise ConfigError(
+            describe(
+                option,
+                f"an executable {program}",
+                str(exe),
+                f"give the {program} of cmake --build (docs/live-control.md)",
+            )
+        )
+    return CNodeBuild(exe, "external", False)
 
 
 def _compiler_line(cc: str) -> str:
