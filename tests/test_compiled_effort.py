@@ -253,6 +253,27 @@ def test_oosms_inverse_map_is_refused_in_one_line(paper: Any, kind: str, input_m
         build_estimator(sc_e, lib, parts.sensors, parts.z0, effort=spec)  # the Python one
 
 
+@pytest.mark.parametrize(("kind", "input_model"), KINDS)
+def test_a_c_log_refuses_an_estimator_without_the_applied_torque(
+    paper: Any, kind: str, input_model: str
+) -> None:
+    """The C log format (examples/estimate_from_log.c) has no effort fields: logging an
+    estimator with input states, a joint torque or a net torque input is one ConfigError
+    line (the check the C node makes too); the same estimator of the applied torque logs."""
+    from amsfe_sym.runtime.compiled_estimator import estimator_log_lines
+    from amsfe_sym.sim.builders import build_estimator, build_run
+
+    sc, lib, _ = paper
+    parts = build_run(sc, lib)
+    spec = EffortSpec(kind, input_model=input_model)
+    c = build_estimator(sc, lib, parts.sensors, parts.z0, compiled=True, effort=spec)
+    with pytest.raises(ConfigError, match="an estimator of the applied torque") as info:
+        estimator_log_lines(c)  # type: ignore[arg-type]
+    assert "\n" not in str(info.value)
+    applied = build_estimator(sc, lib, parts.sensors, parts.z0, compiled=True)
+    assert estimator_log_lines(applied)[0].startswith("params ")  # type: ignore[arg-type]
+
+
 @pytest.mark.parametrize("kind", ["joint_torque", "none"])
 def test_amsfe_estimate_runs_such_a_log_in_c(
     paper: Any, kind: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch

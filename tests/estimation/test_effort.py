@@ -27,6 +27,7 @@ from amsfe_sym.estimation.effort import (
     reconstruct_input,
 )
 from amsfe_sym.estimation.effort_models import (
+    EffortModels,
     InputStateTransition,
     NetTorqueTransition,
     SpringTorqueMeasurement,
@@ -198,9 +199,8 @@ def test_wrap_models_starts_the_input_at_the_spring_torque() -> None:
     meas = SpringTorqueMeasurement(m, 1e-6, 1e-4, 1e-2)
     x0 = rng.normal(size=m.N)
     P0 = np.eye(m.N)
-    out = wrap_models(
-        EffortSpec(kind="joint_torque"), m, inner, meas, meas, x0, P0, lambda *a: inner.B
-    )
+    plain = EffortModels(inner, meas, meas, x0, P0)
+    out = wrap_models(EffortSpec(kind="joint_torque"), m, plain, lambda *a: inner.B)
     n = m.n
     Ks = m.stiffness(x0[4 * n :])
     np.testing.assert_allclose(
@@ -210,6 +210,19 @@ def test_wrap_models_starts_the_input_at_the_spring_torque() -> None:
     z, H = out.encoder.predict(out.x0)  # type: ignore[attr-defined]
     np.testing.assert_array_equal(z, meas.predict(x0)[0])
     assert H.shape == (3 * n, m.N + n) and not H[:, m.N :].any()
+
+
+def test_wrap_models_keeps_the_applied_models_and_wraps_a_reconstructed_net_torque() -> None:
+    rng = np.random.default_rng(7)
+    m = _motor(n=2, p=2)
+    inner = _linear_inner(m, rng)
+    meas = SpringTorqueMeasurement(m, 1e-6, 1e-4, 1e-2)
+    plain = EffortModels(inner, meas, meas, rng.normal(size=m.N), np.eye(m.N))
+    assert wrap_models(EffortSpec(), m, plain) is plain
+    net = wrap_models(EffortSpec(kind="none", input_model="reconstruct"), m, plain)
+    assert isinstance(net.model, NetTorqueTransition) and net.model.inner is inner
+    assert net.encoder is meas and net.camera is meas
+    assert net.x0 is plain.x0 and net.P0 is plain.P0
 
 
 def test_trapezoid_input_gain_is_exact_for_the_motor_double_integrator() -> None:

@@ -14,7 +14,7 @@ Pure numpy; the robot enters through :class:`~amsfe_sym.estimation.effort.MotorP
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 import numpy as np
@@ -22,6 +22,7 @@ from numpy.typing import ArrayLike
 
 from amsfe_sym.arrays import FloatArray
 from amsfe_sym.estimation.effort import EffortSpec, MotorParams
+from amsfe_sym.estimation.models import MeasurementModel, TransitionModel
 
 __all__ = [
     "EffortModels",
@@ -293,9 +294,9 @@ class EffortModels:
         P0: Initial covariance, (nx, nx).
     """
 
-    model: object
-    encoder: object
-    camera: object
+    model: TransitionModel
+    encoder: MeasurementModel
+    camera: MeasurementModel
     x0: FloatArray
     P0: FloatArray
 
@@ -303,16 +304,13 @@ class EffortModels:
 def wrap_models(
     spec: EffortSpec,
     motor: MotorParams,
-    model: TransitionLike,
-    encoder: _Measurement,
-    camera: _Measurement,
-    x0: FloatArray,
-    P0: FloatArray,
+    plain: EffortModels,
     input_gain: InputGain | None = None,
     u0: FloatArray | None = None,
 ) -> EffortModels:
-    """Wrap an estimator's models for ``spec`` (``encoder`` is already the right one:
-    :class:`SpringTorqueMeasurement` for ``joint_torque``).
+    """Wrap an estimator's models ``plain`` (the robot's, for the applied torque) for ``spec``
+    (``plain.encoder`` is already the right one: :class:`SpringTorqueMeasurement` for
+    ``joint_torque``).
 
     - ``applied``, or ``none`` reconstructed: unchanged, but ``none`` runs the
       :class:`NetTorqueTransition`;
@@ -322,23 +320,22 @@ def wrap_models(
       gravity torque ``g(q0) + Fm qmd0`` instead, which a wrong ``q0`` moves far less on a
       stiff joint), ``P0`` with ``spec.input_std0^2``.
     """
-    if spec.kind == "applied":
-        return EffortModels(model, encoder, camera, x0, P0)
-    if not spec.input_as_state:
+    if not spec.input_as_state:  # applied, or none reconstructed
         if spec.kind == "none":
-            model = NetTorqueTransition(model, motor, input_gain)
-        return EffortModels(model, encoder, camera, x0, P0)
+            return replace(plain, model=NetTorqueTransition(plain.model, motor, input_gain))
+        return plain
     n, N = motor.n, motor.N
+    x0 = plain.x0
     if u0 is None:
         Ks = motor.stiffness(x0[4 * n : N])
         u0 = Ks * (x0[2 * n : 3 * n] - x0[:n]) + motor.Fm * x0[3 * n : 4 * n]
     P = np.zeros((N + n, N + n))
-    P[:N, :N] = P0
+    P[:N, :N] = plain.P0
     P[N:, N:] = np.eye(n) * spec.input_std0**2
     return EffortModels(
-        InputStateTransition(model, motor, spec.input_rate_std, input_gain),
-        PaddedMeasurement(encoder, N, n),
-        PaddedMeasurement(camera, N, n),
+        InputStateTransition(plain.model, motor, spec.input_rate_std, input_gain),
+        PaddedMeasurement(plain.encoder, N, n),
+        PaddedMeasurement(plain.camera, N, n),
         np.concatenate([x0, u0]),
         P,
     )

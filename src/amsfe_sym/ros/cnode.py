@@ -152,15 +152,7 @@ def write_params(
         raise ConfigError(
             describe("C node estimator", "the library's C one", type(est).__name__, "")
         )
-    if est.effort.effort:  # input states, a joint torque or a net torque
-        raise ConfigError(
-            describe(
-                "the estimator of the C node",
-                "an estimator of the applied torque",
-                "input states or a joint torque",
-                "run amsfe node --impl python",
-            )
-        )
+    est.require_applied_torque("the estimator of the C node", "run amsfe node --impl python")
     p = est._params
     qw, re, rc, x0, P0 = est._arrays[:5]
     timing = parts.timing

@@ -232,6 +232,27 @@ class CompiledEstimator(Estimator):
                 )
             )
 
+    def require_applied_torque(self, what: str, fix: str) -> None:
+        """Refuse this estimator, in one line, where only the applied torque is carried (a C
+        log, the C node): none with input states, a joint torque or a net torque input.
+
+        Args:
+            what: The place that refuses it (the message's subject).
+            fix: What to do instead.
+
+        Raises:
+            ConfigError: an effort field is set (:attr:`EffortParts.effort`).
+        """
+        if self.effort.effort:
+            raise ConfigError(
+                describe(
+                    what,
+                    "an estimator of the applied torque",
+                    "input states, a joint torque or a net torque input",
+                    fix,
+                )
+            )
+
     # ------------------------------------------------------------------ C calls
     def status_string(self, status: int) -> str:
         """The runtime's description of a status code."""
@@ -372,16 +393,11 @@ def log_numbers(values: Any) -> str:
 
 def estimator_log_lines(est: CompiledEstimator) -> list[str]:
     """The estimator block of a log (its parameter block as built at construction)."""
+    est.require_applied_torque(
+        "the estimator of a C log (examples/estimate_from_log.c: no effort fields)",
+        "write logs of estimators built with the applied torque",
+    )
     p = est._params
-    if p.input_states or p.joint_torque or p.net_torque:
-        raise ConfigError(
-            describe(
-                "the estimator of a C log (examples/estimate_from_log.c)",
-                "an estimator of the applied torque (the log format has no effort fields)",
-                "input states or joint torques",
-                "write logs of estimators built with the applied torque",
-            )
-        )
     if p.backward_map != 0:  # the log's params line has no field for it
         raise ConfigError(
             describe(

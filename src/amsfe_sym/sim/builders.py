@@ -28,7 +28,11 @@ from amsfe_sym.control import Controller, make_controller
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.estimation import Estimator, FilterConfig, make_estimator
 from amsfe_sym.estimation.effort import EffortSpec, MotorParams, input_noise_std
-from amsfe_sym.estimation.effort_models import SpringTorqueMeasurement, wrap_models
+from amsfe_sym.estimation.effort_models import (
+    EffortModels,
+    SpringTorqueMeasurement,
+    wrap_models,
+)
 from amsfe_sym.estimation.registry import estimator_class
 from amsfe_sym.runtime.compiled_estimator import make_compiled_estimator
 from amsfe_sym.runtime.library import ModelLibrary
@@ -271,16 +275,8 @@ def build_estimator(
         ** 2
     )
     g0 = lib.function("gravity")(x0[:n], th0)[0]  # the torque holding the arm at x0
-    parts = wrap_models(
-        effort,
-        motor,
-        compiled_model,
-        encoder_model,
-        camera_model,
-        x0,
-        P0,
-        u0=g0 + motor.Fm * x0[3 * n : 4 * n],
-    )
+    plain = EffortModels(compiled_model, encoder_model, camera_model, x0, P0)
+    parts = wrap_models(effort, motor, plain, u0=g0 + motor.Fm * x0[3 * n : 4 * n])
     make = make_compiled_estimator if compiled else make_estimator
     return make(
         sc.estimator,
