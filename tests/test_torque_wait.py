@@ -10,6 +10,8 @@ loop fed in that order, and both count the same waits.
 
 from __future__ import annotations
 
+import contextlib
+import os
 import re
 import subprocess
 import sys
@@ -20,12 +22,13 @@ from typing import Any
 import numpy as np
 import pytest
 
+from amsfe_sym.apps.bench.ros import node_impls
 from amsfe_sym.codegen import library_for
 from amsfe_sym.ros.live import LiveLoop
 from amsfe_sym.ros.torque_wait import TorqueWait
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
-from tests.test_ros import PATIENT_NODE, _finish, _remaps, _ros_env, _start
+from tests.test_ros import PATIENT_NODE, _finish, _impl, _remaps, _ros_env, _start
 
 T = 1e-3
 
@@ -172,6 +175,14 @@ _WAITED = re.compile(
 )
 
 
+def _real_time(pid: int) -> None:
+    """The process ``pid`` (just started: the threads it starts inherit it) at SCHED_FIFO
+    priority 50, the C node's own, when permitted: the two nodes are compared at one priority,
+    so whether a node takes its sample within DELAY is less the load's doing."""
+    with contextlib.suppress(AttributeError, PermissionError, OSError):
+        os.sched_setscheduler(pid, os.SCHED_FIFO, os.sched_param(50))
+
+
 def _ns(stamp: Any) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
@@ -218,8 +229,10 @@ def test_both_nodes_wait_for_a_late_torque_alike(tmp_path: Path) -> None:
     node and into the Python node (estimators, no controller): both give the estimates of
     the live loop fed the torques in time (the one never sent held over, the one after its
     tick skipped), at 1e-12, which a node that did not wait misses; both wait at every
-    sample but the one after the lost torque and miss that one.  A torque later than the
-    wait's 20 T (a loaded machine) changes the estimate: then the test skips, saying so."""
+    sample but the one after the lost torque and miss that one.  Each node is judged on its
+    own: a torque later than the wait's 20 T (a loaded machine) changes that node's estimate,
+    and a sample taken later than DELAY after it was sent finds its torque there (one wait
+    fewer); either skips the test at its end, saying so, after the other checks."""
     from amsfe_sym.logs.write import write_run_bag
 
     sc = load_scenario("paper-sim").with_overrides(duration=DURATION)
@@ -231,7 +244,7 @@ def test_both_nodes_wait_for_a_late_torque_alike(tmp_path: Path) -> None:
     assert skipped["torque sample after its tick was estimated"] == 1
     assert skipped["torque held from the previous tick"] == 2  # DROPPED + 1, DROPPED + 2
     got: dict[str, tuple[np.ndarray, tuple[int, int]]] = {}
-    for impl in ("c", "python"):
+    for impl in node_impls():
         env = _ros_env(tmp_path / impl)
         out = tmp_path / impl / "est.npy"
         player = subprocess.Popen(
@@ -241,8 +254,9 @@ def test_both_nodes_wait_for_a_late_torque_alike(tmp_path: Path) -> None:
         )  # fmt: skip
         procs = []
         try:
-            procs.append(_start(env, "node", "paper-sim", "--impl", impl, "--duration",
+            procs.append(_start(env, "node", "paper-sim", *_impl(impl), "--duration",
                                 str(DURATION), *PATIENT_NODE))  # fmt: skip
+            _real_time(procs[-1].p.pid)
             text_player, _ = player.communicate(timeout=300)
         finally:
             if player.poll() is None:
@@ -254,17 +268,21 @@ def test_both_nodes_wait_for_a_late_torque_alike(tmp_path: Path) -> None:
         waited = _WAITED.findall(text)
         assert len(waited) == 1, text
         got[impl] = np.load(out), (int(waited[0][0]), int(waited[0][1]))
+    # every sample from tick 1 waits but DROPPED + 2 (its stream not live: the torque of
+    # DROPPED never came), and misses DROPPED's torque; fewer waits where a node took its
+    # sample later than DELAY after it was sent (the torque was there), more misses where a
+    # torque came later than 20 T: the machine's doing, said, not a failure
+    expected = (K - 2, 1)
+    loaded = []
     for impl, (est, (waits, missed)) in got.items():
         assert est.shape == ref.shape, impl
-        assert waits > 0 and missed >= 1, (impl, waits, missed)  # the lost torque: missed
+        assert 0 < waits <= K - 2 and missed >= 1, (impl, waits, missed)
         if missed > 1:
-            pytest.skip(f"{impl}: {missed - 1} torques came later than 20 T (a loaded machine)")
-    np.testing.assert_allclose(got["c"][0], ref, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(got["python"][0], ref, rtol=0, atol=1e-12)
-    # every sample from tick 1 waits but DROPPED + 2 (its stream not live: the torque of
-    # DROPPED never came); unless a node took its sample later than DELAY after it was sent
-    expected = (K - 2, 1)
-    late = {impl: w for impl, (_, w) in got.items() if w != expected}
-    if late:
-        pytest.skip(f"the torque came before the node took its sample (a loaded machine): {late}")
-    assert got["c"][1] == got["python"][1] == expected
+            loaded.append(f"{impl}: {missed - 1} torques came later than 20 T")
+            continue
+        np.testing.assert_allclose(est, ref, rtol=0, atol=1e-12, err_msg=impl)
+        if waits < K - 2:
+            loaded.append(f"{impl}: {K - 2 - waits} torques came before the node took its sample")
+    if loaded:
+        pytest.skip(f"counts not compared (a loaded machine): {'; '.join(loaded)}")
+    assert all(counts == expected for _, counts in got.values()), got

@@ -271,6 +271,8 @@ class _Node:
                 self._effort(ns, effort_values(self.m, msg, idx, self.n))  # of this sample
             if self._effort_wait is not None and self._await_torque(ns):
                 taken = time.monotonic()  # a wait is not the tick's compute time (the C node)
+            if self.stop is not None:  # a torque taken meanwhile stopped the node (bad input)
+                return
             watched = self.live.watch(
                 ns, z, int(info["source_timestamp"]), taken=taken, clock=time.monotonic
             )
