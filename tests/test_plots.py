@@ -188,7 +188,7 @@ def test_run_figures_of_a_simulation(tmp_path: Path) -> None:
 def test_log_figures_without_truth_show_deflection_and_residual(tmp_path: Path) -> None:
     """A driver's log (no truth): ``estimate.png`` has a panel per joint with the spring
     deflection and the encoder residual, and ``nis.png`` the chi-square bands."""
-    from amsfe_sym.apps.plots.log import plot_log
+    from amsfe_sym.apps.plots.log import NisSeries, plot_log
     from amsfe_sym.codegen import library_for
     from amsfe_sym.logs.read import RobotLog
     from amsfe_sym.logs.replay import estimate_log
@@ -202,6 +202,6 @@ def test_log_figures_without_truth_show_deflection_and_residual(tmp_path: Path) 
     log = RobotLog(Path("drive.bag"), lib.T, 0, res.z_enc, res.u, [])
     est = estimate_log(log, build_run(sc, lib, compiled=True).estimator, progress=False)
     nis = {"encoders": {"dof": 4, "band_95": [0.48, 11.14]}}
-    paths = plot_log(log, est.x_hat, est.P_diag, "oosm", nis, est.encoder_nis, None, tmp_path)
+    paths = plot_log(log, est.x_hat, est.P_diag, "oosm", NisSeries(nis, est.encoder_nis), tmp_path)
     assert [p.name for p in paths] == ["estimate.png", "nis.png"]
     assert all(p.stat().st_size > 10_000 for p in paths)
