@@ -188,7 +188,7 @@ def test_run_figures_of_a_simulation(tmp_path: Path) -> None:
 def test_log_figures_without_truth_show_deflection_and_residual(tmp_path: Path) -> None:
     """A driver's log (no truth): ``estimate.png`` has a panel per joint with the spring
     deflection and the encoder residual, and ``nis.png`` the chi-square bands."""
-    from amsfe_sym.apps.plots.log import plot_log
+    from amsfe_sym.apps.plots.log import NisSeries, plot_log
     from amsfe_sym.codegen import library_for
     from amsfe_sym.logs.read import RobotLog
     from amsfe_sym.logs.replay import estimate_log
@@ -202,6 +202,27 @@ def test_log_figures_without_truth_show_deflection_and_residual(tmp_path: Path) 
     log = RobotLog(Path("drive.bag"), lib.T, 0, res.z_enc, res.u, [])
     est = estimate_log(log, build_run(sc, lib, compiled=True).estimator, progress=False)
     nis = {"encoders": {"dof": 4, "band_95": [0.48, 11.14]}}
-    paths = plot_log(log, est.x_hat, est.P_diag, "oosm", nis, est.encoder_nis, None, tmp_path)
+    paths = plot_log(log, est.x_hat, est.P_diag, "oosm", NisSeries(nis, est.encoder_nis), tmp_path)
     assert [p.name for p in paths] == ["estimate.png", "nis.png"]
     assert all(p.stat().st_size > 10_000 for p in paths)
+
+
+@pytest.mark.slow
+def test_an_arms_comparison_draws_what_is_read_and_the_rest_with_all_plots(
+    tmp_path: Path,
+) -> None:
+    """A 7-joint comparison draws the estimation errors, theta and the tracking grid; the
+    sliding variable and torque (a panel per joint and controller each) only with
+    ``--all-plots``."""
+    from amsfe_sym.apps.cli import main
+
+    args = ["simulate", "panda-control", "--compare", "amsfe,truth", "--duration", "0.3"]
+    args += ["--no-progress"]
+    read = {"fig04_estimation_errors.png", "fig05_theta_error.png", "tracking.png"}
+    assert main([*args, "--out", str(tmp_path / "few")]) == 0
+    assert {p.name for p in (tmp_path / "few").glob("*.png")} == read
+    assert main([*args, "--all-plots", "--out", str(tmp_path / "all")]) == 0
+    drawn = {p.name for p in (tmp_path / "all").glob("*.png")}
+    assert drawn == read | {"sliding_surface.png", "torque.png"}
+    assert main([*args, "--all-plots", "--no-plots", "--out", str(tmp_path / "none")]) == 0
+    assert not list((tmp_path / "none").glob("*.png"))

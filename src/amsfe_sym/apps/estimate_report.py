@@ -344,17 +344,13 @@ def figures(run: EstimateRun, folder: Path) -> None:
     """``estimate.png`` (per joint: the error against the truth with +-2 sigma, or the
     spring deflection and the encoder residual) and ``nis.png``
     (:func:`~amsfe_sym.apps.plots.log.plot_log`)."""
-    from amsfe_sym.apps.plots.log import plot_log
+    from amsfe_sym.apps.plots.log import NisSeries, plot_log
 
     est = run.estimate
     enc = getattr(est, "encoder_nis", None)
-    plot_log(
-        run.log,
-        est.x_hat,
-        est.P_diag,
-        run.scenario.estimator,
+    nis = NisSeries(
         nis_report(run),
         None if enc is None else np.asarray(enc, dtype=np.float64),
         _frame_nis(est),
-        folder,
     )
+    plot_log(run.log, est.x_hat, est.P_diag, run.scenario.estimator, nis, folder)

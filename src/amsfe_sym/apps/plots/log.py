@@ -13,6 +13,7 @@ chi-square 95 % bands.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +31,7 @@ from amsfe_sym.apps.plots.style import (
 )
 from amsfe_sym.logs.read import RobotLog
 
-__all__ = ["RUG_MAX", "plot_log"]
+__all__ = ["RUG_MAX", "NisSeries", "plot_log"]
 
 FloatArray = NDArray[np.float64]
 
@@ -39,14 +40,28 @@ FloatArray = NDArray[np.float64]
 RUG_MAX = 200
 
 
+@dataclass(frozen=True)
+class NisSeries:
+    """What ``nis.png`` draws.
+
+    Attributes:
+        report: Per channel (``encoders``, ``camera``): ``dof`` and ``band_95``
+            (:func:`~amsfe_sym.apps.estimate_report.nis_report`); empty: no ``nis.png``.
+        encoder: The encoder NIS per tick, (K,), or None.
+        frames: (arrival step, NIS) of each frame, or None.
+    """
+
+    report: Mapping[str, Mapping[str, Any]]
+    encoder: FloatArray | None = None
+    frames: tuple[FloatArray, FloatArray] | None = None
+
+
 def plot_log(
     log: RobotLog,
     x_hat: FloatArray,
     P_diag: FloatArray,
     estimator: str,
-    nis: Mapping[str, Mapping[str, Any]],
-    encoder_nis: FloatArray | None,
-    frame_nis: tuple[FloatArray, FloatArray] | None,
+    nis: NisSeries,
     folder: Path,
 ) -> list[Path]:
     """Write ``estimate.png`` and ``nis.png`` of an estimate over ``log``.
@@ -56,10 +71,7 @@ def plot_log(
         x_hat: x(k|k) per tick (eq. 2), (K, N).
         P_diag: diag P(k|k), (K, N).
         estimator: The estimator's name (for the titles).
-        nis: Per channel (``encoders``, ``camera``): ``dof`` and ``band_95``
-            (:func:`~amsfe_sym.apps.estimate_report.nis_report`); empty: no ``nis.png``.
-        encoder_nis: The encoder NIS per tick, (K,), or None.
-        frame_nis: (arrival step, NIS) of each frame, or None.
+        nis: The NIS to draw (an empty report: no ``nis.png``).
         folder: Where the PNGs go.
 
     Returns:
@@ -115,26 +127,19 @@ def plot_log(
         frames = "ticks at the bottom: camera frames' arrivals"
     title(fig, f"{estimator} on {log.path.name}; axes set by the last 80 %; {frames}")
     paths = [save(fig, folder / "estimate.png")]
-    if nis:
-        paths.append(_nis_figure(log, estimator, nis, encoder_nis, frame_nis, folder))
+    if nis.report:
+        paths.append(_nis_figure(log, estimator, nis, folder))
     return paths
 
 
-def _nis_figure(
-    log: RobotLog,
-    estimator: str,
-    nis: Mapping[str, Mapping[str, Any]],
-    encoder_nis: FloatArray | None,
-    frame_nis: tuple[FloatArray, FloatArray] | None,
-    folder: Path,
-) -> Path:
+def _nis_figure(log: RobotLog, estimator: str, nis: NisSeries, folder: Path) -> Path:
     """``nis.png``: NIS of the encoder updates and of the camera frames over time, with
     their chi-square 95 % bands (nothing drawn where no NIS was recorded)."""
-    fig = figure((8, 2.3 * len(nis) + 0.6))
-    axes = fig.subplots(len(nis), 1, squeeze=False, sharex=True)
-    for ax, (what, r) in zip(axes[:, 0], nis.items(), strict=True):
-        if what == "encoders" and encoder_nis is not None:
-            t, v = log.t, np.asarray(encoder_nis, dtype=np.float64)
+    fig = figure((8, 2.3 * len(nis.report) + 0.6))
+    axes = fig.subplots(len(nis.report), 1, squeeze=False, sharex=True)
+    for ax, (what, r) in zip(axes[:, 0], nis.report.items(), strict=True):
+        if what == "encoders" and nis.encoder is not None:
+            t, v = log.t, np.asarray(nis.encoder, dtype=np.float64)
             w = max(1, len(v) // 100)  # its running mean over 1 % of the log
             ok = np.isfinite(v)
             mean = np.convolve(np.where(ok, v, 0), np.ones(w), "same") / np.maximum(
@@ -143,8 +148,8 @@ def _nis_figure(
             tc, vc, mc = envelope(t, v, mean, pixels=800)
             ax.plot(tc, vc, lw=0.3, alpha=0.5, label="encoder update", rasterized=True)
             ax.plot(tc, mc, lw=1.0, color="k", label=f"running mean ({w} ticks)")
-        elif frame_nis is not None:
-            arrival, v = frame_nis
+        elif nis.frames is not None:
+            arrival, v = nis.frames
             ax.plot(arrival * log.T, v, ".", ms=3, label="camera frame (at its arrival)")
         lo, hi = r["band_95"]
         ax.axhspan(lo, hi, color="g", alpha=0.12, label=f"chi²({r['dof']}) 95 % band")

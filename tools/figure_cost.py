@@ -1,0 +1,67 @@
+"""What a command's figures cost: the CPU time of its figure functions against the whole
+command's, in one run (docs/api.md, "The figures the commands draw").
+
+Runs ``amsfe ARGS...`` in this process (``amsfe_sym.apps.cli.main``) with the figure
+functions (``plot_comparison``, ``plot_run``, ``plot_log``) timed by ``time.process_time``,
+and prints one line: the process's CPU time (all of it, the interpreter's start-up too) and
+its wall time from before the package is imported, and the figures' CPU and wall time with
+their share of them.  CPU time is the number to compare on a loaded machine (the wall
+time of the same command moves by 2x with the load); the share is within one run.
+
+Usage::
+
+    .venv/bin/python tools/figure_cost.py simulate panda-control --no-progress --out S
+    .venv/bin/python tools/figure_cost.py estimate LOG --out E
+"""
+
+from __future__ import annotations
+
+import importlib
+import resource
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+WALL0 = time.perf_counter()
+
+FIGURES = (
+    ("amsfe_sym.apps.plots.paper", "plot_comparison"),
+    ("amsfe_sym.apps.plots.run", "plot_run"),
+    ("amsfe_sym.apps.plots.log", "plot_log"),
+)
+
+
+def _timed(draw: Callable[..., Any], spent: dict[str, float]) -> Callable[..., Any]:
+    def run(*args: Any, **kwargs: Any) -> Any:
+        cpu, wall = time.process_time(), time.perf_counter()
+        try:
+            return draw(*args, **kwargs)
+        finally:
+            spent["cpu"] += time.process_time() - cpu
+            spent["wall"] += time.perf_counter() - wall
+
+    return run
+
+
+def main(argv: list[str]) -> int:
+    from amsfe_sym.apps.cli import main as amsfe
+
+    spent = {"cpu": 0.0, "wall": 0.0}
+    for module, name in FIGURES:  # the commands import them by name when they draw
+        mod = importlib.import_module(module)
+        setattr(mod, name, _timed(getattr(mod, name), spent))
+    code = amsfe(argv)
+    use = resource.getrusage(resource.RUSAGE_SELF)
+    cpu = use.ru_utime + use.ru_stime
+    wall = time.perf_counter() - WALL0
+    print(
+        f"amsfe {' '.join(argv)}: CPU {cpu:.2f} s, wall {wall:.2f} s; figures CPU "
+        f"{spent['cpu']:.2f} s ({100 * spent['cpu'] / cpu:.0f} %), wall {spent['wall']:.2f} s "
+        f"({100 * spent['wall'] / wall:.0f} %)"
+    )
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
