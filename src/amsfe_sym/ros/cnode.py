@@ -135,7 +135,7 @@ def write_params(
         ConfigError: a controller without a C counterpart, or an estimator the C node does
             not run (input states).
     """
-    from amsfe_sym.runtime.compiled_estimator import CompiledEstimator
+    from amsfe_sym.runtime.compiled_estimator import CompiledEstimator, require_applied_torque
     from amsfe_sym.scenario import run_ticks
     from amsfe_sym.sim.builders import build_run
     from amsfe_sym.sim.compiled import controller_params, simulation_inputs
@@ -147,16 +147,8 @@ def write_params(
         raise ConfigError(
             describe("C node estimator", "the library's C one", type(est).__name__, "")
         )
+    require_applied_torque(est, "the estimator of the C node", "", "run amsfe node --impl python")
     p = est._params
-    if p.input_states or p.joint_torque or p.net_torque:
-        raise ConfigError(
-            describe(
-                "the estimator of the C node",
-                "an estimator of the applied torque",
-                "input states or a joint torque",
-                "run amsfe node --impl python",
-            )
-        )
     qw, re, rc, x0, P0 = est._arrays[:5]
     timing = parts.timing
     enc_depth, cam_depth = queue_depths(

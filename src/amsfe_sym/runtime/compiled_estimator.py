@@ -371,18 +371,28 @@ def log_numbers(values: Any) -> str:
     return " ".join(repr(float(v)) for v in np.ravel(values, order="F"))
 
 
-def estimator_log_lines(est: CompiledEstimator) -> list[str]:
-    """The estimator block of a log (its parameter block as built at construction)."""
+def require_applied_torque(est: CompiledEstimator, what: str, why: str, fix: str) -> None:
+    """Refuse an estimator that is not given the applied torque (input states, a joint or
+    net torque) where only the applied torque is carried.
+
+    Raises:
+        ConfigError: ``what`` expected an estimator of the applied torque (``why``).
+    """
     p = est._params
     if p.input_states or p.joint_torque or p.net_torque:
-        raise ConfigError(
-            describe(
-                "the estimator of a C log (examples/estimate_from_log.c)",
-                "an estimator of the applied torque (the log format has no effort fields)",
-                "input states or joint torques",
-                "write logs of estimators built with the applied torque",
-            )
-        )
+        expected = "an estimator of the applied torque" + (f" ({why})" if why else "")
+        raise ConfigError(describe(what, expected, "input states or a joint torque", fix))
+
+
+def estimator_log_lines(est: CompiledEstimator) -> list[str]:
+    """The estimator block of a log (its parameter block as built at construction)."""
+    require_applied_torque(
+        est,
+        "the estimator of a C log (examples/estimate_from_log.c)",
+        "the log format has no effort fields",
+        "write logs of estimators built with the applied torque",
+    )
+    p = est._params
     if p.backward_map != 0:  # the log's params line has no field for it
         raise ConfigError(
             describe(
