@@ -1036,8 +1036,7 @@ int main(int argc, char **argv) {
     R->hold_u = ALLOC(double, n);
   }
   /* ---- rcl: context, node, subscriptions, publishers, wait set */
-  amsfe_rcl_start(argc, argv, &s->ctx, &s->node, "amsfe_node", "node", priority);
-  rcl_allocator_t alloc = rcl_get_default_allocator();
+  rcl_allocator_t alloc = amsfe_rcl_start(argc, argv, &s->ctx, &s->node, "amsfe_node", "node", priority);
   const amsfe_types ty = amsfe_message_types();
   const rosidl_message_type_support_t *ts_str = ROSIDL_GET_MSG_TYPE_SUPPORT(std_msgs, msg, String);
   rcl_subscription_options_t so = rcl_subscription_get_default_options();
