@@ -14,6 +14,7 @@ LiveLoop and the simulated arm free running on a simulated wall clock
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -252,17 +253,28 @@ def test_checks_one_by_one() -> None:
     # the same innovations on samples processed 0.06 s late: the node behind is named, not
     # what its lateness caused (the arm on older commands), before 50 late samples counted;
     # the same with the tracking error
-    for k_trip, kw in ((50, {"encoder_nis": 84.0}), (1, {"q_des": np.array([0.0, 0.6])})):
+    # (queued: each due before the previous one was done; the tracking error at the 2nd)
+    for k_trip, kw in ((50, {"encoder_nis": 84.0}), (2, {"q_des": np.array([0.0, 0.6])})):
         wd.reset()
         wd.sample(_tick(0))
         for k in range(1, k_trip + 1):
-            got = wd.sample(_tick(k, taken=k * 1e-3 + 0.06, done=k * 1e-3 + 0.0601, **kw))
+            extra = kw if "encoder_nis" in kw or k == k_trip else {}
+            got = wd.sample(_tick(k, taken=k * 1e-3 + 0.06, done=k * 1e-3 + 0.0601, **extra))
             assert got == (Reason.DEADLINE if k == k_trip else Reason.NONE), k
         assert wd.hold is not None and wd.hold.cause == Cause.LATE
         assert wd.hold.value == pytest.approx(0.0601) and wd.hold.bound == 0.05
         assert wd.line().startswith("hold: deadline: this node is behind, not the arm: ")
         caused = "innovation" if k_trip == 50 else "tracking"
         assert wd.line().endswith(f"0 missing); {caused} tripped"), wd.line()
+    # the same late innovations in lockstep (each sample sent after the previous command:
+    # never queued, the arm waited): named as they are, the arm's
+    wd.reset()
+    wd.sample(_tick(0))
+    for k in range(1, 51):
+        sent = k * 1_000_000 + 70_000_000 * (k - 1)  # after the previous one was done
+        late = _tick(k, stamp_ns=sent, taken=sent * 1e-9 + 0.06, done=sent * 1e-9 + 0.0601)
+        got = wd.sample(dataclasses.replace(late, encoder_nis=84.0))
+        assert got == (Reason.INNOVATION if k == 50 else Reason.NONE), k
     # non-finite: the estimate before the command
     wd.reset()
     wd.sample(_tick(0))

@@ -46,7 +46,9 @@ BOUNDS = (
     WatchdogBounds(innovation_nis=1.05, innovation_window=1, tracking_error=0.0045),
     WatchdogBounds(actuation_error=1e-3, actuation_ticks=1),
     WatchdogBounds(actuation_error=0.5, actuation_ticks=40, innovation_nis=math.inf),
-    # every sample late, never enough of them: what trips is named the lateness (LATE)
+    # late samples never enough of them: the lag's queued late samples trip tracking, which
+    # is named the lateness (LATE); the clean runs' samples, late or not, are never queued
+    WatchdogBounds(deadline_misses=5000, deadline_window=5000, tracking_error=0.01),
     WatchdogBounds(deadline=1e-4, deadline_misses=5000, deadline_window=5000, tracking_error=0.01),
 )
 SIZES = {"jump": 0.01, "stall": 0.3, "lag": 0.08}

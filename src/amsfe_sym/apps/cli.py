@@ -355,7 +355,7 @@ def _bench_ros(args: argparse.Namespace) -> int:
     )
 
     loads = (0, args.ros_load) if args.ros_load else (0,)
-    rows = bench_ros(args.ros_scenario, args.ros_duration, loads)
+    rows = bench_ros(args.ros_scenario, args.ros_duration, loads, repeat=args.ros_repeat)
     machine = machine_name()
     print(format_ros_report(rows, machine))
     if args.json:

@@ -159,6 +159,12 @@ def add_bench_arguments(p: argparse.ArgumentParser) -> None:
         default=2,
         help="CPU hogs of the loaded --ros runs (default 2; the idle runs have none)",
     )
+    p.add_argument(
+        "--ros-repeat",
+        type=number_type(int, 1, True, "pass a count of runs, e.g. 5", 100),
+        default=1,
+        help="runs of each --ros row; the report adds each row's p99 median and worst (default 1)",
+    )
 
 
 def add_study_arguments(p: argparse.ArgumentParser) -> None:

@@ -36,12 +36,14 @@ The checks, in the order that decides which reason a sample that trips several g
    reference, not q_d).
 
 A node that is behind is named before what its lateness caused: when the first check that
-trips is 7, 8 or 9 and the sample itself is late (its lateness past ``deadline``), the hold
-is ``deadline`` with the cause :attr:`Cause.LATE` (value: the lateness [s]; the line ends
-``; <check> tripped``).  The arm ran on
-older commands while the node lagged (a stall of 300 ms: 300 ticks on one command), and the
-node catches its backlog up in milliseconds: the innovations and the path of that backlog
-trip long before ``deadline_misses`` late samples are counted (issue 34).
+trips is 7, 8 or 9 and the sample itself is late (its lateness past ``deadline``) and was
+queued (due before the previous sample's command was done: the arm ran on meanwhile; a
+lockstep arm waits for each command, so its samples never are), the hold is ``deadline``
+with the cause :attr:`Cause.LATE` (value: the lateness [s]; the line ends ``; <check>
+tripped``).  The arm ran on older commands while the node lagged (a stall of 300 ms: 300
+ticks on one command), and the node catches its backlog up in milliseconds: the
+innovations and the path of that backlog trip long before ``deadline_misses`` late samples
+are counted.
 
 Which command the arm applied (``actuation``).  A command reaches the arm late, or not at
 all, in free running: the arm then applies the newest one it has (an older one), or holds
@@ -294,6 +296,7 @@ class Watchdog:
         self._taken0 = 0.0
         self._last_call = 0.0
         self._last_taken = 0.0
+        self._last_done = 0.0
         self._last_k = -1
         self._nis_sum, self._nis_pos, self._nis_count = 0.0, 0, 0
         self._late_pos, self._late_count, self._late_filled = 0, 0, 0
@@ -336,6 +339,7 @@ class Watchdog:
             self._first = False
             self._stamp0, self._taken0 = tick.stamp_ns, tick.taken
             self._last_call = self._last_taken = tick.taken
+            self._last_done = tick.done
             self._last_k = tick.k
             s.samples += 1
             self._keep_command(tick)
@@ -400,7 +404,11 @@ class Watchdog:
             s.max_tracking = max(s.max_tracking, err)
             if err > b.tracking_error:
                 trips.append(Hold(Reason.TRACKING, Cause.NONE, k, err, b.tracking_error, gap))
-        if trips and late and trips[0].reason in _CAUSED_BY_LATENESS:  # 10: behind first
+        # 10: behind first: a late sample that was due before the previous one was done
+        # waited in the queue while the arm ran on (never in lockstep: the arm waits)
+        queued = due < self._last_done
+        self._last_done = tick.done
+        if trips and late and queued and trips[0].reason in _CAUSED_BY_LATENESS:
             first = trips[0].reason
             trips[0] = Hold(Reason.DEADLINE, Cause.LATE, k, lateness, b.deadline, gap, first)
         if trips:

@@ -57,66 +57,70 @@ class Cause(IntEnum):
     LATE = 10
 
 
+#: Each (reason, cause)'s text, the C's (``amsfe_watchdog_cause_text``) character for character:
+#: a line ``<reason name> <cause name>:``, then the text, wrapped at spaces (joined by one).
+_TEXTS = """
+tracking none:
+    the arm left its path: a link angle is farther from q_d than tracking_error; check the
+    arm (a broken encoder, a torque loss, a collision) and the gains
+innovation none:
+    the measurements disagree with the model: the mean NIS of the last fused updates is
+    above innovation_nis; check the encoders and the camera (a jump, a frozen sample), the
+    torque the arm applies and the spec's noise
+covariance behind:
+    the node fell behind: the covariance lost positive definiteness after a prediction over
+    missing samples; give the node CPU (priority, fewer jobs) or a deeper queue
+covariance inconsistent:
+    model/noise inconsistent: the covariance lost positive definiteness with no sample
+    missing; check the robot spec's model and the [filter] noise
+deadline none:
+    this node is behind (CPU load / priority), not the driver: samples processed later than
+    deadline after their stamp; give the node CPU (real-time priority, fewer jobs)
+deadline late:
+    this node is behind, not the arm: it processed this sample later than deadline after its
+    stamp, and what the arm did meanwhile on older commands (its innovations, its path, its
+    torque) left a bound; give the node CPU (real-time priority, fewer jobs)
+compute none:
+    one tick's computation took longer than compute_budget: the machine is too loaded or too
+    slow for this loop; give the node CPU or run the C node
+encoder_stall silent:
+    the arm's driver is silent: its publisher is in the graph but sends no sample; check the
+    driver and the arm's hardware
+encoder_stall gone:
+    the arm's driver is gone: no publisher of the encoders is left; restart the driver
+encoder_stall gap:
+    the arm's driver paused: more than max_gap_steps samples missing, the next one on time;
+    check the driver (or raise [timing] max_gap_steps)
+node_stalled lost:
+    this node is behind, not the driver: more than max_gap_steps samples lost from its queue
+    while it lagged; give the node CPU (priority) or a deeper queue ([qos] depth)
+node_stalled unscheduled:
+    this node was not scheduled, not the driver: its own loop paused longer than
+    encoder_timeout; give the node CPU (real-time priority, fewer jobs)
+nonfinite estimate:
+    the estimate turned NaN or inf; check the encoder values and the robot spec
+nonfinite command:
+    the command turned NaN or inf; check the gains and the reference
+actuation none:
+    the arm does not apply the command (drive fault, e-stop, brakes): the torque it reports
+    differs from every command it may have applied by more than actuation_error; check the
+    drives
+"""
+
+
+def _parse_texts(table: str) -> dict[tuple[Reason, Cause], str]:
+    """:data:`_TEXTS` as a dict (the wrapped lines joined with one space)."""
+    out: dict[tuple[Reason, Cause], str] = {}
+    key: tuple[Reason, Cause] | None = None
+    for line in table.strip().splitlines():
+        if not line.startswith(" "):
+            reason, cause = line.rstrip(":").split()
+            key = (Reason(REASON_NAMES.index(reason)), Cause[cause.upper()])
+            out[key] = ""
+        elif key is not None:
+            out[key] = f"{out[key]} {line.strip()}".strip()
+    return out
+
+
 #: One line per (reason, cause): the real cause and its fix (the C's, character for character).
-CAUSE_TEXT: dict[tuple[Reason, Cause], str] = {
-    (Reason.TRACKING, Cause.NONE): (
-        "the arm left its path: a link angle is farther from q_d than tracking_error; "
-        "check the arm (a broken encoder, a torque loss, a collision) and the gains"
-    ),
-    (Reason.INNOVATION, Cause.NONE): (
-        "the measurements disagree with the model: the mean NIS of the last fused updates "
-        "is above innovation_nis; check the encoders and the camera (a jump, a frozen "
-        "sample), the torque the arm applies and the spec's noise"
-    ),
-    (Reason.COVARIANCE, Cause.BEHIND): (
-        "the node fell behind: the covariance lost positive definiteness after a prediction "
-        "over missing samples; give the node CPU (priority, fewer jobs) or a deeper queue"
-    ),
-    (Reason.COVARIANCE, Cause.INCONSISTENT): (
-        "model/noise inconsistent: the covariance lost positive definiteness with no sample "
-        "missing; check the robot spec's model and the [filter] noise"
-    ),
-    (Reason.DEADLINE, Cause.NONE): (
-        "this node is behind (CPU load / priority), not the driver: samples processed later "
-        "than deadline after their stamp; give the node CPU (real-time priority, fewer jobs)"
-    ),
-    (Reason.DEADLINE, Cause.LATE): (
-        "this node is behind, not the arm: it processed this sample later than deadline "
-        "after its stamp, and what the arm did meanwhile on older commands (its innovations, "
-        "its path, its torque) left a bound; give the node CPU (real-time priority, fewer jobs)"
-    ),
-    (Reason.COMPUTE, Cause.NONE): (
-        "one tick's computation took longer than compute_budget: the machine is too loaded "
-        "or too slow for this loop; give the node CPU or run the C node"
-    ),
-    (Reason.ENCODER_STALL, Cause.SILENT): (
-        "the arm's driver is silent: its publisher is in the graph but sends no sample; "
-        "check the driver and the arm's hardware"
-    ),
-    (Reason.ENCODER_STALL, Cause.GONE): (
-        "the arm's driver is gone: no publisher of the encoders is left; restart the driver"
-    ),
-    (Reason.ENCODER_STALL, Cause.GAP): (
-        "the arm's driver paused: more than max_gap_steps samples missing, the next one on "
-        "time; check the driver (or raise [timing] max_gap_steps)"
-    ),
-    (Reason.NODE_STALLED, Cause.LOST): (
-        "this node is behind, not the driver: more than max_gap_steps samples lost from its "
-        "queue while it lagged; give the node CPU (priority) or a deeper queue ([qos] depth)"
-    ),
-    (Reason.NODE_STALLED, Cause.UNSCHEDULED): (
-        "this node was not scheduled, not the driver: its own loop paused longer than "
-        "encoder_timeout; give the node CPU (real-time priority, fewer jobs)"
-    ),
-    (Reason.NONFINITE, Cause.ESTIMATE): (
-        "the estimate turned NaN or inf; check the encoder values and the robot spec"
-    ),
-    (Reason.NONFINITE, Cause.COMMAND): (
-        "the command turned NaN or inf; check the gains and the reference"
-    ),
-    (Reason.ACTUATION, Cause.NONE): (
-        "the arm does not apply the command (drive fault, e-stop, brakes): the torque it "
-        "reports differs from every command it may have applied by more than "
-        "actuation_error; check the drives"
-    ),
-}
+CAUSE_TEXT: dict[tuple[Reason, Cause], str] = _parse_texts(_TEXTS)

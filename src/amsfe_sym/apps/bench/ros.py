@@ -12,10 +12,18 @@ CpuHogs`) beside them.  Reported, from the two processes' own lines:
   command answering it (the sim-node's receive stamps; ``encoder -> command``);
 - deadline misses: ticks of the arm that ended without a new command (the previous one was
   applied again), and ticks that started late (the arm itself behind);
+- the C node's p99 per kind of tick (its ``node: latency p99 by tick`` line: the first 10
+  ticks, ticks that fused or refused a camera frame, the tick after one (its diagnostics
+  JSON and record were written after the command, before this sample was taken), the tick
+  after a standard deviations' publish, the others): which ticks make the p99;
 - how the node stopped (``done``, or the hold line with its reason);
 - which arm ran (``sim-node --impl auto``: the C arm when it builds, ros/carm.py) and the
   machine's load over the run: the cores busy, from ``/proc/stat`` (every process of the
   machine, the hogs, the two nodes and anything else running).
+
+On a noisy machine one run's p99 says little (0.2 to 0.9 ms run to run for the same idle
+C node here): ``repeat`` runs each row N times and :func:`summarize` gives each row's p99
+median and worst over its runs.
 
 Nothing here is asserted by a test (a test checks the report's shape): the numbers are this
 machine's, at this moment.
@@ -25,22 +33,25 @@ from __future__ import annotations
 
 import os
 import re
+import statistics
 import subprocess
 import sys
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 from amsfe_sym.core.cpu_load import CpuHogs
 
 __all__ = [
     "RosBenchRun",
+    "RosBenchSummary",
     "bench_ros",
     "format_ros_report",
     "machine_name",
     "node_impls",
     "parse_run",
     "ros_report_json",
+    "summarize",
 ]
 
 _NUM = r"([0-9.]+|nan)"
@@ -53,6 +64,8 @@ _TICKS = re.compile(
     r"sim-node: (\d+) ticks in ([0-9.]+) s wall, (\d+) commands, (\d+) late ticks, "
     r"(\d+) without a new command"
 )
+_BY_KIND = re.compile(r"node: latency p99 by tick \[ms\]: (.*)")
+_KIND = re.compile(rf"\s*(.+?) {_NUM} \((\d+)\)")
 _STOP = re.compile(r"^node: ((?:done|hold)[^;\n]*)", re.M)
 _ARM = re.compile(r"\((c|python) arm\)")
 
@@ -94,6 +107,7 @@ class RosBenchRun:
         codes: Exit codes (sim-node, node).
         arm: The arm's implementation (``c`` or ``python``; "" when it did not say).
         cpu_busy: Cores busy over the run, the whole machine (``/proc/stat``; None: unknown).
+        p99_by_kind: The node's p99 per kind of tick [ms] (the C node's line; empty: none).
     """
 
     impl: str
@@ -112,6 +126,7 @@ class RosBenchRun:
     codes: tuple[int, int]
     arm: str = ""
     cpu_busy: float | None = None
+    p99_by_kind: dict[str, float] = field(default_factory=dict)
 
 
 def _f(text: str) -> float:
@@ -142,7 +157,16 @@ def parse_run(
         stopped=stops[-1].strip() if stops else "no stop line (exit code only)",
         arm=arm.group(1) if (arm := _ARM.search(sim_out)) else "",
         codes=codes,
+        p99_by_kind=_by_kind(node_out),
     )
+
+
+def _by_kind(node_out: str) -> dict[str, float]:
+    """The C node's ``node: latency p99 by tick [ms]: <kind> <p99> (<count>), ...``."""
+    found = _BY_KIND.search(node_out)
+    if not found:
+        return {}
+    return {m.group(1): _f(m.group(2)) for m in map(_KIND.match, found.group(1).split(",")) if m}
 
 
 def _one_run(
@@ -184,21 +208,92 @@ def bench_ros(
     loads: tuple[int, ...] = (0, 2),
     impls: tuple[str, ...] | None = None,
     say: Any = print,
+    repeat: int = 1,
 ) -> list[RosBenchRun]:
     """Each implementation (None: every one :func:`node_impls` offers) idle and under each
-    load, one run each (module docstring)."""
+    load, ``repeat`` runs each, one after the other (module docstring)."""
     impls = node_impls() if impls is None else impls
     rows = []
     base = 60 + (os.getpid() % 30)  # a domain of its own per run: no run hears another
-    for i, (load, impl) in enumerate((ld, im) for ld in loads for im in impls):
+    plan = [(ld, im) for ld in loads for im in impls for _ in range(max(1, repeat))]
+    for i, (load, impl) in enumerate(plan):
         t0 = time.perf_counter()
-        row = _one_run(scenario, duration, impl, load, base + i, timeout=300.0 + 10 * duration)
+        domain = base + i % 30
+        row = _one_run(scenario, duration, impl, load, domain, timeout=300.0 + 10 * duration)
         say(
             f"bench --ros: {impl} node, {load} hogs: {row.stopped} "
             f"({time.perf_counter() - t0:.0f} s)"
         )
         rows.append(row)
     return rows
+
+
+@dataclass(frozen=True)
+class RosBenchSummary:
+    """The runs of one row (an implementation at a load) over ``repeat`` runs [ms].
+
+    Attributes:
+        impl, load: The row.
+        runs: Its runs.
+        node_p99_median, node_p99_worst: The node's own p99, median and largest over the runs.
+        e2e_p99_median, e2e_p99_worst: The same of the end-to-end latency through DDS.
+        missed_median, missed_worst: Ticks without a new command.
+        stops: How the runs stopped: ``done`` or the hold's reason -> runs.
+        p99_by_kind_median: Per kind of tick, the median over the runs of its p99.
+    """
+
+    impl: str
+    load: int
+    runs: int
+    node_p99_median: float | None
+    node_p99_worst: float | None
+    e2e_p99_median: float | None
+    e2e_p99_worst: float | None
+    missed_median: float
+    missed_worst: int
+    stops: dict[str, int]
+    p99_by_kind_median: dict[str, float]
+
+
+def _median_worst(values: list[float | None]) -> tuple[float | None, float | None]:
+    known = [v for v in values if v is not None]
+    return (statistics.median(known), max(known)) if known else (None, None)
+
+
+def summarize(rows: list[RosBenchRun]) -> list[RosBenchSummary]:
+    """Each row's runs (same implementation and load, in the order first run): the p99's
+    median and worst over them, and how they stopped."""
+    groups: dict[tuple[str, int], list[RosBenchRun]] = {}
+    for r in rows:
+        groups.setdefault((r.impl, r.load), []).append(r)
+    out = []
+    for (impl, load), runs in groups.items():
+        node = _median_worst([r.node_p99 for r in runs])
+        e2e = _median_worst([r.e2e_p99 for r in runs])
+        stops: dict[str, int] = {}
+        for r in runs:
+            key = "done" if r.stopped.startswith("done") else r.stopped.split(":")[:2][-1].strip()
+            stops[key] = stops.get(key, 0) + 1
+        kinds = {k for r in runs for k in r.p99_by_kind}
+        by_kind = {
+            k: statistics.median([r.p99_by_kind[k] for r in runs if k in r.p99_by_kind])
+            for k in sorted(kinds)
+        }
+        missed = [r.missed for r in runs]
+        out.append(
+            RosBenchSummary(
+                impl,
+                load,
+                len(runs),
+                *node,
+                *e2e,
+                statistics.median(missed),
+                max(missed),
+                stops,
+                by_kind,
+            )
+        )
+    return out
 
 
 def _short(line: str, width: int = 72) -> str:
@@ -224,12 +319,33 @@ def format_ros_report(rows: list[RosBenchRun], machine: str = "") -> str:
             f"{r.ticks} | {r.missed} | {r.late_ticks} | {_short(r.stopped)} | {r.arm or '-'} | "
             f"{'-' if r.cpu_busy is None else f'{r.cpu_busy:.2f}'} |"
         )
+    summary = summarize(rows)
+    if any(g.runs > 1 for g in summary):
+        lines += ["", "over the runs of each row: p99 median / worst [ms]", _SUMMARY_HEAD]
+        lines.append("|" + "---|" * 8)
+        for g in summary:
+            kinds = ", ".join(f"{k} {v:.3f}" for k, v in g.p99_by_kind_median.items()) or "-"
+            stops = ", ".join(f"{k} {v}" for k, v in g.stops.items())
+            lines.append(
+                f"| {g.impl} | {g.load} | {g.runs} | {_ms(g.node_p99_median)} / "
+                f"{_ms(g.node_p99_worst)} | {_ms(g.e2e_p99_median)} / {_ms(g.e2e_p99_worst)} | "
+                f"{g.missed_median:g} / {g.missed_worst} | {stops} | {kinds} |"
+            )
     return "\n".join(lines)
+
+
+_SUMMARY_HEAD = (
+    "| node | hogs | runs | node p99 | e2e p99 | missed | stopped | node p99 by tick (median) |"
+)
 
 
 def ros_report_json(rows: list[RosBenchRun], machine: str = "") -> dict[str, Any]:
     """The runs as JSON (``--json``)."""
-    return {"machine": machine, "runs": [asdict(r) for r in rows]}
+    return {
+        "machine": machine,
+        "runs": [asdict(r) for r in rows],
+        "summary": [asdict(g) for g in summarize(rows)],
+    }
 
 
 def machine_name() -> str:

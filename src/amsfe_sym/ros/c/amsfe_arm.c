@@ -658,8 +658,7 @@ int main(int argc, char **argv) {
   const char *reliability = qt[0];
   int depth = (int)pf_parse_long(pf, "qos", qt[1]), out_depth = (int)pf_parse_long(pf, "qos", qt[2]);
   int priority = (int)pf_long(pf, "sched_priority");
-  amsfe_rcl_start(argc, argv, &s->ctx, &s->node, "amsfe_sim", "sim-node", priority);
-  rcl_allocator_t alloc = rcl_get_default_allocator();
+  rcl_allocator_t alloc = amsfe_rcl_start(argc, argv, &s->ctx, &s->node, "amsfe_sim", "sim-node", priority);
   const amsfe_types ty = amsfe_message_types();
   const rosidl_message_type_support_t *ts_clk = ROSIDL_GET_MSG_TYPE_SUPPORT(rosgraph_msgs, msg, Clock);
   rcl_publisher_options_t po = rcl_publisher_get_default_options();

@@ -181,21 +181,9 @@ static const double *u_for(live_loop *L, long j) {
 }
 
 static void count_frame(live_loop *L, int status) {
-  live_counters *c = &L->c;
-  switch (status) {
-    case AMSFE_OK: c->frames_applied++; L->tick_applied++; return;
-    case AMSFE_IGNORED: return;
-    case AMSFE_GATED: c->refused_gated++; break;
-    case AMSFE_REFUSED_NONFINITE: c->refused_nan++; break;
-    case AMSFE_REFUSED_TOO_OLD:
-    case AMSFE_REFUSED_NO_CLONE_LEFT: c->refused_too_late++; break;
-    case AMSFE_REFUSED_INDEFINITE: c->refused_indefinite++; break;
-    case AMSFE_REFUSED_NO_CLONE: c->refused_unscheduled++; break;
-    case AMSFE_REFUSED_NO_CONVERGENCE: c->refused_no_convergence++; break;
-    default: c->refused_other++;
-  }
-  c->frames_rejected++;
-  L->tick_rejected++;
+  int counted = amsfe_sim_count_frame(&L->c, status); /* the compiled loop's counting */
+  if (counted > 0) L->tick_applied++;
+  if (counted < 0) L->tick_rejected++;
 }
 
 /* One estimator step k-1 -> k (L->k is k already) with the sample z (NULL: none) and the

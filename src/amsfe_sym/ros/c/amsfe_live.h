@@ -41,12 +41,9 @@ enum live_skip {
 };
 extern const char *const LIVE_SKIP_TEXT[SKIP_REASONS];
 
-/* The estimator's decisions (sim/result.py's DECISION_COUNTERS). */
-typedef struct {
-  long frames_applied, frames_rejected, encoder_rejected;
-  long refused_nan, refused_too_late, refused_gated, refused_indefinite,
-      refused_no_convergence, refused_unscheduled, refused_other;
-} live_counters;
+/* The estimator's decisions (sim/result.py's DECISION_COUNTERS): the compiled loop's
+ * counters, the frames' and encoder_rejected (the rest stay 0). */
+typedef amsfe_sim_state live_counters;
 
 typedef struct {
   long kappa;

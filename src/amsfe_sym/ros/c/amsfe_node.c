@@ -64,6 +64,13 @@ extern int gravity_work(long long *sz_arg, long long *sz_res, long long *sz_iw, 
 
 
 
+/* The kinds of tick the node's own latency is split by at the stop: which work falls on a
+ * sample's way (a frame's update runs before its command; the diagnostics JSON, the record
+ * and the standard deviations after it, delaying the next sample taken). */
+enum lat_kind { LAT_FIRST, LAT_FRAME, LAT_AFTER_FRAME, LAT_AFTER_STD, LAT_OTHER, LAT_KINDS };
+static const char *const LAT_KIND_NAME[LAT_KINDS] = {
+    "first 10", "frame fused or refused", "after a frame tick", "after a std tick", "others"};
+
 /* ------------------------------------------------------------------ the record */
 /* What the node received and published, kept in arrays of `cap` ticks (allocated at
  * start) and written at the stop as sections "name type rows cols data". */
@@ -144,6 +151,8 @@ typedef struct {
   char stop_line[2048];
   int stop_code;
   double *lat;  /* [cap] sample received by the middleware -> command published [s] */
+  unsigned char *lat_kind; /* [cap] each one's tick kind (enum lat_kind) */
+  int prev_kind;           /* what the previous tick did after its command (LAT_AFTER_*) */
   long n_lat, cap_lat;
   long long cmd_wall; /* wall clock when the tick's command was published [ns] (0: none) */
   record_t rec;
@@ -637,8 +646,14 @@ static void on_encoders(node_t *s, long long sent, long long received, double ta
     record_effort(s, ns, s->eff);
   }
   s->cmd_wall = 0;
+  long std_k = s->std_k;
   publish_tick(s, ns, s->z, sent);
-  if (s->cmd_wall && s->n_lat < s->cap_lat) s->lat[s->n_lat++] = 1e-9 * (double)(s->cmd_wall - received);
+  if (s->cmd_wall && s->n_lat < s->cap_lat) {
+    int kind = L->k < 10 ? LAT_FIRST : L->n_due > 0 ? LAT_FRAME : s->prev_kind;
+    s->lat_kind[s->n_lat] = (unsigned char)kind;
+    s->lat[s->n_lat++] = 1e-9 * (double)(s->cmd_wall - received);
+  }
+  s->prev_kind = L->n_due > 0 ? LAT_AFTER_FRAME : s->std_k != std_k ? LAT_AFTER_STD : LAT_OTHER;
   s->last_rx = amsfe_mono_s(); /* after the work: a slow first tick is no silence */
   s->started = 1;
 }
@@ -1002,7 +1017,8 @@ int main(int argc, char **argv) {
   s->g_res = ALLOC(double *, sz_res + 1);
   s->g_iw = ALLOC(long long, sz_iw + 1), s->g_w = ALLOC(double, sz_w + 1);
   long cap = s->end_k >= 0 ? s->end_k + 1 : (L->K_ref > 0 ? L->K_ref : 100000);
-  s->cap_lat = cap, s->lat = ALLOC(double, cap);
+  s->cap_lat = cap, s->lat = ALLOC(double, cap), s->lat_kind = ALLOC(unsigned char, cap);
+  s->prev_kind = LAT_OTHER;
   if (s->recording) {
     record_t *R = &s->rec;
     R->cap = cap;
@@ -1020,8 +1036,7 @@ int main(int argc, char **argv) {
     R->hold_u = ALLOC(double, n);
   }
   /* ---- rcl: context, node, subscriptions, publishers, wait set */
-  amsfe_rcl_start(argc, argv, &s->ctx, &s->node, "amsfe_node", "node", priority);
-  rcl_allocator_t alloc = rcl_get_default_allocator();
+  rcl_allocator_t alloc = amsfe_rcl_start(argc, argv, &s->ctx, &s->node, "amsfe_node", "node", priority);
   const amsfe_types ty = amsfe_message_types();
   const rosidl_message_type_support_t *ts_str = ROSIDL_GET_MSG_TYPE_SUPPORT(std_msgs, msg, String);
   rcl_subscription_options_t so = rcl_subscription_get_default_options();
@@ -1128,6 +1143,21 @@ int main(int argc, char **argv) {
     code = 0;
   } else {
     printf("node: %s%s\n", s->stop_line, held);
+  }
+  if (s->n_lat > 0) { /* the p99 of each kind of tick (bench --ros reads it), then the whole */
+    double *by = ALLOC(double, s->n_lat);
+    printf("node: latency p99 by tick [ms]:");
+    for (int kind = 0, said = 0; kind < LAT_KINDS; ++kind) {
+      long m = 0;
+      for (long i = 0; i < s->n_lat; ++i)
+        if (s->lat_kind[i] == kind) by[m++] = s->lat[i];
+      qsort(by, (size_t)m, sizeof(double), cmp_double);
+      if (m)
+        printf("%s %s %.3f (%ld)", said++ ? "," : "", LAT_KIND_NAME[kind],
+               1e3 * percentile(by, m, 0.99), m);
+    }
+    printf("\n");
+    free(by);
   }
   if (s->n_lat > 0) { /* the node's own latency (the Python node's line: bench --ros reads it) */
     double *l = s->lat;

@@ -59,8 +59,8 @@ static void catch_signals(void) {
   sigaction(SIGTERM, &sa, NULL);
 }
 
-void amsfe_rcl_start(int argc, char **argv, rcl_context_t *ctx, rcl_node_t *node,
-                     const char *name, const char *who, int priority) {
+rcl_allocator_t amsfe_rcl_start(int argc, char **argv, rcl_context_t *ctx, rcl_node_t *node,
+                                const char *name, const char *who, int priority) {
   catch_signals();
   amsfe_realtime(who, priority);
   rcl_allocator_t alloc = rcl_get_default_allocator();
@@ -71,6 +71,7 @@ void amsfe_rcl_start(int argc, char **argv, rcl_context_t *ctx, rcl_node_t *node
   *node = rcl_get_zero_initialized_node();
   rcl_node_options_t no = rcl_node_get_default_options();
   amsfe_rcl_check(rcl_node_init(node, name, "", ctx, &no), "rcl_node_init");
+  return alloc;
 }
 
 rmw_qos_profile_t amsfe_qos(const char *reliability, int depth) {

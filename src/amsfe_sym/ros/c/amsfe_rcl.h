@@ -41,9 +41,10 @@ void amsfe_rcl_check(rcl_ret_t ret, const char *what);
  * the middleware's threads (Fast DDS's receive and event threads) inherit the policy and a
  * sample's way through the process is real-time too, not only its tick (reception threads at
  * normal priority beside CPU hogs delayed the commands by ms); then rcl_init from argc/argv
- * (their --ros-args: remaps, parameters) and the node `name`. */
-void amsfe_rcl_start(int argc, char **argv, rcl_context_t *ctx, rcl_node_t *node,
-                     const char *name, const char *who, int priority);
+ * (their --ros-args: remaps, parameters) and the node `name`.  Returns rcl's default
+ * allocator (the wait sets'). */
+rcl_allocator_t amsfe_rcl_start(int argc, char **argv, rcl_context_t *ctx, rcl_node_t *node,
+                                const char *name, const char *who, int priority);
 /* A live topic's QoS: KEEP_LAST `depth`, "reliable" or best effort, volatile. */
 rmw_qos_profile_t amsfe_qos(const char *reliability, int depth);
 /* A serialized message buffer of `capacity` bytes (incoming messages taken into it). */

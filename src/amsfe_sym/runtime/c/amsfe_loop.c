@@ -859,11 +859,11 @@ static double nees(int N, const double *L, const double *e, double *w) {
   return acc;
 }
 
-/* sim/loop.py's REFUSAL_KINDS, from the runtime's statuses. */
-static void count_frame(amsfe_sim_state *st, int status) {
+/* sim/loop.py's REFUSAL_KINDS, from the runtime's statuses (amsfe_loop.h). */
+int amsfe_sim_count_frame(amsfe_sim_state *st, int status) {
   switch (status) {
-    case AMSFE_OK: st->frames_applied++; return;
-    case AMSFE_IGNORED: return;
+    case AMSFE_OK: st->frames_applied++; return 1;
+    case AMSFE_IGNORED: return 0;
     case AMSFE_GATED: st->refused_gated++; break;
     case AMSFE_REFUSED_NONFINITE: st->refused_nan++; break;
     case AMSFE_REFUSED_TOO_OLD:
@@ -874,6 +874,7 @@ static void count_frame(amsfe_sim_state *st, int status) {
     default: st->refused_other++;
   }
   st->frames_rejected++;
+  return -1;
 }
 
 int amsfe_sim_run(amsfe_sim *s, long ticks, const amsfe_sim_records *rec) {
@@ -918,7 +919,7 @@ int amsfe_sim_run(amsfe_sim *s, long ticks, const amsfe_sim_records *rec) {
     if (k > 0) {
       amsfe_diag dg;
       amsfe_est_diagnostics(s->est, &dg);
-      for (int i = 0; i < nf; ++i) count_frame(st, s->status[i]);
+      for (int i = 0; i < nf; ++i) amsfe_sim_count_frame(st, s->status[i]);
       if (!dg.encoder_accepted) {
         st->encoder_rejected++;
         if (isnan(dg.encoder_nis)) st->refused_nan++; else st->refused_gated++;

@@ -206,6 +206,10 @@ int amsfe_sim_init(amsfe_sim **out, const amsfe_sim_params *params, amsfe_est *e
                    amsfe_ctrl *ctrl, void *memory, size_t size);
 /* Run up to `ticks` more ticks (until K, or divergence, or an error).  Returns the status. */
 int amsfe_sim_run(amsfe_sim *sim, long ticks, const amsfe_sim_records *rec);
+/* Count one camera frame's status (amsfe_est_camera_frame's) in st: frames_applied, or
+ * frames_rejected and its refused_* kind (sim/loop.py's REFUSAL_KINDS).  Returns 1 fused,
+ * 0 ignored, -1 refused.  The live node counts its frames with it too. */
+int amsfe_sim_count_frame(amsfe_sim_state *st, int status);
 void amsfe_sim_get_state(const amsfe_sim *sim, amsfe_sim_state *state);
 
 #ifdef __cplusplus

@@ -23,6 +23,7 @@ struct amsfe_watchdog {
   double taken0;          /* ... and when it was taken [s] */
   double last_call;       /* the last sample's take or idle call [s] */
   double last_taken;      /* the last sample's take [s] */
+  double last_done;       /* the last sample's done [s] */
   long last_k;
   double *nis;            /* [innovation_window] NIS / dimension, a ring */
   double nis_sum;
@@ -101,7 +102,7 @@ void amsfe_watchdog_reset(amsfe_watchdog *wd) {
   wd->s.max_lateness = -INFINITY;
   wd->first = 1;
   wd->stamp0 = 0;
-  wd->taken0 = wd->last_call = wd->last_taken = 0.0;
+  wd->taken0 = wd->last_call = wd->last_taken = wd->last_done = 0.0;
   wd->last_k = -1;
   wd->nis_sum = 0.0;
   wd->nis_pos = wd->nis_count = 0;
@@ -211,6 +212,7 @@ int amsfe_watchdog_sample(amsfe_watchdog *wd, const amsfe_watchdog_tick *t) {
     wd->stamp0 = t->stamp_ns;
     wd->taken0 = t->taken;
     wd->last_call = wd->last_taken = t->taken;
+    wd->last_done = t->done;
     wd->last_k = t->k;
     s->samples += 1;
     keep_command(wd, t);
@@ -279,9 +281,12 @@ int amsfe_watchdog_sample(amsfe_watchdog *wd, const amsfe_watchdog_tick *t) {
     if (err > c->tracking_error)
       trip(s, AMSFE_WD_TRACKING, AMSFE_WD_CAUSE_NONE, k, err, c->tracking_error, gap);
   }
-  /* 10: a late sample names the node behind before what its lateness caused (the arm on
-   * older commands: its torque, its innovations, its path) */
-  if (late && (s->reason == AMSFE_WD_ACTUATION || s->reason == AMSFE_WD_INNOVATION ||
+  /* 10: a late sample that was due before the previous one was done (it waited in the
+   * queue while the arm ran on older commands; never in lockstep) names the node behind
+   * before what its lateness caused: the arm's torque, innovations, path */
+  int queued = due < wd->last_done;
+  wd->last_done = t->done;
+  if (late && queued && (s->reason == AMSFE_WD_ACTUATION || s->reason == AMSFE_WD_INNOVATION ||
                s->reason == AMSFE_WD_TRACKING)) {
     int first = s->reason;
     s->reason = AMSFE_WD_NONE;

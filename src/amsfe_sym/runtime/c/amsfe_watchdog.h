@@ -156,7 +156,8 @@ void amsfe_watchdog_reset(amsfe_watchdog *wd);
  * checks (the first that trips wins): stall (gap > max_gap_steps), node_stalled (no call for
  * encoder_timeout), covariance (status < 0), nonfinite, compute (done - taken), deadline
  * (lateness = done - (stamp + offset), offset = taken - stamp of the first sample), actuation,
- * innovation, tracking; then, when the sample itself is late (lateness > deadline) and the
+ * innovation, tracking; then, when the sample itself is late (lateness > deadline) and was
+ * queued (due before the previous sample was done: the arm ran on; never in lockstep) and the
  * reason is actuation, innovation or tracking, deadline with AMSFE_WD_CAUSE_LATE instead
  * (value: the lateness [s]): the node behind is named before what its lateness caused (the
  * arm on older commands meanwhile).  The first sample only sets the offset (no compute or
