@@ -26,7 +26,7 @@ def test_the_vision_section_reports_every_kind_and_search(capsys, tmp_path: Path
     v = json.loads(out_json.read_text())["vision"]
     assert (v["image"], v["frames"], v["rounds"], v["threads"]) == ("640 x 480", 12, 2, 1)
     rows = {(r["kind"], r["search"]): r for r in v["rows"]}
-    assert set(rows) == {(k, s) for k in KINDS for s in ("whole", "roi")}
+    assert set(rows) == {(k, s) for k in KINDS for s in ("whole", "roi")} | {("mono8", "opencv")}
     for (kind, search), r in rows.items():
         assert r["message"] == ("CompressedImage" if kind.startswith("jpeg") else "Image")
         assert r["found"] == 12, (kind, search)
