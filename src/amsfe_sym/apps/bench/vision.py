@@ -200,14 +200,14 @@ def vision_lines(v: dict[str, Any], cpu: str) -> list[str]:
         f"7. camera chain per frame: read + grey + detect + undistort, {v['image']} px, a "
         f"{v['marker_px']:g} px tag moving; {v['frames']} frames, median of {v['rounds']}; "
         f"{cpu}, OpenCV threads {v['threads']}",
-        f"   {'message':<24}{'search':<8}{'found':>7}{'fps CPU':>9}{'fps wall':>10}"
+        f"   {'message':<28}{'search':<8}{'found':>7}{'fps CPU':>9}{'fps wall':>10}"
         f"{'read+grey':>10}{'detect':>8}{'undist':>8}  [CPU ms/frame]  roi - whole [px]",
     ]
     for r in v["rows"]:
         s = r["stages_cpu_ms"]
         d = r.get("max_corner_diff_px")
         lines.append(
-            f"   {r['kind'] + ' ' + r['message']:<24}{r['search']:<8}"
+            f"   {r['kind'] + ' ' + r['message']:<28}{r['search']:<8}"
             f"{r['found']:>4}/{v['frames']:<3}{r['fps_cpu']:>8.0f}{r['fps_wall']:>10.0f}"
             f"{s['read_grey']:>10.3f}{s['detect']:>8.3f}{s['undistort']:>8.3f}"
             f"{'' if d is None else f'  {d:.1e}':>18}"
