@@ -48,7 +48,8 @@ class Detection:
 #: The adaptive threshold's window [px] of the first search: one window instead of
 #: OpenCV's three (3, 13, 23).  The window of 3 px turns the sensor's noise into thousands of
 #: tiny contours, which cost most of a detection (docs/camera.md, "Speed"); 7 px finds the
-#: 13-213 px markers of the renders as the three do, with the same corners' accuracy.
+#: 27-213 px markers of the simulated camera's renders as the three do, as accurately; on
+#: noisier or flatter images it misses some, which the three then find (the fall-back).
 THRESHOLD_WINDOW = 7
 
 
