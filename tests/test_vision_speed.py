@@ -1,10 +1,13 @@
 """The camera chain's fast paths (docs/camera.md, "Speed") against the reference paths:
 image payloads read in place against ``rosbags``' deserializer (both encodings, every image
-kind, bytes and a view of a chunk's buffer); bad payloads still refused in one line.
+kind, bytes and a view of a chunk's buffer); bad payloads still refused in one line; a log's
+centres in one pass against frame by frame; small slices joined; a log's summary parsed
+once per file version.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import cv2
@@ -149,3 +152,33 @@ def test_small_slices_join_into_the_same_payloads() -> None:
     assert list(joined) == raws
     assert joined.buffer.size == sum(len(r) for r in raws)
     assert not any(np.shares_memory(joined.buffer, p.buffer) for p in parts)
+
+
+def _mcap(path: Path, topic: str, count: int) -> None:
+    from mcap.writer import Writer
+
+    with path.open("wb") as fh:
+        w = Writer(fh)
+        w.start()
+        sid = w.register_schema("std_msgs/msg/String", "ros2msg", b"string data")
+        cid = w.register_channel(topic, "cdr", sid)
+        for i in range(count):
+            w.add_message(
+                cid, log_time=i, publish_time=i, data=b"\x00\x01\x00\x00\x01\x00\x00\x00\x00"
+            )
+        w.finish()
+
+
+def test_a_log_summary_is_parsed_once_per_file_version(tmp_path: Path) -> None:
+    """``summary_of`` (asked for by the first messages' search and by the read) parses a
+    file once; the same path holding another file (even of the same size) is parsed again."""
+    from amsfe_sym.logs.chunks import summary_of
+
+    path = tmp_path / "log.mcap"
+    _mcap(path, "/a", 3)
+    first = summary_of(path)
+    assert summary_of(path) is first
+    _mcap(path, "/b", 3)  # (same size: another topic name of the same length)
+    again = summary_of(path)
+    assert again is not first
+    assert [c.topic for c in again.channels.values()] == ["/b"]

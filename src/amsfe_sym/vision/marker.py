@@ -46,9 +46,10 @@ class Detection:
 
 
 #: The adaptive threshold's window [px] of the first search: one window instead of
-#: OpenCV's three (3, 13, 23).  The window of 3 px turns the sensor's noise into thousands of
-#: tiny contours, which cost most of a detection (docs/camera.md, "Speed"); 7 px finds the
-#: 13-213 px markers of the renders as the three do, with the same corners' accuracy.
+#: OpenCV's three (3, 13, 23).  The window of 3 px turns the sensor's noise into many tiny
+#: contours, which cost most of a detection (docs/camera.md, "Speed"); 7 px finds the
+#: 27-213 px markers of the simulated camera's renders as the three do, as accurately; on
+#: noisier or flatter images it misses some, which the three then find (the fall-back).
 THRESHOLD_WINDOW = 7
 
 
@@ -169,9 +170,9 @@ def single_threaded() -> None:
     """OpenCV on one thread in this process (``cv2.setNumThreads(1)``).
 
     A detection is ~0.2 ms in a region of interest and ~1-2 ms in a whole 640 x 480 image of
-    CPU time; OpenCV's ``parallel_for_`` over its candidates adds a thread hand-off that,
-    on a loaded machine, costs more wall time than it saves and takes a core from the
-    estimator (docs/camera.md, "Speed").
+    CPU time; OpenCV's ``parallel_for_`` over so little work adds a thread hand-off, and a
+    second thread would take the core of the estimator or the encoder path (docs/camera.md,
+    "Speed").
     """
     import cv2
 

@@ -11,7 +11,10 @@ run through what the log reader does per frame (the loop of
 marker detected), plus the undistortion of its corners and the centre (which the log reader
 does once for the whole log, the camera node per frame), twice: searching the whole image
 every frame (``whole``), and in a region of interest around the previous frame's corners
-(``roi``, the log reader's path: the whole image only when the marker is not there).
+(``roi``, the log reader's path: the whole image only when the marker is not there); for
+mono8 also the whole image with OpenCV's default threshold windows (``opencv``: 3, 13 and
+23 px instead of :data:`~amsfe_sym.vision.marker.THRESHOLD_WINDOW`), what the one window
+saves.
 
 OpenCV runs on one thread (:func:`amsfe_sym.vision.marker.single_threaded`), so CPU time
 (``time.process_time``) is one core's; the wall time is beside it.  Medians over rounds;
@@ -94,20 +97,22 @@ def _payloads(frames: list[NDArray[np.uint8]], kind: str) -> tuple[list[bytes], 
 
 
 def _run(
-    raws: list[bytes], msgtype: str, roi: bool, clocks: tuple[Callable[[], float], ...]
+    raws: list[bytes], msgtype: str, search: str, clocks: tuple[Callable[[], float], ...]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """One pass over the payloads: the corners (M, 4, 2) [px], the total (CPU, wall) [s] and
     the CPU time of each stage (3,) [s]."""
     from amsfe_sym.logs.image_wire import image_message
     from amsfe_sym.vision.camera_info import make_camera_info, undistort
     from amsfe_sym.vision.images import grey_from_message
-    from amsfe_sym.vision.marker import MarkerDetector, tracked_point
+    from amsfe_sym.vision.marker import THRESHOLD_WINDOW, MarkerDetector, tracked_point
     from amsfe_sym.vision.sim_images import LENSES
     from amsfe_sym.vision.spec import MarkerSpec
 
     K = np.array([[_F, 0.0, _W / 2], [0.0, _F, _H / 2], [0.0, 0.0, 1.0]])
     info = make_camera_info(_W, _H, LENSES["plumb_bob"][0], K, LENSES["plumb_bob"][1])
-    detector = MarkerDetector(MarkerSpec())
+    window = None if search == "opencv" else THRESHOLD_WINDOW
+    detector = MarkerDetector(MarkerSpec(), threshold_window=window)
+    roi = search == "roi"
     cpu, wall = clocks
     corners = np.full((len(raws), 4, 2), np.nan)
     stages = np.zeros(3)
@@ -151,8 +156,9 @@ def bench_vision(frames: int = 150, rounds: int = 3, marker_px: float = 27.0) ->
     for kind in KINDS:
         raws, msgtype = _payloads(grey, kind)
         whole_corners = None
-        for search in ("whole", "roi"):
-            runs = [_run(raws, msgtype, search == "roi", clocks) for _ in range(rounds)]
+        searches = ("whole", "roi", "opencv") if kind == "mono8" else ("whole", "roi")
+        for search in searches:
+            runs = [_run(raws, msgtype, search, clocks) for _ in range(rounds)]
             corners = runs[-1][0]
             found = np.isfinite(corners).all(axis=(1, 2))
             cpu = statistics.median(float(r[1][0]) for r in runs)
@@ -172,7 +178,7 @@ def bench_vision(frames: int = 150, rounds: int = 3, marker_px: float = 27.0) ->
             }
             if search == "whole":
                 whole_corners = corners
-            elif whole_corners is not None:
+            elif search == "roi" and whole_corners is not None:
                 both = found & np.isfinite(whole_corners).all(axis=(1, 2))
                 diff = np.abs(corners[both] - whole_corners[both])
                 row["max_corner_diff_px"] = float(diff.max()) if diff.size else None
@@ -194,18 +200,22 @@ def vision_lines(v: dict[str, Any], cpu: str) -> list[str]:
         f"7. camera chain per frame: read + grey + detect + undistort, {v['image']} px, a "
         f"{v['marker_px']:g} px tag moving; {v['frames']} frames, median of {v['rounds']}; "
         f"{cpu}, OpenCV threads {v['threads']}",
-        f"   {'message':<24}{'search':<7}{'found':>7}{'fps CPU':>9}{'fps wall':>10}"
+        f"   {'message':<28}{'search':<8}{'found':>7}{'fps CPU':>9}{'fps wall':>10}"
         f"{'read+grey':>10}{'detect':>8}{'undist':>8}  [CPU ms/frame]  roi - whole [px]",
     ]
     for r in v["rows"]:
         s = r["stages_cpu_ms"]
         d = r.get("max_corner_diff_px")
         lines.append(
-            f"   {r['kind'] + ' ' + r['message']:<24}{r['search']:<7}"
+            f"   {r['kind'] + ' ' + r['message']:<28}{r['search']:<8}"
             f"{r['found']:>4}/{v['frames']:<3}{r['fps_cpu']:>8.0f}{r['fps_wall']:>10.0f}"
             f"{s['read_grey']:>10.3f}{s['detect']:>8.3f}{s['undistort']:>8.3f}"
             f"{'' if d is None else f'  {d:.1e}':>18}"
         )
+    lines.append(
+        "   whole = the whole image every frame; roi = around the last corners (the log "
+        "reader's path); opencv = whole, OpenCV's default threshold windows (3, 13, 23 px)"
+    )
     lines.append(
         f"   target (issue 35): decoding + detection >= {VISION_TARGET_FPS:g} frames/s on "
         "one core (fps CPU: time.process_time, OpenCV on one thread)"
