@@ -399,31 +399,11 @@ def _residual(model: ReprojectionModel, obs: Observations, x: FloatArray) -> Flo
     return res
 
 
-def _problem(
-    model: ReprojectionModel,
-    obs: Observations,
-    x: FloatArray,
-    free: NDArray[np.bool_],
-    idx: NDArray[np.intp],
-) -> tuple[Callable[[FloatArray], FloatArray], Callable[[FloatArray], FloatArray]]:
-    """Residuals [px] and their jacobian over the free parameters ``p`` (the others as in
-    ``x``) for the frames ``idx``."""
-    x = x.copy()
-
-    def full(p: FloatArray) -> FloatArray:
-        xx = x.copy()
-        xx[free] = p
-        return xx
-
-    def fun(p: FloatArray) -> FloatArray:
-        pr = model.project(full(p))
-        return (pr.y[idx] - obs.pixel[idx]).reshape(-1)
-
-    def jac(p: FloatArray) -> FloatArray:
-        pr = model.project(full(p))
-        return pr.J[idx][:, :, free].reshape(-1, int(free.sum()))
-
-    return fun, jac
+def _with(x: FloatArray, free: NDArray[np.bool_], p: FloatArray) -> FloatArray:
+    """``x`` with its free entries set to ``p``."""
+    out = x.copy()
+    out[free] = p
+    return out
 
 
 def _fit(
@@ -446,7 +426,18 @@ def _fit(
         for i in np.flatnonzero(use & ~pr.valid):
             dropped[int(i)] = NO_ENCODER
         use = use & pr.valid
-        fun, jac = _problem(model, obs, x, free, np.flatnonzero(use))
+        idx, base = np.flatnonzero(use), x.copy()
+
+        def fun(p: FloatArray, idx: NDArray[np.intp] = idx, base: FloatArray = base) -> FloatArray:
+            """Residuals [px] of the frames ``idx`` at the free parameters ``p``."""
+            pr = model.project(_with(base, free, p))
+            return (pr.y[idx] - obs.pixel[idx]).reshape(-1)
+
+        def jac(p: FloatArray, idx: NDArray[np.intp] = idx, base: FloatArray = base) -> FloatArray:
+            """Their jacobian over the free parameters."""
+            pr = model.project(_with(base, free, p))
+            return pr.J[idx][:, :, free].reshape(-1, int(free.sum()))
+
         sol = least_squares(
             fun, x[free], jac=jac, method="trf", loss=loss, f_scale=f_scale, x_scale="jac"
         )

@@ -1,0 +1,102 @@
+"""The topic spec's ``[camera] time_offset`` [s] (header stamp - exposure, what ``amsfe
+calibrate`` measures; docs/calibrate.md): parsed and bounded, turned into whole ticks, applied
+by the live loop of ``amsfe node`` as by the log reader, refused by the C node in one line,
+and written by ``amsfe calibrate`` into the topic spec it outputs.  The log reader's side, a
+recording with a known camera delay estimated with and without the key, is
+tests/test_calibrate.py (slow: it simulates)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from amsfe_sym.calibration.spec_out import calibrated_topic_spec
+from amsfe_sym.codegen import library_for
+from amsfe_sym.errors import ConfigError
+from amsfe_sym.ros.cnode import c_node_refusal
+from amsfe_sym.ros.live import LiveLoop
+from amsfe_sym.scenario import load_scenario
+from amsfe_sym.topics.spec import TopicSpec, parse_topic_spec, read_topic_spec
+
+EPOCH_NS = 1_700_000_000 * 10**9
+
+
+def test_the_key_is_read_and_rounded_to_ticks() -> None:
+    spec = parse_topic_spec({"camera": {"time_offset": 0.0123}})
+    assert spec.camera_time_offset == 0.0123
+    assert spec.exposure_shift(0.001) == 12  # 12.3 ticks: frames are fused at ticks
+    assert spec.exposure_shift(0.01) == 1
+    assert parse_topic_spec({"camera": {"time_offset": -0.0251}}).exposure_shift(0.001) == -25
+    assert TopicSpec().camera_time_offset == 0.0 and TopicSpec().exposure_shift(0.001) == 0
+    both = parse_topic_spec({"camera": {"info": "/cam/info", "time_offset": 0.1}})
+    assert both.camera_info == "/cam/info" and both.camera_time_offset == 0.1
+
+
+@pytest.mark.parametrize(
+    ("value", "words"),
+    [("25ms", "time_offset"), (2.0, "time_offset"), (float("nan"), "time_offset")],
+)
+def test_a_bad_time_offset_is_one_line(value: Any, words: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        parse_topic_spec({"camera": {"time_offset": value}}, "topics.toml")
+    msg = str(err.value)
+    assert "\n" not in msg and words in msg and "topics.toml [camera]" in msg
+
+
+def test_an_unknown_camera_key_names_both_keys() -> None:
+    with pytest.raises(ConfigError, match=r"\['info', 'time_offset'\]"):
+        parse_topic_spec({"camera": {"delay": 0.1}})
+
+
+def test_the_c_node_refuses_it_in_one_line() -> None:
+    sc = load_scenario("paper-sim")
+    spec = parse_topic_spec({"camera": {"time_offset": 0.02}})
+    why = c_node_refusal(sc, spec, managed=False)
+    assert why is not None and "time_offset = 0.02 s" in why and "\n" not in why
+    assert c_node_refusal(sc, TopicSpec(), managed=False) is None
+
+
+def _loop_with_frame(lib: Any, sc: Any, shift: int, frame_tick: int) -> list[int]:
+    """A live loop fed 12 encoder samples, then a frame stamped at ``frame_tick``: the
+    exposure steps it has pending."""
+    loop = LiveLoop(sc, lib, controller=False, exposure_shift=shift)
+    T = round(lib.T * 1e9)
+    z = np.zeros(2 * loop.n)
+    for k in range(12):
+        loop.encoders(EPOCH_NS + k * T, z, 5 * 10**9 + k * T)
+    loop.frame(EPOCH_NS + frame_tick * T, np.array([300.0, 200.0]), 5 * 10**9 + 12 * T)
+    return [f.exposure_step for f in loop._frames.pending]
+
+
+def test_the_live_loop_shifts_the_exposure_by_the_key() -> None:
+    """``amsfe node`` (Python) takes a frame stamped at tick 10 as exposed at 10 - shift,
+    as the log reader does (logs/sensors.camera_frames)."""
+    sc = load_scenario("paper-sim").with_overrides(duration=2.0)
+    lib = library_for(sc)
+    assert _loop_with_frame(lib, sc, 0, 10) == [10]
+    assert _loop_with_frame(lib, sc, 3, 10) == [7]
+    # the spec's key in the node's ticks (what ros/node.py passes)
+    spec = parse_topic_spec({"camera": {"time_offset": 3.2 * lib.T}})
+    assert _loop_with_frame(lib, sc, spec.exposure_shift(lib.T), 10) == [7]
+
+
+def test_calibrate_writes_the_key_into_the_users_topic_spec(tmp_path: Path) -> None:
+    """The user's topic spec with the key added (its other keys kept), read back by the topic
+    spec's own reader; without one, a spec with the key alone."""
+    user = tmp_path / "mine.toml"
+    user.write_text(
+        '[topics]\nencoders = "/arm/joint_states"\n\n[camera]\ninfo = "/cam/info"\n'
+        "time_offset = 0.5\n"
+    )
+    out = tmp_path / "topics.toml"
+    out.write_text(calibrated_topic_spec(user, 0.0251234567, "the.bag"))
+    spec = read_topic_spec(out)
+    assert spec.camera_time_offset == 0.025123  # to 1 us
+    assert spec.encoders == "/arm/joint_states" and spec.camera_info == "/cam/info"
+    assert out.read_text().startswith("# ") and "the.bag" in out.read_text()
+    out.write_text(calibrated_topic_spec(None, -0.004, "the.bag"))
+    spec = read_topic_spec(out)
+    assert spec.camera_time_offset == -0.004 and spec.encoders == TopicSpec().encoders
