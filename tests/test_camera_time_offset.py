@@ -100,3 +100,31 @@ def test_calibrate_writes_the_key_into_the_users_topic_spec(tmp_path: Path) -> N
     out.write_text(calibrated_topic_spec(None, -0.004, "the.bag"))
     spec = read_topic_spec(out)
     assert spec.camera_time_offset == -0.004 and spec.encoders == TopicSpec().encoders
+
+
+def _stamps(bag: Path, topic: str) -> list[int]:
+    from rosbags.highlevel import AnyReader
+
+    from amsfe_sym.logs.decode import typestore
+
+    with AnyReader([bag], default_typestore=typestore()) as reader:
+        conns = [c for c in reader.connections if c.topic == topic]
+        msgs = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(conns)]
+    return [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in msgs]
+
+
+@pytest.mark.slow
+def test_simulated_images_are_stamped_as_the_pixel_topic(tmp_path: Path) -> None:
+    """``amsfe simulate --bag --images`` with ``[camera] stamp_offset``: each image carries
+    the pixel topic's stamp, exposure + offset (the images were stamped at the exposure, so a
+    calibration from them found no time offset)."""
+    from amsfe_sym.apps.cli import main
+
+    stamps = {}
+    for name, extra in (("pixels", []), ("images", ["--images", "png"])):
+        argv = ["simulate", "--controller", "amsfe", "--duration", "1", "--seed", "3"]
+        argv += ["--out", str(tmp_path / name), "--bag", "--no-plots", "--no-progress"]
+        assert main([*argv, "--set", "camera.stamp_offset=0.005", *extra]) == 0
+    stamps["pixels"] = _stamps(tmp_path / "pixels" / "bag", "/camera/marker")
+    stamps["images"] = _stamps(tmp_path / "images" / "bag", "/camera/image_raw/compressed")
+    assert len(stamps["pixels"]) > 5 and stamps["images"] == stamps["pixels"]
