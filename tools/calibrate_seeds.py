@@ -14,17 +14,19 @@ Summary: median / p90 / worst of each error, the share of seeds within the issue
 all ten).  A failed seed counts as the worst value.
 
 Seeds 9000-9019 by default (the method was tuned on seed 5 only); docs/calibrate.md's table
-is two runs at once (each ~1 min a seed on two shared cores) and their merge::
+is seeds 20000-20099, six runs at once (each ~4 s of CPU a seed, minutes of wall on two
+shared cores) and their merge::
 
-    nice -n 10 .venv/bin/python tools/calibrate_seeds.py --first-seed 9000 --seeds 20 \\
+    PYTHONPATH=src .venv/bin/python tools/calibrate_seeds.py --first-seed 20000 --seeds 20 \\
         --out /tmp/a.json
-    nice -n 15 .venv/bin/python tools/calibrate_seeds.py --first-seed 9020 --seeds 30 \\
-        --out /tmp/b.json
-    .venv/bin/python tools/calibrate_seeds.py --merge /tmp/a.json /tmp/b.json \\
+    ... (--first-seed 20020 --seeds 14, 20034 19, 20053 14, 20067 20, 20087 13)
+    PYTHONPATH=src .venv/bin/python tools/calibrate_seeds.py --merge /tmp/a.json ... \\
         --out docs/data/calibrate-seeds.json
 
 ``--synthetic 40``: the fit on frames made by its own map (no encoders, no dynamics), the
-z-scores of its errors (docs/data/calibrate-synthetic.json).
+z-scores of its errors (docs/data/calibrate-synthetic.json); with ``--encoder-std 2e-4``
+white noise on the link angles, smoothed as ``amsfe calibrate`` smooths them, or not with
+``--no-smooth`` (docs/data/calibrate-synthetic-encoders*.json).
 """
 
 from __future__ import annotations

@@ -17,9 +17,9 @@ Then every joint's angle is smoothed by a cubic Savitzky-Golay filter over
 +-:data:`SMOOTH_HALF_WINDOW_S` (:func:`smooth_angles`).  The fit interpolates the angles
 linearly between ticks and takes the time offset's derivative from that slope, ``(q_k+1 -
 q_k) / T``: on raw 1 kHz encoders with 2e-4 rad of noise the slope's noise is ~0.3 rad/s,
-as large as the motion, and the time offset's errors then spread 1.37 times its stated sigma
-(tools/calibrate_seeds.py --synthetic with encoder noise); smoothed, 1.0 times, as without
-noise (docs/calibrate.md, "Intervals").
+as large as the motion, and the time offset's errors then spread 1.29 times its stated sigma
+(``tools/calibrate_seeds.py --synthetic 20 --encoder-std 2e-4 --no-smooth``); smoothed, 0.95
+times, as without encoder noise (docs/calibrate.md, "Intervals").
 """
 
 from __future__ import annotations
