@@ -210,6 +210,10 @@ def test_recovers_a_synthetic_camera(robot: Robot) -> None:
     inside = (obs.pixel >= 0).all(axis=1) & (obs.pixel[:, 0] < 640) & (obs.pixel[:, 1] < 480)
     assert set(cal.dropped.values()) <= {"pixel outside the image"}
     assert cal.used.sum() == inside.sum() > 800
+    # the correlations: those of (J^T J)^-1 at the solution, computed here without scaling
+    J = ReprojectionModel(robot, links, stamp, cal.R0).project(cal.x).J[cal.used].reshape(-1, NP)
+    C = np.linalg.inv(J.T @ J)
+    np.testing.assert_allclose(cal.correlation, C / np.outer(*[np.sqrt(np.diag(C))] * 2), atol=1e-8)
 
 
 def test_time_offset_of_an_arm_that_stops_for_each_frame(robot: Robot) -> None:
@@ -234,6 +238,8 @@ def test_time_offset_of_an_arm_that_stops_for_each_frame(robot: Robot) -> None:
     cal = calibrate(robot, links, _synthetic(robot, links, stamp, x_true, seed=2))
     assert "time_offset" in cal.held and cal.time_offset == 0.0
     assert np.isnan(cal.std[9]) and not cal.free[9]
+    assert np.isnan(cal.correlation[9]).all() and np.isnan(cal.correlation[:, 9]).all()
+    np.testing.assert_allclose(np.diag(cal.correlation)[:9], 1.0, atol=1e-12)
     assert np.linalg.norm(cal.position - x_true[3:6]) < 5e-3
     lines = report_lines(cal, robot, {})
     held = [ln for ln in lines if "cannot determine the time offset" in ln]

@@ -262,6 +262,10 @@ def _summary(
             "rms_px": cal.initial.rms,
         },
         "singular_values_scaled": cal.singular_values.tolist(),
+        "correlation": {
+            "parameters": list(PARAMETERS),
+            "matrix": [[num(round(float(v), 4)) for v in row] for row in cal.correlation],
+        },
     }
 
 

@@ -100,6 +100,9 @@ class Calibration:
         dropped: Frame index -> reason, for every frame not used.
         initial: The OpenCV initial guess.
         singular_values: Of the final jacobian with its columns scaled to unit norm.
+        correlation: The parameters' correlation matrix (NP, NP) from the same linearisation
+            as ``std`` (NaN rows and columns: held): which parameters the pixels tell apart
+            least (docs/calibrate.md, "Accuracy").
         nfev: Model evaluations of the final fit.
     """
 
@@ -120,6 +123,7 @@ class Calibration:
     singular_values: FloatArray
     nfev: int = 0
     pixel: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    correlation: FloatArray = field(default_factory=lambda: np.full((NP, NP), np.nan))
     stamp: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def half_width95(self) -> FloatArray:
@@ -326,6 +330,7 @@ def calibrate(
         nfev=nfev,
         pixel=obs.pixel,
         stamp=obs.stamp,
+        correlation=_correlation(Jf, free),
     )
 
 
@@ -351,6 +356,19 @@ def _stds(J: FloatArray, s2: float) -> tuple[FloatArray, FloatArray]:
     sd[null] = np.inf
     std[seen] = sd
     return std, S
+
+
+def _correlation(J: FloatArray, free: NDArray[np.bool_]) -> FloatArray:
+    """The correlation matrix (NP, NP) of the free parameters from ``(J^T J)^+`` (``J``: the
+    jacobian over them), NaN in the rows and columns of the held ones."""
+    out = np.full((NP, NP), np.nan)
+    cols = np.linalg.norm(J, axis=0)
+    cols[cols == 0] = 1.0
+    C = np.linalg.pinv((J / cols).T @ (J / cols))
+    d = np.sqrt(np.clip(np.diag(C), 1e-300, None))
+    idx = np.flatnonzero(free)
+    out[np.ix_(idx, idx)] = C / np.outer(d, d)
+    return out
 
 
 def _undetermined(std: FloatArray, free: NDArray[np.bool_], held: dict[str, str]) -> dict[str, str]:
