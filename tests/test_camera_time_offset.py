@@ -128,3 +128,29 @@ def test_simulated_images_are_stamped_as_the_pixel_topic(tmp_path: Path) -> None
     stamps["pixels"] = _stamps(tmp_path / "pixels" / "bag", "/camera/marker")
     stamps["images"] = _stamps(tmp_path / "images" / "bag", "/camera/image_raw/compressed")
     assert len(stamps["pixels"]) > 5 and stamps["images"] == stamps["pixels"]
+
+
+def test_the_node_s_parameters_carry_the_key_and_override_it() -> None:
+    """``spec_parameters`` (what ``amsfe node`` reads back from its ROS parameters) keeps the
+    file's ``[camera] time_offset`` and takes ``-p camera.time_offset:=...`` over it."""
+    from types import SimpleNamespace
+
+    from amsfe_sym.ros.middleware import spec_parameters
+
+    class FakeNode:
+        def __init__(self, overrides: dict[str, Any]) -> None:
+            self.overrides = overrides
+
+        def declare_parameter(self, name: str, value: Any, descriptor: Any = None) -> Any:
+            return SimpleNamespace(value=self.overrides.get(name, value))
+
+        def get_name(self) -> str:
+            return "amsfe_node"
+
+    spec = parse_topic_spec({"camera": {"time_offset": 0.031}})
+    got = spec_parameters(FakeNode({}), spec, ("joint1", "joint2"))
+    assert got.camera_time_offset == 0.031
+    got = spec_parameters(FakeNode({"camera.time_offset": 0.012}), spec, ("joint1", "joint2"))
+    assert got.camera_time_offset == 0.012
+    with pytest.raises(ConfigError, match="time_offset"):
+        spec_parameters(FakeNode({"camera.time_offset": 5.0}), spec, ("joint1", "joint2"))
