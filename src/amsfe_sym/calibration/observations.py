@@ -31,15 +31,8 @@ from numpy.typing import NDArray
 
 from amsfe_sym.logs.read import RobotLog
 
-__all__ = [
-    "ACCEL_WINDOW_S",
-    "SMOOTH_HALF_WINDOW_S",
-    "LinkAngles",
-    "Observations",
-    "link_angles",
-    "observations",
-    "smooth_angles",
-]
+__all__ = ["LinkAngles", "Observations", "link_angles", "observations", "smooth_angles"]
+__all__ += ["ACCEL_WINDOW_S", "SMOOTH_HALF_WINDOW_S"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]

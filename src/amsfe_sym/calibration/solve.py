@@ -291,7 +291,7 @@ def calibrate(
 
     # 3./4. plain least squares on the inliers; hold what the motion cannot determine
     while True:
-        x, use, nfev = _fit(model, obs, x, free, use, dropped, "linear", 1.0)
+        x, use, nfev = _fit(model, obs, x, free, use, dropped)  # the squared loss
         pr = model.project(x)
         r = (pr.y - obs.pixel)[use]
         Jf = pr.J[use][:, :, free].reshape(-1, int(free.sum()))
@@ -431,8 +431,8 @@ def _fit(
     free: NDArray[np.bool_],
     use: NDArray[np.bool_],
     dropped: dict[int, str],
-    loss: str,
-    f_scale: float,
+    loss: str = "linear",
+    f_scale: float = 1.0,
 ) -> tuple[FloatArray, NDArray[np.bool_], int]:
     """``least_squares`` over the free parameters and the frames in ``use``; frames that lose
     their encoder samples (the time offset moved them off the log) or fall behind the camera
