@@ -223,3 +223,11 @@ def test_the_time_offset_key_fuses_late_stamps_as_the_true_timing(
     assert wo["nis"]["camera"]["mean"] > 20
     nees_ref = ref["nees_mean"]
     assert abs(w["nees_mean"] - nees_ref) < 0.05 * nees_ref
+
+    # calibrate measures the offset from the stamps whatever the topic spec says: the key in
+    # --log-spec is not applied, and the topics.toml written replaces it
+    cal = tmp_path / "cal"
+    argv = ["calibrate", str(bag), "--robot", str(DATA / "robot.toml"), "--log-spec", str(key)]
+    assert main([*argv, "--out", str(cal), "--no-plots"]) == 0
+    written = read_topic_spec(cal / "topics.toml").camera_time_offset
+    assert abs(written - STAMP_OFFSET) < 1e-3
