@@ -198,7 +198,7 @@ def test_bad_input_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str
 
 
 def test_the_time_offset_key_fuses_late_stamps_as_the_true_timing(
-    truth: Path, tmp_path: Path
+    truth: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A recording whose camera stamps are 25 ms late (the simulation's own oosm estimate,
     fed the true exposures, is the reference): ``amsfe estimate`` without ``[camera]
@@ -209,12 +209,16 @@ def test_the_time_offset_key_fuses_late_stamps_as_the_true_timing(
     ref = json.loads((tmp_path / "run" / "summary.json").read_text())
     key = tmp_path / "topics.toml"
     key.write_text(f"[camera]\ntime_offset = {STAMP_OFFSET}\n")
-    got = {}
+    got, printed = {}, {}
     for which, extra in (("without", []), ("with", ["--log-spec", str(key)])):
         out = tmp_path / which
         argv = ["estimate", str(bag), "--scenario", str(truth.parent / "calib-sim.toml")]
+        capsys.readouterr()
         assert main([*argv, "--estimator", "oosm", "--no-plots", "--out", str(out), *extra]) == 0
+        printed[which] = capsys.readouterr().out
         got[which] = json.loads((out / "summary.json").read_text())
+    said = "camera: exposures +25.000 ms before the stamps ([camera] time_offset), taken 25 tick"
+    assert said in printed["with"] and "[camera] time_offset" not in printed["without"]
     w, wo = got["with"], got["without"]
     frames = w["counters"]["frames_applied"]
     assert frames > 290 and w["counters"]["refused_gated"] == 0
