@@ -14,6 +14,7 @@ import json
 import math
 import shutil
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +25,7 @@ from amsfe_sym.calibration.spec_out import moved_camera_spec
 from amsfe_sym.codegen import generate
 from amsfe_sym.load import load_robot
 from amsfe_sym.runtime.library import ModelLibrary
+from amsfe_sym.topics.spec import TopicSpec, read_topic_spec
 
 pytestmark = pytest.mark.slow
 
@@ -113,6 +115,11 @@ def test_calibrate_recovers_the_true_camera(
         assert abs(err) < 4 * p[f"offset_{axis}"]["std"]
     assert abs(result["time_offset_s"] - STAMP_OFFSET) < 4 * p["time_offset"]["std"]
     assert 0.8 < result["pixel_std"] < 1.2
+    # the time offset as a topic spec key, for amsfe estimate / node (the defaults + the key)
+    topics = read_topic_spec(out / "topics.toml")
+    assert topics.camera_time_offset == round(result["time_offset_s"], 6)
+    assert topics == replace(TopicSpec(), camera_time_offset=topics.camera_time_offset)
+    assert f"--log-spec {out / 'topics.toml'}" in printed
     assert (out / "residuals.png").stat().st_size > 10_000
     assert len((out / "residuals.csv").read_text().splitlines()) > 800
 
@@ -188,3 +195,43 @@ def test_bad_input_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and err.startswith("error:"), err
         assert not (tmp_path / "out").exists()
+
+
+def test_the_time_offset_key_fuses_late_stamps_as_the_true_timing(
+    truth: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A recording whose camera stamps are 25 ms late (the simulation's own oosm estimate,
+    fed the true exposures, is the reference): ``amsfe estimate`` without ``[camera]
+    time_offset`` takes the frames 25 ms late and gates most of them; with the key it fuses
+    every frame, its camera NIS in band and its NEES as the reference's."""
+    sim = ["--estimator", "oosm", "--duration", "10"]
+    bag = _simulate(truth, tmp_path / "run", 4244, *sim)
+    ref = json.loads((tmp_path / "run" / "summary.json").read_text())
+    key = tmp_path / "topics.toml"
+    key.write_text(f"[camera]\ntime_offset = {STAMP_OFFSET}\n")
+    got, printed = {}, {}
+    for which, extra in (("without", []), ("with", ["--log-spec", str(key)])):
+        out = tmp_path / which
+        argv = ["estimate", str(bag), "--scenario", str(truth.parent / "calib-sim.toml")]
+        capsys.readouterr()
+        assert main([*argv, "--estimator", "oosm", "--no-plots", "--out", str(out), *extra]) == 0
+        printed[which] = capsys.readouterr().out
+        got[which] = json.loads((out / "summary.json").read_text())
+    said = "camera: exposures +25.000 ms before the stamps ([camera] time_offset), taken 25 tick"
+    assert said in printed["with"] and "[camera] time_offset" not in printed["without"]
+    w, wo = got["with"], got["without"]
+    frames = w["counters"]["frames_applied"]
+    assert frames > 290 and w["counters"]["refused_gated"] == 0
+    assert 1.6 < w["nis"]["camera"]["mean"] < 2.5 and w["nis"]["camera"]["inside_95"] > 0.9
+    assert wo["counters"]["refused_gated"] > frames / 2
+    assert wo["nis"]["camera"]["mean"] > 20
+    nees_ref = ref["nees_mean"]
+    assert abs(w["nees_mean"] - nees_ref) < 0.05 * nees_ref
+
+    # calibrate measures the offset from the stamps whatever the topic spec says: the key in
+    # --log-spec is not applied, and the topics.toml written replaces it
+    cal = tmp_path / "cal"
+    argv = ["calibrate", str(bag), "--robot", str(DATA / "robot.toml"), "--log-spec", str(key)]
+    assert main([*argv, "--out", str(cal), "--no-plots"]) == 0
+    written = read_topic_spec(cal / "topics.toml").camera_time_offset
+    assert abs(written - STAMP_OFFSET) < 1e-3

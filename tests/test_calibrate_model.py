@@ -18,6 +18,7 @@ from amsfe_sym.calibration import (
     ReprojectionModel,
     calibrate,
     link_angles,
+    smooth_angles,
 )
 from amsfe_sym.calibration.model import PARAMETERS
 from amsfe_sym.errors import LogError
@@ -119,7 +120,8 @@ def _log(z: np.ndarray, u: np.ndarray, effort: np.ndarray | None, kind: str) -> 
 def test_link_angles_by_effort_kind(robot: Robot) -> None:
     """q = qm - tau_J / Ks for a joint torque; from the motor rows of eq. (1b) for an applied
     torque (exact on a motion whose motor acceleration the central difference gets right);
-    the positions themselves without effort."""
+    the positions themselves without effort.  Smoothed (the default), a motion this slow
+    is unchanged to 1e-8 rad."""
     K, n = 2000, 3
     t = np.arange(K) * T
     qm = np.stack([0.3 * np.sin(2 * t + j) for j in range(n)], axis=1)
@@ -128,19 +130,50 @@ def test_link_angles_by_effort_kind(robot: Robot) -> None:
     z = np.concatenate([qm, qmd], axis=1)
     Ks, Mm, Fm = robot.Ks, robot.Mm, robot.Fm
     tau = np.stack([2.0 + np.sin(t + j) for j in range(n)], axis=1)  # spring torque
-    got = link_angles(_log(z, np.zeros((K, n)), tau, "joint_torque"), Ks, Mm, Fm)
+    got = link_angles(_log(z, np.zeros((K, n)), tau, "joint_torque"), Ks, Mm, Fm, smooth=False)
     np.testing.assert_allclose(got.q, qm - tau / Ks, rtol=0, atol=1e-15)
     u = Mm * qmdd_exact + Fm * qmd + tau
-    got = link_angles(_log(z, u, u, "applied"), Ks, Mm, Fm)
+    got = link_angles(_log(z, u, u, "applied"), Ks, Mm, Fm, smooth=False)
     h = 10
     # the central difference of a sinusoid over +-h ticks: sin(w h T) / (w h T) of the truth
     np.testing.assert_allclose(got.q[h:-h], (qm - tau / Ks)[h:-h], rtol=0, atol=1e-7)
     assert np.isnan(got.q[:h]).all()
-    got = link_angles(_log(z, np.zeros((K, n)), None, "none"), Ks, Mm, Fm)
+    smoothed = link_angles(_log(z, u, u, "applied"), Ks, Mm, Fm)
+    np.testing.assert_allclose(smoothed.q[h:-h], got.q[h:-h], rtol=0, atol=1e-8)
+    assert np.isnan(smoothed.q[:h]).all() and "Savitzky-Golay" in smoothed.note
+    got = link_angles(_log(z, np.zeros((K, n)), None, "none"), Ks, Mm, Fm, smooth=False)
     np.testing.assert_array_equal(got.q, qm)
     assert "ignored" in got.note
-    got = link_angles(_log(z, np.zeros((K, n)), tau, "joint_torque"), Ks, Mm, Fm, "link")
+    got = link_angles(_log(z, np.zeros((K, n)), tau, "joint_torque"), Ks, Mm, Fm, "link", False)
     np.testing.assert_array_equal(got.q, qm)
+
+
+def test_smoothing_is_savgol_and_quiets_the_time_offsets_slope() -> None:
+    """The link angles' smoothing is scipy's ``savgol_filter`` (cubic, 21 ticks, mode
+    "interp") run by finite run, to 1e-12; a gap stays NaN, a run shorter than the window
+    stays raw; on 2e-4 rad of encoder noise the slope between ticks, which the time offset's
+    jacobian column is made of (model.py), has ~0.28 rad/s of noise raw and under a tenth of
+    that smoothed."""
+    from scipy.signal import savgol_filter
+
+    rng = np.random.default_rng(11)
+    q = rng.normal(size=(3000, 3))
+    q[1000:1010] = np.nan  # a gap
+    q[[2000, 2016]] = np.nan  # a 15-tick run between: shorter than the 21-tick window
+    got, h = smooth_angles(q, T)
+    assert h == 10
+    for a, b in [(0, 1000), (1010, 2000), (2017, 3000)]:
+        want = savgol_filter(q[a:b], 21, 3, axis=0, mode="interp")
+        np.testing.assert_allclose(got[a:b], want, rtol=0, atol=1e-12)
+    assert np.isnan(got[1000:1010]).all() and np.isnan(got[[2000, 2016]]).all()
+    np.testing.assert_array_equal(got[2001:2016], q[2001:2016])
+    assert smooth_angles(q, 0.01)[1] == 0  # 100 Hz: a 3-tick window, nothing smoothed
+
+    noise = rng.normal(0.0, 2e-4, (30000, 3))
+    raw_slope = np.diff(noise, axis=0) / T
+    smooth_slope = np.diff(smooth_angles(noise, T)[0], axis=0) / T
+    assert 0.25 < raw_slope.std() < 0.31
+    assert smooth_slope[20:-20].std() < 0.1 * raw_slope.std()
 
 
 def _synthetic(
@@ -177,6 +210,10 @@ def test_recovers_a_synthetic_camera(robot: Robot) -> None:
     inside = (obs.pixel >= 0).all(axis=1) & (obs.pixel[:, 0] < 640) & (obs.pixel[:, 1] < 480)
     assert set(cal.dropped.values()) <= {"pixel outside the image"}
     assert cal.used.sum() == inside.sum() > 800
+    # the correlations: those of (J^T J)^-1 at the solution, computed here without scaling
+    J = ReprojectionModel(robot, links, stamp, cal.R0).project(cal.x).J[cal.used].reshape(-1, NP)
+    C = np.linalg.inv(J.T @ J)
+    np.testing.assert_allclose(cal.correlation, C / np.outer(*[np.sqrt(np.diag(C))] * 2), atol=1e-8)
 
 
 def test_time_offset_of_an_arm_that_stops_for_each_frame(robot: Robot) -> None:
@@ -201,6 +238,8 @@ def test_time_offset_of_an_arm_that_stops_for_each_frame(robot: Robot) -> None:
     cal = calibrate(robot, links, _synthetic(robot, links, stamp, x_true, seed=2))
     assert "time_offset" in cal.held and cal.time_offset == 0.0
     assert np.isnan(cal.std[9]) and not cal.free[9]
+    assert np.isnan(cal.correlation[9]).all() and np.isnan(cal.correlation[:, 9]).all()
+    np.testing.assert_allclose(np.diag(cal.correlation)[:9], 1.0, atol=1e-12)
     assert np.linalg.norm(cal.position - x_true[3:6]) < 5e-3
     lines = report_lines(cal, robot, {})
     held = [ln for ln in lines if "cannot determine the time offset" in ln]

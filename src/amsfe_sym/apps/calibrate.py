@@ -5,7 +5,8 @@ one batch (docs/calibrate.md; the method: :mod:`amsfe_sym.calibration`).
 The log is read as ``amsfe estimate`` reads it (the same topics, topic spec and checks).  It
 prints each parameter with its linearised 95 % interval, the per-frame reprojection error,
 the frames dropped and why, what the motion could not determine, and writes a folder with the
-calibrated ``robot.toml`` (``amsfe generate`` accepts it), ``calibration.json``,
+calibrated ``robot.toml`` (``amsfe generate`` accepts it), ``topics.toml`` (the topic spec
+with the camera's ``[camera] time_offset``, when it was fitted), ``calibration.json``,
 ``residuals.csv`` and ``residuals.png``.  Bad input: one line, nothing written.
 """
 
@@ -14,7 +15,7 @@ from __future__ import annotations
 import argparse
 import math
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -80,7 +81,7 @@ def calibrate_command(
             or is an input.
     """
     from amsfe_sym.calibration import calibrate, link_angles, observations
-    from amsfe_sym.calibration.spec_out import calibrated_spec
+    from amsfe_sym.calibration.spec_out import calibrated_spec, calibrated_topic_spec
     from amsfe_sym.codegen.preflight import modelled_joints
     from amsfe_sym.load import load_robot
     from amsfe_sym.load.spec import load_spec
@@ -96,7 +97,9 @@ def calibrate_command(
     if spec.spec_path is not None:
         inputs.append(spec.spec_path)
     check_output(out, option="--out", force=opts.force, inputs=inputs)
-    ls = read_log_spec(log_spec)
+    # the frames at their header stamps: the time offset is measured from them, whatever
+    # [camera] time_offset the topic spec has (the written one replaces it)
+    ls = replace(read_log_spec(log_spec), camera_time_offset=0.0)
     joints = modelled_joints(spec) or []
     n_state = 4 * len(joints) + len(spec.theta)
     plan = plan_log(log_path, ls, joints)
@@ -123,9 +126,14 @@ def calibrate_command(
     for line in report_lines(cal, rob, obs.skipped):
         print(line)
     text = calibrated_spec(rob, cal, str(log_path))
+    topics = (
+        calibrated_topic_spec(ls.source, cal.time_offset, str(log_path)) if cal.free[9] else None
+    )
 
     def fill(tmp: Path) -> None:
         (tmp / "robot.toml").write_text(text)
+        if topics is not None:
+            (tmp / "topics.toml").write_text(topics)
         write_json(tmp / "calibration.json", _summary(cal, rob, log_path, obs.skipped))
         _write_residuals(tmp / "residuals.csv", cal)
         if opts.plots:
@@ -133,6 +141,12 @@ def calibrate_command(
 
     done = write_folder(out, fill, replace=opts.force)
     print(f"wrote {done}: robot.toml (amsfe generate {done / 'robot.toml'}), calibration.json")
+    if topics is not None:
+        print(
+            f"  topics.toml: your topic spec with [camera] time_offset = "
+            f"{round(cal.time_offset, 6):g} (amsfe estimate {log_path} --robot "
+            f"{done / 'robot.toml'} --log-spec {done / 'topics.toml'})"
+        )
     return cal, rob
 
 
@@ -248,6 +262,10 @@ def _summary(
             "rms_px": cal.initial.rms,
         },
         "singular_values_scaled": cal.singular_values.tolist(),
+        "correlation": {
+            "parameters": list(PARAMETERS),
+            "matrix": [[num(round(float(v), 4)) for v in row] for row in cal.correlation],
+        },
     }
 
 

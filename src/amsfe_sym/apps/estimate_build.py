@@ -237,6 +237,12 @@ def estimator_for_log(
             f"  clock: log time - header stamp = {c.median:+.6f} s (spread {c.spread:.2e} s); "
             "log times moved onto the stamp clock"
         )
+        if spec.camera_time_offset:  # the topic spec's [camera] time_offset, in whole ticks
+            shift = spec.exposure_shift(log.T)
+            print(
+                f"  camera: exposures {spec.camera_time_offset * 1e3:+.3f} ms before the stamps "
+                f"([camera] time_offset), taken {shift} tick(s) earlier"
+            )
         for line in settled.lines:
             print(f"  {line}")
     from amsfe_sym.codegen import library_for

@@ -17,6 +17,7 @@ from amsfe_sym.calibration.observations import (
     Observations,
     link_angles,
     observations,
+    smooth_angles,
 )
 from amsfe_sym.calibration.solve import Calibration, InitialGuess, calibrate, initial_guess
 
@@ -33,4 +34,5 @@ __all__ = [
     "initial_guess",
     "link_angles",
     "observations",
+    "smooth_angles",
 ]

@@ -100,6 +100,9 @@ class Calibration:
         dropped: Frame index -> reason, for every frame not used.
         initial: The OpenCV initial guess.
         singular_values: Of the final jacobian with its columns scaled to unit norm.
+        correlation: The parameters' correlation matrix (NP, NP) from the same linearisation
+            as ``std`` (NaN rows and columns: held): which parameters the pixels tell apart
+            least (docs/calibrate.md, "Accuracy").
         nfev: Model evaluations of the final fit.
     """
 
@@ -120,6 +123,7 @@ class Calibration:
     singular_values: FloatArray
     nfev: int = 0
     pixel: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    correlation: FloatArray = field(default_factory=lambda: np.full((NP, NP), np.nan))
     stamp: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def half_width95(self) -> FloatArray:
@@ -287,7 +291,7 @@ def calibrate(
 
     # 3./4. plain least squares on the inliers; hold what the motion cannot determine
     while True:
-        x, use, nfev = _fit(model, obs, x, free, use, dropped, "linear", 1.0)
+        x, use, nfev = _fit(model, obs, x, free, use, dropped)  # the squared loss
         pr = model.project(x)
         r = (pr.y - obs.pixel)[use]
         Jf = pr.J[use][:, :, free].reshape(-1, int(free.sum()))
@@ -326,6 +330,7 @@ def calibrate(
         nfev=nfev,
         pixel=obs.pixel,
         stamp=obs.stamp,
+        correlation=_correlation(Jf, free),
     )
 
 
@@ -351,6 +356,19 @@ def _stds(J: FloatArray, s2: float) -> tuple[FloatArray, FloatArray]:
     sd[null] = np.inf
     std[seen] = sd
     return std, S
+
+
+def _correlation(J: FloatArray, free: NDArray[np.bool_]) -> FloatArray:
+    """The correlation matrix (NP, NP) of the free parameters from ``(J^T J)^+`` (``J``: the
+    jacobian over them), NaN in the rows and columns of the held ones."""
+    out = np.full((NP, NP), np.nan)
+    cols = np.linalg.norm(J, axis=0)
+    cols[cols == 0] = 1.0
+    C = np.linalg.pinv((J / cols).T @ (J / cols))
+    d = np.sqrt(np.clip(np.diag(C), 1e-300, None))
+    idx = np.flatnonzero(free)
+    out[np.ix_(idx, idx)] = C / np.outer(d, d)
+    return out
 
 
 def _undetermined(std: FloatArray, free: NDArray[np.bool_], held: dict[str, str]) -> dict[str, str]:
@@ -399,31 +417,11 @@ def _residual(model: ReprojectionModel, obs: Observations, x: FloatArray) -> Flo
     return res
 
 
-def _problem(
-    model: ReprojectionModel,
-    obs: Observations,
-    x: FloatArray,
-    free: NDArray[np.bool_],
-    idx: NDArray[np.intp],
-) -> tuple[Callable[[FloatArray], FloatArray], Callable[[FloatArray], FloatArray]]:
-    """Residuals [px] and their jacobian over the free parameters ``p`` (the others as in
-    ``x``) for the frames ``idx``."""
-    x = x.copy()
-
-    def full(p: FloatArray) -> FloatArray:
-        xx = x.copy()
-        xx[free] = p
-        return xx
-
-    def fun(p: FloatArray) -> FloatArray:
-        pr = model.project(full(p))
-        return (pr.y[idx] - obs.pixel[idx]).reshape(-1)
-
-    def jac(p: FloatArray) -> FloatArray:
-        pr = model.project(full(p))
-        return pr.J[idx][:, :, free].reshape(-1, int(free.sum()))
-
-    return fun, jac
+def _with(x: FloatArray, free: NDArray[np.bool_], p: FloatArray) -> FloatArray:
+    """``x`` with its free entries set to ``p``."""
+    out = x.copy()
+    out[free] = p
+    return out
 
 
 def _fit(
@@ -433,8 +431,8 @@ def _fit(
     free: NDArray[np.bool_],
     use: NDArray[np.bool_],
     dropped: dict[int, str],
-    loss: str,
-    f_scale: float,
+    loss: str = "linear",
+    f_scale: float = 1.0,
 ) -> tuple[FloatArray, NDArray[np.bool_], int]:
     """``least_squares`` over the free parameters and the frames in ``use``; frames that lose
     their encoder samples (the time offset moved them off the log) or fall behind the camera
@@ -446,7 +444,18 @@ def _fit(
         for i in np.flatnonzero(use & ~pr.valid):
             dropped[int(i)] = NO_ENCODER
         use = use & pr.valid
-        fun, jac = _problem(model, obs, x, free, np.flatnonzero(use))
+        idx, base = np.flatnonzero(use), x.copy()
+
+        def fun(p: FloatArray, idx: NDArray[np.intp] = idx, base: FloatArray = base) -> FloatArray:
+            """Residuals [px] of the frames ``idx`` at the free parameters ``p``."""
+            pr = model.project(_with(base, free, p))
+            return (pr.y[idx] - obs.pixel[idx]).reshape(-1)
+
+        def jac(p: FloatArray, idx: NDArray[np.intp] = idx, base: FloatArray = base) -> FloatArray:
+            """Their jacobian over the free parameters."""
+            pr = model.project(_with(base, free, p))
+            return pr.J[idx][:, :, free].reshape(-1, int(free.sum()))
+
         sol = least_squares(
             fun, x[free], jac=jac, method="trf", loss=loss, f_scale=f_scale, x_scale="jac"
         )

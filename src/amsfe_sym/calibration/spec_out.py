@@ -1,9 +1,12 @@
-"""The calibrated robot spec: the input ``robot.toml`` with its camera pose and tracked offset
-replaced by the calibration's, which ``amsfe generate`` accepts (docs/calibrate.md)."""
+"""The calibrated specs (docs/calibrate.md): the input ``robot.toml`` with its camera pose and
+tracked offset replaced by the calibration's, which ``amsfe generate`` accepts, and the topic
+spec with the camera's ``[camera] time_offset``, which ``amsfe estimate`` and ``amsfe node``
+apply."""
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -11,11 +14,11 @@ from numpy.typing import NDArray
 
 from amsfe_sym.calibration.solve import Calibration
 from amsfe_sym.core.toml import dump_toml, read_toml
-from amsfe_sym.errors import SpecError
+from amsfe_sym.errors import ConfigError, SpecError
 from amsfe_sym.load.rotation import matrix_to_quaternion
 from amsfe_sym.load.types import Robot
 
-__all__ = ["calibrated_spec", "moved_camera_spec", "spec_with_camera"]
+__all__ = ["calibrated_spec", "calibrated_topic_spec", "moved_camera_spec", "spec_with_camera"]
 
 FloatArray = NDArray[np.float64]
 
@@ -57,15 +60,32 @@ def spec_with_camera(
 def calibrated_spec(robot: Robot, cal: Calibration, log: str) -> str:
     """The calibrated ``robot.toml``: :func:`spec_with_camera` at the calibration, named
     ``<name>_calibrated`` (its own library, beside the original's), with a header saying
-    where it comes from and the time offset (which no spec key holds)."""
+    where it comes from and the time offset (a topic spec key:
+    :func:`calibrated_topic_spec`)."""
     spec = robot.spec
     head = (
         f"# {spec.spec_path or spec.urdf} with the camera pose and the tracked offset that\n"
         f"# `amsfe calibrate` found in {log} (docs/calibrate.md); time offset (stamp - exposure)\n"
-        f"# {cal.time_offset * 1e3:+.3f} ms, reprojection RMS {cal.pixel_std:.3f} px per axis.\n"
+        f"# {cal.time_offset * 1e3:+.3f} ms (topics.toml beside it: [camera] time_offset),\n"
+        f"# reprojection RMS {cal.pixel_std:.3f} px per axis.\n"
     )
     name = f"{spec.name}_calibrated"
     return head + spec_with_camera(robot, name, cal.R_cw, cal.position, cal.offset)
+
+
+def calibrated_topic_spec(source: Path | None, time_offset: float, log: str) -> str:
+    """The topic spec ``source`` (its keys; comments are not kept; None: an empty one) with
+    ``[camera] time_offset`` = ``time_offset`` [s] (header stamp - exposure, rounded to 1 us),
+    under a header saying where it comes from."""
+    data: dict[str, Any] = dict(read_toml(source, ConfigError)) if source is not None else {}
+    camera = dict(data.get("camera", {}))
+    camera["time_offset"] = round(float(time_offset), 6)
+    data["camera"] = camera
+    head = (
+        f"# {source or 'the default topic spec'} with the camera's time offset (header stamp -\n"
+        f"# exposure) that `amsfe calibrate` found in {log} (docs/calibrate.md).\n"
+    )
+    return head + dump_toml(data)
 
 
 def moved_camera_spec(

@@ -27,8 +27,9 @@ Two steps, both before anything is compiled:
   the grid (all stamps zero) are refused;
 - the effort is held from its stamp (zero-order hold by stamp): u(k) is the last effort
   stamped at or before t_k (within the tolerance);
-- a camera frame is taken at ``header.stamp`` (its exposure step kappa) and reaches the
-  estimator at the first tick at or after its arrival; skipped frames are counted by reason.
+- a camera frame is taken at ``header.stamp`` less the topic spec's ``[camera] time_offset``
+  in whole ticks (its exposure step kappa) and reaches the estimator at the first tick at or
+  after its arrival; skipped frames are counted by reason.
 
 Every role's messages, used and skipped by reason, are in :attr:`RobotLog.usage`.
 """
@@ -412,7 +413,9 @@ def read_log(
             ] = round(after / T)
 
     # ------------------------------------------------------------------ camera frames
-    on_grid = OnGrid(path, plan, times, decoded, grid, clock, K)  # (the grid the log starts on)
+    on_grid = OnGrid(  # (the grid the log starts on)
+        path, plan, times, decoded, grid, clock, K, spec.exposure_shift(T)
+    )
     frames: list[CameraFrame] = []
     if "camera" in present and plan.camera_info is not None:  # images: docs/camera.md
         from amsfe_sym.logs.images import image_frames

@@ -32,6 +32,9 @@ class OnGrid:
         grid: The encoders' tick grid.
         clock: Log time minus header stamp over the encoder samples.
         K: Ticks on the grid.
+        exposure_shift: The camera's time offset in ticks (the topic spec's ``[camera]
+            time_offset``, :meth:`~amsfe_sym.topics.spec.TopicSpec.exposure_shift`): a frame
+            stamped at tick k was exposed at tick k - exposure_shift.
     """
 
     path: Path
@@ -41,6 +44,7 @@ class OnGrid:
     grid: TickGrid
     clock: ClockOffset
     K: int
+    exposure_shift: int = 0
 
     def on_stamp_clock(self, topic: str) -> IntArray:
         """``topic``'s log times moved onto the header stamps' clock [ns] (its arrivals, as
@@ -131,12 +135,13 @@ def held_effort(log: OnGrid, spec: LogSpec, use: RoleUse, n: int) -> HeldEffort:
 
 
 def camera_frames(log: OnGrid, use: RoleUse) -> list[CameraFrame]:
-    """Each camera frame at its exposure step and its arrival tick, in arrival order; the
-    frames not used counted by reason."""
+    """Each camera frame at its exposure step (its stamp's tick less ``log.exposure_shift``)
+    and its arrival tick, in arrival order; the frames not used counted by reason."""
     topic = log.plan.roles["camera"]
     pts = log.decoded[topic]
     log_ns = log.on_stamp_clock(topic)
     kappa, on = log.grid.steps(pts.stamp_ns)
+    kappa = kappa - log.exposure_shift
     arrive = log.grid.arrivals(log_ns)
     frames: list[CameraFrame] = []
     seen: set[int] = set()

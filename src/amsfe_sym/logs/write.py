@@ -196,8 +196,11 @@ def run_bag_filler(
                     if camera is not None:
                         kap = int(kappa)
                         x = res.x_true[kap]
-                        msg, info, mark = image_messages(
-                            camera, _ns(kap * lib.T), x[lib.layout["q"]], x[lib.layout["theta"]]
+                        msg, info, mark = image_messages(  # stamped as the pixel topic
+                            camera,
+                            _ns(kap * lib.T + stamp_offset),
+                            x[lib.layout["q"]],
+                            x[lib.layout["theta"]],
                         )
                         bag.write(camera.image_topic, camera.image_type, t, msg)
                         bag.write(_INFO, "sensor_msgs/msg/CameraInfo", t, info)

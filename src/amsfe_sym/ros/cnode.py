@@ -66,7 +66,9 @@ def c_node_refusal(
     """Why the C node cannot run this configuration (None: it can): the C node reads an
     effort topic of kind ``applied`` only (the estimators of a joint torque or of an
     unknown input are the Python node's) and runs the controllers the C runtime has, on the
-    library's C estimator (``--runtime python``, the Python estimator: the Python node)."""
+    library's C estimator (``--runtime python``, the Python estimator: the Python node); a
+    camera ``[camera] time_offset`` is the Python node's too (the C node does not shift
+    the frames' stamps)."""
     from amsfe_sym.runtime.compiled_loop import CONTROLLER_CODES
 
     if not compiled:
@@ -76,6 +78,11 @@ def c_node_refusal(
     kind = spec.effort_kind or "applied"
     if kind != "applied":
         return f"effort kind {kind!r} (the C node reads the applied torque only)"
+    if spec.camera_time_offset != 0.0:
+        return (
+            f"[camera] time_offset = {spec.camera_time_offset:g} s (the C node takes frames "
+            "at their header stamps; the Python node applies it)"
+        )
     return None
 
 

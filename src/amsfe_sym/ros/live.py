@@ -80,6 +80,8 @@ class LiveLoop:
             and the joint torque held at its tick, :meth:`joint_torque`); None: ``applied``.
         watchdog: The watchdogs' bounds (:meth:`watch` judges each sample by them); None:
             the defaults.
+        exposure_shift: The camera's time offset in ticks (the topic spec's ``[camera]
+            time_offset``): a frame stamped at tick k was exposed at tick k - exposure_shift.
 
     Raises:
         ConfigError: an oracle controller (it reads the true state), or what the builders
@@ -97,8 +99,10 @@ class LiveLoop:
         max_gap_steps: int = 5,
         effort: EffortSpec | None = None,
         watchdog: WatchdogBounds | None = None,
+        exposure_shift: int = 0,
     ) -> None:
         self.sc, self.lib = sc, lib
+        self._exposure_shift = exposure_shift
         self.n, self.N, self.T = lib.n, lib.N, lib.T
         self._T_ns = round(lib.T * 1e9)
         self._tol, self._max_gap = grid_tolerance, max_gap_steps
@@ -193,6 +197,8 @@ class LiveLoop:
             self._skip("frame exposed before the first encoder sample")
             return
         kappa = self.tick_of(exposure_ns)
+        if kappa is not None:  # the camera's time offset ([camera] time_offset) in ticks
+            kappa -= self._exposure_shift
         if kappa is None:
             self._skip("frame exposure off the tick grid")
         elif kappa < 0:

@@ -303,7 +303,8 @@ def waiting_line(node: Any, topic: str, msgtype: str, seconds: float) -> str:
 def spec_parameters(node: Any, spec: TopicSpec, joints: tuple[str, ...]) -> TopicSpec:
     """The topic spec as ROS parameters of ``node`` (declared with ``spec``'s values as
     defaults: ``topics.<role>``, ``joints.names``, ``joints.positions``, ``effort.kind``,
-    ``timing.*``, ``qos.reliability``, ``qos.depth``, ``watchdog.*``; the ``[effort]`` noise
+    ``timing.*``, ``qos.reliability``, ``qos.depth``, ``watchdog.*``, ``camera.time_offset``;
+    the ``[effort]`` noise
     keys and the ``[filter]`` keys are the spec's), read back and checked as a spec file is: a
     value of another type, or ``joints.names`` of another count than ``joints``, refused in
     one line (:func:`check_parameters` refuses the names declared nowhere).
@@ -360,6 +361,11 @@ def spec_parameters(node: Any, spec: TopicSpec, joints: tuple[str, ...]) -> Topi
             "50" if key in WATCHDOG_COUNTS else "0.1",
         )
         for key in WATCHDOG_KEYS
+    }
+    data["camera"] = {  # the camera's time offset ([camera] time_offset, docs/calibrate.md)
+        "time_offset": _declared(
+            node, "camera.time_offset", spec.camera_time_offset, "a number [s]", "0.025"
+        )
     }
     if spec.filter_options:  # the [filter] keys: the file's (as the [effort] noise keys)
         data["filter"] = dict(spec.filter_options)

@@ -137,6 +137,7 @@ class _Node:
             max_gap_steps=spec.max_gap_steps,
             effort=live_effort(spec),
             watchdog=spec.watchdog.with_timeout(options.encoder_timeout),
+            exposure_shift=spec.exposure_shift(lib.T),
         )
         self.n = lib.n
         self.std_every = std_every_parameter(node, options.std_every)

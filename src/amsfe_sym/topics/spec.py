@@ -29,6 +29,7 @@ depth = 100                       # history depth (KEEP_LAST)
 
 [camera]                          # when [topics] camera is an image topic (docs/camera.md)
 info = "/camera/camera_info"      # its CameraInfo (default: the log's one CameraInfo topic)
+time_offset = 0.025               # [s] header stamp - exposure (amsfe calibrate measures it)
 
 [marker]                          # what the images are searched for (amsfe_sym.vision.spec)
 dictionary = "DICT_APRILTAG_36h11"
@@ -67,6 +68,8 @@ from amsfe_sym.vision.spec import MarkerSpec, parse_camera_section, parse_marker
 __all__ = ["FILTER_KEYS", "FROM_LOG", "TopicSpec", "parse_topic_spec", "read_topic_spec"]
 
 _TOPIC_KEYS = tuple(ROLES)
+#: Largest |[camera] time_offset| [s] a topic spec takes (a USB camera's ~0.1 s, ten times).
+CAMERA_TIME_OFFSET_MAX = 1.0
 _ALIASES = {"torque": "effort"}
 
 
@@ -101,6 +104,10 @@ class TopicSpec:
         reliability: QoS reliability of live topics: ``reliable`` or ``best_effort``.
         depth: QoS history depth of live topics (KEEP_LAST).
         camera_info: The CameraInfo topic of an image camera topic (None: the log's one).
+        camera_time_offset: How much later the camera's header stamps are than its
+            exposures [s] (``[camera] time_offset``, what ``amsfe calibrate`` measures): a
+            frame stamped ``s`` was exposed at ``s - time_offset``, rounded to the nearest
+            tick (:meth:`exposure_shift`).
         marker: The marker an image camera topic is searched for.
         watchdog: The bounds of a live node's watchdogs (``[watchdog]``,
             :class:`~amsfe_sym.topics.watchdog.WatchdogBounds`).
@@ -129,6 +136,7 @@ class TopicSpec:
     reliability: Literal["reliable", "best_effort"] = "reliable"
     depth: int = 100
     camera_info: str | None = None
+    camera_time_offset: float = 0.0
     marker: MarkerSpec = field(default_factory=MarkerSpec)
     watchdog: WatchdogBounds = field(default_factory=WatchdogBounds)
     source: Path | None = field(default=None, compare=False)
@@ -143,6 +151,12 @@ class TopicSpec:
         """Every role among ``roles`` that ``topic`` plays (a driver's ``/joint_states`` plays
         ``encoders`` and ``effort`` at once)."""
         return [r for r in roles if self.topic(r) == topic]
+
+    def exposure_shift(self, T: float) -> int:
+        """The camera's time offset in whole ticks of ``T`` [s] (rounded to the nearest):
+        a frame stamped at tick k was exposed at tick ``k - exposure_shift(T)``.  Frames are
+        fused at ticks, so the remainder (at most T/2) is not applied."""
+        return round(self.camera_time_offset / T)
 
     @property
     def torque(self) -> str:
@@ -184,7 +198,7 @@ _SECTIONS = {
     "filter": FILTER_KEYS,
     "timing": ("grid_tolerance", "max_gap_steps"),
     "qos": ("reliability", "depth"),
-    "camera": ("info",),
+    "camera": ("info", "time_offset"),
     "marker": ("dictionary", "id", "size", "point", "pixel_std"),
     "watchdog": WATCHDOG_KEYS,
 }
@@ -268,6 +282,15 @@ def parse_topic_spec(data: dict[str, Any], where: str = "topic spec") -> TopicSp
             raise ConfigError(describe(f"{where} [{section}]", "a table", repr(table), "fix it"))
         if section == "camera":
             out["camera_info"] = parse_camera_section(table, f"{where} [camera]")
+            if "time_offset" in table:
+                out["camera_time_offset"] = read_in_range(
+                    table["time_offset"],
+                    f"{where} [camera] time_offset",
+                    ConfigError,
+                    -CAMERA_TIME_OFFSET_MAX,
+                    CAMERA_TIME_OFFSET_MAX,
+                    "write the camera's stamp - exposure in seconds (amsfe calibrate prints it)",
+                )
             continue
         if section == "marker":
             out["marker"] = parse_marker(table, f"{where} [marker]")

@@ -122,9 +122,11 @@ def parse_camera_section(table: dict[str, Any], where: str = "[camera]") -> str 
     Raises:
         ConfigError: an unknown key, or a topic name that does not start with ``/``.
     """
-    bad = sorted(set(table) - {"info"})
+    bad = sorted(set(table) - {"info", "time_offset"})  # time_offset: topics.spec reads it
     if bad:
-        raise ConfigError(describe(where, "keys among ['info']", str(bad), "drop them"))
+        raise ConfigError(
+            describe(where, "keys among ['info', 'time_offset']", str(bad), "drop them")
+        )
     if "info" not in table:
         return None
     v = table["info"]
