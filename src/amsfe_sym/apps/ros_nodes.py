@@ -59,10 +59,20 @@ def _common(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _impl_argument(p: argparse.ArgumentParser, help: str) -> None:
+def _impl_argument(
+    p: argparse.ArgumentParser, help: str, exe: str | None = None, exe_help: str = ""
+) -> None:
     """``--impl auto|c|python``: the C path on rcl, the Python reference, or the C one when
-    it builds and runs this configuration (``auto``, the default)."""
+    it builds and runs this configuration (``auto``, the default); with ``exe`` (``node`` or
+    ``arm``) also ``--EXE-exe FILE``, that C program built elsewhere (``exe_help``: where)."""
     p.add_argument("--impl", choices=("auto", "c", "python"), default="auto", help=help)
+    if exe is not None:
+        p.add_argument(
+            f"--{exe}-exe",
+            default=None,
+            metavar="FILE",
+            help=f"the C {exe} built elsewhere ({exe_help}) instead of the wheel build",
+        )
 
 
 def _scenario(args: argparse.Namespace, **over: Any) -> Any:
@@ -114,13 +124,8 @@ def add_sim_node_arguments(p: argparse.ArgumentParser) -> None:
         p,
         "the arm in C on rcl (a real-time clock; auto: when it builds) or in Python "
         '(docs/live-load.md, "The C arm")',
-    )
-    p.add_argument(
-        "--arm-exe",
-        default=None,
-        metavar="FILE",
-        help="the C arm built elsewhere (cmake --build: BUILD/amsfe_arm) instead of the wheel "
-        "build",
+        "arm",
+        "cmake --build: BUILD/amsfe_arm",
     )
 
 
@@ -254,13 +259,8 @@ def add_node_arguments(p: argparse.ArgumentParser) -> None:
         p,
         "the per-sample path: the C node on rcl (auto: when it builds and runs this "
         "configuration) or the Python reference (docs/live-control.md)",
-    )
-    p.add_argument(
-        "--node-exe",
-        default=None,
-        metavar="FILE",
-        help="the C node built elsewhere (cmake --build: BUILD/amsfe_node; colcon: "
-        "install/amsfe_node/lib/amsfe_node/amsfe_node) instead of the wheel build",
+        "node",
+        "cmake --build: BUILD/amsfe_node; colcon: install/amsfe_node/lib/amsfe_node/amsfe_node",
     )
 
 

@@ -31,8 +31,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.core.interrupts import DeferredSignals
 from amsfe_sym.errors import RosError, describe
 from amsfe_sym.ros.arm import SimArm
@@ -52,8 +52,6 @@ from amsfe_sym.scenario import Scenario
 from amsfe_sym.topics import TopicSpec
 
 __all__ = ["SimNodeOptions", "SimNodeReport", "run_sim_node"]
-
-FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from amsfe_sym.apps.plots.style import (
     converged_limit,
@@ -29,11 +28,11 @@ from amsfe_sym.apps.plots.style import (
     save,
     title,
 )
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.logs.read import RobotLog
 
 __all__ = ["RUG_MAX", "NisSeries", "plot_log"]
 
-FloatArray = NDArray[np.float64]
 
 #: Camera frames marked by a tick at the bottom of each panel up to this many (more make a
 #: solid bar: the title gives their count and mean period instead).
