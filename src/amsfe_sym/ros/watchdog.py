@@ -45,23 +45,7 @@ ticks on one command), and the node catches its backlog up in milliseconds: the
 innovations and the path of that backlog trip long before ``deadline_misses`` late samples
 are counted.
 
-Which command the arm applied (``actuation``).  A command reaches the arm late, or not at
-all, in free running: the arm then applies the newest one it has (an older one), or holds
-zero before the first; what it applied over tick j is one of the node's commands of ticks
-<= j, and never an older one than it applied before (one publisher, in order).  So the
-watchdog keeps the commands of the last :data:`ACTUATION_RING` ticks (each sample's ``u``)
-and the command the arm was last seen applying (zero before the first match); the
-candidates for the torque a reported over tick j are that one and the kept commands after
-it up to tick j.  The distance of a candidate c is max_j |a_j - c_j| / s_j, s_j the joint's
-actuator limit u_max,j (1 N m without one).  The nearest candidate (the oldest of equals)
-within ``actuation_error`` is the command applied (it becomes the last seen); none within:
-a mismatch, its value the smallest distance.  A hold after ``actuation_ticks`` mismatches in
-a row.  Judged only when the sample has a command
-(the node publishes commands) and a reported torque (new since the last sample, finite), and
-the candidates are those kept: a command more than :data:`ACTUATION_RING` ticks older than
-the node's newest is not one the arm may still apply (the node itself is then that far
-behind, which the ``deadline`` check holds long before).  The search is short: the last
-seen command follows the arm, so the candidates are the commands still on their way to it.
+Which command the arm applied (``actuation``): :mod:`amsfe_sym.ros.watchdog_actuation`.
 
 :meth:`Watchdog.idle` holds when no sample came for ``encoder_timeout``: ``node_stalled``
 when the node's own previous call is that old (it was not scheduled, nothing tells about the
@@ -80,6 +64,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.errors import ConfigError, describe
+from amsfe_sym.ros.watchdog_actuation import ACTUATION_RING, ActuationJudge
 from amsfe_sym.ros.watchdog_reasons import CAUSE_TEXT, REASON_NAMES, Cause, Reason
 from amsfe_sym.topics.watchdog import WatchdogBounds
 
@@ -97,9 +82,6 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
-
-#: Ticks of commands the ``actuation`` check keeps (``AMSFE_WD_ACTUATION_RING``).
-ACTUATION_RING = 1024
 
 
 @dataclass(frozen=True)
@@ -302,12 +284,7 @@ class Watchdog:
         self._late_pos, self._late_count, self._late_filled = 0, 0, 0
         self._nis[:] = [0.0] * len(self._nis)
         self._late[:] = [0] * len(self._late)
-        self._ring_k = [-1] * ACTUATION_RING  # the tick of each kept command, by k % RING
-        self._ring_u: list[list[float]] = [[0.0] * self.config.n] * ACTUATION_RING
-        self._cmd_newest = -1
-        self._matched = [0.0] * self.config.n  # the command last seen applied (zero first)
-        self._matched_k = -1
-        self._act_run = 0
+        self._act = ActuationJudge(self.config.n, self._scale, self.config.bounds.actuation_error)
 
     @property
     def reason(self) -> Reason:
@@ -342,7 +319,7 @@ class Watchdog:
             self._last_done = tick.done
             self._last_k = tick.k
             s.samples += 1
-            self._keep_command(tick)
+            self._act.keep(tick.k, tick.u)
             return Reason.NONE
         s.samples += 1
         rel = float(tick.stamp_ns - self._stamp0) * 1e-9
@@ -385,10 +362,11 @@ class Watchdog:
             trips.append(
                 Hold(Reason.DEADLINE, Cause.NONE, k, misses, float(b.deadline_misses), gap)
             )
-        mismatch = self._actuation(tick)  # 7
-        if mismatch is not None and self._act_run >= b.actuation_ticks:
+        mismatch = self._act.judge(tick.k, tick.u, tick.applied, tick.applied_k)  # 7
+        s.actuation_judged, s.max_actuation = self._act.judged, self._act.max_distance
+        if mismatch is not None and self._act.run >= b.actuation_ticks:
             trips.append(Hold(Reason.ACTUATION, Cause.NONE, k, mismatch, b.actuation_error, gap))
-        self._keep_command(tick)
+        self._act.keep(tick.k, tick.u)
         if math.isfinite(tick.encoder_nis):  # 8
             self._push_nis(tick.encoder_nis / c.ne)
         for v in tick.frame_nis:
@@ -415,53 +393,6 @@ class Watchdog:
             self.hold = trips[0]
             return self.hold.reason
         return Reason.NONE
-
-    def _keep_command(self, tick: WatchdogTick) -> None:
-        """The sample's command into the ring (none: nothing)."""
-        if tick.u is None or tick.k < 0:
-            return
-        slot = tick.k % ACTUATION_RING
-        self._ring_k[slot] = tick.k
-        self._ring_u[slot] = [float(v) for v in tick.u]
-        self._cmd_newest = max(self._cmd_newest, tick.k)
-
-    def _distance(self, a: list[float], c: list[float]) -> float:
-        """max_j |a_j - c_j| / s_j (the C's loop: the first joint, then larger ones)."""
-        d = abs(a[0] - c[0]) / self._scale[0]
-        for j in range(1, self.config.n):
-            dj = abs(a[j] - c[j]) / self._scale[j]
-            if dj > d:
-                d = dj
-        return d
-
-    def _actuation(self, tick: WatchdogTick) -> float | None:
-        """Judge the reported torque (module docstring): None when not judged or matched
-        (the run of mismatches reset), else the mismatch (the run counted)."""
-        if tick.u is None or tick.applied is None or tick.applied_k < 0:
-            return None
-        a = [float(v) for v in tick.applied]
-        if len(a) != self.config.n or not all(math.isfinite(v) for v in a):
-            return None
-        newest = self._cmd_newest
-        s, bound = self.seen, self.config.bounds.actuation_error
-        s.actuation_judged += 1
-        last = min(tick.applied_k, newest)
-        best, best_k, best_c = self._distance(a, self._matched), self._matched_k, self._matched
-        i = max(self._matched_k + 1, newest - ACTUATION_RING + 1)
-        while i <= last:
-            slot = i % ACTUATION_RING
-            if self._ring_k[slot] == i:
-                d = self._distance(a, self._ring_u[slot])
-                if d < best:
-                    best, best_k, best_c = d, i, self._ring_u[slot]
-            i += 1
-        s.max_actuation = max(s.max_actuation, best)
-        if best <= bound:  # the command applied: the nearest (the oldest of equals)
-            self._matched, self._matched_k = best_c, best_k
-            self._act_run = 0
-            return None
-        self._act_run += 1
-        return best
 
     def idle(self, now: float, publishers: int = -1) -> Reason:
         """The wait for a sample timed out at wall clock ``now`` [s]; ``publishers``: the
