@@ -331,8 +331,11 @@ def _messy_messages(sc: Any, lib: Any) -> list[tuple[Any, ...]]:
     return msgs
 
 
-def _replay(tmp_path: Path, sc: Any, lib: Any, msgs: list[tuple[Any, ...]]) -> list[str]:
-    """The C node's live loop (``amsfe_node --replay``, no rcl) on ``msgs``: its lines."""
+def _replay(
+    tmp_path: Path, sc: Any, lib: Any, msgs: list[tuple[Any, ...]], spec: Any = None
+) -> list[str]:
+    """The C node's live loop (``amsfe_node --replay``, no rcl) on ``msgs`` (``spec``: the
+    topic spec, default TopicSpec()): its lines."""
     from amsfe_sym.ros.cnode import build_node, write_params
     from amsfe_sym.topics import TopicSpec
 
@@ -348,7 +351,8 @@ def _replay(tmp_path: Path, sc: Any, lib: Any, msgs: list[tuple[Any, ...]]) -> l
     events.write_text("\n".join(lines) + "\n")
     opts = {"end_k": -1, "std_every": 10, "hold": "gravity", "encoder_timeout": 0.5,
             "subscriber_wait": 1.0, "record": None, "sched_priority": 0}  # fmt: skip
-    params = write_params(tmp_path, sc, lib, TopicSpec(), controller=True, options=opts)
+    spec = TopicSpec() if spec is None else spec
+    params = write_params(tmp_path, sc, lib, spec, controller=True, options=opts)
     exe = build_node(lib).path
     done = subprocess.run([str(exe), str(params), "--replay", str(events)],
                           capture_output=True, text=True, timeout=120)  # fmt: skip
@@ -356,21 +360,26 @@ def _replay(tmp_path: Path, sc: Any, lib: Any, msgs: list[tuple[Any, ...]]) -> l
     return done.stdout.splitlines()
 
 
-def test_c_live_loop_is_the_python_live_loop(tmp_path: Path) -> None:
+@pytest.mark.parametrize("shift", [0, 3])
+def test_c_live_loop_is_the_python_live_loop(tmp_path: Path, shift: int) -> None:
     """The C node's live loop (``amsfe_live.c``, run by ``amsfe_node --replay`` without rcl)
     and the Python LiveLoop on the same messy message stream (early, duplicated, off-grid,
     missing, NaN and late messages, zero stamps, stamps 1 h ahead and 0.3 s back): the same
     estimates and commands at every tick (1e-9), the same ticks skipped, the same skip counts
-    by reason and the same decisions."""
+    by reason and the same decisions; with the camera's ``[camera] time_offset`` of
+    ``shift`` ticks too (frames taken as exposed ``shift`` ticks before their stamps)."""
     pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (pip install -e '.[ros]')")
     from amsfe_sym.ros.live import LiveLoop
+    from amsfe_sym.topics.spec import parse_topic_spec
 
     sc = load_scenario("paper-sim").with_overrides(duration=0.3)
     lib = library_for(sc)
     msgs = _messy_messages(sc, lib)
-    out = _replay(tmp_path, sc, lib, msgs)
+    spec = parse_topic_spec({"camera": {"time_offset": shift * lib.T}})
+    assert spec.exposure_shift(lib.T) == shift
+    out = _replay(tmp_path, sc, lib, msgs, spec)
     # the Python reference on the same messages
-    loop = LiveLoop(sc, lib, controller=True)
+    loop = LiveLoop(sc, lib, controller=True, exposure_shift=shift)
     want: list[str | np.ndarray] = []
     for m in msgs:
         if m[0] == "frame":

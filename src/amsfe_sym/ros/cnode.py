@@ -66,9 +66,7 @@ def c_node_refusal(
     """Why the C node cannot run this configuration (None: it can): the C node reads an
     effort topic of kind ``applied`` only (the estimators of a joint torque or of an
     unknown input are the Python node's) and runs the controllers the C runtime has, on the
-    library's C estimator (``--runtime python``, the Python estimator: the Python node); a
-    camera ``[camera] time_offset`` is the Python node's too (the C node does not shift
-    the frames' stamps)."""
+    library's C estimator (``--runtime python``, the Python estimator: the Python node)."""
     from amsfe_sym.runtime.compiled_loop import CONTROLLER_CODES
 
     if not compiled:
@@ -78,11 +76,6 @@ def c_node_refusal(
     kind = spec.effort_kind or "applied"
     if kind != "applied":
         return f"effort kind {kind!r} (the C node reads the applied torque only)"
-    if spec.camera_time_offset != 0.0:
-        return (
-            f"[camera] time_offset = {spec.camera_time_offset:g} s (the C node takes frames "
-            "at their header stamps; the Python node applies it)"
-        )
     return None
 
 
@@ -181,6 +174,7 @@ def write_params(
         f"T {float(lib.T)!r}",
         f"grid_tolerance {spec.grid_tolerance!r}",
         f"max_gap_steps {spec.max_gap_steps}",
+        f"exposure_shift {spec.exposure_shift(lib.T)}",
         f"controller {int(controller)}",
         f"end_k {options['end_k']}",
         f"std_every {options['std_every']}",

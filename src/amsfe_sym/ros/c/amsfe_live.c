@@ -115,6 +115,7 @@ void live_frame_in(live_loop *L, long long exposure_ns, const double z[2], long 
   }
   int ok;
   long kappa = live_tick_of(L, exposure_ns, &ok);
+  if (ok) kappa -= L->exposure_shift; /* [camera] time_offset in ticks (LiveLoop.frame) */
   if (!ok) {
     skip(L, SKIP_FRAME_OFF_GRID, 1);
   } else if (kappa < 0) {

@@ -57,6 +57,8 @@ typedef struct {
   long long T_ns;
   double tol;            /* grid tolerance [T] */
   int max_gap;           /* missing samples predicted through */
+  long exposure_shift;   /* the camera's time offset in ticks ([camera] time_offset): a frame
+                            stamped at tick k was exposed at tick k - exposure_shift */
   amsfe_params ep;       /* the estimator's block (x0's motor part from the first sample) */
   double inverse_tol;    /* amsfe_est_set_inverse_tolerance (oosm's inverse backward map) */
   amsfe_ctrl_params cp;  /* the controller's block */

@@ -189,6 +189,7 @@ static void configure(node_t *s, const char *path) {
   s->T = pf_double(pf, "T");
   L->tol = pf_double(pf, "grid_tolerance");
   L->max_gap = (int)pf_long(pf, "max_gap_steps");
+  L->exposure_shift = pf_long(pf, "exposure_shift");
   L->controller = (int)pf_long(pf, "controller");
   s->end_k = (long)pf_long(pf, "end_k");
   s->std_every = (int)pf_long(pf, "std_every");
