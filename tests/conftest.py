@@ -147,6 +147,29 @@ def one_chord_2link(tmp_path_factory: pytest.TempPathFactory) -> ModelLibrary:
     return ModelLibrary(gen.out_dir)
 
 
+@pytest.fixture(scope="session")
+def paper_1link_build(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """paper_1link compiled once per session (per xdist worker) into a folder of its own:
+    ``paper_1link/`` and the compiled objects' cache ``.objects/``.  The tests of the cache
+    copy it (:func:`copy_build`) and damage their copy: a rebuild of the copy then compiles
+    nothing again but links (the object cache), as a user's rebuild does."""
+    out = tmp_path_factory.mktemp("paper_1link_build")
+    generate("paper_1link", out=out)
+    return out
+
+
+def copy_build(build: Path, dest: Path, objects_only: bool = False) -> Path:
+    """A copy of :func:`paper_1link_build`'s folder in ``dest`` (only ``.objects/`` if
+    ``objects_only``); ``dest``."""
+    import shutil
+
+    dest.mkdir(parents=True, exist_ok=True)
+    for item in build.iterdir():
+        if item.is_dir() and (not objects_only or item.name == ".objects"):
+            shutil.copytree(item, dest / item.name)
+    return dest
+
+
 @pytest.fixture(scope="module")
 def paper_sim() -> tuple[Scenario, ModelLibrary]:
     """paper-sim and its library (compiled once per session: the content-hash cache); a
