@@ -147,6 +147,29 @@ def one_chord_2link(tmp_path_factory: pytest.TempPathFactory) -> ModelLibrary:
     return ModelLibrary(gen.out_dir)
 
 
+@pytest.fixture(scope="session")
+def paper_1link_build(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """paper_1link compiled once per session (per xdist worker) into a folder of its own:
+    ``paper_1link/`` and the compiled objects' cache ``.objects/``.  The tests of the cache
+    copy it (:func:`copy_build`) and damage their copy: a rebuild of the copy then compiles
+    nothing again but links (the object cache), as a user's rebuild does."""
+    out = tmp_path_factory.mktemp("paper_1link_build")
+    generate("paper_1link", out=out)
+    return out
+
+
+def copy_build(build: Path, dest: Path, objects_only: bool = False) -> Path:
+    """A copy of :func:`paper_1link_build`'s folder in ``dest`` (only ``.objects/`` if
+    ``objects_only``); ``dest``."""
+    import shutil
+
+    dest.mkdir(parents=True, exist_ok=True)
+    for item in build.iterdir():
+        if item.is_dir() and (not objects_only or item.name == ".objects"):
+            shutil.copytree(item, dest / item.name)
+    return dest
+
+
 @pytest.fixture(scope="module")
 def paper_sim() -> tuple[Scenario, ModelLibrary]:
     """paper-sim and its library (compiled once per session: the content-hash cache); a
@@ -205,11 +228,6 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
 
 
 # ------------------------------------------------------------- shared lockstep runs over DDS
-#: The xdist group of the tests that share :func:`lockstep_runs`' runs (``--dist loadgroup``,
-#: pyproject's addopts): one worker runs them all, so each run is made once per session.
-LOCKSTEP_GROUP = "lockstep-runs"
-
-
 @dataclass(frozen=True)
 class LockstepRun:
     """One ``amsfe sim-node --lockstep`` + ``amsfe node --controller amsfe --record`` run over
@@ -222,54 +240,79 @@ class LockstepRun:
 
 
 class _LockstepRuns:
+    """The runs, made once per test session in a folder every xdist worker of the session
+    sees: the first test to ask makes a run while holding its lock (``fcntl.flock``), the
+    others wait for it and read its record."""
+
     def __init__(self, folder: Path) -> None:
         self._folder = folder
-        self._runs: dict[tuple[str, str, str | None, float], LockstepRun | BaseException] = {}
+        self._read: dict[str, LockstepRun] = {}
 
     def get(
         self, scenario: str, node: str, arm: str | None = None, duration: float = 2.0
     ) -> LockstepRun:
         """The run of ``amsfe node SCENARIO --impl NODE`` and ``amsfe sim-node SCENARIO
-        --lockstep [--impl ARM]`` (None: the arm's default) for ``duration`` s, made at the
-        first call (a failed run fails every test that asks for it, it is not made again)."""
-        key = (scenario, node, arm, duration)
-        if key not in self._runs:
-            try:
-                self._runs[key] = self._make(*key)
-            except (Exception, pytest.skip.Exception) as err:  # kept, raised to each asker
-                self._runs[key] = err
-        got = self._runs[key]
-        if isinstance(got, BaseException):
-            raise got
-        return got
+        --lockstep [--impl ARM]`` (None: the arm's default) for ``duration`` s.  A run that
+        failed fails every test that asks for it and is not made again."""
+        import fcntl
 
-    def _make(self, scenario: str, node: str, arm: str | None, duration: float) -> LockstepRun:
+        name = f"{scenario}-{node}-{arm or 'default'}-{duration:g}"
+        if name in self._read:
+            return self._read[name]
+        folder = self._folder / name
+        done = folder / "done.json"
+        with open(self._folder / f"{name}.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file is closed
+            if not done.exists():
+                folder.mkdir(exist_ok=True)
+                try:
+                    texts = self._make(folder, scenario, node, arm, duration)
+                except Exception as err:
+                    done.write_text(json.dumps({"error": f"{type(err).__name__}: {err}"}))
+                    raise
+                done.write_text(json.dumps({"node": texts[0], "arm": texts[1]}))
+        made = json.loads(done.read_text())
+        if "error" in made:
+            pytest.fail(f"the shared lockstep run {name} failed: {made['error']}")
         from tests.test_node_record import _bag
+
+        rec = folder / "rec"
+        self._read[name] = LockstepRun(_bag(rec), made["node"], made["arm"], rec)
+        return self._read[name]
+
+    @staticmethod
+    def _make(
+        folder: Path, scenario: str, node: str, arm: str | None, duration: float
+    ) -> tuple[str, str]:
+        """Run the two processes (a skip, the [ros] extra missing, is raised as it is)."""
         from tests.test_ros import PATIENT_ARM, PATIENT_NODE, _finish, _ros_env, _start
 
-        folder = self._folder / f"{scenario}-{node}-{arm or 'default'}-{duration:g}"
-        folder.mkdir()
         env = _ros_env(folder)
-        rec = folder / "rec"
         d = f"{duration:g}"
         arm_args = ["--impl", arm] if arm else []
         procs = []
         try:
             procs.append(_start(env, "node", scenario, "--controller", "amsfe", "--impl", node,
-                                "--duration", d, "--record", str(rec), *PATIENT_NODE))  # fmt: skip
+                                "--duration", d, "--record", str(folder / "rec"),
+                                *PATIENT_NODE))  # fmt: skip
             procs.append(_start(env, "sim-node", scenario, "--lockstep", "--duration", d,
                                 *arm_args, *PATIENT_ARM))  # fmt: skip
         finally:
             results = _finish(procs, 180.0)
         for code, text in results:
             assert code == 0, text
-        return LockstepRun(_bag(rec), results[0][1], results[1][1], rec)
+        return results[0][1], results[1][1]
 
 
 @pytest.fixture(scope="session")
 def lockstep_runs(tmp_path_factory: pytest.TempPathFactory) -> _LockstepRuns:
     """Lockstep runs over DDS shared by the tests that assert on them (tests/test_ros.py,
     test_cnode.py, test_carm.py): ``lockstep_runs.get(scenario, node_impl, arm_impl,
-    duration)``, each made once per session; mark a test using it
-    ``@pytest.mark.xdist_group(LOCKSTEP_GROUP)`` so that its runs are this worker's."""
-    return _LockstepRuns(tmp_path_factory.mktemp("lockstep"))
+    duration)``, each made once per session, whichever xdist worker asks first (the
+    workers' base folders share the session's parent; ``-n 0``: a folder of its own)."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        folder = tmp_path_factory.getbasetemp().parent / "lockstep-runs"
+        folder.mkdir(exist_ok=True)
+    else:
+        folder = tmp_path_factory.mktemp("lockstep-runs")
+    return _LockstepRuns(folder)

@@ -21,6 +21,7 @@ import pytest
 
 from amsfe_sym.apps.cli import main
 from amsfe_sym.scenario import scenarios_dir
+from tests.conftest import copy_build
 
 BAD_URDFS = Path(__file__).parent / "data" / "bad_urdfs"
 PAPER_SIM = (scenarios_dir() / "paper-sim.toml").read_text()
@@ -424,10 +425,13 @@ def test_ctrl_c_during_generate_leaves_nothing(tmp_path: Path, stage: str) -> No
 
 
 def test_damaged_library_is_rebuilt_by_check(
-    workdir: Path, capsys: pytest.CaptureFixture[str]
+    workdir: Path, capsys: pytest.CaptureFixture[str], paper_1link_build: Path
 ) -> None:
-    """A library with flipped bytes (same size) used to segfault check; now it is rebuilt."""
+    """A library with flipped bytes (same size) used to segfault check; now it is rebuilt.
+    (The library: a copy of the session's build, tests/conftest.py's ``paper_1link_build``.)"""
+    copy_build(paper_1link_build, workdir / "generated")
     assert main(["generate", "paper_1link"]) == 0
+    assert "up to date (cached)" in capsys.readouterr().out  # the copy is the cache
     lib = workdir / "generated" / "paper_1link" / "libpaper_1link.so"
     data = bytearray(lib.read_bytes())
     for i in range(len(data) // 2, len(data) // 2 + 64):

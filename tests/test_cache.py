@@ -1,6 +1,8 @@
 """The generation cache trusts only what it verified (issue 10, deliverable 2).
 
-Each test builds the 1-link arm (about 2 s) into its own temporary folder.
+Each test has the 1-link arm's build in its own temporary folder: a copy of the one build of
+the session (tests/conftest.py's ``paper_1link_build``, with its object cache: a rebuild
+links and compiles nothing again).
 """
 
 from __future__ import annotations
@@ -15,14 +17,16 @@ import pytest
 from amsfe_sym.codegen import clean_stale_tmp, generate
 from amsfe_sym.errors import CodegenError
 from amsfe_sym.runtime.library import ModelLibrary, file_sha256
+from tests.conftest import copy_build
 
 ROBOT = "paper_1link"
 
 
 @pytest.fixture()
-def built(tmp_path: Path) -> Path:
-    """A fresh build of the 1-link arm; returns its ``generated/<name>/`` folder."""
-    return generate(ROBOT, out=tmp_path).out_dir
+def built(tmp_path: Path, paper_1link_build: Path) -> Path:
+    """A build of the 1-link arm of this test's own (a copy of the session's); returns its
+    ``generated/<name>/`` folder."""
+    return copy_build(paper_1link_build, tmp_path) / ROBOT
 
 
 def _overwrite(path: Path, data: bytes) -> None:
@@ -82,7 +86,7 @@ def test_manifest_without_hash_is_refused(built: Path) -> None:
     assert not generate(ROBOT, out=built.parent).reused  # and generate rebuilds it
 
 
-def test_stale_temporary_folders_are_cleaned(tmp_path: Path) -> None:
+def test_stale_temporary_folders_are_cleaned(tmp_path: Path, paper_1link_build: Path) -> None:
     """Only a build folder this tool marked, whose process is gone, is removed; an unmarked
     look-alike (a user's folder), a running build and another robot's name are kept."""
     from amsfe_sym.core.folders import TMP_MARKER, make_tmp
@@ -100,6 +104,7 @@ def test_stale_temporary_folders_are_cleaned(tmp_path: Path) -> None:
     removed = clean_stale_tmp(tmp_path, ROBOT)
     assert removed == [dead]
     assert live.is_dir() and other.is_dir() and unmarked.is_dir()
+    copy_build(paper_1link_build, tmp_path, objects_only=True)  # (compiled objects: a link)
     generate(ROBOT, out=tmp_path)
     kept = [ROBOT, live.name, other.name, unmarked.name, ".objects"]  # .objects: compile_units
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(kept)

@@ -23,7 +23,6 @@ import pytest
 from amsfe_sym.codegen import library_for
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
-from tests.conftest import LOCKSTEP_GROUP
 from tests.test_live_load import free_running_under_load
 from tests.test_node_record import _bag
 from tests.test_ros import PATIENT_NODE, SRC, _finish, _ros_env, _start
@@ -38,7 +37,6 @@ def _stamps(msgs: list[Any]) -> np.ndarray:
 
 @pytest.mark.ros
 @pytest.mark.slow
-@pytest.mark.xdist_group(LOCKSTEP_GROUP)
 def test_c_arm_lockstep_is_simulate(lockstep_runs: Any) -> None:
     """The C arm and the C node in lockstep: the truth the arm sent, the samples, the frames,
     the node's estimates and commands (its record, every tick) equal ``amsfe simulate``'s
@@ -70,7 +68,6 @@ def test_c_arm_lockstep_is_simulate(lockstep_runs: Any) -> None:
 
 @pytest.mark.ros
 @pytest.mark.slow
-@pytest.mark.xdist_group(LOCKSTEP_GROUP)
 def test_c_arm_sends_the_python_arms_messages(lockstep_runs: Any) -> None:
     """The same lockstep run with the C arm and with the Python arm (the readable
     reference): the node received the same encoder samples, frames (pixels and exposure

@@ -24,7 +24,6 @@ from amsfe_sym.codegen import library_for
 from amsfe_sym.errors import RosError
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
-from tests.conftest import LOCKSTEP_GROUP
 from tests.test_node_record import _bag
 from tests.test_ros import (
     _PREFIX,
@@ -69,7 +68,6 @@ def _lockstep(
 
 @pytest.mark.ros
 @pytest.mark.slow
-@pytest.mark.xdist_group(LOCKSTEP_GROUP)
 @pytest.mark.parametrize("scenario", ["paper-sim", "panda-control"])
 def test_c_node_lockstep_is_simulate(scenario: str, lockstep_runs: Any) -> None:
     """The C node over DDS in lockstep: its estimates, theta and commands (from its record,
@@ -109,7 +107,6 @@ def assert_is_simulate(got: dict[str, Any], sc: Any, lib: Any) -> None:
 
 @pytest.mark.ros
 @pytest.mark.slow
-@pytest.mark.xdist_group(LOCKSTEP_GROUP)
 def test_c_node_equals_the_python_node(lockstep_runs: Any) -> None:
     """The same lockstep run with the C node and with the Python node (the readable
     reference): the same estimates, standard deviations, theta and commands (1e-12), the same

@@ -123,7 +123,7 @@ IMPLS = node_impls()
 
 
 #: A repeat of a free-running run for how often it holds: CI runs it once (docs/how-to/tests.md).
-REPEAT = pytest.mark.nightly("a repeat of a free-running run under load CI runs once")
+REPEAT = pytest.mark.nightly("a repeat of a free-running DDS run that CI makes once")
 
 #: The C node on the C arm (the default arm) under load: test_carm.py's free-running run
 #: (``--impl c`` both), which CI runs; here a repeat of it.

@@ -32,7 +32,6 @@ from amsfe_sym.ros.live import LiveLoop
 from amsfe_sym.ros.record_bag import record_state
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
-from tests.conftest import LOCKSTEP_GROUP
 from tests.test_node_record import _bag, assert_record_is_run
 
 SRC = Path(__file__).resolve().parent.parent / "src"
@@ -576,7 +575,6 @@ def _finish(procs: list[_Proc], timeout: float) -> list[tuple[int, str]]:
 
 @pytest.mark.ros
 @pytest.mark.slow
-@pytest.mark.xdist_group(LOCKSTEP_GROUP)
 @pytest.mark.parametrize("impl", node_impls())
 def test_lockstep_reproduces_simulate(paper: Any, lockstep_runs: Any, impl: str) -> None:
     """``sim-node --lockstep`` + ``node --controller amsfe`` on paper-sim for 2 s over DDS,
