@@ -704,8 +704,8 @@ def test_faults_hold_and_clean_exits(tmp_path: Path, impl: str) -> None:
     """Each node implementation.  The encoder publisher killed mid-run: the node holds for
     ``encoder_stall`` (its encoder timeout 2 s here, not the default 0.5 s: a loaded machine
     can stall the arm half a second; how soon is the watchdogs' unit tests' business, not a
-    wall-clock assertion here) and exits 3 with a readable record; Ctrl-C of the node: hold, exit 130, record readable; SIGTERM of the
-    sim-node: exit 143."""
+    wall-clock assertion here) and exits 3 with a readable record; Ctrl-C of the node: hold,
+    exit 130, record readable; SIGTERM of the sim-node: exit 143."""
     env = _ros_env(tmp_path)
     procs: list[_Proc] = []
     try:
