@@ -513,6 +513,7 @@ class _Proc:
             text=True,
             start_new_session=True,
         )
+        self.args = args
         self.lines: list[str] = []
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
@@ -562,7 +563,15 @@ def _finish(procs: list[_Proc], timeout: float) -> list[tuple[int, str]]:
     out = []
     try:
         for p in procs:
-            code = p.p.wait(timeout=max(0.1, deadline - time.monotonic()))
+            try:
+                code = p.p.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired as late:  # say what each process said, then kill
+                said = "\n".join(
+                    f"--- amsfe {' '.join(q.args[:3])} ... (running: {q.p.poll() is None}):\n"
+                    f"{q.text[-3000:]}"
+                    for q in procs
+                )
+                raise AssertionError(f"not done within {timeout:g} s:\n{said}") from late
             p._reader.join(timeout=5)
             out.append((code, p.text))
     finally:
