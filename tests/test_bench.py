@@ -153,7 +153,7 @@ def test_pinocchio_transition_matches_the_semi_implicit_library() -> None:
 def test_compare_cflags_rebuilds_and_times(capsys, libraries) -> None:
     libraries.get("paper_2link")
     argv = ["bench", "--repeat", "200", "--rounds", "2", "--skip", "generation", "calls"]
-    argv += ["tick", "loop", "scaling", "logs"]  # (logs: a 10 s and a 60 s log estimated)
+    argv += ["tick", "loop", "scaling", "logs", "vision"]  # (logs: a 10 s and a 60 s log estimated)
     assert main([*argv, "estimators", "--compare-cflags=-O0,-O1"]) == 0
     out = capsys.readouterr().out
     assert "6. amsfe estimate" not in out  # only the section asked for

@@ -293,7 +293,10 @@ def _sweep_in_own_folder(tmp: Path) -> list[str]:
     return ["sweep", str(spec), "--out", str(sw), "--workers", "0", "--no-plots", "--force"]
 
 
-BENCH = ["bench", "--skip", "generation", "calls", "estimators", "tick", "loop", "scaling", "logs"]
+#: ``amsfe bench`` with every section skipped but the machine's header (the outputs are
+#: what these tests judge, not the timings).
+SECTIONS = ["generation", "calls", "estimators", "tick", "loop", "scaling", "logs", "vision"]
+BENCH = ["bench", "--skip", *SECTIONS]
 
 CASES: dict[tuple[str, str], Case] = {
     ("simulate", "--out"): Case(
