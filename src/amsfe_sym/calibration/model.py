@@ -30,12 +30,12 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.calibration.observations import LinkAngles
 from amsfe_sym.load.types import Robot
 
 __all__ = ["NP", "PARAMETERS", "Projection", "ReprojectionModel"]
 
-FloatArray = NDArray[np.float64]
 
 #: The parameter vector's entries, in order: camera rotation (rotation vector about the
 #: camera's axes) [rad], camera position in the world [m], marker offset in the tracked

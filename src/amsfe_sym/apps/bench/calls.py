@@ -14,9 +14,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from amsfe_sym.apps.bench.timing import CTimer, Timing, round4, run_checked, time_calls
+from amsfe_sym.arrays import FloatArray
 from amsfe_sym.core.jsonfile import to_json
 
 __all__ = [
@@ -28,7 +28,6 @@ __all__ = [
     "tick_compiled_us",
 ]
 
-FloatArray = NDArray[np.float64]
 
 #: Functions timed per call, in table order (``camera`` is the near-empty one that shows
 #: the binding's fixed overhead; ``plant_step`` is the simulated truth, once per tick).
