@@ -431,6 +431,8 @@ def run_node(
                 if state is not None and state.active and state.stop is None:
                     state.idle()  # the watchdog: silence, the node stalled
         state = holder[-1] if holder else None
+        if state is not None and state.record is not None and state.stop is not None:
+            _await_last_truth(ex, state.record)
         if state is None:  # a managed node shut down before it was configured
             say("node: shut down before it was configured")
             return NodeReport(0, "shutdown", 0, None, {}, None)
@@ -470,3 +472,19 @@ def run_node(
         say(waited)
     counters = {**state.live.counters, **state.live.skipped}
     return NodeReport(state.live.k + 1, reason, code, hold, counters, options.record)
+
+
+#: Longest wait at the stop for the truth of the last recorded ticks [s, wall].
+TRUTH_WAIT_S = 1.0
+
+
+def _await_last_truth(ex: Any, record: NodeRecord) -> None:
+    """Spin until the truth of every recorded tick has come, at most :data:`TRUTH_WAIT_S`:
+    the arm sends a tick's truth before its encoder sample, but DDS orders no deliveries
+    across topics, so the last tick's can arrive after the node stopped on that sample (the
+    record would then miss it; the C node takes what came once more before it writes its
+    record).  A truth that never comes leaves its tick without one, counted in the record's
+    metadata."""
+    end = time.monotonic() + TRUTH_WAIT_S
+    while record.awaiting_truth and time.monotonic() < end:
+        ex.spin_once(timeout_sec=0.01)

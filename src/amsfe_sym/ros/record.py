@@ -159,6 +159,12 @@ class NodeRecord:
         else:
             self._awaiting.append((ns, prev, sent_ns))
 
+    @property
+    def awaiting_truth(self) -> bool:
+        """A tick recorded whose truth has not come yet (DDS orders no deliveries across
+        topics: the last tick's truth can arrive after its sample)."""
+        return bool(self._awaiting)
+
     def truth_sent(self, sent_ns: int, x: FloatArray) -> None:
         """A truth message [q, qd, qm, qmd, theta] as received, sent at ``sent_ns`` (its
         source timestamp [ns]): recorded at the tick whose encoder sample was the first sent

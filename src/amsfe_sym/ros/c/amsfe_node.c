@@ -1177,6 +1177,7 @@ int main(int argc, char **argv) {
   if (any_skip) printf("\n");
   fflush(stdout);
   s->exit_code = code;
+  if (s->recording) take_truth(s); /* a last tick's truth can come after its sample */
   if (s->recording) write_record(s, record_path);
   if (s->managed) lifecycle_fini(&s->lc, &s->node);
   amsfe_rcl_stop(&s->ws, &s->node, &s->ctx);
