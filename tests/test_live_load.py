@@ -278,13 +278,12 @@ def test_free_running_under_load_tracks_or_holds_for_being_behind(
     free_running_under_load(tmp_path, _impl_args(impl), [])
 
 
-def free_running_under_load(tmp_path: Path, node_args: list[str], arm_args: list[str]) -> str:
-    """The run and the assertions of
-    :func:`test_free_running_under_load_tracks_or_holds_for_being_behind` for ``amsfe node
-    ... *node_args`` and ``amsfe sim-node ... *arm_args``; its outcome (``tracked`` or
-    ``held <reason> at <tick>``), and the arm's summary lines, printed."""
-    from amsfe_sym.sim.record import window
-
+def free_running_run(
+    tmp_path: Path, node_args: list[str], arm_args: list[str]
+) -> tuple[int, str, dict[str, Any], Any]:
+    """``amsfe node paper-sim --controller amsfe *node_args`` and ``amsfe sim-node paper-sim
+    *arm_args``, free running for 2 s beside two CPU hogs: the node's exit code and output,
+    its record's topics, and the arm's process."""
     env = _ros_env(tmp_path)
     rec = tmp_path / "rec"
     procs: list[Any] = []
@@ -298,7 +297,34 @@ def free_running_under_load(tmp_path: Path, node_args: list[str], arm_args: list
             code, text = _stop_arm(sim, node, 300.0)
         finally:
             _finish(procs, 60.0)
-    bag = _bag(rec)
+    return code, text, _bag(rec), sim
+
+
+def free_running_rmse(bag: dict[str, Any]) -> tuple[Any, Any, int, int]:
+    """The link tracking RMSE per joint [rad] of a 2 s free-running paper-sim record's
+    ``/joint_states`` over the run's window, that of the in-process run of the same seed over
+    the same ticks, how many ticks the record has (ticks the node skipped are predicted
+    through) and how many the in-process run has."""
+    from amsfe_sym.sim.record import window
+
+    sc = load_scenario("paper-sim").with_overrides(duration=2.0)
+    ref = run(sc, library_for(sc), runtime="compiled")
+    n, T = ref.lib.n, round(ref.lib.T * 1e9)
+    js = bag["/joint_states"]
+    ks = np.array([(m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec) // T for m in js])
+    w = ks >= window(ref.t.size).start
+    q = np.array([m.position for m in js])[w]
+    got = np.sqrt(np.mean((q - ref.q_des[ks[w]]) ** 2, axis=0))
+    want = np.sqrt(np.mean((ref.x_true[ks[w], :n] - ref.q_des[ks[w]]) ** 2, axis=0))
+    return got, want, int(ks.size), int(ref.t.size)
+
+
+def free_running_under_load(tmp_path: Path, node_args: list[str], arm_args: list[str]) -> str:
+    """The run and the assertions of
+    :func:`test_free_running_under_load_tracks_or_holds_for_being_behind` for ``amsfe node
+    ... *node_args`` and ``amsfe sim-node ... *arm_args``; its outcome (``tracked`` or
+    ``held <reason> at <tick>``), and the arm's summary lines, printed."""
+    code, text, bag, sim = free_running_run(tmp_path, node_args, arm_args)
     hold = _hold(text)
     outcome = f"held {hold[0]} at {hold[1]}" if hold else "tracked"
     print("outcome:", node_args, arm_args, outcome, sim.text.splitlines()[-2:])
@@ -307,16 +333,8 @@ def free_running_under_load(tmp_path: Path, node_args: list[str], arm_args: list
         _assert_not_diverged(bag, max_k=hold[1])
         return outcome
     assert code == 0 and hold is None and "encoder" not in text.split("node: done")[-1], text
-    sc = load_scenario("paper-sim").with_overrides(duration=2.0)
-    ref = run(sc, library_for(sc), runtime="compiled")
-    n, T = ref.lib.n, round(ref.lib.T * 1e9)
-    js = bag["/joint_states"]
-    ks = np.array([(m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec) // T for m in js])
-    assert ks.size > ref.t.size // 2  # (ticks the node skipped are predicted through)
-    w = ks >= window(ref.t.size).start
-    q = np.array([m.position for m in js])[w]
-    got = np.sqrt(np.mean((q - ref.q_des[ks[w]]) ** 2, axis=0))
-    want = np.sqrt(np.mean((ref.x_true[ks[w], :n] - ref.q_des[ks[w]]) ** 2, axis=0))
+    got, want, ticks, ref_ticks = free_running_rmse(bag)
+    assert ticks > ref_ticks // 2  # (ticks the node skipped are predicted through)
     assert np.all(got <= 2 * want + 0.05), (got, want)
     _assert_not_diverged(bag)
     return outcome
