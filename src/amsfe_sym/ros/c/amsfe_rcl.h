@@ -36,7 +36,7 @@ long long amsfe_wall_ns(void);
  * "error: <program>: <what>: <rcl's error>" and exits 1 (at start: nothing to hold yet). */
 void amsfe_rcl_check(rcl_ret_t ret, const char *what);
 /* The start of a program: SIGINT and SIGTERM set amsfe_signal (the loops end, the stop is
- * published); the real-time set-up (amsfe_rt.h: SCHED_FIFO `priority`, mlockall,
+ * published); the real-time set-up (amsfe_rcl.c's realtime: SCHED_FIFO `priority`, mlockall,
  * /dev/cpu_dma_latency; `who` prefixes its line; priority <= 0: none) before rcl_init, so
  * the middleware's threads (Fast DDS's receive and event threads) inherit the policy and a
  * sample's way through the process is real-time too, not only its tick (reception threads at
