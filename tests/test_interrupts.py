@@ -4,11 +4,16 @@ twice is raised at once; outside a block nothing changes."""
 
 from __future__ import annotations
 
+import fcntl
 import os
 import signal
+import threading
+from pathlib import Path
+from typing import Any
 
 import pytest
 
+from amsfe_sym.codegen.cache import build_lock
 from amsfe_sym.core.interrupts import DeferredSignals, checkpoint
 
 
@@ -58,3 +63,67 @@ def test_outside_a_block_checkpoint_does_nothing(usr1: int) -> None:
     checkpoint()
     with pytest.raises(StoppedError):
         os.kill(os.getpid(), usr1)
+
+
+@pytest.fixture
+def sigint():  # type: ignore[no-untyped-def]
+    """SIGINT raises :class:`StoppedError` (not KeyboardInterrupt, which would stop pytest)."""
+    previous = signal.signal(signal.SIGINT, _raise)
+    yield signal.SIGINT
+    signal.signal(signal.SIGINT, previous)
+
+
+def test_a_ctrl_c_as_the_lock_is_taken_leaves_no_lock_file(
+    sigint: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The signal lands inside ``flock``, right after the lock file was made: it used to be
+    raised before the ``try`` that removes the file (CI: ``.ur5.lock`` left behind)."""
+    real_flock = fcntl.flock
+
+    def flock_then_ctrl_c(fd: Any, op: int) -> None:
+        real_flock(fd, op)
+        if op & fcntl.LOCK_EX:
+            os.kill(os.getpid(), sigint)
+
+    monkeypatch.setattr(fcntl, "flock", flock_then_ctrl_c)
+    lock = tmp_path / "gen" / ".robot.lock"
+    ran = []
+    with pytest.raises(StoppedError), build_lock(lock):
+        ran.append(True)
+    assert ran == []  # held, delivered once the lock is taken, before the body
+    assert not (tmp_path / "gen").exists()  # neither the file nor the folder it made
+
+
+def test_a_ctrl_c_while_another_build_holds_the_lock_stops_the_wait(
+    sigint: int, tmp_path: Path
+) -> None:
+    """Waiting for another process's build is interruptible, and the waiter leaves the
+    holder's lock file alone (the holder removes it)."""
+    lock = tmp_path / ".robot.lock"
+    lock.touch()
+    with open(lock, "a") as holder:
+        fcntl.flock(holder, fcntl.LOCK_EX)  # another open file: a conflicting lock
+        timer = threading.Timer(0.2, os.kill, (os.getpid(), sigint))
+        timer.start()
+        with pytest.raises(StoppedError), build_lock(lock, poll=0.01):
+            pytest.fail("the lock was taken while another held it")
+        timer.join()
+        assert lock.exists()
+
+
+def test_nested_blocks_deliver_to_the_real_handler(usr1: int) -> None:
+    """A block inside another (the build inside the build lock): a checkpoint of the inner
+    block raises the handler held back by the outer one, not the outer block's hold (which
+    only recorded the signal again, so the build ran to its end); a signal held by the outer
+    block before the inner began is delivered at the inner block's checkpoint too."""
+    with DeferredSignals((usr1,)), DeferredSignals((usr1,)):
+        os.kill(os.getpid(), usr1)
+        with pytest.raises(StoppedError):
+            checkpoint()
+    assert signal.getsignal(usr1) is _raise
+    with pytest.raises(StoppedError), DeferredSignals((usr1,)):
+        os.kill(os.getpid(), usr1)
+        with DeferredSignals((usr1,)):
+            checkpoint()
+            pytest.fail("the outer block's signal was not delivered")
+    assert signal.getsignal(usr1) is _raise

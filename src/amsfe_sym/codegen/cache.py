@@ -19,6 +19,7 @@ import os
 import platform
 import shlex
 import subprocess
+import time
 from collections.abc import Iterator, Sequence
 from importlib import metadata
 from pathlib import Path
@@ -26,6 +27,7 @@ from typing import Any
 
 from amsfe_sym import __version__
 from amsfe_sym.core.folders import STALE_TMP_SECONDS, clean_stale_tmp, replace_dir
+from amsfe_sym.core.interrupts import DeferredSignals
 from amsfe_sym.errors import CodegenError, describe
 from amsfe_sym.load.spec import RobotSpec
 from amsfe_sym.runtime.library import file_sha256
@@ -204,21 +206,39 @@ def cached_dir(out_dir: Path, key: str) -> Path | None:
 
 
 @contextlib.contextmanager
-def build_lock(path: Path) -> Iterator[None]:
+def build_lock(path: Path, poll: float = 0.05) -> Iterator[None]:
     """An exclusive advisory lock on ``path`` (released when the process dies).
 
     The file is removed afterwards, so a failed or interrupted build leaves nothing behind;
     a process that opened it just before the removal may then build the same library once
     more, which the atomic move into place keeps harmless.
+
+    Ctrl-C and SIGTERM are held from before the file is made until it is removed
+    (:class:`~amsfe_sym.core.interrupts.DeferredSignals`), and delivered while the lock is
+    awaited (polled every ``poll`` s), at the body's checkpoints, or on leaving: a signal
+    that landed between the file's creation and the ``try`` that removes it used to leave
+    the lock file behind.  A process interrupted while it waits leaves the file to its
+    holder, which removes it.
     """
-    created = not path.parent.exists()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "a") as fh:
-        fcntl.flock(fh, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            path.unlink(missing_ok=True)
-            fcntl.flock(fh, fcntl.LOCK_UN)
-            if created and not any(path.parent.iterdir()):  # bad input: leave no folder
-                path.parent.rmdir()
+    with DeferredSignals() as held:
+        created = not path.parent.exists()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "a") as fh:
+            acquired = False
+            try:
+                while True:
+                    try:
+                        fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                        acquired = True
+                        break
+                    except BlockingIOError:
+                        held.check()  # Ctrl-C while another build holds it
+                        time.sleep(poll)
+                held.check()
+                yield
+            finally:
+                if acquired:
+                    path.unlink(missing_ok=True)
+                    fcntl.flock(fh, fcntl.LOCK_UN)
+                if created and not any(path.parent.iterdir()):  # bad input: leave no folder
+                    path.parent.rmdir()

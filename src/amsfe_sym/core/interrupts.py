@@ -39,7 +39,8 @@ class DeferredSignals:
 
     def __init__(self, signums: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM)) -> None:
         self._signums = signums
-        self._previous: dict[int, _Handler] = {}
+        self._previous: dict[int, _Handler] = {}  # the real handler, delivered at a check
+        self._installed: dict[int, _Handler] = {}  # what to put back on exit
         self._pending: list[int] = []
 
     def __enter__(self) -> DeferredSignals:
@@ -47,7 +48,12 @@ class DeferredSignals:
             for s in self._signums:
                 prev = signal.getsignal(s)
                 if callable(prev):
-                    self._previous[s] = prev
+                    self._installed[s] = prev
+                    # inside another block: deliver to the handler that block holds back,
+                    # not to its hold (which would only record the signal again)
+                    outer = getattr(prev, "__self__", None)
+                    real = outer._previous.get(s) if isinstance(outer, DeferredSignals) else None
+                    self._previous[s] = real or prev
                     signal.signal(s, self._hold)
         _ACTIVE.append(self)
         return self
@@ -79,14 +85,17 @@ class DeferredSignals:
         tb: TracebackType | None,
     ) -> None:
         _ACTIVE.remove(self)
-        for s, prev in self._previous.items():
+        for s, prev in self._installed.items():
             signal.signal(s, prev)
         if exc_type is None:
             self.check()
 
 
 def checkpoint() -> None:
-    """Deliver a signal held by the innermost :class:`DeferredSignals` block (if any): the
-    place where a long computation of the toolkit may be interrupted."""
-    if _ACTIVE:
-        _ACTIVE[-1].check()
+    """Deliver a signal held by a :class:`DeferredSignals` block in force (the innermost
+    first; an outer block's too, since its code chose to run the inner one): the place where
+    a long computation of the toolkit may be interrupted."""
+    for block in reversed(_ACTIVE):
+        if block.pending:
+            block.check()
+            return

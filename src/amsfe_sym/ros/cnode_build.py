@@ -29,6 +29,7 @@ from importlib import metadata
 from pathlib import Path
 
 from amsfe_sym.codegen.cache import build_lock, compiler, default_out_dir
+from amsfe_sym.core.interrupts import checkpoint
 from amsfe_sym.errors import ConfigError, RosError, describe
 from amsfe_sym.runtime.library import ModelLibrary, file_sha256
 
@@ -194,6 +195,7 @@ def build_node(
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0 or not tmp.is_file():
             tmp.unlink(missing_ok=True)
+            checkpoint()  # signals are held in the lock: a Ctrl-C stopped cc, say that
             tail = " | ".join((proc.stderr or proc.stdout).strip().splitlines()[-3:])
             raise RosError(
                 describe(
