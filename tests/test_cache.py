@@ -123,3 +123,19 @@ def test_native_flags_put_the_cpu_kind_in_the_cache_key() -> None:
     assert "cpu" not in plain and cpu_kind(compiler(), ["-O1"]) is None
     assert native["cpu"] == cpu_kind(compiler(), ["-march=native"]) and native["cpu"]
     assert native_key != plain_key
+
+
+def test_a_robot_of_the_same_name_from_another_source_is_named(built: Path) -> None:
+    """The folder is named by the robot's name: the bare URDF of the 1-link arm is also
+    ``paper_1link`` but not the shipped robot.toml, so its build would replace the shipped
+    one's: generate says whose library it replaces (``_other_source``, read from the real
+    manifest of the build)."""
+    from amsfe_sym.codegen.build import _other_source
+    from amsfe_sym.load.spec import load_spec
+
+    shipped = load_spec(ROBOT)
+    assert _other_source(built, shipped) is None
+    bare = load_spec(shipped.urdf)
+    assert bare.name == ROBOT and bare.spec_path is None
+    assert _other_source(built, bare) == str(shipped.spec_path)
+    assert _other_source(built.parent / "nothing-here", bare) is None

@@ -239,6 +239,13 @@ def _build(
         f"({out_dir}): generating it (model, C, compile: once per robot and settings, "
         "then it is reused)",
     )
+    other = _other_source(out_dir, spec)
+    _say(
+        progress and other is not None,
+        f"[amsfe] {spec.name}: {out_dir} held the library of another robot of that name "
+        f"({other}); it is replaced, and the two will take turns there (give one its own "
+        "`name` in a robot.toml, or another --out, to keep both)",
+    )
     if progress:  # before the compile, not after it (a 7-DOF arm compiles for ~20 s)
         m = spec.model
         warn_stiff(
@@ -379,6 +386,23 @@ def lowered_stiffness(spec: RobotSpec, Ks: Sequence[float], joints: Sequence[str
         for name, k in zip(joints, Ks, strict=True)
         if float(k) < default * (1 - 1e-9)
     ]
+
+
+def _other_source(out_dir: Path, spec: RobotSpec) -> str | None:
+    """The source (robot.toml or URDF) of the library in ``out_dir`` if it is not ``spec``'s:
+    the folder is named by the robot's name, so a bare ``panda.urdf`` and the shipped
+    ``robots/panda`` share ``generated/panda`` and each build replaces the other's."""
+    try:
+        old = json.loads((out_dir / MANIFEST).read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(old, dict):
+        return None
+    mine = {"urdf": str(spec.urdf), "spec": None if spec.spec_path is None else str(spec.spec_path)}
+    theirs = {k: old.get(k) for k in mine}
+    if theirs == mine or theirs["urdf"] is None:
+        return None
+    return str(theirs["spec"] or theirs["urdf"])
 
 
 def _check_library_folder(out_dir: Path) -> None:
