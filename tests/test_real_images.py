@@ -23,16 +23,17 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _tool() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("real_images", ROOT / "tools/real_images.py")
+def _tool(name: str) -> ModuleType:
+    """``tools/<name>.py`` as the module ``name``."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / f"tools/{name}.py")
     assert spec is not None and spec.loader is not None
     mod = importlib.util.module_from_spec(spec)
-    sys.modules["real_images"] = mod
+    sys.modules[name] = mod
     spec.loader.exec_module(mod)
     return mod
 
 
-ri = _tool()
+ri = _tool("real_images")
 
 
 @pytest.fixture(scope="module")
@@ -112,18 +113,7 @@ def test_hand_eye_residuals_on_real_frames() -> None:
 # references (docs/camera.md, "A fixed camera on a real arm").
 
 
-def _visp_tool() -> ModuleType:
-    spec = importlib.util.spec_from_file_location(
-        "visp_eye_to_hand", ROOT / "tools/visp_eye_to_hand.py"
-    )
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["visp_eye_to_hand"] = mod
-    spec.loader.exec_module(mod)
-    return mod
-
-
-ve = _visp_tool()
+ve = _tool("visp_eye_to_hand")
 
 
 def test_visp_tag_found_on_every_frame() -> None:
