@@ -206,7 +206,7 @@ def test_visp_calibration_against_visp_and_opencv(tmp_path: Path) -> None:
         assert np.median(e) < 6.0 and e.max() < 12.0  # measured 4.1 / 7.5 px
         # tolerances: the norm of the stated 95 % half-widths (position, offset) and the
         # largest one (rotation); with the factory intrinsics plus the rotation their
-        # principal point's offset from ViSP's makes (atan(6.8 px / 602 px) = 0.64 deg) and
+        # principal point's offset from ViSP's makes (atan(6.8 px / 608 px) = 0.64 deg) and
         # its lever arm over the tag's distance from the camera
         hw = cal.half_width95()
         rMc = np.eye(4)
@@ -226,3 +226,12 @@ def test_visp_calibration_against_visp_and_opencv(tmp_path: Path) -> None:
             assert d["camera_position_mm"] / 1e3 < np.linalg.norm(hw[3:6]) + extra_m, name
             assert d["camera_rotation_deg"] < np.degrees(hw[0:3]).max() + extra_deg, name
             assert d["marker_offset_mm"] / 1e3 < np.linalg.norm(hw[6:9]), name
+        # the what-if of docs/camera.md: the four corners would pin the rotation within the
+        # command's 1 deg, at the same residual
+        cv_eMo = ve.opencv_reference(ds.rMe, ve.tag_poses(corners, info))[1]
+        eMo0 = np.eye(4)
+        eMo0[:3, :3], eMo0[:3, 3] = cv_eMo[:3, :3], cal.offset
+        cf = ve.corner_fit(ds.rMe, corners, info, rMc, eMo0)
+        print(f"  corners: {cf['half_width95']}, {cf['residual_px']}")
+        assert max(cf["half_width95"]["rotation_deg"]) < 1.0
+        assert cf["residual_px"]["median"] < 6.0
