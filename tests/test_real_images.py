@@ -182,8 +182,8 @@ def test_visp_calibration_against_visp_and_opencv(tmp_path: Path) -> None:
     visp_rMc = ve.pose_vector(ve.VISP_RMC)
     for label, info in (("factory", ve.factory_camera_info()), ("visp", ve.visp_camera_info())):
         log, robot = ve.write_inputs(tmp_path, info, f"e2h_{label}")
-        if label == "factory":
-            rc, lines = ve.run_command(log, robot, tmp_path / "cal")
+        if label == "factory":  # the user's command, with the data folder's robot.toml
+            rc, lines = ve.run_command(log, ve.DATA / "robot.toml", tmp_path / "cal")
             err = [x for x in lines if x.startswith("error:")]
             assert rc == 2 and len(err) == 1, lines
             assert "the camera pose" in err[0] and "(limit 1 deg)" in err[0]

@@ -41,6 +41,10 @@ The references (``measure``):
 Writes docs/data/real-images-visp.json and prints it:
 
     PYTHONPATH=src .venv/bin/python tools/visp_eye_to_hand.py [--keep DIR]
+
+or only the log, for ``amsfe calibrate`` by hand (docs/camera.md):
+
+    PYTHONPATH=src .venv/bin/python tools/visp_eye_to_hand.py --write-log runs/visp-e2h
 """
 
 from __future__ import annotations
@@ -669,7 +673,23 @@ def measure(work: Path) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--keep", type=Path, help="write the logs and calibrations here (kept)")
+    ap.add_argument(
+        "--write-log",
+        type=Path,
+        metavar="DIR",
+        help="only write the log (factory intrinsics) as the rosbag2 folder DIR, and stop",
+    )
     args = ap.parse_args(argv)
+    if args.write_log is not None:
+        if args.write_log.exists():
+            print(f"error: {args.write_log} exists: name a new folder", file=sys.stderr)
+            return 2
+        write_log(args.write_log)
+        print(
+            f"wrote {args.write_log}: amsfe calibrate {args.write_log} "
+            f"--robot {DATA / 'robot.toml'} --log-spec {DATA / 'topics.toml'}"
+        )
+        return 0
     if args.keep is not None:
         args.keep.mkdir(parents=True, exist_ok=False)
         out = measure(args.keep)
