@@ -652,7 +652,7 @@ def measure(work: Path) -> dict[str, Any]:
                 "vs_opencv": _against(rMc, cal.offset, cv_rMc, cv_eMo[:3, 3]),
                 "progress": lines,
             },
-            "command": {"exit": rc, "output": command},
+            "command": {"exit": rc, "output": [x.replace(str(work), "WORK") for x in command]},
             "opencv": {
                 **_solution(cv_rMc, cv_eMo[:3, 3]),
                 "residual_px": [
