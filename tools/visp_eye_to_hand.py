@@ -248,8 +248,9 @@ def trajectory(qs: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, Floa
         expo.append(T0 + (k + hold // 2) * T)
         k += hold
     q_all = np.concatenate(qs_list)
-    t = T0 + np.arange(q_all.shape[0]) * T
-    return t, q_all, np.concatenate(qd_list), np.array(expo)
+    t = T0 + np.arange(q_all.shape[0], dtype=np.float64) * T
+    f64 = np.float64
+    return t, q_all.astype(f64), np.concatenate(qd_list).astype(f64), np.array(expo, dtype=f64)
 
 
 def _ns(t: float) -> int:
@@ -351,7 +352,13 @@ def detect(images: list[Path]) -> list[FloatArray | None]:
     from amsfe_sym.vision.spec import MarkerSpec
 
     det = MarkerDetector(MarkerSpec(dictionary="DICT_APRILTAG_36h11", id=TAG_ID, size=TAG_SIZE))
-    return [det.detect(cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)).corners for p in images]
+    out = []
+    for p in images:
+        grey = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
+        if grey is None:
+            raise SystemExit(f"{p}: not an image")
+        out.append(det.detect(np.asarray(grey, dtype=np.uint8)).corners)
+    return out
 
 
 def tag_poses(corners: list[FloatArray], info: Any) -> list[FloatArray]:
@@ -370,7 +377,7 @@ def tag_poses(corners: list[FloatArray], info: Any) -> list[FloatArray]:
         ok, rv, tv = cv2.solvePnP(obj, und, info.new_matrix, None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
         if not ok:
             raise SystemExit("solvePnP failed")
-        out.append(_hom(np.asarray(cv2.Rodrigues(rv)[0]), tv))
+        out.append(_hom(np.asarray(cv2.Rodrigues(rv)[0]), np.asarray(tv, dtype=np.float64)))
     return out
 
 
