@@ -189,6 +189,8 @@ def test_visp_calibration_against_visp_and_opencv(tmp_path: Path) -> None:
             assert "the camera pose" in err[0] and "(limit 1 deg)" in err[0]
             assert not (tmp_path / "cal").exists()
             assert any("8 camera frames" in x for x in lines)
+            # the PnP of 8 centres with the tag's offset unknown is worse than the typed pose
+            assert any("initial guess: the spec's camera pose" in x for x in lines)
         cal, _progress = ve.fit(log, robot)
         assert int(cal.used.sum()) == 8 and cal.dropped == {}
         assert set(cal.held) == {"time_offset"}
@@ -235,3 +237,25 @@ def test_visp_calibration_against_visp_and_opencv(tmp_path: Path) -> None:
         print(f"  corners: {cf['half_width95']}, {cf['residual_px']}")
         assert max(cf["half_width95"]["rotation_deg"]) < 1.0
         assert cf["residual_px"]["median"] < 6.0
+
+
+@pytest.mark.slow
+def test_visp_fit_left_without_redundancy_is_refused(tmp_path: Path) -> None:
+    """Three of the 8 frames given wrong pixels (as mis-detections would be: 60, 120, 180 px
+    off in u): the robust fit drops 3 frames as outliers (not necessarily those: with 8
+    frames and 10 parameters a bad frame pulls the fit), and the 5 left (10 residuals)
+    cannot carry the 10 parameters: refused in one line, not a fit with zero-width intervals
+    (before, a fit of 4 frames passed with +-0.00 mm)."""
+    from dataclasses import replace
+
+    from amsfe_sym.calibration import calibrate
+    from amsfe_sym.errors import LogError
+
+    log, robot = ve.write_inputs(tmp_path, ve.factory_camera_info(), "e2h")
+    rob, links, obs = ve.read_inputs(log, robot)
+    px = obs.pixel.copy()
+    px[:3, 0] += [60.0, 120.0, 180.0]
+    with pytest.raises(LogError, match="more pixel residuals than the 10 parameters") as e:
+        calibrate(rob, links, replace(obs, pixel=px), limits=ve.WIDE_LIMITS)
+    assert "found 10 from 5 frames left of 8 (3 dropped)" in str(e.value)
+    assert len(str(e.value).splitlines()) == 1

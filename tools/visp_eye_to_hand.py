@@ -529,13 +529,12 @@ def run_command(log: Path, robot: Path, out: Path) -> tuple[int, list[str]]:
     return rc, o.getvalue().splitlines() + e.getvalue().splitlines()
 
 
-def fit(log: Path, robot: Path, limits: dict[str, float] | None = None) -> tuple[Any, list[str]]:
-    """The calibration of ``amsfe calibrate`` (the same reader, link angles and
-    :func:`~amsfe_sym.calibration.calibrate`) with ``limits`` (default :data:`WIDE_LIMITS`);
-    returns it and its progress lines."""
+def read_inputs(log: Path, robot: Path) -> tuple[Any, Any, Any]:
+    """What ``amsfe calibrate`` reads from ``log`` with ``robot`` and topics.toml: the loaded
+    robot, the link angles and the camera frames (the same reader and steps)."""
     from dataclasses import replace
 
-    from amsfe_sym.calibration import calibrate, link_angles, observations
+    from amsfe_sym.calibration import link_angles, observations
     from amsfe_sym.codegen.preflight import modelled_joints
     from amsfe_sym.load import load_robot
     from amsfe_sym.load.spec import load_spec
@@ -553,11 +552,20 @@ def fit(log: Path, robot: Path, limits: dict[str, float] | None = None) -> tuple
     links = link_angles(
         lg, rob.stiffness_at(rob.theta_true), rob.Mm, rob.Fm, positions=ls.positions
     )
+    return rob, links, observations(lg)
+
+
+def fit(log: Path, robot: Path, limits: dict[str, float] | None = None) -> tuple[Any, list[str]]:
+    """The calibration of ``amsfe calibrate`` (:func:`read_inputs`, then
+    :func:`~amsfe_sym.calibration.calibrate`) with ``limits`` (default
+    :data:`WIDE_LIMITS`); returns it and its progress lines."""
+    from amsfe_sym.calibration import calibrate
+
+    rob, links, obs = read_inputs(log, robot)
     lines: list[str] = []
     cal = calibrate(
-        rob, links, observations(lg), limits=WIDE_LIMITS if limits is None else limits,
-        progress=lines.append,
-    )  # fmt: skip
+        rob, links, obs, limits=WIDE_LIMITS if limits is None else limits, progress=lines.append
+    )
     return cal, lines
 
 

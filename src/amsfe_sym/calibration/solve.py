@@ -21,7 +21,8 @@ Steps:
    of it are dropped as outliers.
 3. **Final fit** on the inliers with the plain squared loss, from the robust fit.  Its
    covariance is ``s^2 (J^T J)^-1`` with ``s^2`` the residual variance (RSS / (2m - p)): a
-   linearised interval, ``+-1.96 sigma`` for 95 %.
+   linearised interval, ``+-1.96 sigma`` for 95 %.  Inliers with no more residuals than
+   parameters (2m <= p) are refused: their fit is exact and its interval zero, not known.
 4. **What the motion determines.**  A parameter whose 95 % half-width exceeds
    :data:`UNDETERMINED` is held at its initial value (the spec's marker offset, a zero time
    offset) and the fit repeated without it; the result names it and why.  The camera's pose is
@@ -266,7 +267,8 @@ def calibrate(
             (default :data:`UNDETERMINED`; ``amsfe calibrate`` always uses the default).
 
     Raises:
-        LogError: no usable frame; an arm at rest; a pose the log cannot determine.
+        LogError: no usable frame; an arm at rest; a pose the log cannot determine; too few
+            frames left after the drops to leave a residual (2m <= p).
     """
     say = progress or (lambda _s: None)
     offset0 = np.asarray(robot.tracked_offset, dtype=np.float64)
