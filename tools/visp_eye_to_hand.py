@@ -695,10 +695,11 @@ def main(argv: list[str] | None = None) -> int:
         help="only write the log (factory intrinsics) as the rosbag2 folder DIR, and stop",
     )
     args = ap.parse_args(argv)
-    if args.write_log is not None:
-        if args.write_log.exists():
-            print(f"error: {args.write_log} exists: name a new folder", file=sys.stderr)
+    for folder in (args.write_log, args.keep):
+        if folder is not None and folder.exists():
+            print(f"error: {folder} exists: name a new folder", file=sys.stderr)
             return 2
+    if args.write_log is not None:
         write_log(args.write_log)
         print(
             f"wrote {args.write_log}: amsfe calibrate {args.write_log} "
