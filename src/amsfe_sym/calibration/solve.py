@@ -7,14 +7,22 @@ Steps:
 1. **Initial guess.**  For trial time offsets every :data:`SCAN_STEP_S` over
    ``+-max_offset``, the tracked points at ``stamp - dt`` with the spec's marker offset and the
    pixels go to ``cv2.solvePnP`` (SQPnP); the trial with the smallest reprojection error gives
-   the camera pose and ``dt``.
+   the camera pose and ``dt``.  The spec's own camera pose (at ``dt = 0``) is the start
+   instead when it reprojects better: with few frames and a marker offset typed centimetres
+   off, the PnP of the tracked points can be far worse than a pose measured by eye (ViSP's
+   8-frame eye-to-hand set: 507 px against 197 px, tools/visp_eye_to_hand.py).
 2. **Robust fit.**  ``scipy.optimize.least_squares`` (trust region reflective) over all ten
    parameters with the Huber loss, its scale :data:`HUBER_SCALE` times the pixel noise
-   (``pixel_std``).  The pixel noise is then measured from the residuals (1.4826 MAD) and
-   frames farther than :data:`OUTLIER_SIGMAS` of it are dropped as outliers.
+   (``pixel_std``).  From a start more than :data:`FAR_START` Huber scales off (RMS), a
+   squared-loss fit comes first: there every residual is in the loss's linear part, and the
+   robust fit alone wandered to a wrong minimum (ViSP's eye-to-hand set with its own
+   intrinsics: a camera 1 m away, tools/visp_eye_to_hand.py).  The pixel noise is then
+   measured from the residuals (1.4826 MAD) and frames farther than :data:`OUTLIER_SIGMAS`
+   of it are dropped as outliers.
 3. **Final fit** on the inliers with the plain squared loss, from the robust fit.  Its
    covariance is ``s^2 (J^T J)^-1`` with ``s^2`` the residual variance (RSS / (2m - p)): a
-   linearised interval, ``+-1.96 sigma`` for 95 %.
+   linearised interval, ``+-1.96 sigma`` for 95 %.  Inliers with no more residuals than
+   parameters (2m <= p) are refused: their fit is exact and its interval zero, not known.
 4. **What the motion determines.**  A parameter whose 95 % half-width exceeds
    :data:`UNDETERMINED` is held at its initial value (the spec's marker offset, a zero time
    offset) and the fit repeated without it; the result names it and why.  The camera's pose is
@@ -58,6 +66,9 @@ OUTLIER_SIGMAS = 5.0
 #: 95 % half-width above which a parameter is "not determined by the motion" (the parameter
 #: group's unit: rotation [deg], position and offset [m], time [s]).
 UNDETERMINED = {"rotation": 1.0, "camera": 0.02, "offset": 0.02, "time_offset": 0.01}
+#: A start whose reprojection RMS exceeds this many Huber scales gets a squared-loss fit
+#: before the robust one (module docstring, step 2).
+FAR_START = 10.0
 #: The tracked point must move at least this far [m] over the frames to fit anything.
 MIN_SPREAD_M = 0.01
 #: The 95 % two-sided normal quantile.
@@ -70,13 +81,17 @@ _UNIT = (180.0 / np.pi,) * 3 + (1.0,) * 7
 @dataclass(frozen=True)
 class InitialGuess:
     """The ``solvePnP`` scan's best trial: world -> camera rotation, camera centre [m], time
-    offset [s], its reprojection RMS [px], and the number of frames it used."""
+    offset [s], its reprojection RMS [px], and the number of frames it used; ``source``:
+    ``"solvePnP"``, or ``"spec"`` when the spec's camera pose reprojected better (then
+    ``pnp_rms`` is the scan's best RMS [px])."""
 
     R_cw: FloatArray
     position: FloatArray
     time_offset: float
     rms: float
     frames: int
+    source: str = "solvePnP"
+    pnp_rms: float = float("nan")
 
 
 @dataclass
@@ -185,6 +200,19 @@ def initial_guess(
                 "record the encoders and the camera together",
             )
         )
+    # the spec's own pose, at dt = 0, when it reprojects better (module docstring, step 1)
+    pts, ok = _points(robot, links, obs.stamp[pick], offset)
+    cam = robot.camera
+    rvec = cv2.Rodrigues(np.asarray(cam.R_cw, dtype=np.float64))[0]
+    tvec = -np.asarray(cam.R_cw, dtype=np.float64) @ np.asarray(cam.position, dtype=np.float64)
+    if ok.sum() >= 6:
+        proj, _ = cv2.projectPoints(pts[ok], rvec, tvec, K, None)
+        img = obs.pixel[pick][ok]
+        rms = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - img) ** 2, axis=1))))
+        if rms < best.rms:
+            R = np.asarray(cam.R_cw, dtype=np.float64).copy()
+            pos = np.asarray(cam.position, dtype=np.float64).copy()
+            return InitialGuess(R, pos, 0.0, rms, int(ok.sum()), "spec", best.rms)
     return best
 
 
@@ -223,6 +251,7 @@ def calibrate(
     max_offset: float = 0.2,
     fit_time_offset: bool = True,
     progress: Callable[[str], None] | None = None,
+    limits: dict[str, float] | None = None,
 ) -> Calibration:
     """Calibrate the camera pose, the marker offset and the time offset (module docstring).
 
@@ -234,9 +263,12 @@ def calibrate(
         max_offset: Largest time offset the initial scan tries [s].
         fit_time_offset: False holds the time offset at 0.
         progress: Called with a line per step.
+        limits: The 95 % half-widths above which a parameter group is not determined
+            (default :data:`UNDETERMINED`; ``amsfe calibrate`` always uses the default).
 
     Raises:
-        LogError: no usable frame; an arm at rest; a pose the log cannot determine.
+        LogError: no usable frame; an arm at rest; a pose the log cannot determine; too few
+            frames left after the drops to leave a residual (2m <= p).
     """
     say = progress or (lambda _s: None)
     offset0 = np.asarray(robot.tracked_offset, dtype=np.float64)
@@ -252,11 +284,18 @@ def calibrate(
         )
     _spread_check(robot, links, obs, offset0)
     init = initial_guess(robot, links, obs, offset0, max_offset if fit_time_offset else 0.0)
-    say(
-        f"initial guess (solvePnP over {init.frames} frames, time offset scanned in "
-        f"+-{max_offset:g} s): reprojection RMS {init.rms:.2f} px at "
-        f"{init.time_offset * 1e3:+.0f} ms"
-    )
+    if init.source == "spec":
+        say(
+            f"initial guess: the spec's camera pose (reprojection RMS {init.rms:.2f} px over "
+            f"{init.frames} frames; solvePnP's best, time offset scanned in "
+            f"+-{max_offset:g} s: {init.pnp_rms:.2f} px)"
+        )
+    else:
+        say(
+            f"initial guess (solvePnP over {init.frames} frames, time offset scanned in "
+            f"+-{max_offset:g} s): reprojection RMS {init.rms:.2f} px at "
+            f"{init.time_offset * 1e3:+.0f} ms"
+        )
     model = ReprojectionModel(robot, links, obs.stamp, init.R_cw)
     x0 = np.concatenate([np.zeros(3), init.position, offset0, [init.time_offset]])
     free = np.ones(NP, dtype=bool)
@@ -277,7 +316,9 @@ def calibrate(
         dropped[int(i)] = "pixel outside the image"
     use = inside.copy()
 
-    # 2. robust fit, pixel noise from the residuals, outliers
+    # 2. robust fit (after a squared-loss one from a far start), pixel noise, outliers
+    if init.rms > FAR_START * HUBER_SCALE * pixel_std:
+        x0, use, _ = _fit(model, obs, x0, free, use, dropped)
     x, use, nfev = _fit(model, obs, x0, free, use, dropped, "huber", HUBER_SCALE * pixel_std)
     res = _residual(model, obs, x)
     sigma = 1.4826 * float(np.median(np.abs(res[use])))
@@ -295,12 +336,22 @@ def calibrate(
         pr = model.project(x)
         r = (pr.y - obs.pixel)[use]
         Jf = pr.J[use][:, :, free].reshape(-1, int(free.sum()))
-        dof = max(r.size - int(free.sum()), 1)
+        if r.size <= int(free.sum()):
+            raise LogError(
+                describe(
+                    "calibration",
+                    f"more pixel residuals than the {int(free.sum())} parameters fitted",
+                    f"{r.size} from {int(use.sum())} frames left of {obs.m} "
+                    f"({len(dropped)} dropped)",
+                    "record more frames",
+                )
+            )
+        dof = r.size - int(free.sum())
         s2 = float(np.sum(r**2)) / dof
         sd, sv = _stds(Jf, s2)
         std = np.full(NP, np.nan)
         std[free] = sd
-        newly = _undetermined(std, free, held)
+        newly = _undetermined(std, free, held, UNDETERMINED if limits is None else limits)
         if not newly:
             break
         for group, why in newly.items():
@@ -371,11 +422,13 @@ def _correlation(J: FloatArray, free: NDArray[np.bool_]) -> FloatArray:
     return out
 
 
-def _undetermined(std: FloatArray, free: NDArray[np.bool_], held: dict[str, str]) -> dict[str, str]:
-    """Parameter groups whose 95 % half-width is over :data:`UNDETERMINED` (module docstring,
-    step 4); a camera pose among them is refused."""
+def _undetermined(
+    std: FloatArray, free: NDArray[np.bool_], held: dict[str, str], limits: dict[str, float]
+) -> dict[str, str]:
+    """Parameter groups whose 95 % half-width is over ``limits`` (:data:`UNDETERMINED`;
+    module docstring, step 4); a camera pose among them is refused."""
     out: dict[str, str] = {}
-    for group, limit in UNDETERMINED.items():
+    for group, limit in limits.items():
         ks = [k for k in range(NP) if _GROUP[k] == group and free[k]]
         if not ks:
             continue
