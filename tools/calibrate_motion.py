@@ -61,7 +61,10 @@ def motion_report(
     half = info.half_width95()
     b = BOUNDS
     beyond = info.beyond(
-        b["position_mm"] * 1e-3, math.radians(b["rotation_deg"]), b["offset_mm"] * 1e-3
+        b["position_mm"] * 1e-3,
+        math.radians(b["rotation_deg"]),
+        b["offset_mm"] * 1e-3,
+        np.random.default_rng(0),
     )
     corr = np.triu(info.correlation(), 1)
     strongest = np.argsort(-np.abs(corr), axis=None)[:3]

@@ -63,12 +63,18 @@ class MotionInformation:
         return np.asarray(self.covariance / np.outer(sd, sd))
 
     def beyond(
-        self, position: float, rotation: float, offset: float, draws: int = 200_000, seed: int = 0
+        self,
+        position: float,
+        rotation: float,
+        offset: float,
+        rng: np.random.Generator,
+        draws: int = 200_000,
     ) -> tuple[float, float, float]:
         """The share of recordings whose camera position error [m], rotation error [rad]
         (the rotation vector's norm) and marker offset error [m] exceed ``position``,
-        ``rotation`` and ``offset``, the errors drawn as Gaussian with :attr:`covariance`."""
-        e = np.random.default_rng(seed).multivariate_normal(np.zeros(NP), self.covariance, draws)
+        ``rotation`` and ``offset``, ``draws`` errors drawn from ``rng`` as Gaussian with
+        :attr:`covariance`."""
+        e = rng.multivariate_normal(np.zeros(NP), self.covariance, draws)
         return (
             float(np.mean(np.linalg.norm(e[:, 3:6], axis=1) > position)),
             float(np.mean(np.linalg.norm(e[:, 0:3], axis=1) > rotation)),
