@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import shutil
 from collections.abc import Iterator
 from dataclasses import replace
@@ -19,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import tomllib
 
 from amsfe_sym.apps.cli import main
 from amsfe_sym.calibration.spec_out import moved_camera_spec
@@ -129,8 +131,10 @@ def test_calibrate_recovers_the_true_camera(
     )
     lib_true = ModelLibrary(generate(truth, out=tmp_path / "gen", parts=["model"]).out_dir)
     rng = np.random.default_rng(seed)
-    for _ in range(50):
-        q = np.array([rng.uniform(-1.2, 1.2), rng.uniform(0, 1), rng.uniform(0, 1.6)])
+    motion = tomllib.loads((DATA / "calib-sim.toml").read_text())["trajectory"]
+    centre, reach = np.array(motion["offset"]), np.array(motion["amplitude"])
+    for _ in range(50):  # poses within the recorded motion's ranges
+        q = rng.uniform(centre - reach, centre + reach)
         y_cal = lib_cal.function("camera")(q, np.zeros(0))[0].reshape(2)
         y_true = lib_true.function("camera")(q, np.zeros(0))[0].reshape(2)
         assert np.linalg.norm(y_cal - y_true) < 1.0
@@ -142,9 +146,11 @@ def test_arm_at_rest_cannot_determine_the_time_offset(
     """An arm holding still: one line naming the time offset, exit 2, nothing written."""
     scenario = truth.parent / "calib-sim.toml"
     text = scenario.read_text()
+    q0 = tomllib.loads(text)["plant"]["q0"]  # held where the motion starts
     start, end = text.index("[trajectory]"), text.index("[controller_gains")
-    rest = text[:start] + '[trajectory]\nkind = "constant"\nq = [0.0, 0.5, 0.8]\n\n' + text[end:]
-    rest = rest.replace("qd0 = [1.56, 1.05, 2.32]", "qd0 = [0.0, 0.0, 0.0]")
+    rest = text[:start] + f'[trajectory]\nkind = "constant"\nq = {q0}\n\n' + text[end:]
+    rest = re.sub(r"\n(qd0?) = \[[^]]*\]", r"\n\1 = [0.0, 0.0, 0.0]", rest)  # at rest from t = 0
+    assert tomllib.loads(rest)["plant"]["qd0"] == tomllib.loads(rest)["estimate0"]["qd"] == [0] * 3
     (truth.parent / "rest.toml").write_text(rest)
     rc = main(
         [

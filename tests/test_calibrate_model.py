@@ -20,11 +20,14 @@ from amsfe_sym.calibration import (
     link_angles,
     smooth_angles,
 )
+from amsfe_sym.calibration.design import motion_information
 from amsfe_sym.calibration.model import PARAMETERS
-from amsfe_sym.errors import LogError
+from amsfe_sym.errors import ConfigError, LogError
 from amsfe_sym.load import load_robot
 from amsfe_sym.load.types import Robot
 from amsfe_sym.logs.read import RobotLog
+from amsfe_sym.scenario import apply_sets, load_scenario
+from amsfe_sym.signals.trajectory import from_config
 
 DATA = Path(__file__).parent / "data" / "calibrate"
 T = 0.001
@@ -36,7 +39,8 @@ def robot() -> Robot:
 
 
 def _moving(K: int = 4000) -> LinkAngles:
-    """Smooth link angles of the 3 joints over K ticks (the calib-sim motion)."""
+    """Smooth link angles of the 3 joints over K ticks: a sweep across the camera's view (the
+    calib-sim motion before the designed one)."""
     t = np.arange(K) * T
     q = np.stack(
         [
@@ -275,3 +279,53 @@ def test_frames_without_encoders_are_dropped_by_reason(robot: Robot) -> None:
     assert any(r.startswith("no encoder sample") for r in reasons)
     gap = [i for i, r in cal.dropped.items() if r.startswith("no encoder")]
     assert all(14990 * T <= stamp[i] <= 15220 * T for i in gap)
+
+
+def _planned(scenario: Path, K: int) -> LinkAngles:
+    """The link angles of ``scenario``'s ``[trajectory]`` over K ticks (the arm following it)."""
+    sc = load_scenario(scenario)
+    return LinkAngles(T, from_config(sc.trajectory).evaluate(np.arange(K) * T).q, "planned")
+
+
+def test_a_motion_s_predicted_intervals_are_the_fit_s(robot: Robot) -> None:
+    """calibration.design, before recording: the 95 % half-widths it predicts for the
+    calib-sim motion are those the fit states on frames the map makes from that motion with
+    1 px noise, to 5 %; the designed motion narrows every group of parameters against the
+    sweep across the view it replaced (docs/calibrate.md, "What the motion must do")."""
+    links = _planned(DATA / "calib-sim.toml", 31000)
+    stamp = np.arange(100, 30900, 33) * T
+    info = motion_information(robot, links, stamp, pixel_std=1.0)
+    x_true = _x(robot, [0.002, -0.001, 0.001], [0.002, -0.001, 0.0015], [0.001, 0.0, -0.001], 0.0)
+    cal = calibrate(robot, links, _synthetic(robot, links, stamp, x_true, seed=3))
+    assert cal.held == {} and info.seen.sum() > 850
+    assert abs(int(cal.used.sum()) - int(info.seen.sum())) <= 5  # (the camera moved 2.6 mm)
+    stated = cal.half_width95() / cal.pixel_std  # the fit's, per px of its measured noise
+    np.testing.assert_allclose(stated, info.half_width95(), rtol=0.05)
+    assert np.all(np.abs(cal.x - x_true)[3:] < 4 * cal.std[3:])
+
+    # the camera's rotation and position and the marker offset, each as the RMS of its
+    # error: under 3/4 of the sweep's (over 1.8 times the information), in its weak direction
+    # (the camera sideways and turned back about its y axis) under 2/3
+    sweep = motion_information(robot, _moving(31000), stamp, pixel_std=1.0)
+    for group in (slice(0, 3), slice(3, 6), slice(6, 9)):
+        rms = [np.sqrt(np.trace(m.covariance[group, group])) for m in (info, sweep)]
+        assert rms[0] < 0.75 * rms[1], (group, rms)
+    assert np.all(info.half_width95()[[1, 4]] < 0.67 * sweep.half_width95()[[1, 4]])
+
+
+def test_a_motion_that_sees_too_little_is_refused(robot: Robot) -> None:
+    """A marker held still determines nothing: one line naming the motion."""
+    links = LinkAngles(T, np.tile([0.0, 0.5, 0.8], (4000, 1)), "still")
+    with pytest.raises(ConfigError, match="calibration motion"):
+        motion_information(robot, links, np.arange(100, 3900, 33) * T, pixel_std=1.0)
+
+
+def test_a_trajectory_key_is_set_from_the_command_line() -> None:
+    """``--set trajectory.amplitude=...`` (a calibration motion tried without editing the
+    scenario): a [trajectory] list takes numbers separated by commas or a TOML list."""
+    sc = load_scenario(DATA / "calib-sim.toml")
+    for value in ("1.2,0.5,0.8", "[1.2, 0.5, 0.8]"):
+        got = apply_sets(sc, [f"trajectory.amplitude={value}"]).trajectory["amplitude"]
+        assert got == [1.2, 0.5, 0.8]
+    with pytest.raises(ConfigError, match=r"trajectory\.omega"):
+        apply_sets(sc, ["trajectory.omega=fast"])

@@ -483,8 +483,8 @@ def _log(tmp: Path) -> Path:
     return dest
 
 
-#: The calibration test arm (tests/data/calibrate): 6 s of it moving is the least that
-#: determines its camera (3 s is refused: docs/calibrate.md).
+#: The calibration test arm (tests/data/calibrate): 6 s of calib-sim's motion determine its
+#: camera to +-3 mm (docs/calibrate.md, "Long enough").
 CALIB = Path(__file__).parent / "data" / "calibrate"
 CALIBRATE = ["calibrate", "--robot", str(CALIB / "robot.toml")]
 

@@ -57,16 +57,17 @@ def _coerce(key: str, current: Any, raw: str) -> Any:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise bad("a number")
         return float(value)
-    if isinstance(current, tuple):
+    if isinstance(current, tuple | list):  # (a list: a [trajectory] key as TOML read it)
         items: Any = value
         if isinstance(value, str):
             items = [s for s in value.strip("[]() ").split(",") if s.strip()]
         elif not isinstance(value, list):
             items = [value]
         try:
-            return tuple(float(v) for v in items)
+            numbers = tuple(float(v) for v in items)
         except (TypeError, ValueError):
             raise bad("numbers separated by commas, e.g. 0.5,0.5") from None
+        return list(numbers) if isinstance(current, list) else numbers
     if isinstance(current, str):
         if isinstance(value, list | dict):
             raise bad("a string")
