@@ -250,14 +250,15 @@ def test_ctrl_c_during_the_read_ends_the_threads(jpeg_log: Path, monkeypatch) ->
 
 
 def test_the_threads_setting(monkeypatch) -> None:
-    """``$AMSFE_IMAGE_THREADS``: 0 (serial) to 16; unset: 1 on 2+ cores; else one line."""
+    """``$AMSFE_IMAGE_THREADS``: 0 (serial) to 16; unset: 2 for compressed images on 2+
+    cores, 0 for raw ones; else one line."""
     monkeypatch.setenv(THREADS_ENV, "0")
     assert image_threads() == 0
     monkeypatch.setenv(THREADS_ENV, "3")
-    assert image_threads() == 3
+    assert image_threads() == 3 and image_threads(compressed=False) == 3
     monkeypatch.delenv(THREADS_ENV)
     monkeypatch.setattr("os.cpu_count", lambda: 2)
-    assert image_threads() == 1
+    assert image_threads() == 2 and image_threads(compressed=False) == 0
     monkeypatch.setattr("os.cpu_count", lambda: 1)
     assert image_threads() == 0
     for bad in ("two", "-1", "17", "1.5"):

@@ -68,14 +68,17 @@ def decoders(plan: LogPlan, marker: MarkerSpec, threads: int | None = None) -> d
     ``threads``: decoding threads beside the reading thread (:class:`~amsfe_sym.vision.
     prefetch.Prefetch`, which the caller closes: :func:`close_decoders`); 0 decodes and
     detects on the reading thread; None: :func:`~amsfe_sym.vision.prefetch.image_threads`
-    (``$AMSFE_IMAGE_THREADS``, else 1 on 2 or more cores).
+    (``$AMSFE_IMAGE_THREADS``, else 2 for compressed images on 2 or more cores, 0 for raw
+    ones).
     """
     if plan.camera_info is None:
         return {}
     single_threaded()
     image = plan.roles["camera"]
-    serial = ImageDecoder(plan.topics[image].msgtype, marker, image_message)
-    n = image_threads() if threads is None else threads
+    msgtype = plan.topics[image].msgtype
+    serial = ImageDecoder(msgtype, marker, image_message)
+    compressed = msgtype.endswith("CompressedImage")
+    n = image_threads(compressed=compressed) if threads is None else threads
     return {
         image: Prefetch(serial, n) if n > 0 else serial,
         plan.camera_info: _decode_infos,

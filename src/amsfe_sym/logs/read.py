@@ -174,8 +174,8 @@ def read_log(
 ) -> RobotLog:
     """Read ``path`` for a robot with ``joints`` (q order), sampling interval ``T`` [s] and
     ``N`` states (``robot``: its name, for the fix of a rate mismatch; ``image_threads``:
-    an image topic's decoding threads, 0 serial, None ``$AMSFE_IMAGE_THREADS`` or 1 on 2+
-    cores: :func:`amsfe_sym.vision.prefetch.image_threads`).
+    an image topic's decoding threads, 0 serial, None ``$AMSFE_IMAGE_THREADS`` or the
+    default: :func:`amsfe_sym.vision.prefetch.image_threads`).
 
     Raises:
         LogError: unreadable; topics missing or of the wrong type; joint names not found or

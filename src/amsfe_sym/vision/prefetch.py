@@ -37,18 +37,24 @@ from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.vision.detections import Detections, FrameColumns, ImageDecoder
 from amsfe_sym.vision.images import GreyImage
 
-__all__ = ["DEPTH", "THREADS_ENV", "Prefetch", "image_threads"]
+__all__ = ["DEFAULT_THREADS", "DEPTH", "THREADS_ENV", "Prefetch", "image_threads"]
 
 #: Frames read but not yet detected, at most (each ~0.1-0.3 MB of payload, and a 0.3 MB grey
 #: image once decoded, for 640 x 480).
 DEPTH = 8
+#: Decoding threads on a machine of 2 or more cores: a jpeg's decoding (~1.2 ms a frame) is
+#: twice its search (~0.6 ms), so two decoders keep the one detection thread fed; on 2 cores
+#: the four threads (reader, 2 decoders, detector) fill both (docs/camera.md, "Speed").
+DEFAULT_THREADS = 2
 #: The environment variable that sets the decoding threads (0: serial, on the reading thread).
 THREADS_ENV = "AMSFE_IMAGE_THREADS"
 
 
-def image_threads(value: str | None = None) -> int:
+def image_threads(value: str | None = None, compressed: bool = True) -> int:
     """Decoding threads of a log's image topic: ``value`` (default: ``$AMSFE_IMAGE_THREADS``),
-    else 1 on a machine of 2 or more cores and 0 (serial) on one core.  With N >= 1 the
+    else, for ``compressed`` images (jpeg, png), :data:`DEFAULT_THREADS` on a machine of 2 or
+    more cores, and 0 (serial) on one core or for raw Images (their pixels are read in place:
+    there is no decoding to overlap, only the threads' hand-offs to pay).  With N >= 1 the
     reader runs N decoding threads and one detection thread beside itself
     (:class:`Prefetch`); 0 decodes and detects on the reading thread.
 
@@ -57,7 +63,7 @@ def image_threads(value: str | None = None) -> int:
     """
     text = os.environ.get(THREADS_ENV) if value is None else value
     if text is None or text.strip() == "":
-        return 1 if (os.cpu_count() or 1) >= 2 else 0
+        return DEFAULT_THREADS if compressed and (os.cpu_count() or 1) >= 2 else 0
     try:
         n = int(text)
     except ValueError:
