@@ -294,7 +294,10 @@ def test_sigint_during_the_read_is_one_line(jpeg_log: Path, tmp_path) -> None:
 
     out = tmp_path / "est"
     env = {**os.environ, "PYTHONUNBUFFERED": "1", THREADS_ENV: "2"}
-    cmd = [sys.executable, "-m", "amsfe_sym", "estimate", str(jpeg_log), "--out", str(out)]
+    # (run as the ``amsfe`` script runs it: ``python -m amsfe_sym`` exits by SIGINT after
+    # the same one line, serial decoding too: runpy's path, not the threads')
+    run = "import sys; from amsfe_sym.__main__ import run; sys.exit(run())"
+    cmd = [sys.executable, "-c", run, "estimate", str(jpeg_log), "--out", str(out)]
     proc = subprocess.Popen(
         [*cmd, "--no-plots"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
