@@ -250,7 +250,7 @@ def test_ctrl_c_during_the_read_ends_the_threads(jpeg_log: Path, monkeypatch) ->
 
 
 def test_the_threads_setting(monkeypatch) -> None:
-    """``$AMSFE_IMAGE_THREADS``: 0 (serial) to 16; unset: 2 for compressed images on 2+
+    """``$AMSFE_IMAGE_THREADS``: 0 (serial) to 16; unset: 1 for compressed images on 2+
     cores, 0 for raw ones; else one line."""
     monkeypatch.setenv(THREADS_ENV, "0")
     assert image_threads() == 0
@@ -258,7 +258,7 @@ def test_the_threads_setting(monkeypatch) -> None:
     assert image_threads() == 3 and image_threads(compressed=False) == 3
     monkeypatch.delenv(THREADS_ENV)
     monkeypatch.setattr("os.cpu_count", lambda: 2)
-    assert image_threads() == 2 and image_threads(compressed=False) == 0
+    assert image_threads() == 1 and image_threads(compressed=False) == 0
     monkeypatch.setattr("os.cpu_count", lambda: 1)
     assert image_threads() == 0
     for bad in ("two", "-1", "17", "1.5"):

@@ -42,10 +42,11 @@ __all__ = ["DEFAULT_THREADS", "DEPTH", "THREADS_ENV", "Prefetch", "image_threads
 #: Frames read but not yet detected, at most (each ~0.1-0.3 MB of payload, and a 0.3 MB grey
 #: image once decoded, for 640 x 480).
 DEPTH = 8
-#: Decoding threads on a machine of 2 or more cores: a jpeg's decoding (~1.2 ms a frame) is
-#: twice its search (~0.6 ms), so two decoders keep the one detection thread fed; on 2 cores
-#: the four threads (reader, 2 decoders, detector) fill both (docs/camera.md, "Speed").
-DEFAULT_THREADS = 2
+#: Decoding threads on a machine of 2 or more cores: one decoder and one detector beside the
+#: reader.  A second decoder keeps the detector better fed on idle cores (a jpeg's decoding,
+#: ~1.2 ms a frame, is twice its search), but on the shared 2-core machine it measured no
+#: faster over four runs of the whole command (docs/camera.md, "Speed"), so the fewer threads.
+DEFAULT_THREADS = 1
 #: The environment variable that sets the decoding threads (0: serial, on the reading thread).
 THREADS_ENV = "AMSFE_IMAGE_THREADS"
 
