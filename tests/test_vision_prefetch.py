@@ -74,7 +74,7 @@ def _same(a: Detections, b: Detections) -> None:
         assert np.array_equal(getattr(a, f), getattr(b, f), equal_nan=True), f
 
 
-def _decode(payloads: list[Any], threads: int, depth: int = 8, slice_: int = 7) -> Detections:
+def _decode(payloads: list[Any], threads: int, depth: int = 32, slice_: int = 7) -> Detections:
     """The payloads decoded in slices of ``slice_``, serially (0) or prefetched."""
     serial = ImageDecoder(CIMG, MarkerSpec(), image_message)
     dec: Any = serial if threads == 0 else Prefetch(serial, threads, depth)
@@ -98,7 +98,7 @@ def test_prefetched_detections_and_estimate_equal_the_serial_ones(
     assert len(payloads) > 80
     ref = _decode(payloads, 0)
     assert (ref.reason == 0).all()
-    for threads, depth in ((1, 8), (2, 8), (2, 1)):
+    for threads, depth in ((1, 32), (2, 8), (2, 1)):
         _same(ref, _decode(payloads, threads, depth))
     logs = {n: read_log(jpeg_log, LogSpec(), JOINTS, 0.001, 9, image_threads=n) for n in (0, 2)}
     a, b = logs[0], logs[2]
@@ -250,7 +250,7 @@ def test_ctrl_c_during_the_read_ends_the_threads(jpeg_log: Path, monkeypatch) ->
 
 
 def test_the_threads_setting(monkeypatch) -> None:
-    """``$AMSFE_IMAGE_THREADS``: 0 (serial) to 16; unset: 1 for compressed images on 2+
+    """``$AMSFE_IMAGE_THREADS``: 0 (serial) to 16; unset: 2 for compressed images on 2+
     cores, 0 for raw ones; else one line."""
     monkeypatch.setenv(THREADS_ENV, "0")
     assert image_threads() == 0
@@ -258,7 +258,7 @@ def test_the_threads_setting(monkeypatch) -> None:
     assert image_threads() == 3 and image_threads(compressed=False) == 3
     monkeypatch.delenv(THREADS_ENV)
     monkeypatch.setattr("os.cpu_count", lambda: 2)
-    assert image_threads() == 1 and image_threads(compressed=False) == 0
+    assert image_threads() == 2 and image_threads(compressed=False) == 0
     monkeypatch.setattr("os.cpu_count", lambda: 1)
     assert image_threads() == 0
     for bad in ("two", "-1", "17", "1.5"):

@@ -68,7 +68,7 @@ def decoders(plan: LogPlan, marker: MarkerSpec, threads: int | None = None) -> d
     ``threads``: decoding threads beside the reading thread (:class:`~amsfe_sym.vision.
     prefetch.Prefetch`, which the caller closes: :func:`close_decoders`); 0 decodes and
     detects on the reading thread; None: :func:`~amsfe_sym.vision.prefetch.image_threads`
-    (``$AMSFE_IMAGE_THREADS``, else 1 for compressed images on 2 or more cores, 0 for raw
+    (``$AMSFE_IMAGE_THREADS``, else 2 for compressed images on 2 or more cores, 0 for raw
     ones).
     """
     if plan.camera_info is None:

@@ -39,14 +39,15 @@ from amsfe_sym.vision.images import GreyImage
 
 __all__ = ["DEFAULT_THREADS", "DEPTH", "THREADS_ENV", "Prefetch", "image_threads"]
 
-#: Frames read but not yet detected, at most (each ~0.1-0.3 MB of payload, and a 0.3 MB grey
-#: image once decoded, for 640 x 480).
-DEPTH = 8
-#: Decoding threads on a machine of 2 or more cores: one decoder and one detector beside the
-#: reader.  A second decoder keeps the detector better fed on idle cores (a jpeg's decoding,
-#: ~1.2 ms a frame, is twice its search), but on the shared 2-core machine it measured no
-#: faster over four runs of the whole command (docs/camera.md, "Speed"), so the fewer threads.
-DEFAULT_THREADS = 1
+#: Frames read but not yet detected, at most (each holds its payload, ~0.1-0.3 MB for a 640 x
+#: 480 jpeg, by a view of its chunk, and once decoded a 0.3 MB grey image: ~10-20 MB in all).
+#: Deep enough that a thread the scheduler leaves waiting for a few ms on a busy machine does
+#: not stall the others (at a load of 9 on 2 cores, one decoder read the 60 s jpeg log of
+#: docs/camera.md in 6.1 s with 32, 6.9 s with 8: medians of 3).
+DEPTH = 32
+#: Decoding threads on a machine of 2 or more cores: two decoders and one detector beside the
+#: reader (a jpeg's decoding, ~1.2 ms a frame, is twice its search; docs/camera.md, "Speed").
+DEFAULT_THREADS = 2
 #: The environment variable that sets the decoding threads (0: serial, on the reading thread).
 THREADS_ENV = "AMSFE_IMAGE_THREADS"
 
