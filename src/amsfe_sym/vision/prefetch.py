@@ -46,7 +46,8 @@ __all__ = ["DEFAULT_THREADS", "DEPTH", "THREADS_ENV", "Prefetch", "image_threads
 #: docs/camera.md in 6.1 s with 32, 6.9 s with 8: medians of 3).
 DEPTH = 32
 #: Decoding threads on a machine of 2 or more cores: two decoders and one detector beside the
-#: reader (a jpeg's decoding, ~1.2 ms a frame, is twice its search; docs/camera.md, "Speed").
+#: reader (a jpeg's decoding, ~1.2 ms a frame, costs more than its search, ~0.7 ms;
+#: docs/camera.md, "Speed").
 DEFAULT_THREADS = 2
 #: The environment variable that sets the decoding threads (0: serial, on the reading thread).
 THREADS_ENV = "AMSFE_IMAGE_THREADS"
