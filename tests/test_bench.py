@@ -181,3 +181,11 @@ def test_a_bad_log_case_is_one_line(text: str) -> None:
     case = log_case("paper-sim:60:images")
     assert (case.scenario, case.duration, case.camera) == ("paper-sim", 60.0, "images")
     assert log_case("paper-sim:60:pixels").label == "paper-sim 60 s, 30 Hz pixels"
+    serial = log_case("paper-sim:60:jpeg:threads=0")
+    assert (serial.camera, serial.threads) == ("jpeg", 0)
+    assert serial.label == "paper-sim 60 s, 30 Hz jpeg, serial decoding"
+    assert log_case("paper-sim:60:jpeg:threads=2").label.endswith("2 decoding threads")
+    assert serial.log_key == log_case("paper-sim:60:jpeg").log_key
+    with pytest.raises(ConfigError) as exc:
+        log_case("paper-sim:60:jpeg:threads=x")
+    assert "\n" not in str(exc.value) and "AMSFE_IMAGE_THREADS" in str(exc.value)

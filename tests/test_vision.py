@@ -32,6 +32,7 @@ from amsfe_sym.vision.camera_info import camera_info_from_message, read_camera_i
 from amsfe_sym.vision.detections import ImageDecoder
 from amsfe_sym.vision.images import grey_from_message
 from amsfe_sym.vision.marker import NO_MARKER, OTHER_ID
+from amsfe_sym.vision.prefetch import THREADS_ENV, Prefetch
 from amsfe_sym.vision.sim_images import ImageOptions, SimulatedCamera
 from amsfe_sym.vision.spec import MarkerSpec
 from tests.test_log_reader import OFFSET_S, Ev, _cli, _one_line, arm_events
@@ -436,19 +437,25 @@ def test_images_are_detected_a_slice_at_a_time(sim, tmp_path, monkeypatch) -> No
     joints, _ = arm_events(sim, camera=False)
     frames, truth = image_frames(sim)
     seen: list[int] = []
-    call = ImageDecoder.__call__
+    calls = {c: c.__call__ for c in (ImageDecoder, Prefetch)}
 
-    def spy(self: ImageDecoder, raws: Any, *a: Any) -> Any:
-        seen.append(len(raws))
-        return call(self, raws, *a)
+    def spied(cls: type) -> Any:
+        def spy(self: Any, raws: Any, *a: Any) -> Any:
+            seen.append(len(raws))
+            return calls[cls](self, raws, *a)
 
-    monkeypatch.setattr(ImageDecoder, "__call__", spy)
+        return spy
+
+    for cls in calls:
+        monkeypatch.setattr(cls, "__call__", spied(cls))
     monkeypatch.setattr(stream, "SLICE_BYTES", 700_000)  # two 640 x 512 mono8 images
-    for fmt in ("sqlite3", "mcap"):
-        seen.clear()
-        got = _read(sim, write_images_log(tmp_path / fmt, joints, frames, fmt))
-        _check_frames(sim, got, truth)
-        assert sum(seen) == len(sim.frames) and max(seen) <= 3 and len(seen) >= 3, (fmt, seen)
+    for threads in ("0", "1"):  # (serial, and decoded ahead: vision.prefetch)
+        monkeypatch.setenv(THREADS_ENV, threads)
+        for fmt in ("sqlite3", "mcap"):
+            seen.clear()
+            got = _read(sim, write_images_log(tmp_path / f"{fmt}{threads}", joints, frames, fmt))
+            _check_frames(sim, got, truth)
+            assert sum(seen) == len(sim.frames) and max(seen) <= 3 and len(seen) >= 3, (fmt, seen)
 
 
 def test_images_without_a_bag_are_refused_in_one_line(tmp_path, capsys) -> None:

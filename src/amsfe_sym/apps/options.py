@@ -136,10 +136,11 @@ def add_bench_arguments(p: argparse.ArgumentParser) -> None:
         "--logs",
         nargs="+",
         default=None,
-        metavar="SCENARIO:SECONDS[:CAMERA]",
+        metavar="SCENARIO:SECONDS[:CAMERA][:threads=N]",
         help="logs amsfe estimate is timed on, simulated with --bag (default paper-sim:10 "
-        "panda-control:60); CAMERA: a 30 Hz camera writing 'pixels' or 'images' "
-        "(e.g. paper-sim:60:images)",
+        "panda-control:60); CAMERA: a 30 Hz camera writing 'pixels', 'images' or 'jpeg' "
+        "(e.g. paper-sim:60:images); threads=N: the image decoding threads "
+        "(AMSFE_IMAGE_THREADS, 0 serial; cases of one log share it, rounds interleaved)",
     )
     p.add_argument(
         "--ros",

@@ -27,10 +27,11 @@ from amsfe_sym.logs.sensors import OnGrid, camera_frames
 from amsfe_sym.vision.camera_info import CameraInfo, camera_info_from_message
 from amsfe_sym.vision.detections import REASONS, Detections, ImageDecoder, image_sizes, points_of
 from amsfe_sym.vision.marker import single_threaded
+from amsfe_sym.vision.prefetch import Prefetch, image_threads
 from amsfe_sym.vision.sim_images import SimulatedCamera
 from amsfe_sym.vision.spec import CAMERA_INFO, MarkerSpec
 
-__all__ = ["CameraInfos", "decoders", "image_frames", "image_messages"]
+__all__ = ["CameraInfos", "close_decoders", "decoders", "image_frames", "image_messages"]
 
 
 @dataclass
@@ -59,18 +60,36 @@ def _decode_infos(raws: Sequence[bytes], encoding: str = "cdr", where: str = "")
     return CameraInfos(stamps, infos)
 
 
-def decoders(plan: LogPlan, marker: MarkerSpec) -> dict[str, Any]:
+def decoders(plan: LogPlan, marker: MarkerSpec, threads: int | None = None) -> dict[str, Any]:
     """The log reader's decoders of an image camera topic and its CameraInfo topic (none
-    for a pixel topic): images read in place (:mod:`amsfe_sym.logs.image_wire`), OpenCV
-    on one thread (:func:`amsfe_sym.vision.marker.single_threaded`)."""
+    for a pixel topic): images read in place (:mod:`amsfe_sym.logs.image_wire`), each
+    OpenCV call on one thread (:func:`amsfe_sym.vision.marker.single_threaded`).
+
+    ``threads``: decoding threads beside the reading thread (:class:`~amsfe_sym.vision.
+    prefetch.Prefetch`, which the caller closes: :func:`close_decoders`); 0 decodes and
+    detects on the reading thread; None: :func:`~amsfe_sym.vision.prefetch.image_threads`
+    (``$AMSFE_IMAGE_THREADS``, else 2 for compressed images on 2 or more cores, 0 for raw
+    ones).
+    """
     if plan.camera_info is None:
         return {}
     single_threaded()
     image = plan.roles["camera"]
+    msgtype = plan.topics[image].msgtype
+    serial = ImageDecoder(msgtype, marker, image_message)
+    compressed = msgtype.endswith("CompressedImage")
+    n = image_threads(compressed=compressed) if threads is None else threads
     return {
-        image: ImageDecoder(plan.topics[image].msgtype, marker, image_message),
+        image: Prefetch(serial, n) if n > 0 else serial,
         plan.camera_info: _decode_infos,
     }
+
+
+def close_decoders(decoders: dict[str, Any]) -> None:
+    """End the threads of :func:`decoders`' decoders (after the read, an error or Ctrl-C)."""
+    for d in decoders.values():
+        if isinstance(d, Prefetch):
+            d.close()
 
 
 def image_frames(log: OnGrid, use: RoleUse, marker: MarkerSpec) -> list[CameraFrame]:

@@ -136,19 +136,26 @@ class RobotLog:
 
 
 def _read_decoded(
-    path: Path, plan: LogPlan, spec: LogSpec
+    path: Path, plan: LogPlan, spec: LogSpec, image_threads: int | None = None
 ) -> tuple[dict[str, IntArray], dict[str, Any]]:
     """Log times and decoded columns of every topic the plan uses (a topic without a
     message: absent), in one pass of :func:`amsfe_sym.logs.stream.read_topics` (bounded
-    memory, bulk decoding, a progress bar on long logs)."""
+    memory, bulk decoding, a progress bar on long logs; an image topic decoded ahead on
+    ``image_threads`` threads, :func:`amsfe_sym.logs.images.decoders`)."""
     from amsfe_sym.logs.stream import read_topics
 
-    own = None
+    own: dict[str, Any] = {}
     if plan.camera_info is not None:  # an image camera topic: its marker detected as read
         from amsfe_sym.logs.images import decoders
 
-        own = decoders(plan, spec.marker)
-    got = read_topics(path, plan.topics_read, decoders=own)
+        own = decoders(plan, spec.marker, image_threads)
+    try:
+        got = read_topics(path, plan.topics_read, decoders=own)
+    finally:
+        if own:
+            from amsfe_sym.logs.images import close_decoders
+
+            close_decoders(own)
     return (
         {t: np.asarray(v.log_time_ns, dtype=np.int64) for t, v in got.items()},
         {t: v.decoded for t, v in got.items()},
@@ -163,9 +170,12 @@ def read_log(
     N: int,
     plan: LogPlan | None = None,
     robot: str = "ROBOT",
+    image_threads: int | None = None,
 ) -> RobotLog:
     """Read ``path`` for a robot with ``joints`` (q order), sampling interval ``T`` [s] and
-    ``N`` states (``robot``: its name, for the fix of a rate mismatch).
+    ``N`` states (``robot``: its name, for the fix of a rate mismatch; ``image_threads``:
+    an image topic's decoding threads, 0 serial, None ``$AMSFE_IMAGE_THREADS`` or the
+    default: :func:`amsfe_sym.vision.prefetch.image_threads`).
 
     Raises:
         LogError: unreadable; topics missing or of the wrong type; joint names not found or
@@ -175,7 +185,7 @@ def read_log(
     plan = plan or plan_log(path, spec, joints)
     n = len(joints)
     names = plan.names
-    times, decoded = _read_decoded(path, plan, spec)
+    times, decoded = _read_decoded(path, plan, spec, image_threads)
     usage = {r: RoleUse(plan.roles.get(r), not_used=plan.unused.get(r, [])) for r in LOG_ROLES}
     for ru in usage.values():
         if ru.topic is not None:

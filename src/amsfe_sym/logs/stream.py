@@ -24,6 +24,7 @@ Both give each topic's messages in log-time order (ties: file order), as ``iter_
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -69,7 +70,9 @@ PROGRESS_MIN_S = 5.0
 
 Progress = Callable[[int, int], None]
 #: A topic's own decoder (``decode(payloads, encoding, where)``, e.g. an image topic's
-#: marker detector, :class:`amsfe_sym.vision.detections.ImageDecoder`), by topic.
+#: marker detector, :class:`amsfe_sym.vision.detections.ImageDecoder`), by topic; it may
+#: return a ``Future`` of the slice's columns (decoded on other threads while the reading
+#: goes on, :class:`amsfe_sym.vision.prefetch.Prefetch`), resolved when the topic is joined.
 Decoders = dict[str, Callable[..., Any]]
 
 
@@ -176,7 +179,8 @@ class _Parts:
         times = np.concatenate(self.times) if self.times else np.zeros(0, np.int64)
         order = np.argsort(times, kind="stable")
         sorted_already = bool(np.all(order == np.arange(order.size)))
-        decoded = concat_decoded(self.decoded) if self.decoded else None
+        slices = [d.result() if isinstance(d, Future) else d for d in self.decoded]
+        decoded = concat_decoded(slices) if slices else None
         raw = self.raw
         if not sorted_already:
             if decoded is not None:

@@ -17,17 +17,30 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.vision.camera_info import CameraInfo, undistort
-from amsfe_sym.vision.images import grey_from_message
+from amsfe_sym.vision.images import GreyImage, UndecodableImageError, grey_from_message
 from amsfe_sym.vision.marker import NO_MARKER, OTHER_ID, MarkerDetector, diagonals_meet_many
 from amsfe_sym.vision.spec import CORNERS, MarkerSpec
 
-__all__ = ["REASONS", "Detections", "ImageDecoder", "image_sizes", "points_of"]
+__all__ = [
+    "REASONS",
+    "UNDECODABLE",
+    "Detections",
+    "FrameColumns",
+    "ImageDecoder",
+    "image_sizes",
+    "points_of",
+]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
+#: The pixels of an image that did not decode.
+_NOTHING = np.zeros((0, 0), np.uint8)
+
+#: A frame whose compressed bytes do not decode (a corrupt jpeg or png): skipped, counted.
+UNDECODABLE = "whose image bytes do not decode (corrupt)"
 #: Why a frame has no point, by code (0: found); the log reader counts them by these names.
-REASONS = ("", NO_MARKER, OTHER_ID)
+REASONS = ("", NO_MARKER, OTHER_ID, UNDECODABLE)
 
 
 @dataclass
@@ -82,24 +95,58 @@ class ImageDecoder:
 
     def __call__(self, raws: Sequence[bytes], encoding: str = "cdr", where: str = "") -> Detections:
         M = len(raws)
-        stamps = np.zeros(M, np.int64)
-        corners = np.full((M, 4, 2), np.nan)
-        reason = np.zeros(M, np.int64)
-        size = np.zeros((M, 2), np.int64)
+        cols = FrameColumns(M)
         view = getattr(raws, "view", raws.__getitem__)
         for i in range(M):
-            msg = self.deserialize(view(i), self.msgtype, encoding, where)
-            img = grey_from_message(msg, self.msgtype, where or self.msgtype)
-            stamps[i] = img.stamp_ns
-            size[i] = img.pixels.shape[1], img.pixels.shape[0]
-            det = self.detector.detect(img.pixels, self._last)  # (around the last first)
-            self._last = det.corners
-            if det.corners is None:
-                reason[i] = REASONS.index(det.skipped or NO_MARKER)
-            else:
-                corners[i] = det.corners
+            self.detect_into(cols, i, self.grey(view(i), encoding, where))
+        return cols.detections()
+
+    def grey(self, raw: Any, encoding: str = "cdr", where: str = "") -> GreyImage:
+        """One payload (``raw``: bytes or a uint8 view) decoded to grey; no pixels (an empty
+        array) when its image bytes do not decode (a corrupt jpeg or png: the frame is
+        skipped and counted).
+
+        Raises:
+            LogError: a payload that is not such a message, an encoding not supported.
+        """
+        msg = self.deserialize(raw, self.msgtype, encoding, where)
+        try:
+            return grey_from_message(msg, self.msgtype, where or self.msgtype)
+        except UndecodableImageError as exc:
+            return GreyImage(exc.stamp_ns, _NOTHING)
+
+    def detect_into(self, cols: FrameColumns, i: int, img: GreyImage) -> None:
+        """Row ``i`` of ``cols``: ``img`` searched for the marker, around the previous
+        frame's corners first (so frames must come in the log's order: the region of
+        interest makes each detection depend on the one before)."""
+        cols.stamp_ns[i] = img.stamp_ns
+        if img.pixels is _NOTHING:
+            cols.reason[i] = REASONS.index(UNDECODABLE)
             self.frames += 1
-        return Detections(stamps, corners, reason, size)
+            return  # (the next frame is searched around the last corners found before)
+        cols.size[i] = img.pixels.shape[1], img.pixels.shape[0]
+        det = self.detector.detect(img.pixels, self._last)  # (around the last first)
+        self._last = det.corners
+        if det.corners is None:
+            cols.reason[i] = REASONS.index(det.skipped or NO_MARKER)
+        else:
+            cols.corners[i] = det.corners
+        self.frames += 1
+
+
+class FrameColumns:
+    """The rows of one slice of frames, filled frame by frame (:class:`Detections`'s
+    columns, preallocated for ``M`` frames)."""
+
+    def __init__(self, M: int) -> None:
+        self.stamp_ns = np.zeros(M, np.int64)
+        self.corners = np.full((M, 4, 2), np.nan)
+        self.reason = np.zeros(M, np.int64)
+        self.size = np.zeros((M, 2), np.int64)
+
+    def detections(self) -> Detections:
+        """The slice's :class:`Detections`."""
+        return Detections(self.stamp_ns, self.corners, self.reason, self.size)
 
 
 def points_of(det: Detections, info: CameraInfo, spec: MarkerSpec) -> FloatArray:
@@ -119,9 +166,10 @@ def points_of(det: Detections, info: CameraInfo, spec: MarkerSpec) -> FloatArray
 
 
 def image_sizes(det: Detections) -> list[tuple[int, int]]:
-    """The distinct image sizes (width, height) of a topic, in order of first appearance."""
+    """The distinct image sizes (width, height) of a topic, in order of first appearance
+    (of the images that decoded)."""
     seen: list[tuple[int, int]] = []
-    for w, h in det.size.tolist():
+    for w, h in det.size[det.reason != REASONS.index(UNDECODABLE)].tolist():
         if (w, h) not in seen:
             seen.append((w, h))
     return seen

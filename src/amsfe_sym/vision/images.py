@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from amsfe_sym.errors import LogError, describe
 
-__all__ = ["ENCODINGS", "FORMATS", "GreyImage", "grey_from_message"]
+__all__ = ["ENCODINGS", "FORMATS", "GreyImage", "UndecodableImageError", "grey_from_message"]
 
 U8Array = NDArray[np.uint8]
 
@@ -41,6 +41,18 @@ def _encodings() -> dict[str, tuple[int, int | None]]:
             }
         )
     return ENCODINGS
+
+
+class UndecodableImageError(LogError):
+    """A CompressedImage whose bytes do not decode (a corrupt or truncated jpeg or png).
+
+    Attributes:
+        stamp_ns: Its ``header.stamp`` [ns] (the message itself was read).
+    """
+
+    def __init__(self, message: str, stamp_ns: int) -> None:
+        super().__init__(message)
+        self.stamp_ns = stamp_ns
 
 
 @dataclass(frozen=True)
@@ -75,8 +87,8 @@ def grey_from_message(msg: Any, msgtype: str, where: str = "image") -> GreyImage
     """An ``Image`` or ``CompressedImage`` (rosbags or rclpy message) as a grey image.
 
     Raises:
-        LogError: an encoding or format not supported, a buffer of the wrong size, bytes
-            that do not decode.
+        LogError: an encoding or format not supported, a buffer of the wrong size;
+            UndecodableImageError (a LogError): compressed bytes that do not decode.
     """
     import cv2
 
@@ -95,8 +107,9 @@ def grey_from_message(msg: Any, msgtype: str, where: str = "image") -> GreyImage
         # (straight to grey: libjpeg skips the colour planes' upsampling and conversion)
         img = cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE) if buf.size else None
         if img is None:
-            raise LogError(
-                describe(where, f"{msg.format} bytes that decode", f"{buf.size} bytes", "re-record")
+            found = f"{buf.size} bytes"
+            raise UndecodableImageError(
+                describe(where, f"{msg.format} bytes that decode", found, "re-record"), _stamp(msg)
             )
         return GreyImage(_stamp(msg), np.ascontiguousarray(img, dtype=np.uint8))
     enc = str(msg.encoding)

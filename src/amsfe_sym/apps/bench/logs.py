@@ -16,6 +16,11 @@ Real-time factors: the log's duration over
 - ``process``: the whole process seen from outside (interpreter, imports, command, exit);
 - ``process_cpu``: its CPU time (user + system), which a loaded machine inflates less;
 - ``no_interpreter``: the process less a bare interpreter's start and exit.
+
+A case may set the image decoding threads of ``amsfe estimate`` (``...:threads=N``:
+``$AMSFE_IMAGE_THREADS``, 0 = serial; docs/camera.md, "Speed").  Cases of one log (the same
+scenario, duration and camera) share its written log, and the rounds interleave: round r of
+every case runs before round r + 1 of any, so a before/after pair sees the same load.
 """
 
 from __future__ import annotations
@@ -32,7 +37,14 @@ from typing import Any
 
 from amsfe_sym.errors import ConfigError, describe
 
-__all__ = ["CAMERAS", "DEFAULT_LOGS", "LogCase", "bench_log_estimate", "log_case"]
+__all__ = [
+    "CAMERAS",
+    "DEFAULT_LOGS",
+    "LogCase",
+    "bench_log_estimate",
+    "bench_log_estimates",
+    "log_case",
+]
 
 #: The phases of ``summary.json``'s ``timing`` (docs/how-to/logs.md, "Speed").
 PHASES = ("startup_s", "setup_s", "library_s", "read_s", "estimate_s", "write_s", "wall_s")
@@ -52,16 +64,27 @@ CAMERAS: dict[str, list[str]] = {
 @dataclass(frozen=True)
 class LogCase:
     """One log of the section: ``scenario`` simulated for ``duration`` [s], with the
-    scenario's camera or one of :data:`CAMERAS` (``camera``)."""
+    scenario's camera or one of :data:`CAMERAS` (``camera``); ``threads``: the image
+    decoding threads of ``amsfe estimate`` (None: its default; 0: serial)."""
 
     scenario: str
     duration: float
     camera: str = ""
+    threads: int | None = None
 
     @property
     def label(self) -> str:
         extra = f", 30 Hz {self.camera}" if self.camera else ""
+        if self.threads == 0:
+            extra += ", serial decoding"
+        elif self.threads is not None:
+            extra += f", {self.threads} decoding thread{'s' if self.threads > 1 else ''}"
         return f"{self.scenario} {self.duration:g} s{extra}"
+
+    @property
+    def log_key(self) -> tuple[str, float, str]:
+        """What the written log depends on (cases with the same key share it)."""
+        return (self.scenario, self.duration, self.camera)
 
 
 #: Issue 26 item 8's logs: a 10 s 1 kHz 2-link log (target >= 100x real time end to end)
@@ -70,14 +93,22 @@ DEFAULT_LOGS = (LogCase("paper-sim", 10.0), LogCase("panda-control", 60.0))
 
 
 def log_case(text: str) -> LogCase:
-    """``SCENARIO:SECONDS[:CAMERA]`` (e.g. ``paper-sim:10``, ``paper-sim:60:images``) as a
-    :class:`LogCase` (CAMERA: one of :data:`CAMERAS`).
+    """``SCENARIO:SECONDS[:CAMERA][:threads=N]`` (e.g. ``paper-sim:10``,
+    ``paper-sim:60:images``, ``paper-sim:60:jpeg:threads=0``) as a :class:`LogCase` (CAMERA:
+    one of :data:`CAMERAS`; N: image decoding threads, 0 to 16, 0 serial).
 
     Raises:
         ConfigError: not of that form, or a duration that is not a positive number.
     """
-    camera = ""
+    camera, threads = "", None
+    original = text
     head, _, tail = text.rpartition(":")
+    if tail.startswith("threads="):
+        from amsfe_sym.vision.prefetch import image_threads
+
+        threads = image_threads(tail.removeprefix("threads="))
+        text = head
+        head, _, tail = text.rpartition(":")
     if tail in CAMERAS:
         text, camera = head, tail
     name, _, seconds = text.rpartition(":")
@@ -89,12 +120,12 @@ def log_case(text: str) -> LogCase:
         raise ConfigError(
             describe(
                 "--logs",
-                f"SCENARIO:SECONDS[:{'|'.join(CAMERAS)}], e.g. paper-sim:10",
-                repr(text),
+                f"SCENARIO:SECONDS[:{'|'.join(CAMERAS)}][:threads=N], e.g. paper-sim:10",
+                repr(original),
                 "pass e.g. paper-sim:10 or paper-sim:60:images",
             )
         )
-    return LogCase(name, duration, camera)
+    return LogCase(name, duration, camera, threads)
 
 
 def _process(cmd: list[str], env: dict[str, str]) -> tuple[float, float]:
@@ -139,26 +170,72 @@ def bench_log_estimate(
     Returns:
         ``{"log", "scenario", "duration_s", "ticks", "frames", "rounds", "median": {phase:
         seconds, "process_s", "process_cpu_s", "interpreter_s"}, "real_time_factor":
-        {"log", "command", "process", "process_cpu", "no_interpreter"}}``, or ``{"log",
-        "error"}`` when a process failed.
+        {"log", "command", "process", "process_cpu", "no_interpreter"}}`` (and
+        ``"image_threads"`` when the case sets them), or ``{"log", "error"}`` when a
+        process failed.
     """
-    env = dict(os.environ)
+    return bench_log_estimates([case], rounds, folder, generated)[0]
+
+
+def bench_log_estimates(
+    cases: list[LogCase] | tuple[LogCase, ...],
+    rounds: int,
+    folder: Path,
+    generated: str | None = None,
+) -> list[dict[str, Any]]:
+    """:func:`bench_log_estimate` of each case, each log written once for the cases that
+    share it and the rounds interleaved across the cases (module docstring); one row per
+    case, in order."""
+    base = dict(os.environ)
     if generated is not None:
-        env["AMSFE_GENERATED_DIR"] = generated
-    label = case.label
-    out: dict[str, Any] = {"log": label, "scenario": case.scenario}
-    try:
-        bag = _write_log(case, folder / "log", env)
-        runs = []
-        for r in range(rounds):
+        base["AMSFE_GENERATED_DIR"] = generated
+    bags: dict[tuple[str, float, str], Path | str] = {}
+    for case in cases:
+        if case.log_key not in bags:
+            try:
+                bags[case.log_key] = _write_log(case, folder / f"log{len(bags)}", base)
+            except subprocess.CalledProcessError as exc:
+                bags[case.log_key] = _last_line(exc)
+    runs: list[list[tuple[float, float, dict[str, Any], float]]] = [[] for _ in cases]
+    failed: dict[int, str] = {
+        i: str(bags[c.log_key]) for i, c in enumerate(cases) if isinstance(bags[c.log_key], str)
+    }
+    for r in range(rounds):
+        for i, case in enumerate(cases):
+            if i in failed:
+                continue
+            env = dict(base)
+            if case.threads is not None:
+                from amsfe_sym.vision.prefetch import THREADS_ENV
+
+                env[THREADS_ENV] = str(case.threads)
             bare = _process([sys.executable, "-c", "pass"], env)[0]
-            run = folder / f"estimate-{r}"
-            cmd = [sys.executable, "-m", "amsfe_sym", "estimate", str(bag), "--out", str(run)]
-            wall, cpu = _process([*cmd, "--no-plots", "--force"], env)
-            runs.append((bare, wall, json.loads((run / "summary.json").read_text()), cpu))
-    except subprocess.CalledProcessError as exc:
-        lines = (exc.stderr or b"").decode(errors="replace").strip().splitlines()
-        return {**out, "error": lines[-1] if lines else f"exit status {exc.returncode}"}
+            run = folder / f"estimate-{i}-{r}"
+            cmd = [sys.executable, "-m", "amsfe_sym", "estimate", str(bags[case.log_key])]
+            try:
+                wall, cpu = _process([*cmd, "--out", str(run), "--no-plots", "--force"], env)
+            except subprocess.CalledProcessError as exc:
+                failed[i] = _last_line(exc)
+                continue
+            runs[i].append((bare, wall, json.loads((run / "summary.json").read_text()), cpu))
+    out = []
+    for i, case in enumerate(cases):
+        head: dict[str, Any] = {"log": case.label, "scenario": case.scenario}
+        if case.threads is not None:
+            head["image_threads"] = case.threads
+        out.append({**head, "error": failed[i]} if i in failed else _row(head, runs[i]))
+    return out
+
+
+def _last_line(exc: subprocess.CalledProcessError) -> str:
+    lines = (exc.stderr or b"").decode(errors="replace").strip().splitlines()
+    return lines[-1] if lines else f"exit status {exc.returncode}"
+
+
+def _row(
+    head: dict[str, Any], runs: list[tuple[float, float, dict[str, Any], float]]
+) -> dict[str, Any]:
+    """One case's row from its runs ``(bare interpreter [s], wall [s], summary, CPU [s])``."""
     s = runs[-1][2]
     med = {k: statistics.median(float(r[2]["timing"][k] or 0.0) for r in runs) for k in PHASES}
     med["process_s"] = statistics.median(r[1] for r in runs)
@@ -170,11 +247,11 @@ def bench_log_estimate(
         return round(d / max(seconds, 1e-9), 2)
 
     return {
-        **out,
+        **head,
         "duration_s": d,
         "ticks": s["ticks"],
         "frames": s["frames_fused"],
-        "rounds": rounds,
+        "rounds": len(runs),
         "median": {k: round(v, 4) for k, v in med.items()},
         "real_time_factor": {
             "log": factor(med["read_s"] + med["estimate_s"]),
@@ -183,6 +260,8 @@ def bench_log_estimate(
             "process_cpu": factor(med["process_cpu_s"]),
             "no_interpreter": factor(med["process_s"] - med["interpreter_s"]),
         },
+        "process_s": [round(r[1], 4) for r in runs],
+        "process_cpu_s": [round(r[3], 4) for r in runs],
     }
 
 

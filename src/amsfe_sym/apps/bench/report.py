@@ -8,7 +8,7 @@ from typing import Any
 
 from amsfe_sym.apps.bench.calls import CallRow, bench_calls, bench_cflags, tick_compiled_us
 from amsfe_sym.apps.bench.generation import bench_generation
-from amsfe_sym.apps.bench.logs import DEFAULT_LOGS, LogCase, bench_log_estimate, log_lines
+from amsfe_sym.apps.bench.logs import DEFAULT_LOGS, LogCase, bench_log_estimates, log_lines
 from amsfe_sym.apps.bench.loop import bench_closed_loop
 from amsfe_sym.apps.bench.scaling import bench_scaling
 from amsfe_sym.apps.bench.tick import bench_tick
@@ -392,10 +392,9 @@ def run_bench(opts: BenchOptions) -> int:
         import tempfile
 
         with tempfile.TemporaryDirectory(prefix="amsfe-bench-logs-") as tmp:
-            report["logs"] = [
-                bench_log_estimate(case, min(rounds, 3), Path(tmp) / f"log{i}", opts.out)
-                for i, case in enumerate(opts.logs or DEFAULT_LOGS)
-            ]
+            report["logs"] = bench_log_estimates(
+                opts.logs or DEFAULT_LOGS, min(rounds, 3), Path(tmp), opts.out
+            )
     if "vision" not in opts.skip:  # the camera chain per frame, one core
         report["vision"] = bench_vision(opts.vision_frames, min(rounds, 3))
     if opts.compare_cflags is not None:
