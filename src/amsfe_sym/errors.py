@@ -31,8 +31,9 @@ __all__ = [
 
 
 def describe(what: str, expected: str, found: str, fix: str) -> str:
-    """Format a message as ``what: expected ..., found ...; fix: ...``."""
-    return f"{what}: expected {expected}, found {found}. Fix: {fix}"
+    """Format a message as ``what: expected ..., found .... Fix: ...`` (no "Fix:" when
+    ``fix`` is empty: an internal check whose remedy is not the user's)."""
+    return f"{what}: expected {expected}, found {found}." + (f" Fix: {fix}" if fix else "")
 
 
 class AmsfeError(Exception):

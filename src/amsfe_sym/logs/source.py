@@ -131,7 +131,12 @@ def _kind(path: Path) -> str:
     """``bag`` | ``rosbag2`` | ``mcap``, or a one-line refusal naming what ``path`` is."""
     if not path.exists():
         raise LogError(
-            describe(f"log {path}", "an existing .bag, rosbag2 folder or .mcap", "nothing", "")
+            describe(
+                f"log {path}",
+                "an existing .bag, rosbag2 folder or .mcap",
+                "nothing at that path",
+                "check the path (a rosbag2 recording is the folder holding metadata.yaml)",
+            )
         )
     if path.is_dir():
         if (path / "metadata.yaml").is_file():
