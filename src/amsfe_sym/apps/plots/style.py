@@ -17,9 +17,11 @@ figure once more to measure it).
 from __future__ import annotations
 
 import functools
+import gc
 import math
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,8 +32,10 @@ __all__ = [
     "PANEL",
     "PNG_COMPRESSION",
     "Canvas",
+    "collect_once",
     "converged_limit",
     "envelope",
+    "few_ticks",
     "figure",
     "joint_grid",
     "logscale",
@@ -43,6 +47,7 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+F = TypeVar("F", bound=Callable[..., Any])
 
 #: Resolution of every PNG [dots per inch].
 DPI = 100
@@ -60,6 +65,33 @@ MAX_COLUMNS = 4
 #: Columns of pixels a line is cut to by :func:`envelope`: a joint's panel is 3.8-4 in wide
 #: at :data:`DPI` (wider figures pass their own).
 PIXELS = 500
+
+
+def collect_once(draw: F) -> F:
+    """``draw`` with Python's cyclic garbage collector paused while it runs, and one
+    collection of the young generations after it (what the figures made: figures, axes and
+    artists hold reference cycles, so they go then).
+
+    Drawing a command's figures makes ~10^5 small objects (matplotlib's import, each axes'
+    ticks, texts and transforms); every 700 of them started a collection, every tenth of
+    those scanned the older objects too (the command's own), and the collector took ~10 %
+    of the figures' CPU time (``gc.callbacks`` around ``amsfe estimate``'s figures: 0.11 of
+    1.05 s).  Paused, what the figures make is freed by reference counting as it always is,
+    and their cycles in one pass at the end (counted in the figures' time).
+    """
+
+    @functools.wraps(draw)
+    def run(*args: Any, **kwargs: Any) -> Any:
+        if not gc.isenabled():  # the caller's choice: leave it
+            return draw(*args, **kwargs)
+        gc.disable()
+        try:
+            return draw(*args, **kwargs)
+        finally:
+            gc.enable()
+            gc.collect(1)
+
+    return run  # type: ignore[return-value]
 
 
 def pyplot() -> Any:
@@ -152,9 +184,8 @@ def joint_grid(
         for i in range(rows_per_joint):
             ax = fig.add_subplot(grid[r * rows_per_joint + i, c], sharex=first)
             first = first if first is not None or not sharex else ax
-            _few_ticks(ax)
+            few_ticks(ax)
             ax.tick_params(labelsize=7)
-            ax.yaxis.get_offset_text().set_fontsize(7)
             axes.append(ax)
         if sharex:  # the time labels once a column, on its lowest axes
             last_row = j + cols >= n
@@ -167,14 +198,15 @@ def joint_grid(
     return fig, cells
 
 
-def _few_ticks(ax: Any) -> None:
-    """At most 5 ticks an axis (each is lines and texts to make and draw), and a y axis
-    whose small numbers are written once above it (1e-4)."""
+def few_ticks(ax: Any) -> None:
+    """At most 5 ticks an axis, all in view (each is lines and texts to make and draw),
+    and a y axis whose small numbers are written once above it (1e-4, at 7 pt)."""
     from matplotlib.ticker import MaxNLocator
 
     ax.xaxis.set_major_locator(_in_view(MaxNLocator)(4))
     ax.yaxis.set_major_locator(_in_view(MaxNLocator)(4))
     ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 3))
+    ax.yaxis.get_offset_text().set_fontsize(7)
 
 
 @functools.cache
@@ -240,7 +272,7 @@ def _empty(ax: Any) -> None:
     ax.set_title("")
     if ax.get_yscale() != "linear":
         ax.set_yscale("linear")
-    _few_ticks(ax)
+    few_ticks(ax)
     ax.relim()
     ax.set_autoscale_on(True)
     ax.autoscale_view()
