@@ -126,6 +126,33 @@ def test_ticks_are_made_only_where_they_are_seen(tmp_path: Path) -> None:
             assert len(axis.majorTicks) == len(locs)  # none made outside the view
 
 
+def test_axis_labels_stand_clear_of_the_tick_labels_and_line_up(tmp_path: Path) -> None:
+    """A grid's axis labels are placed once (not from the tick labels' boxes at each draw):
+    each y label stands left of its widest tick labels (symlog's "-1e-3") and right of
+    the panel before it, at the same offset in every panel; each x label below its tick
+    labels and inside the figure."""
+    t = np.linspace(0.0, 5.0, 500)
+    fig, cells = joint_grid(7, PANEL)
+    for j, (ax,) in enumerate(cells):
+        ax.plot(t, 0.5 * np.sin(3 * t) * 10.0**-j)
+        symlog(ax, 1e-3)
+        ax.set_ylabel(f"q{j + 1} − q{j + 1},d [rad]", fontsize=8)
+    save(fig, tmp_path / "labels.png")
+    r = fig.canvas.get_renderer()
+    offsets = set()
+    for j, (ax,) in enumerate(cells):
+        label = ax.yaxis.label.get_window_extent(r)
+        ticks = [b.get_window_extent(r) for b in ax.get_yticklabels() if b.get_text()]
+        assert ticks and label.x1 < min(b.x0 for b in ticks)
+        assert label.x0 > (cells[j - 1][0].bbox.x1 if j % 4 else 0)
+        offsets.add(round(ax.bbox.x0 - label.x1, 6))
+        if ax.get_xlabel():
+            xlabel = ax.xaxis.label.get_window_extent(r)
+            xticks = [b.get_window_extent(r) for b in ax.get_xticklabels() if b.get_text()]
+            assert xticks and xlabel.y1 < min(b.y0 for b in xticks) and xlabel.y0 > 0
+    assert len(offsets) == 1
+
+
 def test_a_wide_log_axis_is_labelled_at_its_decades(tmp_path: Path) -> None:
     """A log axis over many decades gets its decades alone (1, 2 and 5 a decade over six
     decades were 18 crowded labels); over a few decades 1, 2 and 5 times each."""

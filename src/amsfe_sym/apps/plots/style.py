@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 
 __all__ = [
     "DPI",
+    "LABEL_OFFSET",
     "LOG_SUBS_UP_TO",
     "PANEL",
     "PNG_COMPRESSION",
@@ -186,6 +187,7 @@ def joint_grid(
             first = first if first is not None or not sharex else ax
             few_ticks(ax)
             ax.tick_params(labelsize=7)
+            _place_labels(ax)
             axes.append(ax)
         if sharex:  # the time labels once a column, on its lowest axes
             last_row = j + cols >= n
@@ -196,6 +198,24 @@ def joint_grid(
                     ax.tick_params(labelbottom=False)
         cells.append(axes)
     return fig, cells
+
+
+#: Where a grid's axis labels stand [in]: the y label's edge left of the axes (the widest
+#: 7-pt tick label, "-1e-3", its tick and pads: 0.45 in), the x label's top below them.
+LABEL_OFFSET = (0.48, 0.26)
+
+
+def _place_labels(ax: Any) -> None:
+    """The y label at :data:`LABEL_OFFSET` left of ``ax``, the x label below it, once.
+    Matplotlib otherwise places each at every draw from the bounding boxes of the axis's
+    tick labels, laying out its ticks a second time to get them: the fonts (7 pt) and
+    margins of a grid are fixed, so the place is known (and the labels of a row line up)."""
+    from matplotlib.transforms import ScaledTranslation
+
+    inches = ax.get_figure().dpi_scale_trans
+    dx, dy = LABEL_OFFSET
+    ax.yaxis.set_label_coords(0.0, 0.5, ax.transAxes + ScaledTranslation(-dx, 0.0, inches))
+    ax.xaxis.set_label_coords(0.5, 0.0, ax.transAxes + ScaledTranslation(0.0, -dy, inches))
 
 
 def few_ticks(ax: Any) -> None:
@@ -347,12 +367,15 @@ def save(fig: Any, path: Path, paths: list[Path] | None = None) -> Path:
     :data:`DPI` and zlib level :data:`PNG_COMPRESSION`; ``paths`` gets it."""
     w, h = fig.get_size_inches()
     head = 0.3 + 0.17 * (fig._suptitle.get_text().count("\n") if fig._suptitle else 0)
+    left, right, gap = 0.62, 0.15, LABEL_OFFSET[0] + 0.3  # gap: a y label and room
+    cols = max(1, _columns(fig))
+    width = (w - left - right - gap * (cols - 1)) / cols  # of one axes
     fig.subplots_adjust(
-        left=0.62 / w,
-        right=1 - 0.15 / w,
+        left=left / w,
+        right=1 - right / w,
         bottom=0.45 / h,
         top=1 - (head + 0.15) / h,
-        wspace=0.75 / (w / max(1, _columns(fig))),
+        wspace=gap / width,
         hspace=0.5 / (h / max(1, _rows(fig))),
     )
     fig.savefig(path, dpi=DPI, pil_kwargs={"compress_level": PNG_COMPRESSION})
