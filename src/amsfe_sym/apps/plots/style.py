@@ -219,11 +219,12 @@ def _place_labels(ax: Any) -> None:
 
 
 def few_ticks(ax: Any) -> None:
-    """At most 5 ticks an axis, all in view (each is lines and texts to make and draw),
-    and a y axis whose small numbers are written once above it (1e-4, at 7 pt)."""
+    """At most 4 ticks on the time axis and 5 on the y axis, all in view (each is lines
+    and texts to make and draw), and a y axis whose small numbers are written once above
+    it (1e-4, at 7 pt)."""
     from matplotlib.ticker import MaxNLocator
 
-    ax.xaxis.set_major_locator(_in_view(MaxNLocator)(4))
+    ax.xaxis.set_major_locator(_in_view(MaxNLocator)(3))
     ax.yaxis.set_major_locator(_in_view(MaxNLocator)(4))
     ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 3))
     ax.yaxis.get_offset_text().set_fontsize(7)
