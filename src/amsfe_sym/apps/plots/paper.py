@@ -100,14 +100,18 @@ def _simulation_figures(cmp: Comparison, out: Path, canvas: Canvas) -> list[Path
             tc, lo, hi, e = envelope(res0.t, -band[:, i], band[:, i], err[:, i])
             ax.fill_between(tc, lo, hi, color="0.85", lw=0, label="±2σ of the filter")
             ax.plot(tc, e, lw=0.9, label=f"{th.name}: true − estimate", rasterized=True)
-        lim = converged_limit(err, band)
-        ax.set_ylim(-lim, lim)
+        lim = converged_limit(err, band)  # linear within it: the band; the start logarithmic
+        symlog(ax, lim)
         ax.set_xlabel("t [s]", fontsize=8)
         ax.set_ylabel(f"theta error [{th.unit}]", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="upper right")
-        title(fig, f"Fig. 5: estimation error of theta ({est}); axis set by the last 80 %")
+        title(
+            fig,
+            f"Fig. 5: estimation error of theta ({est}); symlog: linear within ±{lim:.1g} "
+            f"{th.unit} (the last 80 %), the convergence before it on a log scale",
+        )
         _save(fig, out / "fig05_theta_error.png", paths)
 
     if n > 2:  # an arm: one panel per joint (the paper's Figs. 6-7 are its two joints)
