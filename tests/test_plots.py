@@ -16,6 +16,7 @@ from amsfe_sym.apps.plots.style import (
     LOG_SUBS_UP_TO,
     PANEL,
     Canvas,
+    collect_once,
     converged_limit,
     envelope,
     figure,
@@ -169,6 +170,35 @@ def test_a_wide_log_axis_is_labelled_at_its_decades(tmp_path: Path) -> None:
     assert np.log10(40.0 / 3.0) <= LOG_SUBS_UP_TO
     assert {"5", "10", "20"} <= set(labels)
     assert all("$" not in label for label in labels)  # plain text, not TeX math
+
+
+def test_figures_are_drawn_with_the_collector_paused_and_collected_once(tmp_path: Path) -> None:
+    """While a command's figures are drawn the cyclic garbage collector is off and what
+    lives on is frozen; after, it is on again, nothing is left frozen, and the figures
+    (reference cycles) are gone; an error in the drawing leaves the collector as it was."""
+    import gc
+    import weakref
+
+    seen: dict = {}
+
+    @collect_once
+    def draw(path: Path, fail: bool = False) -> Path:
+        seen["enabled"], seen["frozen"] = gc.isenabled(), gc.get_freeze_count()
+        fig, cells = joint_grid(2, PANEL)
+        cells[0][0].plot([0.0, 1.0], [0.0, 1.0])
+        seen["figure"] = weakref.ref(fig)
+        if fail:
+            raise KeyboardInterrupt
+        return save(fig, path)
+
+    assert gc.isenabled() and gc.get_freeze_count() == 0
+    assert draw(tmp_path / "a.png").is_file()
+    assert seen["enabled"] is False and seen["frozen"] > 0
+    assert gc.isenabled() and gc.get_freeze_count() == 0
+    assert seen["figure"]() is None  # collected at the end
+    with pytest.raises(KeyboardInterrupt):
+        draw(tmp_path / "b.png", fail=True)
+    assert gc.isenabled() and gc.get_freeze_count() == 0  # (the traceback holds the figure)
 
 
 def test_the_error_axis_is_set_by_the_converged_part() -> None:
