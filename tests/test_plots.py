@@ -13,11 +13,15 @@ import pytest
 from amsfe_sym.apps.plots.cost import SHARE, FigureClock, hint_line
 from amsfe_sym.apps.plots.style import (
     DPI,
+    LOG_SUBS_UP_TO,
     PANEL,
     Canvas,
+    collect_once,
     converged_limit,
     envelope,
+    figure,
     joint_grid,
+    logscale,
     pyplot,
     save,
     symlog,
@@ -88,6 +92,113 @@ def test_a_reused_grid_draws_what_a_new_one_draws(tmp_path: Path) -> None:
     assert np.array_equal(reused, new)
     assert not np.array_equal(imread(tmp_path / "a.png"), new)
     assert canvas.joint_grid(6, PANEL)[0] is not fig  # another shape: a new grid
+
+
+def test_ticks_are_made_only_where_they_are_seen(tmp_path: Path) -> None:
+    """Matplotlib makes a tick (three lines, two texts) for every location its locator
+    gives, and its locators give one or two outside the view on each side: a grid's
+    locators give the same locations inside the view and no others, so every tick made is
+    drawn (linear, symlog and log axes)."""
+    from matplotlib.ticker import LogLocator, MaxNLocator, SymmetricalLogLocator
+
+    t = np.linspace(0.0, 30.0, 3000)
+    fig, cells = joint_grid(3, PANEL)
+    (lin,), (sym,), (log,) = cells
+    lin.plot(t, 1e-4 * np.sin(t))
+    lin.set_ylim(-2.2e-4, 2.2e-4)
+    sym.plot(t, 0.3 * np.sin(t) * np.exp(-t))
+    symlog(sym, 1e-3)
+    log.plot(t, 1e-3 + np.exp(-t / 3))
+    logscale(log)
+    save(fig, tmp_path / "ticks.png")
+    references = {
+        id(lin.yaxis): MaxNLocator(4),
+        id(sym.yaxis): SymmetricalLogLocator(linthresh=1e-3, base=10, subs=[1.0]),
+        id(log.yaxis): LogLocator(base=10, subs=(1.0,), numticks=7),
+    }
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            lo, hi = sorted(axis.get_view_interval())
+            reference = references.get(id(axis), MaxNLocator(3 if axis is ax.xaxis else 4))
+            reference.set_axis(axis)
+            seen = [v for v in reference.tick_values(lo, hi) if lo <= v <= hi]
+            locs = list(axis.get_majorticklocs())
+            assert locs == seen and len(locs) >= 2
+            assert len(axis.majorTicks) == len(locs)  # none made outside the view
+
+
+def test_axis_labels_stand_clear_of_the_tick_labels_and_line_up(tmp_path: Path) -> None:
+    """A grid's axis labels are placed once (not from the tick labels' boxes at each draw):
+    each y label stands left of its widest tick labels (symlog's "-1e-3") and right of
+    the panel before it, at the same offset in every panel; each x label below its tick
+    labels and inside the figure."""
+    t = np.linspace(0.0, 5.0, 500)
+    fig, cells = joint_grid(7, PANEL)
+    for j, (ax,) in enumerate(cells):
+        ax.plot(t, 0.5 * np.sin(3 * t) * 10.0**-j)
+        symlog(ax, 1e-3)
+        ax.set_ylabel(f"q{j + 1} − q{j + 1},d [rad]", fontsize=8)
+    save(fig, tmp_path / "labels.png")
+    r = fig.canvas.get_renderer()
+    offsets = set()
+    for j, (ax,) in enumerate(cells):
+        label = ax.yaxis.label.get_window_extent(r)
+        ticks = [b.get_window_extent(r) for b in ax.get_yticklabels() if b.get_text()]
+        assert ticks and label.x1 < min(b.x0 for b in ticks)
+        assert label.x0 > (cells[j - 1][0].bbox.x1 if j % 4 else 0)
+        offsets.add(round(ax.bbox.x0 - label.x1, 6))
+        if ax.get_xlabel():
+            xlabel = ax.xaxis.label.get_window_extent(r)
+            xticks = [b.get_window_extent(r) for b in ax.get_xticklabels() if b.get_text()]
+            assert xticks and xlabel.y1 < min(b.y0 for b in xticks) and xlabel.y0 > 0
+    assert len(offsets) == 1
+
+
+def test_a_wide_log_axis_is_labelled_at_its_decades(tmp_path: Path) -> None:
+    """A log axis over many decades gets its decades alone (1, 2 and 5 a decade over six
+    decades were 18 crowded labels); over a few decades 1, 2 and 5 times each."""
+    fig = figure((6.0, 4.0))
+    wide, narrow = fig.subplots(2, 1)
+    wide.plot([0.0, 1.0], [2e-5, 20.0], ".")
+    logscale(wide)
+    narrow.plot([0.0, 1.0], [3.0, 40.0], ".")
+    logscale(narrow)
+    save(fig, tmp_path / "log.png")
+    decades = np.log10(wide.yaxis.get_majorticklocs())
+    assert np.allclose(decades, np.round(decades)) and 4 <= decades.size <= 7
+    labels = [tick.get_text() for tick in narrow.get_yticklabels()]
+    assert np.log10(40.0 / 3.0) <= LOG_SUBS_UP_TO
+    assert {"5", "10", "20"} <= set(labels)
+    assert all("$" not in label for label in labels)  # plain text, not TeX math
+
+
+def test_figures_are_drawn_with_the_collector_paused_and_collected_once(tmp_path: Path) -> None:
+    """While a command's figures are drawn the cyclic garbage collector is off and what
+    lives on is frozen; after, it is on again, nothing is left frozen, and the figures
+    (reference cycles) are gone; an error in the drawing leaves the collector as it was."""
+    import gc
+    import weakref
+
+    seen: dict = {}
+
+    @collect_once
+    def draw(path: Path, fail: bool = False) -> Path:
+        seen["enabled"], seen["frozen"] = gc.isenabled(), gc.get_freeze_count()
+        fig, cells = joint_grid(2, PANEL)
+        cells[0][0].plot([0.0, 1.0], [0.0, 1.0])
+        seen["figure"] = weakref.ref(fig)
+        if fail:
+            raise KeyboardInterrupt
+        return save(fig, path)
+
+    assert gc.isenabled() and gc.get_freeze_count() == 0
+    assert draw(tmp_path / "a.png").is_file()
+    assert seen["enabled"] is False and seen["frozen"] > 0
+    assert gc.isenabled() and gc.get_freeze_count() == 0
+    assert seen["figure"]() is None  # collected at the end
+    with pytest.raises(KeyboardInterrupt):
+        draw(tmp_path / "b.png", fail=True)
+    assert gc.isenabled() and gc.get_freeze_count() == 0  # (the traceback holds the figure)
 
 
 def test_the_error_axis_is_set_by_the_converged_part() -> None:

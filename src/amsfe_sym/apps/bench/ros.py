@@ -41,6 +41,7 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 from amsfe_sym.core.cpu_load import CpuHogs
+from amsfe_sym.core.provenance import cpu_name
 
 __all__ = [
     "RosBenchRun",
@@ -349,15 +350,8 @@ def ros_report_json(rows: list[RosBenchRun], machine: str = "") -> dict[str, Any
 
 
 def machine_name() -> str:
-    """The CPU's model name (``lscpu``'s), or ""."""
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    return f"{line.split(':', 1)[1].strip()}, {os.cpu_count()} cores"
-    except OSError:
-        pass
-    return ""
+    """The CPU's model name (:func:`~amsfe_sym.core.provenance.cpu_name`) and its core count."""
+    return f"{cpu_name()}, {os.cpu_count()} cores"
 
 
 def node_impls() -> tuple[str, ...]:

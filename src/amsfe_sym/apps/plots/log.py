@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from amsfe_sym.apps.plots.style import (
+    collect_once,
     converged_limit,
     envelope,
     figure,
@@ -55,6 +56,7 @@ class NisSeries:
     frames: tuple[FloatArray, FloatArray] | None = None
 
 
+@collect_once
 def plot_log(
     log: RobotLog,
     x_hat: FloatArray,

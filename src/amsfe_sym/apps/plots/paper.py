@@ -20,7 +20,10 @@ from amsfe_sym.apps.plots.run import (
 from amsfe_sym.apps.plots.style import (
     PANEL,
     Canvas,
+    collect_once,
+    converged_limit,
     envelope,
+    few_ticks,
     figure,
     joint_grid,
     logscale,
@@ -48,6 +51,7 @@ def _save(fig: Any, path: Path, paths: list[Path]) -> None:
     save(fig, path, paths)
 
 
+@collect_once
 def plot_comparison(cmp: Comparison, out: Path, every: bool = False) -> list[Path]:
     """Write the comparison's figures to ``out``; returns their paths.
 
@@ -88,19 +92,26 @@ def _simulation_figures(cmp: Comparison, out: Path, canvas: Canvas) -> list[Path
     if res0.lib.p:
         fig = figure((7, 3.5))
         ax = fig.subplots()
+        few_ticks(ax)
+        theta = L["theta"]
+        err = res0.x_true[:, theta] - res0.x_hat[:, theta]
+        band = 2 * np.sqrt(np.maximum(res0.P_diag[:, theta], 0.0))
         for i, th in enumerate(res0.lib.manifest.theta):
-            c = L["theta"].start + i
-            sd = np.sqrt(np.maximum(res0.P_diag[:, c], 0.0))
-            tc, lo, hi, err = envelope(
-                res0.t, -2 * sd, 2 * sd, res0.x_true[:, c] - res0.x_hat[:, c]
-            )
+            tc, lo, hi, e = envelope(res0.t, -band[:, i], band[:, i], err[:, i])
             ax.fill_between(tc, lo, hi, color="0.85", lw=0, label="±2σ of the filter")
-            ax.plot(tc, err, label=f"{th.name}: true − estimate", rasterized=True)
-        ax.set_xlabel("t [s]")
-        ax.set_ylabel(f"theta error (true − estimate) [{th.unit}]")
+            ax.plot(tc, e, lw=0.9, label=f"{th.name}: true − estimate", rasterized=True)
+        lim = converged_limit(err, band)  # linear within it: the band; the start logarithmic
+        symlog(ax, lim)
+        ax.set_xlabel("t [s]", fontsize=8)
+        ax.set_ylabel(f"theta error [{th.unit}]", fontsize=8)
+        ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-        ax.set_title(f"Fig. 5: estimation error of theta ({est})")
+        ax.legend(fontsize=7, loc="upper right")
+        title(
+            fig,
+            f"Fig. 5: estimation error of theta ({est}); symlog: linear within ±{lim:.1g} "
+            f"{th.unit} (the last 80 %), the convergence before it on a log scale",
+        )
         _save(fig, out / "fig05_theta_error.png", paths)
 
     if n > 2:  # an arm: one panel per joint (the paper's Figs. 6-7 are its two joints)

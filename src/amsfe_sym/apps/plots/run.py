@@ -22,6 +22,7 @@ import numpy as np
 from amsfe_sym.apps.plots.style import (
     PANEL,
     Canvas,
+    collect_once,
     converged_limit,
     envelope,
     figure,
@@ -103,6 +104,7 @@ def estimation_error_axes(res: RunResult, cells: list[list[Any]]) -> None:
     cells[0][0].legend(loc="upper right", fontsize=7)
 
 
+@collect_once
 def plot_run(res: RunResult, out: Path) -> list[Path]:
     """Write the run's figures to ``out``; returns their paths."""
     lib, t = res.lib, res.t
