@@ -40,6 +40,7 @@ from amsfe_sym.apps.bench.timing import run_checked
 
 __all__ = [
     "BaselineEkf",
+    "CallCost",
     "TickInputs",
     "TickStats",
     "bench_tick",
@@ -56,17 +57,22 @@ _TIMER_SOURCE = Path(__file__).parent / "c" / "tick_timer.c"
 
 
 @dataclass(frozen=True)
-class TickStats:
-    """Per-tick cost of one route.
+class CallCost:
+    """The cost of one kind of call, over the calls timed.
 
     Attributes:
-        median_us: Median over the ticks [us].
+        median_us: Median [us].
         p99_us: 99th percentile [us].
-        ticks: Ticks timed.
     """
 
     median_us: float
     p99_us: float
+
+
+@dataclass(frozen=True)
+class TickStats(CallCost):
+    """Per-tick cost of one route (:class:`CallCost` over the ticks); ``ticks``: ticks timed."""
+
     ticks: int
 
     @classmethod
@@ -203,18 +209,11 @@ def compiled_tick(
 
 
 @dataclass(frozen=True)
-class FrameStats:
-    """Cost of the camera frames of a run in pure C (``amsfe_est_camera_frame``).
+class FrameStats(CallCost):
+    """Cost of the camera frames of a run in pure C (``amsfe_est_camera_frame``:
+    :class:`CallCost` over the frames); ``frames``: frames delivered; ``applied``: frames the
+    estimator applied (the others were gated or refused)."""
 
-    Attributes:
-        median_us: Median over the frames [us].
-        p99_us: 99th percentile [us].
-        frames: Frames delivered.
-        applied: Frames the estimator applied (the others were gated or refused).
-    """
-
-    median_us: float
-    p99_us: float
     frames: int
     applied: int
 
