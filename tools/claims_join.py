@@ -12,6 +12,7 @@ scenario or duration. Writes ``claims.json`` and ``claims.md`` as ``amsfe study 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 from pathlib import Path
 
@@ -25,7 +26,7 @@ def main() -> None:
     ap.add_argument("--force", action="store_true")
     args = ap.parse_args()
     docs = [json.loads(p.read_text()) for p in args.parts]
-    for a, b in zip(docs, docs[1:], strict=False):
+    for a, b in itertools.pairwise(docs):
         if b["seeds"][0] != a["seeds"][1] + 1 or (a["scenario"], a["duration"]) != (
             b["scenario"], b["duration"]):  # fmt: skip
             ap.error(f"parts not consecutive or not alike: {a['seeds']} then {b['seeds']}")

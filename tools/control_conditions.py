@@ -1,4 +1,5 @@
-"""The paper's stability conditions and divergences over seed blocks (docs/explanation/control.md 2, 5).
+"""The paper's stability conditions and divergences over seed blocks (docs/explanation/control.md
+2, 5).
 
     .venv/bin/python tools/control_conditions.py B1000/study.json B13000/study.json \
         --variant rk4 --estimator oosm --out docs/data/control-conditions

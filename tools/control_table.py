@@ -1,4 +1,5 @@
-"""The controller table of docs/explanation/reproduction.md: every (controller, estimator) pair on one
+"""The controller table of docs/explanation/reproduction.md: every (controller, estimator) pair on
+one
 scenario over many seeds, mean +- std of the closed-loop metrics, in parallel processes.
 
     .venv/bin/python tools/control_table.py paper-sim --first-seed 1000 --seeds 200 \

@@ -1,4 +1,5 @@
-"""What each kind of effort costs the estimator (issue 26, item 3): docs/explanation/effort.md's table.
+"""What each kind of effort costs the estimator (issue 26, item 3): docs/explanation/effort.md's
+table.
 
 Per seed: one closed-loop run of the scenario (compiled loop, the scenario's controller and
 estimator), then each estimator re-run over its recorded encoders and frames (Python

@@ -10,7 +10,8 @@ Reads ``amsfe study`` outputs of the same commands on two seed blocks (the full
 ``study.json``, with its per-run records) and compares rows seed by seed: the median over
 seeds of the paired difference a - b with its bootstrap 95 % interval, a failed run counted
 as +inf (never dropped), and the verdict stated only where both blocks agree
-(amsfe_sym.apps.study.effects). Writes ``effects.json`` (with each block's studies' aggregates, ``aggregates``) and
+(amsfe_sym.apps.study.effects). Writes ``effects.json`` (with each block's studies' aggregates,
+``aggregates``) and
 ``effects.md``.
 
 A row is ``VARIANT/ESTIMATOR`` (the variant is ``base`` without ``--variant``), prefixed by
@@ -129,7 +130,9 @@ def main() -> None:
             text.append(format_effects(a, b, what=what, unit=unit, scale=scale))
         if pairs is not None:
             doc["claims"] = doc["claims"]["all"]
-        if len(one) == 1 and pairs is None:  # the format docs/explanation/estimation.md section 6 reads
+        if (
+            len(one) == 1 and pairs is None
+        ):  # the format docs/explanation/estimation.md section 6 reads
             doc["first"], doc["second"] = doc["first"][0], doc["second"][0]
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "effects.json").write_text(json.dumps(doc, indent=1) + "\n")

@@ -1,4 +1,5 @@
-"""Issue 18, items 2-3, before and after in one interleaved run (docs/explanation/performance.md section
+"""Issue 18, items 2-3, before and after in one interleaved run (docs/explanation/performance.md
+section
 "Estimator kernels and late frames"; writes docs/data/kernels.json and docs/data/kernels.md).
 
     .venv/bin/python tools/kernels_before_after.py --base 5059726 \

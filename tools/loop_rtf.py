@@ -1,4 +1,5 @@
-"""Real-time factor of the compiled closed loop per estimator and controller (docs/explanation/performance.md
+"""Real-time factor of the compiled closed loop per estimator and controller
+(docs/explanation/performance.md
 section 6): median of 3 runs of ``run(..., runtime="compiled")``.
 
     .venv/bin/python tools/loop_rtf.py paper-sim 10

@@ -78,7 +78,7 @@ def write_urdf() -> Path:
     header = (
         '<?xml version="1.0" ?>\n'
         "<!-- Franka Emika Panda: example-robot-data 6.0.0's panda_description/urdf/panda.urdf\n"
-        "     (upstream franka_ros/franka_description, Apache-2.0, see LICENSE-franka_description),\n"
+        "     (upstream franka_ros/franka_description, Apache-2.0, see LICENSE-franka_description),\n"  # noqa: E501 (the shipped URDF's bytes)
         "     with its <visual> and <collision> elements removed by tools/panda_model.py urdf.\n"
         "     Kinematics: Franka's modified DH parameters.  Inertial parameters of links 1-7:\n"
         "     Gaz et al., RA-L 2019 (see README.md).  Hand and fingers: franka_description's. -->\n"

@@ -1,6 +1,6 @@
 """How many substeps, with which integrator, the truth plant needs (issue 18, item 4).
 
-    .venv/bin/python tools/plant_accuracy.py                       # paper-sim, panda-control, ur5-control
+    .venv/bin/python tools/plant_accuracy.py      # paper-sim, panda-control, ur5-control
     .venv/bin/python tools/plant_accuracy.py --scenarios paper-sim --duration 2
 
 For each scenario, 10 s of its closed loop are simulated with the truth plant integrated by
@@ -265,7 +265,8 @@ def study(name: str, duration: float) -> dict[str, Any]:
                     if key not in runs:
                         runs[key] = closed_loop(sc, lib, plant, tau, *key)
                         print(
-                            f"  {name}: {key[0]} x {key[1]}: {runs[key]['us_per_step']:.1f} us/step",
+                            f"  {name}: {key[0]} x {key[1]}: "
+                            f"{runs[key]['us_per_step']:.1f} us/step",
                             flush=True,
                         )
                 a, b = runs[(method, S)], runs[(method, 10 * S)]
@@ -341,7 +342,8 @@ def write_page(results: list[dict[str, Any]], machine: str) -> str:
         "",
         "    .venv/bin/python tools/plant_accuracy.py",
         "",
-        "Each scenario's closed loop (its trajectory, initial state and seeded disturbance torques) "
+        "Each scenario's closed loop (its trajectory, initial state and seeded disturbance "
+        "torques) "
         f"is closed by `{CONTROLLER}`, the scenario's computed-torque law on the true state, a "
         "smooth law, so that the difference between two runs is integration error only.  "
         "Through the estimator, a pixel rounded the other way makes a 1e-9 rad difference a "
@@ -353,7 +355,8 @@ def write_page(results: list[dict[str, Any]], machine: str) -> str:
         "integrator: `semi_implicit` (symplectic Euler), `rk2` (midpoint), `rk3` (Kutta), `rk4` "
         "(classical, what `plant_step` uses).  Error: max over ticks and joints of "
         "|q - q_ref| [rad], q_ref the same integrator at 10x the substeps; cost: dynamics "
-        "evaluations per tick, and the time of one plant step in C (the fastest of 5 rounds of repeated calls at the scenario's start state).",
+        "evaluations per tick, and the time of one plant step in C (the fastest of 5 rounds "
+        "of repeated calls at the scenario's start state).",
         "",
         f"Machine: {machine}.",
         "",
@@ -363,7 +366,8 @@ def write_page(results: list[dict[str, Any]], machine: str) -> str:
             f"## {res['scenario']} ({res['robot']}, n = {res['n']}, {res['duration_s']:g} s; "
             f"shipped plant_substeps {res['current_substeps']})",
             "",
-            "| integrator | substeps | max q error [rad] | worst joint | other joints [rad] | max qm error [rad] | evaluations / tick | plant step [us] | <= 1e-6 |",
+            "| integrator | substeps | max q error [rad] | worst joint | other joints [rad] "
+            "| max qm error [rad] | evaluations / tick | plant step [us] | <= 1e-6 |",
             "|---|---|---|---|---|---|---|---|---|",
         ]
         for r in res["rows"]:
@@ -372,7 +376,8 @@ def write_page(results: list[dict[str, Any]], machine: str) -> str:
                 f"| {r['integrator']} | {r['substeps']} | {r['max_q_error_rad']:.1e} | "
                 f"{1 + int(np.argmax(r['max_q_error_per_joint']))} | "
                 f"{_others(r['max_q_error_per_joint'])} | "
-                f"{r['max_qm_error_rad']:.1e} | {r['evaluations_per_tick']} | {r['us_per_step']:.1f} | {ok} |"
+                f"{r['max_qm_error_rad']:.1e} | {r['evaluations_per_tick']} | "
+                f"{r['us_per_step']:.1f} | {ok} |"
             )
         c = res["choice"]
         lines += [

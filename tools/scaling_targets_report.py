@@ -2,8 +2,8 @@
 section of docs/explanation/performance.md between its ``<!-- scaling-targets -->`` markers,
 and docs/data/bench-issue18.json (the data file keeps its first name).
 
-    .venv/bin/python tools/scaling_targets_report.py            # the bench (~15-25 min on 2 cores), then the section
-    .venv/bin/python tools/scaling_targets_report.py --from docs/data/bench-issue18.json   # the section only
+    .venv/bin/python tools/scaling_targets_report.py   # the bench (~15-25 min, 2 cores), section
+    .venv/bin/python tools/scaling_targets_report.py --from docs/data/bench-issue18.json  # section
 
 The bench runs the sections the targets need: the closed loop (paper-sim, ur5-control,
 panda-control, 10 s each) and the scaling table (chains of 1..12 joints and the Panda).  The
@@ -111,7 +111,8 @@ def section(report: dict[str, Any]) -> str:
             _row(
                 "12-joint chain: generate + compile; lines; peak memory",
                 "<= 20 s; <= 60k (lines ~ n^1); <= 300 MB",
-                f"{c12['generate_s']:.1f} s; {c12['c_lines']:,} (lines ~ n^{ex.get('c_lines', '?')}); "
+                f"{c12['generate_s']:.1f} s; {c12['c_lines']:,} "
+                f"(lines ~ n^{ex.get('c_lines', '?')}); "
                 f"{c12['peak_mb']:.0f} MB",
                 ok,
             )

@@ -1,5 +1,6 @@
 """What the blend plans on a moving start (docs/explanation/control.md, "Start-up: the blend
-planned before the trusted tick"): for grid starts of tools/startup_moving.py, the largest offset from the path that the
+planned before the trusted tick"): for grid starts of tools/startup_moving.py, the largest offset
+from the path that the
 hand-over's blend *plans* (the peak of |delta| of control/blend.py over the plan, any joint),
 
 * planned at the trusted tick from the estimate there (``blend_lead = 0``, the third pass),

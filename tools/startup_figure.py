@@ -1,4 +1,5 @@
-"""Per-seed traces of the start-up (docs/explanation/control.md, "Start-up"): one paper-sim seed with the
+"""Per-seed traces of the start-up (docs/explanation/control.md, "Start-up"): one paper-sim seed
+with the
 paper's start, with the start-up that waits for the estimate, and with the wait and the
 blended reference (paper-sim's default), compiled loop: the joints' tracking error, the link
 angles' posterior std against the threshold, and the torque with the actuator limit::

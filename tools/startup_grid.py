@@ -1,4 +1,5 @@
-"""The start-up on a grid of starts (docs/explanation/control.md, "Start-up"; issue 17 item 2): paper-sim,
+"""The start-up on a grid of starts (docs/explanation/control.md, "Start-up"; issue 17 item 2):
+paper-sim,
 ``amsfe``, 3 s, compiled loop, seed 0, the start-ups: the paper's (``first``), the wait
 (``converged``), the wait with the blended reference (``blend``, ``blend_accel`` given by
 ``--blend-accel``), and the oracles without and with the blend.

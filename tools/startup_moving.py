@@ -1,5 +1,6 @@
 """The start-up on moving starts, on fresh seeds, and with the paper's integrator
-(docs/explanation/control.md, "Start-up"; issue 28 items 1 and 2).  paper-sim, ``amsfe``, compiled loop.
+(docs/explanation/control.md, "Start-up"; issue 28 items 1 and 2).  paper-sim, ``amsfe``, compiled
+loop.
 
 Three studies, each over a block of seeds (pick one disjoint from the tuning seeds 700-899):
 

@@ -1,4 +1,5 @@
-"""The cascade's start-up over many seeds (docs/explanation/control.md, "Start-up"; issue 17): ``amsfe``
+"""The cascade's start-up over many seeds (docs/explanation/control.md, "Start-up"; issue 17):
+``amsfe``
 (and ``dtsmc-ekf``) on paper-sim with the paper's start (``startup = "first"``: the command
 filter starts at rest on the first command, computed from an estimate that has not converged)
 against ``"converged"`` (wait until the link angles' posterior std is below ``ready_q_std``),
@@ -56,7 +57,7 @@ def one(job: tuple[int, str, str, str, float]) -> dict[str, Any]:
     n, T = res.lib.n, res.lib.T
     e = np.abs(res.x_true[:, :n] - res.q_des)
     diverged = res.diverged_at is not None
-    K = int(round(duration / T)) + 1
+    K = round(duration / T) + 1
     w = slice(int(0.2 * K), len(e))
     rmse = np.sqrt(np.mean(e[w] ** 2, axis=0)) if not diverged else np.full(n, np.inf)
     late = e[int(1.5 / T) :]

@@ -1,4 +1,5 @@
-"""The start-up's settings on the tuning seeds (docs/explanation/control.md, "Start-up"): paper-sim, 3 s
+"""The start-up's settings on the tuning seeds (docs/explanation/control.md, "Start-up"):
+paper-sim, 3 s
 runs, ``amsfe``.  Group ``threshold`` (Python loop): the paper's start against waiting until
 the link angles' posterior std is below 0.10 / 0.05 / 0.03 / 0.02 rad (rates not waited for);
 group ``blend`` (compiled loop): the wait with the blended reference at offset accelerations
@@ -71,7 +72,6 @@ def one(args):
     res = run(sc, library_for(sc), runtime="compiled" if blend else "python")
     n = res.lib.n
     e = res.x_true[:, :n] - res.q_des
-    k25 = int(2.5 / res.lib.T)
     peak = np.abs(e).max()
     e0 = np.abs(e[0]).max()
     late = np.abs(e[int(1.5 / res.lib.T) :]).max() if len(e) > int(1.5 / res.lib.T) else np.inf
@@ -95,9 +95,9 @@ if __name__ == "__main__":
             st,
             "diverged",
             sum(x[2] is not None for x in r),
-            "peak-over-initial max %.3f med %.3f" % (peak_over.max(), np.median(peak_over)),
-            "err after 1.5s max %.4f" % late.max(),
-            "j2 rmse med %.4f max %.4f" % (np.median(j2), j2.max()),
+            f"peak-over-initial max {peak_over.max():.3f} med {np.median(peak_over):.3f}",
+            f"err after 1.5s max {late.max():.4f}",
+            f"j2 rmse med {np.median(j2):.4f} max {j2.max():.4f}",
             "n(peak>0.1)",
             int((peak_over > 0.1).sum()),
         )

@@ -1,4 +1,5 @@
-"""Why ur5-demo's wrist-3 tracking moved from 31.1 to 138.5 mrad (docs/explanation/ur5-estimation.md 5).
+"""Why ur5-demo's wrist-3 tracking moved from 31.1 to 138.5 mrad
+(docs/explanation/ur5-estimation.md 5).
 
     .venv/bin/python tools/ur5_demo_limit.py
 
@@ -34,8 +35,10 @@ def main() -> None:
             base.Controller.__init__ = init  # type: ignore[method-assign]
         s = summarize(run(sc, lib, runtime="compiled"))
         c = s["control"]
-        print(f"{label}: tracking [mrad] {np.round(1e3 * np.array(s['tracking_rmse']['q']), 1)}, "
-              f"max |u| [N m] {np.round(c['u_max_abs'], 1)}, saturated {c['saturated_fraction']:.3f}")
+        print(
+            f"{label}: tracking [mrad] {np.round(1e3 * np.array(s['tracking_rmse']['q']), 1)}, "
+            f"max |u| [N m] {np.round(c['u_max_abs'], 1)}, saturated {c['saturated_fraction']:.3f}"
+        )
 
 
 if __name__ == "__main__":
