@@ -188,8 +188,41 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     )
 
 
+#: The suite's longest tests (CPU and wall seconds of a whole run, docs/how-to/tests.md), the
+#: costliest first: started first, one after the other on alternate workers, so that none of
+#: them is the run's tail (at the end of the collection order they kept one worker busy for
+#: minutes after the other had finished).  None uses a module-scoped fixture: moved out of its
+#: module, it sets nothing up twice.
+HEAVY_FIRST = (
+    "tests/test_docs_blocks.py::test_the_page_s_blocks_run[docs/tutorials/real-recording.md]",
+    "tests/test_docs_blocks.py::test_the_page_s_blocks_run[docs/calibrate.md]",
+    "tests/test_docs_blocks.py::test_the_page_s_blocks_run[docs/tutorials/your-arm.md]",
+    "tests/test_bench.py::test_bench_prints_every_row_and_the_routes_agree",
+    "tests/test_generated.py::test_cache_reuse_and_invalidation",
+)
+
+
+def heavy_first(items: list[pytest.Item], workers: int) -> list[pytest.Item]:
+    """``items`` with the :data:`HEAVY_FIRST` tests moved to the front of the first chunk
+    each of ``workers`` xdist workers is sent (``--dist load``, the default: it sends each
+    worker a run of consecutive tests, a quarter of its share), the costliest first and
+    alternating between the workers; the others keep their order."""
+    rank = {name: i for i, name in enumerate(HEAVY_FIRST)}
+    heavy = sorted((it for it in items if it.nodeid in rank), key=lambda it: rank[it.nodeid])
+    rest = [it for it in items if it.nodeid not in rank]
+    if workers <= 1:
+        return heavy + rest
+    chunk = max(len(items) // workers // 4, 2)  # xdist's LoadScheduling.schedule
+    out = list(rest)
+    for w in range(workers):  # worker w's first chunk starts at w * chunk
+        out[w * chunk : w * chunk] = heavy[w::workers]
+    return out
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Without ``--nightly``, a test marked ``nightly`` is skipped with the mark's reason."""
+    """The :data:`HEAVY_FIRST` tests first (:func:`heavy_first`); without ``--nightly``, a
+    test marked ``nightly`` is skipped with the mark's reason."""
+    items[:] = heavy_first(items, int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
     if config.getoption("--nightly"):
         return
     for item in items:
