@@ -198,7 +198,7 @@ HEAVY_FIRST = (
     "tests/test_docs_blocks.py::test_the_page_s_blocks_run[docs/calibrate.md]",
     "tests/test_docs_blocks.py::test_the_page_s_blocks_run[docs/tutorials/your-arm.md]",
     "tests/test_bench.py::test_bench_prints_every_row_and_the_routes_agree",
-    "tests/test_generated.py::test_cache_reuse_and_invalidation",
+    "tests/test_real_images.py::test_hand_eye_residuals_on_real_frames",
 )
 
 
