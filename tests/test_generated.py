@@ -259,8 +259,11 @@ def test_cache_reuse_and_invalidation(tmp_path) -> None:
     assert sorted(p.name for p in out.iterdir()) == ["dp-model"]
 
 
-def test_a_model_only_library_has_no_laws_and_keeps_the_full_one(tmp_path) -> None:
+def test_a_model_only_library_has_no_laws_and_keeps_the_full_one(tmp_path, libraries) -> None:
+    # the full library: a copy of the session's build (the cache takes it as its own)
+    shutil.copytree(libraries.get("paper_2link")[1].dir, tmp_path / "paper_2link")
     full = generate("paper_2link", out=tmp_path)
+    assert full.reused
     part = generate("paper_2link", out=tmp_path, parts=("model",))
     assert part.out_dir.name == "paper_2link-model" and not part.reused
     names = set(json.loads(part.manifest_path.read_text())["functions"])
