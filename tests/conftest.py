@@ -261,6 +261,12 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
 
 
 # ------------------------------------------------------------- shared lockstep runs over DDS
+#: Seconds of sample time of the shared lockstep runs (1001 ticks of paper-sim, 30 camera
+#: frames; 2 s before): their assertions, every topic equal to ``amsfe simulate`` tick for
+#: tick, hold for 1 s as for 10 s (docs/how-to/tests.md).
+LOCKSTEP_S = 1.0
+
+
 @dataclass(frozen=True)
 class LockstepRun:
     """One ``amsfe sim-node --lockstep`` + ``amsfe node --controller amsfe --record`` run over
@@ -282,7 +288,7 @@ class _LockstepRuns:
         self._read: dict[str, LockstepRun] = {}
 
     def get(
-        self, scenario: str, node: str, arm: str | None = None, duration: float = 2.0
+        self, scenario: str, node: str, arm: str | None = None, duration: float = LOCKSTEP_S
     ) -> LockstepRun:
         """The run of ``amsfe node SCENARIO --impl NODE`` and ``amsfe sim-node SCENARIO
         --lockstep [--impl ARM]`` (None: the arm's default) for ``duration`` s.  A run that

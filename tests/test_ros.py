@@ -32,6 +32,7 @@ from amsfe_sym.ros.live import LiveLoop
 from amsfe_sym.ros.record_bag import record_state
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
+from tests.conftest import LOCKSTEP_S
 from tests.test_node_record import _bag, assert_record_is_run
 
 SRC = Path(__file__).resolve().parent.parent / "src"
@@ -586,11 +587,11 @@ def _finish(procs: list[_Proc], timeout: float) -> list[tuple[int, str]]:
 @pytest.mark.slow
 @pytest.mark.parametrize("impl", node_impls())
 def test_lockstep_reproduces_simulate(paper: Any, lockstep_runs: Any, impl: str) -> None:
-    """``sim-node --lockstep`` + ``node --controller amsfe`` on paper-sim for 2 s over DDS,
+    """``sim-node --lockstep`` + ``node --controller amsfe`` on paper-sim for 1 s over DDS,
     each node implementation: every topic of the node's record (estimates, theta, commands,
     the truth of each tick...) equals ``amsfe simulate`` of the same seed; the record says
     it finished, and why.  (The run is shared: tests/conftest.py's ``lockstep_runs``.)"""
-    sc, lib = paper
+    sc, lib = paper[0].with_overrides(duration=LOCKSTEP_S), paper[1]
     got = lockstep_runs.get("paper-sim", impl)
     ref = run(sc, lib, runtime="compiled")
     assert_record_is_run(got.topics, ref)  # every topic, every tick (the truth its own)
