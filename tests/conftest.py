@@ -188,8 +188,41 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     )
 
 
+#: The suite's longest tests (CPU and wall seconds of a whole run, docs/how-to/tests.md), the
+#: costliest first: started first, one after the other on alternate workers, so that none of
+#: them is the run's tail (at the end of the collection order they kept one worker busy for
+#: minutes after the other had finished).  None uses a module-scoped fixture: moved out of its
+#: module, it sets nothing up twice.
+HEAVY_FIRST = (
+    "tests/test_docs_blocks.py::test_the_page_s_blocks_run[docs/tutorials/real-recording.md]",
+    "tests/test_docs_blocks.py::test_the_page_s_blocks_run[docs/calibrate.md]",
+    "tests/test_docs_blocks.py::test_the_page_s_blocks_run[docs/tutorials/your-arm.md]",
+    "tests/test_bench.py::test_bench_prints_every_row_and_the_routes_agree",
+    "tests/test_real_images.py::test_hand_eye_residuals_on_real_frames",
+)
+
+
+def heavy_first(items: list[pytest.Item], workers: int) -> list[pytest.Item]:
+    """``items`` with the :data:`HEAVY_FIRST` tests moved to the front of the first chunk
+    each of ``workers`` xdist workers is sent (``--dist load``, the default: it sends each
+    worker a run of consecutive tests, a quarter of its share), the costliest first and
+    alternating between the workers; the others keep their order."""
+    rank = {name: i for i, name in enumerate(HEAVY_FIRST)}
+    heavy = sorted((it for it in items if it.nodeid in rank), key=lambda it: rank[it.nodeid])
+    rest = [it for it in items if it.nodeid not in rank]
+    if workers <= 1:
+        return heavy + rest
+    chunk = max(len(items) // workers // 4, 2)  # xdist's LoadScheduling.schedule
+    out = list(rest)
+    for w in range(workers):  # worker w's first chunk starts at w * chunk
+        out[w * chunk : w * chunk] = heavy[w::workers]
+    return out
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Without ``--nightly``, a test marked ``nightly`` is skipped with the mark's reason."""
+    """The :data:`HEAVY_FIRST` tests first (:func:`heavy_first`); without ``--nightly``, a
+    test marked ``nightly`` is skipped with the mark's reason."""
+    items[:] = heavy_first(items, int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
     if config.getoption("--nightly"):
         return
     for item in items:
@@ -228,6 +261,12 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
 
 
 # ------------------------------------------------------------- shared lockstep runs over DDS
+#: Seconds of sample time of the shared lockstep runs (1001 ticks of paper-sim, 30 camera
+#: frames; 2 s before): their assertions, every topic equal to ``amsfe simulate`` tick for
+#: tick, hold for 1 s as for 10 s (docs/how-to/tests.md).
+LOCKSTEP_S = 1.0
+
+
 @dataclass(frozen=True)
 class LockstepRun:
     """One ``amsfe sim-node --lockstep`` + ``amsfe node --controller amsfe --record`` run over
@@ -249,7 +288,7 @@ class _LockstepRuns:
         self._read: dict[str, LockstepRun] = {}
 
     def get(
-        self, scenario: str, node: str, arm: str | None = None, duration: float = 2.0
+        self, scenario: str, node: str, arm: str | None = None, duration: float = LOCKSTEP_S
     ) -> LockstepRun:
         """The run of ``amsfe node SCENARIO --impl NODE`` and ``amsfe sim-node SCENARIO
         --lockstep [--impl ARM]`` (None: the arm's default) for ``duration`` s.  A run that

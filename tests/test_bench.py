@@ -134,7 +134,7 @@ def test_pinocchio_transition_matches_the_semi_implicit_library() -> None:
     spec = load_spec("paper_2link")
     spec = replace(
         spec,
-        name="paper_2link_semi",
+        name="paper_2link_semi_implicit",  # the library_for override's: compiled once
         model=replace(spec.model, integrator="semi_implicit"),
     )
     lib = ModelLibrary(generate(spec).out_dir)

@@ -23,6 +23,7 @@ import pytest
 from amsfe_sym.codegen import library_for
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
+from tests.conftest import LOCKSTEP_S
 from tests.test_live_load import free_running_under_load
 from tests.test_node_record import _bag
 from tests.test_ros import PATIENT_NODE, SRC, _finish, _ros_env, _start
@@ -41,13 +42,14 @@ def test_c_arm_lockstep_is_simulate(lockstep_runs: Any) -> None:
     """The C arm and the C node in lockstep: the truth the arm sent, the samples, the frames,
     the node's estimates and commands (its record, every tick) equal ``amsfe simulate``'s
     compiled loop of the same seed bit for bit.  (The C arm is ``sim-node``'s default; the
-    run, 2 s, is shared with test_ros.py and test_cnode.py: tests/conftest.py's
+    run, 1 s, is shared with test_ros.py and test_cnode.py: tests/conftest.py's
     ``lockstep_runs``.)"""
-    sc = load_scenario("paper-sim").with_overrides(duration=2.0)
+    sc = load_scenario("paper-sim").with_overrides(duration=LOCKSTEP_S)
     lib = library_for(sc)
     run_ = lockstep_runs.get("paper-sim", "c")
     got = {**run_.topics, "_arm": run_.arm_text}
-    assert "(c arm)" in got["_arm"] and "2001 ticks" in got["_arm"], got["_arm"]
+    ticks = f"{round(LOCKSTEP_S / lib.T) + 1} ticks"
+    assert "(c arm)" in got["_arm"] and ticks in got["_arm"], got["_arm"]
     ref = run(sc, lib, runtime="compiled")
     n = lib.n
     truth = np.array([m.data for m in got["/amsfe/truth"]])
@@ -72,7 +74,7 @@ def test_c_arm_sends_the_python_arms_messages(lockstep_runs: Any) -> None:
     """The same lockstep run with the C arm and with the Python arm (the readable
     reference): the node received the same encoder samples, frames (pixels and exposure
     stamps), truth and applied torques, stamped the same, and answered the same commands.
-    (2 s runs, the C arm's shared: tests/conftest.py's ``lockstep_runs``.)"""
+    (1 s runs, the C arm's shared: tests/conftest.py's ``lockstep_runs``.)"""
     runs = lockstep_runs.get("paper-sim", "c"), lockstep_runs.get("paper-sim", "c", "python")
     c, py = ({**r.topics, "_arm": r.arm_text} for r in runs)
     assert "(c arm)" in c["_arm"] and "(python arm)" in py["_arm"]

@@ -24,6 +24,7 @@ from amsfe_sym.codegen import library_for
 from amsfe_sym.errors import RosError
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
+from tests.conftest import LOCKSTEP_S
 from tests.test_node_record import _bag
 from tests.test_ros import (
     _PREFIX,
@@ -73,8 +74,8 @@ def test_c_node_lockstep_is_simulate(scenario: str, lockstep_runs: Any) -> None:
     """The C node over DDS in lockstep: its estimates, theta and commands (from its record,
     every tick) equal ``amsfe simulate``'s compiled loop of the same seed bit for bit, its
     frames fused and refused are the loop's, and it ends with the hold command.  (The run,
-    2 s, is shared: tests/conftest.py's ``lockstep_runs``.)"""
-    sc = load_scenario(scenario).with_overrides(duration=2.0)
+    1 s, is shared: tests/conftest.py's ``lockstep_runs``.)"""
+    sc = load_scenario(scenario).with_overrides(duration=LOCKSTEP_S)
     run_ = lockstep_runs.get(scenario, "c")
     assert_is_simulate({**run_.topics, "_text": run_.node_text}, sc, library_for(sc))
 
@@ -112,14 +113,14 @@ def test_c_node_equals_the_python_node(lockstep_runs: Any) -> None:
     reference): the same estimates, standard deviations, theta and commands (1e-12), the same
     estimator decisions.  (Not the skipped messages: whether a torque sample arrives before
     or after the next encoder sample is DDS's timing, and in lockstep either way the step
-    uses the same torque, the command.)  The two 2 s runs of test_ros.py's
+    uses the same torque, the command.)  The two runs of test_ros.py's
     ``test_lockstep_reproduces_simulate``, shared (tests/conftest.py's ``lockstep_runs``)."""
     c = lockstep_runs.get("paper-sim", "c").topics
     py = lockstep_runs.get("paper-sim", "python").topics
     for topic in ("/amsfe/estimate", "/amsfe/estimate_std"):
         a = np.array([np.r_[m.position, m.velocity] for m in c[topic]])
         b = np.array([np.r_[m.position, m.velocity] for m in py[topic]])
-        assert a.shape == b.shape and a.shape[0] == 2001
+        assert a.shape == b.shape and a.shape[0] == round(LOCKSTEP_S / 1e-3) + 1
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
     for topic in ("/amsfe/theta", "/effort_controller/commands"):
         a = np.array([m.data for m in c[topic]])

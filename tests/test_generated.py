@@ -221,37 +221,49 @@ def test_paper_integrator_inverse_and_jacobian_inverse(libraries) -> None:
         assert np.max(np.abs(Jb @ A - np.eye(xn.size))) <= 1e-6
 
 
+#: The model functions only (``generate(parts=MODEL)``): a library without the controller's
+#: laws and the estimator's C.
+MODEL = ("model",)
+
+
 def test_cache_reuse_and_invalidation(tmp_path) -> None:
-    """Unchanged input is reused without recompiling; a changed spec or flag rebuilds."""
+    """Unchanged input is reused without recompiling; a changed spec or flag rebuilds.  (A
+    model-only library: the cache's rules are the same for every part, and it builds in a
+    fraction of the full one's CPU: test_a_model_only_library_has_no_laws_and_keeps_the_full_one
+    shows the full and the partial libraries are cached apart.)"""
     src = tmp_path / "robot"
     src.mkdir()
     urdf = tmp_path / "dp.urdf"
     shutil.copy(erd_urdf("double_pendulum_description/urdf/double_pendulum_simple.urdf"), urdf)
     (src / "robot.toml").write_text(f'name = "dp"\nurdf = "{urdf}"\n[model]\nT = 0.002\n')
     out = tmp_path / "gen"
-    first = generate(src, out=out)
+    first = generate(src, out=out, parts=MODEL)
     assert not first.reused and first.library_path.is_file()
     lib_mtime = first.library_path.stat().st_mtime_ns
-    second = generate(src, out=out)
+    second = generate(src, out=out, parts=MODEL)
     assert second.reused and second.library_path.stat().st_mtime_ns == lib_mtime
     # changed spec -> rebuilt, and the manifest records the new T
     (src / "robot.toml").write_text(f'name = "dp"\nurdf = "{urdf}"\n[model]\nT = 0.003\n')
-    third = generate(src, out=out)
+    third = generate(src, out=out, parts=MODEL)
     assert not third.reused
     assert json.loads(third.manifest_path.read_text())["T"] == 0.003
     # changed compiler flags -> rebuilt
-    fourth = generate(src, out=out, extra_cflags=["-DAMSFE_TEST_FLAG=1"])
+    fourth = generate(src, out=out, extra_cflags=["-DAMSFE_TEST_FLAG=1"], parts=MODEL)
     assert not fourth.reused
     # a corrupted manifest is repaired by rebuilding
     fourth.manifest_path.write_text("{ not json")
-    fifth = generate(src, out=out, extra_cflags=["-DAMSFE_TEST_FLAG=1"])
+    fifth = generate(src, out=out, extra_cflags=["-DAMSFE_TEST_FLAG=1"], parts=MODEL)
     assert not fifth.reused and json.loads(fifth.manifest_path.read_text())["T"] == 0.003
-    # no temporary folders left (.objects: the robot-independent objects, codegen/compile_units)
-    assert sorted(p.name for p in out.iterdir()) == [".objects", "dp"]
+    # no temporary folders left (a model-only library links no robot-independent object, so
+    # no .objects: codegen/compile_units; tests/test_compile_units.py tests that cache)
+    assert sorted(p.name for p in out.iterdir()) == ["dp-model"]
 
 
-def test_a_model_only_library_has_no_laws_and_keeps_the_full_one(tmp_path) -> None:
+def test_a_model_only_library_has_no_laws_and_keeps_the_full_one(tmp_path, libraries) -> None:
+    # the full library: a copy of the session's build (the cache takes it as its own)
+    shutil.copytree(libraries.get("paper_2link")[1].dir, tmp_path / "paper_2link")
     full = generate("paper_2link", out=tmp_path)
+    assert full.reused
     part = generate("paper_2link", out=tmp_path, parts=("model",))
     assert part.out_dir.name == "paper_2link-model" and not part.reused
     names = set(json.loads(part.manifest_path.read_text())["functions"])

@@ -253,36 +253,47 @@ def _rho(M: np.ndarray) -> float:
     return float(np.max(np.abs(np.linalg.eigvals(M))))
 
 
+#: The period of docs/tutorials/real-recording.md's ``amsfe generate panda --period 0.03333``
+#: (what the refusal of its 10 s, 30 Hz Franka log prints): the test below builds the same
+#: library, so a run of the suite compiles it once (the content-hash cache).
+T_TUTORIAL = 0.03333
+
+
 @pytest.mark.slow
 def test_panda_at_30_hz_is_stable_and_cached(panda: Robot, capsys) -> None:
-    """~20-40 s: one 7-DOF compile (a second call must not compile).  The fewest substeps
-    that are stable (w h <= 2.0: 16) keep the compile short; the default (w h <= 0.5, 62)
-    has more, so it is stable too (rk4 is stable for every w h <= 2.83)."""
-    k = substeps_for(joint_modes(panda), T_LOG, STABILITY_MARGIN)
-    lib = library_at_period("panda", T_LOG, substeps=k)
+    """One 7-DOF compile, the library of docs/tutorials/real-recording.md's ``amsfe generate
+    panda --period 0.03333`` (shared with that page's test: the suite compiles it once; a
+    second call must not compile).  Its default substeps (w h <= 0.5: 62) are more than the
+    fewest stable ones (w h <= 2.0: 16), so it is stable (rk4 is stable for every w h <=
+    2.83); the exact rk4 map of the continuous jacobian, to 1e-9."""
+    T = T_TUTORIAL
+    modes = joint_modes(panda)
+    k = substeps_for(modes, T)
+    assert k == 62 and substeps_for(modes, T, STABILITY_MARGIN) == 16
+    lib = library_at_period("panda", T)
     raw = lib.manifest.raw
     m, n = raw["model_substeps"], panda.n
-    assert m == k == 16
+    assert m == k
     rng = np.random.default_rng(1)
     for _ in range(3):
         q = rng.uniform(-1.0, 1.0, n)
         x, u, Ac = _continuous_jacobian(panda, q, panda.theta_initial)
         (A,) = lib.function("transition_jacobian")(x, u)
-        want = np.linalg.matrix_power(_rk4_map(T_LOG / m * Ac), m)
+        want = np.linalg.matrix_power(_rk4_map(T / m * Ac), m)
         np.testing.assert_allclose(
             A[: 4 * n, : 4 * n], want, rtol=0, atol=1e-9 * np.abs(want).max()
         )
         # gravity tips the arm over: the physical map exp(A_c T) grows (|lambda| ~ 1.14); the
         # model adds nothing to it, where one rk4 step per T would amplify by ~2e4
-        physical = _rho(scipy.linalg.expm(Ac * T_LOG))
+        physical = _rho(scipy.linalg.expm(Ac * T))
         assert _rho(A[: 4 * n, : 4 * n]) <= physical * (1 + 1e-9)
-        assert _rho(_rk4_map(T_LOG * Ac)) > 100 * physical
-    again = generate(spec_at_period("panda", T_LOG, substeps=k, loaded=panda))
+        assert _rho(_rk4_map(T * Ac)) > 100 * physical
+    again = generate(spec_at_period("panda", T, substeps=k, loaded=panda))
     assert again.reused and again.out_dir == lib.dir and again.stiff() == ()
-    assert main(["generate", "panda", "--period", repr(T_LOG), "--substeps", str(k)]) == 0
+    assert main(["generate", "panda", "--period", "0.03333"]) == 0  # the tutorial's command
     out, err = capsys.readouterr()
-    assert "panda_T33333p333us_rk4x16: up to date (cached)" in out
-    assert "integrator rk4, model_substeps 16, camera period 1 / delay 1 steps" in out
+    assert "panda_T33330us_rk4x62: up to date (cached)" in out
+    assert "integrator rk4, model_substeps 62, camera period 1 / delay 1 steps" in out
     assert "warning" not in err
 
 

@@ -4,8 +4,9 @@ A ROS 1 ``.bag`` was published as its ROS 1 bytes (play exited 0, the node logge
 exceptions and waited forever).  Here a simulated run's rosbag2 is written again as a ROS 1
 bag (Noetic definitions: ``std_msgs/Header`` with its ``seq``) with rosbags' ROS 1 writer;
 its payloads converted by :func:`amsfe_sym.ros.play.ros1_to_cdr` equal, message by message,
-the CDR of the rosbag2; and played over real DDS into ``amsfe node`` it gives the estimates
-of ``amsfe estimate`` on the same bag.
+the CDR of the rosbag2.  Played over real DDS into ``amsfe node`` it gives the estimates of
+``amsfe estimate`` on the same bag: tests/test_ros.py's ``test_play_into_node_is_estimate``
+(its ``ros1`` case plays this bag into the Python node: one DDS run for both).
 """
 
 from __future__ import annotations
@@ -23,11 +24,12 @@ from amsfe_sym.ros.play import ros1_to_cdr
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
 from amsfe_sym.topics import TopicSpec
+from tests.test_ros import PLAY_S
 
 
 @pytest.fixture(scope="module")
 def paper() -> Any:
-    sc = load_scenario("paper-sim").with_overrides(duration=2.0)
+    sc = load_scenario("paper-sim").with_overrides(duration=PLAY_S)
     return sc, library_for(sc)
 
 
@@ -92,23 +94,6 @@ def test_the_queue_depth_rule() -> None:
 
 @pytest.mark.ros
 @pytest.mark.slow
-def test_play_of_a_ros1_bag_into_node_is_estimate(paper: Any, tmp_path: Path) -> None:
-    from amsfe_sym.apps.estimate import EstimateOptions, estimate_command
-    from tests.test_ros import _play_into_recording_node
-
-    sc, lib = paper
-    bag2 = write_run_bag(run(sc, lib, runtime="compiled"), tmp_path / "bag")
-    bag = tmp_path / "run.bag"
-    ros2_to_ros1_bag(bag2, bag)
-    ref = estimate_command(bag, tmp_path / "est", EstimateOptions(plots=False)).estimate
-    got = _play_into_recording_node(tmp_path, bag, tmp_path / "rec")
-    n = lib.n
-    est = np.array([np.r_[m.position, m.velocity] for m in got["/amsfe/estimate"]])
-    np.testing.assert_allclose(est, ref.x_hat[:, : 2 * n], rtol=0, atol=1e-9)
-
-
-@pytest.mark.ros
-@pytest.mark.slow
 def test_play_at_the_recorded_pace_loses_no_sample(paper: Any, tmp_path: Path) -> None:
     """``amsfe play BAG`` into ``amsfe node`` with neither ``--ordered`` nor ``-p
     qos.depth:=5000`` (tests/test_ros.py passes both): the queues of both ends are sized by
@@ -124,8 +109,8 @@ def test_play_at_the_recorded_pace_loses_no_sample(paper: Any, tmp_path: Path) -
     rec = tmp_path / "rec"
     procs = []
     try:
-        procs.append(_start(env, "node", "paper-sim", "--duration", "2", "--record", str(rec),
-                            *PATIENT_NODE))  # fmt: skip
+        procs.append(_start(env, "node", "paper-sim", "--duration", f"{PLAY_S:g}",
+                            "--record", str(rec), *PATIENT_NODE))  # fmt: skip
         procs.append(_start(env, "play", str(bag), "--start-timeout", "60"))
     finally:
         results = _finish(procs, 120.0)

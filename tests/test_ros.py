@@ -32,6 +32,7 @@ from amsfe_sym.ros.live import LiveLoop
 from amsfe_sym.ros.record_bag import record_state
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
+from tests.conftest import LOCKSTEP_S
 from tests.test_node_record import _bag, assert_record_is_run
 
 SRC = Path(__file__).resolve().parent.parent / "src"
@@ -586,11 +587,11 @@ def _finish(procs: list[_Proc], timeout: float) -> list[tuple[int, str]]:
 @pytest.mark.slow
 @pytest.mark.parametrize("impl", node_impls())
 def test_lockstep_reproduces_simulate(paper: Any, lockstep_runs: Any, impl: str) -> None:
-    """``sim-node --lockstep`` + ``node --controller amsfe`` on paper-sim for 2 s over DDS,
+    """``sim-node --lockstep`` + ``node --controller amsfe`` on paper-sim for 1 s over DDS,
     each node implementation: every topic of the node's record (estimates, theta, commands,
     the truth of each tick...) equals ``amsfe simulate`` of the same seed; the record says
     it finished, and why.  (The run is shared: tests/conftest.py's ``lockstep_runs``.)"""
-    sc, lib = paper
+    sc, lib = paper[0].with_overrides(duration=LOCKSTEP_S), paper[1]
     got = lockstep_runs.get("paper-sim", impl)
     ref = run(sc, lib, runtime="compiled")
     assert_record_is_run(got.topics, ref)  # every topic, every tick (the truth its own)
@@ -604,6 +605,14 @@ def _impl(impl: str) -> tuple[str, ...]:
     return ("--impl", impl) if len(node_impls()) > 1 else ()
 
 
+#: Seconds of the simulated logs the play tests play into a node over DDS.  Their assertion,
+#: the node's estimates equal to ``amsfe estimate``'s, holds for 1 s as for 10 s; 1000 ticks
+#: (2 s before) hold 30 camera frames and the joint torque's waits.  Measured with -n 0 on
+#: this 2-core AMD EPYC at load 7-9: the 7 play runs of this file 66.9 -> 42.3 s of CPU, the
+#: ROS 1 bag's run of tests/test_probe_play.py (11.1 s in a whole run) now one of them.
+PLAY_S = 1.0
+
+
 def _play_into_recording_node(
     tmp_path: Path,
     bag: Path,
@@ -611,14 +620,15 @@ def _play_into_recording_node(
     node_args: tuple[str, ...] = (),
     play_args: tuple[str, ...] = (),
 ) -> dict[str, list[Any]]:
-    """``amsfe play --ordered BAG`` into ``amsfe node paper-sim --record REC`` (2 s, a deep
-    reliable queue: no sample lost on a loaded machine); both exit 0; the record's topics."""
+    """``amsfe play --ordered BAG`` into ``amsfe node paper-sim --record REC`` (for
+    :data:`PLAY_S` of samples, a deep reliable queue: no sample lost on a loaded machine);
+    both exit 0; the record's topics."""
     env = _ros_env(tmp_path)
     depth = ["--ros-args", "-p", "qos.depth:=5000"]
     procs = []
     try:
-        procs.append(_start(env, "node", "paper-sim", "--duration", "2", "--record", str(rec),
-                            *node_args, *PATIENT_NODE, *depth))  # fmt: skip
+        procs.append(_start(env, "node", "paper-sim", "--duration", f"{PLAY_S:g}",
+                            "--record", str(rec), *node_args, *PATIENT_NODE, *depth))  # fmt: skip
         procs.append(_start(env, "play", str(bag), "--start-timeout", "60", "--ordered",
                             *play_args, *depth))  # fmt: skip
     finally:
@@ -630,30 +640,49 @@ def _play_into_recording_node(
 
 @pytest.fixture(scope="module")
 def played(paper: Any, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Any]:
-    """A simulated bag of paper-sim (2 s) and ``amsfe estimate``'s estimate of it (made once
-    for every node implementation)."""
+    """A simulated bag of paper-sim (:data:`PLAY_S`) and ``amsfe estimate``'s estimate of it
+    (made once for every node implementation)."""
     from amsfe_sym.apps.estimate import EstimateOptions, estimate_command
     from amsfe_sym.logs.write import write_run_bag
 
     sc, lib = paper
     tmp = tmp_path_factory.mktemp("played")
-    bag = write_run_bag(run(sc, lib, runtime="compiled"), tmp / "bag")
+    bag = write_run_bag(
+        run(sc.with_overrides(duration=PLAY_S), lib, runtime="compiled"), tmp / "bag"
+    )
     return bag, estimate_command(bag, tmp / "est", EstimateOptions(plots=False)).estimate
+
+
+def _played_containers() -> list[tuple[str, str]]:
+    """(node implementation, container played): the Python node is played a ROS 1 ``.bag``
+    (issue 37 item 3, tests/test_probe_play.py), the C node the rosbag2; the test
+    below plays MCAP into both, tests/test_probe_play.py a rosbag2 into the Python node."""
+    return [(impl, "ros1" if impl == "python" else "rosbag2") for impl in node_impls()]
 
 
 @pytest.mark.ros
 @pytest.mark.slow
-@pytest.mark.parametrize("impl", node_impls())
+@pytest.mark.parametrize(("impl", "container"), _played_containers())
 def test_play_into_node_is_estimate(
-    paper: Any, played: tuple[Path, Any], tmp_path: Path, impl: str
+    paper: Any, played: tuple[Path, Any], tmp_path: Path, impl: str, container: str
 ) -> None:
     """``amsfe play`` of a simulated bag into ``amsfe node`` (estimator only, reliable QoS),
     each node implementation, gives the estimates of ``amsfe estimate`` on that bag; the
-    node's record, estimated again, gives them too."""
+    node's record, estimated again, gives them too.  ``ros1``: the bag written again as a
+    ROS 1 ``.bag`` (Noetic definitions, a Header's ``seq``): ``amsfe estimate`` of it is
+    that of the rosbag2, and play sends its messages as CDR (a ROS 1 bag was once published
+    as its ROS 1 bytes: play exited 0, the node logged Fast CDR exceptions and waited)."""
     from amsfe_sym.apps.estimate import EstimateOptions, estimate_command
 
     lib = paper[1]
     bag, ref = played
+    if container == "ros1":
+        from tests.test_probe_play import ros2_to_ros1_bag
+
+        ros2_to_ros1_bag(bag, tmp_path / "run.bag")
+        bag = tmp_path / "run.bag"
+        ros1 = estimate_command(bag, tmp_path / "est1", EstimateOptions(plots=False)).estimate
+        np.testing.assert_allclose(ros1.x_hat, ref.x_hat, rtol=0, atol=1e-9)
     rec = tmp_path / "rec"
     got = _play_into_recording_node(tmp_path, bag, rec, _impl(impl))
     n = lib.n
@@ -686,7 +715,9 @@ def test_play_into_node_with_a_joint_torque_is_estimate(
     JointState, and the record has them so too (tests/test_node_record.py).  ``impl``: the
     node implementation (``auto`` runs the Python node for the kinds the C node refuses)."""
     sc, lib = paper
-    _, bag, spec = _effort_log(sc, lib, kind, tmp_path, positions, shared)
+    _, bag, spec = _effort_log(
+        sc.with_overrides(duration=PLAY_S), lib, kind, tmp_path, positions, shared
+    )
     ref = _estimate_with(bag, spec, tmp_path / "est")
     rec = tmp_path / "rec"
     spec_args = ("--topic-spec", str(spec))
