@@ -47,10 +47,16 @@ are counted.
 
 Which command the arm applied (``actuation``): :mod:`amsfe_sym.ros.watchdog_actuation`.
 
-:meth:`Watchdog.idle` holds when no sample came for ``encoder_timeout``: ``node_stalled``
-when the node's own previous call is that old (it was not scheduled, nothing tells about the
-driver), else ``encoder_stall`` (its publisher still in the graph: the driver is silent; no
-publisher: it is gone).  The first sample only sets the clock offset (its compute time is
+:meth:`Watchdog.idle` holds when no sample came for ``encoder_timeout``: ``encoder_stall``
+(its publisher still in the graph: the driver is silent; no publisher: it is gone).  A call
+that comes after the node's own loop paused longer than ``encoder_timeout`` judges nothing:
+the samples an arm sent meanwhile may not be taken yet, and the next call (50 ms later)
+decides.  It used to hold ``node_stalled`` there, and named the node when the arm was
+killed (tests/test_ros.py's faults test, 2 of 5 suite runs: the node's loop had paused 3.0 s
+as the arm died; what paused it is not known); a node that was truly not scheduled finds
+the arm's samples queued after its pause, and their lateness and gap judge it
+(``deadline``, ``node_stalled`` lost, or ``node_stalled`` unscheduled at the sample).
+The first sample only sets the clock offset (its compute time is
 the estimator's build) and nothing is judged before it.
 """
 
@@ -407,10 +413,12 @@ class Watchdog:
         self._last_call = now
         silence = now - self._last_taken
         if wall_gap > b.encoder_timeout:
-            self.hold = Hold(
-                Reason.NODE_STALLED, Cause.UNSCHEDULED, self._last_k, wall_gap, b.encoder_timeout
-            )
-        elif silence > b.encoder_timeout:
+            # the node's own loop paused (a write to a peer that died blocked it, or it had
+            # no CPU): what an arm sent meanwhile may not be taken yet, so the silence is
+            # judged at the next call; a live arm's samples then come (a sample after the
+            # pause is judged by its gap and lateness), a dead one's do not
+            return self.reason
+        if silence > b.encoder_timeout:
             cause = Cause.GONE if publishers == 0 else Cause.SILENT
             self.hold = Hold(Reason.ENCODER_STALL, cause, self._last_k, silence, b.encoder_timeout)
         return self.reason

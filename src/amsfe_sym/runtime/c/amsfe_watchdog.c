@@ -305,10 +305,11 @@ int amsfe_watchdog_idle(amsfe_watchdog *wd, double now, int publishers) {
   s->max_wall_gap = pymax(s->max_wall_gap, wall_gap);
   wd->last_call = now;
   double silence = now - wd->last_taken;
-  if (wall_gap > wd->c.encoder_timeout)
-    trip(s, AMSFE_WD_NODE_STALLED, AMSFE_WD_CAUSE_UNSCHEDULED, wd->last_k, wall_gap,
-         wd->c.encoder_timeout, 0);
-  else if (silence > wd->c.encoder_timeout)
+  /* the node's own loop paused (a blocked write to a peer that died, no CPU): the samples
+     an arm sent meanwhile may not be taken yet, so the silence is judged at the next call
+     (ros/watchdog.py, Watchdog.idle) */
+  if (wall_gap > wd->c.encoder_timeout) return s->reason;
+  if (silence > wd->c.encoder_timeout)
     trip(s, AMSFE_WD_ENCODER_STALL, publishers == 0 ? AMSFE_WD_CAUSE_GONE : AMSFE_WD_CAUSE_SILENT,
          wd->last_k, silence, wd->c.encoder_timeout, 0);
   return s->reason;
