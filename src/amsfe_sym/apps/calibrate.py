@@ -348,10 +348,22 @@ def from_args(args: argparse.Namespace) -> int:
 
     log = Path(args.log)
     if not (math.isfinite(args.pixel_std) and args.pixel_std > 0):
-        raise ConfigError(describe("--pixel-std", "a number > 0 [px]", str(args.pixel_std), ""))
+        raise ConfigError(
+            describe(
+                "--pixel-std",
+                "a number > 0 [px]",
+                str(args.pixel_std),
+                "give the detection noise in px",
+            )
+        )
     if not (math.isfinite(args.max_time_offset) and args.max_time_offset >= 0):
         raise ConfigError(
-            describe("--max-time-offset", "a number >= 0 [s]", str(args.max_time_offset), "")
+            describe(
+                "--max-time-offset",
+                "a number >= 0 [s]",
+                str(args.max_time_offset),
+                "give the largest camera delay to search, in s (default 0.2)",
+            )
         )
     out = Path(args.out) if args.out else default_out(log)
     options = CalibrateOptions(

@@ -34,11 +34,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
+from amsfe_sym.calibration.initial import SCAN_STEP_S, InitialGuess, initial_guess, spread_check
 from amsfe_sym.calibration.model import NP, ReprojectionModel
 from amsfe_sym.calibration.observations import NO_ENCODER, LinkAngles, Observations
 from amsfe_sym.errors import LogError, describe
@@ -57,8 +57,6 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-#: Step of the initial guess's time-offset scan [s].
-SCAN_STEP_S = 0.005
 #: Huber loss scale, in pixel noise standard deviations.
 HUBER_SCALE = 3.0
 #: A frame whose reprojection error exceeds this many pixel-noise sigmas is an outlier.
@@ -69,29 +67,11 @@ UNDETERMINED = {"rotation": 1.0, "camera": 0.02, "offset": 0.02, "time_offset": 
 #: A start whose reprojection RMS exceeds this many Huber scales gets a squared-loss fit
 #: before the robust one (module docstring, step 2).
 FAR_START = 10.0
-#: The tracked point must move at least this far [m] over the frames to fit anything.
-MIN_SPREAD_M = 0.01
 #: The 95 % two-sided normal quantile.
 Z95 = 1.959963984540054
 
 _GROUP = ("rotation",) * 3 + ("camera",) * 3 + ("offset",) * 3 + ("time_offset",)
 _UNIT = (180.0 / np.pi,) * 3 + (1.0,) * 7
-
-
-@dataclass(frozen=True)
-class InitialGuess:
-    """The ``solvePnP`` scan's best trial: world -> camera rotation, camera centre [m], time
-    offset [s], its reprojection RMS [px], and the number of frames it used; ``source``:
-    ``"solvePnP"``, or ``"spec"`` when the spec's camera pose reprojected better (then
-    ``pnp_rms`` is the scan's best RMS [px])."""
-
-    R_cw: FloatArray
-    position: FloatArray
-    time_offset: float
-    rms: float
-    frames: int
-    source: str = "solvePnP"
-    pnp_rms: float = float("nan")
 
 
 @dataclass
@@ -150,99 +130,6 @@ class Calibration:
         return np.linalg.norm(self.residual[self.used], axis=1)
 
 
-def _points(
-    robot: Robot, links: LinkAngles, t: FloatArray, offset: FloatArray
-) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """World positions [m] of the marker at ``offset`` at times ``t``; which could be
-    interpolated."""
-    model = ReprojectionModel(robot, links, t, np.eye(3))
-    q, _, ok = links.at(t)
-    pts = np.zeros((t.size, 3))
-    if ok.any():
-        p, R, _, _ = model.frame_kinematics(q[ok])
-        pts[ok] = p + R @ offset
-    return pts, ok
-
-
-def initial_guess(
-    robot: Robot,
-    links: LinkAngles,
-    obs: Observations,
-    offset: FloatArray,
-    max_offset: float,
-    max_frames: int = 300,
-) -> InitialGuess:
-    """The ``solvePnP`` scan (module docstring, step 1) over at most ``max_frames`` frames."""
-    K = robot.camera.K
-    pick = np.unique(np.linspace(0, obs.m - 1, min(obs.m, max_frames)).round().astype(int))
-    trials = np.arange(-max_offset, max_offset + 0.5 * SCAN_STEP_S, SCAN_STEP_S)
-    best: InitialGuess | None = None
-    for dt in trials:
-        pts, ok = _points(robot, links, obs.stamp[pick] - dt, offset)
-        if ok.sum() < 6:
-            continue
-        obj, img = pts[ok], obs.pixel[pick][ok]
-        good, rvec, tvec = cv2.solvePnP(obj, img, K, None, flags=cv2.SOLVEPNP_SQPNP)
-        if not good:
-            continue
-        proj, _ = cv2.projectPoints(obj, rvec, tvec, K, None)
-        rms = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - img) ** 2, axis=1))))
-        if best is None or rms < best.rms:
-            R = np.asarray(cv2.Rodrigues(rvec)[0], dtype=np.float64)
-            centre = -R.T @ np.asarray(tvec, dtype=np.float64).reshape(3)
-            best = InitialGuess(R, centre, float(dt), rms, int(ok.sum()))
-    if best is None:
-        raise LogError(
-            describe(
-                "calibration",
-                "at least 6 camera frames with encoder samples around them",
-                f"{obs.m} frames, none usable at any time offset within +-{max_offset:g} s",
-                "record the encoders and the camera together",
-            )
-        )
-    # the spec's own pose, at dt = 0, when it reprojects better (module docstring, step 1)
-    pts, ok = _points(robot, links, obs.stamp[pick], offset)
-    cam = robot.camera
-    rvec = cv2.Rodrigues(np.asarray(cam.R_cw, dtype=np.float64))[0]
-    tvec = -np.asarray(cam.R_cw, dtype=np.float64) @ np.asarray(cam.position, dtype=np.float64)
-    if ok.sum() >= 6:
-        proj, _ = cv2.projectPoints(pts[ok], rvec, tvec, K, None)
-        img = obs.pixel[pick][ok]
-        rms = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - img) ** 2, axis=1))))
-        if rms < best.rms:
-            R = np.asarray(cam.R_cw, dtype=np.float64).copy()
-            pos = np.asarray(cam.position, dtype=np.float64).copy()
-            return InitialGuess(R, pos, 0.0, rms, int(ok.sum()), "spec", best.rms)
-    return best
-
-
-def _spread_check(robot: Robot, links: LinkAngles, obs: Observations, offset: FloatArray) -> None:
-    """Refuse a log whose tracked point does not move: nothing can be determined."""
-    pts, ok = _points(robot, links, obs.stamp, offset)
-    if ok.sum() == 0:
-        raise LogError(
-            describe(
-                "calibration",
-                "camera frames with encoder samples around their stamps",
-                f"none of {obs.m} frames",
-                "record the encoders and the camera over the same time",
-            )
-        )
-    p = pts[ok]
-    spread = float(np.max(np.linalg.norm(p - p.mean(axis=0), axis=1)))
-    if spread < MIN_SPREAD_M:
-        raise LogError(
-            describe(
-                "calibration",
-                f"the tracked point moving (>= {MIN_SPREAD_M * 1000:g} mm) over the frames",
-                f"it stays within {spread * 1000:.2f} mm of one place over {int(ok.sum())} "
-                "frames: the arm is at rest, so the camera pose, the marker offset and the "
-                "time offset cannot be determined",
-                "record the arm moving through its workspace",
-            )
-        )
-
-
 def calibrate(
     robot: Robot,
     links: LinkAngles,
@@ -282,7 +169,7 @@ def calibrate(
                 "docs/reference/topics.md)",
             )
         )
-    _spread_check(robot, links, obs, offset0)
+    spread_check(robot, links, obs, offset0)
     init = initial_guess(robot, links, obs, offset0, max_offset if fit_time_offset else 0.0)
     if init.source == "spec":
         say(

@@ -104,7 +104,10 @@ class CameraConfig:
         if not isinstance(self.round_to_pixel, bool):
             raise ConfigError(
                 describe(
-                    "CameraConfig.round_to_pixel", "true or false", repr(self.round_to_pixel), ""
+                    "CameraConfig.round_to_pixel",
+                    "true or false",
+                    repr(self.round_to_pixel),
+                    "write round_to_pixel = true or round_to_pixel = false",
                 )
             )
         # store plain Python numbers (numpy scalars would leak into reprs and hashes)

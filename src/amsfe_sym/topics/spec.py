@@ -144,7 +144,11 @@ class TopicSpec:
     def topic(self, role: str) -> str:
         """The topic of ``role`` (a key of :data:`~amsfe_sym.topics.roles.ROLES`)."""
         if role not in ROLES:
-            raise ConfigError(describe("topic role", f"one of {list(ROLES)}", repr(role), ""))
+            raise ConfigError(
+                describe(
+                    "topic role", f"one of {list(ROLES)}", repr(role), "name one of those roles"
+                )
+            )
         return str(getattr(self, role))
 
     def roles_of(self, topic: str, roles: tuple[str, ...] = tuple(ROLES)) -> list[str]:
