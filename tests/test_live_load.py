@@ -375,9 +375,12 @@ def test_a_lockstep_arm_refuses_a_second_controller_by_name(tmp_path: Path) -> N
     )  # fmt: skip
     try:
         assert intruder.stdout is not None and "publishing" in intruder.stdout.readline()
-        node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--duration", "1",
+        # 5 s of arm time: the refusal ends the run at the intruder's first command, but the
+        # arm must have discovered it by then (a 1 s run took 0.67 s of wall time in CI and
+        # ended before discovery did: the arm never heard of the intruder and ran to its end)
+        node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--duration", "5",
                       "--impl", "python", *PATIENT_NODE)  # fmt: skip
-        sim = _start(env, "sim-node", "paper-sim", "--lockstep", "--duration", "1",
+        sim = _start(env, "sim-node", "paper-sim", "--lockstep", "--duration", "5",
                      *PATIENT_ARM)  # fmt: skip
         procs += [sim, node]
         code = sim.p.wait(timeout=180)
