@@ -37,6 +37,7 @@ from amsfe_sym.codegen.cache import (
     compiler,
     content_hash,
     default_out_dir,
+    manifest_of,
     replace_dir,
 )
 from amsfe_sym.codegen.compile_units import (
@@ -392,11 +393,8 @@ def _other_source(out_dir: Path, spec: RobotSpec) -> str | None:
     """The source (robot.toml or URDF) of the library in ``out_dir`` if it is not ``spec``'s:
     the folder is named by the robot's name, so a bare ``panda.urdf`` and the shipped
     ``robots/panda`` share ``generated/panda`` and each build replaces the other's."""
-    try:
-        old = json.loads((out_dir / MANIFEST).read_text())
-    except (OSError, ValueError):
-        return None
-    if not isinstance(old, dict):
+    old = manifest_of(out_dir)
+    if old is None:
         return None
     mine = {"urdf": str(spec.urdf), "spec": None if spec.spec_path is None else str(spec.spec_path)}
     theirs = {k: old.get(k) for k in mine}

@@ -45,6 +45,7 @@ __all__ = [
     "compiler",
     "content_hash",
     "default_out_dir",
+    "manifest_of",
     "replace_dir",
 ]
 
@@ -185,16 +186,22 @@ def _has_dist(name: str) -> bool:
     return True
 
 
+def manifest_of(out_dir: Path) -> dict[str, Any] | None:
+    """The manifest in ``out_dir`` as a dict, or None when there is none or it is not a JSON
+    object (the cache's checks treat both as no library)."""
+    try:
+        manifest = json.loads((out_dir / MANIFEST).read_text())
+    except (OSError, ValueError):
+        return None
+    return manifest if isinstance(manifest, dict) else None
+
+
 def cached_dir(out_dir: Path, key: str) -> Path | None:
     """The library path if ``out_dir`` holds a complete build with hash ``key`` whose
     library still has the sha256 recorded in the manifest (a truncated or damaged ``.so``
     is not reused: it is rebuilt)."""
-    mpath = out_dir / MANIFEST
-    try:
-        manifest = json.loads(mpath.read_text())
-    except (OSError, ValueError):
-        return None
-    if not isinstance(manifest, dict) or manifest.get("content_hash") != key:
+    manifest = manifest_of(out_dir)
+    if manifest is None or manifest.get("content_hash") != key:
         return None
     lib = out_dir / str(manifest.get("library", ""))
     try:
