@@ -65,7 +65,7 @@ def load(folder: Path = DATA) -> Frames:
     words = (folder / "robot_cali.txt").read_text().split()
     n = int(words[0])
     base_to_hand = np.array(words[1:], dtype=np.float64).reshape(n, 4, 4)
-    flange = np.array([_inv(T) for T in base_to_hand])
+    flange = np.array([hom_inv(T) for T in base_to_hand])
     if n != len(images):
         raise SystemExit(f"{folder}: {n} poses for {len(images)} images")
     board = np.zeros((PATTERN[0] * PATTERN[1], 3))
@@ -114,15 +114,17 @@ def info_yaml(K: FloatArray, D: FloatArray) -> str:
     )
 
 
-def _hom(R: FloatArray, t: FloatArray) -> FloatArray:
+def hom(R: FloatArray, t: FloatArray) -> FloatArray:
+    """The 4 x 4 transform of rotation ``R`` and translation ``t`` [m]."""
     T = np.eye(4)
     T[:3, :3] = R
     T[:3, 3] = np.ravel(t)
     return T
 
 
-def _inv(T: FloatArray) -> FloatArray:
-    return _hom(T[:3, :3].T, -T[:3, :3].T @ T[:3, 3])
+def hom_inv(T: FloatArray) -> FloatArray:
+    """The inverse of the 4 x 4 rigid transform ``T``."""
+    return hom(T[:3, :3].T, -T[:3, :3].T @ T[:3, 3])
 
 
 def board_in_camera(info: object, frames: Frames, pts: list[FloatArray]) -> list[FloatArray]:
@@ -136,7 +138,7 @@ def board_in_camera(info: object, frames: Frames, pts: list[FloatArray]) -> list
     for p in pts:
         und = undistort(info, p)  # type: ignore[arg-type]
         _ok, rv, tv = cv2.solvePnP(frames.board, und, info.new_matrix, None)  # type: ignore[attr-defined]
-        out.append(_hom(cv2.Rodrigues(rv)[0], tv))
+        out.append(hom(cv2.Rodrigues(rv)[0], tv))
     return out
 
 
@@ -147,8 +149,8 @@ def park_martin(flange: FloatArray, cam: list[FloatArray]) -> FloatArray:
 
     alphas, betas, As, Bs = [], [], [], []
     for i in range(len(cam) - 1):
-        A = _inv(flange[i]) @ flange[i + 1]
-        B = cam[i] @ _inv(cam[i + 1])
+        A = hom_inv(flange[i]) @ flange[i + 1]
+        B = cam[i] @ hom_inv(cam[i + 1])
         alphas.append(Rotation.from_matrix(A[:3, :3]).as_rotvec())
         betas.append(Rotation.from_matrix(B[:3, :3]).as_rotvec())
         As.append(A)
@@ -159,13 +161,13 @@ def park_martin(flange: FloatArray, cam: list[FloatArray]) -> FloatArray:
     C = np.vstack([A[:3, :3] - np.eye(3) for A in As])
     d = np.concatenate([R @ B[:3, 3] - A[:3, 3] for A, B in zip(As, Bs, strict=True)])
     t = np.linalg.lstsq(C, d, rcond=None)[0]
-    return _hom(R, t)
+    return hom(R, t)
 
 
 def _pose(x: FloatArray) -> FloatArray:
     from scipy.spatial.transform import Rotation
 
-    return _hom(Rotation.from_rotvec(x[:3]).as_matrix(), x[3:])
+    return hom(Rotation.from_rotvec(x[:3]).as_matrix(), x[3:])
 
 
 def _vec(T: FloatArray) -> FloatArray:
@@ -185,7 +187,7 @@ def reprojection(
     fx, fy, cx, cy = info.pinhole  # type: ignore[attr-defined]
     errs = []
     for F, p in zip(frames.flange, pts, strict=True):
-        T = _inv(F @ X) @ Z  # board in camera
+        T = hom_inv(F @ X) @ Z  # board in camera
         q = frames.board @ T[:3, :3].T + T[:3, 3]
         uv = np.column_stack([fx * q[:, 0] / q[:, 2] + cx, fy * q[:, 1] / q[:, 2] + cy])
         errs.append(np.linalg.norm(distort(info, uv) - p, axis=1))  # type: ignore[arg-type]

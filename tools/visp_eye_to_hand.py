@@ -59,6 +59,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from real_images import hom, hom_inv  # tools/real_images.py (tools/ is the script's path)
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests/data/real_images/visp_eye_to_hand"
@@ -106,22 +107,11 @@ VISP_INTRINSICS = {
 }
 
 
-def _hom(R: FloatArray, t: FloatArray) -> FloatArray:
-    T_ = np.eye(4)
-    T_[:3, :3] = R
-    T_[:3, 3] = np.ravel(t)
-    return T_
-
-
-def _inv(M: FloatArray) -> FloatArray:
-    return _hom(M[:3, :3].T, -M[:3, :3].T @ M[:3, 3])
-
-
 def pose_vector(v: FloatArray) -> FloatArray:
     """ViSP's ``vpPoseVector`` [tx ty tz (m), theta-u (rad)] as a 4 x 4."""
     import cv2
 
-    return _hom(np.asarray(cv2.Rodrigues(np.asarray(v[3:], dtype=np.float64))[0]), v[:3])
+    return hom(np.asarray(cv2.Rodrigues(np.asarray(v[3:], dtype=np.float64))[0]), v[:3])
 
 
 def rotation_deg(Ra: FloatArray, Rb: FloatArray) -> float:
@@ -377,7 +367,7 @@ def tag_poses(corners: list[FloatArray], info: Any) -> list[FloatArray]:
         ok, rv, tv = cv2.solvePnP(obj, und, info.new_matrix, None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
         if not ok:
             raise SystemExit("solvePnP failed")
-        out.append(_hom(np.asarray(cv2.Rodrigues(rv)[0]), np.asarray(tv, dtype=np.float64)))
+        out.append(hom(np.asarray(cv2.Rodrigues(rv)[0]), np.asarray(tv, dtype=np.float64)))
     return out
 
 
@@ -403,7 +393,7 @@ def shah(A: list[FloatArray], B: list[FloatArray]) -> tuple[FloatArray, FloatArr
     C = np.vstack([np.hstack([a[:3, :3], -np.eye(3)]) for a in A])
     d = np.concatenate([RZ @ b[:3, 3] - a[:3, 3] for a, b in zip(A, B, strict=True)])
     t = np.linalg.lstsq(C, d, rcond=None)[0]
-    return _hom(RX, t[:3]), _hom(RZ, t[3:])
+    return hom(RX, t[:3]), hom(RZ, t[3:])
 
 
 def opencv_reference(rMe: FloatArray, cMo: list[FloatArray]) -> tuple[FloatArray, FloatArray]:
@@ -413,8 +403,8 @@ def opencv_reference(rMe: FloatArray, cMo: list[FloatArray]) -> tuple[FloatArray
     ``B_i = eMr_i``, ``X = cMr``, ``Z = oMe``, solved by :func:`shah`.  OpenCV 5.0.0's Python
     wheel (the project's) does not expose the function; OpenCV 4.14's gives the same ``rMc``
     and ``eMo`` to 1e-12 on this data (module docstring)."""
-    X, Z = shah([_inv(M) for M in cMo], [_inv(M) for M in rMe])
-    return _inv(X), _inv(Z)
+    X, Z = shah([hom_inv(M) for M in cMo], [hom_inv(M) for M in rMe])
+    return hom_inv(X), hom_inv(Z)
 
 
 def centre_residuals(
@@ -424,7 +414,7 @@ def centre_residuals(
     the camera ``rMc`` and ``info``'s pinhole, against ``pixels`` (N, 2) [px] (undistorted,
     in that pinhole)."""
     fx, fy, cx, cy = info.pinhole
-    cMr = _inv(rMc)
+    cMr = hom_inv(rMc)
     p = np.array([(cMr @ M @ np.append(offset, 1.0))[:3] for M in rMe])
     uv = np.column_stack([fx * p[:, 0] / p[:, 2] + cx, fy * p[:, 1] / p[:, 2] + cy])
     return np.asarray(np.linalg.norm(uv - pixels, axis=1), dtype=np.float64)
@@ -434,7 +424,7 @@ def consistency(rMe: FloatArray, cMo: list[FloatArray], eMo: FloatArray) -> dict
     """ViSP's residual measure for a solution ``eMo``: each frame's ``rMc_i = rMe_i eMo
     cMo_i^-1`` against their mean (rotation: the chordal mean), mean angle [deg] and distance
     [m]."""
-    rMc = [M @ eMo @ _inv(C) for M, C in zip(rMe, cMo, strict=True)]
+    rMc = [M @ eMo @ hom_inv(C) for M, C in zip(rMe, cMo, strict=True)]
     U, _, Vt = np.linalg.svd(sum(M[:3, :3] for M in rMc))
     R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
     t = np.mean([M[:3, 3] for M in rMc], axis=0)
@@ -464,13 +454,13 @@ def corner_fit(
     fx, fy, cx, cy = info.pinhole
 
     def pose(x: FloatArray) -> FloatArray:
-        return _hom(Rotation.from_rotvec(x[:3]).as_matrix(), x[3:])
+        return hom(Rotation.from_rotvec(x[:3]).as_matrix(), x[3:])
 
     def vec(M: FloatArray) -> FloatArray:
         return np.concatenate([Rotation.from_matrix(M[:3, :3]).as_rotvec(), M[:3, 3]])
 
     def residual(x: FloatArray) -> FloatArray:
-        cMr, eMo = _inv(pose(x[:6])), pose(x[6:])
+        cMr, eMo = hom_inv(pose(x[:6])), pose(x[6:])
         p = np.einsum("nij,kj->nki", cMr @ rMe @ eMo, obj)[..., :3]  # (N, 4, 3)
         uv = np.stack([fx * p[..., 0] / p[..., 2] + cx, fy * p[..., 1] / p[..., 2] + cy], -1)
         return np.asarray((uv - meas).ravel(), dtype=np.float64)
@@ -588,7 +578,7 @@ def _corners_entry(
 ) -> dict[str, Any]:
     """:func:`corner_fit` from the centre fit's camera and offset with the tag's rotation of
     the OpenCV reference, and its distances from ViSP's result."""
-    out = corner_fit(rMe, corners, info, rMc, _hom(cv_eMo[:3, :3], cal.offset))
+    out = corner_fit(rMe, corners, info, rMc, hom(cv_eMo[:3, :3], cal.offset))
     M, E = out.pop("rMc"), out.pop("eMo")
     return {**_solution(M, E[:3, 3]), **out, "vs_visp": _against(M, E[:3, 3], visp_rMc, VISP_EMO_T)}
 
@@ -638,7 +628,7 @@ def measure(work: Path) -> dict[str, Any]:
         log, robot = write_inputs(work, info, f"panda_visp_e2h_{label}")
         rc, command = run_command(log, robot, work / f"{label}-cal")
         cal, lines = fit(log, robot)
-        rMc = _hom(cal.R_cw.T, cal.position)
+        rMc = hom(cal.R_cw.T, cal.position)
         centres = np.array([diagonals_meet(undistort(info, c)) for c in found])
         cMo = tag_poses(found, info)
         cv_rMc, cv_eMo = opencv_reference(ds.rMe, cMo)
