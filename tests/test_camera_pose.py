@@ -144,3 +144,37 @@ def test_orientation_is_normalised_and_hashed(tmp_path: Path) -> None:
     assert np.linalg.norm(spec.camera.orientation) == pytest.approx(1.0, abs=1e-15)
     other = load_spec(_robot(tmp_path / "b", _quaternion_camera(q[[1, 0, 2, 3]])))
     assert spec.fingerprint() != other.fingerprint()
+
+
+def _with_tracked(path: Path, lines: str) -> Path:
+    """``path``'s robot.toml with ``lines`` added under its ``[tracked]`` table."""
+    text = path.read_text()
+    assert "[tracked]" in text
+    path.write_text(text.replace("[tracked]", "[tracked]\n" + lines, 1))
+    return path
+
+
+def test_marker_orientation_is_read_and_normalised(tmp_path: Path) -> None:
+    """``[tracked] orientation`` (the marker's frame on its link) is read and normalised."""
+    base = load_spec(_robot(tmp_path / "a", _look_at_camera()))
+    assert base.tracked.orientation is None
+    q = np.array([0.3, -0.2, 0.1, 0.9])
+    q /= np.linalg.norm(q)
+    line = f"orientation = [{', '.join(repr(float(v)) for v in q * (1 + 5e-7))}]"
+    spec = load_spec(_with_tracked(_robot(tmp_path / "b", _look_at_camera()), line))
+    assert spec.tracked.orientation is not None
+    np.testing.assert_allclose(spec.tracked.orientation, q, atol=1e-15)
+
+
+@pytest.mark.parametrize(
+    ("line", "words"),
+    [("orientation = [0, 0, 0.1, 1]", ["unit quaternion"]), ("orientation = 3", ["4 numbers"])],
+)
+def test_bad_marker_orientation_is_one_line(tmp_path: Path, line: str, words: list[str]) -> None:
+    path = _with_tracked(_robot(tmp_path, _look_at_camera()), line)
+    with pytest.raises(SpecError) as err:
+        load_spec(path)
+    msg = str(err.value)
+    assert "\n" not in msg and "[tracked] orientation" in msg
+    for w in words:
+        assert w in msg

@@ -15,6 +15,7 @@ from amsfe_sym.core.values import read_number
 from amsfe_sym.errors import SpecError, describe
 
 __all__ = ["UNIT_TOLERANCE", "matrix_to_quaternion", "quaternion_to_matrix", "read_orientation"]
+__all__ += ["read_marker_orientation"]
 
 
 def quaternion_to_matrix(q: tuple[float, ...] | NDArray[np.float64]) -> NDArray[np.float64]:
@@ -59,7 +60,7 @@ def matrix_to_quaternion(R: NDArray[np.float64]) -> NDArray[np.float64]:
     return -q if q[3] < 0 else q
 
 
-#: How far from 1 the norm of ``[camera] orientation`` may be (it is then normalised).
+#: How far from 1 the norm of an orientation's quaternion may be (it is then normalised).
 UNIT_TOLERANCE = 1e-6
 
 
@@ -89,6 +90,30 @@ def read_orientation(c: Mapping[str, Any], where: str) -> tuple[float, float, fl
         raise SpecError(
             describe(w, "a camera position with it", "none", "add position = [x, y, z]")
         )
+    return _unit(q, w)
+
+
+def read_marker_orientation(
+    t: Mapping[str, Any], where: str
+) -> tuple[float, float, float, float] | None:
+    """``[tracked] orientation``: the marker's frame in the tracked frame, a unit quaternion
+    [qx, qy, qz, qw], normalised; None when absent.  The marker's frame is OpenCV's ArUco one:
+    its centre at the tracked point, x to the right and y up as printed, z out of the printed
+    face (toward a camera that sees it); corners at ``size/2 (-1, 1), (1, 1), (1, -1),
+    (-1, -1)``."""
+    x = t.get("orientation")
+    if x is None:
+        return None
+    w = f"{where} orientation"
+    if not isinstance(x, Sequence) or isinstance(x, str) or len(x) != 4:
+        raise SpecError(
+            describe(w, "4 numbers [qx, qy, qz, qw]", repr(x), "write [qx, qy, qz, qw]")
+        )
+    return _unit([read_number(v, w, SpecError) for v in x], w)
+
+
+def _unit(q: Sequence[float], w: str) -> tuple[float, float, float, float]:
+    """``q`` normalised, refused when its norm is not 1 within :data:`UNIT_TOLERANCE`."""
     norm = math.sqrt(sum(v * v for v in q))
     if abs(norm - 1.0) > UNIT_TOLERANCE:
         raise SpecError(

@@ -25,7 +25,7 @@ from amsfe_sym.core.values import (
     read_in_range,
 )
 from amsfe_sym.errors import SpecError, describe
-from amsfe_sym.load.rotation import read_orientation
+from amsfe_sym.load.rotation import read_marker_orientation, read_orientation
 from amsfe_sym.load.spec_values import (
     read_count,
     read_finite,
@@ -108,10 +108,14 @@ class ActuatorSpec:
 
 @dataclass(frozen=True)
 class TrackedSpec:
-    """The point the camera sees: ``offset`` [m] expressed in ``frame``."""
+    """The point the camera sees: ``offset`` [m] expressed in ``frame``; ``orientation`` the
+    marker's frame in ``frame`` (a unit quaternion [qx, qy, qz, qw], OpenCV's ArUco marker
+    frame: :func:`~amsfe_sym.load.rotation.read_marker_orientation`), None when not known
+    (the generated functions see the point only; the images and the corner fit use it)."""
 
     frame: str | None = None
     offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    orientation: tuple[float, float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -369,10 +373,11 @@ def parse_spec(data: Mapping[str, Any], path: Path) -> RobotSpec:
     )
 
     t = read_table(data, "tracked", where)
-    refuse_unknown(t, {"frame", "offset"}, f"{where} [tracked]")
+    refuse_unknown(t, {"frame", "offset", "orientation"}, f"{where} [tracked]")
     tracked = TrackedSpec(
         frame=None if t.get("frame") is None else str(t["frame"]),
         offset=read_vec3(t.get("offset", (0.0, 0.0, 0.0)), f"{where} [tracked] offset"),
+        orientation=read_marker_orientation(t, f"{where} [tracked]"),
     )
 
     c = read_table(data, "camera", where)
