@@ -4,17 +4,20 @@ twice is raised at once; outside a block nothing changes."""
 
 from __future__ import annotations
 
+import _thread
 import fcntl
 import os
 import signal
 import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
 import pytest
 
 from amsfe_sym.codegen.cache import build_lock
-from amsfe_sym.core.interrupts import DeferredSignals, checkpoint
+from amsfe_sym.core.interrupts import DeferredSignals, checkpoint, result_held, wait_held
 
 
 class StoppedError(Exception):
@@ -127,3 +130,47 @@ def test_nested_blocks_deliver_to_the_real_handler(usr1: int) -> None:
             checkpoint()
             pytest.fail("the outer block's signal was not delivered")
     assert signal.getsignal(usr1) is _raise
+
+
+def _hold_then_interrupt(sem: threading.Semaphore, started: threading.Event) -> None:
+    """Hold ``sem``'s internal lock while a Ctrl-C comes to the main thread, then let go."""
+    sem._cond.acquire()  # type: ignore[attr-defined]
+    started.set()
+    time.sleep(0.1)  # the main thread now waits to enter that lock
+    _thread.interrupt_main()
+    time.sleep(0.1)
+    sem._cond.release()  # type: ignore[attr-defined]
+
+
+def _contended(wait: Any) -> bool:
+    """``wait(sem)`` interrupted as it enters ``sem``'s lock; whether the lock is left held."""
+    sem = threading.Semaphore(0)
+    started = threading.Event()
+    other = threading.Thread(target=_hold_then_interrupt, args=(sem, started))
+    other.start()
+    started.wait()
+    with pytest.raises(KeyboardInterrupt):
+        wait(sem)
+    other.join()
+    return bool(sem._cond._lock.locked())  # type: ignore[attr-defined]
+
+
+def test_a_ctrl_c_inside_a_semaphores_lock_leaves_it_held() -> None:
+    """The hazard wait_held exists for: Python looks for signals after the C acquire inside
+    ``Condition.__enter__``, so the Ctrl-C is raised with the lock taken and no ``with`` to
+    release it (a worker then waits for it forever)."""
+    assert _contended(lambda sem: sem.acquire(timeout=5.0))
+
+
+def test_wait_held_raises_the_ctrl_c_with_no_lock_held() -> None:
+    assert not _contended(lambda sem: wait_held(lambda t: sem.acquire(timeout=t)))
+
+
+def test_result_held_returns_the_result_and_raises_a_held_ctrl_c() -> None:
+    with ThreadPoolExecutor(1) as pool:
+        assert result_held(pool.submit(lambda: 7), poll=0.01) == 7
+        slow = pool.submit(time.sleep, 0.3)
+        threading.Timer(0.05, _thread.interrupt_main).start()
+        with pytest.raises(KeyboardInterrupt):
+            result_held(slow, poll=0.01)
+        assert slow.running() or slow.done()  # (the worker was left alone)

@@ -12,6 +12,8 @@ logs (rosbags' writers) for the corrupt frame.
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 import threading
 from pathlib import Path
 from typing import Any
@@ -316,3 +318,53 @@ def test_sigint_during_the_read_is_one_line(jpeg_log: Path, tmp_path) -> None:
     assert "Traceback" not in err
     assert len(lines) == 1 and lines[0].startswith("interrupted: amsfe estimate"), err
     assert not out.exists()
+
+
+#: A prefetch whose decoding thread holds the room semaphore's lock while a Ctrl-C comes:
+#: the reading thread waits to enter that lock when the interruption is due.
+_CTRL_C_IN_THE_ROOMS_LOCK = """
+import _thread, time
+import numpy as np
+from amsfe_sym.vision.images import GreyImage
+from amsfe_sym.vision.prefetch import Prefetch
+
+class Contending:
+    frames = calls = 0
+    def grey(self, raw, encoding="cdr", where=""):
+        self.calls += 1
+        if self.calls == 1:
+            cond = prefetch._room._cond
+            cond.acquire()
+            time.sleep(0.1)
+            _thread.interrupt_main()
+            time.sleep(0.1)
+            cond.release()
+        return GreyImage(0, np.zeros((1, 1), np.uint8))
+    def detect_into(self, cols, i, img):
+        self.frames += 1
+
+prefetch = Prefetch(Contending(), threads=1, depth=64)
+try:
+    prefetch([b"x"] * 50).result()
+    print("not interrupted")
+except KeyboardInterrupt:
+    print("interrupted")
+finally:
+    prefetch.close()
+print("closed")
+"""
+
+
+def test_ctrl_c_while_the_reader_enters_the_rooms_lock_never_hangs() -> None:
+    """A Ctrl-C raised as the reading thread takes the room semaphore's lock used to leave
+    that lock held (core/interrupts.py's docstring): the detection thread then waited for it
+    forever and ``close`` with it (``amsfe estimate`` of a jpeg log hung on a Ctrl-C).  Now
+    the Ctrl-C is raised between two waits and ``close`` ends."""
+    done = subprocess.run(
+        [sys.executable, "-c", _CTRL_C_IN_THE_ROOMS_LOCK],
+        capture_output=True,
+        text=True,
+        timeout=60,  # (a hang fails here)
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["interrupted", "closed"]

@@ -10,6 +10,15 @@ by one that only records the signal; :func:`checkpoint` (called by the build bet
 stages and while it waits for the compiler) and leaving the block call the handler that was
 there before (``KeyboardInterrupt``, or the command line's SIGTERM exception), so the
 interruption is raised in the toolkit's own code, where every ``finally`` cleans up.
+
+:func:`wait_held` and :func:`result_held` are the waits of the main thread on worker threads
+(the image prefetch): a ``KeyboardInterrupt`` raised inside ``threading``'s Python-level lock
+protocol can leave a lock held.  The interpreter looks for signals after each call into C,
+so a Ctrl-C that came while ``Condition.__enter__`` waited for its lock is raised after the
+lock was taken and before the ``with`` block holds it: nothing ever releases it, the worker
+that needs it next waits forever, and so does the join at exit (``amsfe estimate`` of a jpeg
+log hung on a Ctrl-C: tests/test_interrupts.py reproduces the leak).  Held, the signal is
+raised between two waits, where no lock is taken.
 """
 
 from __future__ import annotations
@@ -17,10 +26,16 @@ from __future__ import annotations
 import signal
 import threading
 from collections.abc import Callable
+from concurrent.futures import Future
 from types import FrameType, TracebackType
-from typing import Any
+from typing import Any, TypeVar
 
-__all__ = ["DeferredSignals", "checkpoint"]
+__all__ = ["POLL_S", "DeferredSignals", "checkpoint", "result_held", "wait_held"]
+
+T = TypeVar("T")
+
+#: How often [s] a held wait (:func:`wait_held`, :func:`result_held`) delivers a held signal.
+POLL_S = 0.05
 
 _Handler = Callable[[int, FrameType | None], Any]
 
@@ -99,3 +114,23 @@ def checkpoint() -> None:
         if block.pending:
             block.check()
             return
+
+
+def wait_held(ready: Callable[[float], bool], poll: float = POLL_S) -> None:
+    """Call ``ready(timeout)`` (``timeout`` = ``poll`` [s]; e.g. a semaphore's ``acquire``)
+    until it returns True, with Ctrl-C and SIGTERM held during each call and delivered
+    between calls (module docstring: a lock is never left held by an interruption)."""
+    with DeferredSignals() as hold:
+        while not ready(poll):
+            hold.check()
+
+
+def result_held(fut: Future[T], poll: float = POLL_S) -> T:
+    """``fut.result()``, waited for as :func:`wait_held` waits: a Ctrl-C meanwhile is
+    raised between two waits of ``poll`` [s], never inside the future's lock."""
+    with DeferredSignals() as hold:
+        while True:
+            try:
+                return fut.result(timeout=poll)
+            except TimeoutError:
+                hold.check()

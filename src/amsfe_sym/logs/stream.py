@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amsfe_sym.arrays import IntArray
+from amsfe_sym.core.interrupts import result_held
 from amsfe_sym.errors import LogError, describe
 from amsfe_sym.logs.chunks import (
     NotIndexed,
@@ -179,7 +180,7 @@ class _Parts:
         times = np.concatenate(self.times) if self.times else np.zeros(0, np.int64)
         order = np.argsort(times, kind="stable")
         sorted_already = bool(np.all(order == np.arange(order.size)))
-        slices = [d.result() if isinstance(d, Future) else d for d in self.decoded]
+        slices = [result_held(d) if isinstance(d, Future) else d for d in self.decoded]
         decoded = concat_decoded(slices) if slices else None
         raw = self.raw
         if not sorted_already:

@@ -22,7 +22,10 @@ before it hands out the next one.  A slice's result is a ``Future`` the reader r
 it joins the topic's slices.  A frame that fails (a payload that is not an image message)
 stops the work: the frames after it are not decoded and the reader raises the error at its
 next slice, or when it joins the topic.  :meth:`Prefetch.close` (the reader calls it in a
-``finally``: an error, Ctrl-C) cancels what is queued and joins the threads.
+``finally``: an error, Ctrl-C) cancels what is queued and joins the threads.  The reading
+thread waits for room with Ctrl-C held (:func:`~amsfe_sym.core.interrupts.wait_held`): an
+interruption inside the semaphore's lock left it held, the detection thread then waited for
+it forever and ``amsfe estimate`` hung at its join.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from collections.abc import Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
+from amsfe_sym.core.interrupts import DeferredSignals, wait_held
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.vision.detections import Detections, FrameColumns, ImageDecoder
 from amsfe_sym.vision.images import GreyImage
@@ -123,7 +127,7 @@ class Prefetch:
         cols = FrameColumns(len(raws))
         view = getattr(raws, "view", raws.__getitem__)
         for i in range(len(raws)):
-            self._room.acquire()  # (Ctrl-C interrupts the wait: the reader then closes)
+            wait_held(lambda t: self._room.acquire(timeout=t))  # (Ctrl-C: raised here)
             with self._lock:
                 self._held += 1
                 self.peak = max(self.peak, self._held)
@@ -167,9 +171,10 @@ class Prefetch:
         self._closed = True
         if self._failed is None:
             self._failed = _ClosedError("the image prefetch was closed")
-        self._decode.shutdown(wait=False, cancel_futures=True)
-        self._detect.shutdown(wait=True, cancel_futures=True)
-        self._decode.shutdown(wait=True)
+        with DeferredSignals():  # (the joins take locks the workers release)
+            self._decode.shutdown(wait=False, cancel_futures=True)
+            self._detect.shutdown(wait=True, cancel_futures=True)
+            self._decode.shutdown(wait=True)
 
     def __enter__(self) -> Prefetch:
         return self
