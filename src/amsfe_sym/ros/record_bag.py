@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from amsfe_sym.core.folders import MARKER, pid_alive
+from amsfe_sym.core.interrupts import wait_held
 from amsfe_sym.core.jsonfile import to_json
 from amsfe_sym.core.ledger import resolved
 from amsfe_sym.errors import RunFolderError, describe
@@ -82,7 +83,22 @@ class SegmentedBag:
             self._thread = threading.Thread(target=self._work, name="amsfe-record", daemon=True)
             self._thread.start()
         self.segments += 1
-        self._jobs.put((list(rows), maker))
+        self._put((list(rows), maker))
+
+    def _put(self, job: tuple[list[Row], Callable[[], Message]] | None) -> None:
+        """Queue ``job`` for the writer, waiting for room with Ctrl-C and SIGTERM held
+        between waits (:func:`~amsfe_sym.core.interrupts.wait_held`: raised inside the
+        queue's lock, an interruption would leave it held and the writer, then the drain,
+        waiting forever)."""
+
+        def put(timeout: float) -> bool:
+            try:
+                self._jobs.put(job, timeout=timeout)
+            except queue.Full:
+                return False
+            return True
+
+        wait_held(put)
 
     def _work(self) -> None:
         message: Message | None = None
@@ -98,8 +114,14 @@ class SegmentedBag:
     def _drain(self) -> None:
         """Wait for the writer thread to write every segment handed to it."""
         if self._thread is not None:
-            self._jobs.put(None)
-            self._thread.join()
+            self._put(None)
+            thread = self._thread
+
+            def joined(timeout: float) -> bool:
+                thread.join(timeout)
+                return not thread.is_alive()
+
+            wait_held(joined)
             self._thread = None
         if self._error is not None:
             raise self._error
