@@ -30,6 +30,7 @@ __all__ = [
     "read_int",
     "read_number",
     "read_seed",
+    "require_positive",
 ]
 
 #: The values of ``[filter] backward_map`` / ``FilterConfig.backward_map`` (``oosm``'s
@@ -105,6 +106,16 @@ def read_number(
         bound = f"{'>' if strict else '>='} {low:g}"
         expected = "a positive number" if strict and low == 0 else f"a number {bound}"
         raise error(describe(where, expected, repr(x), f"use a value {bound}"))
+    return v
+
+
+def require_positive(
+    v: float, where: str, expected: str, fix: str, error: type[AmsfeError]
+) -> float:
+    """``v`` when it is finite and > 0; else ``error`` saying ``where``, ``expected`` (with
+    its unit, e.g. "a positive sample time [s]"), the value found and ``fix``."""
+    if not (math.isfinite(v) and v > 0):
+        raise error(describe(where, expected, repr(v), fix))
     return v
 
 

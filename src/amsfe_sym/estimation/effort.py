@@ -48,7 +48,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from amsfe_sym.arrays import FloatArray
-from amsfe_sym.core.values import EFFORT_KINDS
+from amsfe_sym.core.values import EFFORT_KINDS, require_positive
 from amsfe_sym.errors import ConfigError, ShapeError, check_known_keys, describe, unknown_name
 
 __all__ = [
@@ -141,25 +141,20 @@ class EffortSpec:
             if getattr(self, key) not in known:
                 raise unknown_name(where, getattr(self, key), known, fix)
         for name in ("input_rate_std", "input_std0", "scale"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise ConfigError(
-                    describe(
-                        f"[effort] {name}",
-                        "a positive, finite standard deviation",
-                        repr(v),
-                        "leave it out for the default",
-                    )
-                )
-        if not (np.isfinite(self.joint_torque_std) and self.joint_torque_std > 0):
-            raise ConfigError(
-                describe(
-                    "[effort] joint_torque_std",
-                    "a positive, finite standard deviation [N m]",
-                    repr(self.joint_torque_std),
-                    "give the torque sensor's noise, e.g. 0.05",
-                )
+            require_positive(
+                float(getattr(self, name)),
+                f"[effort] {name}",
+                "a positive, finite standard deviation",
+                "leave it out for the default",
+                ConfigError,
             )
+        require_positive(
+            float(self.joint_torque_std),
+            "[effort] joint_torque_std",
+            "a positive, finite standard deviation [N m]",
+            "give the torque sensor's noise, e.g. 0.05",
+            ConfigError,
+        )
 
 
 def effort_spec(table: Mapping[str, object], where: str = "[effort]") -> EffortSpec:
@@ -238,10 +233,9 @@ class MotorParams:
         object.__setattr__(self, "stiffness_theta", idx)
         umax = np.asarray(self.u_max, dtype=float).reshape(-1)
         object.__setattr__(self, "u_max", np.full(n, np.inf) if umax.size == 0 else umax)
-        if not (np.isfinite(self.T) and self.T > 0):
-            raise ConfigError(
-                describe("MotorParams.T", "a positive sample time [s]", repr(self.T), "use lib.T")
-            )
+        require_positive(
+            float(self.T), "MotorParams.T", "a positive sample time [s]", "use lib.T", ConfigError
+        )
 
     @property
     def n(self) -> int:

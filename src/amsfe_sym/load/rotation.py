@@ -71,11 +71,7 @@ def read_orientation(c: Mapping[str, Any], where: str) -> tuple[float, float, fl
     if x is None:
         return None
     w = f"{where} orientation"
-    if not isinstance(x, Sequence) or isinstance(x, str) or len(x) != 4:
-        raise SpecError(
-            describe(w, "4 numbers [qx, qy, qz, qw]", repr(x), "write [qx, qy, qz, qw]")
-        )
-    q = [read_number(v, w, SpecError) for v in x]
+    q = _four_numbers(x, w)
     both = [k for k in ("look_at", "up") if k in c]
     if both:
         raise SpecError(
@@ -102,14 +98,17 @@ def read_marker_orientation(
     face (toward a camera that sees it); corners at ``size/2 (-1, 1), (1, 1), (1, -1),
     (-1, -1)``."""
     x = t.get("orientation")
-    if x is None:
-        return None
     w = f"{where} orientation"
+    return None if x is None else _unit(_four_numbers(x, w), w)
+
+
+def _four_numbers(x: Any, w: str) -> list[float]:
+    """``x`` as the 4 numbers of a quaternion [qx, qy, qz, qw], refused with one line."""
     if not isinstance(x, Sequence) or isinstance(x, str) or len(x) != 4:
         raise SpecError(
             describe(w, "4 numbers [qx, qy, qz, qw]", repr(x), "write [qx, qy, qz, qw]")
         )
-    return _unit([read_number(v, w, SpecError) for v in x], w)
+    return [read_number(v, w, SpecError) for v in x]
 
 
 def _unit(q: Sequence[float], w: str) -> tuple[float, float, float, float]:
