@@ -112,8 +112,8 @@ HOLD = re.compile(r"hold: (\w+): .*at tick (\d+), (\d+) missing\)")
 #: The reasons that name the arm (its encoders, its torque, its path): an arm fault's.
 ARM_REASONS = ("innovation", "tracking", "actuation")
 
-#: The reasons that name this node being behind (CPU load, priority, a stall).
-BEHIND_REASONS = ("deadline", "node_stalled", "compute")
+#: The reasons that name this node being behind (CPU load, priority, a stall, a steady lag).
+BEHIND_REASONS = ("deadline", "node_stalled", "compute", "lag")
 
 #: A hold must come within this much of the arm's time after its cause [ticks of 1 ms].
 WITHIN_TICKS = 100
