@@ -110,6 +110,17 @@ def test_lateness_in_lockstep_or_caught_up_is_not_lag() -> None:
 
 
 @pytest.mark.slow
+def test_a_stall_caught_up_from_a_deep_queue_is_deadline_s() -> None:
+    """A 300 ms stall of a node whose queue keeps every sample (the C node's): the samples
+    it catches up are each past ``deadline``, and ``deadline`` counts them (held at the
+    51st); ``lag`` counts each at most ``deadline``, so it does not trip first."""
+    sc = load_scenario("paper-sim").with_overrides(duration=2.3, seed=11)
+    run = run_watched(sc, library_for(sc), Fault("stall", 1.6, 0.3), depth=1000)
+    assert run.hold is not None and run.hold.name == "deadline", run.hold and run.hold.line()
+    assert run.hold.value == 51 and run.seen.max_lag < 0.01
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_a_node_30_ms_behind_holds_for_lag(seed: int) -> None:
     """In process, free running: the node not scheduled for 30 ms at 0.5 s, then just keeping

@@ -29,8 +29,9 @@ The checks, in the order that decides which reason a sample that trips several g
 7. ``lag``: the node is behind on average: the sum over the last ``deadline_window``
    samples of the lateness of each sample that is late (> 0) and was queued (due before the
    previous sample's command was done: the arm ran on an older command; never in
-   lockstep), divided by ``deadline_window`` (the others, and the samples before the
-   first, count 0), above ``lag``.  A node 20-70 ms late on every sample has no sample past
+   lockstep), at most ``deadline`` (a burst of samples past it is ``deadline``'s), divided
+   by ``deadline_window`` (the others, and the samples before the first, count 0), above
+   ``lag``.  A node 20-70 ms late on every sample has no sample past
    ``deadline``, but the arm runs on commands that old: paper-sim's loop leaves its path
    when its node is steadily 30 ms behind (docs/watchdogs.md);
 8. ``actuation``: the torque the arm reports applying over tick j (``WatchdogTick.applied``,
@@ -385,7 +386,10 @@ class Watchdog:
             trips.append(
                 Hold(Reason.DEADLINE, Cause.NONE, k, misses, float(b.deadline_misses), gap)
             )
-        behind = lateness if queued and lateness > 0.0 else 0.0  # 7
+        # 7: a sample past deadline counts deadline (a burst of them is deadline's to count)
+        behind = 0.0
+        if queued and lateness > 0.0:
+            behind = lateness if lateness < b.deadline else b.deadline
         self._behind_sum = (self._behind_sum - self._behind[pos]) + behind
         self._behind[pos] = behind
         lag = self._behind_sum / len(self._behind)

@@ -61,10 +61,10 @@ class WatchdogBounds:
             samples were late.
         deadline_window: Samples in that count, and in the mean of ``lag``.
         lag: Largest mean lateness of the last ``deadline_window`` samples [s], a sample
-            counting with its lateness (as ``deadline`` measures it) when it was queued (due
-            before the previous sample's command was done: the arm ran on an older
-            command; never in lockstep) and late, else 0 (also the samples before the
-            first); inf: off.  The default is a third of the steady lag at which
+            counting with its lateness (as ``deadline`` measures it, at most ``deadline``)
+            when it was queued (due before the previous sample's command was done: the arm
+            ran on an older command; never in lockstep) and late, else 0 (also the samples
+            before the first); inf: off.  The default is a third of the steady lag at which
             paper-sim's loop leaves its path (30 ms: 0.26 rad; 10 ms: 0.008 rad, under twice a
             clean run's; docs/watchdogs.md).
         compute_budget: Longest computation of one tick (sample taken -> command ready)

@@ -272,7 +272,9 @@ int amsfe_watchdog_sample(amsfe_watchdog *wd, const amsfe_watchdog_tick *t) {
   if (wd->late_count > c->deadline_misses)
     trip(s, AMSFE_WD_DEADLINE, AMSFE_WD_CAUSE_NONE, k, (double)wd->late_count,
          (double)c->deadline_misses, gap);
-  double behind = queued && lateness > 0.0 ? lateness : 0.0; /* 7 */
+  /* 7: a sample past deadline counts deadline (a burst of them is deadline's to count) */
+  double behind = 0.0;
+  if (queued && lateness > 0.0) behind = lateness < c->deadline ? lateness : c->deadline;
   wd->behind_sum = (wd->behind_sum - wd->behind[pos]) + behind;
   wd->behind[pos] = behind;
   double lag = wd->behind_sum / (double)c->deadline_window;

@@ -95,7 +95,8 @@ typedef struct {
   int actuation_ticks;      /* hold after this many judged mismatches in a row (>= 1) */
   const double *u_max;      /* [n] the actuator limits [N m] (NULL: none); copied by init */
   double lag;               /* [s] largest mean over the last deadline_window samples of the
-                               lateness of each queued late sample (0 for the others);
+                               lateness of each queued late sample, at most deadline (0 for
+                               the others);
                                INFINITY = off (0 in a config written before it: refused) */
 } amsfe_watchdog_config;
 
@@ -163,8 +164,8 @@ void amsfe_watchdog_reset(amsfe_watchdog *wd);
  * encoder_timeout), covariance (status < 0), nonfinite, compute (done - taken), deadline
  * (lateness = done - (stamp + offset), offset = taken - stamp of the first sample), lag (the
  * sum over the last deadline_window samples of the lateness of each sample that is late
- * (> 0) and was queued (due before the previous sample was done), divided by
- * deadline_window, > lag), actuation, innovation, tracking; then, when the sample itself is late (lateness > deadline) and was
+ * (> 0) and was queued (due before the previous sample was done), at most deadline,
+ * divided by deadline_window, > lag), actuation, innovation, tracking; then, when the sample itself is late (lateness > deadline) and was
  * queued (due before the previous sample was done: the arm ran on; never in lockstep) and the
  * reason is actuation, innovation or tracking, deadline with AMSFE_WD_CAUSE_LATE instead
  * (value: the lateness [s]): the node behind is named before what its lateness caused (the
