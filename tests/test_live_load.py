@@ -112,8 +112,8 @@ HOLD = re.compile(r"hold: (\w+): .*at tick (\d+), (\d+) missing\)")
 #: The reasons that name the arm (its encoders, its torque, its path): an arm fault's.
 ARM_REASONS = ("innovation", "tracking", "actuation")
 
-#: The reasons that name this node being behind (CPU load, priority, a stall).
-BEHIND_REASONS = ("deadline", "node_stalled", "compute")
+#: The reasons that name this node being behind (CPU load, priority, a stall, a steady lag).
+BEHIND_REASONS = ("deadline", "node_stalled", "compute", "lag")
 
 #: A hold must come within this much of the arm's time after its cause [ticks of 1 ms].
 WITHIN_TICKS = 100
@@ -233,7 +233,7 @@ def test_a_300_ms_stall_of_the_node_holds_within_100_ms(
 ) -> None:
     """Free running at 1 kHz: the harness stops the node's processes for 300 ms (SIGSTOP,
     SIGCONT) once the arm passed t = 1 s.  The node holds with a reason saying it is
-    behind (deadline, node stalled, compute; never "encoder stall": the arm's driver did
+    behind (deadline, node stalled, compute, lag; never "encoder stall": the arm's driver did
     not stop), at most 100 ms of the arm's time after the stall began, and exits 3.  (A node
     that could not keep up before the stall holds earlier, with such a reason too.)"""
     env = _ros_env(tmp_path)

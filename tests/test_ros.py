@@ -544,7 +544,8 @@ class _Proc:
 
 #: The node's own timing watchdogs off (a lockstep arm waits for the node however late it is;
 #: tests/test_watchdog*.py test them): a ``--ros-args`` block.
-PATIENT_WATCHDOG = ("-p", "watchdog.deadline:=.inf", "-p", "watchdog.compute_budget:=.inf")
+PATIENT_WATCHDOG = ("-p", "watchdog.deadline:=.inf", "-p", "watchdog.compute_budget:=.inf",
+                    "-p", "watchdog.lag:=.inf")  # fmt: skip
 #: Timeouts for a loaded 2-core machine, where a process may stall for seconds: the node's
 #: encoder silence before the hold (the faults test keeps the default 0.5 s it measures), the
 #: arm's wait for a node and for each lockstep command.  Bounded: every run ends in _finish.

@@ -165,6 +165,7 @@ def test_watchdog_keys_parse_and_refuse() -> None:
         parse_topic_spec({"watchdog": {"innovation_nis": math.inf}}).watchdog.innovation_nis
         == math.inf
     )
+    assert parse_topic_spec({"watchdog": {"lag": 0.02}}).watchdog.lag == 0.02
     for bad in (
         {"tracking": 0.1},
         {"tracking_error": 0.0},
@@ -176,6 +177,8 @@ def test_watchdog_keys_parse_and_refuse() -> None:
         {"deadline_misses": True},
         {"actuation_error": 0.0},
         {"actuation_ticks": 0},
+        {"lag": -0.01},
+        {"lag": 0},
     ):
         with pytest.raises(ConfigError, match=r"\[watchdog\]"):
             parse_topic_spec({"watchdog": bad})

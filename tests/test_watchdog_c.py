@@ -50,6 +50,10 @@ BOUNDS = (
     # is named the lateness (LATE); the clean runs' samples, late or not, are never queued
     WatchdogBounds(deadline_misses=5000, deadline_window=5000, tracking_error=0.01),
     WatchdogBounds(deadline=1e-4, deadline_misses=5000, deadline_window=5000, tracking_error=0.01),
+    # the lag's queued samples (80 ms behind) in a short window: lag before deadline; the
+    # stall's catch-up too
+    WatchdogBounds(deadline_misses=5000, deadline_window=200, lag=0.005),
+    WatchdogBounds(lag=1e-5, deadline_window=3),
 )
 SIZES = {"jump": 0.01, "stall": 0.3, "lag": 0.08}
 
@@ -90,6 +94,7 @@ class CWatchdog:
             max_gap_steps=config.max_gap_steps,
             actuation_error=b.actuation_error,
             actuation_ticks=b.actuation_ticks,
+            lag=b.lag,
         )
         self._u_max = np.ascontiguousarray(config.u_max, dtype=float)
         if config.u_max:
@@ -185,6 +190,30 @@ def _injected(events: list[WatchEvent], what: str) -> list[WatchEvent]:
     return ev
 
 
+def _lagging(lib: Any) -> list[WatchEvent]:
+    """A synthetic stream 20 ms behind on every sample after the first (queued: the arm ran
+    on older commands; never past deadline) whose arm drifts off its path by 0.125 mrad a
+    sample: ``lag`` holds at sample 502 under the defaults (samples 2-502 queued),
+    ``tracking`` at 801 without it."""
+    out = []
+    for k in range(1000):
+        t, lag = k * 1e-3, (0.02 if k else 1e-4)
+        q_des = np.zeros(lib.n)
+        q_des[-1] = 1.25e-4 * k
+        tick = WatchdogTick(k=k, gap=0, stamp_ns=k * 1_000_000, taken=t + lag - 1e-4,
+                            done=t + lag, x_hat=np.zeros(lib.N), P_diag=np.ones(lib.N),
+                            q_des=q_des, u=np.zeros(lib.n), handed_over=True,
+                            encoder_nis=4.0)  # fmt: skip
+        out.append(WatchEvent(tick, t + lag - 1e-4, -1, Reason.NONE))
+    return out
+
+
+def _first_hold(reasons: list[int]) -> tuple[int, int]:
+    """The first hold of a sequence's reasons and its call (0, -1: none)."""
+    held = [(r, i) for i, r in enumerate(reasons) if r]
+    return held[0] if held else (0, -1)
+
+
 def _compare(lib: Any, events: list[WatchEvent], bounds: WatchdogBounds) -> list[int]:
     config = WatchdogConfig(lib.n, lib.N, 2 * lib.n, lib.T, bounds, 5, _u_max(lib))
     py, c = Watchdog(config), CWatchdog(str(lib.library_path), config)
@@ -201,6 +230,7 @@ def _compare(lib: Any, events: list[WatchEvent], bounds: WatchdogBounds) -> list
             assert getattr(s, name) == getattr(seen, name), (i, name)
         assert s.max_wall_gap == seen.max_wall_gap
         assert (s.max_actuation, s.actuation_judged) == (seen.max_actuation, seen.actuation_judged)
+        assert s.max_lag == seen.max_lag, i
         if py.hold is not None:
             h = py.hold
             assert (s.reason, s.cause, s.k, s.gap) == (h.reason, h.cause, h.k, h.gap)
@@ -220,6 +250,7 @@ def test_c_watchdog_decides_as_python(runs: dict[str, Any]) -> None:
     sequences = {k: v for k, v in runs.items() if k != "lib"}
     sequences["nan"] = _injected(runs["none"], "nan")
     sequences["failed"] = _injected(runs["none"], "failed")
+    sequences["lagging"] = _lagging(lib)
     for name, events in sequences.items():
         for bounds in BOUNDS:
             reasons = _compare(lib, events, bounds)
@@ -233,6 +264,11 @@ def test_c_watchdog_decides_as_python(runs: dict[str, Any]) -> None:
                         break
                 causes.add(c.state().cause)
             assert name != "none" or bounds != WatchdogBounds() or not held, name
+    # the lagging stream: lag before tracking; without it tracking, at the same calls in C
+    lagging = sequences["lagging"]
+    assert _first_hold(_compare(lib, lagging, WatchdogBounds())) == (Reason.LAG, 502)
+    off = WatchdogBounds(lag=math.inf)
+    assert _first_hold(_compare(lib, lagging, off)) == (Reason.TRACKING, 801)
     # every reason and most causes were exercised, so the comparison covered them
     assert seen == set(range(1, len(REASON_NAMES))), sorted(seen)
     expected = {Cause.LOST, Cause.UNSCHEDULED, Cause.SILENT, Cause.BEHIND, Cause.COMMAND}

@@ -55,6 +55,7 @@ SEEN = (
     "max_innovation",
     "max_lateness",
     "max_late_in_window",
+    "max_lag",
     "max_compute",
     "max_wall_gap",
     "max_actuation",

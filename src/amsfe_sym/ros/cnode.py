@@ -239,7 +239,7 @@ def _watchdog(spec: TopicSpec, options: dict[str, Any]) -> list[float]:
     return [w.tracking_error, w.innovation_nis, w.innovation_window, w.deadline,
             w.deadline_misses, w.deadline_window, w.compute_budget,
             float(options["encoder_timeout"]), w.actuation_error,
-            w.actuation_ticks]  # fmt: skip
+            w.actuation_ticks, w.lag]  # fmt: skip
 
 
 def _ctrl_code(name: str) -> int:

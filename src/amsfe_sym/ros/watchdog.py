@@ -26,17 +26,25 @@ The checks, in the order that decides which reason a sample that trips several g
 6. ``deadline``: more than ``deadline_misses`` of the last ``deadline_window`` samples were
    processed later than ``deadline`` after their stamp (lateness = done - (stamp + offset),
    the offset = taken - stamp of the first sample; the stamp is the send time when known);
-7. ``actuation``: the torque the arm reports applying over tick j (``WatchdogTick.applied``,
+7. ``lag``: the node is behind on average: the sum over the last ``deadline_window``
+   samples of the lateness of each sample that is late (> 0) and was queued (due before the
+   previous sample's command was done: the arm ran on an older command; never in
+   lockstep), at most ``deadline`` (a burst of samples past it is ``deadline``'s), divided
+   by ``deadline_window`` (the others, and the samples before the first, count 0), above
+   ``lag``.  A node 20-70 ms late on every sample has no sample past
+   ``deadline``, but the arm runs on commands that old: paper-sim's loop leaves its path
+   when its node is steadily 30 ms behind (docs/watchdogs.md);
+8. ``actuation``: the torque the arm reports applying over tick j (``WatchdogTick.applied``,
    the effort topic of kind ``applied``) is none of the commands it may have applied, on
    ``actuation_ticks`` judged samples in a row (below);
-8. ``innovation``: the mean of NIS / dimension over the last ``innovation_window`` fused
+9. ``innovation``: the mean of NIS / dimension over the last ``innovation_window`` fused
    updates (encoder samples and camera frames) above ``innovation_nis``;
-9. ``tracking``: max_j |q_d,j - q_hat,j| above ``tracking_error``, once the start-up handed
+10. ``tracking``: max_j |q_d,j - q_hat,j| above ``tracking_error``, once the start-up handed
    over (the blend of control/blend.py ended: before it the law tracks the blended
    reference, not q_d).
 
 A node that is behind is named before what its lateness caused: when the first check that
-trips is 7, 8 or 9 and the sample itself is late (its lateness past ``deadline``) and was
+trips is 8, 9 or 10 and the sample itself is late (its lateness past ``deadline``) and was
 queued (due before the previous sample's command was done: the arm ran on meanwhile; a
 lockstep arm waits for each command, so its samples never are), the hold is ``deadline``
 with the cause :attr:`Cause.LATE` (value: the lateness [s]; the line ends ``; <check>
@@ -135,6 +143,7 @@ class WatchdogConfig:
             and b.tracking_error > 0
             and b.innovation_nis > 0
             and b.deadline > 0
+            and b.lag > 0
             and b.compute_budget > 0
             and b.encoder_timeout > 0
             and b.actuation_error > 0
@@ -202,6 +211,7 @@ class WatchdogSeen:
     max_wall_gap: float = 0.0
     max_actuation: float = 0.0
     actuation_judged: int = 0
+    max_lag: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -272,6 +282,7 @@ class Watchdog:
         b = config.bounds
         self._nis = [0.0] * b.innovation_window
         self._late = [0] * b.deadline_window
+        self._behind = [0.0] * b.deadline_window
         self._scale = config.scale()
         self.reset()
 
@@ -290,6 +301,8 @@ class Watchdog:
         self._late_pos, self._late_count, self._late_filled = 0, 0, 0
         self._nis[:] = [0.0] * len(self._nis)
         self._late[:] = [0] * len(self._late)
+        self._behind[:] = [0.0] * len(self._behind)
+        self._behind_sum = 0.0
         self._act = ActuationJudge(self.config.n, self._scale, self.config.bounds.actuation_error)
 
     @property
@@ -356,24 +369,39 @@ class Watchdog:
         s.max_compute = max(s.max_compute, compute)
         if compute > b.compute_budget:
             trips.append(Hold(Reason.COMPUTE, Cause.NONE, k, compute, b.compute_budget, gap))
+        # queued: due before the previous sample's command was done (the arm ran on an
+        # older command; never in lockstep: that arm sends a sample after the command came)
+        queued = due < self._last_done
+        self._last_done = tick.done
         lateness = tick.done - due  # 6
         s.max_lateness = max(s.max_lateness, lateness)
         late = 1 if lateness > b.deadline else 0
-        self._late_count += late - self._late[self._late_pos]
-        self._late[self._late_pos] = late
-        self._late_pos = (self._late_pos + 1) % len(self._late)
+        pos = self._late_pos
+        self._late_count += late - self._late[pos]
+        self._late[pos] = late
+        self._late_pos = (pos + 1) % len(self._late)
         s.max_late_in_window = max(s.max_late_in_window, self._late_count)
         if self._late_count > b.deadline_misses:
             misses = float(self._late_count)
             trips.append(
                 Hold(Reason.DEADLINE, Cause.NONE, k, misses, float(b.deadline_misses), gap)
             )
-        mismatch = self._act.judge(tick.k, tick.u, tick.applied, tick.applied_k)  # 7
+        # 7: a sample past deadline counts deadline (a burst of them is deadline's to count)
+        behind = 0.0
+        if queued and lateness > 0.0:
+            behind = lateness if lateness < b.deadline else b.deadline
+        self._behind_sum = (self._behind_sum - self._behind[pos]) + behind
+        self._behind[pos] = behind
+        lag = self._behind_sum / len(self._behind)
+        s.max_lag = max(s.max_lag, lag)
+        if lag > b.lag:
+            trips.append(Hold(Reason.LAG, Cause.NONE, k, lag, b.lag, gap))
+        mismatch = self._act.judge(tick.k, tick.u, tick.applied, tick.applied_k)  # 8
         s.actuation_judged, s.max_actuation = self._act.judged, self._act.max_distance
         if mismatch is not None and self._act.run >= b.actuation_ticks:
             trips.append(Hold(Reason.ACTUATION, Cause.NONE, k, mismatch, b.actuation_error, gap))
         self._act.keep(tick.k, tick.u)
-        if math.isfinite(tick.encoder_nis):  # 8
+        if math.isfinite(tick.encoder_nis):  # 9
             self._push_nis(tick.encoder_nis / c.ne)
         for v in tick.frame_nis:
             if math.isfinite(v):
@@ -383,15 +411,13 @@ class Watchdog:
             s.max_innovation = max(s.max_innovation, mean)
             if mean > b.innovation_nis:
                 trips.append(Hold(Reason.INNOVATION, Cause.NONE, k, mean, b.innovation_nis, gap))
-        if tick.handed_over and tick.q_des is not None and tick.x_hat is not None:  # 9
+        if tick.handed_over and tick.q_des is not None and tick.x_hat is not None:  # 10
             err = _max_abs_diff(tick.q_des, tick.x_hat[: c.n])
             s.max_tracking = max(s.max_tracking, err)
             if err > b.tracking_error:
                 trips.append(Hold(Reason.TRACKING, Cause.NONE, k, err, b.tracking_error, gap))
-        # 10: behind first: a late sample that was due before the previous one was done
+        # 11: behind first: a late sample that was due before the previous one was done
         # waited in the queue while the arm ran on (never in lockstep: the arm waits)
-        queued = due < self._last_done
-        self._last_done = tick.done
         if trips and late and queued and trips[0].reason in _CAUSED_BY_LATENESS:
             first = trips[0].reason
             trips[0] = Hold(Reason.DEADLINE, Cause.LATE, k, lateness, b.deadline, gap, first)

@@ -24,6 +24,7 @@ class Reason(IntEnum):
     NODE_STALLED = 7
     NONFINITE = 8
     ACTUATION = 9
+    LAG = 10
 
 
 #: The stable names of the reasons (the hold line's, tests match them).
@@ -38,6 +39,7 @@ REASON_NAMES = (
     "node_stalled",
     "nonfinite",
     "actuation",
+    "lag",
 )
 
 
@@ -105,6 +107,11 @@ actuation none:
     the arm does not apply the command (drive fault, e-stop, brakes): the torque it reports
     differs from every command it may have applied by more than actuation_error; check the
     drives
+lag none:
+    this node is behind on average, not the arm: the mean lateness of the last
+    deadline_window samples (each queued while the arm ran on an older command) is above
+    lag, so the arm runs on stale commands; give the node CPU (real-time priority, fewer
+    jobs) or run the C node
 """
 
 

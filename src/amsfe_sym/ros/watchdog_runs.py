@@ -23,8 +23,9 @@ Faults (:class:`Fault`), from ``at`` [s] on:
 - ``reversed``: the actuators apply -u while the drive reports u (a motor mounted or wired
   with the wrong sign: the drive reports its own setpoint; a diverging arm);
 - ``stall``: the node is not scheduled for ``size`` [s] (its queue fills: ``depth``);
-- ``lag``: the node is not scheduled for ``size`` [s], then needs ``0.99 T`` a sample, so it
-  stays that far behind (a deadline burst that never catches up);
+- ``lag``: the node is not scheduled for ``size`` [s], then needs ``0.99 T`` a sample (or
+  ``compute`` when longer: ``compute = T`` keeps it exactly ``size`` behind), so it stays
+  that far behind (a deadline burst that never catches up);
 - ``silent``: the arm stops publishing (its publisher stays in the graph).
 """
 
@@ -196,7 +197,7 @@ def run_watched(
             if off_start <= taken < off_start + off_len:
                 taken = off_start + off_len  # not scheduled
                 if fault.kind == "lag":
-                    per_sample = 0.99 * T
+                    per_sample = max(compute, 0.99 * T)
             if taken >= t + T:
                 break  # the next tick comes first
             queue.popleft()

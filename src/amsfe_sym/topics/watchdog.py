@@ -11,6 +11,8 @@ innovation_window = 50     # fused updates (encoder samples and camera frames)
 deadline = 0.05            # [s] a sample processed later than this after its stamp is late
 deadline_misses = 50       # hold when more than this many of the window are late
 deadline_window = 1000     # [samples]
+lag = 0.01                 # [s] hold when the mean lateness of the queued samples of the
+                           # window (the others count 0) is above this
 compute_budget = 0.1       # [s] one tick's computation
 encoder_timeout = 0.5      # [s] wall clock without an encoder sample
 actuation_error = 0.01     # [-] |applied - command| / u_max per joint ([N m] without a limit)
@@ -57,7 +59,14 @@ class WatchdogBounds:
             late [s]; inf: off.
         deadline_misses: Hold when more than this many of the last ``deadline_window``
             samples were late.
-        deadline_window: Samples in that count.
+        deadline_window: Samples in that count, and in the mean of ``lag``.
+        lag: Largest mean lateness of the last ``deadline_window`` samples [s], a sample
+            counting with its lateness (as ``deadline`` measures it, at most ``deadline``)
+            when it was queued (due before the previous sample's command was done: the arm
+            ran on an older command; never in lockstep) and late, else 0 (also the samples
+            before the first); inf: off.  The default is a third of the steady lag at which
+            paper-sim's loop leaves its path (30 ms: 0.26 rad; 10 ms: 0.008 rad, under twice a
+            clean run's; docs/watchdogs.md).
         compute_budget: Longest computation of one tick (sample taken -> command ready)
             [s]; inf: off.
         encoder_timeout: Longest wall-clock silence of the encoders, and longest gap
@@ -76,6 +85,7 @@ class WatchdogBounds:
     deadline: float = 0.05
     deadline_misses: int = 50
     deadline_window: int = 1000
+    lag: float = 0.01
     compute_budget: float = 0.1
     encoder_timeout: float = 0.5
     actuation_error: float = 0.01
@@ -93,6 +103,7 @@ MEASURING = WatchdogBounds(
     tracking_error=math.inf,
     innovation_nis=math.inf,
     deadline=math.inf,
+    lag=math.inf,
     compute_budget=math.inf,
     actuation_error=math.inf,
 )

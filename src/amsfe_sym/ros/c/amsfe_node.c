@@ -279,11 +279,11 @@ static void configure(node_t *s, const char *path) {
   s->hold_limit = ALLOC(double, n);
   pf_doubles(pf, "hold_limit", s->hold_limit, n);
   /* the watchdogs: the [watchdog] keys of the spec, in amsfe_watchdog_config's order */
-  double w[10];
-  pf_doubles(pf, "watchdog", w, 10);
+  double w[11];
+  pf_doubles(pf, "watchdog", w, 11);
   amsfe_watchdog_config wc = {n, N, d.ne, s->T, w[0], w[1], (int)w[2], w[3], (int)w[4],
                               (int)w[5], w[6], w[7], L->max_gap, w[8], (int)w[9],
-                              s->hold_limit /* u_max (inf: none) */};
+                              s->hold_limit /* u_max (inf: none) */, w[10]};
   size_t wsize = amsfe_watchdog_memory_size(&wc);
   void *wmem = NULL;
   if (!wsize || posix_memalign(&wmem, 64, wsize) != 0 ||

@@ -30,6 +30,9 @@ struct amsfe_watchdog {
   int nis_pos, nis_count;
   unsigned char *late;    /* [deadline_window] 1: that sample was late, a ring */
   int late_pos, late_count;
+  double *behind;         /* [deadline_window] the lateness of a queued late sample (0), a
+                             ring at late_pos */
+  double behind_sum;
   double *scale;          /* [n] the actuation scale per joint */
   long *ring_k;           /* [AMSFE_WD_ACTUATION_RING] the tick of each kept command (-1) */
   double *ring_u;         /* [AMSFE_WD_ACTUATION_RING x n] the commands */
@@ -50,7 +53,7 @@ static int config_ok(const amsfe_watchdog_config *c) {
   if (c->deadline_misses < 0 || c->max_gap_steps < 0 || c->actuation_ticks < 1) return 0;
   /* written so that NaN fails */
   return c->T > 0 && c->tracking_error > 0 && c->innovation_nis > 0 && c->deadline > 0 &&
-         c->compute_budget > 0 && c->encoder_timeout > 0 && c->actuation_error > 0;
+         c->lag > 0 && c->compute_budget > 0 && c->encoder_timeout > 0 && c->actuation_error > 0;
 }
 
 size_t amsfe_watchdog_memory_size(const amsfe_watchdog_config *config) {
@@ -58,7 +61,9 @@ size_t amsfe_watchdog_memory_size(const amsfe_watchdog_config *config) {
   size_t n = (size_t)config->n;
   return align16(sizeof(struct amsfe_watchdog)) +
          align16(sizeof(double) * (size_t)config->innovation_window) +
-         align16((size_t)config->deadline_window) + 2 * align16(sizeof(double) * n) +
+         align16((size_t)config->deadline_window) +
+         align16(sizeof(double) * (size_t)config->deadline_window) +
+         2 * align16(sizeof(double) * n) +
          align16(sizeof(long) * AMSFE_WD_ACTUATION_RING) +
          align16(sizeof(double) * AMSFE_WD_ACTUATION_RING * n);
 }
@@ -77,6 +82,8 @@ int amsfe_watchdog_init(amsfe_watchdog **out, const amsfe_watchdog_config *confi
   p += align16(sizeof(double) * (size_t)config->innovation_window);
   wd->late = p;
   p += align16((size_t)config->deadline_window);
+  wd->behind = (double *)p;
+  p += align16(sizeof(double) * (size_t)config->deadline_window);
   size_t n = (size_t)config->n;
   wd->scale = (double *)p;
   p += align16(sizeof(double) * n);
@@ -109,6 +116,8 @@ void amsfe_watchdog_reset(amsfe_watchdog *wd) {
   wd->late_pos = wd->late_count = 0;
   memset(wd->nis, 0, sizeof(double) * (size_t)wd->c.innovation_window);
   memset(wd->late, 0, (size_t)wd->c.deadline_window);
+  wd->behind_sum = 0.0;
+  for (int i = 0; i < wd->c.deadline_window; ++i) wd->behind[i] = 0.0;
   memset(wd->matched, 0, sizeof(double) * (size_t)wd->c.n);
   for (int i = 0; i < AMSFE_WD_ACTUATION_RING; ++i) wd->ring_k[i] = -1;
   wd->matched_k = wd->cmd_newest = -1;
@@ -248,21 +257,34 @@ int amsfe_watchdog_sample(amsfe_watchdog *wd, const amsfe_watchdog_tick *t) {
   s->max_compute = pymax(s->max_compute, compute);
   if (compute > c->compute_budget)
     trip(s, AMSFE_WD_COMPUTE, AMSFE_WD_CAUSE_NONE, k, compute, c->compute_budget, gap);
+  /* queued: due before the previous sample's command was done (the arm ran on an older
+   * command; never in lockstep, whose arm sends a sample after the previous command came) */
+  int queued = due < wd->last_done;
+  wd->last_done = t->done;
   double lateness = t->done - due; /* 6 */
   s->max_lateness = pymax(s->max_lateness, lateness);
   int late = lateness > c->deadline ? 1 : 0;
-  wd->late_count += late - (int)wd->late[wd->late_pos];
-  wd->late[wd->late_pos] = (unsigned char)late;
-  wd->late_pos = (wd->late_pos + 1) % c->deadline_window;
+  int pos = wd->late_pos;
+  wd->late_count += late - (int)wd->late[pos];
+  wd->late[pos] = (unsigned char)late;
+  wd->late_pos = (pos + 1) % c->deadline_window;
   if (wd->late_count > s->max_late_in_window) s->max_late_in_window = wd->late_count;
   if (wd->late_count > c->deadline_misses)
     trip(s, AMSFE_WD_DEADLINE, AMSFE_WD_CAUSE_NONE, k, (double)wd->late_count,
          (double)c->deadline_misses, gap);
-  double mismatch = 0.0; /* 7 */
+  /* 7: a sample past deadline counts deadline (a burst of them is deadline's to count) */
+  double behind = 0.0;
+  if (queued && lateness > 0.0) behind = lateness < c->deadline ? lateness : c->deadline;
+  wd->behind_sum = (wd->behind_sum - wd->behind[pos]) + behind;
+  wd->behind[pos] = behind;
+  double lag = wd->behind_sum / (double)c->deadline_window;
+  s->max_lag = pymax(s->max_lag, lag);
+  if (lag > c->lag) trip(s, AMSFE_WD_LAG, AMSFE_WD_CAUSE_NONE, k, lag, c->lag, gap);
+  double mismatch = 0.0; /* 8 */
   if (actuation(wd, t, &mismatch) && wd->act_run >= c->actuation_ticks)
     trip(s, AMSFE_WD_ACTUATION, AMSFE_WD_CAUSE_NONE, k, mismatch, c->actuation_error, gap);
   keep_command(wd, t);
-  if (isfinite(t->encoder_nis)) push_nis(wd, t->encoder_nis / (double)c->ne); /* 8 */
+  if (isfinite(t->encoder_nis)) push_nis(wd, t->encoder_nis / (double)c->ne); /* 9 */
   for (int i = 0; t->frame_nis && i < t->n_frames; ++i)
     if (isfinite(t->frame_nis[i])) push_nis(wd, t->frame_nis[i] / 2.0);
   if (wd->nis_count == c->innovation_window) {
@@ -271,7 +293,7 @@ int amsfe_watchdog_sample(amsfe_watchdog *wd, const amsfe_watchdog_tick *t) {
     if (mean > c->innovation_nis)
       trip(s, AMSFE_WD_INNOVATION, AMSFE_WD_CAUSE_NONE, k, mean, c->innovation_nis, gap);
   }
-  if (t->handed_over && t->q_des && t->x_hat) { /* 9: numpy's max (NaN wins) */
+  if (t->handed_over && t->q_des && t->x_hat) { /* 10: numpy's max (NaN wins) */
     double err = fabs(t->q_des[0] - t->x_hat[0]);
     for (int j = 1; j < c->n; ++j) {
       double d = fabs(t->q_des[j] - t->x_hat[j]);
@@ -281,11 +303,9 @@ int amsfe_watchdog_sample(amsfe_watchdog *wd, const amsfe_watchdog_tick *t) {
     if (err > c->tracking_error)
       trip(s, AMSFE_WD_TRACKING, AMSFE_WD_CAUSE_NONE, k, err, c->tracking_error, gap);
   }
-  /* 10: a late sample that was due before the previous one was done (it waited in the
+  /* 11: a late sample that was due before the previous one was done (it waited in the
    * queue while the arm ran on older commands; never in lockstep) names the node behind
    * before what its lateness caused: the arm's torque, innovations, path */
-  int queued = due < wd->last_done;
-  wd->last_done = t->done;
   if (late && queued && (s->reason == AMSFE_WD_ACTUATION || s->reason == AMSFE_WD_INNOVATION ||
                s->reason == AMSFE_WD_TRACKING)) {
     int first = s->reason;
@@ -321,7 +341,7 @@ void amsfe_watchdog_get_state(const amsfe_watchdog *wd, amsfe_watchdog_state *st
 
 static const char *const NAMES[AMSFE_WD_REASONS] = {
     "none",     "tracking",      "innovation",   "covariance", "deadline",
-    "compute",  "encoder_stall", "node_stalled", "nonfinite",  "actuation"};
+    "compute",  "encoder_stall", "node_stalled", "nonfinite",  "actuation", "lag"};
 
 const char *amsfe_watchdog_reason_name(int reason) {
   return reason >= 0 && reason < AMSFE_WD_REASONS ? NAMES[reason] : "unknown";
@@ -380,6 +400,11 @@ const char *amsfe_watchdog_cause_text(int reason, int cause) {
       return "the arm does not apply the command (drive fault, e-stop, brakes): the torque it "
              "reports differs from every command it may have applied by more than "
              "actuation_error; check the drives";
+    case AMSFE_WD_LAG:
+      return "this node is behind on average, not the arm: the mean lateness of the last "
+             "deadline_window samples (each queued while the arm ran on an older command) is "
+             "above lag, so the arm runs on stale commands; give the node CPU (real-time "
+             "priority, fewer jobs) or run the C node";
     default:
       return "";
   }

@@ -30,7 +30,7 @@ extern "C" {
 
 /* Why the node holds.  The stable names (amsfe_watchdog_reason_name) are what a hold line
  * prints and what tests match: "tracking", "innovation", "covariance", "deadline",
- * "compute", "encoder_stall", "node_stalled", "nonfinite", "actuation". */
+ * "compute", "encoder_stall", "node_stalled", "nonfinite", "actuation", "lag". */
 enum amsfe_watchdog_reason {
   AMSFE_WD_NONE = 0,          /* no hold */
   AMSFE_WD_TRACKING = 1,      /* max_j |q_d - q_hat| > tracking_error after the hand-over */
@@ -44,10 +44,12 @@ enum amsfe_watchdog_reason {
   AMSFE_WD_ENCODER_STALL = 6, /* no encoder sample (the driver silent or gone) */
   AMSFE_WD_NODE_STALLED = 7,  /* the node itself was not scheduled (its own wall-clock gap) */
   AMSFE_WD_NONFINITE = 8,     /* the estimate or the command holds NaN or inf */
-  AMSFE_WD_ACTUATION = 9      /* the torque the arm reports applying is none of the commands
+  AMSFE_WD_ACTUATION = 9,     /* the torque the arm reports applying is none of the commands
                                  it may have applied, actuation_ticks judged samples in a row */
+  AMSFE_WD_LAG = 10           /* the mean lateness of the queued samples of the last
+                                 deadline_window > lag (the node behind on average) */
 };
-#define AMSFE_WD_REASONS 10
+#define AMSFE_WD_REASONS 11
 
 /* Ticks of commands kept for the actuation check (ros/watchdog.py's ACTUATION_RING). */
 #define AMSFE_WD_ACTUATION_RING 1024
@@ -92,6 +94,10 @@ typedef struct {
                                where u_max is NULL or not finite > 0); INFINITY = off */
   int actuation_ticks;      /* hold after this many judged mismatches in a row (>= 1) */
   const double *u_max;      /* [n] the actuator limits [N m] (NULL: none); copied by init */
+  double lag;               /* [s] largest mean over the last deadline_window samples of the
+                               lateness of each queued late sample, at most deadline (0 for
+                               the others);
+                               INFINITY = off (0 in a config written before it: refused) */
 } amsfe_watchdog_config;
 
 /* One encoder sample as processed. */
@@ -139,6 +145,7 @@ typedef struct {
   long actuation_judged; /* applied torques judged */
   int caused;            /* deadline with AMSFE_WD_CAUSE_LATE: the reason that tripped first
                             (what the lateness caused); else AMSFE_WD_NONE */
+  double max_lag;        /* [s] the largest mean lateness of lag */
 } amsfe_watchdog_state;
 
 typedef struct amsfe_watchdog amsfe_watchdog;
@@ -155,8 +162,10 @@ void amsfe_watchdog_reset(amsfe_watchdog *wd);
 /* Judge one processed sample: returns the reason to hold, or AMSFE_WD_NONE.  Order of the
  * checks (the first that trips wins): stall (gap > max_gap_steps), node_stalled (no call for
  * encoder_timeout), covariance (status < 0), nonfinite, compute (done - taken), deadline
- * (lateness = done - (stamp + offset), offset = taken - stamp of the first sample), actuation,
- * innovation, tracking; then, when the sample itself is late (lateness > deadline) and was
+ * (lateness = done - (stamp + offset), offset = taken - stamp of the first sample), lag (the
+ * sum over the last deadline_window samples of the lateness of each sample that is late
+ * (> 0) and was queued (due before the previous sample was done), at most deadline,
+ * divided by deadline_window, > lag), actuation, innovation, tracking; then, when the sample itself is late (lateness > deadline) and was
  * queued (due before the previous sample was done: the arm ran on; never in lockstep) and the
  * reason is actuation, innovation or tracking, deadline with AMSFE_WD_CAUSE_LATE instead
  * (value: the lateness [s]): the node behind is named before what its lateness caused (the
