@@ -4,6 +4,8 @@ exited by SIGSEGV after its first line, and nothing said where).
 - A fatal signal is reported on stderr with the stack (``amsfe_program_start`` in
   ``ros/c/amsfe_rcl.c``), the exit status stays the signal's; stdout is line-buffered, so
   every line printed before the death reaches a pipe.
+- ``$AMSFE_CNODE_EXTRA_FLAGS`` (tools/cnode_starts.py ``--sanitize``) keys a build of its
+  own: the normal build's key and command are unchanged without it.
 """
 
 from __future__ import annotations
@@ -67,3 +69,31 @@ def test_a_fatal_signal_is_reported_with_its_stack_and_the_lines_before_it(
     assert node.returncode == -signal.SIGSEGV, err
     assert "error: amsfe_node: killed by SIGSEGV; its stack:\n" in err, err
     assert any(line.startswith(str(exe)) for line in err.splitlines()), err
+
+
+def test_extra_flags_key_a_build_of_their_own(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Without ``$AMSFE_CNODE_EXTRA_FLAGS`` the build's inputs (its key) and command have no
+    extra flags; with them, the inputs name them (another key) and the command carries them
+    after the normal flags."""
+    from amsfe_sym.codegen.cache import compiler
+    from amsfe_sym.ros.cnode_build import (
+        CNODE_CFLAGS,
+        EXTRA_FLAGS_ENV,
+        _command,
+        build_inputs,
+        ros_paths,
+    )
+
+    _, lib = _paper()
+    ros, cc = ros_paths(), compiler()
+    monkeypatch.delenv(EXTRA_FLAGS_ENV, raising=False)
+    plain = build_inputs(lib, "amsfe_node", ros, cc)  # type: ignore[arg-type]
+    assert "extra_flags" not in plain
+    monkeypatch.setenv(EXTRA_FLAGS_ENV, "-g -fsanitize=address,undefined")
+    sanitized = build_inputs(lib, "amsfe_node", ros, cc)  # type: ignore[arg-type]
+    assert sanitized == {**plain, "extra_flags": ["-g", "-fsanitize=address,undefined"]}
+    flags = ("-g", "-fsanitize=address")
+    cmd = _command(cc, lib, ros, [], Path("out"), Path("gen"), (), flags)  # type: ignore[arg-type]
+    at = cmd.index(CNODE_CFLAGS[-1])
+    assert cmd[at + 1 : at + 3] == list(flags)
+    assert not set(flags) & set(_command(cc, lib, ros, [], Path("out"), Path("gen")))  # type: ignore[arg-type]
