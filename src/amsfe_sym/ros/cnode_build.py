@@ -27,6 +27,7 @@ import sysconfig
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
+from typing import Any
 
 from amsfe_sym.codegen.cache import build_lock, compiler, default_out_dir
 from amsfe_sym.core.interrupts import checkpoint
@@ -36,8 +37,10 @@ from amsfe_sym.runtime.library import ModelLibrary, file_sha256
 __all__ = [
     "CNODE_CFLAGS",
     "C_DIR",
+    "EXTRA_FLAGS_ENV",
     "CNodeBuild",
     "RosPaths",
+    "build_inputs",
     "build_node",
     "external_build",
     "ros_paths",
@@ -48,6 +51,11 @@ __all__ = [
 C_DIR = Path(__file__).with_name("c")
 #: Flags of the node's build (-O1 as the generated libraries: the node's own code is small).
 CNODE_CFLAGS: tuple[str, ...] = ("-O1", "-std=gnu11")
+#: Environment variable of extra compiler and linker flags (shell words) appended to
+#: :data:`CNODE_CFLAGS`, e.g. ``-g -fsanitize=address,undefined`` for a sanitizer build
+#: (tools/cnode_asan.py): hashed into the cache key, so such a build never replaces the
+#: normal one (unset or empty: the normal build, its key unchanged).
+EXTRA_FLAGS_ENV = "AMSFE_CNODE_EXTRA_FLAGS"
 #: The message packages the node's topics use (their C type support is linked).
 _MSG_PACKAGES = (
     "sensor_msgs",
@@ -139,6 +147,28 @@ def _sources(program: str = "amsfe_node") -> list[Path]:
     return sorted([*c, *C_DIR.glob("*.h")])
 
 
+def build_inputs(lib: ModelLibrary, program: str, ros: RosPaths, cc: str) -> dict[str, Any]:
+    """What a build of ``program`` for ``lib`` is keyed by (its content hash): the sources,
+    the library, the compiler, the flags (:data:`EXTRA_FLAGS_ENV`'s too, when set), rcl's
+    version and the environment's prefix."""
+    gen = hashlib.sha256()
+    for path in _sources(program):
+        gen.update(path.name.encode() + b"\0" + path.read_bytes())
+    extra_flags = tuple(shlex.split(os.environ.get(EXTRA_FLAGS_ENV, "")))
+    return {
+        "sources": gen.hexdigest(),
+        "library": lib.manifest.raw.get("content_hash"),
+        "library_sha256": lib.manifest.raw.get("library_sha256"),
+        "library_path": str(lib.library_path),
+        "compiler": _compiler_line(cc),
+        "cflags": list(CNODE_CFLAGS),
+        "rcl": ros.rcl_version,
+        "prefix": str(sys.prefix),
+        **({"program": program} if program != "amsfe_node" else {}),
+        **({"extra_flags": list(extra_flags)} if extra_flags else {}),
+    }
+
+
 def build_node(
     lib: ModelLibrary, out_dir: Path | None = None, program: str = "amsfe_node"
 ) -> CNodeBuild:
@@ -153,20 +183,8 @@ def build_node(
     ros = ros_paths()
     cc = compiler()
     srcs = [p for p in _sources(program) if p.suffix == ".c"]
-    gen = hashlib.sha256()
-    for path in _sources(program):
-        gen.update(path.name.encode() + b"\0" + path.read_bytes())
-    inputs = {
-        "sources": gen.hexdigest(),
-        "library": lib.manifest.raw.get("content_hash"),
-        "library_sha256": lib.manifest.raw.get("library_sha256"),
-        "library_path": str(lib.library_path),
-        "compiler": _compiler_line(cc),
-        "cflags": list(CNODE_CFLAGS),
-        "rcl": ros.rcl_version,
-        "prefix": str(sys.prefix),
-        **({"program": program} if program != "amsfe_node" else {}),
-    }
+    inputs = build_inputs(lib, program, ros, cc)
+    extra_flags = tuple(inputs.get("extra_flags", ()))
     key = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:20]
     folder = (out_dir or default_out_dir()) / program / key
     exe = folder / program
@@ -191,7 +209,8 @@ def build_node(
                 )
             )
         tmp = folder / f"{program}.tmp{os.getpid()}"
-        cmd = _command(cc, lib, ros, srcs, tmp, folder, _EXTRA_PACKAGES.get(program, ()))
+        extra = _EXTRA_PACKAGES.get(program, ())
+        cmd = _command(cc, lib, ros, srcs, tmp, folder, extra, extra_flags)
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0 or not tmp.is_file():
             tmp.unlink(missing_ok=True)
@@ -251,15 +270,18 @@ def _command(
     out: Path,
     gen_dir: Path,
     extra: tuple[str, ...] = (),
+    flags: tuple[str, ...] = (),
 ) -> list[str]:
     """The compile-and-link command of the node, against the library and headers copied
-    into ``gen_dir`` (the node's folder), linking the message packages ``extra`` too."""
+    into ``gen_dir`` (the node's folder), linking the message packages ``extra`` too, with
+    the extra compiler and linker ``flags`` (:data:`EXTRA_FLAGS_ENV`) after
+    :data:`CNODE_CFLAGS`."""
     name = lib.library_path.name.removeprefix("lib").removesuffix(".so")
     libs = ["rcl", "rcl_lifecycle", "rcutils", "rmw", "rosidl_runtime_c"]
     for pkg in (*_MSG_PACKAGES, *extra):
         libs += [f"{pkg}__rosidl_generator_c", f"{pkg}__rosidl_typesupport_c"]
     rpaths = [gen_dir, ros.lib, *ros.bundled]
-    cmd = [cc, *CNODE_CFLAGS, *map(str, srcs), f"-I{C_DIR}", f"-I{gen_dir}"]
+    cmd = [cc, *CNODE_CFLAGS, *flags, *map(str, srcs), f"-I{C_DIR}", f"-I{gen_dir}"]
     cmd += [f"-I{d}" for d in ros.include]
     cmd += [f"-L{gen_dir}", f"-l{name}", f"-L{ros.lib}", *(f"-l{x}" for x in libs), "-lm"]
     cmd += ["-Wl,--disable-new-dtags", *(f"-Wl,-rpath,{d}" for d in rpaths)]

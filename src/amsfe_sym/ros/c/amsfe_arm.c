@@ -649,7 +649,7 @@ int main(int argc, char **argv) {
     return 2;
   }
   static arm_t S;
-  amsfe_program = "amsfe_arm";
+  amsfe_program_start("amsfe_arm");
   arm_t *s = &S;
   configure(s, argv[1]);
   params_file *pf = &s->pf;

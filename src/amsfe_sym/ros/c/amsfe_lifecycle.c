@@ -3,7 +3,9 @@
 
 #include <rcl_lifecycle/default_state_machine.h>
 #include <rcutils/error_handling.h>
+#include <lifecycle_msgs/msg/state.h>
 #include <lifecycle_msgs/msg/transition.h>
+#include <lifecycle_msgs/msg/transition_description.h>
 #include <lifecycle_msgs/msg/transition_event.h>
 #include <lifecycle_msgs/srv/change_state.h>
 #include <lifecycle_msgs/srv/get_available_states.h>

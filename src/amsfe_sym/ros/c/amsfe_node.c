@@ -982,7 +982,7 @@ int main(int argc, char **argv) {
     return EXIT_BAD_INPUT;
   }
   static node_t S;
-  amsfe_program = "amsfe_node";
+  amsfe_program_start("amsfe_node");
   node_t *s = &S;
   s->stop_code = -1;
   s->first_command = 1;

@@ -3,6 +3,7 @@
 #include "amsfe_rcl.h"
 
 #include <errno.h>
+#include <execinfo.h>
 #include <fcntl.h>
 #include <sched.h>
 #include <stdint.h>
@@ -22,6 +23,59 @@ const char *amsfe_program = "amsfe";
 volatile sig_atomic_t amsfe_signal = 0;
 
 static void on_signal(int sig) { amsfe_signal = sig; }
+
+/* ------------------------------------------------------------ the report of a fatal signal */
+static void put(const char *text) { /* write(2) only: async-signal-safe */
+  size_t len = strlen(text);
+  while (len > 0) {
+    ssize_t w = write(STDERR_FILENO, text, len);
+    if (w <= 0) return;
+    text += w, len -= (size_t)w;
+  }
+}
+
+static void put_hex(uintptr_t v) {
+  char buf[2 + 2 * sizeof v + 1], *e = buf + sizeof buf - 1;
+  *e = 0;
+  do *--e = "0123456789abcdef"[v & 15u]; while (v >>= 4);
+  *--e = 'x', *--e = '0';
+  put(e);
+}
+
+/* One line naming the signal and the address, then the stack (backtrace_symbols_fd:
+ * "file(function+offset) [address]"; `addr2line -f -e FILE OFFSET` names a static
+ * function), then the signal again with its default action: the exit status and the core
+ * dump stay the signal's. */
+static void on_fatal(int sig, siginfo_t *info, void *context) {
+  (void)context;
+  static const char *const names[] = {[SIGSEGV] = "SIGSEGV", [SIGBUS] = "SIGBUS",
+                                      [SIGILL] = "SIGILL", [SIGFPE] = "SIGFPE",
+                                      [SIGABRT] = "SIGABRT"};
+  put("error: "), put(amsfe_program), put(": killed by "), put(names[sig]);
+  if (info->si_code > 0) put(" at address "), put_hex((uintptr_t)info->si_addr); /* kernel's */
+  put("; its stack:\n");
+  void *frames[64];
+  backtrace_symbols_fd(frames, backtrace(frames, 64), STDERR_FILENO);
+  raise(sig); /* SA_RESETHAND: the default action, delivered when this handler returns */
+}
+
+void amsfe_program_start(const char *name) {
+  amsfe_program = name;
+  setvbuf(stdout, NULL, _IOLBF, 0);
+#if !defined(__SANITIZE_ADDRESS__) /* an AddressSanitizer build reports these itself */
+  void *warm[1];
+  backtrace(warm, 1); /* loads libgcc's unwinder now: the handler then allocates nothing */
+  static char alt[64 * 1024]; /* a stack overflow is reported too */
+  stack_t ss = {.ss_sp = alt, .ss_size = sizeof alt, .ss_flags = 0};
+  sigaltstack(&ss, NULL);
+  struct sigaction sa;
+  memset(&sa, 0, sizeof sa);
+  sa.sa_sigaction = on_fatal;
+  sa.sa_flags = SA_SIGINFO | SA_RESETHAND | SA_ONSTACK;
+  static const int fatal[] = {SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGABRT};
+  for (size_t i = 0; i < sizeof fatal / sizeof fatal[0]; ++i) sigaction(fatal[i], &sa, NULL);
+#endif
+}
 
 void *amsfe_must(void *p, const char *what) {
   if (!p) {
@@ -76,8 +130,14 @@ static void realtime(const char *who, int priority) {
   if (priority <= 0) return;
   char why[384] = "";
   size_t len = 0;
+#if defined(__SANITIZE_ADDRESS__)
+  /* an AddressSanitizer build (tools/cnode_asan.py): its shadow memory is terabytes of
+   * reserved address space that mlockall would try to populate */
+  snprintf(why, sizeof why, "mlockall: skipped under AddressSanitizer");
+#else
   if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0)
     snprintf(why, sizeof why, "mlockall: %s", strerror(errno));
+#endif
   struct sched_param sp = {.sched_priority = priority};
   if (sched_setscheduler(0, SCHED_FIFO, &sp) != 0) {
     len = strlen(why);

@@ -21,6 +21,12 @@ extern const char *amsfe_program;
 /* The signal caught (SIGINT, SIGTERM; 0: none) since amsfe_rcl_start. */
 extern volatile sig_atomic_t amsfe_signal;
 
+/* The first call of a program's main: its name `name` in its error lines (amsfe_program);
+ * stdout line-buffered (a pipe's block buffer lost every line after the start's when a
+ * program died: issue 34's SIGSEGV said nothing of where; the sample path prints nothing);
+ * SIGSEGV, SIGBUS, SIGILL, SIGFPE and SIGABRT reported on stderr with the stack, on an
+ * alternate stack, before the signal's default action (its exit status and core dump). */
+void amsfe_program_start(const char *name);
 /* `p`, or "error: <program>: out of memory for <what>" and exit 1. */
 void *amsfe_must(void *p, const char *what);
 /* `count` zeroed elements of `type` (at least one), or the program stops (amsfe_must). */
