@@ -293,7 +293,6 @@ def test_recovers_a_synthetic_camera_from_the_marker_corners(robot: Robot, tmp_p
     assert np.all(np.abs(dR) < 4 * cal.std[0:3])
     assert 0.85 < cal.pixel_std < 1.15
     lines = report_lines(cal, robot, {})
-    assert any("fit: corners (4 corners a frame)" in ln for ln in lines)
     assert any(ln.strip().startswith("marker orientation") for ln in lines)
     text = calibrated_spec(robot, cal, "synthetic")
     written = tomllib.loads(text)["tracked"]["orientation"]

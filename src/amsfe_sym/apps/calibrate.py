@@ -173,11 +173,7 @@ def report_lines(cal: Calibration, robot: Robot, reader_skipped: dict[str, int])
     from amsfe_sym.load.rotation import matrix_to_quaternion
 
     hw = cal.half_width95()
-    what = "4 corners a frame" if cal.fit == "corners" else "one point a frame"
-    out = [
-        f"  fit: {cal.fit} ({what})",
-        "  parameter                  value        95 % interval (linearised)",
-    ]
+    out = ["  parameter                  value        95 % interval (linearised)"]
 
     def row(label: str, k: int, scale: float, unit: str, value: float, digits: int) -> str:
         if not cal.free[k]:
