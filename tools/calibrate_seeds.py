@@ -26,7 +26,10 @@ seed, minutes of wall on two shared cores) and their merge::
 ``--synthetic 40``: the fit on frames made by its own map (no encoders, no dynamics), the
 z-scores of its errors (docs/data/calibrate-synthetic.json); with ``--encoder-std 2e-4``
 white noise on the link angles, smoothed as ``amsfe calibrate`` smooths them, or not with
-``--no-smooth`` (docs/data/calibrate-synthetic-encoders*.json).
+``--no-smooth`` (docs/data/calibrate-synthetic-encoders*.json).  ``--corners``: the marker's 4
+corners instead, the corner fit beside the centre fit on the same seeds (``--first-seed``),
+runs merged by ``--merge-synthetic`` (docs/data/calibrate-synthetic-corners.json, seeds
+30200-30299).
 """
 
 from __future__ import annotations
@@ -159,23 +162,51 @@ def merge(files: list[str], out: str | None) -> int:
     return 0
 
 
-def synthetic(seeds: int, out: str | None, encoder_std: float = 0.0, smooth: bool = True) -> int:
+def _rotvec(R: Any) -> Any:
+    """The rotation vector [rad] of a rotation matrix."""
+    import cv2
+
+    return np.asarray(cv2.Rodrigues(np.asarray(R, dtype=np.float64))[0]).reshape(3)
+
+
+#: The synthetic check's true marker: 5 cm, turned from the tracked frame's axes (a rotation
+#: vector [rad]), so that no corner is on an axis.
+MARKER_SIZE = 0.05
+MARKER_ROTVEC = (0.4, -0.3, 1.1)
+
+
+def synthetic(
+    seeds: int,
+    out: str | None,
+    encoder_std: float = 0.0,
+    smooth: bool = True,
+    first_seed: int = 1000,
+    corners: bool = False,
+) -> int:
     """The fit on frames made by its own map (no encoders, no dynamics): calib_arm's joints
     on a sweep across the view (calib-sim's motion before the designed one) over 31 s, a
     frame every 33 ms, the camera moved 2 cm / ~1.5 deg, a 1-2 cm marker offset, 25 ms late
-    stamps, 1 px noise per seed; ``encoder_std``
+    stamps, 1 px noise per seed (``first_seed`` on); ``encoder_std``
     [rad]: white noise on the link angles, smoothed as ``amsfe calibrate`` smooths them (not
     with ``smooth=False``).  Per parameter the z-scores (error / stated sigma): their spread
-    and the coverage of the 95 % intervals."""
+    and the coverage of the 95 % intervals.
+
+    ``corners``: the marker's 4 corners (:data:`MARKER_SIZE`, :data:`MARKER_ROTVEC`)
+    projected by the true camera with 1 px noise on each, fitted by the corner fit, and the
+    centre fit on the same seeds with the point where the noisy corners' diagonals meet (what
+    the detector gives); the camera's and the marker's rotation errors as rotation vectors
+    about the camera's / the tracked frame's axes (their intervals' axes), and per fit the
+    errors' median / p90 / max."""
     from amsfe_sym.calibration import (
-        PARAMETERS,
         LinkAngles,
         Observations,
         ReprojectionModel,
         calibrate,
         smooth_angles,
     )
+    from amsfe_sym.calibration.model import marker_corners_local
     from amsfe_sym.load import load_robot
+    from amsfe_sym.vision.marker import diagonals_meet_many
 
     robot = load_robot(HERE / "robot.toml")
     T = 0.001
@@ -193,33 +224,106 @@ def synthetic(seeds: int, out: str | None, encoder_std: float = 0.0, smooth: boo
             [0.025],
         ]
     )
-    clean = ReprojectionModel(robot, links, stamp, robot.camera.R_cw).project(x).y
-    z = []
-    for seed in range(seeds):
-        rng = np.random.default_rng(1000 + seed)
-        pix = clean + rng.normal(0, 1.0, clean.shape)
-        obs = Observations(stamp, pix, np.rint(stamp / T).astype(np.int64), {})
+    model = ReprojectionModel(robot, links, stamp, robot.camera.R_cw)
+    R_true = model.rotation(x[0:3])
+    Rm_true = np.asarray(__import__("cv2").Rodrigues(np.array(MARKER_ROTVEC))[0])
+    local = marker_corners_local(MARKER_SIZE)
+    clean = model.project(x).y
+    clean_c = ReprojectionModel(robot, links, stamp, robot.camera.R_cw, local, Rm_true)
+    clean_k = clean_c.project(np.concatenate([x, np.zeros(3)])).y
+    fits: dict[str, list[Any]] = {"centres": [], "corners": []} if corners else {"centres": []}
+    for seed in range(first_seed, first_seed + seeds):
+        rng = np.random.default_rng(seed)
+        steps = np.rint(stamp / T).astype(np.int64)
         seen = links
+        if corners:
+            noisy = (clean_k + rng.normal(0, 1.0, clean_k.shape)).reshape(-1, 4, 2)
+            pix = diagonals_meet_many(noisy)
+        else:
+            pix = clean + rng.normal(0, 1.0, clean.shape)
         if encoder_std > 0:  # the encoders' noise in the link angles (then smoothed or not)
-            noisy = q + rng.normal(0, encoder_std, q.shape)
-            seen = LinkAngles(T, smooth_angles(noisy, T)[0] if smooth else noisy, "noisy")
-        cal = calibrate(robot, seen, obs)
-        err = cal.x[3:] - x[3:]  # (the rotation is relative to the fit's start: left out)
-        z.append(err / cal.std[3:])
-    zz = np.array(z)
-    result = {
-        "command": f"tools/calibrate_seeds.py --synthetic {seeds}"
+            noisy_q = q + rng.normal(0, encoder_std, q.shape)
+            seen = LinkAngles(T, smooth_angles(noisy_q, T)[0] if smooth else noisy_q, "noisy")
+        for fit in fits:
+            obs = Observations(stamp, pix, steps, {})
+            if fit == "corners":
+                obs = Observations(stamp, pix, steps, {}, noisy, MARKER_SIZE)
+            cal = calibrate(robot, seen, obs)
+            err = np.concatenate([_rotvec(cal.R_cw @ R_true.T), cal.x[3:10] - x[3:]])
+            if fit == "corners":
+                assert cal.marker_R is not None
+                err = np.concatenate([err, _rotvec(cal.marker_R @ Rm_true.T)])
+            fits[fit].append((err, cal.std))
+    rows = {f: [[r[0].tolist(), r[1].tolist()] for r in v] for f, v in fits.items()}
+    command = (
+        f"tools/calibrate_seeds.py --synthetic {seeds}"
+        + (f" --first-seed {first_seed}" if first_seed != 1000 else "")
+        + (" --corners" if corners else "")
         + (f" --encoder-std {encoder_std:g}" if encoder_std else "")
-        + ("" if smooth else " --no-smooth"),
-        "z_std": {n: float(zz[:, k].std()) for k, n in enumerate(PARAMETERS[3:])},
-        "inside_95": {
-            n: f"{int((np.abs(zz[:, k]) < 1.96).sum())} / {seeds}"
-            for k, n in enumerate(PARAMETERS[3:])
-        },
-    }
+        + ("" if smooth else " --no-smooth")
+    )
+    return _write_synthetic(command, rows, corners, out)
+
+
+def merge_synthetic(paths: list[str], out: str | None) -> int:
+    """One summary of :func:`synthetic` runs' JSON files (their ``rows``, in order)."""
+    runs = [json.loads(Path(p).read_text()) for p in paths]
+    rows: dict[str, list[Any]] = {}
+    for r in runs:
+        for fit, v in r["rows"].items():
+            rows.setdefault(fit, []).extend(v)
+    command = " + ".join(r["command"] for r in runs)
+    return _write_synthetic(command, rows, "corners" in rows, out)
+
+
+def _write_synthetic(
+    command: str, rows: dict[str, list[Any]], corners: bool, out: str | None
+) -> int:
+    """The summary of :func:`synthetic`'s ``rows`` (fit -> per seed [errors, stds]):
+    z-scores' spread, coverage of the 95 % intervals; with ``corners`` each fit's errors'
+    median / p90 / max and its median 95 % half-width."""
+    from amsfe_sym.calibration import PARAMETERS
+    from amsfe_sym.calibration.model import CORNER_PARAMETERS
+
+    names = CORNER_PARAMETERS if corners else PARAMETERS
+    result: dict[str, Any] = {"command": command}
+    scale = {n: (180 / math.pi, "deg") if "rot" in n else (1e3, "mm") for n in names}
+    scale["time_offset"] = (1e3, "ms")
+    for fit, rr in rows.items():
+        E = np.array([r[0] for r in rr])
+        S = np.array([r[1] for r in rr])
+        seeds = len(rr)
+        k0 = 0 if corners else 3  # (without --corners: as before, the rotation left out)
+        use = names[k0 : E.shape[1]]
+        zz = E[:, k0:] / S[:, k0 : E.shape[1]]
+        entry: dict[str, Any] = {
+            "seeds": seeds,
+            "z_std": {n: float(zz[:, k].std()) for k, n in enumerate(use)},
+            "inside_95": {
+                n: f"{int((np.abs(zz[:, k]) < 1.96).sum())} / {seeds}" for k, n in enumerate(use)
+            },
+        }
+        if corners:
+            entry["abs_error"] = {
+                f"{n} [{scale[n][1]}]": [
+                    round(float(np.percentile(np.abs(E[:, k0 + k]) * scale[n][0], p)), 4)
+                    for p in (50, 90, 100)
+                ]
+                for k, n in enumerate(use)
+            }
+            entry["abs_error_columns"] = "median, p90, max over the seeds"
+            entry["half_width95_median"] = {
+                f"{n} [{scale[n][1]}]": round(
+                    float(np.median(S[:, k0 + k]) * 1.959964 * scale[n][0]), 4
+                )
+                for k, n in enumerate(use)
+            }
+            result[fit] = entry
+        else:
+            result.update({k: v for k, v in entry.items() if k != "seeds"})
     text = json.dumps(result, indent=1)
     if out:
-        Path(out).write_text(text + "\n")
+        Path(out).write_text(json.dumps({**result, "rows": rows}) + "\n")
     print(text)
     return 0
 
@@ -232,16 +336,29 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--stamp-offset", type=float, default=0.025)
     ap.add_argument("--out", default=None, help="JSON file to write")
     ap.add_argument("--merge", nargs="+", default=None, help="summarise these runs' JSON files")
+    ap.add_argument(
+        "--merge-synthetic", nargs="+", default=None, help="summarise --synthetic runs' files"
+    )
     ap.add_argument("--synthetic", type=int, default=0, help="seeds of the synthetic check")
     ap.add_argument("--encoder-std", type=float, default=0.0, help="synthetic: encoder noise [rad]")
     ap.add_argument(
         "--no-smooth", action="store_true", help="synthetic: the noisy angles unsmoothed"
     )
+    ap.add_argument(
+        "--corners",
+        action="store_true",
+        help="synthetic: the marker's 4 corners, the corner fit beside the centre fit",
+    )
     args = ap.parse_args(argv)
     if args.synthetic:
-        return synthetic(args.synthetic, args.out, args.encoder_std, not args.no_smooth)
+        first = args.first_seed if "--first-seed" in (argv or sys.argv) else 1000
+        return synthetic(
+            args.synthetic, args.out, args.encoder_std, not args.no_smooth, first, args.corners
+        )
     if args.merge:
         return merge(args.merge, args.out)
+    if args.merge_synthetic:
+        return merge_synthetic(args.merge_synthetic, args.out)
     from amsfe_sym.apps.cli import main as amsfe
 
     work = Path(tempfile.mkdtemp(prefix="calibrate-seeds-"))
