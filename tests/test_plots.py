@@ -69,6 +69,15 @@ def _draw_b(fig, cells: list, t: np.ndarray) -> None:
     title(fig, "B")
 
 
+def _assert_b_drawn_alike(folder: Path) -> None:
+    """b_reused.png and b_new.png are the same pixels, and not a.png's."""
+    imread = pyplot().imread
+    reused, new = imread(folder / "b_reused.png"), imread(folder / "b_new.png")
+    assert reused.shape == new.shape
+    assert np.array_equal(reused, new)
+    assert not np.array_equal(imread(folder / "a.png"), new)
+
+
 def test_a_reused_grid_draws_what_a_new_one_draws(tmp_path: Path) -> None:
     """Canvas hands the previous grid back emptied: a figure drawn on it after another is
     the same PNG, pixel for pixel, as the figure drawn on a new grid (no line, band, legend,
@@ -86,12 +95,70 @@ def test_a_reused_grid_draws_what_a_new_one_draws(tmp_path: Path) -> None:
     assert fresh is not fig
     _draw_b(fresh, fresh_cells, t)
     save(fresh, tmp_path / "b_new.png")
-    imread = pyplot().imread
-    reused, new = imread(tmp_path / "b_reused.png"), imread(tmp_path / "b_new.png")
-    assert reused.shape == new.shape
-    assert np.array_equal(reused, new)
-    assert not np.array_equal(imread(tmp_path / "a.png"), new)
+    _assert_b_drawn_alike(tmp_path)
     assert canvas.joint_grid(6, PANEL)[0] is not fig  # another shape: a new grid
+
+
+def _draw_tracking(fig, axes: list, t: np.ndarray, j: int) -> None:
+    """What the paper's Figs. 6-7 draw: a dashed reference, lines, a symlog lower axis, a
+    legend and fixed y limits on the upper one."""
+    axes[0].plot(t, np.sin(t + j), "k--", lw=1.2, label="desired")
+    axes[0].plot(t, np.sin(t + j) + 0.1 * j, lw=0.9, label=f"line {j}")
+    axes[1].plot(t, 10.0 ** -(j + 2) * np.cos(9 * t), lw=0.9)
+    axes[0].set_ylabel(f"q{j + 1} [rad]")
+    symlog(axes[1], 1e-3)
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        ax.tick_params(labelsize=8)
+    axes[0].legend(fontsize=8)
+    axes[0].set_ylim(-1.5 - j, 1.5 + j)
+    title(fig, f"tracking {j}")
+
+
+def test_a_reused_stack_draws_what_a_new_one_draws(tmp_path: Path) -> None:
+    """Canvas.stack hands the previous figure of stacked axes back emptied: Fig. 7 drawn on
+    Fig. 6's figure is the same PNG, pixel for pixel, as on a new one."""
+    t = np.linspace(0.0, 10.0, 5000)
+    canvas = Canvas()
+    fig, axes = canvas.stack((8, 6), 2)
+    _draw_tracking(fig, axes, t, 0)
+    save(fig, tmp_path / "a.png")
+    fig2, axes2 = canvas.stack((8, 6), 2)
+    assert fig2 is fig and len(axes2) == 2  # reused
+    _draw_tracking(fig2, axes2, t, 1)
+    save(fig2, tmp_path / "b_reused.png")
+    fresh, fresh_axes = Canvas().stack((8, 6), 2)
+    _draw_tracking(fresh, fresh_axes, t, 1)
+    save(fresh, tmp_path / "b_new.png")
+    _assert_b_drawn_alike(tmp_path)
+    assert canvas.stack((8, 5), 2)[0] is not fig  # another size: a new figure
+
+
+def test_matplotlib_is_imported_without_set_help_and_works_the_same() -> None:
+    """import_matplotlib skips the help text matplotlib writes at import for each artist
+    class's ``set`` (a third of its import's time): ``set`` sets the same properties, and
+    matplotlib's own writer is back for any class defined after (a fresh interpreter)."""
+    import subprocess
+    import sys
+
+    code = """
+import inspect
+from amsfe_sym.apps.plots.style import import_matplotlib
+import_matplotlib()
+import matplotlib.artist, matplotlib.lines
+line = matplotlib.lines.Line2D([0.0], [0.0])
+line.set(color="r", lw=3.0)  # an alias: set() works as before
+assert line.get_color() == "r" and line.get_linewidth() == 3.0
+assert matplotlib.lines.Line2D.set.__doc__ is None  # the help skipped
+assert isinstance(matplotlib.artist.Artist.__dict__["_update_set_signature_and_docstring"],
+                  classmethod)
+class Later(matplotlib.lines.Line2D):
+    pass
+assert "linewidth" in Later.set.__doc__  # written again for a class defined later
+assert "linewidth" in inspect.signature(Later.set).parameters
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
 
 
 def test_ticks_are_made_only_where_they_are_seen(tmp_path: Path) -> None:
@@ -240,6 +307,19 @@ def test_envelope_keeps_every_spike_and_cuts_to_the_pixels() -> None:
     short = np.arange(100.0)
     out = envelope(short, short, pixels=800)
     assert out[0] is short and out[1] is short
+
+
+def test_the_frames_rug_is_a_tick_at_each_arrival() -> None:
+    """The camera frames' rug of estimate.png, one line broken by NaN: a vertical tick from
+    0 to its height at each arrival, and nothing between two ticks."""
+    from amsfe_sym.apps.plots.log import _rug
+
+    at = np.array([0.1, 0.4, 2.5])
+    x, y = _rug(at, height=0.04)
+    assert x.shape == y.shape == (9,)
+    np.testing.assert_array_equal(x.reshape(3, 3)[:, :2], np.repeat(at, 2).reshape(3, 2))
+    np.testing.assert_array_equal(y.reshape(3, 3)[:, :2], [[0.0, 0.04]] * 3)
+    assert np.isnan(x[2::3]).all() and np.isnan(y[2::3]).all()
 
 
 def test_legends_name_the_law_not_truth() -> None:

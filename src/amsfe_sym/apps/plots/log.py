@@ -82,6 +82,7 @@ def plot_log(
     t = log.t
     sd = np.sqrt(np.maximum(P_diag, 0.0))
     arrivals = np.array([fr.delivery_step * log.T for fr in log.frames], dtype=float)
+    rug = _rug(arrivals) if 0 < arrivals.size <= RUG_MAX else None
     fig, cells = joint_grid(n, (3.8, 2.3))
     for j, (ax,) in enumerate(cells):
         band = 2 * sd[:, j]
@@ -107,17 +108,8 @@ def plot_log(
             ) + abs(center)
             ax.set_ylabel(f"joint {j + 1} [rad]", fontsize=8)
         ax.set_ylim(-lim, lim)
-        if 0 < arrivals.size <= RUG_MAX:  # one collection (an axvline each: 12 of 15 s)
-            ax.vlines(
-                arrivals,
-                0,
-                0.04,
-                transform=ax.get_xaxis_transform(),
-                color="k",
-                lw=0.3,
-                alpha=0.5,
-                rasterized=True,
-            )
+        if rug is not None:  # one line (an axvline each: 12 of 15 s; vlines: 10 %)
+            ax.plot(*rug, transform=ax.get_xaxis_transform(), color="k", lw=0.3, alpha=0.5)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
     cells[0][0].legend(loc="upper right", fontsize=6)
@@ -131,6 +123,17 @@ def plot_log(
     if nis.report:
         paths.append(_nis_figure(log, estimator, nis, folder))
     return paths
+
+
+def _rug(at: FloatArray, height: float = 0.04) -> tuple[FloatArray, FloatArray]:
+    """A tick at each of ``at`` [s], from 0 to ``height`` of the axes, as one line (x, y)
+    broken by NaN between ticks: the picture of ``vlines``, whose collection converts its
+    segments one by one in Python (10 % of the figures of a 5 s log's estimate, 7 panels
+    of ~150 frames), made with three numpy operations."""
+    x = np.repeat(at, 3)
+    x[2::3] = np.nan
+    y = np.tile([0.0, height, np.nan], at.size)
+    return x, y
 
 
 def _nis_figure(log: RobotLog, estimator: str, nis: NisSeries, folder: Path) -> Path:

@@ -117,8 +117,7 @@ def _simulation_figures(cmp: Comparison, out: Path, canvas: Canvas) -> list[Path
     if n > 2:  # an arm: one panel per joint (the paper's Figs. 6-7 are its two joints)
         return [*paths, _tracking_grid(cmp, out, canvas)]
     for j in range(n):
-        fig = figure((8, 6))
-        axes = fig.subplots(2, 1, sharex=True)
+        fig, axes = canvas.stack((8, 6), 2)
         axes[0].plot(res0.t, res0.q_des[:, j], "k--", lw=1.2, label="desired")
         for (name, res), color in zip(cmp.results.items(), _COLORS, strict=False):
             tc, q, dq = envelope(
