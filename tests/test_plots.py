@@ -134,33 +134,6 @@ def test_a_reused_stack_draws_what_a_new_one_draws(tmp_path: Path) -> None:
     assert canvas.stack((8, 5), 2)[0] is not fig  # another size: a new figure
 
 
-def test_matplotlib_is_imported_without_set_help_and_works_the_same() -> None:
-    """import_matplotlib skips the help text matplotlib writes at import for each artist
-    class's ``set`` (a third of its import's time): ``set`` sets the same properties, and
-    matplotlib's own writer is back for any class defined after (a fresh interpreter)."""
-    import subprocess
-    import sys
-
-    code = """
-import inspect
-from amsfe_sym.apps.plots.style import import_matplotlib
-import_matplotlib()
-import matplotlib.artist, matplotlib.lines
-line = matplotlib.lines.Line2D([0.0], [0.0])
-line.set(color="r", lw=3.0)  # an alias: set() works as before
-assert line.get_color() == "r" and line.get_linewidth() == 3.0
-assert matplotlib.lines.Line2D.set.__doc__ is None  # the help skipped
-assert isinstance(matplotlib.artist.Artist.__dict__["_update_set_signature_and_docstring"],
-                  classmethod)
-class Later(matplotlib.lines.Line2D):
-    pass
-assert "linewidth" in Later.set.__doc__  # written again for a class defined later
-assert "linewidth" in inspect.signature(Later.set).parameters
-"""
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
-    assert done.returncode == 0, done.stderr
-
-
 def test_ticks_are_made_only_where_they_are_seen(tmp_path: Path) -> None:
     """Matplotlib makes a tick (three lines, two texts) for every location its locator
     gives, and its locators give one or two outside the view on each side: a grid's
