@@ -93,3 +93,47 @@ def test_a_bad_build_jobs_is_refused_not_ignored(monkeypatch, jobs: str) -> None
     monkeypatch.setenv("AMSFE_BUILD_JOBS", jobs)
     with pytest.raises(CodegenError, match=r"\$AMSFE_BUILD_JOBS.*integer >= 1.*Fix: export"):
         build_jobs()
+
+
+def test_the_same_model_under_another_name_links_the_first_one_s_object(tmp_path, capsys) -> None:
+    """The generated C has one symbol prefix for every robot (``GENERATED_PREFIX``), so a
+    model renamed (a sweep's derived spec, the tutorial's copy of the UR5) is the same
+    bytes: its object comes from the cache, and the two libraries compute the same."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from amsfe_sym.codegen import generate
+    from amsfe_sym.load.spec import load_spec
+    from amsfe_sym.runtime.library import ModelLibrary
+
+    spec = load_spec("paper_1link")
+    first = generate(replace(spec, name="one"), out=tmp_path, parts=("model",), progress=True)
+    assert "compiling (1 of 1 unit(s), 0 from the object cache" in capsys.readouterr().err
+    second = generate(replace(spec, name="two"), out=tmp_path, parts=("model",), progress=True)
+    assert "compiling (0 of 1 unit(s), 1 from the object cache" in capsys.readouterr().err
+    assert not second.reused and second.out_dir.name == "two-model"
+    assert (first.out_dir / "one.c").read_bytes() == (second.out_dir / "two.c").read_bytes()
+    a, b = ModelLibrary(first.out_dir), ModelLibrary(second.out_dir)
+    x, u = np.linspace(0.1, 0.4, a.N), np.array([0.3])
+    np.testing.assert_array_equal(a.function("transition")(x, u), b.function("transition")(x, u))
+    # another model (another T): another object
+    other = replace(spec, name="three", model=replace(spec.model, T=spec.model.T / 2))
+    generate(other, out=tmp_path, parts=("model",), progress=True)
+    assert "compiling (1 of 1 unit(s), 0 from the object cache" in capsys.readouterr().err
+    assert len(list((tmp_path / ".objects").glob("generated-*.o"))) == 2
+
+
+def test_objects_unused_for_a_month_are_removed(tmp_path) -> None:
+    import os
+    import time
+
+    from amsfe_sym.codegen.compile_units import OBJECT_MAX_AGE_S, _prune
+
+    old, new = tmp_path / "old.o", tmp_path / "new.o"
+    for f in (old, new):
+        f.write_bytes(b"x")
+    t = time.time() - OBJECT_MAX_AGE_S - 60
+    os.utime(old, (t, t))
+    _prune(tmp_path)
+    assert not old.exists() and new.exists()

@@ -254,9 +254,10 @@ def test_cache_reuse_and_invalidation(tmp_path) -> None:
     fourth.manifest_path.write_text("{ not json")
     fifth = generate(src, out=out, extra_cflags=["-DAMSFE_TEST_FLAG=1"], parts=MODEL)
     assert not fifth.reused and json.loads(fifth.manifest_path.read_text())["T"] == 0.003
-    # no temporary folders left (a model-only library links no robot-independent object, so
-    # no .objects: codegen/compile_units; tests/test_compile_units.py tests that cache)
-    assert sorted(p.name for p in out.iterdir()) == ["dp-model"]
+    # no temporary folders left: the library and the object cache, which holds objects only
+    # (codegen/compile_units; tests/test_compile_units.py tests that cache)
+    assert sorted(p.name for p in out.iterdir()) == [".objects", "dp-model"]
+    assert {p.suffix for p in (out / ".objects").iterdir()} == {".o"}
 
 
 def test_a_model_only_library_has_no_laws_and_keeps_the_full_one(tmp_path, libraries) -> None:

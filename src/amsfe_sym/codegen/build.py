@@ -41,6 +41,7 @@ from amsfe_sym.codegen.cache import (
     replace_dir,
 )
 from amsfe_sym.codegen.compile_units import (
+    GENERATED_PREFIX,
     OBJECT_CACHE,
     RUNTIME_C,
     Unit,
@@ -273,7 +274,11 @@ def _build(
         cname = f"{spec.name}.c"
         import casadi as ca  # here, not at import: a cache hit (amsfe estimate) needs none
 
-        gen = ca.CodeGenerator(cname, {"with_header": True, "with_mem": False})
+        # one prefix for every robot: the same model under another name is the same C, and
+        # its object comes from the object cache (codegen/compile_units.py)
+        gen = ca.CodeGenerator(
+            cname, {"with_header": True, "with_mem": False, "prefix": GENERATED_PREFIX}
+        )
         for f in model.internal.values():  # first: the contract's MX graphs call them
             gen.add(f)
         for f in model.functions.values():
@@ -299,13 +304,16 @@ def _build(
         timings["codegen"] = time.perf_counter() - t
         t = time.perf_counter()
         libname = f"lib{spec.name}.so"
-        units = [Unit(cname)]  # first: the largest unit starts first
+        # every unit is cached by its content and the headers it can include (those of
+        # runtime/c and of tmp), so a model another library has (a sweep's derived spec, the
+        # same arm under another name) links its objects; the largest unit starts first
+        units = [Unit(cname, shared=True, local=True, label="generated")]
         (tmp / "amsfe_model_config.h").write_text(model_config_header(model))
         if model.chained:  # the contract functions written in C over the generated stage
-            units.append(runtime_unit("amsfe_model.c"))
+            units.append(runtime_unit("amsfe_model.c", local=True))
         if "estimator" in parts:  # the C glue calls the est_* functions
             shutil.copy(RUNTIME_C / "amsfe_runtime.h", tmp)
-            units.append(runtime_unit("amsfe_runtime.c"))
+            units.append(runtime_unit("amsfe_runtime.c", local=True))
         if set(parts) == set(ALL_PARTS):  # the loop calls the laws, the plant, the estimators
             shutil.copy(RUNTIME_C / "amsfe_loop.h", tmp)
             units.append(runtime_unit("amsfe_loop.c"))

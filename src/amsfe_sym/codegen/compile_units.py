@@ -8,14 +8,20 @@ file
 is its own unit (``cc -c``), the units run ``jobs`` at a time (default: the CPUs this process
 may use), the largest first, and the objects are linked into the shared library.
 
-The robot-independent units (:data:`SHARED_UNITS`: the estimator kernels, the closed loop
-and the watchdogs, which include no generated header) are compiled once per content: their
-object is kept in ``<parent>/.objects/<key>.o``, the key a sha256 of the compiler's version,
-the flags, the CPU kind when the flags name ``native``, the unit's source and every header of
-``runtime/c``.  A later library in the same parent folder (another robot, another
-integrator; the test suite builds a dozen) links that object instead of compiling it again.
-A damaged or missing object is simply compiled again; the object is written under a
-temporary name and moved into place, so a concurrent build never links a partial file.
+Every unit of a library is compiled once per content: its object is kept in
+``<parent>/.objects/<label>-<key>.o``, the key a sha256 of the compiler's version, the flags,
+the CPU kind when the flags name ``native``, the unit's source and every header it can
+include (those of ``runtime/c``, and the build folder's ``amsfe_model_config.h``), not the
+file's name.  A later library in the same parent folder
+links that object instead of compiling it again: the robot-independent units
+(:data:`SHARED_UNITS`: the estimator kernels, the closed loop and the watchdogs) for every
+robot; the robot's own units when their bytes are another library's, e.g. the same model
+under another name (a sweep's ``paper_2link_r<tag>_rk4``, whose parameters are data, is
+``paper_2link_rk4``'s C; the tutorial's ``my_arm`` is ``ur5_rk4``'s), the generated C's
+symbol prefix being the same for every robot (:data:`GENERATED_PREFIX`).  A damaged or
+missing object is simply compiled again; the object is written under a temporary name and
+moved into place, so a concurrent build never links a partial file.  An object unused for
+:data:`OBJECT_MAX_AGE_S` is removed when another is stored.
 """
 
 from __future__ import annotations
@@ -37,7 +43,9 @@ from amsfe_sym.core.interrupts import checkpoint
 from amsfe_sym.errors import CodegenError, describe
 
 __all__ = [
+    "GENERATED_PREFIX",
     "OBJECT_CACHE",
+    "OBJECT_MAX_AGE_S",
     "RUNTIME_C",
     "SHARED_UNITS",
     "Unit",
@@ -57,6 +65,15 @@ SHARED_UNITS = ("amsfe_kernels.c", "amsfe_loop.c", "amsfe_watchdog.c")
 #: The object cache's folder, in the parent folder of the libraries.
 OBJECT_CACHE = ".objects"
 
+#: The symbol prefix of CasADi's helpers in every generated C file (``amsfe_cg_copy``, ...;
+#: CasADi's default is the file's name): one model's C is then the same bytes whatever the
+#: robot's name, and its object is compiled once (the contract's functions, ``transition``
+#: and the others, carry no prefix in any library).
+GENERATED_PREFIX = "amsfe_cg"
+
+#: Seconds after its last use that a cached object is removed (30 days).
+OBJECT_MAX_AGE_S = 30 * 24 * 3600.0
+
 #: Seconds between two "still compiling" lines (``progress``).
 COMPILE_PROGRESS_S = 5.0
 
@@ -67,17 +84,25 @@ class Unit:
 
     Attributes:
         source: Its path (relative to the build folder, or absolute).
-        shared: Robot-independent: its object may come from, and goes to, the object cache.
+        shared: Its object may come from, and goes to, the object cache (keyed by its
+            content and the headers it can include, not its name).
+        local: It includes headers of the build folder (the generated ones): their bytes
+            are in its key too (the robot-independent units include only ``runtime/c``'s).
+        label: Its objects' name in the cache (default: the file's stem).
     """
 
     source: str
     shared: bool = False
+    local: bool = False
+    label: str = ""
 
 
-def runtime_unit(name: str) -> Unit:
-    """The unit of the file ``name`` of ``runtime/c``, shared when it is in
-    :data:`SHARED_UNITS`."""
-    return Unit(str(RUNTIME_C / name), shared=name in SHARED_UNITS)
+def runtime_unit(name: str, local: bool = False) -> Unit:
+    """The unit of the file ``name`` of ``runtime/c``, its object cached: robot-independent
+    when it is in :data:`SHARED_UNITS`, else ``local`` (it includes the build folder's
+    ``amsfe_model_config.h``: its key holds that folder's headers)."""
+    shared = name in SHARED_UNITS
+    return Unit(str(RUNTIME_C / name), shared=shared or local, local=local and not shared)
 
 
 def build_jobs() -> int:
@@ -106,12 +131,23 @@ def build_jobs() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def object_key(unit: Path, key_inputs: dict[str, Any]) -> str:
-    """The object cache's key of a shared unit (see the module docstring)."""
+def object_key(unit: Path, key_inputs: dict[str, Any], build: Path | None = None) -> str:
+    """The object cache's key of a shared unit: the toolchain (``key_inputs``), the unit's
+    bytes, those of every header of ``runtime/c`` and, with ``build``, those of the build
+    folder's headers that the unit or a header names (what an ``#include "x.h"`` can
+    read: ``amsfe_model_config.h``; not the generated ``<robot>.h``, which no unit includes,
+    so that the same model under another name has the same key)."""
     h = hashlib.sha256(json.dumps(key_inputs, sort_keys=True).encode())
-    h.update(unit.name.encode() + b"\0" + unit.read_bytes())
-    for header in sorted(RUNTIME_C.glob("*.h")):
-        h.update(header.name.encode() + b"\0" + header.read_bytes())
+    source = unit.read_bytes()
+    h.update(b"unit\0" + source)
+    runtime = sorted(RUNTIME_C.glob("*.h"))
+    local = sorted(build.glob("*.h")) if build is not None else []
+    texts = [source] + [p.read_bytes() for p in runtime + local]
+    for header in runtime:
+        h.update(b"runtime/" + header.name.encode() + b"\0" + header.read_bytes())
+    for header in local:
+        if any(header.name.encode() in t for t in texts):
+            h.update(b"build/" + header.name.encode() + b"\0" + header.read_bytes())
     return h.hexdigest()
 
 
@@ -208,8 +244,12 @@ def compile_library(
         obj = f"unit{i}_{src.stem}.o"
         cached = None
         if unit.shared and object_cache is not None:
-            cached = object_cache / f"{src.stem}-{object_key(src, key_inputs)[:32]}.o"
+            path = src if src.is_absolute() else cwd / src
+            key = object_key(path, key_inputs, cwd if unit.local else None)
+            cached = object_cache / f"{unit.label or src.stem}-{key[:32]}.o"
             if reuse and cached.is_file() and cached.stat().st_size > 0:
+                with contextlib.suppress(OSError):
+                    os.utime(cached)  # used: kept another OBJECT_MAX_AGE_S
                 objects.append(str(cached))
                 continue
         compiles.append([cc, *flags, "-I.", "-c", unit.source, "-o", obj])
@@ -228,6 +268,8 @@ def compile_library(
             return proc
     for built, dest in to_cache:
         _store(built, dest)
+    if to_cache and object_cache is not None:
+        _prune(object_cache)
     link = [cc, *flags, "-o", libname, *objects, "-lm"]
     return run_commands([link], cwd, progress, name)
 
@@ -247,6 +289,16 @@ def _store(built: Path, dest: Path) -> None:
         if tmp is not None:
             with contextlib.suppress(OSError):
                 os.unlink(tmp)
+
+
+def _prune(cache: Path, max_age_s: float = OBJECT_MAX_AGE_S) -> None:
+    """Remove the cached objects unused for ``max_age_s`` (best effort; a build that uses
+    one touches it first)."""
+    now = time.time()
+    for obj in cache.glob("*.o"):
+        with contextlib.suppress(OSError):
+            if now - obj.stat().st_mtime > max_age_s:
+                obj.unlink()
 
 
 def say(on: bool, msg: str) -> None:
