@@ -23,6 +23,11 @@ seed, minutes of wall on two shared cores) and their merge::
     PYTHONPATH=src .venv/bin/python tools/calibrate_seeds.py --merge /tmp/a.json ... \\
         --out docs/data/calibrate-seeds.json
 
+``--robot tests/data/calibrate/robot-marker.toml --images png --fit centre= --fit
+corners=ARGS``: the marker fixed to the tip (its ``[tracked] orientation``), the camera's
+images detected, each recording calibrated once per fit (the arguments ``amsfe calibrate``
+gets added), rows and summary per fit.
+
 ``--synthetic 40``: the fit on frames made by its own map (no encoders, no dynamics), the
 z-scores of its errors (docs/data/calibrate-synthetic.json); with ``--encoder-std 2e-4``
 white noise on the link angles, smoothed as ``amsfe calibrate`` smooths them, or not with
@@ -47,17 +52,18 @@ import numpy as np
 HERE = Path(__file__).resolve().parent.parent / "tests" / "data" / "calibrate"
 
 
-def true_robot(folder: Path, seed: int, name: str = "calib_arm_true") -> Path:
-    """``folder/robot.toml``: calib_arm with the camera moved 3 cm and turned 2 deg, the
-    marker 2 cm off the tip (directions from ``seed``), and the scenario beside it; ``name``:
-    its library's (two runs of this script at once need two)."""
+def true_robot(
+    folder: Path, seed: int, name: str = "calib_arm_true", typed: Path = HERE / "robot.toml"
+) -> Path:
+    """``folder/robot.toml``: the ``typed`` calib_arm with the camera moved 3 cm and turned
+    2 deg, the marker 2 cm off the tip (directions from ``seed``; its ``[tracked]
+    orientation`` kept), and the scenario beside it; ``name``: its library's (two runs of
+    this script at once need two)."""
     from amsfe_sym.calibration.spec_out import moved_camera_spec
     from amsfe_sym.load import load_robot
 
     folder.mkdir(parents=True, exist_ok=True)
-    text = moved_camera_spec(
-        load_robot(HERE / "robot.toml"), np.random.default_rng(seed), name=name
-    )
+    text = moved_camera_spec(load_robot(typed), np.random.default_rng(seed), name=name)
     (folder / "robot.toml").write_text(text)
     shutil.copy(HERE / "calib-sim.toml", folder / "calib-sim.toml")
     return folder / "robot.toml"
@@ -146,16 +152,27 @@ def clopper_pearson(hits: int, trials: int, level: float = 0.95) -> tuple[float,
 def merge(files: list[str], out: str | None) -> int:
     """The rows of several runs' JSON files, summarised together."""
     parts = [json.loads(Path(f).read_text()) for f in files]
-    rows = [r for p in parts for r in p["rows"]]
-    result = {
+    result: dict[str, Any] = {
         "command": "tools/calibrate_seeds.py --merge " + " ".join(files),
         "runs": [{k: p[k] for k in ("command", "seeds", "truth_seed", "wall_s")} for p in parts],
-        "summary": summarize(rows),
-        "rows": rows,
     }
+    if "fits" in parts[0]:  # (runs with --fit: merged per fit)
+        result["fits"] = {}
+        for name, fit in parts[0]["fits"].items():
+            rows = [r for p in parts for r in p["fits"][name]["rows"]]
+            result["fits"][name] = {
+                "arguments": fit["arguments"],
+                "summary": summarize(rows),
+                "rows": rows,
+            }
+        shown: Any = {name: f["summary"] for name, f in result["fits"].items()}
+    else:
+        rows = [r for p in parts for r in p["rows"]]
+        result.update(summary=summarize(rows), rows=rows)
+        shown = result["summary"]
     if out:
         Path(out).write_text(json.dumps(result, indent=1) + "\n")
-    print(json.dumps(result["summary"], indent=1))
+    print(json.dumps(shown, indent=1))
     return 0
 
 
@@ -237,6 +254,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--no-smooth", action="store_true", help="synthetic: the noisy angles unsmoothed"
     )
+    ap.add_argument(
+        "--robot", default=str(HERE / "robot.toml"), help="the typed robot spec (moved: the truth)"
+    )
+    ap.add_argument(
+        "--images", default=None, choices=("mono8", "png", "jpeg"),
+        help="the camera writes images (the marker detected) instead of the pixel topic",
+    )  # fmt: skip
+    ap.add_argument(
+        "--fit", action="append", default=None, metavar="NAME=ARGS",
+        help="calibrate each recording once per --fit, with ARGS added (split at spaces)",
+    )  # fmt: skip
     args = ap.parse_args(argv)
     if args.synthetic:
         return synthetic(args.synthetic, args.out, args.encoder_std, not args.no_smooth)
@@ -244,63 +272,52 @@ def main(argv: list[str] | None = None) -> int:
         return merge(args.merge, args.out)
     from amsfe_sym.apps.cli import main as amsfe
 
+    typed = Path(args.robot).resolve()
+    fits = dict(f.partition("=")[::2] for f in args.fit) if args.fit else {"": ""}
     work = Path(tempfile.mkdtemp(prefix="calibrate-seeds-"))
     # the true robot's library in the work folder: a cached one keeps the spec path of its
     # first builder (an earlier run's deleted folder), which simulate --bag reads for /tf
     os.environ["AMSFE_GENERATED_DIR"] = str(work / "generated")
-    truth = true_robot(work / "true", args.truth_seed, f"calib_arm_true_{args.first_seed}")
-    rows: list[dict[str, Any]] = []
+    truth = true_robot(work / "true", args.truth_seed, f"calib_arm_true_{args.first_seed}", typed)
+    rows: dict[str, list[dict[str, Any]]] = {name: [] for name in fits}
+    images = ["--images", args.images] if args.images else []
     t0 = time.time()
     for seed in range(args.first_seed, args.first_seed + args.seeds):
-        run, out = work / f"run{seed}", work / f"cal{seed}"
-        rc = amsfe(
-            [
-                "simulate",
-                str(truth.parent / "calib-sim.toml"),
-                "--controller",
-                "truth-ct",
-                "--out",
-                str(run),
-                "--bag",
-                "--no-plots",
-                "--no-progress",
-                "--seed",
-                str(seed),
-                "--set",
-                f"camera.stamp_offset={args.stamp_offset}",
-            ]
-        )
-        rc = rc or amsfe(
-            [
-                "calibrate",
-                str(run / "bag"),
-                "--robot",
-                str(HERE / "robot.toml"),
-                "--out",
-                str(out),
-                "--no-plots",
-            ]
-        )
-        row: dict[str, object] = {"seed": seed, "ok": rc == 0}
-        if rc == 0:
-            row.update(errors(out, truth, args.stamp_offset))
-        rows.append(row)
+        run = work / f"run{seed}"
+        sim = ["simulate", str(truth.parent / "calib-sim.toml"), "--controller", "truth-ct"]
+        sim += ["--out", str(run), "--bag", *images, "--no-plots", "--no-progress"]
+        sim += ["--seed", str(seed), "--set", f"camera.stamp_offset={args.stamp_offset}"]
+        rc_sim = amsfe(sim)
+        for name, extra in fits.items():  # each fit on the same recording
+            out = work / f"cal{seed}{name}"
+            cal = ["calibrate", str(run / "bag"), "--robot", str(typed), "--out", str(out)]
+            rc = rc_sim or amsfe([*cal, "--no-plots", *extra.split()])
+            row: dict[str, object] = {"seed": seed, "ok": rc == 0}
+            if rc == 0:
+                row.update(errors(out, truth, args.stamp_offset))
+            rows[name].append(row)
+            print(json.dumps({"fit": name, **row} if name else row), file=sys.stderr, flush=True)
         shutil.rmtree(run, ignore_errors=True)
-        print(json.dumps(row), file=sys.stderr, flush=True)
 
-    summary = summarize(rows)
-    result = {
+    result: dict[str, Any] = {
         "command": "tools/calibrate_seeds.py " + " ".join(sys.argv[1:] if argv is None else argv),
         "seeds": [args.first_seed, args.first_seed + args.seeds - 1],
         "truth_seed": args.truth_seed,
         "wall_s": time.time() - t0,
-        "summary": summary,
-        "rows": rows,
     }
+    if args.fit:
+        result["fits"] = {
+            name: {"arguments": fits[name], "summary": summarize(r), "rows": r}
+            for name, r in rows.items()
+        }
+        shown: Any = {name: f["summary"] for name, f in result["fits"].items()}
+    else:
+        result.update(summary=summarize(rows[""]), rows=rows[""])
+        shown = result["summary"]
     text = json.dumps(result, indent=1)
     if args.out:
         Path(args.out).write_text(text + "\n")
-    print(json.dumps(summary, indent=1))
+    print(json.dumps(shown, indent=1))
     shutil.rmtree(work, ignore_errors=True)
     return 0
 
