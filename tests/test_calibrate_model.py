@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -21,7 +22,7 @@ from amsfe_sym.calibration import (
     smooth_angles,
 )
 from amsfe_sym.calibration.design import motion_information
-from amsfe_sym.calibration.model import PARAMETERS
+from amsfe_sym.calibration.model import CORNER_PARAMETERS, PARAMETERS, marker_corners_local
 from amsfe_sym.errors import ConfigError, LogError
 from amsfe_sym.load import load_robot
 from amsfe_sym.load.types import Robot
@@ -57,33 +58,65 @@ def _x(robot: Robot, w: list[float], dc: list[float], o: list[float], dt: float)
     return np.concatenate([w, robot.camera.position + np.array(dc), o, [dt]])
 
 
+def _trial(robot: Robot, rng: np.random.Generator, trial: int) -> np.ndarray:
+    """Parameters away from the start: a rotation vector, a moved camera, a marker offset, a
+    time offset between ticks (no difference straddles an interpolation knot)."""
+    return _x(
+        robot,
+        list(rng.normal(0, 0.03, 3)),
+        list(rng.normal(0, 0.03, 3)),
+        list(rng.normal(0, 0.02, 3)),
+        0.0251 + 0.0003 * trial,
+    )
+
+
+def _columns_match(model: ReprojectionModel, x: np.ndarray) -> None:
+    """Every column of the exact jacobian at ``x`` against central differences."""
+    pr = model.project(x)
+    assert pr.valid.all() and (pr.depth > 0).all()
+    steps = np.array([1e-6] * 9 + [1e-7] + [1e-6] * (model.np - NP))
+    for k in range(model.np):
+        e = np.zeros(model.np)
+        e[k] = steps[k]
+        fd = (model.project(x + e).y - model.project(x - e).y) / (2 * steps[k])
+        scale = max(1.0, float(np.abs(pr.J[:, :, k]).max()))
+        np.testing.assert_allclose(
+            pr.J[:, :, k], fd, rtol=0, atol=2e-6 * scale, err_msg=model.names[k]
+        )
+
+
 def test_jacobian_matches_finite_differences(robot: Robot) -> None:
     """Every column of the exact jacobian against central differences, at parameters away
-    from the start (rotation vector, moved camera, a marker offset, a time offset between
-    ticks so that no difference straddles an interpolation knot)."""
+    from the start (:func:`_trial`)."""
     links = _moving()
     stamp = (np.arange(200, 3800, 33) + 0.5) * T
     model = ReprojectionModel(robot, links, stamp, robot.camera.R_cw)
+    assert model.names == PARAMETERS
     rng = np.random.default_rng(7)
     for trial in range(3):
-        x = _x(
-            robot,
-            list(rng.normal(0, 0.03, 3)),
-            list(rng.normal(0, 0.03, 3)),
-            list(rng.normal(0, 0.02, 3)),
-            0.0251 + 0.0003 * trial,
-        )
-        pr = model.project(x)
-        assert pr.valid.all() and (pr.depth > 0).all()
-        steps = np.array([1e-6] * 9 + [1e-7])
-        for k in range(NP):
-            e = np.zeros(NP)
-            e[k] = steps[k]
-            fd = (model.project(x + e).y - model.project(x - e).y) / (2 * steps[k])
-            scale = max(1.0, float(np.abs(pr.J[:, :, k]).max()))
-            np.testing.assert_allclose(
-                pr.J[:, :, k], fd, rtol=0, atol=2e-6 * scale, err_msg=PARAMETERS[k]
-            )
+        _columns_match(model, _trial(robot, rng, trial))
+
+
+def test_corner_jacobian_matches_finite_differences(robot: Robot) -> None:
+    """The corner fit's map (4 corners a frame, the marker's orientation as 3 more
+    parameters): every column of its exact jacobian against central differences, and its
+    corners around the centre fit's point (the marker's centre) at the same parameters."""
+    links = _moving()
+    stamp = (np.arange(200, 3800, 33) + 0.5) * T
+    local = marker_corners_local(0.05)
+    Rm0 = np.asarray(cv2.Rodrigues(np.array([0.3, -0.2, 0.1]))[0])
+    model = ReprojectionModel(robot, links, stamp, robot.camera.R_cw, local, Rm0)
+    centre = ReprojectionModel(robot, links, stamp, robot.camera.R_cw)
+    assert model.names == CORNER_PARAMETERS and model.np == NP + 3
+    rng = np.random.default_rng(8)
+    for trial in range(2):
+        x = _trial(robot, rng, trial)
+        xc = np.concatenate([x, rng.normal(0, 0.1, 3)])
+        pr = model.project(xc)
+        assert pr.y.shape == (stamp.size, 8) and pr.J.shape == (stamp.size, 8, NP + 3)
+        mid = pr.y.reshape(-1, 4, 2).mean(axis=1)  # (a square's corners: near its centre)
+        assert np.abs(mid - centre.project(x).y).max() < 1.0
+        _columns_match(model, xc)
 
 
 def test_map_is_the_generated_camera_at_the_spec_pose(robot: Robot, libraries: object) -> None:
@@ -218,6 +251,56 @@ def test_recovers_a_synthetic_camera(robot: Robot) -> None:
     J = ReprojectionModel(robot, links, stamp, cal.R0).project(cal.x).J[cal.used].reshape(-1, NP)
     C = np.linalg.inv(J.T @ J)
     np.testing.assert_allclose(cal.correlation, C / np.outer(*[np.sqrt(np.diag(C))] * 2), atol=1e-8)
+
+
+def test_recovers_a_synthetic_camera_from_the_marker_corners(robot: Robot, tmp_path: Path) -> None:
+    """The marker's 4 corners per frame (5 cm, turned on its link, 1 px noise on each), as an
+    image log gives them: the corner fit runs (13 parameters, 8 residuals a frame), finds
+    the camera, the marker's offset and orientation and the time offset within 4 of its
+    stated sigmas; a frame with one corner 40 px off is dropped whole; the report says which
+    fit ran; the written robot.toml carries ``[tracked] orientation``, which loads."""
+    import tomllib
+
+    from amsfe_sym.apps.calibrate import report_lines
+    from amsfe_sym.calibration.spec_out import calibrated_spec
+    from amsfe_sym.load.spec import load_spec
+
+    links = _moving(12000)
+    stamp = np.arange(100, 11900, 33) * T
+    x_true = _x(robot, [0.02, -0.015, 0.01], [0.02, -0.01, 0.015], [0.01, -0.012, 0.008], 0.02)
+    Rm = np.asarray(cv2.Rodrigues(np.array([0.4, -0.3, 1.1]))[0])
+    local = marker_corners_local(0.05)
+    model = ReprojectionModel(robot, links, stamp, robot.camera.R_cw, local, Rm)
+    y = model.project(np.concatenate([x_true, np.zeros(3)])).y
+    y += np.random.default_rng(4).normal(0, 1.0, y.shape)
+    y[40, 2] += 40.0  # one corner of frame 40 mis-detected
+    corners = y.reshape(-1, 4, 2)
+    centre = ReprojectionModel(robot, links, stamp, robot.camera.R_cw).project(x_true).y
+    steps = np.rint(stamp / T).astype(np.int64)
+    obs = Observations(stamp, centre, steps, {}, corners, 0.05)
+    cal = calibrate(robot, links, obs)
+    assert cal.fit == "corners" and cal.names == CORNER_PARAMETERS and cal.held == {}
+    assert cal.corner_start is not None and cal.corner_start.rms < 50.0
+    assert cal.dropped.get(40, "").startswith("outlier")
+    assert all(why == "pixel outside the image" for i, why in cal.dropped.items() if i != 40)
+    err = np.abs(cal.x[3:10] - x_true[3:10])
+    assert np.all(err < 4 * cal.std[3:10]), (err, cal.std[3:10])
+    assert cal.marker_R is not None
+    dRm = cv2.Rodrigues(cal.marker_R @ Rm.T)[0].ravel()
+    assert np.all(np.abs(dRm) < 4 * cal.std[10:13])
+    R_true = ReprojectionModel(robot, links, stamp, robot.camera.R_cw).rotation(x_true[:3])
+    dR = cv2.Rodrigues(cal.R_cw @ R_true.T)[0].ravel()
+    assert np.all(np.abs(dR) < 4 * cal.std[0:3])
+    assert 0.85 < cal.pixel_std < 1.15
+    lines = report_lines(cal, robot, {})
+    assert any("fit: corners (4 corners a frame)" in ln for ln in lines)
+    assert any(ln.strip().startswith("marker orientation") for ln in lines)
+    text = calibrated_spec(robot, cal, "synthetic")
+    written = tomllib.loads(text)["tracked"]["orientation"]
+    (tmp_path / "robot.toml").write_text(text)
+    q = load_spec(str(tmp_path / "robot.toml")).tracked.orientation
+    assert q is not None
+    np.testing.assert_allclose(q, written, atol=1e-12)
 
 
 def test_time_offset_of_an_arm_that_stops_for_each_frame(robot: Robot) -> None:

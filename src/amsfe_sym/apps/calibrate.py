@@ -48,6 +48,8 @@ class CalibrateOptions:
         pixel_std: Expected pixel noise [px]: the robust loss's scale before it is measured.
         max_offset: Largest |time offset| the initial scan tries [s].
         fit_time_offset: False holds the time offset at 0.
+        corners: Fit the marker's 4 corners when the log has them (an image topic); False:
+            the tracked point only.
         plots: Draw the figure.
         force: Replace an existing output folder that amsfe wrote.
     """
@@ -56,6 +58,7 @@ class CalibrateOptions:
     pixel_std: float = 1.0
     max_offset: float = 0.2
     fit_time_offset: bool = True
+    corners: bool = True
     plots: bool = True
     force: bool = False
 
@@ -108,11 +111,19 @@ def calibrate_command(
     links = link_angles(
         log, rob.stiffness_at(rob.theta_true), rob.Mm, rob.Fm, positions=ls.positions
     )
-    obs = observations(log)
+    obs = observations(log, ls.marker.size, corners=opts.corners)
     print(
         f"calibrate {log_path} with {spec.name}: {obs.m} camera frames, {log.K} encoder ticks "
         f"({log.K * log.T:.1f} s)"
     )
+    if obs.corners is not None:
+        print(
+            f"  fit: the marker's 4 corners a frame (8 residuals; its side "
+            f"{obs.marker_size * 1e3:g} mm, the topic spec's [marker] size) and its "
+            "orientation on its link"
+        )
+    else:
+        print("  fit: one point a frame (the tracked point)")
     print(f"  link angles: {links.note}")
     cal = calibrate(
         rob,
@@ -162,7 +173,11 @@ def report_lines(cal: Calibration, robot: Robot, reader_skipped: dict[str, int])
     from amsfe_sym.load.rotation import matrix_to_quaternion
 
     hw = cal.half_width95()
-    out = ["  parameter                  value        95 % interval (linearised)"]
+    what = "4 corners a frame" if cal.fit == "corners" else "one point a frame"
+    out = [
+        f"  fit: {cal.fit} ({what})",
+        "  parameter                  value        95 % interval (linearised)",
+    ]
 
     def row(label: str, k: int, scale: float, unit: str, value: float, digits: int) -> str:
         if not cal.free[k]:
@@ -181,6 +196,16 @@ def report_lines(cal: Calibration, robot: Robot, reader_skipped: dict[str, int])
     for i, axis in enumerate("xyz"):
         out.append(row(f"marker offset {axis}", 6 + i, 1e3, "mm", cal.offset[i], 2))
     out.append(row("time offset", 9, 1e3, "ms", cal.time_offset, 2))
+    if cal.marker_R is not None:
+        qm = matrix_to_quaternion(cal.marker_R)
+        out.append(
+            f"  marker orientation       [{', '.join(f'{v:+.6f}' for v in qm)}] (qx qy qz qw)"
+        )
+        if cal.free[10]:
+            mr = ", ".join(f"{hw[i] * 180 / math.pi:.3f}" for i in range(10, 13))
+            out.append(f"    its rotation: +- {mr} deg about the tracked frame's x, y, z axes")
+        else:
+            out.append("    held at the start's (see below)")
     moved = float(np.linalg.norm(cal.position - robot.camera.position))
     turned = _rotation_error_deg(cal.R_cw, robot.camera.R_cw)
     out.append(
@@ -203,7 +228,11 @@ def report_lines(cal: Calibration, robot: Robot, reader_skipped: dict[str, int])
             out.append(f"    {count:>6}  {why}")
     else:
         out.append("  frames dropped: none")
-    names = {"time_offset": "the time offset", "offset": "the marker offset"}
+    names = {
+        "time_offset": "the time offset",
+        "offset": "the marker offset",
+        "marker_rotation": "the marker orientation",
+    }
     for group, why in cal.held.items():
         out.append(f"  cannot determine {names.get(group, group)}: {why}")
     return out
@@ -214,7 +243,6 @@ def _summary(
 ) -> dict[str, Any]:
     """``calibration.json``: every parameter with its 1-sigma and 95 % half-width (null where
     held), the pose, the errors per frame, the dropped frames and what was held."""
-    from amsfe_sym.calibration.model import PARAMETERS
     from amsfe_sym.calibration.solve import Z95
     from amsfe_sym.load.rotation import matrix_to_quaternion
 
@@ -234,8 +262,12 @@ def _summary(
                 "half_width_95": num(hw[k]),
                 "fitted": bool(cal.free[k]),
             }
-            for k, name in enumerate(PARAMETERS)
+            for k, name in enumerate(cal.names)
         },
+        "fit": cal.fit,
+        "marker_orientation": None
+        if cal.marker_R is None
+        else matrix_to_quaternion(cal.marker_R).tolist(),
         "interval": f"linearised: +-{Z95:.3f} sigma, sigma^2 = (J^T J)^-1 s^2 at the solution",
         "camera": {
             "position": cal.position.tolist(),
@@ -263,22 +295,24 @@ def _summary(
         },
         "singular_values_scaled": cal.singular_values.tolist(),
         "correlation": {
-            "parameters": list(PARAMETERS),
+            "parameters": list(cal.names),
             "matrix": [[num(round(float(v), 4)) for v in row] for row in cal.correlation],
         },
     }
 
 
 def _write_residuals(path: Path, cal: Calibration) -> None:
-    """One row per frame: stamp [s], pixel u, v, residual du, dv [px], used, why dropped."""
-    lines = ["stamp_s,u_px,v_px,du_px,dv_px,used,dropped"]
+    """One row per frame: stamp [s], pixel u, v, residual du, dv [px] (the corner fit: of
+    each corner k, ``u<k>_px`` ...), used, why dropped."""
+    P = cal.pixel.shape[1] // 2
+    tags = [""] if P == 1 else [str(k) for k in range(P)]
+    cols = [f"u{t}_px,v{t}_px" for t in tags] + [f"du{t}_px,dv{t}_px" for t in tags]
+    lines = ["stamp_s," + ",".join(cols) + ",used,dropped"]
     for i in range(cal.stamp.size):
-        du, dv = cal.residual[i]
         why = cal.dropped.get(i, "").replace(",", ";")
-        lines.append(
-            f"{cal.stamp[i]:.6f},{cal.pixel[i, 0]:.4f},{cal.pixel[i, 1]:.4f},"
-            f"{du:.5f},{dv:.5f},{int(cal.used[i])},{why}"
-        )
+        pix = ",".join(f"{v:.4f}" for v in cal.pixel[i])
+        res = ",".join(f"{v:.5f}" for v in cal.residual[i])
+        lines.append(f"{cal.stamp[i]:.6f},{pix},{res},{int(cal.used[i])},{why}")
     path.write_text("\n".join(lines) + "\n")
 
 
@@ -291,7 +325,10 @@ def _figure(path: Path, cal: Calibration, robot: Robot) -> None:
 
     fig, (a, b) = plt.subplots(1, 2, figsize=(12, 4.5))
     u = cal.used
-    t, r = cal.stamp, cal.residual
+    P = cal.pixel.shape[1] // 2
+    t, r = np.repeat(cal.stamp, P), cal.residual.reshape(-1, 2)  # (one row a point)
+    p = cal.pixel.reshape(-1, 2)
+    u = np.repeat(cal.used, P)
     a.plot(t[u], r[u, 0], ".", ms=2, label="u")
     a.plot(t[u], r[u, 1], ".", ms=2, label="v")
     bad = ~u & np.isfinite(r).all(axis=1)
@@ -302,7 +339,6 @@ def _figure(path: Path, cal: Calibration, robot: Robot) -> None:
     a.set_title(f"residuals over time (pixel noise {cal.pixel_std:.2f} px)")
     a.legend(loc="upper right")
     a.grid(True, alpha=0.3)
-    p = cal.pixel
     b.quiver(p[u, 0], p[u, 1], 20 * r[u, 0], 20 * r[u, 1], angles="xy", scale_units="xy", scale=1)
     b.set_xlim(0, robot.camera.width)
     b.set_ylim(robot.camera.height, 0)
@@ -338,6 +374,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--no-time-offset", action="store_true", help="hold the time offset at 0 (do not fit it)"
     )
+    p.add_argument(
+        "--no-corners",
+        action="store_true",
+        help="fit the tracked point only, even when the images give the marker's 4 corners",
+    )
     p.add_argument("--no-plots", action="store_true", help="skip the figure")
     p.add_argument("--force", action="store_true", help="replace an --out that amsfe wrote")
 
@@ -371,6 +412,7 @@ def from_args(args: argparse.Namespace) -> int:
         pixel_std=args.pixel_std,
         max_offset=args.max_time_offset,
         fit_time_offset=not args.no_time_offset,
+        corners=not args.no_corners,
         plots=not args.no_plots,
         force=args.force,
     )

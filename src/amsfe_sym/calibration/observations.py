@@ -91,16 +91,30 @@ class Observations:
         pixel: Measured pixels (m, 2) [px].
         exposure_step: The frames' exposure ticks (m,).
         skipped: Frames the reader did not pass on, by reason (its counts).
+        corners: The marker's 4 corners per frame (m, 4, 2) [px], undistorted, OpenCV's
+            order, when every frame has them (an image topic) and the marker's side is known;
+            then the calibration fits them (None: it fits ``pixel``).
+        marker_size: The marker's side [m] (with ``corners``).
     """
 
     stamp: FloatArray
     pixel: FloatArray
     exposure_step: IntArray
     skipped: dict[str, int]
+    corners: FloatArray | None = None
+    marker_size: float = 0.0
 
     @property
     def m(self) -> int:
         return int(self.stamp.size)
+
+    @property
+    def target(self) -> FloatArray:
+        """What the fit compares its map with, (m, 2P) [px]: the 4 corners' u, v in turn,
+        or the pixel (P = 1)."""
+        if self.corners is None:
+            return self.pixel
+        return self.corners.reshape(self.m, 8)
 
 
 def link_angles(
@@ -176,11 +190,20 @@ def smooth_angles(
     return out, h
 
 
-def observations(log: RobotLog) -> Observations:
-    """The log's camera frames at their exposure stamps, and the reader's skip counts."""
+def observations(
+    log: RobotLog, marker_size: float | None = None, corners: bool = True
+) -> Observations:
+    """The log's camera frames at their exposure stamps, and the reader's skip counts; with
+    their marker corners when every frame has them, ``marker_size`` [m] is given and
+    ``corners`` (False: the centre fit on an image log)."""
     frames = sorted(log.frames, key=lambda f: f.exposure_step)
     steps = np.array([f.exposure_step for f in frames], dtype=np.int64)
     pixel = np.array([np.asarray(f.z, dtype=np.float64)[:2] for f in frames]).reshape(-1, 2)
     use = log.usage.get("camera")
     skipped = dict(use.skipped) if use is not None else {}
-    return Observations(steps.astype(np.float64) * log.T, pixel, steps, skipped)
+    stamp = steps.astype(np.float64) * log.T
+    have = bool(frames) and all(f.corners is not None for f in frames)
+    if not (corners and have and marker_size):
+        return Observations(stamp, pixel, steps, skipped)
+    c = np.array([np.asarray(f.corners, dtype=np.float64) for f in frames]).reshape(-1, 4, 2)
+    return Observations(stamp, pixel, steps, skipped, c, float(marker_size))

@@ -26,7 +26,15 @@ Steps:
 4. **What the motion determines.**  A parameter whose 95 % half-width exceeds
    :data:`UNDETERMINED` is held at its initial value (the spec's marker offset, a zero time
    offset) and the fit repeated without it; the result names it and why.  The camera's pose is
-   never held: a log that cannot determine it is refused (one line).
+   never held: a log that cannot determine it is refused (one line), once every other
+   parameter the log cannot determine is held (a held parameter is not in the degrees of
+   freedom of ``s^2``).
+
+With the marker's 4 corners per frame (an image log, :attr:`Observations.corners`) the fit is
+the same over 8 residuals a frame, with the marker's orientation on its link as 3 more
+parameters (:mod:`amsfe_sym.calibration.model`), its start from
+:mod:`amsfe_sym.calibration.corner_start`; a frame's corners are dropped together, its error
+the RMS of its 4 corners' distances.
 """
 
 from __future__ import annotations
@@ -38,8 +46,17 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
+from amsfe_sym.calibration.corner_start import CornerStart, corner_start
 from amsfe_sym.calibration.initial import SCAN_STEP_S, InitialGuess, initial_guess, spread_check
-from amsfe_sym.calibration.model import NP, ReprojectionModel
+from amsfe_sym.calibration.intervals import (
+    GROUP,
+    UNDETERMINED,
+    Z95,
+    correlation,
+    stds,
+    undetermined,
+)
+from amsfe_sym.calibration.model import NP, PARAMETERS, ReprojectionModel, marker_corners_local
 from amsfe_sym.calibration.observations import NO_ENCODER, LinkAngles, Observations
 from amsfe_sym.errors import LogError, describe
 from amsfe_sym.load.types import Robot
@@ -61,17 +78,9 @@ FloatArray = NDArray[np.float64]
 HUBER_SCALE = 3.0
 #: A frame whose reprojection error exceeds this many pixel-noise sigmas is an outlier.
 OUTLIER_SIGMAS = 5.0
-#: 95 % half-width above which a parameter is "not determined by the motion" (the parameter
-#: group's unit: rotation [deg], position and offset [m], time [s]).
-UNDETERMINED = {"rotation": 1.0, "camera": 0.02, "offset": 0.02, "time_offset": 0.01}
 #: A start whose reprojection RMS exceeds this many Huber scales gets a squared-loss fit
 #: before the robust one (module docstring, step 2).
 FAR_START = 10.0
-#: The 95 % two-sided normal quantile.
-Z95 = 1.959963984540054
-
-_GROUP = ("rotation",) * 3 + ("camera",) * 3 + ("offset",) * 3 + ("time_offset",)
-_UNIT = (180.0 / np.pi,) * 3 + (1.0,) * 7
 
 
 @dataclass
@@ -99,6 +108,14 @@ class Calibration:
             as ``std`` (NaN rows and columns: held): which parameters the pixels tell apart
             least (docs/calibrate.md, "Accuracy").
         nfev: Model evaluations of the final fit.
+        pixel: What was fitted per frame (m, 2P) [px] (P = 1: the tracked point; 4: the
+            marker's corners, u, v of each in turn); ``residual`` has its shape.
+        names: The parameters' names (:data:`~amsfe_sym.calibration.model.PARAMETERS`,
+            or ``CORNER_PARAMETERS`` in the corner fit).
+        fit: ``"centres"`` (one point a frame) or ``"corners"`` (the marker's 4 corners).
+        marker_R: The marker's orientation in the tracked frame (marker -> tracked frame)
+            at the solution (corner fit), else None.
+        corner_start: The corner fit's start (its candidates' RMS), else None.
     """
 
     R_cw: FloatArray
@@ -120,14 +137,24 @@ class Calibration:
     pixel: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     correlation: FloatArray = field(default_factory=lambda: np.full((NP, NP), np.nan))
     stamp: FloatArray = field(default_factory=lambda: np.zeros(0))
+    names: tuple[str, ...] = PARAMETERS
+    fit: str = "centres"
+    marker_R: FloatArray | None = None
+    corner_start: CornerStart | None = None
 
     def half_width95(self) -> FloatArray:
         """The 95 % linearised half-width of each parameter (NaN where held)."""
         return Z95 * self.std
 
     def frame_errors(self) -> FloatArray:
-        """Reprojection error [px] of each used frame."""
-        return np.linalg.norm(self.residual[self.used], axis=1)
+        """Reprojection error [px] of each used frame (the RMS of its points' distances)."""
+        return _frame_rms(self.residual[self.used])
+
+
+def _frame_rms(res: FloatArray) -> FloatArray:
+    """Per frame, the RMS of its points' distances [px], from residuals (m, 2P) [px]."""
+    d2 = np.sum(res.reshape(res.shape[0], -1, 2) ** 2, axis=2)
+    return np.sqrt(np.mean(d2, axis=1))
 
 
 def calibrate(
@@ -183,33 +210,36 @@ def calibrate(
             f"+-{max_offset:g} s): reprojection RMS {init.rms:.2f} px at "
             f"{init.time_offset * 1e3:+.0f} ms"
         )
-    model = ReprojectionModel(robot, links, obs.stamp, init.R_cw)
-    x0 = np.concatenate([np.zeros(3), init.position, offset0, [init.time_offset]])
-    free = np.ones(NP, dtype=bool)
+    model, x0, cs = _start(robot, links, obs, init, offset0, say)
+    start_rms = init.rms if cs is None else cs.rms
+    npar = model.np
+    free = np.ones(npar, dtype=bool)
     held: dict[str, str] = {}
     if not fit_time_offset:
         free[9] = False
         x0[9] = 0.0
         held["time_offset"] = "held at 0 (--no-time-offset)"
     dropped: dict[int, str] = {}
-    inside = (
-        (obs.pixel[:, 0] >= 0)
-        & (obs.pixel[:, 0] < robot.camera.width)
-        & (obs.pixel[:, 1] >= 0)
-        & (obs.pixel[:, 1] < robot.camera.height)
-        & np.isfinite(obs.pixel).all(axis=1)
+    pts = obs.target.reshape(obs.m, -1, 2)
+    box = (
+        (pts[:, :, 0] >= 0)
+        & (pts[:, :, 0] < robot.camera.width)
+        & (pts[:, :, 1] >= 0)
+        & (pts[:, :, 1] < robot.camera.height)
+        & np.isfinite(pts).all(axis=2)
     )
+    inside: NDArray[np.bool_] = np.asarray(box.all(axis=1), dtype=bool)
     for i in np.flatnonzero(~inside):
         dropped[int(i)] = "pixel outside the image"
     use = inside.copy()
 
     # 2. robust fit (after a squared-loss one from a far start), pixel noise, outliers
-    if init.rms > FAR_START * HUBER_SCALE * pixel_std:
+    if start_rms > FAR_START * HUBER_SCALE * pixel_std:
         x0, use, _ = _fit(model, obs, x0, free, use, dropped)
     x, use, nfev = _fit(model, obs, x0, free, use, dropped, "huber", HUBER_SCALE * pixel_std)
     res = _residual(model, obs, x)
     sigma = 1.4826 * float(np.median(np.abs(res[use])))
-    err = np.linalg.norm(res, axis=1)
+    err = _frame_rms(res)
     for i in np.flatnonzero(use & (err > OUTLIER_SIGMAS * sigma)):
         dropped[int(i)] = (
             f"outlier of the robust loss ({err[i]:.1f} px > {OUTLIER_SIGMAS:g} x {sigma:.2f} px)"
@@ -221,7 +251,7 @@ def calibrate(
     while True:
         x, use, nfev = _fit(model, obs, x, free, use, dropped)  # the squared loss
         pr = model.project(x)
-        r = (pr.y - obs.pixel)[use]
+        r = (pr.y - obs.target)[use]
         Jf = pr.J[use][:, :, free].reshape(-1, int(free.sum()))
         if r.size <= int(free.sum()):
             raise LogError(
@@ -235,20 +265,22 @@ def calibrate(
             )
         dof = r.size - int(free.sum())
         s2 = float(np.sum(r**2)) / dof
-        sd, sv = _stds(Jf, s2)
-        std = np.full(NP, np.nan)
+        sd, sv = stds(Jf, s2)
+        std = np.full(npar, np.nan)
         std[free] = sd
-        newly = _undetermined(std, free, held, UNDETERMINED if limits is None else limits)
+        newly = undetermined(std, free, UNDETERMINED if limits is None else limits)
         if not newly:
             break
         for group, why in newly.items():
-            for k in range(NP):
-                if _GROUP[k] == group:
+            for k in range(npar):
+                if GROUP[k] == group:
                     free[k] = False
-                    x[k] = 0.0 if group == "time_offset" else offset0[k - 6]
+                    x[k] = offset0[k - 6] if group == "offset" else 0.0
             held[group] = why
     res = _residual(model, obs, x)
     R = model.rotation(x[0:3])
+    if cs is not None:
+        say(f"corner fit: 4 corners a frame, {int(use.sum())} frames, {npar} parameters")
     return Calibration(
         R_cw=R,
         position=x[3:6].copy(),
@@ -266,93 +298,50 @@ def calibrate(
         initial=init,
         singular_values=sv,
         nfev=nfev,
-        pixel=obs.pixel,
+        pixel=obs.target,
         stamp=obs.stamp,
-        correlation=_correlation(Jf, free),
+        correlation=correlation(Jf, free),
+        names=model.names,
+        fit="centres" if cs is None else "corners",
+        marker_R=None if cs is None else model.marker_rotation(x),
+        corner_start=cs,
     )
 
 
-#: A singular value of the column-scaled jacobian below this share of the largest: its
-#: direction is not determined at all (the parameters in it get an infinite std).
-RANK_TOLERANCE = 1e-9
-
-
-def _stds(J: FloatArray, s2: float) -> tuple[FloatArray, FloatArray]:
-    """1-sigma of each parameter, ``sqrt(diag(s2 (J^T J)^-1))``, with ``inf`` for a parameter
-    the jacobian does not see (a zero column, or a share of a null direction), and the
-    singular values of ``J`` with unit-norm columns."""
-    cols = np.linalg.norm(J, axis=0)
-    std = np.full(J.shape[1], np.inf)
-    seen = cols > 0
-    if not seen.any():
-        return std, np.zeros(0)
-    _, S, Vt = np.linalg.svd(J[:, seen] / cols[seen], full_matrices=False)
-    good = S / S[0] > RANK_TOLERANCE
-    var = (Vt[good].T ** 2) @ (1.0 / S[good] ** 2)
-    null = (np.abs(Vt[~good]) > 0.1).any(axis=0) if (~good).any() else np.zeros(seen.sum(), bool)
-    sd = np.sqrt(s2 * var) / cols[seen]
-    sd[null] = np.inf
-    std[seen] = sd
-    return std, S
-
-
-def _correlation(J: FloatArray, free: NDArray[np.bool_]) -> FloatArray:
-    """The correlation matrix (NP, NP) of the free parameters from ``(J^T J)^+`` (``J``: the
-    jacobian over them), NaN in the rows and columns of the held ones."""
-    out = np.full((NP, NP), np.nan)
-    cols = np.linalg.norm(J, axis=0)
-    cols[cols == 0] = 1.0
-    C = np.linalg.pinv((J / cols).T @ (J / cols))
-    d = np.sqrt(np.clip(np.diag(C), 1e-300, None))
-    idx = np.flatnonzero(free)
-    out[np.ix_(idx, idx)] = C / np.outer(d, d)
-    return out
-
-
-def _undetermined(
-    std: FloatArray, free: NDArray[np.bool_], held: dict[str, str], limits: dict[str, float]
-) -> dict[str, str]:
-    """Parameter groups whose 95 % half-width is over ``limits`` (:data:`UNDETERMINED`;
-    module docstring, step 4); a camera pose among them is refused."""
-    out: dict[str, str] = {}
-    for group, limit in limits.items():
-        ks = [k for k in range(NP) if _GROUP[k] == group and free[k]]
-        if not ks:
-            continue
-        hw = max(Z95 * std[k] * _UNIT[k] for k in ks)
-        if np.isfinite(hw) and hw <= limit:
-            continue
-        unit = {"rotation": "deg", "time_offset": "s"}.get(group, "m")
-        why = (
-            f"its linearised 95 % interval is +-{hw:.3g} {unit} wide (limit {limit:g} {unit}): "
-            + _WHY[group]
+def _start(
+    robot: Robot,
+    links: LinkAngles,
+    obs: Observations,
+    init: InitialGuess,
+    offset0: FloatArray,
+    say: Callable[[str], None],
+) -> tuple[ReprojectionModel, FloatArray, CornerStart | None]:
+    """The model and the start's parameters: the centre scan's (one point a frame), or with
+    the marker's corners the corner start (:mod:`amsfe_sym.calibration.corner_start`)."""
+    if obs.corners is None:
+        model = ReprojectionModel(robot, links, obs.stamp, init.R_cw)
+        return (
+            model,
+            np.concatenate([np.zeros(3), init.position, offset0, [init.time_offset]]),
+            None,
         )
-        if group in ("rotation", "camera"):
-            raise LogError(
-                describe(
-                    "calibration: the camera pose",
-                    "a log whose motion determines it",
-                    why,
-                    "record the arm moving through more of the camera's view",
-                )
-            )
-        out[group] = why
-    return out
+    from amsfe_sym.load.rotation import quaternion_to_matrix
 
-
-_WHY = {
-    "rotation": "the tracked point covers too little of the view",
-    "camera": "the tracked point covers too little of the view",
-    "offset": "the tracked frame does not turn enough in the log (held at the spec's offset)",
-    "time_offset": "the tracked point hardly moves at the exposures, so a shift in time "
-    "changes no pixel (held at 0; move the arm faster)",
-}
+    q = robot.spec.tracked.orientation
+    Rm_spec = None if q is None else np.asarray(quaternion_to_matrix(q), dtype=np.float64)
+    cs = corner_start(robot, links, obs, init, offset0, Rm_spec)
+    tried = ", ".join(f"{k} {v:.2f} px" for k, v in cs.tried.items())
+    say(f"corner start: {cs.source} (corners' reprojection RMS: {tried})")
+    local = marker_corners_local(obs.marker_size)
+    model = ReprojectionModel(robot, links, obs.stamp, cs.R_cw, local, cs.Rm)
+    x0 = np.concatenate([np.zeros(3), cs.position, cs.offset, [cs.time_offset], np.zeros(3)])
+    return model, x0, cs
 
 
 def _residual(model: ReprojectionModel, obs: Observations, x: FloatArray) -> FloatArray:
     """Residuals (m, 2) [px] of every frame with link angles (NaN elsewhere)."""
     pr = model.project(x)
-    res = pr.y - obs.pixel
+    res = pr.y - obs.target
     res[~pr.valid] = np.nan
     return res
 
@@ -389,7 +378,7 @@ def _fit(
         def fun(p: FloatArray, idx: NDArray[np.intp] = idx, base: FloatArray = base) -> FloatArray:
             """Residuals [px] of the frames ``idx`` at the free parameters ``p``."""
             pr = model.project(_with(base, free, p))
-            return (pr.y[idx] - obs.pixel[idx]).reshape(-1)
+            return (pr.y[idx] - obs.target[idx]).reshape(-1)
 
         def jac(p: FloatArray, idx: NDArray[np.intp] = idx, base: FloatArray = base) -> FloatArray:
             """Their jacobian over the free parameters."""

@@ -24,10 +24,16 @@ FloatArray = NDArray[np.float64]
 
 
 def spec_with_camera(
-    robot: Robot, name: str, R_cw: FloatArray, position: FloatArray, offset: FloatArray
+    robot: Robot,
+    name: str,
+    R_cw: FloatArray,
+    position: FloatArray,
+    offset: FloatArray,
+    marker_R: FloatArray | None = None,
 ) -> str:
     """The text of ``robot``'s spec (its keys; comments are not kept) named ``name``, with
-    ``urdf`` an absolute path, ``[tracked]`` at ``offset`` [m] in the tracked frame and
+    ``urdf`` an absolute path, ``[tracked]`` at ``offset`` [m] in the tracked frame (and its
+    ``orientation``, the quaternion of ``marker_R`` (marker -> tracked frame), when given) and
     ``[camera]`` with the resolved intrinsics, ``position`` [m] and ``orientation`` (the
     quaternion of ``R_cw`` transposed; no ``look_at`` / ``up``)."""
     spec = robot.spec
@@ -39,6 +45,8 @@ def spec_with_camera(
     tracked = dict(data.get("tracked", {}))
     tracked["frame"] = robot.tracked_frame
     tracked["offset"] = [float(v) for v in offset]
+    if marker_R is not None:
+        tracked["orientation"] = [float(v) for v in matrix_to_quaternion(np.asarray(marker_R))]
     data["tracked"] = tracked
     camera = {k: v for k, v in dict(data.get("camera", {})).items() if k not in ("look_at", "up")}
     K = robot.camera.K
@@ -58,7 +66,8 @@ def spec_with_camera(
 
 
 def calibrated_spec(robot: Robot, cal: Calibration, log: str) -> str:
-    """The calibrated ``robot.toml``: :func:`spec_with_camera` at the calibration, named
+    """The calibrated ``robot.toml``: :func:`spec_with_camera` at the calibration (with the
+    marker's orientation after a corner fit), named
     ``<name>_calibrated`` (its own library, beside the original's), with a header saying
     where it comes from and the time offset (a topic spec key:
     :func:`calibrated_topic_spec`)."""
@@ -70,7 +79,7 @@ def calibrated_spec(robot: Robot, cal: Calibration, log: str) -> str:
         f"# reprojection RMS {cal.pixel_std:.3f} px per axis.\n"
     )
     name = f"{spec.name}_calibrated"
-    return head + spec_with_camera(robot, name, cal.R_cw, cal.position, cal.offset)
+    return head + spec_with_camera(robot, name, cal.R_cw, cal.position, cal.offset, cal.marker_R)
 
 
 def calibrated_topic_spec(source: Path | None, time_offset: float, log: str) -> str:

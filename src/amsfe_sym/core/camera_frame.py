@@ -24,6 +24,8 @@ class CameraFrame:
         z: Measurement ``(dim,)``, in the camera model's units (pixels for the pinhole map).
         delivery_step: Step at which the frame reached the estimator (``kappa + d`` plus
             jitter); ``-1`` when unknown.
+        corners: The marker's 4 corners (4, 2) [px], undistorted, in OpenCV's order, when
+            the frame comes from an image (the calibration's corner fit); None otherwise.
 
     ``eq=False``: frames compare by identity (an array field has no scalar equality).
     """
@@ -31,6 +33,7 @@ class CameraFrame:
     exposure_step: int
     z: FloatArray
     delivery_step: int = -1
+    corners: FloatArray | None = None
 
     @property
     def delay(self) -> int:

@@ -134,9 +134,13 @@ def held_effort(log: OnGrid, spec: LogSpec, use: RoleUse, n: int) -> HeldEffort:
     return HeldEffort(out, int(np.argmax(last >= 0)), end)
 
 
-def camera_frames(log: OnGrid, use: RoleUse) -> list[CameraFrame]:
+def camera_frames(
+    log: OnGrid, use: RoleUse, corners: FloatArray | None = None
+) -> list[CameraFrame]:
     """Each camera frame at its exposure step (its stamp's tick less ``log.exposure_shift``)
-    and its arrival tick, in arrival order; the frames not used counted by reason."""
+    and its arrival tick, in arrival order; the frames not used counted by reason.
+    ``corners``: the marker's corners (M, 4, 2) [px] of the topic's points, kept with their
+    frames (an image topic)."""
     topic = log.plan.roles["camera"]
     pts = log.decoded[topic]
     log_ns = log.on_stamp_clock(topic)
@@ -162,7 +166,8 @@ def camera_frames(log: OnGrid, use: RoleUse) -> list[CameraFrame]:
             count_skip(use, "arrived after the last tick")
         else:
             seen.add(kp)
-            frames.append(CameraFrame(kp, pix, ar))
+            c = None if corners is None else np.asarray(corners[i], dtype=np.float64)
+            frames.append(CameraFrame(kp, pix, ar, c))
     use.used = len(frames)
     if len(frames) >= 3:  # a camera that stops: named at its last frame (docs/input-rules.md)
         arrivals = np.array([f.delivery_step for f in frames])
