@@ -14,10 +14,11 @@ import pytest
 from amsfe_sym.codegen import library_for
 from amsfe_sym.load import load_robot
 from amsfe_sym.load.rotation import matrix_to_quaternion
+from amsfe_sym.logs.sim_marker import marker_pose_of, robot_marker_pose
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.vision.camera_info import make_camera_info, undistort
 from amsfe_sym.vision.marker import MarkerDetector, diagonals_meet
-from amsfe_sym.vision.marker_pose import MAX_VIEW_DEG, MIN_AREA_PX2, MarkerPose, marker_view
+from amsfe_sym.vision.marker_pose import MAX_VIEW_DEG, MIN_AREA_PX2, marker_view
 from amsfe_sym.vision.render import ImageNoise, MarkerRenderer, marker_corners
 from amsfe_sym.vision.sim_images import LENSES, ImageOptions, SimulatedCamera
 from amsfe_sym.vision.spec import MarkerSpec
@@ -161,7 +162,7 @@ def test_the_simulated_camera_draws_the_marker_on_its_link(lib) -> None:
     R_cw = np.asarray(cam.R_cw, dtype=float)
     theta = lib.theta_true
     q0, q1 = np.array([0.4, -0.9]), np.array([-0.3, 0.6])
-    R_f = MarkerPose(robot, (0.0, 0.0, 0.0, 1.0)).placement(q0)[1]
+    R_f = robot_marker_pose(robot, (0.0, 0.0, 0.0, 1.0)).placement(q0)[1]
     options = ImageOptions(marker=MarkerSpec(size=0.1), model="plumb_bob", D=(0.0,) * 5)
 
     def camera(turn: np.ndarray | None) -> SimulatedCamera:
@@ -169,7 +170,8 @@ def test_the_simulated_camera_draws_the_marker_on_its_link(lib) -> None:
         at q0, or facing it always (None)."""
         pose = None
         if turn is not None:
-            pose = MarkerPose(robot, tuple(matrix_to_quaternion(R_f.T @ R_cw.T @ FACING @ turn)))
+            R_m = R_f.T @ R_cw.T @ FACING @ turn
+            pose = robot_marker_pose(robot, tuple(matrix_to_quaternion(R_m)))
         point = lib.function("tracked_point")
         return SimulatedCamera(cam, point, options, np.random.default_rng(2), pose)
 
@@ -191,11 +193,11 @@ def test_the_simulated_camera_draws_the_marker_on_its_link(lib) -> None:
 
 
 def test_the_orientation_is_read_from_the_spec() -> None:
-    """``MarkerPose.of_spec``: None without ``[tracked] orientation`` (the facing drawing,
+    """``marker_pose_of``: None without ``[tracked] orientation`` (the facing drawing,
     bit-identical images), the marker's rotation with it (robot-marker.toml)."""
-    assert MarkerPose.of_spec(DATA / "robot.toml") is None
-    assert MarkerPose.of_spec(None) is None
-    pose = MarkerPose.of_spec(DATA / "robot-marker.toml")
+    assert marker_pose_of(DATA / "robot.toml") is None
+    assert marker_pose_of(None) is None
+    pose = marker_pose_of(DATA / "robot-marker.toml")
     assert pose is not None
     assert np.abs(pose.R_m[:, 2] - [0.6, -0.8, 0.0]).max() < 1e-8
     assert np.abs(pose.R_m[:, 0] - [0.0, 0.0, 1.0]).max() < 1e-8

@@ -236,12 +236,12 @@ def _camera(res: RunResult, images: ImageOptions) -> Any:
     """The run's true camera (:class:`~amsfe_sym.vision.sim_images.SimulatedCamera`), its
     noise drawn from the run's seed (a stream of its own: the run's draws are unchanged), the
     marker fixed to its link when the run's robot spec gives ``[tracked] orientation``."""
-    from amsfe_sym.vision.marker_pose import MarkerPose
+    from amsfe_sym.logs.sim_marker import marker_pose_of
     from amsfe_sym.vision.sim_images import SimulatedCamera
 
     rng = np.random.default_rng([int(res.scenario.seed), 35])
     lib = res.lib
-    pose = MarkerPose.of_spec(res.scenario.robot, lib.manifest.raw.get("locked", {}))
+    pose = marker_pose_of(res.scenario.robot, lib.manifest.raw.get("locked", {}))
     return SimulatedCamera(lib.manifest.camera, lib.function("tracked_point"), images, rng, pose)
 
 

@@ -375,11 +375,11 @@ class _Images:
     def __init__(self, node: Any, lib: ModelLibrary, seed: int, qos: Any, robot: str) -> None:
         from sensor_msgs.msg import CameraInfo, Image
 
-        from amsfe_sym.vision.marker_pose import MarkerPose
+        from amsfe_sym.logs.sim_marker import marker_pose_of
         from amsfe_sym.vision.sim_images import INFO_TOPIC, ImageOptions, SimulatedCamera
 
         rng = np.random.default_rng([int(seed), 35])  # (as amsfe simulate --bag --images)
-        pose = MarkerPose.of_spec(robot, lib.manifest.raw.get("locked", {}))
+        pose = marker_pose_of(robot, lib.manifest.raw.get("locked", {}))
         self.camera = SimulatedCamera(
             lib.manifest.camera, lib.function("tracked_point"), ImageOptions(), rng, pose
         )

@@ -10,11 +10,11 @@ angles q::
 
     P_k = p_f(q) + R_f(q) (o + R_m size/2 c_k)        eq. (7) of the tracked point, per corner
 
-with ``p_f, R_f`` the tracked frame's placement (Pinocchio), ``o`` the tracked offset and
-``R_m`` the orientation's matrix; the corners are projected by the pinhole (K, R_cw,
-position).  The diagonals of the projected square meet at the pinhole's pixel of the tracked
-point ``p_f + R_f o`` (a projection keeps lines), so the centre the estimator fuses is that of
-the facing-the-camera drawing.
+with ``p_f, R_f`` the tracked frame's placement (Pinocchio's: logs/sim_marker.py), ``o`` the
+tracked offset and ``R_m`` the orientation's matrix; the corners are projected by the
+pinhole (K, R_cw, position).  The diagonals of the projected square meet at the pinhole's
+pixel of the tracked point ``p_f + R_f o`` (a projection keeps lines), so the centre the
+estimator fuses is that of the facing-the-camera drawing.
 
 The camera does not see the marker from behind (its z axis away from the camera), nor past
 :data:`MAX_VIEW_DEG` from face-on, nor when its projected area is under
@@ -24,10 +24,8 @@ The camera does not see the marker from behind (its z axis away from the camera)
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -110,54 +108,31 @@ def marker_view(
 
 
 class MarkerPose:
-    """The tracked frame's placement by Pinocchio and the marker's orientation on it, from a
-    robot spec with ``[tracked] orientation`` (:meth:`of_spec`).
+    """The marker fixed to its link: the tracked frame's placement at link angles q and the
+    marker's place on it (built from a robot spec by
+    :func:`amsfe_sym.logs.sim_marker.marker_pose_of`).
 
     Args:
-        robot: The loaded robot (its Pinocchio model, tracked frame and offset).
-        orientation: ``[qx, qy, qz, qw]`` of the marker's frame in the tracked frame.
+        placement: ``(p_f [m], R_f)`` of the tracked frame (world from frame) at link angles
+            q [rad].
+        offset: The tracked point in the tracked frame ``o`` [m].
+        R_m: The marker's frame in the tracked frame (the ``[tracked] orientation``'s matrix).
     """
 
-    def __init__(self, robot: Any, orientation: tuple[float, float, float, float]) -> None:
-        from amsfe_sym.load.rotation import quaternion_to_matrix
-
-        self.robot = robot
-        self.R_m = quaternion_to_matrix(orientation)
-        self.offset = np.asarray(robot.tracked_offset, dtype=np.float64)
-        self._data = robot.model.createData()
-
-    @classmethod
-    def of_spec(
-        cls, spec_path: str | Path | None, locked: Mapping[str, float] | None = None
-    ) -> MarkerPose | None:
-        """The marker of the robot spec ``spec_path`` (a name, folder or file; its joints in
-        ``locked`` locked, as its library's manifest says), or None when the spec gives no
-        ``[tracked] orientation`` (or there is no spec: a bare URDF)."""
-        if spec_path is None:
-            return None
-        from amsfe_sym.load import load_robot
-        from amsfe_sym.load.spec import load_spec
-
-        spec = load_spec(spec_path)
-        if spec.tracked.orientation is None:
-            return None
-        return cls(load_robot(spec.with_locked(dict(locked or {}))), spec.tracked.orientation)
-
-    def placement(self, q: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """The tracked frame's position [m] and rotation (world from frame) at link angles
-        ``q`` [rad]."""
-        import pinocchio as pin
-
-        robot = self.robot
-        qp = robot.to_pin_q(np.asarray(q, dtype=np.float64).ravel())
-        pin.framesForwardKinematics(robot.model, self._data, qp)
-        M = self._data.oMf[robot.tracked_frame_id]
-        return np.array(M.translation, dtype=np.float64), np.array(M.rotation, dtype=np.float64)
+    def __init__(
+        self,
+        placement: Callable[[FloatArray], tuple[FloatArray, FloatArray]],
+        offset: ArrayLike,
+        R_m: ArrayLike,
+    ) -> None:
+        self.placement = placement
+        self.offset = np.asarray(offset, dtype=np.float64)
+        self.R_m = np.asarray(R_m, dtype=np.float64)
 
     def view(
         self, K: ArrayLike, R_cw: ArrayLike, position: ArrayLike, q: ArrayLike, size: float
     ) -> MarkerView:
         """The marker of side ``size`` [m] at link angles ``q`` [rad] as the pinhole camera
         (K, R_cw, position) sees it."""
-        p_f, R_f = self.placement(q)
+        p_f, R_f = self.placement(np.asarray(q, dtype=np.float64).ravel())
         return marker_view(K, R_cw, position, p_f, R_f, self.offset, self.R_m, size)

@@ -96,8 +96,8 @@ class SimulatedCamera:
         tracked_point: ``r = tracked_point(q, theta)`` [m], the generated function.
         options: What to write.
         rng: The images' noise (seeded by the run's seed).
-        pose: The marker fixed to its link (:meth:`MarkerPose.of_spec`); None: the marker
-            faces the camera.
+        pose: The marker fixed to its link
+            (:func:`~amsfe_sym.logs.sim_marker.marker_pose_of`); None: it faces the camera.
     """
 
     def __init__(
