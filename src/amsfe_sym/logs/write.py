@@ -234,12 +234,15 @@ _DETECTED = "/camera/marker_detected"
 
 def _camera(res: RunResult, images: ImageOptions) -> Any:
     """The run's true camera (:class:`~amsfe_sym.vision.sim_images.SimulatedCamera`), its
-    noise drawn from the run's seed (a stream of its own: the run's draws are unchanged)."""
+    noise drawn from the run's seed (a stream of its own: the run's draws are unchanged), the
+    marker fixed to its link when the run's robot spec gives ``[tracked] orientation``."""
+    from amsfe_sym.logs.sim_marker import marker_pose_of
     from amsfe_sym.vision.sim_images import SimulatedCamera
 
     rng = np.random.default_rng([int(res.scenario.seed), 35])
     lib = res.lib
-    return SimulatedCamera(lib.manifest.camera, lib.function("tracked_point"), images, rng)
+    pose = marker_pose_of(res.scenario.robot, lib.manifest.raw.get("locked", {}))
+    return SimulatedCamera(lib.manifest.camera, lib.function("tracked_point"), images, rng, pose)
 
 
 def _tf_frames(res: RunResult, urdf_text: str | None) -> dict[int, Any] | None:

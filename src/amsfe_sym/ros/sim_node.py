@@ -163,7 +163,7 @@ def run_sim_node(sc: Scenario, lib: ModelLibrary, options: SimNodeOptions) -> Si
         pub_eff = node.create_publisher(m.JointState, spec.effort, out)
         pub_truth = node.create_publisher(m.Float64MultiArray, spec.truth, out)
         pub_clock = node.create_publisher(m.Clock, spec.clock, qos_profile(spec, depth=1))
-        images = _Images(node, lib, sc.seed, qos) if options.images else None
+        images = _Images(node, lib, sc.seed, qos, sc.robot) if options.images else None
         commands: list[FloatArray] = []
         n = lib.n
         controller: list[bytes] = []  # the GID of the first command's publisher
@@ -369,16 +369,19 @@ def _wait_peers(ex: object, pub: object, sub: object | None, timeout: float) -> 
 
 class _Images:
     """``sim-node --images``: the true camera's image of each frame and its CameraInfo
-    (:mod:`amsfe_sym.vision.sim_images`), from the true state at the frame's exposure."""
+    (:mod:`amsfe_sym.vision.sim_images`), from the true state at the frame's exposure; the
+    marker fixed to its link when the robot spec ``robot`` gives ``[tracked] orientation``."""
 
-    def __init__(self, node: Any, lib: ModelLibrary, seed: int, qos: Any) -> None:
+    def __init__(self, node: Any, lib: ModelLibrary, seed: int, qos: Any, robot: str) -> None:
         from sensor_msgs.msg import CameraInfo, Image
 
+        from amsfe_sym.logs.sim_marker import marker_pose_of
         from amsfe_sym.vision.sim_images import INFO_TOPIC, ImageOptions, SimulatedCamera
 
         rng = np.random.default_rng([int(seed), 35])  # (as amsfe simulate --bag --images)
+        pose = marker_pose_of(robot, lib.manifest.raw.get("locked", {}))
         self.camera = SimulatedCamera(
-            lib.manifest.camera, lib.function("tracked_point"), ImageOptions(), rng
+            lib.manifest.camera, lib.function("tracked_point"), ImageOptions(), rng, pose
         )
         self.layout = lib.layout
         self.states: dict[int, FloatArray] = {}

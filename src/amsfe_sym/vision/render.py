@@ -102,16 +102,39 @@ class MarkerRenderer:
         und = undistort(info, np.column_stack([xs.ravel(), ys.ravel()]))
         self._und = und.reshape(h, w, 2)
 
-    def render(self, corners: ArrayLike, rng: np.random.Generator) -> U8Array:
+    def render(
+        self, corners: ArrayLike | None, rng: np.random.Generator, foreshortened: bool = False
+    ) -> U8Array:
         """The raw image (height, width) uint8 of the marker whose corners are ``corners``
-        (4, 2) [px] in the rectified (pinhole) image, OpenCV's order."""
+        (4, 2) [px] in the rectified (pinhole) image, OpenCV's order; None: the image
+        without the marker (the camera does not see it: vision/marker_pose.py).
+
+        ``foreshortened``: the texture is averaged down to the scale of the square's shortest
+        edge (a marker seen obliquely is compressed along one direction); otherwise to its
+        top edge's (the square facing the camera, all four edges alike)."""
         import cv2
 
         info, nz = self.info, self.noise
-        c = np.asarray(corners, dtype=np.float64).reshape(4, 2)
+        img = np.full((info.height, info.width), nz.background, np.float32)
+        if corners is not None:
+            c = np.asarray(corners, dtype=np.float64).reshape(4, 2)
+            edges = np.linalg.norm(c - np.roll(c, -1, axis=0), axis=1)
+            self._draw(img, c, float(edges.min() if foreshortened else edges[0]))
+        if nz.blur_px > 0:
+            img = np.asarray(cv2.GaussianBlur(img, (0, 0), nz.blur_px), np.float32)
+        if nz.noise_std > 0:
+            img += np.float32(nz.noise_std) * rng.standard_normal(img.shape, dtype=np.float32)
+        out: U8Array = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+        return out
+
+    def _draw(self, img: NDArray[np.float32], c: FloatArray, edge: float) -> None:
+        """Warp the marker's texture, its square at ``c`` (4, 2) [px] in the pinhole image
+        and averaged to ``edge`` [px] a side, into the raw image ``img`` (in place)."""
+        import cv2
+
+        info, nz = self.info, self.noise
         H = cv2.getPerspectiveTransform(self._square.astype(np.float32), c.astype(np.float32))
         H = np.asarray(H, dtype=np.float64)
-        img = np.full((info.height, info.width), nz.background, np.float32)
         # the quiet zone's outline in the raw image (edges sampled: distortion bends them)
         s = self._tex_side
         t = np.linspace(0.0, s, 9)
@@ -130,7 +153,7 @@ class MarkerRenderer:
                 und = self._und[y0:y1, x0:x1].reshape(-1, 1, 2)
                 tex = cv2.perspectiveTransform(und, np.linalg.inv(H)).reshape(y1 - y0, x1 - x0, 2)
                 # area-average the texture down to about 2 texels per image pixel first
-                scale = float(np.linalg.norm(c[1] - c[0])) / self._side  # [px / texel]
+                scale = edge / self._side  # [px / texel]
                 level = 0
                 while scale * 2.0**level < 0.5 and level + 1 < len(self._levels):
                     level += 1
@@ -143,9 +166,3 @@ class MarkerRenderer:
                     borderMode=cv2.BORDER_CONSTANT, borderValue=float(nz.background),
                 )  # fmt: skip
                 img[y0:y1, x0:x1] = patch
-        if nz.blur_px > 0:
-            img = np.asarray(cv2.GaussianBlur(img, (0, 0), nz.blur_px), np.float32)
-        if nz.noise_std > 0:
-            img += np.float32(nz.noise_std) * rng.standard_normal(img.shape, dtype=np.float32)
-        out: U8Array = np.clip(np.rint(img), 0, 255).astype(np.uint8)
-        return out

@@ -3,11 +3,13 @@
 
 Each delivered frame of a run becomes the image the true camera took at its exposure step:
 the marker centred on the true tracked point (the generated ``tracked_point`` at the true
-q and theta), rendered through the robot's pinhole and :class:`ImageOptions`' distortion,
-blur and noise (:mod:`amsfe_sym.vision.render`), stamped with the exposure and logged at
-its delivery, with the CameraInfo (K = the robot's intrinsics, the distortion, P = [K | 0])
-of the same stamp (the messages: :func:`amsfe_sym.logs.images.image_messages`).  One image
-is held at a time.
+q and theta), facing the camera, or, when the robot spec gives ``[tracked] orientation``,
+fixed to its link (:mod:`amsfe_sym.vision.marker_pose`: turned with the link, seen
+obliquely, not drawn when the camera does not see it), rendered through the robot's pinhole
+and :class:`ImageOptions`' distortion, blur and noise (:mod:`amsfe_sym.vision.render`),
+stamped with the exposure and logged at its delivery, with the CameraInfo (K = the robot's
+intrinsics, the distortion, P = [K | 0]) of the same stamp (the messages:
+:func:`amsfe_sym.logs.images.image_messages`).  One image is held at a time.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from numpy.typing import NDArray
 
 from amsfe_sym.errors import ConfigError, describe
 from amsfe_sym.vision.camera_info import CameraInfo, make_camera_info
+from amsfe_sym.vision.marker_pose import MarkerPose
 from amsfe_sym.vision.render import ImageNoise, MarkerRenderer, marker_corners
 from amsfe_sym.vision.spec import MarkerSpec
 
@@ -93,6 +96,8 @@ class SimulatedCamera:
         tracked_point: ``r = tracked_point(q, theta)`` [m], the generated function.
         options: What to write.
         rng: The images' noise (seeded by the run's seed).
+        pose: The marker fixed to its link
+            (:func:`~amsfe_sym.logs.sim_marker.marker_pose_of`); None: it faces the camera.
     """
 
     def __init__(
@@ -101,6 +106,7 @@ class SimulatedCamera:
         tracked_point: Any,
         options: ImageOptions,
         rng: np.random.Generator,
+        pose: MarkerPose | None = None,
     ) -> None:
         cam = manifest_camera
         self.K = np.asarray(cam.K, dtype=np.float64)
@@ -110,7 +116,7 @@ class SimulatedCamera:
             cam.width, cam.height, options.model, self.K, options.D
         )
         self.options, self.rng = options, rng
-        self.tracked_point = tracked_point
+        self.tracked_point, self.pose = tracked_point, pose
         self.renderer = MarkerRenderer(self.info, options.marker, options.noise)
         self._detector: Any = None
 
@@ -128,15 +134,22 @@ class SimulatedCamera:
             else "sensor_msgs/msg/CompressedImage"
         )
 
-    def corners(self, q: FloatArray, theta: FloatArray) -> FloatArray:
-        """The marker's 4 corners (4, 2) [px] in the pinhole image at (q, theta)."""
+    def corners(self, q: FloatArray, theta: FloatArray) -> FloatArray | None:
+        """The marker's 4 corners (4, 2) [px] in the pinhole image at (q, theta); None when
+        the camera does not see the marker fixed to its link
+        (:attr:`~amsfe_sym.vision.marker_pose.MarkerView.seen`)."""
+        if self.pose is not None:
+            view = self.pose.view(self.K, self.R_cw, self.position, q, self.options.marker.size)
+            return view.corners if view.seen else None
         r = np.asarray(self.tracked_point(q, theta)[0], dtype=np.float64).ravel()
         return marker_corners(self.K, self.R_cw, self.position, r, self.options.marker.size)
 
     def image(self, q: FloatArray, theta: FloatArray) -> NDArray[np.uint8]:
         """The grey image (height, width) the true camera takes of the arm at (q [rad],
         theta)."""
-        return self.renderer.render(self.corners(q, theta), self.rng)
+        if self.pose is None:
+            return self.renderer.render(self.corners(q, theta), self.rng)
+        return self.renderer.render(self.corners(q, theta), self.rng, foreshortened=True)
 
     def detected(self, image: NDArray[np.uint8]) -> FloatArray | None:
         """The tracked point the camera chain finds in ``image``, in the raw image's pixels
