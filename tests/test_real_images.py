@@ -165,20 +165,21 @@ def test_visp_joint_angles_put_the_hand_tcp_at_every_pose() -> None:
 
 @pytest.mark.slow
 def test_visp_calibration_against_visp_and_opencv(tmp_path: Path) -> None:
-    """``amsfe calibrate`` on the log a user would make of the set (factory intrinsics)
-    fits the tag's 4 corners and accepts it: the camera's rotation within +-0.61 to 0.84 deg
-    (its limit is 1 deg), all 8 frames, the time offset held and why (the arm is at rest at
-    every exposure), the calibrated robot.toml with ``[tracked] orientation``.  With
-    ``--no-corners`` (the tag's centre, 2 numbers a frame) it refuses in one line, the
-    rotation +-2.3 deg (the held time offset out of the degrees of freedom; +-2.49 deg
-    before), nothing written.  The corner fit (the command's limits) and the centre fit (its
-    limits widened, ``calibrate(limits=...)``) against ViSP's own result and Shah's method on
-    OpenCV's tag poses (posed in the base): the centre fit within its own 95 % intervals,
-    with the factory intrinsics' offset from ViSP's added (see the bounds); the corner fit
-    within the distances measured (docs/camera.md: its intervals, 2 mm and 0.8 deg, take a
-    frame's 4 corners as independent while the arm's pose error moves them together, and
-    ViSP's result lies 4.2 mm off), its residual per frame (the RMS of the 4 corners' distances;
-    measured median 4.04 / 4.08, max 7.18 / 7.09 px) under 5 / 9 px."""
+    """``amsfe calibrate`` on the log a user would make of the set (factory intrinsics) with
+    ``--corners`` fits the tag's 4 corners and accepts it: the camera's rotation within
+    +-0.61 to 0.84 deg (its limit is 1 deg), all 8 frames, the time offset held and why (the
+    arm is at rest at every exposure), the calibrated robot.toml with ``[tracked]
+    orientation``.  With the default centre fit (the tag's centre, 2 numbers a frame) it
+    refuses in one line, the rotation +-2.3 deg (the held time offset out of the degrees of
+    freedom; +-2.49 deg before), nothing written.  The corner fit (the command's limits) and
+    the centre fit (its limits widened, ``calibrate(limits=...)``) against ViSP's own result
+    and Shah's method on OpenCV's tag poses (posed in the base): the centre fit within its
+    own 95 % intervals, with the factory intrinsics' offset from ViSP's added (see the
+    bounds); the corner fit within the distances measured (docs/camera.md: its intervals, 2
+    mm and 0.8 deg, take a frame's 4 corners as independent while the arm's pose error moves
+    them together, and ViSP's result lies 4.2 mm off), its residual per frame (the RMS of
+    the 4 corners' distances; measured median 4.04 / 4.08, max 7.18 / 7.09 px) under 5 / 9
+    px."""
     from amsfe_sym.calibration.intervals import UNDETERMINED
     from amsfe_sym.load import load_robot
     from amsfe_sym.vision.camera_info import undistort
@@ -190,16 +191,14 @@ def test_visp_calibration_against_visp_and_opencv(tmp_path: Path) -> None:
     for label, info in (("factory", ve.factory_camera_info()), ("visp", ve.visp_camera_info())):
         log, robot = ve.write_inputs(tmp_path, info, f"e2h_{label}")
         if label == "factory":  # the user's command, with the data folder's robot.toml
-            rc, lines = ve.run_command(log, ve.DATA / "robot.toml", tmp_path / "cal")
+            rc, lines = ve.run_command(log, ve.DATA / "robot.toml", tmp_path / "cal", "--corners")
             assert rc == 0, lines
             assert any("fit: the marker's 4 corners a frame" in x for x in lines), lines
             assert any("8 camera frames" in x for x in lines)
             assert any("cannot determine the time offset" in x for x in lines)
             spec = load_robot(tmp_path / "cal" / "robot.toml").spec
             assert spec.tracked.orientation is not None
-            rc, lines = ve.run_command(
-                log, ve.DATA / "robot.toml", tmp_path / "cal-c", "--no-corners"
-            )
+            rc, lines = ve.run_command(log, ve.DATA / "robot.toml", tmp_path / "cal-c")
             err = [x for x in lines if x.startswith("error:")]
             assert rc == 2 and len(err) == 1, lines
             assert "the camera pose" in err[0] and "+-2.3 deg wide (limit 1 deg)" in err[0]

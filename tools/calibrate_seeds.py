@@ -24,7 +24,7 @@ seed, minutes of wall on two shared cores) and their merge::
         --out docs/data/calibrate-seeds.json
 
 ``--robot tests/data/calibrate/robot-marker.toml --images png --log-spec
-tests/data/calibrate/topics-marker.toml --fit centre=--no-corners --fit corners=``: the
+tests/data/calibrate/topics-marker.toml --fit centre= --fit corners=--corners``: the
 marker fixed to the tip (its ``[tracked] orientation``), the camera's images detected, each
 recording calibrated once per fit (with the arguments after ``=``: here the centre fit and
 the corner fit), rows and summary per fit, the corner fit's marker rotation error too.

@@ -27,7 +27,7 @@ What a user with such data does (``write_log``):
    after its exposure.  Then ``amsfe calibrate LOG --robot robot.toml --log-spec
    topics.toml``, which fits the tag's 4 corners (and its orientation on the hand): the arm
    is at rest at every exposure, so the time offset is undetermined and held at 0, which
-   the command says; with ``--no-corners`` (the tag's centre) it refuses the log.
+   the command says; without ``--corners`` (the tag's centre) it refuses the log.
 
 The references (``measure``):
 
@@ -441,7 +441,7 @@ def consistency(rMe: FloatArray, cMo: list[FloatArray], eMo: FloatArray) -> dict
 
 #: The limits of :func:`fit`'s centre fit (``calibrate(limits=...)``): ``amsfe calibrate``'s
 #: 1 deg and 2 cm on the camera pose and the marker offset widened tenfold (its 8 centre points
-#: pin the rotation to ~+-2.3 deg: ``--no-corners`` refuses them); the time offset's 10 ms
+#: pin the rotation to ~+-2.3 deg: the centre fit refuses them); the time offset's 10 ms
 #: kept, so it is held, as the command does.
 WIDE_LIMITS = {"rotation": 10.0, "camera": 0.2, "offset": 0.2, "time_offset": 0.01}
 
@@ -473,7 +473,7 @@ def run_command(log: Path, robot: Path, out: Path, *extra: str) -> tuple[int, li
 def read_inputs(log: Path, robot: Path, corners: bool = True) -> tuple[Any, Any, Any]:
     """What ``amsfe calibrate`` reads from ``log`` with ``robot`` and topics.toml: the loaded
     robot, the link angles and the camera frames (the same reader and steps), with the tag's
-    corners unless ``corners`` is False (``--no-corners``: the centre fit)."""
+    corners unless ``corners`` is False (the command's default: the centre fit)."""
     from dataclasses import replace
 
     from amsfe_sym.calibration import link_angles, observations
@@ -603,8 +603,8 @@ def measure(work: Path) -> dict[str, Any]:
     }
     for label, info in (("factory", factory_camera_info()), ("visp", visp_camera_info())):
         log, robot = write_inputs(work, info, f"panda_visp_e2h_{label}")
-        rc, command = run_command(log, robot, work / f"{label}-cal")
-        rc_c, command_c = run_command(log, robot, work / f"{label}-cal-c", "--no-corners")
+        rc, command = run_command(log, robot, work / f"{label}-cal", "--corners")
+        rc_c, command_c = run_command(log, robot, work / f"{label}-cal-c")
         centres = np.array([diagonals_meet(undistort(info, c)) for c in found])
         cMo = tag_poses(found, info)
         cv_rMc, cv_eMo = opencv_reference(ds.rMe, cMo)

@@ -58,7 +58,7 @@ class CalibrateOptions:
     pixel_std: float = 1.0
     max_offset: float = 0.2
     fit_time_offset: bool = True
-    corners: bool = True
+    corners: bool = False
     plots: bool = True
     force: bool = False
 
@@ -371,9 +371,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--no-time-offset", action="store_true", help="hold the time offset at 0 (do not fit it)"
     )
     p.add_argument(
-        "--no-corners",
+        "--corners",
         action="store_true",
-        help="fit the tracked point only, even when the images give the marker's 4 corners",
+        help="fit the marker's 4 corners a frame (images only), its orientation on the link "
+        "too: for a few frames whose centres leave the camera's rotation undetermined "
+        "(docs/calibrate.md: the detector's corners carry a bias the centre does not)",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the figure")
     p.add_argument("--force", action="store_true", help="replace an --out that amsfe wrote")
@@ -408,7 +410,7 @@ def from_args(args: argparse.Namespace) -> int:
         pixel_std=args.pixel_std,
         max_offset=args.max_time_offset,
         fit_time_offset=not args.no_time_offset,
-        corners=not args.no_corners,
+        corners=args.corners,
         plots=not args.no_plots,
         force=args.force,
     )

@@ -103,7 +103,8 @@ def undetermined(
                 "calibration: the camera pose",
                 "a log whose motion determines it",
                 refusal,
-                "record the arm moving through more of the camera's view",
+                "record the arm moving through more of the camera's view, or, with images, "
+                "fit the marker's 4 corners (amsfe calibrate --corners)",
             )
         )
     return out
