@@ -40,6 +40,7 @@ from numpy.typing import NDArray
 
 from amsfe_sym.arrays import FloatArray
 from amsfe_sym.calibration.observations import LinkAngles
+from amsfe_sym.core.camera_frame import MARKER_CORNERS
 from amsfe_sym.load.types import Robot
 
 __all__ = ["CORNER_PARAMETERS", "NP", "PARAMETERS", "Projection", "ReprojectionModel"]
@@ -70,8 +71,7 @@ CORNER_PARAMETERS: tuple[str, ...] = (*PARAMETERS, "marker_rot_x", "marker_rot_y
 def marker_corners_local(size: float) -> FloatArray:
     """The marker's 4 corners (4, 3) [m] in its own frame (OpenCV's ArUco order and frame:
     top left, top right, bottom right, bottom left; x right, y up), ``size`` its side [m]."""
-    h = 0.5 * float(size)
-    return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+    return float(size) * MARKER_CORNERS
 
 
 @dataclass(frozen=True)

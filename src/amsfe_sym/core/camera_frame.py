@@ -9,9 +9,17 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["CameraFrame"]
+__all__ = ["MARKER_CORNERS", "CameraFrame"]
 
 FloatArray = NDArray[np.float64]
+
+#: The marker's 4 corners in its own frame for a side of 1 (4, 3): OpenCV's ArUco frame
+#: (centre at the tracked point, x right, y up as printed, z out of the printed face) and
+#: order (top left, top right, bottom right, bottom left), the order of
+#: :attr:`CameraFrame.corners`.  The simulated camera draws them, the corner fit fits them.
+MARKER_CORNERS = 0.5 * np.array(
+    [[-1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [1.0, -1.0, 0.0], [-1.0, -1.0, 0.0]]
+)
 
 
 @dataclass(frozen=True, eq=False)

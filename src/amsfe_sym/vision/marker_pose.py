@@ -30,15 +30,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from amsfe_sym.core.camera_frame import MARKER_CORNERS
+
 __all__ = ["MARKER_CORNERS", "MAX_VIEW_DEG", "MIN_AREA_PX2", "MarkerPose", "MarkerView"]
 __all__ += ["marker_view"]
 
 FloatArray = NDArray[np.float64]
-
-#: The corners in the marker's frame for a side of 1 (4, 3), OpenCV's order.
-MARKER_CORNERS = 0.5 * np.array(
-    [[-1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [1.0, -1.0, 0.0], [-1.0, -1.0, 0.0]]
-)
 
 #: The largest angle [deg] between the marker's z axis and its line of sight to the camera
 #: at which it is drawn.
