@@ -8,6 +8,7 @@ README's main command, reuse them instead of compiling again.
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import subprocess
@@ -44,6 +45,18 @@ SHIPPED = sorted(d.name for d in robots_dir().iterdir() if (d / "robot.toml").is
 COMPILED = [name for name in SHIPPED if name != "panda"]
 DATA = Path(__file__).parent / "data"
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+
+
+@functools.cache
+def c_program_built(scenario: str = "paper-sim", program: str = "amsfe_node") -> Path:
+    """The C ``program`` (``amsfe_node`` or ``amsfe_arm``) of ``scenario``'s library, built
+    (once per content, :func:`amsfe_sym.ros.cnode_build.build_node`) before a test starts it
+    beside a peer: the first build takes tens of seconds on a loaded 2-core machine, and a
+    peer's start timeout (``amsfe play --start-timeout 60``) must not pay it (a cold cache
+    once failed that way at load 6)."""
+    from amsfe_sym.ros.cnode_build import build_node
+
+    return build_node(library_for(load_scenario(scenario)), program=program).path
 
 
 def ur5_three_thetas(folder: Path) -> Path:

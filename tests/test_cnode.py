@@ -151,6 +151,34 @@ def test_build_is_cached_by_content(tmp_path: Path) -> None:
     assert "-O1" in made["cflags"] and "--disable-new-dtags" in made["command"]
 
 
+def test_a_failed_build_names_the_compilers_error(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A compiler that fails prints its error, then warnings (as gcc orders them when the
+    error is in the last function): the one-line refusal quotes the error, not the
+    warnings after it (a build broken by a redeclaration once said only 'warning: ignoring
+    return value')."""
+    pytest.importorskip("rclpy", reason="ROS 2 wheels not installed (pip install -e '.[ros]')")
+    from amsfe_sym.ros.cnode import build_node
+
+    fake = tmp_path / "fake-cc"
+    fake.write_text(
+        "#!/bin/sh\n"
+        'case "$*" in *--version*) echo fake-cc 1.0; exit 0;; esac\n'
+        "echo \"a.c:698:26: error: conflicting types for 'pubs'\" >&2\n"
+        'for i in 1 2 3 4; do echo "a.c:34$i:11: warning: ignoring return value" >&2; done\n'
+        "exit 1\n"
+    )
+    fake.chmod(0o755)
+    lib = library_for(load_scenario("paper-sim"))  # (built by the real compiler)
+    monkeypatch.setenv("CC", str(fake))
+    with pytest.raises(RosError) as err:
+        build_node(lib, tmp_path / "out")
+    line = str(err.value)
+    assert "\n" not in line and "conflicting types for 'pubs'" in line, line
+    assert "warning" not in line, line
+
+
 def test_missing_wheels_is_one_line(tmp_path: Path) -> None:
     """Without rcl's headers and libraries (the [ros] extra) the C node's build says so in
     one line naming the fix; ``amsfe node --impl c`` then exits 2 with that one line and

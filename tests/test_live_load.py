@@ -28,6 +28,7 @@ from amsfe_sym.ros.arm import SimArm
 from amsfe_sym.ros.faults import Fault, FaultPlan, parse_fault
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
+from tests.conftest import c_program_built
 from tests.test_node_record import _bag
 from tests.test_ros import PATIENT_ARM, PATIENT_NODE, _finish, _ros_env, _start
 
@@ -131,6 +132,9 @@ FREE_IMPLS = [pytest.param(i, marks=REPEAT) if i == "c" else i for i in IMPLS]
 
 
 def _impl_args(impl: str) -> list[str]:
+    """``--impl impl`` (none when the node has one implementation); the C node built first."""
+    if impl == "c":
+        c_program_built("paper-sim")
     return ["--impl", impl] if len(IMPLS) > 1 else []
 
 

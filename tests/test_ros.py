@@ -32,7 +32,7 @@ from amsfe_sym.ros.live import LiveLoop
 from amsfe_sym.ros.record_bag import record_state
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
-from tests.conftest import LOCKSTEP_S
+from tests.conftest import LOCKSTEP_S, c_program_built
 from tests.test_node_record import _bag, assert_record_is_run
 
 SRC = Path(__file__).resolve().parent.parent / "src"
@@ -602,7 +602,10 @@ def test_lockstep_reproduces_simulate(paper: Any, lockstep_runs: Any, impl: str)
 
 
 def _impl(impl: str) -> tuple[str, ...]:
-    """``amsfe node``'s ``--impl`` arguments for ``impl`` (none when it has one only)."""
+    """``amsfe node``'s ``--impl`` arguments for ``impl`` (none when it has one only); the C
+    node of paper-sim built first (its build is not the peers' start-up to wait for)."""
+    if impl == "c":
+        c_program_built("paper-sim")
     return ("--impl", impl) if len(node_impls()) > 1 else ()
 
 

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from amsfe_sym.core.interrupts import DeferredSignals
 from amsfe_sym.errors import LogError
 from amsfe_sym.topics.spec import TopicSpec
 from amsfe_sym.vision.camera_info import CameraInfo, camera_info_from_message, undistort
@@ -236,8 +237,14 @@ def run_camera_node(opts: CameraNodeOptions, say: Callable[[str], None] = print)
         f"{opts.spec.marker.dictionary} id {opts.spec.marker.id})")  # fmt: skip
     end = None if opts.duration is None else time.monotonic() + opts.duration
     try:
-        while ctx.ok() and (end is None or time.monotonic() < end):
-            ex.spin_once(timeout_sec=0.1)
+        # Ctrl-C / SIGTERM held while rclpy runs the callbacks and raised between spins:
+        # raised inside :meth:`DetectionWorker.image`'s ``with`` (its condition's lock taken,
+        # the block not yet entered) it would leave that lock held, and the detection thread
+        # would wait for it until ``stop``'s join gave up (core.interrupts).
+        with DeferredSignals() as signals:
+            while ctx.ok() and (end is None or time.monotonic() < end):
+                ex.spin_once(timeout_sec=0.1)
+                signals.check()
     except KeyboardInterrupt:
         pass
     finally:

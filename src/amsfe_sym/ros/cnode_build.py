@@ -215,7 +215,10 @@ def build_node(
         if proc.returncode != 0 or not tmp.is_file():
             tmp.unlink(missing_ok=True)
             checkpoint()  # signals are held in the lock: a Ctrl-C stopped cc, say that
-            tail = " | ".join((proc.stderr or proc.stdout).strip().splitlines()[-3:])
+            said = (proc.stderr or proc.stdout).strip().splitlines()
+            # the compiler's errors, not the warnings printed after them
+            errors = [ln for ln in said if "error" in ln.lower()]
+            tail = " | ".join(errors[:3] or said[-3:])
             raise RosError(
                 describe(
                     "the C node's build",

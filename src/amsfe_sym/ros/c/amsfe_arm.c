@@ -695,6 +695,9 @@ int main(int argc, char **argv) {
   s->ws = rcl_get_zero_initialized_wait_set();
   amsfe_rcl_check(rcl_wait_set_init(&s->ws, 2, 0, 0, 0, 0, 0, &s->ctx, alloc), "wait set");
   int code = run(s);
-  amsfe_rcl_stop(&s->ws, &s->node, &s->ctx);
+  rcl_publisher_t *const all_pubs[] = {&s->pub_enc, &s->pub_cam, &s->pub_eff, &s->pub_truth,
+                                       &s->pub_clock};
+  rcl_subscription_t *const subs[] = {&s->sub_cmd, &s->sub_est};
+  amsfe_rcl_stop(&s->ws, all_pubs, 5, subs, 2, &s->node, &s->ctx);
   return code;
 }

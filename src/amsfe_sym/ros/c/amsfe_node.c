@@ -1180,6 +1180,10 @@ int main(int argc, char **argv) {
   if (s->recording) take_truth(s); /* a last tick's truth can come after its sample */
   if (s->recording) write_record(s, record_path);
   if (s->managed) lifecycle_fini(&s->lc, &s->node);
-  amsfe_rcl_stop(&s->ws, &s->node, &s->ctx);
+  (void)rcl_wait_set_fini(&s->ws_eff); /* (zero-initialised without an effort topic) */
+  rcl_publisher_t *const pubs[] = {&s->pub_cmd, &s->pub_est, &s->pub_std, &s->pub_theta,
+                                   &s->pub_diag};
+  rcl_subscription_t *const subs[] = {&s->sub_enc, &s->sub_cam, &s->sub_eff, &s->sub_truth};
+  amsfe_rcl_stop(&s->ws, pubs, 5, subs, 4, &s->node, &s->ctx);
   return code;
 }

@@ -194,10 +194,15 @@ rcl_serialized_message_t amsfe_message_buffer(size_t capacity) {
   return m;
 }
 
-void amsfe_rcl_stop(rcl_wait_set_t *ws, rcl_node_t *node, rcl_context_t *ctx) {
+void amsfe_rcl_stop(rcl_wait_set_t *ws, rcl_publisher_t *const *pubs, int n_pubs,
+                    rcl_subscription_t *const *subs, int n_subs, rcl_node_t *node,
+                    rcl_context_t *ctx) {
   rcl_ret_t fini = rcl_wait_set_fini(ws);
+  for (int i = 0; i < n_pubs; ++i) fini |= rcl_publisher_fini(pubs[i], node);
+  for (int i = 0; i < n_subs; ++i) fini |= rcl_subscription_fini(subs[i], node);
   fini |= rcl_node_fini(node);
   fini |= rcl_shutdown(ctx);
+  fini |= rcl_context_fini(ctx);
   (void)fini; /* the process ends: nothing left to release it for */
 }
 

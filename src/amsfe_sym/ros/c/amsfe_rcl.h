@@ -88,7 +88,12 @@ void amsfe_out_fill(amsfe_out *m, int field, const double *v, int n);
 /* rcl_publish_serialized_message, a refusal counted (amsfe_publish_failed). */
 void amsfe_publish(rcl_publisher_t *pub, amsfe_out *m);
 
-/* The stop: the wait set, the node, the context (the process ends: errors ignored). */
-void amsfe_rcl_stop(rcl_wait_set_t *ws, rcl_node_t *node, rcl_context_t *ctx);
+/* The stop, in the reverse order of the start: the wait set, the n_pubs publishers and
+ * n_subs subscriptions (zero-initialised ones are skipped by rcl), the node, then the context
+ * shut down and finalised, so the middleware's participant is destroyed here rather than by
+ * exit-time destructors (the process ends: errors are ignored). */
+void amsfe_rcl_stop(rcl_wait_set_t *ws, rcl_publisher_t *const *pubs, int n_pubs,
+                    rcl_subscription_t *const *subs, int n_subs, rcl_node_t *node,
+                    rcl_context_t *ctx);
 
 #endif /* AMSFE_RCL_H */
