@@ -24,23 +24,20 @@ Modules: ``scenarios`` (:func:`generate`, :func:`load_scenario`, :func:`simulate
 ``recordings`` (:class:`LogArrays`, :func:`read_log`), ``estimator`` (:class:`Estimator`),
 ``model`` (:class:`Model`: a scenario's transition, its jacobian and noise, the camera map).
 May import every room but the command line (it composes the applications' parts).
+
+The public names are listed once, in the package root's ``__all__`` (written out there, so
+that ``import amsfe_sym`` imports nothing); here each is imported ``as`` itself, the
+explicit re-export of PEP 484 that mypy (``--no-implicit-reexport``) and ruff read.
 """
 
-from amsfe_sym.api.estimator import EstimateArrays, Estimator, StepResult
-from amsfe_sym.api.model import Model
-from amsfe_sym.api.recordings import LogArrays, read_log
-from amsfe_sym.api.scenarios import Robot, SimResult, generate, load_scenario, simulate
-
-__all__ = [
-    "EstimateArrays",
-    "Estimator",
-    "LogArrays",
-    "Model",
-    "Robot",
-    "SimResult",
-    "StepResult",
-    "generate",
-    "load_scenario",
-    "read_log",
-    "simulate",
-]
+from amsfe_sym.api.estimator import EstimateArrays as EstimateArrays
+from amsfe_sym.api.estimator import Estimator as Estimator
+from amsfe_sym.api.estimator import StepResult as StepResult
+from amsfe_sym.api.model import Model as Model
+from amsfe_sym.api.recordings import LogArrays as LogArrays
+from amsfe_sym.api.recordings import read_log as read_log
+from amsfe_sym.api.scenarios import Robot as Robot
+from amsfe_sym.api.scenarios import SimResult as SimResult
+from amsfe_sym.api.scenarios import generate as generate
+from amsfe_sym.api.scenarios import load_scenario as load_scenario
+from amsfe_sym.api.scenarios import simulate as simulate
