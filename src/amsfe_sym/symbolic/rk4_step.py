@@ -119,11 +119,15 @@ def plant_rhs_over_stage(tr: Any) -> ca.Function:
     return ca.Function("plant_rhs", [xp, u, th, td], [f], ["xp", "u", "theta", "tau_d"], ["f"])
 
 
-#: The rk4 substeps of the contract's ``transition_step`` (and of ``transition``, the
-#: inverse and ``plant_step``, :func:`.transition.rk4_steps`) beyond the first are one
-#: substep function called in a loop (CasADi's ``Function.fold``): its body is emitted once
-#: in the C file, where unrolled every substep was its own copy (the 30 Hz Panda's 62:
-#: docs/explanation/codegen.md).  ``False`` unrolls them (kept to compare against).
+#: The rk4 substeps of the contract's ``transition_step`` beyond the first, and the RK4
+#: steps of ``transition``, the inverse and ``plant_step`` (:func:`.transition.rk4_steps`),
+#: are one substep function called in a loop (CasADi's ``Function.fold``) when there are
+#: more than one: its body is emitted once in the C file, where unrolled every substep was
+#: its own copy (the 30 Hz Panda's 62: docs/explanation/codegen.md).  ``False`` unrolls
+#: them (kept to compare against).  The cache key hashes this module's source, not the
+#: value at run time: a library generated after setting it in a process must go to its own
+#: folder with ``force=True`` (``tools/fold_substeps.py`` does), or the cache would take it
+#: for the folded one.
 FOLD_SUBSTEPS = True
 
 
