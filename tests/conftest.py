@@ -125,17 +125,20 @@ class _Libraries:
         robot: str | Path,
         lock: dict[str, float] | None = None,
         parts: tuple[str, ...] = ALL_PARTS,
+        cflags: tuple[str, ...] = (),
     ) -> tuple[Robot, ModelLibrary]:
-        key = f"{robot}|{sorted((lock or {}).items())}|{parts}"
+        key = f"{robot}|{sorted((lock or {}).items())}|{parts}|{cflags}"
         if key not in self._cache:
-            res = generate(robot, lock=lock, parts=parts)
+            res = generate(robot, lock=lock, parts=parts, extra_cflags=cflags or None)
             self._cache[key] = (load_robot(robot, lock=lock), ModelLibrary(res.out_dir))
         return self._cache[key]
 
 
 @pytest.fixture(scope="session")
 def libraries() -> _Libraries:
-    """Session-wide access to generated libraries: ``libraries.get(name) -> (robot, lib)``."""
+    """Session-wide access to generated libraries: ``libraries.get(name) -> (robot, lib)``
+    (``cflags``: extra compiler flags, e.g. ``("-O0",)`` for a library only checked, never
+    timed, that no other test compiles)."""
     return _Libraries()
 
 

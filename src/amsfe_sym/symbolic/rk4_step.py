@@ -119,6 +119,18 @@ def plant_rhs_over_stage(tr: Any) -> ca.Function:
     return ca.Function("plant_rhs", [xp, u, th, td], [f], ["xp", "u", "theta", "tau_d"], ["f"])
 
 
+#: The rk4 substeps of the contract's ``transition_step`` beyond the first, and the RK4
+#: steps of ``transition``, the inverse and ``plant_step`` (:func:`.transition.rk4_steps`),
+#: are one substep function called in a loop (CasADi's ``Function.fold``) when there are
+#: more than one: its body is emitted once in the C file, where unrolled every substep was
+#: its own copy (the 30 Hz Panda's 62: docs/explanation/codegen.md).  ``False`` unrolls
+#: them (kept to compare against).  The cache key hashes this module's source, not the
+#: value at run time: a library generated after setting it in a process must go to its own
+#: folder with ``force=True`` (``tools/fold_substeps.py`` does), or the cache would take it
+#: for the folded one.
+FOLD_SUBSTEPS = True
+
+
 def step_function(tr: Any, expand: bool = True) -> ca.Function:
     """x+ = F(x, u), A = dF/dx and Gamma = dF/dw of the ``rk4`` model in one function.
 
@@ -129,12 +141,19 @@ def step_function(tr: Any, expand: bool = True) -> ca.Function:
     ``qd += M(q)^-1 w_l``, ``qmd += w_m / Mm`` at the start of the step and ``theta +=
     T w_theta``.
 
-    With ``expand`` the whole graph is SX, straight-line C (UR5: 16 us; as MX calls 41
+    With ``expand`` the stages are SX, straight-line C (UR5: 16 us; as MX calls 41
     us) over :meth:`.Transition.rk4_stage_function` (the solves unrolled) and
     :meth:`.Transition.rk4_minv_function`.  Without, it is an MX graph over the two stage functions
     of :func:`stage_split_functions`, the solves with M by CasADi's ``ldl`` linear
     solver (loops in the generated C; it does not expand to SX), Gamma's M(q)^-1 from the
     first stage's M (its point is x): the same arrangement as the C chain.
+
+    With ``tr.fold`` (default :data:`FOLD_SUBSTEPS`) and more than one substep, the first
+    substep (whose sensitivity starts from the identity, a sparser product) is built
+    inline and the other m - 1 are ``rk4_substep (P = [xp, S], u, theta) -> P+`` called in
+    a loop (:func:`substep_function`, ``Function.fold``): the same operations, its code
+    emitted once; with ``expand`` the substep function is SX and the step an MX graph
+    calling it.
 
     Returns:
         ``transition_step (x, u) -> (x_next, A, Gamma)`` (the inverse's Newton steps use
@@ -145,8 +164,70 @@ def step_function(tr: Any, expand: bool = True) -> ca.Function:
     h = T / tr.substeps
     x, u = ca.MX.sym("x", N), ca.MX.sym("u", n)
     xp, th = x[: 4 * n], x[4 * n :]
-    eye = ca.DM.eye(N)
-    E = eye[4 * n :, :]
+    xp, Sx, M0 = _substep(tr, expand, xp, None, u, th, h)  # Sx = [I 0] before it
+    folded = tr.fold and tr.substeps > 1
+    if folded:
+        body = substep_function(tr, expand, h)
+        P = body.fold(tr.substeps - 1)(ca.horzcat(xp, Sx), u, th)
+        xp, Sx = P[:, 0], P[:, 1:]
+    else:
+        for _ in range(tr.substeps - 1):
+            xp, Sx, _M = _substep(tr, expand, xp, Sx, u, th, h)
+    E = ca.DM.eye(N)[4 * n :, :]
+    A = ca.densify(ca.vertcat(Sx, E))
+    Mm = ca.DM(tr.robot.Mm)
+    if M0 is None:  # A[:, qd] M^-1
+        G_l = ca.mtimes(A[:, n : 2 * n], tr.rk4_minv_function()(x[:n], th))
+    else:  # (M^-1 A[:, qd]^T)^T, M symmetric
+        G_l = ca.solve(M0, A[:, n : 2 * n].T, "ldl").T
+    G = ca.densify(
+        ca.horzcat(
+            G_l,
+            A[:, 3 * n : 4 * n] / ca.repmat(Mm.T, N, 1),
+            ca.vertcat(ca.DM.zeros(4 * n, p), T * ca.DM.eye(p)),
+        )
+    )
+    step = ca.Function(
+        "transition_step",
+        [x, u],
+        [ca.vertcat(xp, th), A, G],
+        ["x", "u"],
+        ["x_next", "A", "Gamma"],
+    )
+    return step.expand() if expand and not folded else step
+
+
+def substep_function(tr: Any, expand: bool, h: float) -> ca.Function:
+    """One rk4 substep of h [s] with its sensitivity, ``rk4_substep (P[4n x (1 + N)], u[n],
+    theta[p]) -> P+``, ``P = [xp, S]`` with ``S = dxp/dx`` (the state and its sensitivity
+    packed in one matrix, the one accumulated input ``Function.fold`` takes); SX when
+    ``expand``; built once per robot and h."""
+    key = f"rk4_substep:{expand}:{h!r}"
+    if key not in tr._cache:
+        n, p = tr.tree.n, tr.tree.p
+        P, u, th = ca.MX.sym("P", 4 * n, 1 + 4 * n + p), ca.MX.sym("u", n), ca.MX.sym("theta", p)
+        xp, Sx, _M = _substep(tr, expand, P[:, 0], P[:, 1:], u, th, h)
+        fn = ca.Function(
+            "rk4_substep",
+            [P, u, th],
+            [ca.densify(ca.horzcat(xp, Sx))],
+            ["P", "u", "theta"],
+            ["P_next"],
+        )
+        tr._cache[key] = fn.expand() if expand else fn
+    return tr._cache[key]
+
+
+def _substep(
+    tr: Any, expand: bool, xp: ca.MX, Sx: ca.MX | None, u: ca.MX, th: ca.MX, h: float
+) -> tuple[ca.MX, ca.MX, ca.MX | None]:
+    """One classical RK4 substep of h [s] from ``xp`` and its sensitivity ``Sx = dxp/dx``
+    (4n x N; ``None`` for ``[I 0]``, the first substep, whose products it skips): returns
+    ``(xp+, Sx+, M)`` with ``M`` the first stage's mass matrix (split stage) or ``None``
+    (the unrolled stage of ``expand``)."""
+    n, p = tr.tree.n, tr.tree.p
+    N = 4 * n + p
+    E = ca.DM.eye(N)[4 * n :, :]
     if expand:
         full = tr.rk4_stage_function()
 
@@ -169,40 +250,15 @@ def step_function(tr: Any, expand: bool = True) -> ca.Function:
             return D
         return ca.vertcat(D[0:n, :], ca.solve(M, D[n : 2 * n, :], "ldl"), D[2 * n :, :])
 
-    M0: ca.MX | None = None  # M(q) at x: the first stage's
-    Sx: ca.MX | ca.DM = eye[: 4 * n, :]  # d xp / d x along the substeps
-    for s in range(tr.substeps):
-        k1, d1, M1 = stage(xp)
-        M0 = M1 if s == 0 else M0
-        d1 = solved(ca.mtimes(d1, ca.vertcat(Sx, E)) if s > 0 else d1, M1)  # Sx = I at s = 0
-        ks, ds = [k1], [d1]
-        for c in (0.5, 0.5, 1.0):
-            xi = xp + c * h * ks[-1]
-            Si = Sx + c * h * ds[-1] if s > 0 else plus_identity(c * h * ds[-1])
-            ki, Ji, Mi = stage(xi)
-            ks.append(ki)
-            ds.append(solved(ca.mtimes(Ji, ca.vertcat(Si, E)), Mi))
-        xp = xp + (h / 6.0) * (ks[0] + 2 * ks[1] + 2 * ks[2] + ks[3])
-        dS = (h / 6.0) * (ds[0] + 2 * ds[1] + 2 * ds[2] + ds[3])
-        Sx = Sx + dS if s > 0 else plus_identity(dS)  # Sx = [I 0] at s = 0 (no constant)
-    A = ca.densify(ca.vertcat(Sx, E))
-    Mm = ca.DM(tr.robot.Mm)
-    if M0 is None:  # A[:, qd] M^-1
-        G_l = ca.mtimes(A[:, n : 2 * n], tr.rk4_minv_function()(x[:n], th))
-    else:  # (M^-1 A[:, qd]^T)^T, M symmetric
-        G_l = ca.solve(M0, A[:, n : 2 * n].T, "ldl").T
-    G = ca.densify(
-        ca.horzcat(
-            G_l,
-            A[:, 3 * n : 4 * n] / ca.repmat(Mm.T, N, 1),
-            ca.vertcat(ca.DM.zeros(4 * n, p), T * ca.DM.eye(p)),
-        )
-    )
-    step = ca.Function(
-        "transition_step",
-        [x, u],
-        [ca.vertcat(xp, th), A, G],
-        ["x", "u"],
-        ["x_next", "A", "Gamma"],
-    )
-    return step.expand() if expand else step
+    k1, d1, M1 = stage(xp)
+    d1 = solved(d1 if Sx is None else ca.mtimes(d1, ca.vertcat(Sx, E)), M1)
+    ks, ds = [k1], [d1]
+    for c in (0.5, 0.5, 1.0):
+        xi = xp + c * h * ks[-1]
+        Si = plus_identity(c * h * ds[-1]) if Sx is None else Sx + c * h * ds[-1]
+        ki, Ji, Mi = stage(xi)
+        ks.append(ki)
+        ds.append(solved(ca.mtimes(Ji, ca.vertcat(Si, E)), Mi))
+    xp = xp + (h / 6.0) * (ks[0] + 2 * ks[1] + 2 * ks[2] + ks[3])
+    dS = (h / 6.0) * (ds[0] + 2 * ds[1] + 2 * ds[2] + ds[3])
+    return xp, plus_identity(dS) if Sx is None else Sx + dS, M1

@@ -42,6 +42,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 
+from amsfe_sym.symbolic import rk4_step as _rk4_step
 from amsfe_sym.symbolic.dynamics import RigidBodyTree
 from amsfe_sym.symbolic.linalg import ldl_solve, plus_identity
 from amsfe_sym.symbolic.rk4_step import (
@@ -76,18 +77,43 @@ EXPAND_MAX_JOINTS = 2
 
 
 def rk4_steps(
-    rhs: ca.Function, x: ca.MX, u: ca.MX, th: ca.MX, td: ca.MX, duration: float, steps: int
+    rhs: ca.Function,
+    x: ca.MX,
+    u: ca.MX,
+    th: ca.MX,
+    td: ca.MX,
+    duration: float,
+    steps: int,
+    fold: bool = True,
 ) -> ca.MX:
     """``steps`` classical RK4 steps of h = duration / steps of ``rhs(x, u, th, td)``, u, th
     and td held: the rk4 model F (td = 0, ``model_substeps``) and the plant
-    (``plant_substeps``)."""
+    (``plant_substeps``).  With ``fold`` and more than one step, one step is a Function
+    called in a loop (``Function.fold``: its code is emitted once), else the steps are
+    unrolled in the graph."""
     h = duration / steps
-    for _ in range(steps):
+
+    def one(x: ca.MX, u: ca.MX, th: ca.MX, td: ca.MX) -> ca.MX:
         k1 = rhs(x, u, th, td)
         k2 = rhs(x + 0.5 * h * k1, u, th, td)
         k3 = rhs(x + 0.5 * h * k2, u, th, td)
         k4 = rhs(x + h * k3, u, th, td)
-        x = x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+        return x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+
+    if fold and steps > 1:
+        ins = [
+            ca.MX.sym(name, *rhs.size_in(i)) for i, name in enumerate(("xp", "u", "theta", "tau_d"))
+        ]
+        body = ca.Function(
+            "rk4_substep_" + rhs.name(),
+            ins,
+            [one(*ins)],
+            ["xp", "u", "theta", "tau_d"],
+            ["xp_next"],
+        )
+        return body.fold(steps)(x, u, th, td)
+    for _ in range(steps):
+        x = one(x, u, th, td)
     return x
 
 
@@ -153,6 +179,8 @@ class Transition:
         integrator: ``"paper"`` or ``"semi_implicit"``.
         inverse_iterations: Unrolled chord steps in the inverse.
         stage_derivative: One of :data:`STAGE_DERIVATIVES`.
+        fold_substeps: rk4 substeps as a loop over one substep function (``True``) or
+            unrolled; ``None`` reads :data:`.rk4_step.FOLD_SUBSTEPS`.
     """
 
     def __init__(
@@ -161,6 +189,7 @@ class Transition:
         integrator: str,
         inverse_iterations: int,
         stage_derivative: str = "analytic",
+        fold_substeps: bool | None = None,
     ) -> None:
         if stage_derivative not in STAGE_DERIVATIVES:
             raise ValueError(f"stage_derivative must be one of {STAGE_DERIVATIVES}")
@@ -172,6 +201,8 @@ class Transition:
         self.iterations = inverse_iterations
         self.T = float(self.robot.spec.model.T)
         self.substeps = int(self.robot.spec.model.model_substeps)  # rk4 steps per T
+        #: rk4 substeps in a loop of one substep function (``Function.fold``) or unrolled
+        self.fold = _rk4_step.FOLD_SUBSTEPS if fold_substeps is None else fold_substeps
         self._cache: dict[str, ca.Function] = {}
 
     # ------------------------------------------------------------------ pieces
@@ -376,7 +407,7 @@ class Transition:
         zero = ca.MX.zeros(2 * n, 1)
 
         def step(xp: ca.MX, duration: float) -> ca.MX:
-            return rk4_steps(rhs, xp, u, th, zero, duration, self.substeps)
+            return rk4_steps(rhs, xp, u, th, zero, duration, self.substeps, self.fold)
 
         F = ca.vertcat(step(x[: 4 * n], T), th)
         step_fn = self.rk4_step_function(expand=n <= EXPAND_MAX_JOINTS)
@@ -458,7 +489,7 @@ class Transition:
         rhs = self.plant_rhs_function()
         xp, u = ca.MX.sym("xp", 4 * n), ca.MX.sym("u", n)
         th, td = ca.MX.sym("theta", p), ca.MX.sym("tau_d", 2 * n)
-        x = rk4_steps(rhs, xp, u, th, td, self.T, substeps)
+        x = rk4_steps(rhs, xp, u, th, td, self.T, substeps, self.fold)
         return ca.Function(
             "plant_step", [xp, u, th, td], [x], ["xp", "u", "theta", "tau_d"], ["xp_next"]
         )

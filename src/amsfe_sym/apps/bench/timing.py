@@ -207,15 +207,22 @@ class CTimer:
         self.exe = compile_program(src, workdir / "amsfe_timer", ["-ldl"], "the C timing loop")
 
     def time(
-        self, library: Path, function: str, inputs: Sequence[FloatArray], rounds: int
+        self,
+        library: Path,
+        function: str,
+        inputs: Sequence[FloatArray],
+        rounds: int,
+        min_calls: int = 1000,
     ) -> tuple[Timing, float]:
         """Per-call time of ``function`` in ``library`` and the sum of its outputs.
 
-        A 1000-call pilot sizes the rounds to about :data:`ROUND_BUDGET_S` each.
+        A ``min_calls``-call pilot sizes the rounds to about :data:`ROUND_BUDGET_S` each
+        (at least ``min_calls`` calls; lower it for functions of milliseconds).
         """
         values = [repr(float(v)) for a in inputs for v in np.ravel(a, order="F")]
-        per_call, checksum = self._run(library, function, 1000, 1, values)
-        calls = int(max(1000, min(10**8, ROUND_BUDGET_S / max(per_call[0] * 1e-6, 1e-9))))
+        per_call, checksum = self._run(library, function, min_calls, 1, values)
+        budget = ROUND_BUDGET_S / max(per_call[0] * 1e-6, 1e-9)
+        calls = int(max(min_calls, min(10**8, budget)))
         per_call, checksum = self._run(library, function, calls, rounds, values)
         return Timing.from_rounds(per_call, calls), checksum
 
