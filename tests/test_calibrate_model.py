@@ -22,6 +22,7 @@ from amsfe_sym.calibration import (
     smooth_angles,
 )
 from amsfe_sym.calibration.design import motion_information
+from amsfe_sym.calibration.intervals import Z95
 from amsfe_sym.calibration.model import CORNER_PARAMETERS, PARAMETERS, marker_corners_local
 from amsfe_sym.errors import ConfigError, LogError
 from amsfe_sym.load import load_robot
@@ -247,10 +248,17 @@ def test_recovers_a_synthetic_camera(robot: Robot) -> None:
     inside = (obs.pixel >= 0).all(axis=1) & (obs.pixel[:, 0] < 640) & (obs.pixel[:, 1] < 480)
     assert set(cal.dropped.values()) <= {"pixel outside the image"}
     assert cal.used.sum() == inside.sum() > 800
-    # the correlations: those of (J^T J)^-1 at the solution, computed here without scaling
+    # the correlations and sigmas: those of the sandwich (J^T J)^-1 M (J^T J)^-1 at the
+    # solution, computed here without scaling; its middle from the residuals (white noise:
+    # the sandwich, no correlation over frames to speak of)
     J = ReprojectionModel(robot, links, stamp, cal.R0).project(cal.x).J[cal.used].reshape(-1, NP)
-    C = np.linalg.inv(J.T @ J)
+    assert cal.errors is not None and cal.errors.kind == "sandwich"
+    assert cal.errors.bandwidth <= 2
+    Hi = np.linalg.inv(J.T @ J)
+    C = Hi @ cal.errors.middle @ Hi
     np.testing.assert_allclose(cal.correlation, C / np.outer(*[np.sqrt(np.diag(C))] * 2), atol=1e-8)
+    np.testing.assert_allclose(cal.std, np.sqrt(np.diag(C)), rtol=1e-8)
+    np.testing.assert_allclose(cal.std_white, np.sqrt(np.diag(cal.pixel_std**2 * Hi)), rtol=1e-8)
 
 
 def test_recovers_a_synthetic_camera_from_the_marker_corners(robot: Robot, tmp_path: Path) -> None:
@@ -381,8 +389,11 @@ def test_a_motion_s_predicted_intervals_are_the_fit_s(robot: Robot) -> None:
     cal = calibrate(robot, links, _synthetic(robot, links, stamp, x_true, seed=3))
     assert cal.held == {} and info.seen.sum() > 850
     assert abs(int(cal.used.sum()) - int(info.seen.sum())) <= 5  # (the camera moved 2.6 mm)
-    stated = cal.half_width95() / cal.pixel_std  # the fit's, per px of its measured noise
+    # the fit's white-noise width (its verdict's), per px of its measured noise; the stated
+    # sandwich on white noise within its sampling spread of it
+    stated = Z95 * cal.std_white / cal.pixel_std
     np.testing.assert_allclose(stated, info.half_width95(), rtol=0.05)
+    np.testing.assert_allclose(cal.std, cal.std_white, rtol=0.12)
     assert np.all(np.abs(cal.x - x_true)[3:] < 4 * cal.std[3:])
 
     # the camera's rotation and position and the marker offset, each as the RMS of its

@@ -20,10 +20,14 @@ Steps:
    measured from the residuals (1.4826 MAD) and frames farther than :data:`OUTLIER_SIGMAS`
    of it are dropped as outliers.
 3. **Final fit** on the inliers with the plain squared loss, from the robust fit.  Its
-   covariance is ``s^2 (J^T J)^-1`` with ``s^2`` the residual variance (RSS / (2m - p)): a
-   linearised interval, ``+-1.96 sigma`` for 95 %.  Inliers with no more residuals than
-   parameters (2m <= p) are refused: their fit is exact and its interval zero, not known.
-4. **What the motion determines.**  A parameter whose 95 % half-width exceeds
+   covariance is the sandwich ``(J^T J)^-1 M (J^T J)^-1`` of
+   :func:`~amsfe_sym.calibration.intervals.error_model` (errors shared by a frame's points
+   and by consecutive frames; ``M = s^2 J^T J`` for independent errors, ``s^2`` the
+   residual variance RSS / (2m - p)): a linearised interval, ``+-1.96 sigma`` for 95 %.
+   Inliers with no more residuals than parameters (2m <= p) are refused: their fit is exact
+   and its interval zero, not known.
+4. **What the motion determines** (its geometry at the measured pixel noise: the verdict
+   takes ``s^2 (J^T J)^-1``, whatever the errors share).  A parameter whose 95 % half-width exceeds
    :data:`UNDETERMINED` is held at its initial value (the spec's marker offset, a zero time
    offset) and the fit repeated without it; the result names it and why.  The camera's pose is
    never held: a log that cannot determine it is refused (one line), once every other
@@ -52,7 +56,9 @@ from amsfe_sym.calibration.intervals import (
     GROUP,
     UNDETERMINED,
     Z95,
+    ErrorModel,
     correlation,
+    error_model,
     stds,
     undetermined,
 )
@@ -95,7 +101,11 @@ class Calibration:
         x: The parameter vector (:data:`~amsfe_sym.calibration.model.PARAMETERS`),
             rotation relative to ``R0``.
         R0: The rotation the fitted rotation vector applies to.
-        std: 1-sigma of each parameter (NaN: held), same units as ``x``.
+        std: 1-sigma of each parameter (NaN: held), same units as ``x``: the sandwich of the
+            error model ``errors`` (docs/calibrate.md, "Intervals").
+        std_white: The same with the pixel errors taken as independent, ``s^2 (J^T J)^-1``:
+            what the motion's geometry determines at the measured pixel noise (step 4's
+            verdict).
         free: Which parameters were fitted.
         held: Parameter group -> why it was held at its initial value.
         pixel_std: Pixel noise measured from the inliers' residuals [px] (RMS per axis).
@@ -116,6 +126,7 @@ class Calibration:
         marker_R: The marker's orientation in the tracked frame (marker -> tracked frame)
             at the solution (corner fit), else None.
         corner_start: The corner fit's start (its candidates' RMS), else None.
+        errors: The error model the intervals come from (docs/calibrate.md, "Intervals").
     """
 
     R_cw: FloatArray
@@ -125,6 +136,7 @@ class Calibration:
     x: FloatArray
     R0: FloatArray
     std: FloatArray
+    std_white: FloatArray
     free: NDArray[np.bool_]
     held: dict[str, str]
     pixel_std: float
@@ -141,6 +153,7 @@ class Calibration:
     fit: str = "centres"
     marker_R: FloatArray | None = None
     corner_start: CornerStart | None = None
+    errors: ErrorModel | None = None
 
     def half_width95(self) -> FloatArray:
         """The 95 % linearised half-width of each parameter (NaN where held)."""
@@ -149,6 +162,21 @@ class Calibration:
     def frame_errors(self) -> FloatArray:
         """Reprojection error [px] of each used frame (the RMS of its points' distances)."""
         return _frame_rms(self.residual[self.used])
+
+
+def _describe(errors: ErrorModel) -> str:
+    """One line: what the intervals take the pixel errors to be."""
+    if errors.kind == "sandwich":
+        return (
+            "intervals: a sandwich over the frames (a frame's points one cluster, "
+            f"correlation over {errors.bandwidth} consecutive frames)"
+        )
+    if errors.tau2 > 0:
+        return (
+            f"intervals: a frame's points share a common shift of {np.sqrt(errors.tau2):.3f} px "
+            f"per axis besides {np.sqrt(errors.sigma2):.3f} px each (few frames: a block model)"
+        )
+    return f"intervals: independent pixel errors of {np.sqrt(errors.sigma2):.3f} px per axis"
 
 
 def _frame_rms(res: FloatArray) -> FloatArray:
@@ -252,7 +280,8 @@ def calibrate(
         x, use, nfev = _fit(model, obs, x, free, use, dropped)  # the squared loss
         pr = model.project(x)
         r = (pr.y - obs.target)[use]
-        Jf = pr.J[use][:, :, free].reshape(-1, int(free.sum()))
+        J3 = pr.J[use][:, :, free]
+        Jf = J3.reshape(-1, int(free.sum()))
         if r.size <= int(free.sum()):
             raise LogError(
                 describe(
@@ -265,10 +294,14 @@ def calibrate(
             )
         dof = r.size - int(free.sum())
         s2 = float(np.sum(r**2)) / dof
-        sd, sv = stds(Jf, s2)
+        errors = error_model(J3, r)
+        sd, sv = stds(Jf, errors.middle)
         std = np.full(npar, np.nan)
         std[free] = sd
-        newly = undetermined(std, free, UNDETERMINED if limits is None else limits)
+        # what the motion determines: its geometry at the measured pixel noise (step 4)
+        std_white = np.full(npar, np.nan)
+        std_white[free] = stds(Jf, s2 * (Jf.T @ Jf))[0]
+        newly = undetermined(std_white, free, UNDETERMINED if limits is None else limits)
         if not newly:
             break
         for group, why in newly.items():
@@ -279,6 +312,7 @@ def calibrate(
             held[group] = why
     res = _residual(model, obs, x)
     R = model.rotation(x[0:3])
+    say(_describe(errors))
     if cs is not None:
         say(f"corner fit: 4 corners a frame, {int(use.sum())} frames, {npar} parameters")
     return Calibration(
@@ -289,6 +323,7 @@ def calibrate(
         x=x,
         R0=init.R_cw,
         std=std,
+        std_white=std_white,
         free=free,
         held=held,
         pixel_std=float(np.sqrt(s2)),
@@ -300,7 +335,8 @@ def calibrate(
         nfev=nfev,
         pixel=obs.target,
         stamp=obs.stamp,
-        correlation=correlation(Jf, free),
+        correlation=correlation(Jf, free, errors.middle),
+        errors=errors,
         names=model.names,
         fit="centres" if cs is None else "corners",
         marker_R=None if cs is None else model.marker_rotation(x),
