@@ -1,0 +1,199 @@
+"""The marker's corners from its 4 outer edges (docs/camera.md, "The marker"): each edge
+sampled along its normal, the sub-pixel 50 % crossing between the dark square and the light
+quiet zone located on each profile, one curve fitted per edge, adjacent curves intersected.
+
+Under a symmetric blur the 50 % level of a straight dark-light step is the step itself, so
+the edge points are unbiased; OpenCV's ``cornerSubPix`` on the convex corner of a blurred
+dark square is not (it stops ~0.2 px inside the true corner, measured in
+tools/marker_view_accuracy.py).  The corners come back in the raw (distorted) image as the
+detector's other corners do.  With the camera's :class:`~amsfe_sym.vision.camera_info.
+CameraInfo` the edge points are undistorted and a straight line is fitted per edge; without
+it (the log reader detects before it has read the CameraInfo) a parabola per edge in the raw
+image takes the lens's bend of a straight edge to second order.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amsfe_sym.vision.camera_info import CameraInfo, distort, undistort
+
+__all__ = ["edge_corners", "edge_points"]
+
+FloatArray = NDArray[np.float64]
+
+#: Passes of (levels at the edge +- a, then the edge at their mean) on each profile.
+LEVEL_PASSES = 4
+#: How far beyond +- a the profiles reach [px] (the approximate corners' error).
+SLACK = 1.0
+#: The shortest edge [px] fitted by a parabola in the raw image (shorter: a line).  The
+#: lens bends a straight edge by its sagitta, 0.07 px over 50 px and 1.1 px over 200 px at
+#: the corner of the simulated camera's image (0.18 and 2.8 px with the strong lens); a
+#: parabola's third coefficient costs noise on short edges: on renders at blur 0.8 px the
+#: corners' RMS error was lowest with the threshold at 40-60 px (tools/marker_view_accuracy.py).
+CURVE_FROM = 50.0
+#: Profile step along an edge's normal [px].
+STEP = 0.25
+#: Most samples along one edge (spaced evenly between its two corner margins).
+MAX_SAMPLES = 40
+#: Longest a profile reaches on each side of the edge [px] (half a module below that).
+MAX_REACH = 4.0
+
+
+def edge_points(
+    grey: NDArray[np.uint8], corners: FloatArray, modules: int
+) -> list[FloatArray] | None:
+    """Sub-pixel points (N_k, 2) [px, raw image, integer = pixel centre] on each of the
+    marker's 4 outer edges, edge k from ``corners[k]`` to ``corners[k+1]`` (OpenCV's
+    order), or None when an edge gives fewer than 3 points.
+
+    ``modules``: the marker's side in modules (bits + 2 border bits).  Each profile reaches
+    ``a`` = half a module (at most :data:`MAX_REACH`) inside and outside the approximate
+    edge, so its inner end stays in the black border; the edge's dark and light levels are
+    the medians of the profiles' ends, symmetric about the edge so that a blur wider than
+    ``a`` moves both alike; a profile's point is its crossing of the levels' mean nearest
+    the approximate edge (linear between samples of a bilinear interpolation).  Samples
+    stay a module (at least 3 px) away from the corners, where the other edge bends the
+    level line.
+    """
+    import cv2
+
+    c = np.asarray(corners, dtype=np.float64).reshape(4, 2)
+    centre = c.mean(axis=0)
+    A, B = c, np.roll(c, -1, axis=0)
+    length = np.linalg.norm(B - A, axis=1)  # (4,)
+    if not np.all(length > 4.0):
+        return None
+    d = (B - A) / length[:, None]
+    n = np.column_stack([-d[:, 1], d[:, 0]])
+    outward = np.sign(np.einsum("ij,ij->i", 0.5 * (A + B) - centre, n))
+    n *= outward[:, None]
+    module = float(length.mean()) / modules
+    reach = min(0.5 * module, MAX_REACH)
+    margin = max(module, 3.0)
+    s = np.arange(-reach - SLACK, reach + SLACK + 1e-9, STEP)  # (M,) outward positive
+    count = int(min(MAX_SAMPLES, max(3, np.floor(length.min() - 2 * margin) + 1)))
+    t = np.linspace(0.0, 1.0, count)
+    u = margin + t[None, :] * (length[:, None] - 2 * margin)  # (4, count) along each edge
+    base = A[:, None, :] + u[..., None] * d[:, None, :]  # (4, count, 2)
+    pts = base[:, :, None, :] + s[None, None, :, None] * n[:, None, None, :]  # (4, count, M, 2)
+    flat = pts.reshape(4 * count, len(s), 2).astype(np.float32)
+    prof = cv2.remap(
+        np.asarray(grey, dtype=np.float32), flat[..., 0], flat[..., 1], cv2.INTER_CUBIC,
+        borderMode=cv2.BORDER_REPLICATE,
+    ).reshape(4, count, len(s)).astype(np.float64)  # fmt: skip
+    off = np.zeros((4, count))  # each profile's edge [px] along the normal
+    ok = np.ones((4, count), dtype=bool)
+    mid = 0.5 * (s[:-1] + s[1:])
+    for _ in range(LEVEL_PASSES):
+        dark = _median_rows(_at(prof, s, off - reach), ok)
+        light = _median_rows(_at(prof, s, off + reach), ok)
+        level = (0.5 * (dark + light))[:, None, None]
+        above = prof >= level  # (4, count, M)
+        rise = ~above[..., :-1] & above[..., 1:]  # a dark -> light crossing in (j, j+1)
+        dist = np.where(rise, np.abs(mid[None, None, :] - off[..., None]), np.inf)
+        j = np.argmin(dist, axis=2)  # (4, count): the crossing nearest the last edge
+        ok = np.isfinite(np.take_along_axis(dist, j[..., None], axis=2)[..., 0])
+        ok &= (light - dark)[:, None] > 0
+        v0 = np.take_along_axis(prof, j[..., None], axis=2)[..., 0]
+        v1 = np.take_along_axis(prof, (j + 1)[..., None], axis=2)[..., 0]
+        frac = (level[..., 0] - v0) / np.where(v1 > v0, v1 - v0, 1.0)
+        off = np.where(ok, s[j] + STEP * frac, off)
+    found = base + off[..., None] * n[:, None, :]
+    out = [found[k][ok[k]] for k in range(4)]
+    return out if all(len(p) >= 3 for p in out) else None
+
+
+def _at(prof: FloatArray, s: FloatArray, x: FloatArray) -> FloatArray:
+    """The profiles ``prof`` (4, count, M), sampled at ``s`` (M,), at ``x`` (4, count)
+    (linear between samples, clamped to the ends)."""
+    f = np.clip((x - s[0]) / STEP, 0.0, len(s) - 1.000001)
+    j = np.floor(f).astype(int)
+    w = f - j
+    v0 = np.take_along_axis(prof, j[..., None], axis=2)[..., 0]
+    v1 = np.take_along_axis(prof, (j + 1)[..., None], axis=2)[..., 0]
+    out: FloatArray = (1.0 - w) * v0 + w * v1
+    return out
+
+
+def _median_rows(v: FloatArray, ok: NDArray[np.bool_]) -> FloatArray:
+    """The median of each row of ``v`` (4, count) over its ``ok`` entries (all if none)."""
+    return np.array([np.median(r[m] if m.any() else r) for r, m in zip(v, ok, strict=True)])
+
+
+def edge_corners(
+    grey: NDArray[np.uint8],
+    corners: FloatArray,
+    modules: int,
+    info: CameraInfo | None = None,
+    curve_from: float = CURVE_FROM,
+) -> FloatArray | None:
+    """The marker's 4 corners (4, 2) [px, raw image] from its edges (:func:`edge_points`),
+    ``corners`` the approximate ones (OpenCV's order); None when an edge gives too few
+    points.
+
+    ``info``: the camera's lens; its edge points are undistorted, a line (total least
+    squares) fitted per edge, adjacent lines intersected and the corners distorted back.
+    None: a parabola per edge of ``curve_from`` px or longer in the raw image (least squares
+    of the offset along the edge's normal; a line for shorter edges), adjacent curves
+    intersected by Newton's method.
+    """
+    found = edge_points(grey, corners, modules)
+    if found is None:
+        return None
+    if info is not None and not info.rectified:
+        lines = [_line(undistort(info, p)) for p in found]
+        return distort(info, np.array([_meet(lines[k - 1], lines[k]) for k in range(4)]))
+    long = np.linalg.norm(np.asarray(corners) - np.roll(corners, -1, axis=0), axis=1) >= curve_from
+    curves = [_parabola(p, bool(bend)) for p, bend in zip(found, long, strict=True)]
+    return np.array([_meet_curves(curves[k - 1], curves[k]) for k in range(4)])
+
+
+def _line(p: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """(a point, a unit direction) of the total-least-squares line through ``p`` (N, 2)."""
+    m = p.mean(axis=0)
+    _, _, vt = np.linalg.svd(p - m, full_matrices=False)
+    return m, vt[0]
+
+
+def _meet(a: tuple[FloatArray, FloatArray], b: tuple[FloatArray, FloatArray]) -> FloatArray:
+    """The intersection of two lines (point, direction)."""
+    (p, d), (q, e) = a, b
+    t = np.linalg.solve(np.column_stack([d, -e]), q - p)
+    out: FloatArray = p + t[0] * d
+    return out
+
+
+Curve = tuple[FloatArray, FloatArray, FloatArray, FloatArray]  # origin, d, n, (c0, c1, c2)
+
+
+def _parabola(p: FloatArray, bend: bool = True) -> Curve:
+    """The parabola ``origin + u d + (c0 + c1 u + c2 u^2) n`` through ``p`` (N, 2) by least
+    squares, ``d`` the points' principal direction, ``u`` from their mean; a straight line
+    (``c2 = 0``) for fewer than 5 points."""
+    m, d = _line(p)
+    n = np.array([-d[1], d[0]])
+    u, w = (p - m) @ d, (p - m) @ n
+    deg = 2 if bend and len(p) >= 5 else 1
+    coef = np.polynomial.polynomial.polyfit(u, w, deg)
+    return m, d, n, np.pad(coef, (0, 3 - len(coef)))
+
+
+def _on(c: Curve, u: float) -> tuple[FloatArray, FloatArray]:
+    """(the point, its derivative in ``u``) of curve ``c`` at ``u``."""
+    m, d, n, (c0, c1, c2) = c
+    return m + u * d + (c0 + u * (c1 + u * c2)) * n, d + (c1 + 2.0 * c2 * u) * n
+
+
+def _meet_curves(a: Curve, b: Curve) -> FloatArray:
+    """The intersection of two parabolas (Newton's method from their points' means)."""
+    ua = ub = 0.0
+    for _ in range(8):  # (the first step: where the tangents at the points' means meet)
+        pa, da = _on(a, ua)
+        pb, db = _on(b, ub)
+        step = np.linalg.solve(np.column_stack([da, -db]), pb - pa)
+        ua, ub = ua + float(step[0]), ub + float(step[1])
+        if abs(step).max() < 1e-10:
+            break
+    return _on(a, ua)[0]
