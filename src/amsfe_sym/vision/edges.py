@@ -1,11 +1,12 @@
-"""The marker's corners from its 4 outer edges (docs/camera.md, "The marker"): each edge
-sampled along its normal, the sub-pixel 50 % crossing between the dark square and the light
+"""The marker's corners from its 4 outer edges (docs/camera.md, "Accuracy"): each edge
+sampled along its normal, the sub-pixel 50 % crossing between the dark border and the light
 quiet zone located on each profile, one curve fitted per edge, adjacent curves intersected.
 
 Under a symmetric blur the 50 % level of a straight dark-light step is the step itself, so
-the edge points are unbiased; OpenCV's ``cornerSubPix`` on the convex corner of a blurred
-dark square is not (it stops ~0.2 px inside the true corner, measured in
-tools/marker_view_accuracy.py).  The corners come back in the raw (distorted) image as the
+the edge points are unbiased; OpenCV's ``cornerSubPix`` on the marker's corners is not (on
+the simulated camera's renders it stops 0.1-0.45 px inside the true corner, more with more
+blur: tools/marker_view_accuracy.py ``--bias``; the marker's own bits lie in its window).
+The corners come back in the raw (distorted) image as the
 detector's other corners do.  With the camera's :class:`~amsfe_sym.vision.camera_info.
 CameraInfo` the edge points are undistorted and a straight line is fitted per edge; without
 it (the log reader detects before it has read the CameraInfo) a parabola per edge in the raw
@@ -37,7 +38,7 @@ CURVE_FROM = 50.0
 STEP = 0.25
 #: Most samples along one edge (spaced evenly between its two corner margins).
 MAX_SAMPLES = 40
-#: Longest a profile reaches on each side of the edge [px] (half a module below that).
+#: Farthest the levels are read on each side of an edge [px] (half a module below that).
 MAX_REACH = 4.0
 
 
@@ -48,14 +49,16 @@ def edge_points(
     marker's 4 outer edges, edge k from ``corners[k]`` to ``corners[k+1]`` (OpenCV's
     order), or None when an edge gives fewer than 3 points.
 
-    ``modules``: the marker's side in modules (bits + 2 border bits).  Each profile reaches
-    ``a`` = half a module (at most :data:`MAX_REACH`) inside and outside the approximate
-    edge, so its inner end stays in the black border; the edge's dark and light levels are
-    the medians of the profiles' ends, symmetric about the edge so that a blur wider than
-    ``a`` moves both alike; a profile's point is its crossing of the levels' mean nearest
-    the approximate edge (linear between samples of a bilinear interpolation).  Samples
-    stay a module (at least 3 px) away from the corners, where the other edge bends the
-    level line.
+    ``modules``: the marker's side in modules (bits + 2 border bits).  Each profile is
+    sampled every :data:`STEP` px (bicubic) across the approximate edge, ``a`` = half a
+    module (at most :data:`MAX_REACH`) and :data:`SLACK` more on each side.  The edge's dark
+    and light levels are the medians over its profiles of the values at ``a`` inside and
+    outside each profile's edge (so the dark one stays in the black border, and a blur wider
+    than ``a`` moves both alike); each profile's edge is then its crossing of the levels'
+    mean nearest the last one (linear between samples), and the two steps are repeated
+    :data:`LEVEL_PASSES` times from the approximate edge (an approximate edge 0.2 px off
+    would otherwise tilt the levels).  Samples stay a module (at least 3 px) away from the
+    corners, where the other edge bends the level line.
     """
     import cv2
 
@@ -78,14 +81,25 @@ def edge_points(
     u = margin + t[None, :] * (length[:, None] - 2 * margin)  # (4, count) along each edge
     base = A[:, None, :] + u[..., None] * d[:, None, :]  # (4, count, 2)
     pts = base[:, :, None, :] + s[None, None, :, None] * n[:, None, None, :]  # (4, count, M, 2)
-    flat = pts.reshape(4 * count, len(s), 2).astype(np.float32)
-    prof = cv2.remap(
-        np.asarray(grey, dtype=np.float32), flat[..., 0], flat[..., 1], cv2.INTER_CUBIC,
-        borderMode=cv2.BORDER_REPLICATE,
-    ).reshape(4, count, len(s)).astype(np.float64)  # fmt: skip
+    flat = pts.reshape(4 * count, len(s), 2)
+    # only the pixels the bicubic samples touch, as float (the region and the whole image's
+    # searches then read the same values)
+    h, w = grey.shape[:2]
+    x0, y0 = np.maximum(np.floor(flat.reshape(-1, 2).min(axis=0)).astype(int) - 3, 0)
+    x1, y1 = np.ceil(flat.reshape(-1, 2).max(axis=0)).astype(int) + 4
+    patch = np.asarray(grey[y0 : min(y1, h), x0 : min(x1, w)], dtype=np.float32)
+    local = (flat - np.array([x0, y0], dtype=np.float64)).astype(np.float32)
+    prof = (
+        cv2.remap(
+            patch, local[..., 0], local[..., 1], cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE
+        )
+        .reshape(4, count, len(s))
+        .astype(np.float64)
+    )
     off = np.zeros((4, count))  # each profile's edge [px] along the normal
     ok = np.ones((4, count), dtype=bool)
     mid = 0.5 * (s[:-1] + s[1:])
+    rows, cols = np.ogrid[:4, :count]
     for _ in range(LEVEL_PASSES):
         dark = _median_rows(_at(prof, s, off - reach), ok)
         light = _median_rows(_at(prof, s, off + reach), ok)
@@ -94,10 +108,9 @@ def edge_points(
         rise = ~above[..., :-1] & above[..., 1:]  # a dark -> light crossing in (j, j+1)
         dist = np.where(rise, np.abs(mid[None, None, :] - off[..., None]), np.inf)
         j = np.argmin(dist, axis=2)  # (4, count): the crossing nearest the last edge
-        ok = np.isfinite(np.take_along_axis(dist, j[..., None], axis=2)[..., 0])
+        ok = np.isfinite(dist[rows, cols, j])
         ok &= (light - dark)[:, None] > 0
-        v0 = np.take_along_axis(prof, j[..., None], axis=2)[..., 0]
-        v1 = np.take_along_axis(prof, (j + 1)[..., None], axis=2)[..., 0]
+        v0, v1 = prof[rows, cols, j], prof[rows, cols, j + 1]
         frac = (level[..., 0] - v0) / np.where(v1 > v0, v1 - v0, 1.0)
         off = np.where(ok, s[j] + STEP * frac, off)
     found = base + off[..., None] * n[:, None, :]
@@ -111,15 +124,20 @@ def _at(prof: FloatArray, s: FloatArray, x: FloatArray) -> FloatArray:
     f = np.clip((x - s[0]) / STEP, 0.0, len(s) - 1.000001)
     j = np.floor(f).astype(int)
     w = f - j
-    v0 = np.take_along_axis(prof, j[..., None], axis=2)[..., 0]
-    v1 = np.take_along_axis(prof, (j + 1)[..., None], axis=2)[..., 0]
-    out: FloatArray = (1.0 - w) * v0 + w * v1
+    rows, cols = np.ogrid[: prof.shape[0], : prof.shape[1]]
+    out: FloatArray = (1.0 - w) * prof[rows, cols, j] + w * prof[rows, cols, j + 1]
     return out
 
 
 def _median_rows(v: FloatArray, ok: NDArray[np.bool_]) -> FloatArray:
-    """The median of each row of ``v`` (4, count) over its ``ok`` entries (all if none)."""
-    return np.array([np.median(r[m] if m.any() else r) for r, m in zip(v, ok, strict=True)])
+    """The median of each row of ``v`` (R, N) over its ``ok`` entries (all of a row that has
+    none), as ``np.median`` would give it, for all rows at once."""
+    ok = ok | ~ok.any(axis=1, keepdims=True)
+    srt = np.sort(np.where(ok, v, np.inf), axis=1)
+    k = ok.sum(axis=1)
+    r = np.arange(len(v))
+    out: FloatArray = 0.5 * (srt[r, (k - 1) // 2] + srt[r, k // 2])
+    return out
 
 
 def edge_corners(
@@ -176,7 +194,8 @@ def _parabola(p: FloatArray, bend: bool = True) -> Curve:
     n = np.array([-d[1], d[0]])
     u, w = (p - m) @ d, (p - m) @ n
     deg = 2 if bend and len(p) >= 5 else 1
-    coef = np.polynomial.polynomial.polyfit(u, w, deg)
+    V = np.vander(u, deg + 1, increasing=True)
+    coef = np.linalg.solve(V.T @ V, V.T @ w)  # (u from the mean: well conditioned)
     return m, d, n, np.pad(coef, (0, 3 - len(coef)))
 
 

@@ -82,11 +82,13 @@ class MarkerDetector:
     or 100 iterations, in a half-window of ``relative_window`` of the marker's module (bit)
     size, at most ``refine_window`` px), then each of the marker's 4 outer edges located to
     sub-pixel and the corners where they meet (:func:`~amsfe_sym.vision.edges.edge_corners`):
-    ``cornerSubPix`` alone places the corners of a blurred marker 0.1-0.4 px inside the true
+    ``cornerSubPix`` alone places the corners of a blurred marker 0.1-0.45 px inside the true
     ones, the edges do not (docs/camera.md, "Accuracy").  ``info``: the camera's lens, for a
     line per edge in the undistorted image (more accurate); None, a parabola per edge in the
-    raw image (the log reader detects before it has the CameraInfo).  The corners come back
-    in the raw image either way; where the edges give too few points, OpenCV's.
+    raw image.  The toolkit's chain passes none (the log reader detects before it has read
+    the CameraInfo, and the camera node must give the log reader's corners bit for bit).
+    The corners come back in the raw image either way; where the edges give too few points
+    or move a corner more than :data:`MAX_MOVE_PX` (or a module), OpenCV's.
 
     OpenCV's own threads: the detector's ``parallel_for_`` splits ~1 ms of work per image, so
     the caller decides (:func:`single_threaded`): the log reader and the camera node run it
