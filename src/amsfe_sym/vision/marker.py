@@ -223,8 +223,8 @@ class MarkerDetector:
 def single_threaded() -> None:
     """OpenCV on one thread in this process (``cv2.setNumThreads(1)``).
 
-    A detection is ~0.2 ms in a region of interest and ~1-2 ms in a whole 640 x 480 image of
-    CPU time; OpenCV's ``parallel_for_`` over so little work adds a thread hand-off, and a
+    OpenCV's part of a detection is ~0.3 ms of CPU in a region of interest and ~1-2 ms in a
+    whole 640 x 480 image; its ``parallel_for_`` over so little work adds a thread hand-off, and a
     second thread would take the core of the estimator or the encoder path (docs/camera.md,
     "Speed").
     """
