@@ -171,8 +171,10 @@ def edge_corners(
 def _line(p: FloatArray) -> tuple[FloatArray, FloatArray]:
     """(a point, a unit direction) of the total-least-squares line through ``p`` (N, 2)."""
     m = p.mean(axis=0)
-    _, _, vt = np.linalg.svd(p - m, full_matrices=False)
-    return m, vt[0]
+    q = p - m
+    sxx, syy, sxy = float(q[:, 0] @ q[:, 0]), float(q[:, 1] @ q[:, 1]), float(q[:, 0] @ q[:, 1])
+    angle = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)  # (the scatter's principal axis)
+    return m, np.array([np.cos(angle), np.sin(angle)])
 
 
 def _meet(a: tuple[FloatArray, FloatArray], b: tuple[FloatArray, FloatArray]) -> FloatArray:
@@ -199,20 +201,23 @@ def _parabola(p: FloatArray, bend: bool = True) -> Curve:
     return m, d, n, np.pad(coef, (0, 3 - len(coef)))
 
 
-def _on(c: Curve, u: float) -> tuple[FloatArray, FloatArray]:
-    """(the point, its derivative in ``u``) of curve ``c`` at ``u``."""
-    m, d, n, (c0, c1, c2) = c
-    return m + u * d + (c0 + u * (c1 + u * c2)) * n, d + (c1 + 2.0 * c2 * u) * n
-
-
 def _meet_curves(a: Curve, b: Curve) -> FloatArray:
-    """The intersection of two parabolas (Newton's method from their points' means)."""
+    """The intersection of two parabolas (Newton's method from their points' means; the
+    2 x 2 steps by Cramer's rule, in floats: ~20 of them a frame)."""
+    (max_, may), (dax, day), (nax, nay), (a0, a1, a2) = (tuple(map(float, v)) for v in a)
+    (mbx, mby), (dbx, dby), (nbx, nby), (b0, b1, b2) = (tuple(map(float, v)) for v in b)
     ua = ub = 0.0
     for _ in range(8):  # (the first step: where the tangents at the points' means meet)
-        pa, da = _on(a, ua)
-        pb, db = _on(b, ub)
-        step = np.linalg.solve(np.column_stack([da, -db]), pb - pa)
-        ua, ub = ua + float(step[0]), ub + float(step[1])
-        if abs(step).max() < 1e-10:
+        wa, ga = a0 + ua * (a1 + ua * a2), a1 + 2.0 * a2 * ua
+        wb, gb = b0 + ub * (b1 + ub * b2), b1 + 2.0 * b2 * ub
+        rx = (mbx + ub * dbx + wb * nbx) - (max_ + ua * dax + wa * nax)
+        ry = (mby + ub * dby + wb * nby) - (may + ua * day + wa * nay)
+        tax, tay = dax + ga * nax, day + ga * nay  # the tangents
+        tbx, tby = dbx + gb * nbx, dby + gb * nby
+        det = tbx * tay - tax * tby  # of [ta, -tb]
+        sa, sb = (tbx * ry - tby * rx) / det, (tax * ry - tay * rx) / det
+        ua, ub = ua + sa, ub + sb
+        if max(abs(sa), abs(sb)) < 1e-10:
             break
-    return _on(a, ua)[0]
+    wa = a0 + ua * (a1 + ua * a2)
+    return np.array([max_ + ua * dax + wa * nax, may + ua * day + wa * nay])
