@@ -103,6 +103,10 @@ def calibrate_command(
     # the frames at their header stamps: the time offset is measured from them, whatever
     # [camera] time_offset the topic spec has (the written one replaces it)
     ls = replace(read_log_spec(log_spec), camera_time_offset=0.0)
+    if opts.corners and ls.marker.refinement is None:
+        # the corners' own positions are fitted: refined from the marker's edges, which
+        # OpenCV's cornerSubPix puts 0.15-0.5 px inside (docs/camera.md, "The corners")
+        ls = replace(ls, marker=replace(ls.marker, refinement="edges"))
     joints = modelled_joints(spec) or []
     n_state = 4 * len(joints) + len(spec.theta)
     plan = plan_log(log_path, ls, joints)

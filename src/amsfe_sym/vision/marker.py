@@ -1,6 +1,6 @@
-"""The marker in an image: OpenCV's ArUco detector (AprilTag families included) with
-sub-pixel corner refinement, and the tracked point from its corners (docs/camera.md, "The
-marker")."""
+"""The marker in an image: OpenCV's ArUco detector (AprilTag families included), its
+corners refined from the marker's edges (:mod:`~amsfe_sym.vision.edges`), and the tracked
+point from its corners (docs/camera.md, "The marker")."""
 
 from __future__ import annotations
 
@@ -10,9 +10,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from amsfe_sym.vision.spec import CORNERS, MarkerSpec
+from amsfe_sym.errors import SpecError, describe
+from amsfe_sym.vision.camera_info import CameraInfo
+from amsfe_sym.vision.edges import edge_corners
+from amsfe_sym.vision.spec import CORNERS, REFINEMENTS, MarkerSpec
 
 __all__ = [
+    "REFINEMENTS",
     "THRESHOLD_WINDOW",
     "Detection",
     "MarkerDetector",
@@ -52,6 +56,11 @@ class Detection:
 #: noisier or flatter images it misses some, which the three then find (the fall-back).
 THRESHOLD_WINDOW = 7
 
+#: The farthest [px] the edge fit may move a corner from ``cornerSubPix``'s (or a module,
+#: when larger); farther, the edges were not found (another edge, a clipped marker) and
+#: OpenCV's corner stays.
+MAX_MOVE_PX = 3.0
+
 
 class MarkerDetector:
     """``cv2.aruco.ArucoDetector`` s for a :class:`MarkerSpec` (built once, reused).
@@ -62,11 +71,22 @@ class MarkerDetector:
     it on noisier or flatter images at ~5x the cost.  ``threshold_window=None``: the default
     windows alone.
 
-    Sub-pixel refinement: ``CORNER_REFINE_SUBPIX`` (``cornerSubPix`` on each corner,
-    stopping at 1e-4 px or 100 iterations) in a half-window of ``relative_window`` of the
-    marker's module (bit) size, at most ``refine_window`` px.  OpenCV's default 0.3 left
-    markers of 20-40 px at 0.5 px RMS on the renders of tests/test_vision_marker.py; 0.8 at
-    0.11-0.14 px (docs/camera.md, "Accuracy").
+    Sub-pixel refinement (``refinement``, else the spec's, else ``subpix``;
+    :data:`~amsfe_sym.vision.spec.REFINEMENTS`): ``subpix`` is OpenCV's
+    ``CORNER_REFINE_SUBPIX`` (``cornerSubPix`` on each corner, stopping at 1e-4 px or 100
+    iterations, in a half-window of ``relative_window`` of the marker's module (bit) size, at
+    most ``refine_window`` px); ``edges`` is that, then each of the marker's 4 outer edges
+    located to sub-pixel and the corners where they meet
+    (:func:`~amsfe_sym.vision.edges.edge_corners`): ``cornerSubPix`` alone places the
+    corners of a blurred marker 0.1-0.45 px inside the true ones, the edges do not, at ~3x
+    the detection's CPU (docs/camera.md, "The corners").  The centre, where the diagonals
+    meet, is not moved by such a shrink: the tracked point uses ``subpix``; ``amsfe
+    calibrate --corners`` uses ``edges``.  ``info``: the camera's lens, for a
+    line per edge in the undistorted image (more accurate); None, a parabola per edge in the
+    raw image.  The toolkit's chain passes none (the log reader detects before it has read
+    the CameraInfo, and the camera node must give the log reader's corners bit for bit).
+    The corners come back in the raw image either way; where the edges give too few points
+    or move a corner more than :data:`MAX_MOVE_PX` (or a module), OpenCV's.
 
     OpenCV's own threads: the detector's ``parallel_for_`` splits ~1 ms of work per image, so
     the caller decides (:func:`single_threaded`): the log reader and the camera node run it
@@ -79,11 +99,28 @@ class MarkerDetector:
         refine_window: int = 5,
         relative_window: float = 0.8,
         threshold_window: int | None = THRESHOLD_WINDOW,
+        refinement: str | None = None,
+        info: CameraInfo | None = None,
     ) -> None:
         import cv2
 
+        refinement = refinement or spec.refinement or "subpix"
+        if refinement not in REFINEMENTS:
+            raise SpecError(
+                describe(
+                    "MarkerDetector refinement",
+                    f"one of {', '.join(REFINEMENTS)}",
+                    repr(refinement),
+                    "name one of those",
+                )
+            )
         self.spec = spec
+        self.refinement = refinement
+        #: The camera's lens for the edge fit (None: a parabola per edge in the raw image).
+        self.info = info
         self._dictionary = cv2.aruco.getPredefinedDictionary(_dictionary_id(spec.dictionary))
+        #: The marker's side in modules: its bits and a black border bit on each side.
+        self.modules = int(self._dictionary.markerSize) + 2
         self._window = (int(refine_window), float(relative_window))
         self._threshold = threshold_window
         self._params = self._parameters(None, threshold_window)
@@ -99,7 +136,10 @@ class MarkerDetector:
         import cv2
 
         params = cv2.aruco.DetectorParameters()
-        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+        params.cornerRefinementMethod = {
+            "contour": cv2.aruco.CORNER_REFINE_CONTOUR,
+            "apriltag": cv2.aruco.CORNER_REFINE_APRILTAG,
+        }.get(self.refinement, cv2.aruco.CORNER_REFINE_SUBPIX)
         params.cornerRefinementWinSize = self._window[0]
         params.relativeCornerRefinmentWinSize = self._window[1]  # (OpenCV's spelling)
         params.cornerRefinementMaxIterations = 100
@@ -120,7 +160,8 @@ class MarkerDetector:
         with the detector's minimum marker perimeter kept in pixels), then, if it is not
         there, in the whole image (then with OpenCV's default threshold windows if still not
         found).  Corners found in the region are those of the whole image to ~1e-4 px
-        (float32 offsets; tests/test_vision_marker.py).
+        (float32 offsets; the edge fit runs on the whole image in both:
+        tests/test_vision_marker.py).
         """
         if near is not None and np.isfinite(near).all():
             found = self._near(grey, np.asarray(near, dtype=np.float64).reshape(4, 2))
@@ -135,15 +176,27 @@ class MarkerDetector:
             return self._found(self._fallback, grey, 0, 0)
         return det
 
-    def _found(self, detector: Any, grey: NDArray[np.uint8], x0: int, y0: int) -> Detection:
-        corners, ids, _ = detector.detectMarkers(grey)
+    def _found(
+        self, detector: Any, grey: NDArray[np.uint8], x0: int, y0: int, crop: int = 0
+    ) -> Detection:
+        """``detector`` on ``grey`` (the whole image), or on its square ``crop`` px at
+        (``x0``, ``y0``) px when ``crop`` > 0; corners in the whole image's pixels."""
+        part = grey[y0 : y0 + crop, x0 : x0 + crop] if crop else grey
+        corners, ids, _ = detector.detectMarkers(part)
         seen = () if ids is None else tuple(int(i) for i in np.asarray(ids).ravel())
         if not seen:
             return Detection(None, NO_MARKER)
         if self.spec.id not in seen:
             return Detection(None, OTHER_ID, seen)
         c = np.asarray(corners[seen.index(self.spec.id)], dtype=np.float64).reshape(4, 2)
-        return Detection(c + np.array([x0, y0], dtype=np.float64), None, seen)
+        c = c + np.array([x0, y0], dtype=np.float64)
+        if self.refinement == "edges":
+            fitted = edge_corners(grey, c, self.modules, self.info)
+            if fitted is not None and np.isfinite(fitted).all():
+                side = float(np.linalg.norm(c - np.roll(c, -1, axis=0), axis=1).min())
+                if np.abs(fitted - c).max() <= max(MAX_MOVE_PX, side / self.modules):
+                    c = fitted
+        return Detection(c, None, seen)
 
     def _near(self, grey: NDArray[np.uint8], near: FloatArray) -> Detection | None:
         import cv2
@@ -162,15 +215,15 @@ class MarkerDetector:
             rate = self._params.minMarkerPerimeterRate * max(w, h) / crop
             params = self._parameters(min(rate, 4.0), self._threshold)
             self._roi[key] = cv2.aruco.ArucoDetector(self._dictionary, params)
-        det = self._found(self._roi[key], grey[y0 : y0 + crop, x0 : x0 + crop], x0, y0)
+        det = self._found(self._roi[key], grey, x0, y0, crop)
         return det if det.corners is not None else None
 
 
 def single_threaded() -> None:
     """OpenCV on one thread in this process (``cv2.setNumThreads(1)``).
 
-    A detection is ~0.2 ms in a region of interest and ~1-2 ms in a whole 640 x 480 image of
-    CPU time; OpenCV's ``parallel_for_`` over so little work adds a thread hand-off, and a
+    OpenCV's part of a detection is ~0.3 ms of CPU in a region of interest and ~1-2 ms in a
+    whole 640 x 480 image; its ``parallel_for_`` over so little work adds a thread hand-off, and a
     second thread would take the core of the estimator or the encoder path (docs/camera.md,
     "Speed").
     """

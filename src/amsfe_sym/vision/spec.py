@@ -15,6 +15,7 @@ id = 0                            # the marker's id in it
 size = 0.05                       # its black square's side [m]
 point = "centre"                  # or "top_left" | "top_right" | "bottom_right" | "bottom_left"
 pixel_std = 0.15                  # the detected point's standard deviation per axis [px]
+refinement = "subpix"             # corner refinement (default: subpix; edges for --corners)
 ```
 """
 
@@ -30,6 +31,7 @@ __all__ = [
     "CORNERS",
     "DICTIONARIES",
     "IMAGE_TYPES",
+    "REFINEMENTS",
     "MarkerSpec",
     "parse_camera_section",
     "parse_marker",
@@ -43,6 +45,13 @@ CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 #: printed); ``centre`` is the intersection of the diagonals.
 CORNERS = ("top_left", "top_right", "bottom_right", "bottom_left")
 Point = Literal["centre", "top_left", "top_right", "bottom_right", "bottom_left"]
+
+#: How the detector refines the marker's corners: ``subpix`` (OpenCV's
+#: ``CORNER_REFINE_SUBPIX``), ``edges`` (then the marker's 4 outer edges fitted and
+#: intersected: :func:`~amsfe_sym.vision.edges.edge_corners`, unbiased where ``subpix`` puts
+#: the corners 0.15-0.5 px inside, at ~3x the detection's CPU), or OpenCV's ``contour`` /
+#: ``apriltag`` (for comparison: tools/marker_view_accuracy.py ``--bias``).
+REFINEMENTS: tuple[str, ...] = ("subpix", "edges", "contour", "apriltag")
 
 #: The cv2.aruco dictionaries by name (resolved by :mod:`amsfe_sym.vision.marker`).
 DICTIONARIES = (
@@ -70,6 +79,10 @@ class MarkerSpec:
             bounds the spread measured on rendered images of 20-60 px markers
             (tests/test_vision_marker.py, docs/camera.md): the value for ``[filter]
             camera_pixel_std`` when the images are this clean.
+        refinement: How the corners are refined (:data:`REFINEMENTS`); None: the
+            command's choice, ``subpix`` for the tracked point (the centre is unbiased by
+            symmetry) and ``edges`` for ``amsfe calibrate --corners`` (the marker's extent
+            matters there: docs/camera.md, "The corners").
     """
 
     dictionary: str = "DICT_APRILTAG_36h11"
@@ -77,6 +90,7 @@ class MarkerSpec:
     size: float = 0.05
     point: Point = "centre"
     pixel_std: float = 0.15
+    refinement: str | None = None
 
 
 def parse_marker(table: dict[str, Any], where: str = "[marker]") -> MarkerSpec:
@@ -85,7 +99,7 @@ def parse_marker(table: dict[str, Any], where: str = "[marker]") -> MarkerSpec:
     Raises:
         ConfigError: an unknown key, dictionary or point; an id < 0; a size or std <= 0.
     """
-    known = ("dictionary", "id", "size", "point", "pixel_std")
+    known = ("dictionary", "id", "size", "point", "pixel_std", "refinement")
     bad = sorted(set(table) - set(known))
     if bad:
         raise ConfigError(describe(where, f"keys among {list(known)}", str(bad), "drop them"))
@@ -106,6 +120,13 @@ def parse_marker(table: dict[str, Any], where: str = "[marker]") -> MarkerSpec:
         out["pixel_std"] = read_number(
             table["pixel_std"], f"{where} pixel_std", ConfigError, 0.0, strict=True
         )
+    if "refinement" in table:
+        r = table["refinement"]
+        if r not in REFINEMENTS:
+            raise ConfigError(
+                describe(f"{where} refinement", f"one of {list(REFINEMENTS)}", repr(r), "fix it")
+            )
+        out["refinement"] = r
     if "point" in table:
         p = table["point"]
         if p not in ("centre", *CORNERS):
