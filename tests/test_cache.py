@@ -139,3 +139,26 @@ def test_a_robot_of_the_same_name_from_another_source_is_named(built: Path) -> N
     assert bare.name == ROBOT and bare.spec_path is None
     assert _other_source(built, bare) == str(shipped.spec_path)
     assert _other_source(built.parent / "nothing-here", bare) is None
+
+
+def test_a_library_reused_by_another_checkout_names_that_checkouts_files(tmp_path: Path) -> None:
+    """Two copies of a robot folder (two checkouts) share one library cache: the library is
+    built once, and each loads it naming its own URDF and robot.toml, even after the copy
+    that built it is deleted (simulate --bag's /tf and the simulated marker read them)."""
+    import shutil
+
+    from amsfe_sym.codegen import load_library
+    from amsfe_sym.load.spec import robots_dir
+
+    out = tmp_path / "generated"
+    a, b = tmp_path / "a" / "paper_1link", tmp_path / "b" / "paper_1link"
+    shutil.copytree(robots_dir() / "paper_1link", a)
+    shutil.copytree(robots_dir() / "paper_1link", b)
+    lib_a = load_library(a / "robot.toml", out=out)
+    assert lib_a.manifest.spec == str((a / "robot.toml").resolve())
+    shutil.rmtree(tmp_path / "a")
+    lib_b = load_library(b / "robot.toml", out=out)
+    assert lib_b.dir == lib_a.dir  # the same library, reused
+    assert json.loads((lib_b.dir / "manifest.json").read_text())["spec"].startswith(str(a))
+    assert lib_b.manifest.spec == str((b / "robot.toml").resolve())
+    assert Path(lib_b.manifest.urdf).is_file() and Path(lib_b.manifest.urdf).is_relative_to(b)

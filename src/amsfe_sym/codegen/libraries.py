@@ -20,7 +20,9 @@ def load_library(
 ) -> ModelLibrary:
     """Generate (or reuse from the cache) and load the library of ``robot``
     (``generate_kwargs`` as :func:`generate`)."""
-    return ModelLibrary(generate(robot, **generate_kwargs).out_dir)
+    spec = robot if isinstance(robot, RobotSpec) else load_spec(robot)
+    out_dir = generate(spec, **generate_kwargs).out_dir
+    return ModelLibrary(out_dir, robot_files=(spec.urdf, spec.spec_path))
 
 
 def library_for(
@@ -79,4 +81,5 @@ def library_at_period(
         SpecError: T not > 0, or substeps < 1.
     """
     spec = spec_at_period(robot, T, substeps)
-    return ModelLibrary(generate(spec, out=out, progress=progress).out_dir)
+    out_dir = generate(spec, out=out, progress=progress).out_dir
+    return ModelLibrary(out_dir, robot_files=(spec.urdf, spec.spec_path))

@@ -15,6 +15,7 @@ Anyone can also load a function with plain CasADi: :meth:`ModelLibrary.external`
 from __future__ import annotations
 
 import ctypes
+import dataclasses
 import hashlib
 import os
 from functools import cached_property
@@ -194,16 +195,30 @@ class ModelLibrary:
 
     Args:
         path: ``generated/<name>/`` or its ``manifest.json``.
+        robot_files: The URDF and ``robot.toml`` (None for a bare URDF) of the robot the
+            caller loaded, in place of the paths the manifest recorded when it was built.
 
     Attributes:
         name, n, p, N, T: The manifest's robot name, joints n, parameters p, state size
             N = 4n + p and sampling interval T [s].
     """
 
-    def __init__(self, path: str | os.PathLike[str]) -> None:
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        robot_files: tuple[str | os.PathLike[str], str | os.PathLike[str] | None] | None = None,
+    ) -> None:
         p = Path(path)
         mpath = p / "manifest.json" if p.is_dir() else p
         self.manifest: Manifest = read_manifest(mpath)
+        if robot_files is not None:
+            # the URDF and robot.toml of the robot this run loaded: a library reused from the
+            # content-keyed cache names those of the checkout that built it, which another
+            # checkout sharing the cache may have deleted (/tf, the marker's pose read them)
+            urdf, spec = robot_files
+            self.manifest = dataclasses.replace(
+                self.manifest, urdf=str(urdf), spec=None if spec is None else str(spec)
+            )
         m = self.manifest
         self.name, self.n, self.p, self.N, self.T = m.name, m.n, m.p, m.N, m.T
         self.dir = mpath.parent
