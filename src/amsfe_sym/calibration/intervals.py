@@ -111,9 +111,16 @@ def error_model(J: FloatArray, r: FloatArray) -> ErrorModel:
         M = B @ Mu @ B.T * (m / u.shape[0])
         return ErrorModel("sandwich", M * m / (m - p), s2, 0.0, L)
     sigma2, tau2 = block_variances(J, r)
+    return ErrorModel("block", sigma2 * H + tau2 * _shift_gram(J), sigma2, tau2, 0)
+
+
+def _shift_gram(J: FloatArray) -> FloatArray:
+    """``J^T B J`` (p, p) for the jacobian ``J`` (m, k, p) of m frames of k/2 points:
+    ``B`` couples a frame's points' u with each other and their v (a shift common to the
+    frame), so each frame's rows summed per axis."""
+    m, k, p = J.shape
     S = J.reshape(m, k // 2, 2, p).sum(axis=1)  # each frame's points summed, per axis
-    Gb = np.einsum("iap,iaq->pq", S, S)  # J^T B J
-    return ErrorModel("block", sigma2 * H + tau2 * Gb, sigma2, tau2, 0)
+    return np.asarray(np.einsum("iap,iaq->pq", S, S))
 
 
 def prewhitening(g: FloatArray) -> FloatArray:
@@ -163,8 +170,7 @@ def block_variances(J: FloatArray, r: FloatArray) -> tuple[float, float]:
     if k == 2:
         return rr / max(n - rank, 1.0), 0.0
     npts = k // 2
-    S = J.reshape(m, npts, 2, p).sum(axis=1)
-    Gb = np.einsum("iap,iaq->pq", S, S)  # J^T B J
+    Gb = _shift_gram(J)  # J^T B J
     rs = r.reshape(m, npts, 2).sum(axis=1)
     rbr = float(np.sum(rs**2))  # r^T B r
     tPB = float(np.trace(Hi @ Gb))  # tr(P B)

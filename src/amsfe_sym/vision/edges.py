@@ -1,4 +1,4 @@
-"""The marker's corners from its 4 outer edges (docs/camera.md, "Accuracy"): each edge
+"""The marker's corners from its 4 outer edges (docs/camera.md, "The corners"): each edge
 sampled along its normal, the sub-pixel 50 % crossing between the dark border and the light
 quiet zone located on each profile, one curve fitted per edge, adjacent curves intersected.
 

@@ -1,6 +1,6 @@
 """The marker in an image: OpenCV's ArUco detector (AprilTag families included), its
-corners refined from the marker's edges (:mod:`~amsfe_sym.vision.edges`), and the tracked
-point from its corners (docs/camera.md, "The marker")."""
+corners refined by OpenCV or from the marker's edges (:mod:`~amsfe_sym.vision.edges`), and
+the tracked point from its corners (docs/camera.md, "The marker")."""
 
 from __future__ import annotations
 
