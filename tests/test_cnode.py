@@ -24,7 +24,7 @@ from amsfe_sym.codegen import library_for
 from amsfe_sym.errors import RosError
 from amsfe_sym.scenario import load_scenario
 from amsfe_sym.sim.loop import run
-from tests.conftest import LOCKSTEP_S
+from tests.conftest import LOCKSTEP_S, c_program_built
 from tests.test_node_record import _bag
 from tests.test_ros import (
     _PREFIX,
@@ -558,6 +558,7 @@ def test_c_node_managed(tmp_path: Path) -> None:
     recorded, and ends at its duration (exit 0)."""
     from tests.test_ros import _lifecycle
 
+    c_program_built("paper-sim")  # not inside the lifecycle client's wait for the service
     env = _ros_env(tmp_path)
     rec = tmp_path / "rec"
     procs = []

@@ -1,4 +1,5 @@
 /* amsfe_lifecycle.c: see amsfe_lifecycle.h. */
+#define _GNU_SOURCE /* clock_gettime */
 #include "amsfe_lifecycle.h"
 
 #include <rcl_lifecycle/default_state_machine.h>
@@ -13,9 +14,14 @@
 #include <lifecycle_msgs/srv/get_state.h>
 #include <rosidl_runtime_c/string_functions.h>
 
+#include <stdio.h>
+#include <string.h>
+#include <time.h>
+
 static void serve_introspection(node_lifecycle *lc);
 
 rcl_ret_t lifecycle_init(node_lifecycle *lc, rcl_node_t *node) {
+  memset(lc, 0, sizeof *lc);
   lc->sm = rcl_lifecycle_get_zero_initialized_state_machine();
   rcl_lifecycle_state_machine_options_t opts = rcl_lifecycle_get_default_state_machine_options();
   opts.enable_com_interface = true;
@@ -71,37 +77,101 @@ static int transition(node_lifecycle *lc, uint8_t id, void (*on)(void *, int), v
   return 1;
 }
 
-void lifecycle_serve(node_lifecycle *lc, void (*on)(void *ctx, int event), void *ctx) {
-  if (!lc->enabled) return;
+static double mono_s(void) {
+  struct timespec t;
+  clock_gettime(CLOCK_MONOTONIC, &t);
+  return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+/* Send one response to change_state (p->change) or get_state: 1 delivered (or its client
+ * gone), 0 not (the error reset). */
+static int send_one(node_lifecycle *lc, lifecycle_pending *p) {
   rcl_lifecycle_com_interface_t *c = &lc->sm.com_interface;
-  rmw_request_id_t header;
+  rcl_ret_t ret;
+  if (p->change) {
+    lifecycle_msgs__srv__ChangeState_Response res;
+    lifecycle_msgs__srv__ChangeState_Response__init(&res);
+    res.success = p->success != 0;
+    ret = rcl_send_response(&c->srv_change_state, &p->header, &res);
+    lifecycle_msgs__srv__ChangeState_Response__fini(&res);
+  } else {
+    lifecycle_msgs__srv__GetState_Response res;
+    lifecycle_msgs__srv__GetState_Response__init(&res);
+    res.current_state.id = (uint8_t)p->state->id;
+    rosidl_runtime_c__String__assign(&res.current_state.label, p->state->label);
+    ret = rcl_send_response(&c->srv_get_state, &p->header, &res);
+    lifecycle_msgs__srv__GetState_Response__fini(&res);
+  }
+  if (ret == RCL_RET_OK) return 1;
+  rcutils_reset_error();
+  return 0;
+}
+
+/* Send, or keep for a later serve (dropped with a line when there is no room). */
+static void send_or_keep(node_lifecycle *lc, lifecycle_pending *p) {
+  if (send_one(lc, p)) return;
+  if (lc->n_pending < LIFECYCLE_PENDING) {
+    p->since = mono_s();
+    lc->pending[lc->n_pending++] = *p;
+  } else {
+    ++lc->dropped;
+    fprintf(stderr, "node: a lifecycle response not delivered (its client not matched), "
+                    "and %d others waiting: dropped\n", LIFECYCLE_PENDING);
+  }
+}
+
+/* The kept responses: tried again (may_block) until LIFECYCLE_RESEND_S, else dropped. */
+static void resend(node_lifecycle *lc, int may_block) {
+  int kept = 0;
+  for (int i = 0; i < lc->n_pending; ++i) {
+    lifecycle_pending *p = &lc->pending[i];
+    if (may_block && send_one(lc, p)) {
+      ++lc->resent;
+      continue;
+    }
+    if (may_block && mono_s() - p->since < LIFECYCLE_RESEND_S) {
+      lc->pending[kept++] = *p;
+      continue;
+    }
+    ++lc->dropped;
+    fprintf(stderr,
+            "node: the response to a lifecycle %s not delivered (its client's reader not "
+            "matched %s): dropped; the client can ask get_state\n",
+            p->change ? "change_state" : "get_state",
+            may_block ? "within 10 s" : "before samples came");
+  }
+  lc->n_pending = kept;
+}
+
+void lifecycle_serve(node_lifecycle *lc, int may_block, void (*on)(void *ctx, int event),
+                     void *ctx) {
+  if (!lc->enabled) return;
+  if (lc->n_pending) resend(lc, may_block);
+  rcl_lifecycle_com_interface_t *c = &lc->sm.com_interface;
+  lifecycle_pending p;
+  memset(&p, 0, sizeof p);
   lifecycle_msgs__srv__ChangeState_Request req;
-  lifecycle_msgs__srv__ChangeState_Response res;
   lifecycle_msgs__srv__ChangeState_Request__init(&req);
-  lifecycle_msgs__srv__ChangeState_Response__init(&res);
-  while (rcl_take_request(&c->srv_change_state, &header, &req) == RCL_RET_OK) {
+  while (rcl_take_request(&c->srv_change_state, &p.header, &req) == RCL_RET_OK) {
     uint8_t id = req.transition.id;
     if (id == 0 && req.transition.label.data) { /* by label: its id from the current state */
       const rcl_lifecycle_transition_t *t =
           rcl_lifecycle_get_transition_by_label(lc->sm.current_state, req.transition.label.data);
       id = t ? (uint8_t)t->id : 0;
     }
-    res.success = id != 0 && transition(lc, id, on, ctx);
-    if (rcl_send_response(&c->srv_change_state, &header, &res) != RCL_RET_OK) rcutils_reset_error();
+    p.change = 1;
+    p.success = id != 0 && transition(lc, id, on, ctx);
+    send_or_keep(lc, &p);
   }
   lifecycle_msgs__srv__ChangeState_Request__fini(&req);
-  lifecycle_msgs__srv__ChangeState_Response__fini(&res);
   lifecycle_msgs__srv__GetState_Request greq;
-  lifecycle_msgs__srv__GetState_Response gres;
   lifecycle_msgs__srv__GetState_Request__init(&greq);
-  lifecycle_msgs__srv__GetState_Response__init(&gres);
-  while (rcl_take_request(&c->srv_get_state, &header, &greq) == RCL_RET_OK) {
-    gres.current_state.id = (uint8_t)lc->sm.current_state->id;
-    rosidl_runtime_c__String__assign(&gres.current_state.label, lc->sm.current_state->label);
-    if (rcl_send_response(&c->srv_get_state, &header, &gres) != RCL_RET_OK) rcutils_reset_error();
+  while (rcl_take_request(&c->srv_get_state, &p.header, &greq) == RCL_RET_OK) {
+    p.change = 0;
+    p.state = lc->sm.current_state;
+    send_or_keep(lc, &p);
   }
   lifecycle_msgs__srv__GetState_Request__fini(&greq);
-  lifecycle_msgs__srv__GetState_Response__fini(&gres);
   serve_introspection(lc);
 }
 

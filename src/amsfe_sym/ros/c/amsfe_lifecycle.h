@@ -6,7 +6,12 @@
  * activate (samples processed from then on, the watchdogs' clocks restarted), deactivate
  * (the hold command published, samples dropped), cleanup, shutdown (the node stops, exit 0).
  * The services are served from the node's wait set between samples; a request allocates
- * (rcl's typed take), a transition is not on the sample path. */
+ * (rcl's typed take), a transition is not on the sample path.
+ * A response the middleware could not deliver (Fast DDS sends it only once the client's
+ * response reader is matched, waiting 100 ms: on a loaded machine discovery takes longer,
+ * and `ros2 lifecycle set` or a manager would wait forever) is kept and sent again at the
+ * next serve, for up to LIFECYCLE_RESEND_S, while the node may block: not once samples flow
+ * (each try can block 100 ms), when it is dropped with a line on stderr. */
 #ifndef AMSFE_LIFECYCLE_H
 #define AMSFE_LIFECYCLE_H
 
@@ -20,9 +25,25 @@
 /* What a served transition asks of the node. */
 enum lifecycle_event { LC_NONE = 0, LC_ACTIVATE, LC_DEACTIVATE, LC_SHUTDOWN };
 
+/* Responses kept for a second try, and for how long [s]. */
+#define LIFECYCLE_PENDING 8
+#define LIFECYCLE_RESEND_S 10.0
+
+/* A response not delivered yet: to change_state (success) or get_state (the state then). */
+typedef struct {
+  rmw_request_id_t header;
+  int change; /* 1 change_state, 0 get_state */
+  int success;
+  const rcl_lifecycle_state_t *state;
+  double since; /* CLOCK_MONOTONIC [s] of the first try */
+} lifecycle_pending;
+
 typedef struct {
   rcl_lifecycle_state_machine_t sm;
   int enabled;
+  lifecycle_pending pending[LIFECYCLE_PENDING];
+  int n_pending;
+  long resent, dropped; /* responses delivered on a later try; given up */
 } node_lifecycle;
 
 /* The state machine and its services on `node` (0 or an rcl error). */
@@ -30,8 +51,11 @@ rcl_ret_t lifecycle_init(node_lifecycle *lc, rcl_node_t *node);
 /* Its services into the wait set (cleared by the caller). */
 rcl_ret_t lifecycle_wait_add(node_lifecycle *lc, rcl_wait_set_t *ws);
 /* Serve every pending request; each transition that succeeded is reported to `on` (the
- * node's reaction: activate, deactivate, shutdown) before its response is sent. */
-void lifecycle_serve(node_lifecycle *lc, void (*on)(void *ctx, int event), void *ctx);
+ * node's reaction: activate, deactivate, shutdown) before its response is sent.  Responses
+ * not delivered before are tried again when `may_block` (the node is not processing samples);
+ * otherwise they are dropped, each with a line. */
+void lifecycle_serve(node_lifecycle *lc, int may_block, void (*on)(void *ctx, int event),
+                     void *ctx);
 /* Its label ("unconfigured", "inactive", "active", "finalized", ...). */
 const char *lifecycle_state(const node_lifecycle *lc);
 void lifecycle_fini(node_lifecycle *lc, rcl_node_t *node);

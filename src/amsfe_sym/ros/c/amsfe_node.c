@@ -1100,7 +1100,8 @@ int main(int argc, char **argv) {
     amsfe_rcl_check(add, "the wait set");
     rcl_ret_t ret = rcl_wait(&s->ws, RCL_MS_TO_NS(50));
     if (ret != RCL_RET_OK && ret != RCL_RET_TIMEOUT) break;
-    if (s->managed) lifecycle_serve(&s->lc, on_lifecycle, s);
+    if (s->managed) /* a response kept for a second try may block 100 ms: not once samples flow */
+      lifecycle_serve(&s->lc, !(s->active && s->started), on_lifecycle, s);
     take_frames(s);
     if (sub_eff) take_efforts(s);
     if (s->recording) take_truth(s);
