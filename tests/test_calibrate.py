@@ -117,6 +117,13 @@ def test_calibrate_recovers_the_true_camera(
         assert abs(err) < 4 * p[f"offset_{axis}"]["std"]
     assert abs(result["time_offset_s"] - STAMP_OFFSET) < 4 * p["time_offset"]["std"]
     assert 0.8 < result["pixel_std"] < 1.2
+    # the error model the intervals took, as printed; on white pixel noise the sandwich is
+    # about as wide as the white-noise interval it records beside it
+    model = result["error_model"]
+    assert model["kind"] == "sandwich" and model["description"] in printed
+    assert model["bandwidth_frames"] >= 0 and model["shift_sigma_px"] is None
+    ratio = [p[k]["std"] / p[k]["std_white"] for k in p if p[k]["fitted"]]
+    assert min(ratio) > 0.7 and max(ratio) < 1.4, ratio
     # the time offset as a topic spec key, for amsfe estimate / node (the defaults + the key)
     topics = read_topic_spec(out / "topics.toml")
     assert topics.camera_time_offset == round(result["time_offset_s"], 6)

@@ -27,6 +27,7 @@ from amsfe_sym.core.outputs import check_output
 
 if TYPE_CHECKING:  # (OpenCV, Pinocchio and scipy are imported when the command runs)
     from amsfe_sym.calibration import Calibration
+    from amsfe_sym.calibration.intervals import ErrorModel
     from amsfe_sym.load.types import Robot
 
 __all__ = [
@@ -238,6 +239,22 @@ def report_lines(cal: Calibration, robot: Robot, reader_skipped: dict[str, int])
     return out
 
 
+def _error_model(errors: ErrorModel | None) -> dict[str, Any] | None:
+    """What ``calibration.json`` says of the intervals' error model (its ``kind``, the
+    sandwich's bandwidth [frames], the block model's variances [px^2]) and the report's line."""
+    from amsfe_sym.calibration.solve import describe_errors
+
+    if errors is None:
+        return None
+    return {
+        "kind": errors.kind,
+        "bandwidth_frames": errors.bandwidth if errors.kind == "sandwich" else None,
+        "sigma_px": float(np.sqrt(errors.sigma2)),
+        "shift_sigma_px": float(np.sqrt(errors.tau2)) if errors.kind == "block" else None,
+        "description": describe_errors(errors),
+    }
+
+
 def _summary(
     cal: Calibration, robot: Robot, log_path: Path, reader_skipped: dict[str, int]
 ) -> dict[str, Any]:
@@ -260,6 +277,7 @@ def _summary(
                 "value": float(cal.x[k]),
                 "std": num(cal.std[k]),
                 "half_width_95": num(hw[k]),
+                "std_white": num(cal.std_white[k]),
                 "fitted": bool(cal.free[k]),
             }
             for k, name in enumerate(cal.names)
@@ -268,7 +286,10 @@ def _summary(
         "marker_orientation": None
         if cal.marker_R is None
         else matrix_to_quaternion(cal.marker_R).tolist(),
-        "interval": f"linearised: +-{Z95:.3f} sigma, sigma^2 = (J^T J)^-1 s^2 at the solution",
+        "interval": f"linearised: +-{Z95:.3f} sigma, sigma^2 from the sandwich "
+        "(J^T J)^-1 M (J^T J)^-1 at the solution (error_model: what M takes the pixel errors "
+        "to be); std_white: the same with M = s^2 J^T J, independent pixel errors",
+        "error_model": _error_model(cal.errors),
         "camera": {
             "position": cal.position.tolist(),
             "orientation": matrix_to_quaternion(cal.R_cw.T).tolist(),

@@ -75,6 +75,7 @@ __all__ = [
     "Calibration",
     "InitialGuess",
     "calibrate",
+    "describe_errors",
     "initial_guess",
 ]
 
@@ -164,7 +165,7 @@ class Calibration:
         return _frame_rms(self.residual[self.used])
 
 
-def _describe(errors: ErrorModel) -> str:
+def describe_errors(errors: ErrorModel) -> str:
     """One line: what the intervals take the pixel errors to be."""
     if errors.kind == "sandwich":
         return (
@@ -312,7 +313,7 @@ def calibrate(
             held[group] = why
     res = _residual(model, obs, x)
     R = model.rotation(x[0:3])
-    say(_describe(errors))
+    say(describe_errors(errors))
     if cs is not None:
         say(f"corner fit: 4 corners a frame, {int(use.sum())} frames, {npar} parameters")
     return Calibration(
