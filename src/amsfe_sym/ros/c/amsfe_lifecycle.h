@@ -29,10 +29,20 @@ enum lifecycle_event { LC_NONE = 0, LC_ACTIVATE, LC_DEACTIVATE, LC_SHUTDOWN };
 #define LIFECYCLE_PENDING 8
 #define LIFECYCLE_RESEND_S 10.0
 
-/* A response not delivered yet: to change_state (success) or get_state (the state then). */
+/* The services, in the order of the wait set and of lifecycle_pending.service. */
+enum lifecycle_service {
+  LC_SRV_CHANGE_STATE = 0,
+  LC_SRV_GET_STATE,
+  LC_SRV_AVAILABLE_STATES,
+  LC_SRV_AVAILABLE_TRANSITIONS,
+  LC_SRV_TRANSITION_GRAPH
+};
+
+/* A response not delivered yet: the service, the request's header, and what the answer is
+ * made of (the transition's outcome; the state when the request was served). */
 typedef struct {
   rmw_request_id_t header;
-  int change; /* 1 change_state, 0 get_state */
+  int service; /* enum lifecycle_service */
   int success;
   const rcl_lifecycle_state_t *state;
   double since; /* CLOCK_MONOTONIC [s] of the first try */
