@@ -18,7 +18,13 @@ from numpy.typing import NDArray
 
 from amsfe_sym.vision.camera_info import CameraInfo, undistort
 from amsfe_sym.vision.images import GreyImage, UndecodableImageError, grey_from_message
-from amsfe_sym.vision.marker import NO_MARKER, OTHER_ID, MarkerDetector, diagonals_meet_many
+from amsfe_sym.vision.marker import (
+    NO_MARKER,
+    OTHER_ID,
+    TOO_OBLIQUE,
+    MarkerDetector,
+    diagonals_meet_many,
+)
 from amsfe_sym.vision.spec import CORNERS, MarkerSpec
 
 __all__ = [
@@ -40,7 +46,7 @@ _NOTHING = np.zeros((0, 0), np.uint8)
 #: A frame whose compressed bytes do not decode (a corrupt jpeg or png): skipped, counted.
 UNDECODABLE = "whose image bytes do not decode (corrupt)"
 #: Why a frame has no point, by code (0: found); the log reader counts them by these names.
-REASONS = ("", NO_MARKER, OTHER_ID, UNDECODABLE)
+REASONS = ("", NO_MARKER, OTHER_ID, UNDECODABLE, TOO_OBLIQUE)
 
 
 @dataclass
@@ -126,7 +132,7 @@ class ImageDecoder:
             return  # (the next frame is searched around the last corners found before)
         cols.size[i] = img.pixels.shape[1], img.pixels.shape[0]
         det = self.detector.detect(img.pixels, self._last)  # (around the last first)
-        self._last = det.corners
+        self._last = det.near
         if det.corners is None:
             cols.reason[i] = REASONS.index(det.skipped or NO_MARKER)
         else:
