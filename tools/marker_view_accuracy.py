@@ -29,13 +29,15 @@ error along the marker's outward diagonal (its bias: negative = inside) and thei
 calib_arm of ``--truth-seed`` SEED with the marker fixed to its tip,
 tests/data/calibrate/robot-marker.toml, simulated with images at seed SEED): every frame's
 exact corners (the renderer's), each view rendered ``--renders`` times (fresh noise) and
-detected with ``subpix``, ``edges`` and ``edges+info``; per method the centre's error
-(detected minus exact, after undistortion) [px]: its mean over the recording's views (the
-error the frames share) beside its per-view spread, and the mean per bin of side [px],
-angle from face-on [deg] and direction of the tilt in the image::
+detected ungated with ``subpix``, ``edges`` (a curve per edge in the raw image, as the log
+reader runs it) and ``edges+info`` (a line per edge in the undistorted image); per method
+the centre's error (detected minus exact, after undistortion) [px]: over the frames
+foreshortened under 40-60 deg (what ``[marker] max_foreshortening_deg`` keeps) its mean, its
+spread and the mean over its standard error; per view (noise averaged) by foreshortening
+[deg] and side [px], and by the image direction of the tilt::
 
-    PYTHONPATH=src .venv/bin/python tools/marker_view_accuracy.py --recording 31700 \\
-        --renders 4 --out /tmp/views.json
+    PYTHONPATH=src .venv/bin/python tools/marker_view_accuracy.py --recording 31652 \\
+        --renders 2 --out docs/data/marker-recording-views.json
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 
 import cv2
@@ -179,7 +182,6 @@ def recording_views(seed: int) -> tuple[list[np.ndarray], object]:
     CameraInfo."""
     import os
     import shutil
-    import sys
     import tempfile
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -315,7 +317,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.recording is not None:
         result = recording_study(args.recording, args.renders, np.random.default_rng(7))
         if args.out:
-            result = {"command": "tools/marker_view_accuracy.py " + " ".join(argv or []), **result}
+            given = sys.argv[1:] if argv is None else argv
+            result = {"command": "tools/marker_view_accuracy.py " + " ".join(given), **result}
             Path(args.out).write_text(json.dumps(result, indent=1) + "\n")
         return 0
     model, D = LENSES["plumb_bob"]
