@@ -4,6 +4,7 @@ the tracked point from its corners (docs/camera.md, "The marker")."""
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -12,7 +13,7 @@ from numpy.typing import NDArray
 
 from amsfe_sym.errors import SpecError, describe
 from amsfe_sym.vision.camera_info import CameraInfo
-from amsfe_sym.vision.edges import edge_corners
+from amsfe_sym.vision.edges import edge_corners, unbend
 from amsfe_sym.vision.spec import CORNERS, REFINEMENTS, MarkerSpec
 
 __all__ = [
@@ -23,6 +24,8 @@ __all__ = [
     "diagonals_meet",
     "diagonals_meet_many",
     "foreshortening",
+    "marker_modules",
+    "raw_corners_unbent",
     "single_threaded",
     "tracked_point",
 ]
@@ -131,7 +134,7 @@ class MarkerDetector:
         self.info = info
         self._dictionary = cv2.aruco.getPredefinedDictionary(_dictionary_id(spec.dictionary))
         #: The marker's side in modules: its bits and a black border bit on each side.
-        self.modules = int(self._dictionary.markerSize) + 2
+        self.modules = marker_modules(spec.dictionary)
         self._window = (int(refine_window), float(relative_window))
         self._threshold = threshold_window
         self._params = self._parameters(None, threshold_window)
@@ -244,6 +247,30 @@ def single_threaded() -> None:
     import cv2
 
     cv2.setNumThreads(1)
+
+
+@functools.cache
+def marker_modules(dictionary: str) -> int:
+    """The side of a marker of ``dictionary`` (a cv2.aruco name) in modules: its bits and a
+    black border bit on each side."""
+    import cv2
+
+    return int(cv2.aruco.getPredefinedDictionary(_dictionary_id(dictionary)).markerSize) + 2
+
+
+def raw_corners_unbent(info: CameraInfo, corners: FloatArray, spec: MarkerSpec) -> FloatArray:
+    """Detected corners (M, 4, 2) [px, raw image] with the error of the edge fit's straight
+    lines in the raw image taken off when ``spec`` refines them from the edges without the
+    lens (:func:`~amsfe_sym.vision.edges.unbend`; the log reader's and the camera node's
+    detector); otherwise as they are.  Frames without a marker (NaN) stay NaN."""
+    c = np.asarray(corners, dtype=np.float64).reshape(-1, 4, 2)
+    if spec.refinement != "edges":
+        return c
+    out = c.copy()
+    ok = np.isfinite(c).all(axis=(1, 2))
+    if ok.any():
+        out[ok] = unbend(info, c[ok], marker_modules(spec.dictionary))
+    return out
 
 
 def _dictionary_id(name: str) -> int:
