@@ -29,8 +29,9 @@ error along the marker's outward diagonal (its bias: negative = inside) and thei
 calib_arm of ``--truth-seed`` SEED with the marker fixed to its tip,
 tests/data/calibrate/robot-marker.toml, simulated with images at seed SEED): every frame's
 exact corners (the renderer's), each view rendered ``--renders`` times (fresh noise) and
-detected ungated with ``subpix``, ``edges`` (a curve per edge in the raw image, as the log
-reader runs it) and ``edges+info`` (a line per edge in the undistorted image); per method
+detected ungated with ``subpix``, ``edges`` (a curve per edge in the raw image), ``edges
+unbent`` (those corners less the raw-image lines' error, vision.edges.unbend: what the log
+reader uses) and ``edges+info`` (a line per edge in the undistorted image); per method
 the centre's error (detected minus exact, after undistortion) [px]: over the frames
 foreshortened under 40-60 deg (what ``[marker] max_foreshortening_deg`` keeps) its mean, its
 spread and the mean over its standard error; per view (noise averaged) by foreshortening
@@ -46,12 +47,14 @@ import argparse
 import json
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from amsfe_sym.vision.camera_info import make_camera_info, undistort
+from amsfe_sym.vision.detections import undistorted_corners
 from amsfe_sym.vision.marker import MarkerDetector, diagonals_meet, foreshortening
 from amsfe_sym.vision.marker_pose import marker_view
 from amsfe_sym.vision.render import ImageNoise, MarkerRenderer
@@ -244,15 +247,16 @@ def _mean_row(e: np.ndarray, **key: object) -> dict:
     }
 
 
-RECORDING_METHODS = ("subpix", "edges", "edges+info")
+RECORDING_METHODS = ("subpix", "edges", "edges unbent", "edges+info")
 
 
 def recording_study(seed: int, renders: int, rng: np.random.Generator) -> dict:
     """The centre's error over a recording's views (module docstring, ``--recording``)."""
     views, info = recording_views(seed)
     spec = MarkerSpec(size=0.1, max_foreshortening_deg=90.0)  # (every view: none gated)
-    detectors = {m: MarkerDetector(spec, refinement=m) for m in RECORDING_METHODS[:-1]}
+    detectors = {m: MarkerDetector(spec, refinement=m) for m in RECORDING_METHODS[:2]}
     detectors["edges+info"] = MarkerDetector(spec, refinement="edges", info=info)
+    edges_spec = replace(spec, refinement="edges")
     renderer = MarkerRenderer(info, spec, ImageNoise())
     geo = [view_geometry(c) for c in views]
     err = {m: np.full((len(views), renders, 2), np.nan) for m in RECORDING_METHODS}
@@ -264,6 +268,9 @@ def recording_study(seed: int, renders: int, rng: np.random.Generator) -> dict:
                 found = det.detect(img).corners
                 if found is not None:
                     err[m][i, r] = diagonals_meet(undistort(info, found)) - truth
+                if found is not None and m == "edges":  # (the log reader's: unbent)
+                    und = undistorted_corners(info, found, edges_spec)[0]
+                    err["edges unbent"][i, r] = diagonals_meet(und) - truth
     side = np.array([g["side"] for g in geo])
     angle = np.array([g["angle"] for g in geo])
     tilt = np.array([g["tilt_dir"] for g in geo])

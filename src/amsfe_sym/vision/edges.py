@@ -234,7 +234,7 @@ def unbend(
     CameraInfo, less the error its straight lines make: an edge shorter than ``curve_from``
     is fitted as a line in the raw image, where the lens bends it, so the line lies off the
     edge's ends by a part of its sagitta and the corners move (on the simulated camera's
-    30-45 px markers, their centre ~0.015-0.02 px towards the image's centre, the same way on
+    30-45 px markers, their centre ~0.015 px away from the image's centre, the same way on
     every frame: docs/camera.md, "The corners").  With the lens ``info`` that error is
     modelled and taken off: each edge's straight segment between the undistorted corners,
     distorted, sampled over the span :func:`edge_points` samples (a module, at least 3 px,
