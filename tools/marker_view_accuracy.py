@@ -24,6 +24,21 @@ error along the marker's outward diagonal (its bias: negative = inside) and thei
 
     PYTHONPATH=src .venv/bin/python tools/marker_view_accuracy.py --bias 12 \\
         --out docs/data/marker-corner-bias.json
+
+``--recording SEED``: the views of a calibration recording (tools/calibrate_seeds.py's true
+calib_arm of ``--truth-seed`` SEED with the marker fixed to its tip,
+tests/data/calibrate/robot-marker.toml, simulated with images at seed SEED): every frame's
+exact corners (the renderer's), each view rendered ``--renders`` times (fresh noise) and
+detected ungated with ``subpix``, ``edges`` (a curve per edge in the raw image), ``edges
+unbent`` (those corners less the raw-image lines' error, vision.edges.unbend: what the log
+reader uses) and ``edges+info`` (a line per edge in the undistorted image); per method
+the centre's error (detected minus exact, after undistortion) [px]: over the frames
+foreshortened under 40-60 deg (what ``[marker] max_foreshortening_deg`` keeps) its mean, its
+spread and the mean over its standard error; per view (noise averaged) by foreshortening
+[deg] and side [px], and by the image direction of the tilt::
+
+    PYTHONPATH=src .venv/bin/python tools/marker_view_accuracy.py --recording 31652 \\
+        --renders 2 --out docs/data/marker-recording-views.json
 """
 
 from __future__ import annotations
@@ -31,13 +46,16 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from amsfe_sym.vision.camera_info import make_camera_info, undistort
-from amsfe_sym.vision.marker import MarkerDetector, diagonals_meet
+from amsfe_sym.vision.detections import undistorted_corners
+from amsfe_sym.vision.marker import MarkerDetector, diagonals_meet, foreshortening
 from amsfe_sym.vision.marker_pose import marker_view
 from amsfe_sym.vision.render import ImageNoise, MarkerRenderer
 from amsfe_sym.vision.sim_images import LENSES
@@ -117,9 +135,9 @@ def summary(signed: list[float], norm: list[float]) -> dict:
 
 def bias_study(info, frames: int, rng: np.random.Generator) -> dict:
     """The corner refinements on the same renders (module docstring, ``--bias``)."""
-    spec = MarkerSpec(size=0.1)
+    spec = MarkerSpec(size=0.1, max_foreshortening_deg=90.0)  # (every view: none gated)
     detectors = {m: MarkerDetector(spec, refinement=m) for m in METHODS[:-1]}
-    detectors["edges+info"] = MarkerDetector(spec, info=info)
+    detectors["edges+info"] = MarkerDetector(spec, refinement="edges", info=info)
     cells, total = [], {m: ([], []) for m in METHODS}
     by_blur: dict[float, dict] = {}
     for blur in (0.5, 0.8, 1.2, 1.5):
@@ -160,12 +178,156 @@ def bias_study(info, frames: int, rng: np.random.Generator) -> dict:
     }
 
 
+def recording_views(seed: int) -> tuple[list[np.ndarray], object]:
+    """The exact corners (4, 2) [px, pinhole image] of every frame the simulated camera drew
+    in a calibration recording (the true calib_arm of truth seed ``seed``, the marker fixed to
+    its tip, simulated at seed ``seed``; tools/calibrate_seeds.py), and the camera's
+    CameraInfo."""
+    import os
+    import shutil
+    import tempfile
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from calibrate_seeds import HERE, true_robot
+
+    from amsfe_sym.apps.cli import main as amsfe
+    from amsfe_sym.vision import sim_images
+
+    work = Path(tempfile.mkdtemp(prefix="marker-views-"))
+    os.environ["AMSFE_GENERATED_DIR"] = str(work / "generated")
+    truth = true_robot(work / "true", seed, f"calib_arm_views_{seed}", HERE / "robot-marker.toml")
+    views: list[np.ndarray] = []
+    infos: list[object] = []
+    original = sim_images.SimulatedCamera.corners
+
+    def corners(self, q, theta):  # the exact corners of each drawn frame, kept
+        c = original(self, q, theta)
+        if c is not None:
+            views.append(np.array(c, dtype=np.float64))
+            infos[:] = [self.info]
+        return c
+
+    sim_images.SimulatedCamera.corners = corners  # type: ignore[method-assign]
+    try:
+        sim = ["simulate", str(truth.parent / "calib-sim.toml"), "--controller", "truth-ct"]
+        sim += ["--out", str(work / "run"), "--bag", "--images", "mono8", "--no-plots"]
+        sim += ["--no-progress", "--seed", str(seed), "--set", "camera.stamp_offset=0.025"]
+        if amsfe(sim) != 0:
+            raise SystemExit(f"simulate failed for seed {seed}")
+    finally:
+        sim_images.SimulatedCamera.corners = original  # type: ignore[method-assign]
+        shutil.rmtree(work, ignore_errors=True)
+    return views, infos[0]
+
+
+def view_geometry(c: np.ndarray) -> dict:
+    """A view's side [px] (mean edge), foreshortening [deg] (vision.marker.foreshortening),
+    the image direction of the tilt [deg, 0-180: the axis along which the marker is
+    compressed] and the image vectors of the marker's x and y per side (2, 2) (columns)."""
+    A = 0.5 * np.column_stack([(c[1] - c[0]) + (c[2] - c[3]), (c[3] - c[0]) + (c[2] - c[1])])
+    U = np.linalg.svd(A)[0]
+    return {
+        "side": float(np.linalg.norm(c - np.roll(c, -1, axis=0), axis=1).mean()),
+        "angle": foreshortening(c),
+        "tilt_dir": math.degrees(math.atan2(U[1, 1], U[0, 1])) % 180.0,
+        "A": A,
+    }
+
+
+def _mean_row(e: np.ndarray, **key: object) -> dict:
+    """The mean of errors ``e`` (N, 2) [px], their spread and the mean over its standard
+    error (per axis), under the labels ``key``."""
+    mean, std = e.mean(axis=0), e.std(axis=0, ddof=1)
+    return {
+        **key,
+        "n": len(e),
+        "mean_px": mean.round(4).tolist(),
+        "std_px": std.round(4).tolist(),
+        "mean_over_se": (mean / std * math.sqrt(len(e))).round(2).tolist(),
+    }
+
+
+RECORDING_METHODS = ("subpix", "edges", "edges unbent", "edges+info")
+
+
+def recording_study(seed: int, renders: int, rng: np.random.Generator) -> dict:
+    """The centre's error over a recording's views (module docstring, ``--recording``)."""
+    views, info = recording_views(seed)
+    spec = MarkerSpec(size=0.1, max_foreshortening_deg=90.0)  # (every view: none gated)
+    detectors = {m: MarkerDetector(spec, refinement=m) for m in RECORDING_METHODS[:2]}
+    detectors["edges+info"] = MarkerDetector(spec, refinement="edges", info=info)
+    edges_spec = replace(spec, refinement="edges")
+    renderer = MarkerRenderer(info, spec, ImageNoise())
+    geo = [view_geometry(c) for c in views]
+    err = {m: np.full((len(views), renders, 2), np.nan) for m in RECORDING_METHODS}
+    for i, c in enumerate(views):
+        truth = diagonals_meet(c)
+        for r in range(renders):
+            img = renderer.render(c, rng, foreshortened=True)
+            for m, det in detectors.items():
+                found = det.detect(img).corners
+                if found is not None:
+                    err[m][i, r] = diagonals_meet(undistort(info, found)) - truth
+                if found is not None and m == "edges":  # (the log reader's: unbent)
+                    und = undistorted_corners(info, found, edges_spec)[0]
+                    err["edges unbent"][i, r] = diagonals_meet(und) - truth
+    side = np.array([g["side"] for g in geo])
+    angle = np.array([g["angle"] for g in geo])
+    tilt = np.array([g["tilt_dir"] for g in geo])
+    out: dict = {
+        "seed": seed,
+        "views": len(views),
+        "renders": renders,
+        "side_px": [float(side.min()), float(np.median(side)), float(side.max())],
+        "foreshortening_deg": [float(np.median(angle)), float(np.percentile(angle, 90)),
+                               float(angle.max())],
+    }  # fmt: skip
+    for m in RECORDING_METHODS:
+        per_view = np.nanmean(err[m], axis=1)  # (views, 2): the view's own error
+        ok = np.isfinite(per_view).all(axis=1)
+        bins = []
+        for lo, hi in ((0, 30), (30, 50), (50, 60), (60, 70), (70, 90)):
+            for slo, shi in ((0, 35), (35, 50), (50, 1000)):
+                sel = ok & (angle >= lo) & (angle < hi) & (side >= slo) & (side < shi)
+                if sel.sum() >= 5:
+                    bins.append(_mean_row(per_view[sel], deg=[lo, hi], side_px=[slo, shi]))
+        dirs = [
+            _mean_row(per_view[sel], tilt_dir_deg=[lo, lo + 45])
+            for lo in range(0, 180, 45)
+            if (sel := ok & (angle >= 50) & (tilt >= lo) & (tilt < lo + 45)).sum() >= 5
+        ]
+        gates = []
+        for cut in (40, 45, 50, 55, 60, 90):
+            one = err[m][angle < cut].reshape(-1, 2)
+            gates.append(_mean_row(one[np.isfinite(one).all(axis=1)], under_deg=cut))
+        out[m] = {
+            "found": f"{int(np.isfinite(err[m][..., 0]).sum())} / {len(views) * renders}",
+            "per_view": _mean_row(per_view[ok]),
+            "gated_frames": gates,
+            "views_by_foreshortening_side": bins,
+            "views_over_50deg_by_tilt_direction": dirs,
+        }
+        print(f"{m}: {out[m]['found']} found; frames under a foreshortening of N deg:")
+        for row in (*gates, *bins, *dirs):
+            print(f"    {row}", flush=True)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--out", default=None, help="JSON file to write")
     ap.add_argument("--bias", type=int, default=0, help="the refinements compared, frames a cell")
+    ap.add_argument("--recording", type=int, default=None, help="a calibration recording's views")
+    ap.add_argument("--renders", type=int, default=4, help="--recording: renders a view")
     args = ap.parse_args(argv)
+    if args.recording is not None:
+        result = recording_study(args.recording, args.renders, np.random.default_rng(7))
+        if args.out:
+            given = sys.argv[1:] if argv is None else argv
+            result = {"command": "tools/marker_view_accuracy.py " + " ".join(given), **result}
+            Path(args.out).write_text(json.dumps(result, indent=1) + "\n")
+        return 0
     model, D = LENSES["plumb_bob"]
     info = make_camera_info(640, 480, model, K, D)
     if args.bias:
@@ -179,7 +341,7 @@ def main(argv: list[str] | None = None) -> int:
             result = {"command": f"tools/marker_view_accuracy.py --bias {args.bias}", **result}
             Path(args.out).write_text(json.dumps(result, indent=1) + "\n")
         return 0
-    spec = MarkerSpec(size=0.1)
+    spec = MarkerSpec(size=0.1, max_foreshortening_deg=90.0)  # (every view: none gated)
     renderer, detector = MarkerRenderer(info, spec, ImageNoise()), MarkerDetector(spec)
     rng = np.random.default_rng(3)
     rows = [

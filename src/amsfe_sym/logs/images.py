@@ -24,8 +24,15 @@ from amsfe_sym.logs.grid import RoleUse, count_skip
 from amsfe_sym.logs.image_wire import image_message
 from amsfe_sym.logs.plan import LogPlan
 from amsfe_sym.logs.sensors import OnGrid, camera_frames
-from amsfe_sym.vision.camera_info import CameraInfo, camera_info_from_message, undistort
-from amsfe_sym.vision.detections import REASONS, Detections, ImageDecoder, image_sizes, points_of
+from amsfe_sym.vision.camera_info import CameraInfo, camera_info_from_message
+from amsfe_sym.vision.detections import (
+    REASONS,
+    Detections,
+    ImageDecoder,
+    image_sizes,
+    points_of,
+    undistorted_corners,
+)
 from amsfe_sym.vision.marker import single_threaded
 from amsfe_sym.vision.prefetch import Prefetch, image_threads
 from amsfe_sym.vision.sim_images import SimulatedCamera
@@ -134,7 +141,7 @@ def image_frames(log: OnGrid, use: RoleUse, marker: MarkerSpec) -> list[CameraFr
     for r in range(1, len(REASONS)):
         count_skip(use, REASONS[r], int((det.reason == r).sum()))
     pts = points_of(det, info, marker)[found]
-    corners = undistort(info, det.corners[found].reshape(-1, 2)).reshape(-1, 4, 2)
+    corners = undistorted_corners(info, det.corners[found], marker)
     xyz = np.column_stack([pts, np.zeros(len(pts))])
     on_grid = replace(
         log,

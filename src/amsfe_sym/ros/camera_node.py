@@ -25,7 +25,8 @@ import numpy as np
 from amsfe_sym.core.interrupts import DeferredSignals
 from amsfe_sym.errors import LogError
 from amsfe_sym.topics.spec import TopicSpec
-from amsfe_sym.vision.camera_info import CameraInfo, camera_info_from_message, undistort
+from amsfe_sym.vision.camera_info import CameraInfo, camera_info_from_message
+from amsfe_sym.vision.detections import undistorted_corners
 from amsfe_sym.vision.images import grey_from_message
 from amsfe_sym.vision.marker import MarkerDetector, single_threaded, tracked_point
 from amsfe_sym.vision.spec import MarkerSpec
@@ -147,7 +148,8 @@ class DetectionWorker:
         if det.corners is None:
             self.stats.skip(det.skipped or "without the marker")
             return
-        u, v = tracked_point(undistort(info, det.corners), self.marker.point)
+        und = undistorted_corners(info, det.corners, self.marker)[0]
+        u, v = tracked_point(und, self.marker.point)
         self.stats.work_ms.append((self.clock() - t0) * 1e3)
         self.publish(grey.stamp_ns, float(u), float(v))
         self.stats.published += 1

@@ -18,7 +18,14 @@ from numpy.typing import NDArray
 
 from amsfe_sym.vision.camera_info import CameraInfo, undistort
 from amsfe_sym.vision.images import GreyImage, UndecodableImageError, grey_from_message
-from amsfe_sym.vision.marker import NO_MARKER, OTHER_ID, MarkerDetector, diagonals_meet_many
+from amsfe_sym.vision.marker import (
+    NO_MARKER,
+    OTHER_ID,
+    TOO_OBLIQUE,
+    MarkerDetector,
+    diagonals_meet_many,
+    raw_corners_unbent,
+)
 from amsfe_sym.vision.spec import CORNERS, MarkerSpec
 
 __all__ = [
@@ -29,6 +36,7 @@ __all__ = [
     "ImageDecoder",
     "image_sizes",
     "points_of",
+    "undistorted_corners",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -40,7 +48,7 @@ _NOTHING = np.zeros((0, 0), np.uint8)
 #: A frame whose compressed bytes do not decode (a corrupt jpeg or png): skipped, counted.
 UNDECODABLE = "whose image bytes do not decode (corrupt)"
 #: Why a frame has no point, by code (0: found); the log reader counts them by these names.
-REASONS = ("", NO_MARKER, OTHER_ID, UNDECODABLE)
+REASONS = ("", NO_MARKER, OTHER_ID, UNDECODABLE, TOO_OBLIQUE)
 
 
 @dataclass
@@ -126,7 +134,7 @@ class ImageDecoder:
             return  # (the next frame is searched around the last corners found before)
         cols.size[i] = img.pixels.shape[1], img.pixels.shape[0]
         det = self.detector.detect(img.pixels, self._last)  # (around the last first)
-        self._last = det.corners
+        self._last = det.near
         if det.corners is None:
             cols.reason[i] = REASONS.index(det.skipped or NO_MARKER)
         else:
@@ -149,13 +157,22 @@ class FrameColumns:
         return Detections(self.stamp_ns, self.corners, self.reason, self.size)
 
 
+def undistorted_corners(info: CameraInfo, corners: FloatArray, spec: MarkerSpec) -> FloatArray:
+    """Detected corners (M, 4, 2) [px, raw image] undistorted by ``info`` into its pinhole's
+    pixels, the edge fit's raw-image lines' error taken off first
+    (:func:`~amsfe_sym.vision.marker.raw_corners_unbent`); NaN rows stay NaN."""
+    c = raw_corners_unbent(info, corners, spec)
+    out: FloatArray = undistort(info, c.reshape(-1, 2)).reshape(-1, 4, 2)
+    return out
+
+
 def points_of(det: Detections, info: CameraInfo, spec: MarkerSpec) -> FloatArray:
     """The tracked point of each frame (M, 2) [px], undistorted by ``info`` into its
     pinhole's pixels (NaN where the marker was not found): the corners are undistorted
     first, then the centre is where their diagonals meet (which is the projection of the
     marker's centre only in an undistorted image)."""
     M = det.stamp_ns.size
-    und = undistort(info, det.corners.reshape(-1, 2)).reshape(M, 4, 2)
+    und = undistorted_corners(info, det.corners, spec)
     out = np.full((M, 2), np.nan)
     found = np.flatnonzero(det.reason == 0)
     if spec.point == "centre":  # (all frames at once; tracked_point's maths)

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from amsfe_sym.vision.camera_info import CameraInfo, distort, undistort
 
-__all__ = ["edge_corners", "edge_points"]
+__all__ = ["edge_corners", "edge_points", "unbend"]
 
 FloatArray = NDArray[np.float64]
 
@@ -221,3 +221,62 @@ def _meet_curves(a: Curve, b: Curve) -> FloatArray:
             break
     wa = a0 + ua * (a1 + ua * a2)
     return np.array([max_ + ua * dax + wa * nax, may + ua * day + wa * nay])
+
+
+#: Points a side in :func:`unbend`'s model of an edge fit.
+UNBEND_POINTS = 41
+
+
+def unbend(
+    info: CameraInfo, corners: FloatArray, modules: int, curve_from: float = CURVE_FROM
+) -> FloatArray:
+    """Corners (M, 4, 2) [px, raw image] found by :func:`edge_corners` without the
+    CameraInfo, less the error its straight lines make: an edge shorter than ``curve_from``
+    is fitted as a line in the raw image, where the lens bends it, so the line lies off the
+    edge's ends by a part of its sagitta and the corners move (on the simulated camera's
+    30-45 px markers, their centre ~0.015 px away from the image's centre, the same way on
+    every frame: docs/camera.md, "The corners").  With the lens ``info`` that error is
+    modelled and taken off: each edge's straight segment between the undistorted corners,
+    distorted, sampled over the span :func:`edge_points` samples (a module, at least 3 px,
+    from each corner) and fitted as :func:`edge_corners` fits it (a total-least-squares line;
+    a longer edge, fitted by a parabola, as its tangent at the corner), adjacent fits
+    intersected; the corners less (those intersections - the distorted corners).  A
+    rectified ``info``: the corners as they are."""
+    c = np.asarray(corners, dtype=np.float64).reshape(-1, 4, 2)
+    if info.rectified or c.size == 0:
+        return c.copy()
+    M = len(c)
+    und = undistort(info, c.reshape(-1, 2)).reshape(M, 4, 2)
+    true = distort(info, und.reshape(-1, 2)).reshape(M, 4, 2)
+    length = np.linalg.norm(c - np.roll(c, -1, axis=1), axis=2)  # (M, 4) raw edge k: k -> k+1
+    margin = np.maximum(length.mean(axis=1, keepdims=True) / modules, 3.0)  # (M, 1)
+    lo = np.clip(margin / length, 0.0, 0.5)  # fractions of each edge sampled
+    t = np.linspace(0.0, 1.0, UNBEND_POINTS)
+    f = lo[..., None] + t * (1.0 - 2.0 * lo[..., None])  # (M, 4, P)
+    a, b = und, np.roll(und, -1, axis=1)
+    pts = a[:, :, None, :] + f[..., None] * (b - a)[:, :, None, :]  # (M, 4, P, 2)
+    raw = distort(info, pts.reshape(-1, 2)).reshape(pts.shape)
+    mean = raw.mean(axis=2)  # (M, 4, 2): each edge's line: mean, direction
+    q = raw - mean[:, :, None, :]
+    sxx, syy = (q[..., 0] ** 2).sum(axis=2), (q[..., 1] ** 2).sum(axis=2)
+    sxy = (q[..., 0] * q[..., 1]).sum(axis=2)
+    angle = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
+    direction = np.stack([np.cos(angle), np.sin(angle)], axis=-1)  # (M, 4, 2)
+    curved = length >= curve_from
+    # corner j meets edge j-1 (its end) and edge j (its start); a curved edge's tangent there
+    eps = 1e-3
+    step = (b - a) / np.maximum(np.linalg.norm(b - a, axis=2, keepdims=True), 1e-300)
+    ahead = distort(info, (a + eps * step).reshape(-1, 2)).reshape(M, 4, 2)
+    behind = distort(info, (b - eps * step).reshape(-1, 2)).reshape(M, 4, 2)
+    start_dir, end_dir = ahead - true, np.roll(true, -1, axis=1) - behind
+    p1 = np.where(curved[..., None], true, mean)  # edge j at corner j
+    d1 = np.where(curved[..., None], start_dir, direction)
+    p0 = np.roll(np.where(curved[..., None], np.roll(true, -1, axis=1), mean), 1, axis=1)
+    d0 = np.roll(np.where(curved[..., None], end_dir, direction), 1, axis=1)  # edge j-1
+    # p0 + s d0 = p1 + r d1 (Cramer's rule)
+    rhs = p1 - p0
+    det = d0[..., 0] * (-d1[..., 1]) - d0[..., 1] * (-d1[..., 0])
+    s = (rhs[..., 0] * (-d1[..., 1]) - rhs[..., 1] * (-d1[..., 0])) / det
+    fitted = p0 + s[..., None] * d0
+    out: FloatArray = c - (fitted - true)
+    return out

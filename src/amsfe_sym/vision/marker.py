@@ -4,6 +4,7 @@ the tracked point from its corners (docs/camera.md, "The marker")."""
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -12,7 +13,7 @@ from numpy.typing import NDArray
 
 from amsfe_sym.errors import SpecError, describe
 from amsfe_sym.vision.camera_info import CameraInfo
-from amsfe_sym.vision.edges import edge_corners
+from amsfe_sym.vision.edges import edge_corners, unbend
 from amsfe_sym.vision.spec import CORNERS, REFINEMENTS, MarkerSpec
 
 __all__ = [
@@ -22,6 +23,9 @@ __all__ = [
     "MarkerDetector",
     "diagonals_meet",
     "diagonals_meet_many",
+    "foreshortening",
+    "marker_modules",
+    "raw_corners_unbent",
     "single_threaded",
     "tracked_point",
 ]
@@ -31,6 +35,7 @@ FloatArray = NDArray[np.float64]
 #: Why a frame gave no point (counted by the log reader under these names).
 NO_MARKER = "without the marker (nothing detected)"
 OTHER_ID = "with another marker id only"
+TOO_OBLIQUE = "with the marker too oblique (over [marker] max_foreshortening_deg)"
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,11 +47,20 @@ class Detection:
             (:data:`~amsfe_sym.vision.spec.CORNERS`), or None when it was not found.
         skipped: Why there is no point (None: found).
         ids: Every id seen in the image.
+        region: The corners (4, 2) [px] of a marker found but not used (too oblique:
+            ``MarkerSpec.max_foreshortening_deg``): where the next image is searched first;
+            None otherwise.
     """
 
     corners: FloatArray | None
     skipped: str | None
     ids: tuple[int, ...] = ()
+    region: FloatArray | None = None
+
+    @property
+    def near(self) -> FloatArray | None:
+        """Where the marker was in this image (used or not): the next search's region."""
+        return self.corners if self.corners is not None else self.region
 
 
 #: The adaptive threshold's window [px] of the first search: one window instead of
@@ -120,7 +134,7 @@ class MarkerDetector:
         self.info = info
         self._dictionary = cv2.aruco.getPredefinedDictionary(_dictionary_id(spec.dictionary))
         #: The marker's side in modules: its bits and a black border bit on each side.
-        self.modules = int(self._dictionary.markerSize) + 2
+        self.modules = marker_modules(spec.dictionary)
         self._window = (int(refine_window), float(relative_window))
         self._threshold = threshold_window
         self._params = self._parameters(None, threshold_window)
@@ -172,7 +186,7 @@ class MarkerDetector:
     def whole(self, grey: NDArray[np.uint8]) -> Detection:
         """The spec's marker searched in the whole image (no region of interest)."""
         det = self._found(self._detector, grey, 0, 0)
-        if det.corners is None and self._fallback is not None:
+        if det.corners is None and det.region is None and self._fallback is not None:
             return self._found(self._fallback, grey, 0, 0)
         return det
 
@@ -196,6 +210,9 @@ class MarkerDetector:
                 side = float(np.linalg.norm(c - np.roll(c, -1, axis=0), axis=1).min())
                 if np.abs(fitted - c).max() <= max(MAX_MOVE_PX, side / self.modules):
                     c = fitted
+        limit = self.spec.max_foreshortening_deg
+        if limit < 90.0 and foreshortening(c) > limit:  # (docs/camera.md, "The corners")
+            return Detection(None, TOO_OBLIQUE, seen, region=c)
         return Detection(c, None, seen)
 
     def _near(self, grey: NDArray[np.uint8], near: FloatArray) -> Detection | None:
@@ -216,7 +233,7 @@ class MarkerDetector:
             params = self._parameters(min(rate, 4.0), self._threshold)
             self._roi[key] = cv2.aruco.ArucoDetector(self._dictionary, params)
         det = self._found(self._roi[key], grey, x0, y0, crop)
-        return det if det.corners is not None else None
+        return det if det.near is not None else None
 
 
 def single_threaded() -> None:
@@ -232,6 +249,30 @@ def single_threaded() -> None:
     cv2.setNumThreads(1)
 
 
+@functools.cache
+def marker_modules(dictionary: str) -> int:
+    """The side of a marker of ``dictionary`` (a cv2.aruco name) in modules: its bits and a
+    black border bit on each side."""
+    import cv2
+
+    return int(cv2.aruco.getPredefinedDictionary(_dictionary_id(dictionary)).markerSize) + 2
+
+
+def raw_corners_unbent(info: CameraInfo, corners: FloatArray, spec: MarkerSpec) -> FloatArray:
+    """Detected corners (M, 4, 2) [px, raw image] with the error of the edge fit's straight
+    lines in the raw image taken off when ``spec`` refines them from the edges without the
+    lens (:func:`~amsfe_sym.vision.edges.unbend`; the log reader's and the camera node's
+    detector); otherwise as they are.  Frames without a marker (NaN) stay NaN."""
+    c = np.asarray(corners, dtype=np.float64).reshape(-1, 4, 2)
+    if spec.refinement != "edges":
+        return c
+    out = c.copy()
+    ok = np.isfinite(c).all(axis=(1, 2))
+    if ok.any():
+        out[ok] = unbend(info, c[ok], marker_modules(spec.dictionary))
+    return out
+
+
 def _dictionary_id(name: str) -> int:
     import cv2
 
@@ -239,6 +280,20 @@ def _dictionary_id(name: str) -> int:
         if hasattr(cv2.aruco, attr):
             return int(getattr(cv2.aruco, attr))
     raise KeyError(name)  # (parse_marker checked the name against DICTIONARIES)
+
+
+def foreshortening(corners: FloatArray) -> float:
+    """How foreshortened a square marker looks [deg], from its 4 corners (4, 2) [px]
+    (OpenCV's order): ``arccos(s2 / s1)``, ``s1 >= s2`` the singular values of the
+    quadrilateral's affine part (the means of opposite edges, along the marker's x and y).
+    The pinhole's jacobian at the marker's centre times its axes, for a small marker; near
+    the image's centre, the angle between its normal and its line of sight (off the axis a
+    marker facing the camera looks stretched along the radius).  The compression is what the
+    detector sees: a module of ``cos`` its width across the foreshortened direction."""
+    c = np.asarray(corners, dtype=np.float64).reshape(4, 2)
+    A = np.column_stack([(c[1] - c[0]) + (c[2] - c[3]), (c[3] - c[0]) + (c[2] - c[1])])
+    s = np.linalg.svd(A, compute_uv=False)
+    return float(np.degrees(np.arccos(min(1.0, s[1] / s[0])))) if s[0] > 0 else 90.0
 
 
 def diagonals_meet(corners: FloatArray) -> FloatArray:

@@ -155,7 +155,8 @@ class SimulatedCamera:
         """The tracked point the camera chain finds in ``image``, in the raw image's pixels
         (undistorted to take the point, then distorted back: where to draw it on the image)
         [px], or None without the marker."""
-        from amsfe_sym.vision.camera_info import distort, undistort
+        from amsfe_sym.vision.camera_info import distort
+        from amsfe_sym.vision.detections import undistorted_corners
         from amsfe_sym.vision.marker import MarkerDetector, tracked_point
 
         if self._detector is None:
@@ -163,7 +164,8 @@ class SimulatedCamera:
         det = self._detector.detect(image)
         if det.corners is None:
             return None
-        point = tracked_point(undistort(self.info, det.corners), self.options.marker.point)
+        und = undistorted_corners(self.info, det.corners, self.options.marker)[0]
+        point = tracked_point(und, self.options.marker.point)
         return distort(self.info, point)[0]
 
     def encoded(self, image: NDArray[np.uint8]) -> NDArray[np.uint8]:

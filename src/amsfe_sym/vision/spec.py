@@ -16,6 +16,7 @@ size = 0.05                       # its black square's side [m]
 point = "centre"                  # or "top_left" | "top_right" | "bottom_right" | "bottom_left"
 pixel_std = 0.15                  # the detected point's standard deviation per axis [px]
 refinement = "subpix"             # corner refinement (default: subpix; edges for --corners)
+max_foreshortening_deg = 50.0     # frames whose marker looks more oblique are skipped (90: none)
 ```
 """
 
@@ -31,6 +32,7 @@ __all__ = [
     "CORNERS",
     "DICTIONARIES",
     "IMAGE_TYPES",
+    "MAX_FORESHORTENING_DEG",
     "REFINEMENTS",
     "MarkerSpec",
     "parse_camera_section",
@@ -52,6 +54,12 @@ Point = Literal["centre", "top_left", "top_right", "bottom_right", "bottom_left"
 #: the corners 0.15-0.5 px inside, at ~3x the detection's CPU), or OpenCV's ``contour`` /
 #: ``apriltag`` (for comparison: tools/marker_view_accuracy.py ``--bias``).
 REFINEMENTS: tuple[str, ...] = ("subpix", "edges", "contour", "apriltag")
+
+#: The default ``[marker] max_foreshortening_deg`` [deg]: on the calibration recordings' views
+#: (25-60 px markers, tools/marker_view_accuracy.py ``--recording``) the centre of ``subpix``
+#: corners is unbiased to within its standard error on markers foreshortened less than 50
+#: deg, and carries an error of the view of 0.05-0.5 px (growing with the angle) beyond.
+MAX_FORESHORTENING_DEG = 50.0
 
 #: The cv2.aruco dictionaries by name (resolved by :mod:`amsfe_sym.vision.marker`).
 DICTIONARIES = (
@@ -83,6 +91,12 @@ class MarkerSpec:
             command's choice, ``subpix`` for the tracked point (the centre is unbiased by
             symmetry) and ``edges`` for ``amsfe calibrate --corners`` (the marker's extent
             matters there: docs/camera.md, "The corners").
+        max_foreshortening_deg: The most foreshortened marker [deg] whose frame is used
+            (:func:`~amsfe_sym.vision.marker.foreshortening` of the detected corners: arccos
+            of the marker's narrower over its wider extent in the image; near the image's
+            centre, its angle from face-on); more, the frame is skipped and counted (the
+            centre of a marker seen more obliquely carries an error of the view that its
+            frames share: docs/camera.md, "The corners").  90: no limit.
     """
 
     dictionary: str = "DICT_APRILTAG_36h11"
@@ -91,6 +105,7 @@ class MarkerSpec:
     point: Point = "centre"
     pixel_std: float = 0.15
     refinement: str | None = None
+    max_foreshortening_deg: float = MAX_FORESHORTENING_DEG
 
 
 def parse_marker(table: dict[str, Any], where: str = "[marker]") -> MarkerSpec:
@@ -99,7 +114,9 @@ def parse_marker(table: dict[str, Any], where: str = "[marker]") -> MarkerSpec:
     Raises:
         ConfigError: an unknown key, dictionary or point; an id < 0; a size or std <= 0.
     """
-    known = ("dictionary", "id", "size", "point", "pixel_std", "refinement")
+    known = (
+        "dictionary", "id", "size", "point", "pixel_std", "refinement", "max_foreshortening_deg"
+    )  # fmt: skip
     bad = sorted(set(table) - set(known))
     if bad:
         raise ConfigError(describe(where, f"keys among {list(known)}", str(bad), "drop them"))
@@ -120,6 +137,12 @@ def parse_marker(table: dict[str, Any], where: str = "[marker]") -> MarkerSpec:
         out["pixel_std"] = read_number(
             table["pixel_std"], f"{where} pixel_std", ConfigError, 0.0, strict=True
         )
+    if "max_foreshortening_deg" in table:
+        key = f"{where} max_foreshortening_deg"
+        deg = read_number(table["max_foreshortening_deg"], key, ConfigError, 0.0, strict=True)
+        if deg > 90.0:
+            raise ConfigError(describe(key, "an angle in (0, 90] deg", repr(deg), "fix it"))
+        out["max_foreshortening_deg"] = deg
     if "refinement" in table:
         r = table["refinement"]
         if r not in REFINEMENTS:
