@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
+from amsfe_sym.apps.calibrate import CORNER_CAUTION, corner_caution
 from amsfe_sym.calibration import (
     NP,
     LinkAngles,
@@ -253,6 +254,7 @@ def test_recovers_a_synthetic_camera(robot: Robot) -> None:
     # the sandwich, no correlation over frames to speak of)
     J = ReprojectionModel(robot, links, stamp, cal.R0).project(cal.x).J[cal.used].reshape(-1, NP)
     assert cal.errors is not None and cal.errors.kind == "sandwich"
+    assert corner_caution(cal) == []  # a centre fit's intervals hold on images
     assert cal.errors.bandwidth <= 2
     Hi = np.linalg.inv(J.T @ J)
     C = Hi @ cal.errors.middle @ Hi
@@ -288,6 +290,8 @@ def test_recovers_a_synthetic_camera_from_the_marker_corners(robot: Robot, tmp_p
     obs = Observations(stamp, centre, steps, {}, corners, 0.05)
     cal = calibrate(robot, links, obs)
     assert cal.fit == "corners" and cal.names == CORNER_PARAMETERS and cal.held == {}
+    # amsfe calibrate --corners would say its intervals understate the error on images
+    assert corner_caution(cal) == [CORNER_CAUTION]
     assert cal.corner_start is not None and cal.corner_start.rms < 50.0
     assert cal.dropped.get(40, "").startswith("outlier")
     assert all(why == "pixel outside the image" for i, why in cal.dropped.items() if i != 40)
