@@ -578,6 +578,94 @@ def test_c_node_managed(tmp_path: Path) -> None:
     assert len(_bag(rec)["/amsfe/estimate"]) == 501
 
 
+#: ``rcl_send_response`` failing as Fast DDS's does when the client's response reader is not
+#: matched yet (RCL_RET_TIMEOUT, nothing sent): the first $AMSFE_TEST_FAILED_SENDS calls of
+#: the process (-1: every call), then rcl's own.  Preloaded into the C node.
+_SEND_FAILS_C = r"""
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <stdint.h>
+#include <stdlib.h>
+typedef int32_t (*send_fn)(const void *, void *, void *);
+static int failed;
+int32_t rcl_send_response(const void *service, void *header, void *response) {
+  static send_fn real;
+  const char *n = getenv("AMSFE_TEST_FAILED_SENDS");
+  int limit = n ? atoi(n) : 0;
+  if (limit < 0 || failed < limit) {
+    ++failed;
+    return 2; /* RCL_RET_TIMEOUT */
+  }
+  if (!real) real = (send_fn)dlsym(RTLD_NEXT, "rcl_send_response");
+  return real(service, header, response);
+}
+"""
+
+#: One get_state request, its answer awaited 15 s; prints "answered" or "silent".
+_ONE_GET_STATE = """
+import sys
+import rclpy
+from lifecycle_msgs.srv import GetState
+
+rclpy.init()
+client = rclpy.create_node("lifecycle_once")
+get = client.create_client(GetState, f"{sys.argv[1]}/get_state")
+assert get.wait_for_service(timeout_sec=60.0)
+fut = get.call_async(GetState.Request())
+rclpy.spin_until_future_complete(client, fut, timeout_sec=15.0)
+print("answered" if fut.result() is not None else "silent")
+"""
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_c_node_sends_a_lifecycle_response_again(tmp_path: Path) -> None:
+    """A lifecycle response the middleware could not send (``rcl_send_response`` made to
+    fail as Fast DDS's does before the client's reader is matched): the C node keeps it and
+    sends it again, so configure and activate are answered at the client's first asking
+    (no ask again) and the node runs its lockstep loop; one that can never be sent is dropped
+    after 10 s with a line, and the node stops at Ctrl-C (130)."""
+    from tests.test_ros import _LIFECYCLE_CLIENT
+
+    c_program_built("paper-sim")
+    shim = tmp_path / "send_fails.so"
+    (tmp_path / "send_fails.c").write_text(_SEND_FAILS_C)
+    cc = os.environ.get("CC", "cc")
+    subprocess.run([cc, "-shared", "-fPIC", "-O1", "-o", str(shim), str(tmp_path / "send_fails.c"),
+                    "-ldl"], check=True)  # fmt: skip
+    for fails in ("3", "-1"):
+        env = {**_ros_env(tmp_path), "LD_PRELOAD": str(shim), "AMSFE_TEST_FAILED_SENDS": fails}
+        procs = []
+        try:
+            node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--managed",
+                          "--impl", "c", *PATIENT_NODE)  # fmt: skip
+            procs.append(node)
+            name = f"{env[_PREFIX]}/amsfe_node"
+            clean = {k: v for k, v in env.items() if k not in ("LD_PRELOAD",)}
+            if fails == "3":  # configure's answer fails 3 times, then goes
+                done = subprocess.run(
+                    [sys.executable, "-c", _LIFECYCLE_CLIENT, name, "configure", "activate"],
+                    env=clean, capture_output=True, text=True, timeout=300,
+                )  # fmt: skip
+                assert done.returncode == 0, done.stderr
+                assert json.loads(done.stdout.strip().splitlines()[-1]) == ["inactive", "active"]
+                assert "no answer" not in done.stderr, done.stderr  # sent again, not asked
+            else:  # never sent: dropped after 10 s
+                done = subprocess.run(
+                    [sys.executable, "-c", _ONE_GET_STATE, name],
+                    env=clean, capture_output=True, text=True, timeout=300,
+                )  # fmt: skip
+                assert done.returncode == 0, done.stderr
+                assert done.stdout.strip().splitlines()[-1] == "silent"
+                node.wait_for("response to a lifecycle get_state not delivered", 60.0)
+            node.kill(signal.SIGINT)
+        finally:
+            results = _finish(procs, 60.0)
+        assert results[0][0] == 130, results[0][1]
+        dropped = "not delivered (its client's reader not matched within 10 s): dropped"
+        assert (dropped in node.text) == (fails == "-1"), node.text
+
+
 #: A client on the test's domain: an rclpy lifecycle node of its own (the reference) and the
 #: node named in argv[1]; each asked what ``ros2 lifecycle list`` asks (get_available_states,
 #: get_available_transitions; and ``list --all``'s get_transition_graph) unconfigured, then
