@@ -30,7 +30,7 @@ from amsfe_sym.vision.detections import (
     Detections,
     ImageDecoder,
     image_sizes,
-    points_of,
+    tracked_points,
     undistorted_corners,
 )
 from amsfe_sym.vision.marker import single_threaded
@@ -140,8 +140,8 @@ def image_frames(log: OnGrid, use: RoleUse, marker: MarkerSpec) -> list[CameraFr
         )
     for r in range(1, len(REASONS)):
         count_skip(use, REASONS[r], int((det.reason == r).sum()))
-    pts = points_of(det, info, marker)[found]
     corners = undistorted_corners(info, det.corners[found], marker)
+    pts = tracked_points(corners, marker)
     xyz = np.column_stack([pts, np.zeros(len(pts))])
     on_grid = replace(
         log,

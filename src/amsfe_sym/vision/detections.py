@@ -36,6 +36,7 @@ __all__ = [
     "ImageDecoder",
     "image_sizes",
     "points_of",
+    "tracked_points",
     "undistorted_corners",
 ]
 
@@ -171,15 +172,18 @@ def points_of(det: Detections, info: CameraInfo, spec: MarkerSpec) -> FloatArray
     pinhole's pixels (NaN where the marker was not found): the corners are undistorted
     first, then the centre is where their diagonals meet (which is the projection of the
     marker's centre only in an undistorted image)."""
-    M = det.stamp_ns.size
-    und = undistorted_corners(info, det.corners, spec)
-    out = np.full((M, 2), np.nan)
+    out = np.full((det.stamp_ns.size, 2), np.nan)
     found = np.flatnonzero(det.reason == 0)
-    if spec.point == "centre":  # (all frames at once; tracked_point's maths)
-        out[found] = diagonals_meet_many(und[found])
-    else:
-        out[found] = und[found, CORNERS.index(spec.point)]
+    out[found] = tracked_points(undistorted_corners(info, det.corners[found], spec), spec)
     return out
+
+
+def tracked_points(und: FloatArray, spec: MarkerSpec) -> FloatArray:
+    """The tracked point (M, 2) [px] of each frame's undistorted corners ``und`` (M, 4, 2):
+    :func:`~amsfe_sym.vision.marker.tracked_point` of all frames at once."""
+    if spec.point == "centre":
+        return diagonals_meet_many(und)
+    return np.array(und[:, CORNERS.index(spec.point)], dtype=np.float64)
 
 
 def image_sizes(det: Detections) -> list[tuple[int, int]]:
