@@ -564,11 +564,8 @@ def _finish(procs: list[_Proc], timeout: float) -> list[tuple[int, str]]:
     Called from a ``finally`` while the test's body raised, it kills them at once and adds
     what each said to that error (waiting on a node the failure left waiting hid it)."""
     if sys.exc_info()[1] is not None:
-        for p in procs:
-            if p.p.poll() is None:
-                os.killpg(p.p.pid, signal.SIGKILL)
-                p.p.wait()
-        said = "\n".join(f"--- amsfe {' '.join(q.args[:3])} ...:\n{q.text[-3000:]}" for q in procs)
+        said = _said(procs)
+        _kill(procs)
         raise AssertionError(f"the test failed; the processes said:\n{said}")
     deadline = time.monotonic() + timeout
     out = []
@@ -577,20 +574,28 @@ def _finish(procs: list[_Proc], timeout: float) -> list[tuple[int, str]]:
             try:
                 code = p.p.wait(timeout=max(0.1, deadline - time.monotonic()))
             except subprocess.TimeoutExpired as late:  # say what each process said, then kill
-                said = "\n".join(
-                    f"--- amsfe {' '.join(q.args[:3])} ... (running: {q.p.poll() is None}):\n"
-                    f"{q.text[-3000:]}"
-                    for q in procs
-                )
-                raise AssertionError(f"not done within {timeout:g} s:\n{said}") from late
+                raise AssertionError(f"not done within {timeout:g} s:\n{_said(procs)}") from late
             p._reader.join(timeout=5)
             out.append((code, p.text))
     finally:
-        for p in procs:
-            if p.p.poll() is None:
-                os.killpg(p.p.pid, signal.SIGKILL)
-                p.p.wait()
+        _kill(procs)
     return out
+
+
+def _said(procs: list[_Proc]) -> str:
+    """What each process said (its last 3000 characters), and whether it still runs."""
+    return "\n".join(
+        f"--- amsfe {' '.join(q.args[:3])} ... (running: {q.p.poll() is None}):\n{q.text[-3000:]}"
+        for q in procs
+    )
+
+
+def _kill(procs: list[_Proc]) -> None:
+    """Kill the process group of each process still running, and reap it."""
+    for p in procs:
+        if p.p.poll() is None:
+            p.kill(signal.SIGKILL)
+            p.p.wait()
 
 
 @pytest.mark.ros

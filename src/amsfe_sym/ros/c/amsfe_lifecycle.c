@@ -165,7 +165,6 @@ static void send_or_keep(node_lifecycle *lc, lifecycle_pending *p) {
     p->since = mono_s();
     lc->pending[lc->n_pending++] = *p;
   } else {
-    ++lc->dropped;
     fprintf(stderr, "node: the response to a lifecycle %s not delivered (its client's reader "
                     "not matched) and %d others waiting: dropped\n",
             SERVICE_NAMES[p->service], LIFECYCLE_PENDING);
@@ -177,15 +176,11 @@ static void resend(node_lifecycle *lc, int may_block) {
   int kept = 0;
   for (int i = 0; i < lc->n_pending; ++i) {
     lifecycle_pending *p = &lc->pending[i];
-    if (may_block && send_one(lc, p)) {
-      ++lc->resent;
-      continue;
-    }
+    if (may_block && send_one(lc, p)) continue;
     if (may_block && mono_s() - p->since < LIFECYCLE_RESEND_S) {
       lc->pending[kept++] = *p;
       continue;
     }
-    ++lc->dropped;
     fprintf(stderr,
             "node: the response to a lifecycle %s not delivered (its client's reader not "
             "matched %s): dropped; the client can ask get_state\n",

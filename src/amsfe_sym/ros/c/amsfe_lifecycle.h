@@ -53,7 +53,6 @@ typedef struct {
   int enabled;
   lifecycle_pending pending[LIFECYCLE_PENDING];
   int n_pending;
-  long resent, dropped; /* responses delivered on a later try; given up */
 } node_lifecycle;
 
 /* The state machine and its services on `node` (0 or an rcl error). */
