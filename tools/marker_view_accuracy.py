@@ -55,7 +55,12 @@ import numpy as np
 
 from amsfe_sym.vision.camera_info import make_camera_info, undistort
 from amsfe_sym.vision.detections import undistorted_corners
-from amsfe_sym.vision.marker import MarkerDetector, diagonals_meet, foreshortening
+from amsfe_sym.vision.marker import (
+    MarkerDetector,
+    diagonals_meet,
+    foreshortening,
+    marker_axes,
+)
 from amsfe_sym.vision.marker_pose import marker_view
 from amsfe_sym.vision.render import ImageNoise, MarkerRenderer
 from amsfe_sym.vision.sim_images import LENSES
@@ -224,7 +229,7 @@ def view_geometry(c: np.ndarray) -> dict:
     """A view's side [px] (mean edge), foreshortening [deg] (vision.marker.foreshortening),
     the image direction of the tilt [deg, 0-180: the axis along which the marker is
     compressed] and the image vectors of the marker's x and y per side (2, 2) (columns)."""
-    A = 0.5 * np.column_stack([(c[1] - c[0]) + (c[2] - c[3]), (c[3] - c[0]) + (c[2] - c[1])])
+    A = marker_axes(c)
     U = np.linalg.svd(A)[0]
     return {
         "side": float(np.linalg.norm(c - np.roll(c, -1, axis=0), axis=1).mean()),

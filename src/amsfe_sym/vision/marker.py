@@ -24,6 +24,7 @@ __all__ = [
     "diagonals_meet",
     "diagonals_meet_many",
     "foreshortening",
+    "marker_axes",
     "marker_modules",
     "raw_corners_unbent",
     "single_threaded",
@@ -285,15 +286,21 @@ def _dictionary_id(name: str) -> int:
 def foreshortening(corners: FloatArray) -> float:
     """How foreshortened a square marker looks [deg], from its 4 corners (4, 2) [px]
     (OpenCV's order): ``arccos(s2 / s1)``, ``s1 >= s2`` the singular values of the
-    quadrilateral's affine part (the means of opposite edges, along the marker's x and y).
+    quadrilateral's affine part (:func:`marker_axes`).
     The pinhole's jacobian at the marker's centre times its axes, for a small marker; near
     the image's centre, the angle between its normal and its line of sight (off the axis a
     marker facing the camera looks stretched along the radius).  The compression is what the
     detector sees: a module of ``cos`` its width across the foreshortened direction."""
-    c = np.asarray(corners, dtype=np.float64).reshape(4, 2)
-    A = np.column_stack([(c[1] - c[0]) + (c[2] - c[3]), (c[3] - c[0]) + (c[2] - c[1])])
-    s = np.linalg.svd(A, compute_uv=False)
+    s = np.linalg.svd(marker_axes(corners), compute_uv=False)
     return float(np.degrees(np.arccos(min(1.0, s[1] / s[0])))) if s[0] > 0 else 90.0
+
+
+def marker_axes(corners: FloatArray) -> FloatArray:
+    """The marker's x and y sides in the image (2, 2) [px], as columns: the means of its
+    opposite edges, from its 4 corners (4, 2) [px] (OpenCV's order); the quadrilateral's
+    affine part."""
+    c = np.asarray(corners, dtype=np.float64).reshape(4, 2)
+    return 0.5 * np.column_stack([(c[1] - c[0]) + (c[2] - c[3]), (c[3] - c[0]) + (c[2] - c[1])])
 
 
 def diagonals_meet(corners: FloatArray) -> FloatArray:
