@@ -23,6 +23,10 @@ seed, minutes of wall on two shared cores) and their merge::
     PYTHONPATH=src .venv/bin/python tools/calibrate_seeds.py --merge /tmp/a.json ... \\
         --out docs/data/calibrate-seeds.json
 
+``--robot tests/data/calibrate/robot-near.toml``: the camera typed closer (its comment), the
+table of docs/calibrate.md's "With the camera closer" (seeds 32000-32099, four runs of 25
+merged into docs/data/calibrate-seeds-near.json).
+
 ``--robot tests/data/calibrate/robot-marker.toml --images png --log-spec
 tests/data/calibrate/topics-marker.toml --fit centre= --fit corners=--corners``: the
 marker fixed to the tip (its ``[tracked] orientation``), the camera's images detected, each
