@@ -315,7 +315,7 @@ def spec_parameters(node: Any, spec: TopicSpec, joints: tuple[str, ...]) -> Topi
     """
     from amsfe_sym.topics import ROLES
     from amsfe_sym.topics.spec import parse_topic_spec
-    from amsfe_sym.topics.watchdog import WATCHDOG_COUNTS, WATCHDOG_KEYS
+    from amsfe_sym.topics.watchdog import WATCHDOG_COUNTS, WATCHDOG_KEYS, WATCHDOG_SWITCHES
 
     data: dict[str, dict[str, Any]] = {s: {} for s in ("topics", "joints", "effort")}
     data["timing"], data["qos"] = {}, {}
@@ -357,7 +357,11 @@ def spec_parameters(node: Any, spec: TopicSpec, joints: tuple[str, ...]) -> Topi
             node,
             f"watchdog.{key}",
             getattr(spec.watchdog, key),
-            "an integer" if key in WATCHDOG_COUNTS else "a number (.inf: off)",
+            "an integer"
+            if key in WATCHDOG_COUNTS
+            else "a number (.inf: off)"
+            if key in WATCHDOG_SWITCHES
+            else "a number > 0",
             "50" if key in WATCHDOG_COUNTS else "0.1",
         )
         for key in WATCHDOG_KEYS

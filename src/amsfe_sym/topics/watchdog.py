@@ -36,6 +36,7 @@ __all__ = [
     "MEASURING",
     "WATCHDOG_COUNTS",
     "WATCHDOG_KEYS",
+    "WATCHDOG_SWITCHES",
     "WatchdogBounds",
     "for_effort",
     "parse_watchdog",
@@ -97,17 +98,6 @@ class WatchdogBounds:
         return self if encoder_timeout is None else replace(self, encoder_timeout=encoder_timeout)
 
 
-#: Every bound that can be switched off, off (inf): the bounds of the runs that measure the
-#: watched quantities over a whole run (tools/watchdog_bounds.py, tools/watchdog_innovation.py).
-MEASURING = WatchdogBounds(
-    tracking_error=math.inf,
-    innovation_nis=math.inf,
-    deadline=math.inf,
-    lag=math.inf,
-    compute_budget=math.inf,
-    actuation_error=math.inf,
-)
-
 #: The default ``innovation_nis`` per effort kind (``[effort] kind``; docs/watchdogs.md, "The
 #: innovation bound per effort kind", tools/watchdog_innovation.py): the filter given the
 #: applied torque is consistent (clean window means up to 1.5); given a measured joint torque,
@@ -129,8 +119,17 @@ def for_effort(
 
 #: The keys of ``[watchdog]`` (the fields of :class:`WatchdogBounds`).
 WATCHDOG_KEYS = tuple(f.name for f in fields(WatchdogBounds))
-#: The keys that are counts (integers); the others are numbers > 0 (inf: off).
+#: The keys that are counts (integers); the others are numbers > 0.
 WATCHDOG_COUNTS = ("innovation_window", "deadline_misses", "deadline_window", "actuation_ticks")
+#: The bounds that ``inf`` switches off: every number but ``encoder_timeout`` (a node that
+#: cannot tell its encoders went silent could not hold for it).
+WATCHDOG_SWITCHES = tuple(
+    k for k in WATCHDOG_KEYS if k not in WATCHDOG_COUNTS and k != "encoder_timeout"
+)
+#: Every bound that can be switched off, off (inf): the bounds of the runs that measure the
+#: watched quantities over a whole run (tools/watchdog_bounds.py, tools/watchdog_innovation.py).
+_OFF: dict[str, Any] = dict.fromkeys(WATCHDOG_SWITCHES, math.inf)
+MEASURING = replace(WatchdogBounds(), **_OFF)
 _AT_LEAST = {
     "innovation_window": 1,
     "deadline_misses": 0,
@@ -161,7 +160,7 @@ def parse_watchdog(table: dict[str, Any], where: str = "[watchdog]") -> Watchdog
                 raise ConfigError(describe(at, f"an integer >= {lo}", repr(value), "fix it"))
             out[key] = int(value)
         else:
-            finite = key == "encoder_timeout"
+            finite = key not in WATCHDOG_SWITCHES
             ok = isinstance(value, int | float) and not isinstance(value, bool) and value > 0
             if not ok or (finite and math.isinf(value)):
                 expected = "a number > 0 [s]" if finite else "a number > 0 (inf: off)"
