@@ -351,7 +351,8 @@ def test_run_figures_of_a_simulation(tmp_path: Path) -> None:
 
 def test_log_figures_without_truth_show_deflection_and_residual(tmp_path: Path) -> None:
     """A driver's log (no truth): ``estimate.png`` has a panel per joint with the spring
-    deflection and the encoder residual, and ``nis.png`` the chi-square bands."""
+    deflection and the encoder residual, and a row below them with the NIS and its
+    chi-square band (green, drawn nowhere else: absent without a NIS report)."""
     from amsfe_sym.apps.plots.log import NisSeries, plot_log
     from amsfe_sym.codegen import library_for
     from amsfe_sym.logs.read import RobotLog
@@ -367,8 +368,27 @@ def test_log_figures_without_truth_show_deflection_and_residual(tmp_path: Path) 
     est = estimate_log(log, build_run(sc, lib, compiled=True).estimator, progress=False)
     nis = {"encoders": {"dof": 4, "band_95": [0.48, 11.14]}}
     paths = plot_log(log, est.x_hat, est.P_diag, "oosm", NisSeries(nis, est.encoder_nis), tmp_path)
-    assert [p.name for p in paths] == ["estimate.png", "nis.png"]
-    assert all(p.stat().st_size > 10_000 for p in paths)
+    assert [p.name for p in paths] == ["estimate.png"]
+    with_nis = _band_rows(paths[0])
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    plot_log(log, est.x_hat, est.P_diag, "oosm", NisSeries({}), bare)
+    without = _band_rows(bare / "estimate.png")
+    row = round(2.3 * DPI)  # the NIS row: one joint panel high
+    assert with_nis.size == without.size + row
+    assert not without.any()
+    assert with_nis[-row:].sum() > row // 4 and not with_nis[:-row].any()
+
+
+def _band_rows(png: Path) -> np.ndarray:
+    """Per pixel row of ``png``: whether it holds the chi-square band's colour (green at
+    alpha 0.12 on white: R = B ~ 225, G ~ 240)."""
+    from PIL import Image
+
+    rgb = np.asarray(Image.open(png).convert("RGB"), dtype=int)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    band = (abs(r - 225) <= 3) & (abs(b - 225) <= 3) & (abs(g - 240) <= 3)
+    return np.asarray(band.sum(axis=1) > 20)
 
 
 @pytest.mark.slow
