@@ -410,3 +410,19 @@ def test_an_arms_comparison_draws_what_is_read_and_the_rest_with_all_plots(
     assert drawn == read | {"sliding_surface.png", "torque.png"}
     assert main([*args, "--all-plots", "--no-plots", "--out", str(tmp_path / "none")]) == 0
     assert not list((tmp_path / "none").glob("*.png"))
+
+
+def test_no_plots_imports_no_matplotlib(tmp_path: Path) -> None:
+    """``amsfe simulate --no-plots`` leaves matplotlib unimported (its import alone is
+    0.3-0.7 s of CPU)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; from amsfe_sym.apps.cli import main; "
+        "code = main(sys.argv[1:]); "
+        "assert code == 0 and 'matplotlib' not in sys.modules, sorted(sys.modules)"
+    )
+    args = ["simulate", "--controller", "amsfe", "--duration", "0.05"]
+    args += ["--no-progress", "--no-plots", "--out", str(tmp_path / "run")]
+    subprocess.run([sys.executable, "-c", code, *args], check=True, capture_output=True)
