@@ -127,7 +127,7 @@ def plot_log(
         frames = f"{arrivals.size} camera frames, one every {every:.3g} s"
     else:
         frames = "ticks at the bottom: camera frames' arrivals"
-    nis_line = "; bottom row: NIS with its chi² 95 % band" if channels else ""
+    nis_line = "; below: NIS with its chi² 95 % band" if channels else ""
     title(fig, f"{estimator} on {log.path.name}; axes set by the last 80 %; {frames}{nis_line}")
     return [save(fig, folder / "estimate.png")]
 
