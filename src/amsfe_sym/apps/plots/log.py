@@ -7,8 +7,7 @@ without the truth: the spring deflection the estimator infers (q_hat - qm, the e
 motor angle) and the encoder residual (qm - qm_hat), each with the 2-sigma band of the
 estimate.  Every axis is set by the converged part (the last 80 %), so the start transient
 does not hide the band.  Its bottom row shows the encoder and camera NIS over time with
-their chi-square 95 % bands, a panel per channel (one figure, laid out and written once: a
-second file cost a sixth of the figures' time).
+their chi-square 95 % bands, a panel per channel (one figure, laid out and written once).
 """
 
 from __future__ import annotations
@@ -77,7 +76,7 @@ def plot_log(
         P_diag: diag P(k|k), (K, N).
         estimator: The estimator's name (for the titles).
         nis: The NIS to draw (an empty report: no NIS row).
-        folder: Where the PNGs go.
+        folder: Where the PNG goes.
 
     Returns:
         The path written, in a list.
