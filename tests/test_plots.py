@@ -351,7 +351,8 @@ def test_run_figures_of_a_simulation(tmp_path: Path) -> None:
 
 def test_log_figures_without_truth_show_deflection_and_residual(tmp_path: Path) -> None:
     """A driver's log (no truth): ``estimate.png`` has a panel per joint with the spring
-    deflection and the encoder residual, and ``nis.png`` the chi-square bands."""
+    deflection and the encoder residual, and a row below them with the NIS and its
+    chi-square band (green, drawn nowhere else: absent without a NIS report)."""
     from amsfe_sym.apps.plots.log import NisSeries, plot_log
     from amsfe_sym.codegen import library_for
     from amsfe_sym.logs.read import RobotLog
@@ -367,8 +368,27 @@ def test_log_figures_without_truth_show_deflection_and_residual(tmp_path: Path) 
     est = estimate_log(log, build_run(sc, lib, compiled=True).estimator, progress=False)
     nis = {"encoders": {"dof": 4, "band_95": [0.48, 11.14]}}
     paths = plot_log(log, est.x_hat, est.P_diag, "oosm", NisSeries(nis, est.encoder_nis), tmp_path)
-    assert [p.name for p in paths] == ["estimate.png", "nis.png"]
-    assert all(p.stat().st_size > 10_000 for p in paths)
+    assert [p.name for p in paths] == ["estimate.png"]
+    with_nis = _band_rows(paths[0])
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    plot_log(log, est.x_hat, est.P_diag, "oosm", NisSeries({}), bare)
+    without = _band_rows(bare / "estimate.png")
+    row = round(2.3 * DPI)  # the NIS row: one joint panel high
+    assert with_nis.size == without.size + row
+    assert not without.any()
+    assert with_nis[-row:].sum() > row // 4 and not with_nis[:-row].any()
+
+
+def _band_rows(png: Path) -> np.ndarray:
+    """Per pixel row of ``png``: whether it holds the chi-square band's colour (green at
+    alpha 0.12 on white: R = B ~ 225, G ~ 240)."""
+    from PIL import Image
+
+    rgb = np.asarray(Image.open(png).convert("RGB"), dtype=int)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    band = (abs(r - 225) <= 3) & (abs(b - 225) <= 3) & (abs(g - 240) <= 3)
+    return np.asarray(band.sum(axis=1) > 20)
 
 
 @pytest.mark.slow
@@ -390,3 +410,19 @@ def test_an_arms_comparison_draws_what_is_read_and_the_rest_with_all_plots(
     assert drawn == read | {"sliding_surface.png", "torque.png"}
     assert main([*args, "--all-plots", "--no-plots", "--out", str(tmp_path / "none")]) == 0
     assert not list((tmp_path / "none").glob("*.png"))
+
+
+def test_no_plots_imports_no_matplotlib(tmp_path: Path) -> None:
+    """``amsfe simulate --no-plots`` leaves matplotlib unimported (its import alone is
+    0.3-0.7 s of CPU)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; from amsfe_sym.apps.cli import main; "
+        "code = main(sys.argv[1:]); "
+        "assert code == 0 and 'matplotlib' not in sys.modules, sorted(sys.modules)"
+    )
+    args = ["simulate", "--controller", "amsfe", "--duration", "0.05"]
+    args += ["--no-progress", "--no-plots", "--out", str(tmp_path / "run")]
+    subprocess.run([sys.executable, "-c", code, *args], check=True, capture_output=True)

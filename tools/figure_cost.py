@@ -8,15 +8,23 @@ its wall time from before the package is imported, and the figures' CPU and wall
 their share of them.  CPU time is the number to compare on a loaded machine (the wall
 time of the same command moves by 2x with the load); the share is within one run.
 
+It also prints the CPU time of matplotlib's import (the figures' first call of
+``plots.style.import_matplotlib``), and with ``--profile`` first in ARGS, cProfile's 30
+costliest functions (cumulative) and 15 (own time) of the figures alone: where their time
+goes (texts, legends, ticks; ``ft2font._render_glyph``'s calls are the glyphs drawn).
+
 Usage::
 
     .venv/bin/python tools/figure_cost.py simulate panda-control --no-progress --out S
     .venv/bin/python tools/figure_cost.py estimate LOG --out E
+    .venv/bin/python tools/figure_cost.py --profile simulate --no-progress --out P
 """
 
 from __future__ import annotations
 
+import cProfile
 import importlib
+import pstats
 import resource
 import sys
 import time
@@ -32,12 +40,18 @@ FIGURES = (
 )
 
 
-def _timed(draw: Callable[..., Any], spent: dict[str, float]) -> Callable[..., Any]:
+def _timed(
+    draw: Callable[..., Any], spent: dict[str, float], profile: cProfile.Profile | None = None
+) -> Callable[..., Any]:
     def run(*args: Any, **kwargs: Any) -> Any:
         cpu, wall = time.process_time(), time.perf_counter()
+        if profile is not None:
+            profile.enable()
         try:
             return draw(*args, **kwargs)
         finally:
+            if profile is not None:
+                profile.disable()
             spent["cpu"] += time.process_time() - cpu
             spent["wall"] += time.perf_counter() - wall
 
@@ -46,11 +60,16 @@ def _timed(draw: Callable[..., Any], spent: dict[str, float]) -> Callable[..., A
 
 def main(argv: list[str]) -> int:
     from amsfe_sym.apps.cli import main as amsfe
+    from amsfe_sym.apps.plots import style
 
+    profile = cProfile.Profile() if argv[:1] == ["--profile"] else None
+    argv = argv[1:] if profile is not None else argv
     spent = {"cpu": 0.0, "wall": 0.0}
     for module, name in FIGURES:  # the commands import them by name when they draw
         mod = importlib.import_module(module)
-        setattr(mod, name, _timed(getattr(mod, name), spent))
+        setattr(mod, name, _timed(getattr(mod, name), spent, profile))
+    imported = {"cpu": 0.0, "wall": 0.0}  # the first call imports; later ones find it
+    style.import_matplotlib = _timed(style.import_matplotlib, imported)
     code = amsfe(argv)
     use = resource.getrusage(resource.RUSAGE_SELF)
     cpu = use.ru_utime + use.ru_stime
@@ -58,8 +77,13 @@ def main(argv: list[str]) -> int:
     print(
         f"amsfe {' '.join(argv)}: CPU {cpu:.2f} s, wall {wall:.2f} s; figures CPU "
         f"{spent['cpu']:.2f} s ({100 * spent['cpu'] / cpu:.0f} %), wall {spent['wall']:.2f} s "
-        f"({100 * spent['wall'] / wall:.0f} %)"
+        f"({100 * spent['wall'] / wall:.0f} %); of them matplotlib's import CPU "
+        f"{imported['cpu']:.2f} s"
     )
+    if profile is not None:
+        stats = pstats.Stats(profile)
+        stats.sort_stats("cumulative").print_stats(30)
+        stats.sort_stats("tottime").print_stats(15)
     return code
 
 

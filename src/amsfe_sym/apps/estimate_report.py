@@ -1,6 +1,6 @@
 """What ``amsfe estimate`` reports about a run: ``summary.json`` (each role's messages used
-and skipped, the clock offset, NIS), the printed headline and the figures (``estimate.png``,
-``nis.png``); docs/how-to/logs.md, "Consistency without truth"."""
+and skipped, the clock offset, NIS), the printed headline and the figure (``estimate.png``,
+its NIS row too); docs/how-to/logs.md, "Consistency without truth"."""
 
 from __future__ import annotations
 
@@ -342,7 +342,7 @@ def print_summary(s: dict[str, Any], out: Path) -> None:
 
 def figures(run: EstimateRun, folder: Path) -> None:
     """``estimate.png`` (per joint: the error against the truth with +-2 sigma, or the
-    spring deflection and the encoder residual) and ``nis.png``
+    spring deflection and the encoder residual; below, a row with the NIS over time)
     (:func:`~amsfe_sym.apps.plots.log.plot_log`)."""
     from amsfe_sym.apps.plots.log import NisSeries, plot_log
 

@@ -1,13 +1,13 @@
-"""Figures of an estimate over a recorded log (``amsfe estimate``): ``estimate.png`` and
-``nis.png`` (docs/how-to/logs.md, "Consistency without truth").
+"""The figure of an estimate over a recorded log (``amsfe estimate``): ``estimate.png``
+(docs/how-to/logs.md, "Consistency without truth").
 
 ``estimate.png`` has one panel per joint.  A log with the truth (a simulated one) shows the
 link-angle error with the filter's +-2 sigma band.  Any other log shows what can be judged
 without the truth: the spring deflection the estimator infers (q_hat - qm, the encoder's
 motor angle) and the encoder residual (qm - qm_hat), each with the 2-sigma band of the
 estimate.  Every axis is set by the converged part (the last 80 %), so the start transient
-does not hide the band.  ``nis.png`` shows the encoder and camera NIS over time with their
-chi-square 95 % bands.
+does not hide the band.  Its bottom row shows the encoder and camera NIS over time with
+their chi-square 95 % bands, a panel per channel (one figure, laid out and written once).
 """
 
 from __future__ import annotations
@@ -20,10 +20,12 @@ from typing import Any
 import numpy as np
 
 from amsfe_sym.apps.plots.style import (
+    MAX_COLUMNS,
+    PIXELS,
     collect_once,
     converged_limit,
     envelope,
-    figure,
+    grid_cell,
     joint_grid,
     logscale,
     save,
@@ -42,11 +44,11 @@ RUG_MAX = 200
 
 @dataclass(frozen=True)
 class NisSeries:
-    """What ``nis.png`` draws.
+    """What the NIS row of ``estimate.png`` draws.
 
     Attributes:
         report: Per channel (``encoders``, ``camera``): ``dof`` and ``band_95``
-            (:func:`~amsfe_sym.apps.estimate_report.nis_report`); empty: no ``nis.png``.
+            (:func:`~amsfe_sym.apps.estimate_report.nis_report`); empty: no NIS row.
         encoder: The encoder NIS per tick, (K,), or None.
         frames: (arrival step, NIS) of each frame, or None.
     """
@@ -65,25 +67,29 @@ def plot_log(
     nis: NisSeries,
     folder: Path,
 ) -> list[Path]:
-    """Write ``estimate.png`` and ``nis.png`` of an estimate over ``log``.
+    """Write ``estimate.png`` of an estimate over ``log``: a panel per joint, and a row of
+    NIS panels below them.
 
     Args:
         log: The read log (its grid, encoder samples, frames, truth).
         x_hat: x(k|k) per tick (eq. 2), (K, N).
         P_diag: diag P(k|k), (K, N).
         estimator: The estimator's name (for the titles).
-        nis: The NIS to draw (an empty report: no ``nis.png``).
-        folder: Where the PNGs go.
+        nis: The NIS to draw (an empty report: no NIS row).
+        folder: Where the PNG goes.
 
     Returns:
-        The paths written.
+        The path written, in a list.
     """
     n = log.u.shape[1]
     t = log.t
     sd = np.sqrt(np.maximum(P_diag, 0.0))
     arrivals = np.array([fr.delivery_step * log.T for fr in log.frames], dtype=float)
     rug = _rug(arrivals) if 0 < arrivals.size <= RUG_MAX else None
-    fig, cells = joint_grid(n, (3.8, 2.3))
+    cols = min(n, MAX_COLUMNS)
+    channels = len(nis.report)
+    nis_rows = 0 if not channels else 1 if channels <= cols else channels
+    fig, cells = joint_grid(n, (3.8, 2.3), extra_rows=nis_rows)
     for j, (ax,) in enumerate(cells):
         band = 2 * sd[:, j]
         if log.truth is not None:
@@ -113,16 +119,16 @@ def plot_log(
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
     cells[0][0].legend(loc="upper right", fontsize=6)
+    if channels:
+        _nis_row(fig, log, nis, cells[0][0], _joint_rows(n))
     if arrivals.size > RUG_MAX:
         every = float(np.ptp(arrivals)) / (arrivals.size - 1)
         frames = f"{arrivals.size} camera frames, one every {every:.3g} s"
     else:
         frames = "ticks at the bottom: camera frames' arrivals"
-    title(fig, f"{estimator} on {log.path.name}; axes set by the last 80 %; {frames}")
-    paths = [save(fig, folder / "estimate.png")]
-    if nis.report:
-        paths.append(_nis_figure(log, estimator, nis, folder))
-    return paths
+    nis_line = "; below: NIS with its chi² 95 % band" if channels else ""
+    title(fig, f"{estimator} on {log.path.name}; axes set by the last 80 %; {frames}{nis_line}")
+    return [save(fig, folder / "estimate.png")]
 
 
 def _rug(at: FloatArray, height: float = 0.04) -> tuple[FloatArray, FloatArray]:
@@ -136,12 +142,24 @@ def _rug(at: FloatArray, height: float = 0.04) -> tuple[FloatArray, FloatArray]:
     return x, y
 
 
-def _nis_figure(log: RobotLog, estimator: str, nis: NisSeries, folder: Path) -> Path:
-    """``nis.png``: NIS of the encoder updates and of the camera frames over time, with
-    their chi-square 95 % bands (nothing drawn where no NIS was recorded)."""
-    fig = figure((8, 2.3 * len(nis.report) + 0.6))
-    axes = fig.subplots(len(nis.report), 1, squeeze=False, sharex=True)
-    for ax, (what, r) in zip(axes[:, 0], nis.report.items(), strict=True):
+def _joint_rows(n: int) -> int:
+    """Rows of :func:`~amsfe_sym.apps.plots.style.joint_grid`'s joint panels for ``n``."""
+    return -(-n // min(n, MAX_COLUMNS))
+
+
+def _nis_row(fig: Any, log: RobotLog, nis: NisSeries, time_axes: Any, row: int) -> None:
+    """The NIS of the encoder updates and of the camera frames over time, with their
+    chi-square 95 % bands, in ``fig``'s grid from ``row`` on: the channels side by side
+    over the columns (one a row when there are more channels than columns); nothing drawn
+    where no NIS was recorded.  ``time_axes``: the joint axes whose time axis they share."""
+    grid = fig.axes[0].get_subplotspec().get_gridspec()
+    cols, channels = grid.ncols, len(nis.report)
+    side = channels <= cols
+    for i, (what, r) in enumerate(nis.report.items()):
+        span = cols // channels if side else cols
+        start = i * span if side else 0
+        stop = cols if not side or i == channels - 1 else start + span
+        ax = grid_cell(fig, row if side else row + i, slice(start, stop), sharex=time_axes)
         if what == "encoders" and nis.encoder is not None:
             t, v = log.t, np.asarray(nis.encoder, dtype=np.float64)
             w = max(1, len(v) // 100)  # its running mean over 1 % of the log
@@ -149,7 +167,7 @@ def _nis_figure(log: RobotLog, estimator: str, nis: NisSeries, folder: Path) -> 
             mean = np.convolve(np.where(ok, v, 0), np.ones(w), "same") / np.maximum(
                 np.convolve(ok, np.ones(w), "same"), 1
             )
-            tc, vc, mc = envelope(t, v, mean, pixels=800)
+            tc, vc, mc = envelope(t, v, mean, pixels=PIXELS * (stop - start))
             ax.plot(tc, vc, lw=0.3, alpha=0.5, label="encoder update", rasterized=True)
             ax.plot(tc, mc, lw=1.0, color="k", label=f"running mean ({w} ticks)")
         elif nis.frames is not None:
@@ -160,8 +178,6 @@ def _nis_figure(log: RobotLog, estimator: str, nis: NisSeries, folder: Path) -> 
         ax.axhline(r["dof"], color="g", lw=0.6)
         logscale(ax)
         ax.set_ylabel(f"NIS {what}", fontsize=8)
-        ax.tick_params(labelsize=7)
-        ax.legend(loc="lower right", fontsize=7, framealpha=0.6)
-    axes[-1, 0].set_xlabel("t [s]")
-    title(fig, f"consistency without truth: NIS of {estimator} on {log.path.name}")
-    return save(fig, folder / "nis.png")
+        ax.set_xlabel("t [s]", fontsize=8)
+        ax.grid(alpha=0.3)
+        ax.legend(loc="lower right", fontsize=6, framealpha=0.6)

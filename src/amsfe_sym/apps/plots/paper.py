@@ -134,7 +134,7 @@ def _simulation_figures(cmp: Comparison, out: Path, canvas: Canvas) -> list[Path
         for ax in axes:
             ax.grid(alpha=0.3)
             ax.tick_params(labelsize=8)
-        axes[0].legend(fontsize=8)
+        axes[0].legend(fontsize=8, loc="upper right")
         axes[0].set_ylim(*_span(res0.q_des[:, j]))
         title(fig, f"Fig. {6 + j}: tracking of joint {j + 1}, proposed vs DTSMC")
         _save(fig, out / f"fig{6 + j:02d}_joint{j + 1}_tracking.png", paths)
@@ -155,7 +155,7 @@ def _tracking_grid(cmp: Comparison, out: Path, canvas: Canvas) -> Path:
         ax.set_ylabel(f"q{j + 1} − q{j + 1},d [rad]", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
-    cells[0][0].legend(fontsize=6)
+    cells[0][0].legend(fontsize=6, loc="upper right")
     title(fig, "Tracking error of each joint (symlog: linear within 1 mrad)")
     return save(fig, out / "tracking.png")
 
@@ -245,7 +245,7 @@ def _control_figures(cmp: Comparison, out: Path, n: int, canvas: Canvas) -> list
         symlog(ax, 1e-2)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
-    cells[0][0].legend(fontsize=6)
+    cells[0][0].legend(fontsize=6, loc="upper right")
     title(fig, "Sliding variable s(k) of eq. (33) (symlog: linear within 0.01)")
     _save(fig, out / "sliding_surface.png", paths)
 
@@ -272,7 +272,7 @@ def _control_figures(cmp: Comparison, out: Path, n: int, canvas: Canvas) -> list
             axes[1].set_xlabel("t [s]", fontsize=8)
         for ax in axes:
             ax.grid(alpha=0.3)
-    cells[0][0].legend(fontsize=6)
+    cells[0][0].legend(fontsize=6, loc="upper right")
     title(
         fig,
         "Motor torque u(k): the whole run (upper) and its last 0.25 s (lower: the chattering)"

@@ -34,7 +34,9 @@ __all__ = [
     "DPI",
     "LABEL_OFFSET",
     "LOG_SUBS_UP_TO",
+    "MAX_COLUMNS",
     "PANEL",
+    "PIXELS",
     "PNG_COMPRESSION",
     "Canvas",
     "collect_once",
@@ -42,6 +44,7 @@ __all__ = [
     "envelope",
     "few_ticks",
     "figure",
+    "grid_cell",
     "import_matplotlib",
     "joint_grid",
     "logscale",
@@ -186,6 +189,7 @@ def joint_grid(
     panel: tuple[float, float] = (4.0, 2.6),
     rows_per_joint: int = 1,
     sharex: bool = True,
+    extra_rows: int = 0,
 ) -> tuple[Any, list[list[Any]]]:
     """A figure with one panel per joint, ``min(n, 4)`` panels a row; each panel is
     ``rows_per_joint`` axes stacked (sharing x).
@@ -196,6 +200,8 @@ def joint_grid(
         rows_per_joint: Axes stacked in a panel (e.g. 2: q error above, qd error below).
         sharex: Every axes shares one time axis, labelled ("t [s]") on the lowest axes of
             each column only; False: each axes its own, all labelled by the caller.
+        extra_rows: Rows of the grid below the joints, ``panel[1]`` high each, left empty
+            for the caller (``grid_cell``; e.g. ``estimate.png``'s NIS).
 
     Returns:
         The figure and, per joint, its list of axes (top to bottom); panels past ``n`` in
@@ -203,8 +209,8 @@ def joint_grid(
     """
     cols = min(n, MAX_COLUMNS)
     rows = math.ceil(n / cols)
-    fig = figure((panel[0] * cols, panel[1] * rows * rows_per_joint + 0.7))
-    grid = fig.add_gridspec(rows * rows_per_joint, cols)
+    fig = figure((panel[0] * cols, panel[1] * (rows * rows_per_joint + extra_rows) + 0.7))
+    grid = fig.add_gridspec(rows * rows_per_joint + extra_rows, cols)
     cells: list[list[Any]] = []
     first: Any = None
     for j in range(n):
@@ -226,6 +232,18 @@ def joint_grid(
                     ax.tick_params(labelbottom=False)
         cells.append(axes)
     return fig, cells
+
+
+def grid_cell(fig: Any, row: int, columns: slice, sharex: Any = None) -> Any:
+    """New axes in ``row`` (counted from the grid's top) over ``columns`` of the grid of
+    :func:`joint_grid`'s figure ``fig`` (e.g. a row of ``extra_rows``), with the grid's few
+    ticks, 7-pt labels and fixed label places; ``sharex``: axes whose time axis it shares."""
+    grid = fig.axes[0].get_subplotspec().get_gridspec()
+    ax = fig.add_subplot(grid[row, columns], sharex=sharex)
+    few_ticks(ax)
+    ax.tick_params(labelsize=7)
+    _place_labels(ax)
+    return ax
 
 
 #: Where a grid's axis labels stand [in]: the y label's edge left of the axes (the widest
