@@ -39,6 +39,13 @@ spread and the mean over its standard error; per view (noise averaged) by foresh
 
     PYTHONPATH=src .venv/bin/python tools/marker_view_accuracy.py --recording 31652 \\
         --renders 2 --out docs/data/marker-recording-views.json
+
+``--robot R`` draws the truth from another typed spec, e.g. the camera at 0.74 m
+(docs/calibrate.md, "With the camera closer: margin")::
+
+    PYTHONPATH=src .venv/bin/python tools/marker_view_accuracy.py --recording 32105 \\
+        --renders 2 --robot tests/data/calibrate/robot-marker-near.toml \\
+        --out docs/data/marker-recording-views-near.json
 """
 
 from __future__ import annotations
@@ -183,11 +190,12 @@ def bias_study(info, frames: int, rng: np.random.Generator) -> dict:
     }
 
 
-def recording_views(seed: int) -> tuple[list[np.ndarray], object]:
+def recording_views(seed: int, robot: Path | None = None) -> tuple[list[np.ndarray], object]:
     """The exact corners (4, 2) [px, pinhole image] of every frame the simulated camera drew
     in a calibration recording (the true calib_arm of truth seed ``seed``, the marker fixed to
     its tip, simulated at seed ``seed``; tools/calibrate_seeds.py), and the camera's
-    CameraInfo."""
+    CameraInfo.  ``robot``: the typed spec the truth is drawn from (None:
+    tests/data/calibrate/robot-marker.toml)."""
     import os
     import shutil
     import tempfile
@@ -200,7 +208,8 @@ def recording_views(seed: int) -> tuple[list[np.ndarray], object]:
 
     work = Path(tempfile.mkdtemp(prefix="marker-views-"))
     os.environ["AMSFE_GENERATED_DIR"] = str(work / "generated")
-    truth = true_robot(work / "true", seed, f"calib_arm_views_{seed}", HERE / "robot-marker.toml")
+    typed = robot.resolve() if robot is not None else HERE / "robot-marker.toml"
+    truth = true_robot(work / "true", seed, f"calib_arm_views_{seed}", typed)
     views: list[np.ndarray] = []
     infos: list[object] = []
     original = sim_images.SimulatedCamera.corners
@@ -255,9 +264,11 @@ def _mean_row(e: np.ndarray, **key: object) -> dict:
 RECORDING_METHODS = ("subpix", "edges", "edges unbent", "edges+info")
 
 
-def recording_study(seed: int, renders: int, rng: np.random.Generator) -> dict:
+def recording_study(
+    seed: int, renders: int, rng: np.random.Generator, robot: Path | None = None
+) -> dict:
     """The centre's error over a recording's views (module docstring, ``--recording``)."""
-    views, info = recording_views(seed)
+    views, info = recording_views(seed, robot)
     spec = MarkerSpec(size=0.1, max_foreshortening_deg=90.0)  # (every view: none gated)
     detectors = {m: MarkerDetector(spec, refinement=m) for m in RECORDING_METHODS[:2]}
     detectors["edges+info"] = MarkerDetector(spec, refinement="edges", info=info)
@@ -325,9 +336,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--bias", type=int, default=0, help="the refinements compared, frames a cell")
     ap.add_argument("--recording", type=int, default=None, help="a calibration recording's views")
     ap.add_argument("--renders", type=int, default=4, help="--recording: renders a view")
+    ap.add_argument(
+        "--robot", default=None,
+        help="--recording: the typed robot spec (default tests/data/calibrate/robot-marker.toml)",
+    )  # fmt: skip
     args = ap.parse_args(argv)
     if args.recording is not None:
-        result = recording_study(args.recording, args.renders, np.random.default_rng(7))
+        robot = Path(args.robot) if args.robot else None
+        result = recording_study(args.recording, args.renders, np.random.default_rng(7), robot)
         if args.out:
             given = sys.argv[1:] if argv is None else argv
             result = {"command": "tools/marker_view_accuracy.py " + " ".join(given), **result}
