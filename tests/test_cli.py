@@ -144,3 +144,32 @@ def test_a_pipe_closed_under_a_command_says_what_was_kept(monkeypatch, capsys) -
     err = capsys.readouterr().err
     assert err.startswith("stopped: amsfe generate's output was closed (broken pipe)")
     assert "nothing half-written was kept" in err
+
+
+def test_a_crash_under_amsfe_prints_the_python_stack() -> None:
+    """A fatal signal in the ``amsfe`` process (a crash in a compiled extension: rclpy, the
+    middleware) prints the Python stack of its threads on stderr (faulthandler, enabled by
+    the entry point) and the process dies by the signal as before: here a SIGSEGV after
+    ``amsfe --version`` ran through the entry point, in a process of its own."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    crash = (
+        "import ctypes, sys\n"
+        "import amsfe_sym.__main__ as entry\n"
+        "sys.argv = ['amsfe', '--version']\n"
+        "try:\n"
+        "    entry.run()\n"
+        "except SystemExit:\n"
+        "    pass\n"
+        "ctypes.string_at(0)\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONFAULTHANDLER"}
+    proc = subprocess.run(
+        [sys.executable, "-c", crash], capture_output=True, text=True, env=env, timeout=120
+    )
+    assert proc.returncode == -signal.SIGSEGV, (proc.returncode, proc.stderr)
+    assert "Fatal Python error: Segmentation fault" in proc.stderr, proc.stderr
+    assert "string_at" in proc.stderr  # the Python frame that crashed

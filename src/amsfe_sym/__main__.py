@@ -3,8 +3,12 @@
 Loading the command line's modules takes seconds on a busy machine; a Ctrl-C or SIGTERM in
 that time is one line and exit 130 / 143 too, as in the command (whose handler replaces the
 one installed here). A stdout closed under the command (``amsfe estimate LOG | head``) is
-one line on stderr and exit 141, not a traceback."""
+one line on stderr and exit 141, not a traceback.  A fatal signal in the process (a crash in
+a compiled extension: rclpy, the middleware) prints the Python stack of every thread on
+stderr (:mod:`faulthandler`) before the process dies as it would have."""
 
+import contextlib
+import faulthandler
 import os
 import signal
 import sys
@@ -20,6 +24,8 @@ def _stopped(signum: int, frame: object) -> None:
 
 def run() -> int:
     """Install the start-up handlers, load the command line, run it; the exit status."""
+    with contextlib.suppress(AttributeError, ValueError, OSError):  # stderr not a file
+        faulthandler.enable()
     signal.signal(signal.SIGTERM, _stopped)
     try:
         from amsfe_sym.apps.cli import BROKEN_PIPE, main
