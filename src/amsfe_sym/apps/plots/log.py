@@ -120,7 +120,7 @@ def plot_log(
         ax.grid(alpha=0.3)
     cells[0][0].legend(loc="upper right", fontsize=6)
     if channels:
-        _nis_row(fig, log, nis, cells[0][0], _joint_rows(n))
+        _nis_row(fig, log, nis, cells[0][0], nis_rows)
     if arrivals.size > RUG_MAX:
         every = float(np.ptp(arrivals)) / (arrivals.size - 1)
         frames = f"{arrivals.size} camera frames, one every {every:.3g} s"
@@ -142,19 +142,15 @@ def _rug(at: FloatArray, height: float = 0.04) -> tuple[FloatArray, FloatArray]:
     return x, y
 
 
-def _joint_rows(n: int) -> int:
-    """Rows of :func:`~amsfe_sym.apps.plots.style.joint_grid`'s joint panels for ``n``."""
-    return -(-n // min(n, MAX_COLUMNS))
-
-
-def _nis_row(fig: Any, log: RobotLog, nis: NisSeries, time_axes: Any, row: int) -> None:
+def _nis_row(fig: Any, log: RobotLog, nis: NisSeries, time_axes: Any, rows: int) -> None:
     """The NIS of the encoder updates and of the camera frames over time, with their
-    chi-square 95 % bands, in ``fig``'s grid from ``row`` on: the channels side by side
-    over the columns (one a row when there are more channels than columns); nothing drawn
-    where no NIS was recorded.  ``time_axes``: the joint axes whose time axis they share."""
+    chi-square 95 % bands, in the last ``rows`` rows of ``fig``'s grid: the channels side
+    by side over the columns in one row, or one a row (``rows`` = the channels, when there
+    are more than columns); nothing drawn where no NIS was recorded.  ``time_axes``: the
+    joint axes whose time axis they share."""
     grid = fig.axes[0].get_subplotspec().get_gridspec()
     cols, channels = grid.ncols, len(nis.report)
-    side = channels <= cols
+    side, row = rows == 1, grid.nrows - rows
     for i, (what, r) in enumerate(nis.report.items()):
         span = cols // channels if side else cols
         start = i * span if side else 0
