@@ -5,36 +5,26 @@ against a fresh run of the tool with ``--robot``."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
-import sys
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from tests.tool_modules import tool
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _tool() -> ModuleType:
-    """``tools/calibrate_motion.py`` as the module ``calibrate_motion``."""
-    spec = importlib.util.spec_from_file_location(
-        "calibrate_motion", ROOT / "tools/calibrate_motion.py"
-    )
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("calibrate_motion", module)
-    spec.loader.exec_module(module)
-    return module
+cm = tool("calibrate_motion")
 
 
 @pytest.mark.parametrize(("var", "radius"), [(1.0, 4.0), (0.3, 2.0), (0.1, 2.0), (0.05, 2.0)])
 def test_norm_tail_with_equal_axes_is_the_chi_square_tail(var: float, radius: float) -> None:
     """Equal axes: ``|e|^2 / var`` is chi-square with 3 degrees of freedom, down to 1e-17."""
-    got = _tool().norm_tail(np.eye(3) * var, radius)
+    got = cm.norm_tail(np.eye(3) * var, radius)
     assert got == pytest.approx(chi2.sf(radius**2 / var, 3), rel=1e-4)
 
 
@@ -46,7 +36,7 @@ def test_norm_tail_with_unequal_axes_matches_gaussian_draws() -> None:
     C = R @ np.diag([0.05, 0.1, 0.3]) @ R.T
     norms = np.linalg.norm(rng.multivariate_normal(np.zeros(3), C, 4_000_000), axis=1)
     for radius in (1.2, 1.8):
-        p = _tool().norm_tail(C, radius)
+        p = cm.norm_tail(C, radius)
         drawn = float(np.mean(norms > radius))
         assert abs(drawn - p) < 5 * math.sqrt(p * (1 - p) / norms.size), (radius, p, drawn)
 
@@ -57,7 +47,7 @@ def test_the_stored_closer_camera_prediction_is_the_tool_s() -> None:
     stored = json.loads((ROOT / "docs/data/calibrate-motion-near.json").read_text())
     scenario = ROOT / "tests/data/calibrate/calib-sim.toml"
     near = Path("tests/data/calibrate/robot-near.toml")
-    got = _tool().motion_report(scenario, [], None, near)
+    got = cm.motion_report(scenario, [], None, near)
     assert got["command"] == stored["command"]
     assert got["frames_in_view"] == stored["frames_in_view"]
     for group in ("half_width_95", "miss_probability"):

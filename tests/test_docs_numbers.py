@@ -136,12 +136,9 @@ def test_check_docs_skips_a_by_hand_source_and_survives_a_failing_command(
 ) -> None:
     """``tools/check_docs.py --all``: a source re-run by hand is named and skipped, a command
     that fails is one line (not a traceback) and the other sources still run; exit 1."""
-    import importlib.util
+    from tests.tool_modules import tool
 
-    spec = importlib.util.spec_from_file_location("check_docs", ROOT / "tools/check_docs.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = tool("check_docs")
     (tmp_path / "docs" / "data").mkdir(parents=True)
     (tmp_path / "docs" / "data" / "out.json").write_text("{}")
     (tmp_path / "docs" / "data" / "claims-registry.toml").write_text(

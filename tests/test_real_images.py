@@ -12,28 +12,17 @@ detection).  The numbers are tools/real_images.py's, in docs/camera.md "On real 
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 import pytest
 
+from tests.tool_modules import tool
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _tool(name: str) -> ModuleType:
-    """``tools/<name>.py`` as the module ``name``."""
-    spec = importlib.util.spec_from_file_location(name, ROOT / f"tools/{name}.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[name] = mod
-    spec.loader.exec_module(mod)
-    return mod
-
-
-ri = _tool("real_images")
+ri = tool("real_images")
 
 
 @pytest.fixture(scope="module")
@@ -113,7 +102,7 @@ def test_hand_eye_residuals_on_real_frames() -> None:
 # references (docs/camera.md, "A fixed camera on a real arm").
 
 
-ve = _tool("visp_eye_to_hand")
+ve = tool("visp_eye_to_hand")
 
 
 def test_visp_tag_found_on_every_frame() -> None:
