@@ -247,6 +247,35 @@ def test_amsfe_live_gives_both_the_same_duration() -> None:
 
 
 @pytest.mark.ros
+def test_amsfe_live_stops_the_arm_when_the_node_is_gone(tmp_path: Path) -> None:
+    """A node that ends without a hold (here exit 2: a controller name it refuses after the
+    arm has started) stops the arm at once: the arm (start and command timeouts 150 s) says
+    it was stopped by Ctrl-C and the command exits with the node's code.  Before, the arm
+    waited out its start timeout for a node that was gone (a CI run's crashed node)."""
+    env = _ros_env(tmp_path)
+    procs = []
+    try:
+        procs.append(_start(env, "live", "paper-sim", "--controller", "nosuch",
+                            "--duration", "1", "--command-timeout", "150"))  # fmt: skip
+    finally:
+        results = _finish(procs, 120.0)  # under the arm's timeouts: a wait fails the test
+    code, out = results[0]
+    assert code == 2, out
+    assert "live: the node ended (exit 2) before the arm; the arm is stopped" in out, out
+    assert "amsfe sim-node stopped by Ctrl-C" in out or "sim-node" not in out, out
+
+
+def test_amsfe_live_names_how_a_process_ended() -> None:
+    from amsfe_sym.ros.pair import _how
+
+    assert [_how(2), _how(-11), _how(-200)] == [
+        "exit 2",
+        "killed by SIGSEGV",
+        "killed by signal 200",
+    ]
+
+
+@pytest.mark.ros
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("impl", "mode"),

@@ -11,6 +11,11 @@ Both run for the same duration (``--duration``, else the scenario's), so the arm
 is the node's end (``done``, exit 0): a node without a duration runs until stopped, and when
 the arm ended after its scenario's duration the node held with ``encoder_stall`` (its
 driver gone) and exit 3 -- the normal end of the data taken for a crash.
+
+A node that ends without a hold (exit 2: it refused its options; a signal: it crashed) before
+the arm stops the arm at once (SIGINT; a line says so): the arm would otherwise wait out its
+start or command timeout for a node that is gone.  After a hold (exit 3) the arm runs on
+under the hold command the node published, to its end, as a real arm would.
 """
 
 from __future__ import annotations
@@ -18,8 +23,10 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
+import time
 from dataclasses import dataclass
 
+from amsfe_sym.ros.node_stop import EXIT_HOLD
 from amsfe_sym.scenario import load_scenario
 
 __all__ = ["PairOptions", "pair_commands", "run_pair"]
@@ -100,6 +107,16 @@ def run_pair(opts: PairOptions) -> int:
     procs = [subprocess.Popen([*exe, *node_args])]
     try:
         procs.append(subprocess.Popen([*exe, *arm_args]))
+        node, arm = procs
+        while node.poll() is None and arm.poll() is None:
+            time.sleep(POLL_S)
+        if node.returncode not in (None, 0, EXIT_HOLD) and arm.poll() is None:
+            print(
+                f"live: the node ended ({_how(node.returncode)}) before the arm; "
+                "the arm is stopped (SIGINT)",
+                flush=True,
+            )
+            arm.send_signal(signal.SIGINT)
         codes = [p.wait() for p in procs]
     except KeyboardInterrupt as exc:
         sig = signal.SIGINT if type(exc) is KeyboardInterrupt else signal.SIGTERM
@@ -110,3 +127,17 @@ def run_pair(opts: PairOptions) -> int:
             p.wait()
         raise
     return codes[0] or codes[1]
+
+
+#: How often :func:`run_pair` looks whether either process has ended [s].
+POLL_S = 0.05
+
+
+def _how(code: int) -> str:
+    """A child's return code in words: ``exit N`` or ``killed by SIGSEGV``."""
+    if code >= 0:
+        return f"exit {code}"
+    try:
+        return f"killed by {signal.Signals(-code).name}"
+    except ValueError:
+        return f"killed by signal {-code}"
