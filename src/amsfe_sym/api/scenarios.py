@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -218,22 +218,17 @@ def simulate(
     validate(sc, f"{sc.name} (simulate)")
     lib = library_for(sc)
     res = run(sc, lib, runtime=_RUNTIMES[runtime])
-    nis = _run_nis(res)
+    from amsfe_sym.sim.result import RunResult
+
+    # what the run has under the same name (t, x_true, x_hat, P_diag, u, q_des, nees, frames,
+    # diverged_at, wall_time_s) is taken as it is: a field both gain is carried over
+    same = {f.name for f in fields(SimResult)} & {f.name for f in fields(RunResult)}
     return SimResult(
-        t=res.t,
-        x_true=res.x_true,
-        x_hat=res.x_hat,
-        P_diag=res.P_diag,
-        u=res.u,
-        q_des=res.q_des,
-        nis=nis,
-        nees=res.nees,
-        frames=res.frames,
+        **{name: getattr(res, name) for name in same},
+        nis=_run_nis(res),
         joints=tuple(lib.manifest.joints),
         layout=dict(lib.layout),
         T=lib.T,
-        diverged_at=res.diverged_at,
-        wall_time_s=res.wall_time_s,
         run=res,
     )
 

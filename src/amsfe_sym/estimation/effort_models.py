@@ -14,8 +14,8 @@ Pure numpy; the robot enters through :class:`~amsfe_sym.estimation.effort.MotorP
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
-from typing import Protocol
+from dataclasses import dataclass, fields, replace
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -299,6 +299,12 @@ class EffortModels:
     camera: MeasurementModel
     x0: FloatArray
     P0: FloatArray
+
+    def estimator_args(self) -> dict[str, Any]:
+        """The estimator constructor's arguments these give, by their names (``model``,
+        ``encoder``, ``camera``, ``x0``, ``P0``), for
+        :func:`~amsfe_sym.estimation.registry.make_estimator`."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
 def wrap_models(

@@ -278,15 +278,7 @@ def build_estimator(
     plain = EffortModels(compiled_model, encoder_model, camera_model, x0, P0)
     parts = wrap_models(effort, motor, plain, u0=g0 + motor.Fm * x0[3 * n : 4 * n])
     make = make_compiled_estimator if compiled else make_estimator
-    return make(
-        sc.estimator,
-        model=parts.model,
-        encoder=parts.encoder,
-        camera=parts.camera,
-        x0=parts.x0,
-        P0=parts.P0,
-        config=filter_config(sc, sensors.timing),
-    )
+    return make(sc.estimator, **parts.estimator_args(), config=filter_config(sc, sensors.timing))
 
 
 def build_controller(sc: Scenario, lib: ModelLibrary) -> tuple[Controller, Trajectory]:
