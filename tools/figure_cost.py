@@ -13,11 +13,17 @@ It also prints the CPU time of matplotlib's import (the figures' first call of
 costliest functions (cumulative) and 15 (own time) of the figures alone: where their time
 goes (texts, legends, ticks; ``ft2font._render_glyph``'s calls are the glyphs drawn).
 
+With ``--floor`` first in ARGS, the command runs with ``--no-plots`` and then, in the same
+process, matplotlib is imported and one panel with one line drawn and written as the
+commands write theirs (``plots.style.figure`` / ``save``): the least any figure adds to
+that command, and the share of it that would be.
+
 Usage::
 
     .venv/bin/python tools/figure_cost.py simulate panda-control --no-progress --out S
     .venv/bin/python tools/figure_cost.py estimate LOG --out E
     .venv/bin/python tools/figure_cost.py --profile simulate --no-progress --out P
+    .venv/bin/python tools/figure_cost.py --floor simulate --no-progress --out F
 """
 
 from __future__ import annotations
@@ -62,6 +68,8 @@ def main(argv: list[str]) -> int:
     from amsfe_sym.apps.cli import main as amsfe
     from amsfe_sym.apps.plots import style
 
+    if argv[:1] == ["--floor"]:
+        return floor(argv[1:])
     profile = cProfile.Profile() if argv[:1] == ["--profile"] else None
     argv = argv[1:] if profile is not None else argv
     spent = {"cpu": 0.0, "wall": 0.0}
@@ -84,6 +92,31 @@ def main(argv: list[str]) -> int:
         stats = pstats.Stats(profile)
         stats.sort_stats("cumulative").print_stats(30)
         stats.sort_stats("tottime").print_stats(15)
+    return code
+
+
+def floor(argv: list[str]) -> int:
+    """``amsfe ARGS --no-plots``, then one panel drawn and written in this process: prints
+    the command's CPU time and the panel's (matplotlib's import included) [s]."""
+    import tempfile
+    from pathlib import Path
+
+    from amsfe_sym.apps.cli import main as amsfe
+    from amsfe_sym.apps.plots import style
+
+    code = amsfe([*argv, "--no-plots"])
+    cpu = time.process_time()
+    style.import_matplotlib()
+    fig = style.figure((4.0, 3.0))
+    fig.add_subplot().plot([0.0, 1.0], [0.0, 1.0])
+    with tempfile.TemporaryDirectory() as tmp:
+        style.save(fig, Path(tmp) / "one.png")
+    panel = time.process_time() - cpu
+    whole = time.process_time()
+    print(
+        f"amsfe {' '.join(argv)} --no-plots: CPU {whole - panel:.2f} s; one panel, "
+        f"matplotlib's import included: CPU {panel:.2f} s ({100 * panel / whole:.0f} % of both)"
+    )
     return code
 
 
