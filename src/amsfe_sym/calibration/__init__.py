@@ -1,4 +1,4 @@
-"""Camera calibration from a recording (issue 35, item 5; docs/calibrate.md): the camera's
+"""Camera calibration from a recording (docs/calibrate.md): the camera's
 pose in the base, the marker's offset on its link and the camera's time offset, in one batch
 over the reprojection error of the frames against the encoders' link angles.
 

@@ -413,7 +413,7 @@ def _other_source(out_dir: Path, spec: RobotSpec) -> str | None:
 
 def _check_library_folder(out_dir: Path) -> None:
     """A library folder is new, empty or one this tool generated (it holds its manifest): a
-    file or a folder of the user's there is never replaced (issue 25).  A library whose
+    file or a folder of the user's there is never replaced.  A library whose
     manifest was lost (its ``lib*.so`` is there) is rebuilt."""
     if not out_dir.exists() or (out_dir / MANIFEST).is_file():
         return

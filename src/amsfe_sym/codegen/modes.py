@@ -1,5 +1,5 @@
 """Joint modes over the workspace, and a robot's library at another sampling interval
-(issue 26, item 5).
+(docs/explanation/codegen.md, "Joint modes and other sampling intervals").
 
 :func:`joint_modes` linearises the flexible-joint model (eqs. 1a-1d) at rest at random link
 angles within the joint limits and solves the undamped two-mass eigenproblem

@@ -197,7 +197,8 @@ class _Cascade(_SlidingBase):
     #: With ``blend_wf`` [rad/s] below ``wf``, the command filter's bandwidth is ``blend_wf``
     #: at the trusted tick and returns to ``wf`` along the blend (``wf + (blend_wf - wf)
     #: b0(s / Tb)``, b0 the blend's polynomial): the law's first commands, computed from a
-    #: rate estimate still ~0.3 rad/s off, reach the motor smoothed (issue 28).
+    #: rate estimate still ~0.3 rad/s off, reach the motor smoothed
+    #: (docs/explanation/control.md "Start-up").
     #: With ``headroom_tau`` [s] finite, the hand-over is saturation-aware: while the blend
     #: runs, with ``r = min_j min(1, u_max_j / |u_j(k-1)|)`` the share of the last tick's
     #: torque demand the actuators could apply (after it, r = 1), ``h``, ``eps``, ``wm`` and
@@ -205,7 +206,7 @@ class _Cascade(_SlidingBase):
     #: time constant ``headroom_tau`` (``rho += T / headroom_tau (r - rho)``): a demand the
     #: actuators cannot meet lowers the loops' bandwidths on every joint alike, so the law
     #: asks what they can apply instead of winding the flexible mode into a saturated
-    #: oscillation (issue 28, docs/explanation/control.md "Start-up").
+    #: oscillation (docs/explanation/control.md "Start-up").
     #: With ``blend_lead`` in (0, 1] the blend is planned as if it had started that share of
     #: the wait before the trusted tick (1: at the loop's first tick), through the trusted
     #: estimate at the trusted tick (:func:`~amsfe_sym.control.blend.blend_through`): the

@@ -1,7 +1,7 @@
 """The one JSON writer of the tool: strict JSON (RFC 8259), never a bare ``NaN``/``Infinity``.
 
 ``json.dumps`` writes a NaN as the bare literal ``NaN``, which no strict parser reads (the
-``summary.json`` of a run whose NEES was NaN was not JSON, issue 25).  :func:`to_json` writes
+``summary.json`` of a run whose NEES was NaN was not JSON).  :func:`to_json` writes
 every non-finite number as ``null`` and records where and what it was in the top-level
 object's :data:`NON_FINITE` entry (``{"nees_mean": "nan"}``), so the reason is kept;
 numpy scalars and arrays become numbers and lists.

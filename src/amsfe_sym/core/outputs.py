@@ -1,4 +1,4 @@
-"""The one rule for every path the tool writes (issue 25): checked before any work starts.
+"""The one rule for every path the tool writes: checked before any work starts.
 
 Every command calls :func:`check_output` for each path it will write (``--out``, ``--bag``,
 ``--json``, ``--record``; figures go inside those folders) before it computes anything:

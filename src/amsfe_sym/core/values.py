@@ -1,5 +1,5 @@
 """Typed values of the configuration files: one reader for robot.toml and the scenario files,
-so both refuse the same things (issue 20): no ``float()`` of a string or a boolean, finite
+so both refuse the same things: no ``float()`` of a string or a boolean, finite
 numbers everywhere, integers that must be integers, and counts bounded by what a C ``int``
 of the runtime's parameter blocks holds (no silent narrowing).
 
@@ -61,7 +61,7 @@ PERIOD_MIN = 1e-6
 PERIOD_MAX = 10.0
 
 #: The most rk4 steps per T (``model_substeps``, ``plant_substeps``, ``inverse_iterations``):
-#: each is unrolled in the generated graph, so 10^10 of them never finished (issue 37); the
+#: each is unrolled in the generated graph, so 10^10 of them never finished; the
 #: Panda at 30 Hz, the most any shipped log needs, takes 62.
 SUBSTEPS_MAX = 256
 

@@ -1,4 +1,4 @@
-"""What a log's effort is, and how the estimator uses it (issue 26, item 3).
+"""What a log's effort is, and how the estimator uses it (docs/explanation/effort.md).
 
 Real arms log different things under "effort":
 

@@ -1,4 +1,4 @@
-"""The estimator's models for a log's kind of effort (issue 26, item 3; docs/explanation/effort.md).
+"""The estimator's models for a log's kind of effort (docs/explanation/effort.md).
 
 - :class:`SpringTorqueMeasurement`: encoders plus joint torque sensors (``joint_torque``);
 - :class:`InputStateTransition`: the unknown input carried as random-walk states, and

@@ -1,4 +1,4 @@
-"""The generated estimator and controller live on ROS 2 (docs/how-to/ros.md, issue 27).
+"""The generated estimator and controller live on ROS 2 (docs/how-to/ros.md).
 
 Modules: ``middleware`` (rclpy imported lazily, the environment it needs, QoS and stamps
 from a :class:`~amsfe_sym.topics.TopicSpec`), ``arm`` (the simulated arm, tick by tick, as

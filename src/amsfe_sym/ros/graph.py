@@ -1,5 +1,5 @@
 """What the ROS graph says about a node's peers: who publishes a topic (by name and GID) and
-whether another node carries the same name (issue 37 item 2: two controllers on one
+whether another node carries the same name (two controllers on one
 lockstep arm, two nodes of one name)."""
 
 from __future__ import annotations

@@ -322,7 +322,7 @@ class LiveLoop:
                     self.frame(exposure_ns, zf, sent)
             self._early_frames.clear()
             return self._control(stamp_ns, row[: 2 * self.n], None, 0)
-        # issue 37: named, not "stalled"
+        # named, not "stalled"
         bad = self._stamps.check(stamp_ns, sent_ns, self.t0_ns, self.k, self._skip)
         if bad is not None:
             return None
@@ -373,7 +373,7 @@ class LiveLoop:
         when its command is computed.  An estimator failure, or more than ``max_gap_steps``
         samples missing, is judged as such (a hold) rather than raised; a skipped sample is
         not judged.  More than ``max_gap_steps`` bad stamps in a row raise the stamps'
-        :class:`~amsfe_sym.errors.EstimatorError`, which names them (issue 37).  The
+        :class:`~amsfe_sym.errors.EstimatorError`, which names them.  The
         watchdog's stamp is ``sent_ns`` when known (the deadline is this node's delay, whatever
         the arm's clock), else ``stamp_ns``."""
         k_before = self.k

@@ -1,6 +1,6 @@
 """The live loop's stamp screening (:class:`amsfe_sym.ros.live.LiveLoop`): which encoder
 samples' header stamps are not used, by the log reader's rule on what a live node has
-(docs/input-rules.md), and when a run of them holds the node (issue 37).
+(docs/input-rules.md), and when a run of them holds the node.
 """
 
 from __future__ import annotations

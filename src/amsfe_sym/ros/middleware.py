@@ -108,7 +108,7 @@ def depth_for(rate_hz: float, spec: TopicSpec, seconds: float = QUEUE_SECONDS) -
     :data:`~amsfe_sym.core.values.BUFFER_STEPS_MAX`.  The one rule of every queue of
     ``play`` and the nodes (a publisher's and a subscription's alike), so both ends of a
     topic hold the same time: ``play`` at the recorded pace needed ``-p qos.depth:=5000`` on
-    a loaded machine before (issue 37).
+    a loaded machine before.
     """
     from amsfe_sym.core.values import BUFFER_STEPS_MAX
 

@@ -68,7 +68,7 @@ FloatArray = NDArray[np.float64]
 
 #: A node that has received no encoder sample says, every this many seconds [s, wall], which
 #: topic it waits on and what the graph shows for it (:func:`~amsfe_sym.ros.middleware.
-#: waiting_line`): it waited forever without a word (issue 37).
+#: waiting_line`): it waited forever without a word.
 WAITING_SAY_S = 10.0
 ENCODER_TYPE = "sensor_msgs/msg/JointState"
 

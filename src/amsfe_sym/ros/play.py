@@ -6,7 +6,7 @@ The topics are the input roles of the topic spec (encoders, effort, camera, trut
 log holds; a log is read by the log reader's own code (:mod:`amsfe_sym.logs.source`: a ROS 1
 ``.bag``, a rosbag2 folder in MCAP or sqlite3, a plain ``.mcap``), and each message goes out
 as CDR: as recorded when it is CDR, converted when it is ROS 1 (a ROS 1 bag's bytes were
-published as they were, and the node's Fast CDR could not read them: issue 37).  Each
+published as they were, and the node's Fast CDR could not read them).  Each
 publisher's history holds :data:`~amsfe_sym.ros.middleware.QUEUE_SECONDS` of its topic at
 the log's rate (:func:`~amsfe_sym.ros.middleware.depth_for`), so a reader that falls behind
 on a loaded machine catches up instead of losing samples.  Messages of one log
@@ -20,7 +20,7 @@ then has them when the sample arrives, at the cost of the recorded pace
 of the match not made yet when the first samples went out, or a full buffer on a loaded
 machine) is sent again within milliseconds; at Fast DDS's default 3 s heartbeat the
 reliable stream of that topic waited seconds for it, and a node without ``--ordered``
-estimated those ticks with a held torque (a false ``innovation`` hold, issue 34).
+estimated those ticks with a held torque (a false ``innovation`` hold).
 """
 
 from __future__ import annotations

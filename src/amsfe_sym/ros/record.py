@@ -23,7 +23,7 @@ truth of tick k after the encoder sample of k - 1 and before the one of k
 one that never comes leaves its tick without a truth (counted in the metadata), never with
 another tick's.
 
-**Streamed to disk, one writer** (issue 37 items 2 and 7).  :meth:`NodeRecord.open` claims
+**Streamed to disk, one writer**.  :meth:`NodeRecord.open` claims
 the folder before the node starts: it is created (refused in one line when it exists) and
 holds a lock file made with ``O_EXCL`` holding the writer's pid, so a second node naming the
 same path is refused before it starts, also when the first one died (its lock stays: a dead

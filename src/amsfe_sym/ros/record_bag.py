@@ -2,7 +2,7 @@
 claimed with a lock file before the node starts, written as a series of complete MCAP files
 by one writer thread, its ``metadata.yaml`` rewritten atomically after each, so a SIGKILL
 leaves a bag readable up to its last segment, its metadata saying ``amsfe.record:
-unfinished`` (issue 37 items 2 and 7); and the one-line refusals of a path that holds
+unfinished``; and the one-line refusals of a path that holds
 another writer's record.
 """
 

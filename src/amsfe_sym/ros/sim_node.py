@@ -17,8 +17,8 @@ command it has when a tick ends (real latency, real drops); it prints the wall c
 (epoch [s]), so a harness knows the tick of any wall time.
 
 A lockstep arm follows one controller: commands from a second publisher of the command topic
-(another GID than the first command's) stop the run in one line naming both nodes (issue 37:
-two controllers interleaved gave each tick another's command); another node named
+(another GID than the first command's) stop the run in one line naming both nodes (two
+controllers interleaved gave each tick another's command); another node named
 ``amsfe_sim`` on the domain is warned of.  ``faults``: the arm breaks at a stated time
 (:mod:`amsfe_sym.ros.faults`; the effort topic publishes the torque actually applied).
 """

@@ -1,4 +1,5 @@
-"""Can a library's discrete model integrate its joints' elastic modes? (issue 26, item 5)
+"""Can a library's discrete model integrate its joints' elastic modes?
+(docs/explanation/codegen.md, "Joint modes and other sampling intervals")
 
 Each elastic joint adds a link-against-rotor mode: an oscillator ``x'' + 2 zeta w x' + w^2 x
 = 0`` with w [rad/s] from the generalized eigenproblem of the linearised flexible-joint model

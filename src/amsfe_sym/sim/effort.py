@@ -1,4 +1,5 @@
-"""Simulated logs with each kind of effort, and the estimator run over them (issue 26, item 3).
+"""Simulated logs with each kind of effort, and the estimator run over them
+(docs/explanation/effort.md).
 
 A simulated run (:class:`~amsfe_sym.sim.result.RunResult`) holds the truth, the applied
 torque ``u`` and the encoder samples.  :func:`simulated_effort` writes what an arm would log

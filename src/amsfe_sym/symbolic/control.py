@@ -260,7 +260,7 @@ def _motor_reference(tree: RigidBodyTree, tr: Transition, n: int, p: int) -> ca.
     of the desired motion, ``qm_r = q_d + Ks^-1 RNEA(q_d, qd_d, qdd_d)``, and its exact first
     and second time derivatives along the trajectory's jerk and snap, by one pass of RNEA on
     second-order Taylor polynomials (:mod:`.rnea_taylor`; nested forward-mode AD emitted
-    about 1.5x the code, issue 18)."""
+    about 1.5x the code)."""
     ref, th = ca.SX.sym("ref", 5 * n), ca.SX.sym("theta", p)
     rq, rqd, rqdd, rj, rs = (ref[i * n : (i + 1) * n] for i in range(5))
     Ks = tr.stiffness(th)  # constant in time

@@ -1,7 +1,7 @@
 """The ``rk4`` model's fused step ``transition_step`` and the split stage it and the C chain
 (``runtime/c/amsfe_model.c``) are built on: the stage without its dense solves with the mass
 matrix, which are done in loops (CasADi's ``ldl`` linear solver in the MX graph, an LDL^T in
-C in the chain) instead of unrolled in the generated code (issue 18, docs/explanation/codegen.md).
+C in the chain) instead of unrolled in the generated code (docs/explanation/codegen.md).
 Called through :class:`.transition.Transition` (``tr`` below; not imported: it imports
 this module), which caches what they build."""
 
@@ -80,7 +80,8 @@ def dynamics_jacobian_function(tr: Any) -> ca.Function:
     What Pinocchio's ``computeABADerivatives(q, v, tau)`` computes for a rigid arm, with the
     spring torque as tau: ``dqdd/dq = ddq_dq - M^-1 diag(Ks)``, ``dqdd/dqd = ddq_dv``,
     ``dqdd/dqm = M^-1 diag(Ks)`` (tests/test_generated.py); ``amsfe bench`` times the two
-    side by side (issue 18's "dynamics jacobian vs computeABADerivatives").  The chain of
+    side by side ("dynamics jacobian vs computeABADerivatives", docs/explanation/codegen.md).
+    The chain of
     ``runtime/c/amsfe_model.c`` does the same work per stage with its solves in C loops.
     """
     n, p = tr.tree.n, tr.tree.p
@@ -102,7 +103,7 @@ def plant_rhs_over_stage(tr: Any) -> ca.Function:
     the motor torque ``u + tau_m`` is the stage's input, the link rows ``rhs + tau_l`` are
     solved with the stage's M by ``rk4_mass_solve``, the unrolled LDL^T of
     :func:`.linalg.ldl_solve` as a small SX function (CasADi's ``ldl`` linear solver made
-    ``plant_step`` 37 % slower on the Panda, this 10 %; issue 18, docs/explanation/codegen.md).  The
+    ``plant_step`` 37 % slower on the Panda, this 10 %; docs/explanation/codegen.md).  The
     same operations in the same order as :meth:`.Transition.plant_rhs`, so equal to it to
     rounding."""
     n, p = tr.tree.n, tr.tree.p

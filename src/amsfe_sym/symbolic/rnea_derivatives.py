@@ -1,4 +1,4 @@
-"""Analytic derivatives of the recursive Newton-Euler algorithm on SX (issue 18).
+"""Analytic derivatives of the recursive Newton-Euler algorithm on SX (docs/explanation/codegen.md).
 
 Carpentier and Mansard, "Analytical Derivatives of Rigid Body Dynamics Algorithms" (RSS
 2018); Pinocchio's ``computeRNEADerivatives`` (``rnea-derivatives.hxx``).  One forward pass

@@ -87,7 +87,7 @@ class LogCase:
         return (self.scenario, self.duration, self.camera)
 
 
-#: Issue 26 item 8's logs: a 10 s 1 kHz 2-link log (target >= 100x real time end to end)
+#: The logs of the targets: a 10 s 1 kHz 2-link log (target >= 100x real time end to end)
 #: and a 60 s 1 kHz Panda log with camera frames (>= 20x).
 DEFAULT_LOGS = (LogCase("paper-sim", 10.0), LogCase("panda-control", 60.0))
 
@@ -293,8 +293,8 @@ def log_lines(rows: list[dict[str, Any]]) -> list[str]:
             f"median of {r['rounds']})"
         )
     lines.append(
-        "   targets (issue 26 item 8): >= 100x for a 10 s 1 kHz 2-link log, >= 20x for a 60 s "
-        "Panda log, end to end; (issue 35) >= 10x for a 60 s log with 30 Hz images "
+        "   targets: >= 100x for a 10 s 1 kHz 2-link log, >= 20x for a 60 s "
+        "Panda log, end to end; >= 10x for a 60 s log with 30 Hz images "
         "(paper-sim:60:images; its pixel-topic twin paper-sim:60:pixels is the floor)"
     )
     return lines

@@ -22,7 +22,7 @@ __all__ = ["DEFAULT_CFLAG_SETS", "TARGETS", "BenchOptions", "format_report", "ru
 
 #: Flag sets of ``--compare-cflags`` when none are given.
 DEFAULT_CFLAG_SETS: tuple[str, ...] = ("-O0", "-O1", "-O2", "-O3", "-Os", "-O1 -march=native")
-#: Targets of the issue: cold generation (2-link, 6/7-DOF arm), cached generation [s],
+#: The project's targets: cold generation (2-link, 6/7-DOF arm), cached generation [s],
 #: and the binding's per-call overhead [us].
 TARGETS = {"cold_2link_s": 2.0, "cold_arm_s": 20.0, "cached_s": 1.0, "overhead_us": 3.0}
 
@@ -201,7 +201,7 @@ def _tick_lines(report: dict[str, Any]) -> list[str]:
         if "speedup" in loop:
             lines.append(
                 f"   compiled / python: {loop['speedup']}x per tick "
-                "(targets, issue 18: >= 300x real time paper-sim, >= 80x ur5-control, "
+                "(targets: >= 300x real time paper-sim, >= 80x ur5-control, "
                 ">= 50x panda-control)"
             )
     sc = report.get("scaling")

@@ -42,7 +42,7 @@ KINDS = ("mono8", "bgr8", "jpeg mono8", "jpeg bgr8")
 #: The stages timed per frame (CPU): payload read in place + grey, detection, undistortion of
 #: the corners + the centre.
 STAGES = ("read_grey", "detect", "undistort")
-#: Issue 35's target: decoding + detection per frame at 640 x 480 on one core [frames/s].
+#: The target: decoding + detection per frame at 640 x 480 on one core [frames/s].
 VISION_TARGET_FPS = 60.0
 
 _W, _H, _F = 640, 480, 500.0
@@ -217,7 +217,7 @@ def vision_lines(v: dict[str, Any], cpu: str) -> list[str]:
         "reader's path); opencv = whole, OpenCV's default threshold windows (3, 13, 23 px)"
     )
     lines.append(
-        f"   target (issue 35): decoding + detection >= {VISION_TARGET_FPS:g} frames/s on "
+        f"   target: decoding + detection >= {VISION_TARGET_FPS:g} frames/s on "
         "one core (fps CPU: time.process_time, OpenCV on one thread)"
     )
     return lines
