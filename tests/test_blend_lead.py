@@ -1,7 +1,7 @@
 """The blend planned before the trusted tick (``blend_lead``, docs/explanation/control.md
 "Start-up: the blend planned before the trusted tick"): the Python controller and amsfe_ctrl
-(runtime/c/amsfe_loop.c) equal tick by tick and in the loop, the gain's checks, and the moving
-start that motivated it.
+(runtime/c/amsfe_blend.c, amsfe_ctrl.c) equal tick by tick and in the loop, the gain's checks,
+and the moving start that motivated it.
 
 The studies on 1000-seed blocks live in tools/startup_moving.py (``--set
 GAINS.blend_lead=...``)."""

@@ -2,7 +2,7 @@
 "Compiled").
 
 The input carried as states and the joint torque sensors' measurement are computed by the C
-runtime (``runtime/c/amsfe_runtime.c``) and compared here with the Python reference
+runtime (``runtime/c/amsfe_est_tick.c``) and compared here with the Python reference
 (``estimation/effort_models.py`` wrapped around the same compiled robot functions): tick by
 tick and through the batch call (``amsfe_est_run``), on a simulated paper_2link run whose
 joint stiffnesses are theta parameters (the bilinear torque jacobian).

@@ -1,7 +1,7 @@
 """The cascades' start-up (docs/explanation/control.md, "Start-up"; issue 28 item 1): the wait for
 the
 rates and the filter's consistency (the encoders' mean NIS), the motor-side hold, and the C
-controller (runtime/c/amsfe_loop.c) equal to the Python one tick by tick and in the loop.
+controller (runtime/c/amsfe_ctrl.c) equal to the Python one tick by tick and in the loop.
 
 The big grids (moving starts, fresh seeds, the paper's integrator) live in
 tools/startup_moving.py; these tests are the cheap checks that the parts do what they say.

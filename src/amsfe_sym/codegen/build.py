@@ -313,10 +313,20 @@ def _build(
             units.append(runtime_unit("amsfe_model.c", local=True))
         if "estimator" in parts:  # the C glue calls the est_* functions
             shutil.copy(RUNTIME_C / "amsfe_runtime.h", tmp)
-            units.append(runtime_unit("amsfe_runtime.c", local=True))
+            units += [
+                runtime_unit(name, local=True)
+                for name in (
+                    "amsfe_runtime.c",
+                    "amsfe_est_tick.c",
+                    "amsfe_est_late.c",
+                    "amsfe_est_run.c",
+                )
+            ]
         if set(parts) == set(ALL_PARTS):  # the loop calls the laws, the plant, the estimators
             shutil.copy(RUNTIME_C / "amsfe_loop.h", tmp)
-            units.append(runtime_unit("amsfe_loop.c"))
+            units += [
+                runtime_unit(name) for name in ("amsfe_loop.c", "amsfe_ctrl.c", "amsfe_blend.c")
+            ]
             shutil.copy(RUNTIME_C / "amsfe_watchdog.h", tmp)  # a live node's watchdogs
             units.append(runtime_unit("amsfe_watchdog.c"))
         if "estimator" in parts:  # the dense kernels of the estimators and the loop (O3 pragma)

@@ -60,7 +60,13 @@ __all__ = [
 RUNTIME_C = Path(__file__).resolve().parent.parent / "runtime" / "c"
 
 #: The files of ``runtime/c`` whose object does not depend on the robot.
-SHARED_UNITS = ("amsfe_kernels.c", "amsfe_loop.c", "amsfe_watchdog.c")
+SHARED_UNITS = (
+    "amsfe_kernels.c",
+    "amsfe_loop.c",
+    "amsfe_ctrl.c",
+    "amsfe_blend.c",
+    "amsfe_watchdog.c",
+)
 
 #: The object cache's folder, in the parent folder of the libraries.
 OBJECT_CACHE = ".objects"

@@ -19,7 +19,7 @@ below ``blend_accel * blend_rate`` and ``blend_accel * blend_rate^2`` (a short b
 rate offset has a large snap, which the cascade feeds forward to the motor):
 |delta^(r)| <= |d0| A0_r / Tb^r + |d1| A1_r / Tb^(r-1), A0_r = max|b0^(r)|, A1_r = max|b1^(r)|.
 
-The C controller (``runtime/c/amsfe_loop.c``) evaluates the same polynomials in the same
+The C controller (``runtime/c/amsfe_blend.c``) evaluates the same polynomials in the same
 order; tests/test_compiled_loop.py holds the two equal tick by tick.
 """
 

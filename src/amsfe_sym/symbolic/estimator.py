@@ -6,10 +6,11 @@ loops (code grows as ``N^2``, not ``N^3``); for small state dimensions (``N <=
 EXPAND_MAX_STATES``) the per-frame functions of :data:`EXPANDED` are expanded into SX
 (straight-line code, 5x faster); small SX helpers for the Cholesky
 factorisations whose pivots decide positive definiteness.  They compute; they never decide:
-the hand-written C glue (``runtime/c/amsfe_runtime.c``) compares NIS with the gates, reads the
-``*_ok`` flags and keeps the history buffers.  Every function mirrors one function of the Python
-reference (``estimation/ekf.py``, ``estimation/oosm.py``) line by line, so both paths agree to
-rounding.  Tuning enters as inputs: ``qw`` (diagonal of Qw), ``r`` (diagonal of R).
+the hand-written C glue (``runtime/c/amsfe_runtime.c`` and the ``amsfe_est_*.c`` beside it)
+compares NIS with the gates, reads the ``*_ok`` flags and keeps the history buffers.  Every
+function mirrors one function of the Python reference (``estimation/ekf.py``,
+``estimation/oosm.py``) line by line, so both paths agree to rounding.  Tuning enters as
+inputs: ``qw`` (diagonal of Qw), ``r`` (diagonal of R).
 
 Names and signatures (``N`` states, ``n`` joints, ``m = 2n + p`` noise inputs):
 

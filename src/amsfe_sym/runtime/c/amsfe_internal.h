@@ -1,4 +1,5 @@
-/* amsfe_internal.h: what amsfe_runtime.c and amsfe_loop.c share inside a generated library.
+/* amsfe_internal.h: what the runtime's C files share inside a generated library (the
+ * estimator's files also share amsfe_est_internal.h, the loop's amsfe_loop_internal.h).
  * Not part of the public API (not copied next to the library): the calling convention of
  * CasADi's generated functions, the carving of caller-owned memory blocks, and the dense
  * kernels (defined in amsfe_kernels.c, hidden from the library's exports). */
