@@ -1,4 +1,5 @@
-"""A reference that starts from the arm's state: the cascades' blended start (issue 17).
+"""A reference that starts from the arm's state: the cascades' blended start
+(docs/explanation/control.md).
 
 When a cascade starts (``startup = "converged"``: at the first tick its estimate is trusted),
 the desired trajectory q_d(t) is in general somewhere else than the arm, and moving at another
@@ -152,7 +153,7 @@ def blend_through(
 ) -> tuple[float, FloatArray, FloatArray]:
     """The blend that started ``wait`` [s] ago and passes through the offsets (e0, e1) now:
     its duration Tb [s] and its offsets at its start (d0, d1), for a start-up that trusted
-    its estimate ``wait`` after the loop began (``blend_lead``, issue 28).
+    its estimate ``wait`` after the loop began (``blend_lead``).
 
     Tb is the least (by bisection) with Tb > wait whose blend, solved to pass through
     (e0, e1) at ``wait`` (:func:`_through`), keeps the budgets of :func:`blend_time`:

@@ -56,7 +56,7 @@ static int vec_ok(const double *v, int n, double low, int strict, int inf_ok) {
 }
 
 /* The parameter block is usable: every gain finite and in range, limits positive, sizes
- * within the library's (issue 20: NaN gains or a negative u_max used to run for tens of
+ * within the library's (NaN gains or a negative u_max used to run for tens of
  * ticks before failing elsewhere). */
 static int ctrl_params_ok(const amsfe_ctrl_params *p) {
   const amsfe_dims d = dims_now();

@@ -83,16 +83,17 @@ typedef struct {
    * [rad/s], returning to wf along the blend (wf + (blend_wf - wf) b0(s / Tb), at most wf;
    * control/sliding.py); 0 (a zeroed block) or INFINITY = wf throughout */
   double blend_wf;
-  /* with startup_converged and a blend: a saturation-aware hand-over (issue 28): while the
-   * blend runs, with r = min_j min(1, u_max_j / |u_j(k-1)|) the share of the last tick's
-   * demand the actuators could apply (after it, r = 1), h, eps, wm and wf are scaled by
-   * rho, which drops to r at once and returns towards it as rho += T / headroom_tau
-   * (r - rho) [s]; 0 (a zeroed block) or INFINITY = off (control/sliding.py) */
+  /* with startup_converged and a blend: a saturation-aware hand-over
+   * (docs/explanation/control.md, "Start-up"): while the blend runs, with
+   * r = min_j min(1, u_max_j / |u_j(k-1)|) the share of the last tick's demand the actuators
+   * could apply (after it, r = 1), h, eps, wm and wf are scaled by rho, which drops to r at
+   * once and returns towards it as rho += T / headroom_tau (r - rho) [s]; 0 (a zeroed block)
+   * or INFINITY = off (control/sliding.py) */
   double headroom_tau;
   /* with startup_converged and a blend, in [0, 1]: the blend is planned as if it had started
    * blend_lead times the wait (from the first tick the controller ran to the trusted one)
    * before the trusted tick, through the trusted estimate there (control/blend.py's
-   * blend_through, issue 28); 0 (a zeroed block) = planned from the trusted tick */
+   * blend_through); 0 (a zeroed block) = planned from the trusted tick */
   double blend_lead;
 } amsfe_ctrl_params;
 

@@ -15,8 +15,8 @@
  *   xp+ = xp_m,  A = [B_m; E],  Gamma = [A[:, qd] M(q)^-1,  A[:, qmd] / Mm,  [0; T I_p]]
  *
  * with I0 = [I_4n 0] and E = [0 I_p] (theta is constant).  The stage's dense solves with the
- * mass matrix are done here, in loops, not in the generated code (issue 18): the generated
- * `rk4_stage_rhs` (xp, u, theta) -> (kr, M) returns k with its qdd rows unsolved
+ * mass matrix are done here, in loops, not in the generated code (docs/explanation/codegen.md):
+ * the generated `rk4_stage_rhs` (xp, u, theta) -> (kr, M) returns k with its qdd rows unsolved
  * (rhs = Ks (qm - q) - b) and M(q, theta); one LDL^T of M gives qdd = M^-1 rhs; the generated
  * `rk4_stage_jac` (xp, u, theta, qdd) -> Jr returns J with its qdd rows unsolved
  * (dtau = d(Ks (qm - q))/dz - dRNEA/dz at a = qdd, which needs qdd first: hence two
@@ -24,7 +24,7 @@
  * ((M^-1 dtau) [S; E] = M^-1 (dtau [S; E])).  Gamma's M(q)^-1 is the first stage's factor
  * (its point is x).  The sensitivities are held row-major (row r of S, B and D contiguous over
  * the N columns) and Jr's pattern is read by rows, so D_i is nnz(Jr) contiguous axpys of length
- * N and the solve n^2 more (issue 18 item 2: the jacobian's identity and diagonal motor rows
+ * N and the solve n^2 more (the jacobian's identity and diagonal motor rows
  * are single-nonzero rows, i.e. copies and scalings of rows of S; measured in docs/explanation/codegen.md).
  *
  * It follows CasADi's calling convention and exports the symbols `casadi.external` needs
