@@ -1,6 +1,6 @@
 /* amsfe_node.h: the C node's state (node_t, its record record_t) and the functions its
  * files share (amsfe_node.c: the program; the others, one concept each).  Private to the
- * node: the arm (amsfe_arm.c) does not include it. */
+ * node: the arm (amsfe_arm*.c) does not include it. */
 #ifndef AMSFE_NODE_H
 #define AMSFE_NODE_H
 
