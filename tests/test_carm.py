@@ -1,4 +1,4 @@
-"""The C arm (``amsfe sim-node --impl c``, ``ros/c/amsfe_arm.c``; docs/live-load.md, "The C
+"""The C arm (``amsfe sim-node --impl c``, ``ros/c/amsfe_arm*.c``; docs/live-load.md, "The C
 arm").
 
 Over real DDS (marker ``ros``; each test on its own domain and topics, every process bounded,

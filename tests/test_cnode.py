@@ -1,4 +1,4 @@
-"""The C node (``amsfe node --impl c``, ``ros/c/amsfe_node.c``; docs/live-control.md).
+"""The C node (``amsfe node --impl c``, ``ros/c/amsfe_node*.c``; docs/live-control.md).
 
 Over real DDS (marker ``ros``; each test on its own domain and topics, every process bounded,
 as tests/test_ros.py does): ``sim-node --lockstep`` + the C node reproduce ``amsfe simulate``

@@ -1,4 +1,4 @@
-"""``amsfe sim-node --impl c``: the simulated arm in C on rcl (``ros/c/amsfe_arm.c``),
+"""``amsfe sim-node --impl c``: the simulated arm in C on rcl (``ros/c/amsfe_arm*.c``),
 configured from Python, started and waited for (docs/live-load.md, "The C arm").
 
 The Python sim-node (:mod:`amsfe_sym.ros.sim_node`) cannot hold 1 kHz on a small loaded

@@ -1,4 +1,4 @@
-"""``amsfe node --impl c``: the node's per-sample path in C on rcl (``ros/c/amsfe_node.c``),
+"""``amsfe node --impl c``: the node's per-sample path in C on rcl (``ros/c/amsfe_node*.c``),
 configured from Python, started and waited for (docs/live-control.md); its build is
 :mod:`amsfe_sym.ros.cnode_build`, its record :mod:`amsfe_sym.ros.cnode_record`.
 

@@ -134,7 +134,15 @@ SHARED: tuple[str, ...] = ("amsfe_rcl.c", "amsfe_pystub.c")
 #: The programs built from ``ros/c/``: their own C files and :data:`SHARED` (``amsfe_node``:
 #: every other one).  ``amsfe_arm`` is the simulated arm of ``amsfe sim-node --impl c``
 #: (:mod:`amsfe_sym.ros.carm`).
-PROGRAMS: dict[str, tuple[str, ...]] = {"amsfe_arm": ("amsfe_arm.c", *SHARED)}
+PROGRAMS: dict[str, tuple[str, ...]] = {
+    "amsfe_arm": (
+        "amsfe_arm.c",
+        "amsfe_arm_commands.c",
+        "amsfe_arm_config.c",
+        "amsfe_arm_sensors.c",
+        *SHARED,
+    )
+}
 #: Message packages a program needs besides :data:`_MSG_PACKAGES`.
 _EXTRA_PACKAGES: dict[str, tuple[str, ...]] = {"amsfe_arm": ("rosgraph_msgs",)}
 

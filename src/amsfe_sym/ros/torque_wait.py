@@ -1,5 +1,5 @@
 """The Python node's wait for the torque applied over the previous tick: the C node's
-``await_effort`` (``ros/c/amsfe_node.c``; docs/live-load.md, "Torque and sample").
+``await_effort`` (``ros/c/amsfe_node_intake.c``; docs/live-load.md, "Torque and sample").
 
 An arm publishes the torque it applied over tick k-1 on the effort topic (kind ``applied``)
 just before sample k; DDS does not order two topics, and a node that estimates tick k before

@@ -1,5 +1,5 @@
-/* amsfe_rcl.h: the rcl set-up the C programs of the toolkit share (the C node, amsfe_node.c,
- * and the C arm, amsfe_arm.c): the program's name in its error lines, allocation that stops
+/* amsfe_rcl.h: the rcl set-up the C programs of the toolkit share (the C node, amsfe_node*.c,
+ * and the C arm, amsfe_arm*.c): the program's name in its error lines, allocation that stops
  * the program in one line, the two clocks, SIGINT / SIGTERM caught into amsfe_signal, the
  * context and the node from the command line's --ros-args, the live topics' QoS, a message
  * buffer, and the stop.  Everything here runs at start or at the stop, never per sample.
