@@ -246,7 +246,7 @@ static int control(live_loop *L, const double *z, int with_nis) {
   return AMSFE_OK;
 }
 
-/* Why an encoder sample's header stamp is not used (-1: it is; LiveLoop._bad_stamp, issue 37):
+/* Why an encoder sample's header stamp is not used (-1: it is; LiveLoop._bad_stamp):
  * a zero stamp; a stamp more than max_gap + 1 ticks behind the last used one (a clock step
  * back); that many ahead of it while the send times advanced less than a quarter as much (a
  * clock step ahead or a corrupt stamp: a stall delays both).  Skipped and counted; the run of
@@ -317,7 +317,7 @@ int live_encoders(live_loop *L, long long stamp_ns, const double *z, long long s
     int cs = control(L, z, 0);
     return cs < 0 ? cs - 100 : 1;
   }
-  if (bad_stamp(L, stamp_ns, sent) >= 0) /* issue 37: named, not "stalled" */
+  if (bad_stamp(L, stamp_ns, sent) >= 0) /* named, not "stalled" */
     return L->bad_run > L->max_gap ? LIVE_BAD_STAMPS : 0;
   int ok;
   long k = live_tick_of(L, stamp_ns, &ok);

@@ -34,7 +34,7 @@ enum live_skip {
   SKIP_ENCODER_DUPLICATE,
   SKIP_ENCODER_MISSING,
   SKIP_FRAMES_OVERFLOW,
-  SKIP_ENCODER_ZERO_STAMP, /* issue 37's live stamp rules (LiveLoop._bad_stamp) */
+  SKIP_ENCODER_ZERO_STAMP, /* the live stamp rules (LiveLoop._bad_stamp) */
   SKIP_ENCODER_STEP_BACK,
   SKIP_ENCODER_AHEAD,
   SKIP_REASONS

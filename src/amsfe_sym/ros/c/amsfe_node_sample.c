@@ -37,7 +37,7 @@ void on_encoders(node_t *s, long long sent, long long received, double taken) {
     for (long j = 0; j < LIVE_RING; ++j)
       if (L->eff_j[j] == j && j > s->eff_last) s->eff_last = j;
   if (r == 0) return; /* skipped (counted): not judged */
-  if (r == LIVE_BAD_STAMPS) { /* issue 37: held by the stamps' name, not as a stall */
+  if (r == LIVE_BAD_STAMPS) { /* held by the stamps' name, not as a stall */
     char why[768];
     live_bad_stamp_line(L, why, sizeof why);
     snprintf(s->stop_line, sizeof s->stop_line, "hold: the estimator stopped: %s", why);

@@ -23,7 +23,7 @@ extern volatile sig_atomic_t amsfe_signal;
 
 /* The first call of a program's main: its name `name` in its error lines (amsfe_program);
  * stdout line-buffered (a pipe's block buffer lost every line after the start's when a
- * program died: issue 34's SIGSEGV said nothing of where; the sample path prints nothing);
+ * program died: a SIGSEGV in CI once said nothing of where; the sample path prints nothing);
  * SIGSEGV, SIGBUS, SIGILL, SIGFPE and SIGABRT reported on stderr with the stack, on an
  * alternate stack, before the signal's default action (its exit status and core dump). */
 void amsfe_program_start(const char *name);
