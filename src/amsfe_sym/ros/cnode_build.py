@@ -217,14 +217,71 @@ def build_node(
                 )
             )
         tmp = folder / f"{program}.tmp{os.getpid()}"
-        extra = _EXTRA_PACKAGES.get(program, ())
-        cmd = _command(cc, lib, ros, srcs, tmp, folder, extra, extra_flags)
-        proc = subprocess.run(cmd, capture_output=True, text=True)
-        if proc.returncode != 0 or not tmp.is_file():
-            tmp.unlink(missing_ok=True)
+        objs = folder / f"objects.tmp{os.getpid()}"
+        objs.mkdir(exist_ok=True)
+        try:
+            # each file compiled on its own, as many at once as there are cores, then linked
+            units = _compile_commands(cc, ros, srcs, objs, folder, extra_flags)
+            _run_all([c for c, _ in units], program, cc)
+            extra = _EXTRA_PACKAGES.get(program, ())
+            obj_files = [o for _, o in units]
+            cmd = _command(cc, lib, ros, obj_files, tmp, folder, extra, extra_flags)
+            _run_all([cmd], program, cc)
+        finally:
+            shutil.rmtree(objs, ignore_errors=True)
+        if not tmp.is_file():
+            raise RosError(
+                describe(
+                    "the C node's build",
+                    f"a linked {program}",
+                    "no file after the linker's exit 0",
+                    "run the command again",
+                )
+            )
+        compile_lines = [shlex.join(c) for c, _ in units]
+        (folder / "build.json").write_text(
+            json.dumps({**inputs, "compile": compile_lines, "command": shlex.join(cmd)}, indent=1)
+        )
+        tmp.replace(exe)
+    return CNodeBuild(exe, key, True)
+
+
+def _compile_commands(
+    cc: str,
+    ros: RosPaths,
+    srcs: list[Path],
+    obj_dir: Path,
+    gen_dir: Path,
+    flags: tuple[str, ...] = (),
+) -> list[tuple[list[str], Path]]:
+    """Each source's compile command (``-c``, to an object in ``obj_dir``) against the
+    headers of this package, of the library copied into ``gen_dir`` and of the wheels, with
+    :data:`CNODE_CFLAGS` and the extra ``flags``; and its object."""
+    out = []
+    for src in srcs:
+        obj = obj_dir / f"{src.stem}.o"
+        cmd = [cc, *CNODE_CFLAGS, *flags, "-c", str(src), f"-I{C_DIR}", f"-I{gen_dir}"]
+        out.append(([*cmd, *(f"-I{d}" for d in ros.include), "-o", str(obj)], obj))
+    return out
+
+
+def _run_all(commands: list[list[str]], program: str, cc: str) -> None:
+    """Run ``commands`` (compiler calls), as many at once as this machine has cores.
+
+    Raises:
+        RosError: one failed (its first errors, not the warnings after them).
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    def one(cmd: list[str]) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(cmd, capture_output=True, text=True)
+
+    with ThreadPoolExecutor(max_workers=max(1, min(len(commands), os.cpu_count() or 1))) as pool:
+        done = list(pool.map(one, commands))
+    for proc in done:
+        if proc.returncode != 0:
             checkpoint()  # signals are held in the lock: a Ctrl-C stopped cc, say that
             said = (proc.stderr or proc.stdout).strip().splitlines()
-            # the compiler's errors, not the warnings printed after them
             errors = [ln for ln in said if "error" in ln.lower()]
             tail = " | ".join(errors[:3] or said[-3:])
             raise RosError(
@@ -235,11 +292,6 @@ def build_node(
                     "check the compiler and the [ros] extra, or run amsfe node --impl python",
                 )
             )
-        (folder / "build.json").write_text(
-            json.dumps({**inputs, "command": shlex.join(cmd)}, indent=1)
-        )
-        tmp.replace(exe)
-    return CNodeBuild(exe, key, True)
 
 
 def external_build(exe: Path, option: str) -> CNodeBuild:
@@ -283,10 +335,10 @@ def _command(
     extra: tuple[str, ...] = (),
     flags: tuple[str, ...] = (),
 ) -> list[str]:
-    """The compile-and-link command of the node, against the library and headers copied
-    into ``gen_dir`` (the node's folder), linking the message packages ``extra`` too, with
-    the extra compiler and linker ``flags`` (:data:`EXTRA_FLAGS_ENV`) after
-    :data:`CNODE_CFLAGS`."""
+    """The link command of the node (its objects as ``srcs``; sources would be compiled in
+    it too), against the library and headers copied into ``gen_dir`` (the node's folder),
+    linking the message packages ``extra`` too, with the extra compiler and linker ``flags``
+    (:data:`EXTRA_FLAGS_ENV`) after :data:`CNODE_CFLAGS`."""
     name = lib.library_path.name.removeprefix("lib").removesuffix(".so")
     libs = ["rcl", "rcl_lifecycle", "rcutils", "rmw", "rosidl_runtime_c"]
     for pkg in (*_MSG_PACKAGES, *extra):
