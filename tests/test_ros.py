@@ -790,7 +790,7 @@ def test_faults_hold_and_clean_exits(tmp_path: Path, impl: str) -> None:
         env = _ros_env(tmp_path)
         rec2 = tmp_path / "rec2"
         node = _start(env, "node", "paper-sim", "--controller", "amsfe", "--record", str(rec2),
-                      *_impl(impl))  # fmt: skip
+                      *_impl(impl), "--ros-args", *PATIENT_WATCHDOG)  # fmt: skip
         sim = _start(env, "sim-node", "paper-sim", "--lockstep", "--duration", "30",
                      "--command-timeout", "20")  # fmt: skip
         procs += [node, sim]
