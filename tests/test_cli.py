@@ -173,3 +173,16 @@ def test_a_crash_under_amsfe_prints_the_python_stack() -> None:
     assert proc.returncode == -signal.SIGSEGV, (proc.returncode, proc.stderr)
     assert "Fatal Python error: Segmentation fault" in proc.stderr, proc.stderr
     assert "string_at" in proc.stderr  # the Python frame that crashed
+
+
+def test_node_refuses_an_unknown_controller_before_anything(capsys, tmp_path, monkeypatch) -> None:
+    """``amsfe node --controller NAME`` with a name no controller has: exit 2 and one line
+    naming the controllers, before the node says or builds anything (it printed its
+    "waiting for encoders" first, then failed)."""
+    monkeypatch.chdir(tmp_path)
+    code = main(["node", "paper-sim", "--controller", "nosuch", "--record", "rec"])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == "", out
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "controller name" in lines[0] and "'amsfe'" in lines[0], err
+    assert list(tmp_path.iterdir()) == []

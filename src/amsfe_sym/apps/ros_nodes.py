@@ -278,6 +278,10 @@ def node_from_args(args: argparse.Namespace) -> int:
             describe("--std-every", "an integer >= 1", str(args.std_every), "--std-every 10")
         )
     sc = _scenario(args, estimator=args.estimator, controller=args.controller or None)
+    if args.controller is not None:  # before anything is said or built
+        from amsfe_sym.control import check_controller_name
+
+        check_controller_name(sc.controller)
     record = None if args.record is None else Path(args.record)
     if record is not None:
         # before anything runs: nothing there is replaced, and no input is written over

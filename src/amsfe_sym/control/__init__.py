@@ -9,7 +9,13 @@ cascaded computed-torque law on the true state.
 May import: errors, runtime (the library's laws and manifest), signals.trajectory.
 """
 
-from amsfe_sym.control.base import CONTROLLERS, Controller, LawInputs, make_controller
+from amsfe_sym.control.base import (
+    CONTROLLERS,
+    Controller,
+    LawInputs,
+    check_controller_name,
+    make_controller,
+)
 from amsfe_sym.control.printed import AmsfePaper, DtsmcPaper
 from amsfe_sym.control.sliding import Amsfe, Dtsmc, Truth
 from amsfe_sym.control.truth import TruthComputedTorque
@@ -24,5 +30,6 @@ __all__ = [
     "LawInputs",
     "Truth",
     "TruthComputedTorque",
+    "check_controller_name",
     "make_controller",
 ]

@@ -140,10 +140,8 @@ def register(cls: type[Controller]) -> type[Controller]:
     return cls
 
 
-def make_controller(
-    name: str, lib: ModelLibrary, trajectory: Trajectory, gains: Mapping[str, Any] | None = None
-) -> Controller:
-    """Build the controller registered as ``name`` (ConfigError listing names if unknown)."""
+def check_controller_name(name: str) -> None:
+    """Refuse a ``name`` no controller is registered as (ConfigError listing the names)."""
     if name not in CONTROLLERS:
         raise ConfigError(
             describe(
@@ -153,4 +151,11 @@ def make_controller(
                 "use a listed name (scenario controller = ..., or --controller)",
             )
         )
+
+
+def make_controller(
+    name: str, lib: ModelLibrary, trajectory: Trajectory, gains: Mapping[str, Any] | None = None
+) -> Controller:
+    """Build the controller registered as ``name`` (ConfigError listing names if unknown)."""
+    check_controller_name(name)
     return CONTROLLERS[name](lib, trajectory, gains)
