@@ -227,6 +227,9 @@ def build_node(
             obj_files = [o for _, o in units]
             cmd = _command(cc, lib, ros, obj_files, tmp, folder, extra, extra_flags)
             _run_all([cmd], program, cc)
+        except BaseException:
+            tmp.unlink(missing_ok=True)  # a half-written program is never left behind
+            raise
         finally:
             shutil.rmtree(objs, ignore_errors=True)
         if not tmp.is_file():
@@ -260,8 +263,8 @@ def _compile_commands(
     out = []
     for src in srcs:
         obj = obj_dir / f"{src.stem}.o"
-        cmd = [cc, *CNODE_CFLAGS, *flags, "-c", str(src), f"-I{C_DIR}", f"-I{gen_dir}"]
-        out.append(([*cmd, *(f"-I{d}" for d in ros.include), "-o", str(obj)], obj))
+        includes = [f"-I{d}" for d in (C_DIR, gen_dir, *ros.include)]
+        out.append(([cc, *CNODE_CFLAGS, *flags, "-c", str(src), *includes, "-o", str(obj)], obj))
     return out
 
 
@@ -329,23 +332,22 @@ def _command(
     cc: str,
     lib: ModelLibrary,
     ros: RosPaths,
-    srcs: list[Path],
+    objects: list[Path],
     out: Path,
     gen_dir: Path,
     extra: tuple[str, ...] = (),
     flags: tuple[str, ...] = (),
 ) -> list[str]:
-    """The link command of the node (its objects as ``srcs``; sources would be compiled in
-    it too), against the library and headers copied into ``gen_dir`` (the node's folder),
-    linking the message packages ``extra`` too, with the extra compiler and linker ``flags``
-    (:data:`EXTRA_FLAGS_ENV`) after :data:`CNODE_CFLAGS`."""
+    """The link command of the node's ``objects`` (:func:`_compile_commands`) against the
+    library copied into ``gen_dir`` (the node's folder), linking the message packages
+    ``extra`` too, with the extra compiler and linker ``flags`` (:data:`EXTRA_FLAGS_ENV`)
+    after :data:`CNODE_CFLAGS`."""
     name = lib.library_path.name.removeprefix("lib").removesuffix(".so")
     libs = ["rcl", "rcl_lifecycle", "rcutils", "rmw", "rosidl_runtime_c"]
     for pkg in (*_MSG_PACKAGES, *extra):
         libs += [f"{pkg}__rosidl_generator_c", f"{pkg}__rosidl_typesupport_c"]
     rpaths = [gen_dir, ros.lib, *ros.bundled]
-    cmd = [cc, *CNODE_CFLAGS, *flags, *map(str, srcs), f"-I{C_DIR}", f"-I{gen_dir}"]
-    cmd += [f"-I{d}" for d in ros.include]
+    cmd = [cc, *CNODE_CFLAGS, *flags, *map(str, objects)]
     cmd += [f"-L{gen_dir}", f"-l{name}", f"-L{ros.lib}", *(f"-l{x}" for x in libs), "-lm"]
     cmd += ["-Wl,--disable-new-dtags", *(f"-Wl,-rpath,{d}" for d in rpaths)]
     # the Python type support librcl's wheel links: functions bound lazily (never called),
